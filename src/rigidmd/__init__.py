@@ -1,0 +1,21 @@
+"""rigidmd: rigid-body molecular dynamics for ASE.
+
+Molecules move as rigid bodies (quaternion velocity Verlet, NO_SQUISH as in
+LAMMPS ``fix rigid/nve``) with forces from any ASE calculator; atoms in no
+body move as point particles in the same step.
+"""
+
+from rigidmd.bodies import BodyGeometry, RigidBodies
+from rigidmd.dynamics import NonFiniteForceError, RigidBodyDOF, RigidVerlet
+from rigidmd.velocities import rigid_maxwell_boltzmann
+
+__all__ = [
+    "RigidVerlet",
+    "RigidBodies",
+    "BodyGeometry",
+    "RigidBodyDOF",
+    "NonFiniteForceError",
+    "rigid_maxwell_boltzmann",
+]
+
+__version__ = "0.1.0"

@@ -1,0 +1,444 @@
+r"""Which atoms form which rigid body, and the geometry of each body.
+
+A :class:`RigidBodies` object partitions the atoms of a system: every atom
+belongs to at most one body.  Atoms in no body, and bodies of a single atom,
+move as point particles.  :meth:`RigidBodies.geometry` then measures, for a
+configuration, each body's mass, centre of mass, principal moments and axes,
+body-frame coordinates and orientation quaternion.
+
+Conventions (see also :mod:`rigidmd.quaternion`): atom :math:`i` of body
+:math:`b` sits at :math:`x_i = X_b + R(q_b)\, d_i`, where :math:`X_b` is the
+centre of mass and :math:`d_i` the body-frame coordinate.  The body frame is
+the principal frame, so the inertia tensor there is
+:math:`\mathrm{diag}(I_1, I_2, I_3)` with :math:`I_1 \le I_2 \le I_3`.  A
+moment below ``1e-7 * max(I)`` is set to exactly 0 (a linear body), the rule
+LAMMPS ``fix rigid`` uses.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rigidmd import quaternion as quat
+
+__all__ = ["RigidBodies", "BodyGeometry", "LINEAR_TOLERANCE"]
+
+#: Relative threshold below which a principal moment counts as zero.
+LINEAR_TOLERANCE = 1e-7
+
+_RULES = ("mol-id", "tags", "connectivity")
+
+
+def _describe(atoms_idx, limit=6):
+    atoms_idx = [int(i) for i in atoms_idx]
+    text = ", ".join(str(i) for i in atoms_idx[:limit])
+    if len(atoms_idx) > limit:
+        text += ", ..."
+    return f"[{text}]"
+
+
+class RigidBodies:
+    """A partition of a system's atoms into rigid bodies.
+
+    Build one with a classmethod that names the rule (:meth:`from_mol_id`,
+    :meth:`from_tags`, :meth:`from_body_ids`, :meth:`from_index_lists`,
+    :meth:`from_connectivity`) or let :meth:`resolve` pick the rule from a
+    specification.  The rule used is kept in :attr:`rule`.
+
+    Parameters
+    ----------
+    body_ids : array_like of int, shape (n_atoms,)
+        Body label of every atom.  Atoms sharing a label ``>= 0`` form one
+        body; a negative label marks an atom that belongs to no body.  Labels
+        need not be contiguous.  A label held by a single atom makes that atom
+        a point particle.
+    rule : str
+        Human-readable name of the rule that produced the labels.
+
+    Attributes
+    ----------
+    body_ids : numpy.ndarray of int, shape (n_atoms,)
+        Normalised labels: bodies of two or more atoms are numbered
+        ``0 .. n_bodies - 1`` in order of their smallest original label; point
+        particles are ``-1``.
+    n_bodies : int
+        Number of bodies with two or more atoms.
+    rule : str
+    """
+
+    def __init__(self, body_ids, rule="body-ids"):
+        ids = np.asarray(body_ids)
+        if ids.ndim != 1:
+            raise ValueError(f"body ids must be one-dimensional, got shape {ids.shape}")
+        if ids.size and not np.issubdtype(ids.dtype, np.integer):
+            if np.issubdtype(ids.dtype, np.floating) and np.all(ids == np.round(ids)):
+                ids = ids.astype(np.int64)
+            else:
+                raise TypeError(
+                    f"body ids must be integers, got dtype {ids.dtype}"
+                )
+        ids = ids.astype(np.int64)
+        labels, inverse, counts = np.unique(
+            np.where(ids < 0, -1, ids), return_inverse=True, return_counts=True
+        )
+        keep = (labels >= 0) & (counts >= 2)
+        new_label = np.full(len(labels), -1, dtype=np.int64)
+        new_label[keep] = np.arange(int(keep.sum()))
+        self.body_ids = new_label[inverse] if ids.size else ids
+        self.n_bodies = int(keep.sum())
+        self.rule = rule
+
+    # ------------------------------------------------------------ builders
+    @classmethod
+    def from_body_ids(cls, body_ids, natoms=None):
+        """One label per atom; negative labels are atoms in no body.
+
+        Parameters
+        ----------
+        body_ids : array_like of int, shape (n_atoms,)
+        natoms : int, optional
+            Expected number of atoms; a mismatch raises ``ValueError``.
+        """
+        ids = np.asarray(body_ids)
+        if natoms is not None and ids.shape != (natoms,):
+            raise ValueError(
+                f"bodies: expected one body id per atom ({natoms}), got shape {ids.shape}"
+            )
+        return cls(ids, rule="body-ids")
+
+    @classmethod
+    def from_index_lists(cls, lists, natoms):
+        """Each list holds the atom indices of one body; unlisted atoms are free.
+
+        Raises ``ValueError`` for an empty list, an index out of range, or an
+        atom listed in two bodies.
+        """
+        ids = np.full(natoms, -1, dtype=np.int64)
+        for b, members in enumerate(lists):
+            members = np.asarray(members)
+            if members.ndim != 1 or members.size == 0:
+                raise ValueError(f"bodies: body {b} is empty or not a flat list of indices")
+            if not np.issubdtype(members.dtype, np.integer):
+                raise TypeError(
+                    f"bodies: body {b} holds non-integer indices ({members.dtype})"
+                )
+            bad = members[(members < 0) | (members >= natoms)]
+            if bad.size:
+                raise ValueError(
+                    f"bodies: body {b} names atom {int(bad[0])}, "
+                    f"but there are only {natoms} atoms"
+                )
+            uniq, cnt = np.unique(members, return_counts=True)
+            if np.any(cnt > 1):
+                raise ValueError(
+                    f"bodies: body {b} lists atom {int(uniq[cnt > 1][0])} twice"
+                )
+            taken = members[ids[members] >= 0]
+            if taken.size:
+                a = int(taken[0])
+                raise ValueError(
+                    f"bodies: atom {a} is in both body {int(ids[a])} and body {b}"
+                )
+            ids[members] = b
+        return cls(ids, rule="index-lists")
+
+    @classmethod
+    def from_mol_id(cls, atoms):
+        """Atoms with the same ``mol-id`` (as ASE's ``lammps-data`` reader sets) form a body."""
+        if "mol-id" not in atoms.arrays:
+            raise ValueError(
+                "bodies='mol-id' but the atoms have no 'mol-id' array "
+                "(read a LAMMPS data file with atom_style full/molecular, or set it)"
+            )
+        return cls(atoms.arrays["mol-id"], rule="mol-id")
+
+    @classmethod
+    def from_tags(cls, atoms):
+        """Atoms with the same tag form a body; negative tags are free atoms."""
+        return cls(atoms.get_tags(), rule="tags")
+
+    @classmethod
+    def from_connectivity(cls, atoms, mult=1.0):
+        """Covalently connected atoms form a body.
+
+        Two atoms are bonded when their distance (minimum image in periodic
+        directions) is below the sum of their natural cutoffs
+        (:func:`ase.neighborlist.natural_cutoffs`, covalent radii times
+        ``mult``).  Each connected component is a body; isolated atoms are
+        point particles.
+        """
+        from ase.neighborlist import build_neighbor_list, natural_cutoffs
+        from scipy.sparse.csgraph import connected_components
+
+        if len(atoms) == 0:
+            return cls(np.zeros(0, dtype=np.int64), rule="connectivity")
+        nl = build_neighbor_list(
+            atoms, cutoffs=natural_cutoffs(atoms, mult=mult), self_interaction=False
+        )
+        _, labels = connected_components(nl.get_connectivity_matrix(sparse=True))
+        return cls(labels, rule="connectivity")
+
+    @classmethod
+    def resolve(cls, atoms, spec=None):
+        """Turn a user specification into a :class:`RigidBodies`.
+
+        Parameters
+        ----------
+        atoms : ase.Atoms
+        spec : None, str, RigidBodies, array_like of int, or list of lists
+            ``None`` uses covalent connectivity; ``"mol-id"``, ``"tags"`` or
+            ``"connectivity"`` name a rule; a :class:`RigidBodies` is used as
+            is; a flat integer sequence of length ``len(atoms)`` gives a body
+            id per atom; a sequence of sequences gives the atom indices of
+            each body.
+        """
+        n = len(atoms)
+        if spec is None or (isinstance(spec, str) and spec == "connectivity"):
+            bodies = cls.from_connectivity(atoms)
+        elif isinstance(spec, RigidBodies):
+            bodies = spec
+        elif isinstance(spec, str):
+            if spec == "mol-id":
+                bodies = cls.from_mol_id(atoms)
+            elif spec == "tags":
+                bodies = cls.from_tags(atoms)
+            else:
+                raise ValueError(
+                    f"bodies: unknown rule {spec!r}; expected one of {', '.join(_RULES)}, "
+                    "a per-atom body-id array or a list of index lists"
+                )
+        else:
+            try:
+                arr = np.asarray(spec)
+                ragged = False
+            except ValueError:
+                ragged = True
+            if not ragged and arr.ndim == 1 and arr.dtype != object:
+                bodies = cls.from_body_ids(arr, natoms=n)
+            elif not ragged and arr.ndim == 2 and arr.dtype != object:
+                bodies = cls.from_index_lists(list(arr), n)
+            else:
+                bodies = cls.from_index_lists(list(spec), n)
+        if len(bodies.body_ids) != n:
+            raise ValueError(
+                f"bodies: the definition covers {len(bodies.body_ids)} atoms, "
+                f"the system has {n}"
+            )
+        return bodies
+
+    # ------------------------------------------------------------ indexing
+    @property
+    def free_indices(self):
+        """Indices of the atoms that move as point particles, shape (n_free,)."""
+        return np.flatnonzero(self.body_ids < 0)
+
+    @property
+    def body_atom_order(self):
+        """Atom indices of all body atoms, grouped by body (stable), shape (n_body_atoms,)."""
+        members = np.flatnonzero(self.body_ids >= 0)
+        return members[np.argsort(self.body_ids[members], kind="stable")]
+
+    def atoms_of(self, b):
+        """Atom indices of body ``b``."""
+        return np.flatnonzero(self.body_ids == b)
+
+    def __len__(self):
+        return self.n_bodies
+
+    def __repr__(self):
+        return (
+            f"RigidBodies(n_bodies={self.n_bodies}, n_free={len(self.free_indices)}, "
+            f"rule={self.rule!r})"
+        )
+
+    # ------------------------------------------------------------ geometry
+    def geometry(self, atoms):
+        """Measure every body in the configuration of ``atoms``.
+
+        Molecules split across a periodic boundary are made whole by taking
+        each atom at its minimum image from the body's first atom.
+
+        Parameters
+        ----------
+        atoms : ase.Atoms
+
+        Returns
+        -------
+        BodyGeometry
+
+        Raises
+        ------
+        ValueError
+            An atom with zero, negative or non-finite mass; a body larger than
+            half the cell in a periodic direction; a body whose atoms all sit
+            at one point.
+        """
+        if len(atoms) != len(self.body_ids):
+            raise ValueError(
+                f"bodies cover {len(self.body_ids)} atoms, the system has {len(atoms)}"
+            )
+        masses = atoms.get_masses()
+        bad = np.flatnonzero(~(masses > 0) | ~np.isfinite(masses))
+        if bad.size:
+            a = int(bad[0])
+            raise ValueError(
+                f"atom {a} ({atoms[a].symbol}) has mass {float(masses[a])!r} amu; "
+                "every atom needs a positive finite mass"
+            )
+        order = self.body_atom_order
+        counts = np.bincount(self.body_ids[order], minlength=self.n_bodies)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        atom_body = np.repeat(np.arange(self.n_bodies), counts)
+        x = unwrap_bodies(atoms, order, starts, atom_body)
+        m = masses[order]
+        if self.n_bodies == 0:
+            return BodyGeometry(
+                order=order, starts=starts, atom_body=atom_body, atom_masses=m,
+                mass=np.zeros(0), com=np.zeros((0, 3)), moments=np.zeros((0, 3)),
+                quaternions=np.zeros((0, 4)), body_coordinates=np.zeros((0, 3)),
+            )
+        mass = np.add.reduceat(m, starts)
+        com = np.add.reduceat(m[:, None] * x, starts) / mass[:, None]
+        r = x - com[atom_body]
+        tensor = inertia_tensors(r, m, starts)
+        moments, axes = np.linalg.eigh(tensor)
+        # Right-handed principal frames: R(q) = axes (columns are body axes).
+        flip = np.linalg.det(axes) < 0
+        axes[flip, :, 2] *= -1.0
+        imax = moments[:, 2]
+        point = ~(imax > 0)
+        if np.any(point):
+            b = int(np.flatnonzero(point)[0])
+            raise ValueError(
+                f"body {b} (atoms {_describe(order[atom_body == b])}) has all its "
+                "atoms at one point: it has no orientation"
+            )
+        moments = np.where(moments < LINEAR_TOLERANCE * imax[:, None], 0.0, moments)
+        q = quat.from_matrix(axes)
+        d = np.einsum("nji,nj->ni", axes[atom_body], r)
+        return BodyGeometry(
+            order=order, starts=starts, atom_body=atom_body, atom_masses=m,
+            mass=mass, com=com, moments=moments, quaternions=q, body_coordinates=d,
+        )
+
+
+@dataclass
+class BodyGeometry:
+    """Geometry of every body in one configuration (arrays over bodies).
+
+    Body atoms are stored grouped by body: ``order[starts[b]:starts[b+1]]``
+    are the atom indices of body ``b``.
+
+    Attributes
+    ----------
+    order : numpy.ndarray of int, shape (n_body_atoms,)
+        Atom index of each body atom, grouped by body.
+    starts : numpy.ndarray of int, shape (n_bodies,)
+        Offset of each body's first atom in ``order``.
+    atom_body : numpy.ndarray of int, shape (n_body_atoms,)
+        Body of each entry of ``order``.
+    atom_masses : numpy.ndarray, shape (n_body_atoms,)
+        Masses of the body atoms (amu), in ``order``.
+    mass : numpy.ndarray, shape (n_bodies,)
+        Body masses (amu).
+    com : numpy.ndarray, shape (n_bodies, 3)
+        Centres of mass (Å), from unwrapped atom positions.
+    moments : numpy.ndarray, shape (n_bodies, 3)
+        Principal moments of inertia, ascending (amu Å²); 0 marks the axis of
+        a linear body.
+    quaternions : numpy.ndarray, shape (n_bodies, 4)
+        Orientations ``(w, x, y, z)``: ``R(q)`` maps body to lab frame.
+    body_coordinates : numpy.ndarray, shape (n_body_atoms, 3)
+        Body-frame coordinates :math:`d_i` (Å), in ``order``.
+    """
+
+    order: np.ndarray
+    starts: np.ndarray
+    atom_body: np.ndarray
+    atom_masses: np.ndarray
+    mass: np.ndarray
+    com: np.ndarray
+    moments: np.ndarray
+    quaternions: np.ndarray
+    body_coordinates: np.ndarray
+
+    @property
+    def n_bodies(self):
+        return len(self.mass)
+
+    @property
+    def linear(self):
+        """Boolean mask of linear bodies (one zero moment), shape (n_bodies,)."""
+        return self.moments[:, 0] == 0.0
+
+    @property
+    def degrees_of_freedom(self):
+        """Rigid degrees of freedom of all bodies: 6 per body, 5 per linear body."""
+        return 6 * self.n_bodies - int(np.count_nonzero(self.linear))
+
+
+def inertia_tensors(r, m, starts):
+    r"""Inertia tensors :math:`\sum_i m_i (|r_i|^2 \mathbb{1} - r_i r_i^\mathsf{T})`.
+
+    Parameters
+    ----------
+    r : numpy.ndarray, shape (n_body_atoms, 3)
+        Positions relative to each body's centre of mass (Å), grouped by body.
+    m : numpy.ndarray, shape (n_body_atoms,)
+        Atom masses (amu).
+    starts : numpy.ndarray of int, shape (n_bodies,)
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_bodies, 3, 3)
+        amu Å².
+    """
+    outer = m[:, None, None] * r[:, :, None] * r[:, None, :]
+    sq = np.trace(outer, axis1=1, axis2=2)
+    per_atom = sq[:, None, None] * np.eye(3) - outer
+    return np.add.reduceat(per_atom, starts, axis=0)
+
+
+def unwrap_bodies(atoms, order, starts, atom_body):
+    """Positions of the body atoms with every body made whole.
+
+    Each atom is placed at its minimum image from its body's first atom (in
+    ``order``).  Non-periodic systems are returned unchanged.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_body_atoms, 3)
+        Unwrapped positions (Å), in ``order``.
+
+    Raises
+    ------
+    ValueError
+        If a body reaches more than half the cell's width in a periodic
+        direction, where the minimum image is ambiguous.
+    """
+    from ase.geometry import find_mic
+
+    x = atoms.positions[order]
+    pbc = atoms.pbc
+    if not pbc.any() or len(order) == 0:
+        return x
+    cell = atoms.cell.complete()
+    anchor = x[starts][atom_body]
+    d, _ = find_mic(x - anchor, cell, pbc)
+    x = anchor + d
+    # Extent of each body along each periodic direction, in fractions of the
+    # cell's width there: the minimum image is unambiguous only below 1/2.
+    frac = np.linalg.solve(cell.T, x.T).T
+    extent = np.maximum.reduceat(frac, starts) - np.minimum.reduceat(frac, starts)
+    extent[:, ~pbc] = 0.0
+    b, k = np.unravel_index(np.argmax(extent), extent.shape)
+    if extent[b, k] >= 0.5:
+        width = abs(np.linalg.det(cell)) / np.linalg.norm(
+            np.cross(cell[(k + 1) % 3], cell[(k + 2) % 3]))
+        raise ValueError(
+            f"body {b} (atoms {_describe(order[atom_body == b])}) spans "
+            f"{extent[b, k] * width:.3f} Å across cell vector {k}, more than half the "
+            f"periodic cell's width there ({width:.3f} Å): cannot make it whole by "
+            "minimum image"
+        )
+    return x

@@ -1,0 +1,126 @@
+r"""Small molecular systems for examples, tests and the demo.
+
+Every builder is deterministic for a given ``seed`` and returns an
+:class:`ase.Atoms` whose molecules are contiguous (water as O, H, H, as
+ASE's :class:`~ase.calculators.tip3p.TIP3P` expects) with a ``mol-id`` array
+(1-based, one per molecule) as ASE's LAMMPS data reader would give.
+"""
+
+import numpy as np
+from ase import Atoms
+from ase.calculators.tip3p import angleHOH, rOH
+
+from rigidmd import quaternion as quat
+
+__all__ = ["water_molecule", "co2_molecule", "water_cluster", "water_box",
+           "co2_water_mixture", "random_quaternions"]
+
+#: C=O bond length of the TraPPE CO2 model (Å).
+R_CO = 1.16
+
+
+def water_molecule():
+    """One TIP3P-geometry water (O, H, H) with its oxygen at the origin, in the xy plane."""
+    half = np.radians(angleHOH) / 2
+    return Atoms("OH2", positions=[
+        [0.0, 0.0, 0.0],
+        [rOH * np.sin(half), rOH * np.cos(half), 0.0],
+        [-rOH * np.sin(half), rOH * np.cos(half), 0.0],
+    ])
+
+
+def co2_molecule():
+    """One linear CO2 (C, O, O) along x, carbon at the origin (C=O 1.16 Å)."""
+    return Atoms("CO2", positions=[[0.0, 0, 0], [R_CO, 0, 0], [-R_CO, 0, 0]])
+
+
+def random_quaternions(n, rng):
+    """``n`` uniformly distributed unit quaternions (Shoemake's method), shape (n, 4)."""
+    u1, u2, u3 = rng.random((3, n))
+    a, b = np.sqrt(1 - u1), np.sqrt(u1)
+    return np.stack([a * np.sin(2 * np.pi * u2), a * np.cos(2 * np.pi * u2),
+                     b * np.sin(2 * np.pi * u3), b * np.cos(2 * np.pi * u3)], axis=1)
+
+
+def _place(molecules, centres, rng):
+    """Copies of template molecules, randomly rotated about their centres of mass."""
+    q = random_quaternions(len(centres), rng)
+    symbols, positions, mol_id = [], [], []
+    for k, (mol, centre) in enumerate(zip(molecules, centres, strict=True)):
+        local = mol.positions - mol.get_center_of_mass()
+        positions.append(centre + quat.rotate(q[k], local))
+        symbols += mol.get_chemical_symbols()
+        mol_id += [k + 1] * len(mol)
+    atoms = Atoms(symbols, positions=np.concatenate(positions))
+    atoms.arrays["mol-id"] = np.array(mol_id)
+    return atoms
+
+
+def _lattice(n_side, spacing):
+    g = np.arange(n_side) * spacing
+    return np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+def water_cluster(n_molecules, seed=0, spacing=3.1, jitter=0.1):
+    """A compact cluster of randomly oriented waters, no periodicity.
+
+    The molecules sit on the simple-cubic lattice sites (``spacing`` Å) closest
+    to the lattice centre, displaced by up to ``jitter`` Å.
+
+    Parameters
+    ----------
+    n_molecules : int
+    seed : int
+    spacing, jitter : float
+        Å.
+    """
+    rng = np.random.default_rng(seed)
+    n_side = int(np.ceil(n_molecules ** (1 / 3)))
+    sites = _lattice(n_side, spacing)
+    centre = sites.mean(axis=0)
+    sites = sites[np.argsort(np.linalg.norm(sites - centre, axis=1), kind="stable")]
+    sites = sites[:n_molecules] + rng.uniform(-jitter, jitter, (n_molecules, 3))
+    return _place([water_molecule()] * n_molecules, sites, rng)
+
+
+def water_box(n_side=3, seed=0, spacing=3.1, jitter=0.1):
+    """A periodic cubic box of ``n_side**3`` randomly oriented waters.
+
+    About liquid density at the default spacing (1.0 g/cm³ at 3.1 Å).  The
+    lattice is offset by half a spacing and every atom wrapped into the cell,
+    so molecules straddle the boundaries.
+    """
+    rng = np.random.default_rng(seed)
+    n = n_side**3
+    sites = _lattice(n_side, spacing) + rng.uniform(-jitter, jitter, (n, 3))
+    atoms = _place([water_molecule()] * n, sites, rng)
+    atoms.cell = np.eye(3) * n_side * spacing
+    atoms.pbc = True
+    atoms.wrap()
+    return atoms
+
+
+def co2_water_mixture(n_co2=4, n_water=4, seed=0, spacing=3.6, box=None):
+    """Linear CO2 and water molecules mixed on a lattice.
+
+    Parameters
+    ----------
+    n_co2, n_water : int
+    seed : int
+    spacing : float
+        Lattice spacing (Å).
+    box : bool, optional
+        If true, a periodic cubic cell of the lattice's size, atoms wrapped.
+    """
+    rng = np.random.default_rng(seed)
+    n = n_co2 + n_water
+    n_side = int(np.ceil(n ** (1 / 3)))
+    sites = _lattice(n_side, spacing)[:n] + rng.uniform(-0.1, 0.1, (n, 3))
+    kinds = [co2_molecule()] * n_co2 + [water_molecule()] * n_water
+    kinds = [kinds[i] for i in rng.permutation(n)]
+    atoms = _place(kinds, sites, rng)
+    if box:
+        atoms.cell = np.eye(3) * n_side * spacing
+        atoms.pbc = True
+        atoms.wrap()
+    return atoms

@@ -1,0 +1,54 @@
+r"""Thermal velocities for rigid bodies (the rigid analogue of ASE's
+:func:`ase.md.velocitydistribution.MaxwellBoltzmannDistribution`)."""
+
+import numpy as np
+from ase import units
+
+from rigidmd import operators as ops
+from rigidmd import quaternion as quat
+from rigidmd.bodies import RigidBodies
+from rigidmd.state import RigidState
+
+__all__ = ["rigid_maxwell_boltzmann"]
+
+
+def rigid_maxwell_boltzmann(atoms, temperature_K, bodies=None, rng=None):
+    r"""Give the atoms rigid-body velocities drawn at a temperature.
+
+    Each body gets a centre-of-mass velocity with components drawn from
+    :math:`\mathcal N(0, k_B T / M)` and a body-frame angular momentum with
+    components :math:`L_{b,k} \sim \mathcal N(0, k_B T I_k)` (none about a
+    zero-moment axis); each point particle gets :math:`v \sim \mathcal N(0,
+    k_B T/m)`.  Atom momenta are set to :math:`m_i (V + \omega \times r_i)`,
+    so they are rigid-consistent: a :class:`~rigidmd.RigidVerlet` started
+    from them removes no kinetic energy.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+    temperature_K : float
+        Temperature (K), non-negative.
+    bodies : optional
+        Body specification, as for :class:`~rigidmd.RigidVerlet`.
+    rng : numpy.random.Generator, optional
+        Source of random numbers (``numpy.random.default_rng()`` if omitted).
+    """
+    if not (np.isfinite(temperature_K) and temperature_K >= 0):
+        raise ValueError(f"temperature_K must be finite and >= 0, got {temperature_K!r}")
+    rng = np.random.default_rng() if rng is None else rng
+    rigid = RigidBodies.resolve(atoms, bodies)
+    geom = rigid.geometry(atoms)
+    kT = units.kB * temperature_K
+    nb = geom.n_bodies
+    V = rng.normal(size=(nb, 3)) * np.sqrt(kT / geom.mass)[:, None]
+    L_body = rng.normal(size=(nb, 3)) * np.sqrt(kT * geom.moments)
+    q = geom.quaternions
+    state = RigidState(X=geom.com, V=V, q=q, p=ops.conjugate_momentum(q, L_body),
+                       x=np.zeros((0, 3)), v=np.zeros((0, 3)))
+    r = quat.rotate(q[geom.atom_body], geom.body_coordinates)
+    momenta = np.zeros((len(atoms), 3))
+    momenta[geom.order] = geom.atom_masses[:, None] * ops.atom_velocities(state, r, geom)
+    free = rigid.free_indices
+    masses = atoms.get_masses()[free]
+    momenta[free] = rng.normal(size=(len(free), 3)) * np.sqrt(kT * masses)[:, None]
+    atoms.set_momenta(momenta, apply_constraint=False)

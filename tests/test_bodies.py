@@ -1,0 +1,125 @@
+import numpy as np
+import pytest
+from ase import Atoms
+
+from rigidmd import RigidBodies
+from rigidmd import quaternion as quat
+from rigidmd.systems import co2_water_mixture, water_box, water_cluster
+
+
+def reconstruct(geom):
+    """Unwrapped atom positions X + R(q) d, in geom.order."""
+    return geom.com[geom.atom_body] + quat.rotate(
+        geom.quaternions[geom.atom_body], geom.body_coordinates
+    )
+
+
+def test_rules_agree_on_waters():
+    atoms = water_cluster(5, seed=3)
+    expected = np.repeat(np.arange(5), 3)
+    atoms.set_tags(expected + 7)
+    for spec, rule in [(None, "connectivity"), ("mol-id", "mol-id"), ("tags", "tags"),
+                       (expected, "body-ids"), ([[0, 1, 2], [3, 4, 5], [6, 7, 8], [9, 10, 11],
+                                                 [12, 13, 14]], "index-lists")]:
+        bodies = RigidBodies.resolve(atoms, spec)
+        np.testing.assert_array_equal(bodies.body_ids, expected)
+        assert bodies.rule == rule
+        assert bodies.n_bodies == 5
+    assert RigidBodies.resolve(atoms, bodies) is bodies
+
+
+def test_free_atoms_and_single_atom_bodies():
+    atoms = water_cluster(2, seed=1) + Atoms("Ne2", positions=[[9, 0, 0], [0, 9, 0]])
+    bodies = RigidBodies.resolve(atoms, [0, 0, 0, 1, 1, 1, 5, -1])
+    np.testing.assert_array_equal(bodies.body_ids, [0, 0, 0, 1, 1, 1, -1, -1])
+    np.testing.assert_array_equal(bodies.free_indices, [6, 7])
+    # Unlisted atoms are free; connectivity finds the isolated atoms too.
+    assert list(RigidBodies.resolve(atoms, [[0, 1, 2]]).free_indices) == [3, 4, 5, 6, 7]
+    conn = RigidBodies.resolve(atoms)
+    np.testing.assert_array_equal(conn.body_ids, [0, 0, 0, 1, 1, 1, -1, -1])
+    geom = conn.geometry(atoms)
+    assert geom.degrees_of_freedom == 12
+
+
+def test_geometry_is_principal_and_reconstructs(rng):
+    atoms = co2_water_mixture(3, 3, seed=2)
+    bodies = RigidBodies.resolve(atoms, "mol-id")
+    g = bodies.geometry(atoms)
+    np.testing.assert_allclose(reconstruct(g), atoms.positions[g.order], atol=1e-13)
+    masses = atoms.get_masses()
+    for b in range(bodies.n_bodies):
+        idx = bodies.atoms_of(b)
+        m = masses[idx]
+        com = m @ atoms.positions[idx] / m.sum()
+        np.testing.assert_allclose(g.com[b], com, atol=1e-13)
+        r = atoms.positions[idx] - com
+        tensor = np.sum(m[:, None, None] * (np.eye(3) * (r * r).sum(1)[:, None, None]
+                                             - r[:, :, None] * r[:, None, :]), axis=0)
+        # The body frame diagonalises the inertia tensor.
+        R = quat.to_matrix(g.quaternions[b])
+        diag = R.T @ tensor @ R
+        np.testing.assert_allclose(diag, np.diag(g.moments[b]), atol=1e-9)
+    linear = g.linear
+    is_co2 = np.array([atoms.symbols[bodies.atoms_of(b)[0]] == "C" for b in range(6)])
+    np.testing.assert_array_equal(linear, is_co2)
+    assert g.degrees_of_freedom == 6 * 3 + 5 * 3
+    assert np.all(g.moments[linear, 0] == 0.0)
+
+
+def test_periodic_molecules_are_made_whole():
+    atoms = water_box(3, seed=4)
+    g = RigidBodies.resolve(atoms, "mol-id").geometry(atoms)
+    x = reconstruct(g)
+    # Some molecules straddle the boundary, yet every O–H distance is the bond length.
+    wrapped = atoms.positions[g.order]
+    assert np.any(np.abs(x - wrapped) > 1.0)
+    oh = np.linalg.norm(x.reshape(-1, 3, 3)[:, 1:] - x.reshape(-1, 3, 3)[:, :1], axis=2)
+    np.testing.assert_allclose(oh, 0.9572, atol=1e-12)
+    # The unwrapped images are the wrapped atoms shifted by lattice vectors.
+    frac = np.linalg.solve(atoms.cell.T, (x - wrapped).T).T
+    np.testing.assert_allclose(frac, np.round(frac), atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "spec, error, match",
+    [
+        ([[0, 1, 2], [2, 3, 4]], ValueError, "atom 2 is in both body 0 and body 1"),
+        ([[0, 1, 99]], ValueError, "body 0 names atom 99"),
+        ([[0, 1], []], ValueError, "body 1 is empty"),
+        ([[0, 1, 1]], ValueError, "lists atom 1 twice"),
+        ([[0.5, 1]], TypeError, "non-integer"),
+        (np.zeros(4, dtype=int), ValueError, "one body id per atom"),
+        (np.full(6, 0.5), TypeError, "must be integers"),
+        ("residues", ValueError, "unknown rule 'residues'"),
+        ("mol-id", ValueError, "no 'mol-id' array"),
+    ],
+)
+def test_bad_body_definitions(spec, error, match):
+    atoms = water_cluster(2, seed=0)
+    del atoms.arrays["mol-id"]
+    with pytest.raises(error, match=match):
+        RigidBodies.resolve(atoms, spec)
+
+
+def test_bad_geometry():
+    atoms = Atoms("H2O", positions=[[1, 1, 1]] * 3)
+    with pytest.raises(ValueError, match=r"body 0 \(atoms \[0, 1, 2\]\) has all its atoms at one"):
+        RigidBodies.resolve(atoms, [[0, 1, 2]]).geometry(atoms)
+    atoms = water_cluster(2)
+    for mass in (0.0, -1.0, np.nan):
+        m = atoms.get_masses()
+        m[4] = mass
+        atoms.set_masses(m)
+        with pytest.raises(ValueError, match="atom 4 .* has mass"):
+            RigidBodies.resolve(atoms, "mol-id").geometry(atoms)
+
+
+def test_body_larger_than_half_the_cell_is_refused():
+    atoms = Atoms("H2", positions=[[0, 0, 0], [1.9, 0, 0]], cell=[4, 4, 4], pbc=True)
+    RigidBodies.resolve(atoms, [[0, 1]]).geometry(atoms)  # 1.9 < 2: fine
+    atoms.positions[1, 0] = 2.1  # minimum image is now -1.9 through the boundary: fine too
+    RigidBodies.resolve(atoms, [[0, 1]]).geometry(atoms)
+    chain = Atoms("H3", positions=[[0, 0, 0], [1.5, 0, 0], [3.0, 0, 0]], cell=[4, 4, 4], pbc=True)
+    message = "body 0 .* spans 2.500 Å across cell vector 0, more than half"
+    with pytest.raises(ValueError, match=message):
+        RigidBodies.resolve(chain, [[0, 1, 2]]).geometry(chain)

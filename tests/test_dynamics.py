@@ -1,0 +1,303 @@
+"""Physics and behaviour of RigidVerlet (NO_SQUISH) without LAMMPS."""
+
+import warnings
+
+import numpy as np
+import pytest
+from ase import Atoms, units
+from ase.calculators.calculator import Calculator, all_changes
+from ase.calculators.tip3p import TIP3P
+from ase.constraints import FixBondLengths
+from ase.io import Trajectory, read
+from conftest import CoulombLJ
+
+from rigidmd import NonFiniteForceError, RigidVerlet, rigid_maxwell_boltzmann
+from rigidmd.systems import co2_water_mixture, water_cluster
+
+BACKENDS = ["numpy", "numba"]
+
+
+def waters(n=8, seed=1, temperature_K=250):
+    atoms = water_cluster(n, seed=seed)
+    atoms.calc = TIP3P(rc=40)
+    rigid_maxwell_boltzmann(atoms, temperature_K, rng=np.random.default_rng(seed))
+    return atoms
+
+
+def mixture(seed=3):
+    """4 CO2 (linear), 4 waters and 2 neon atoms (point particles)."""
+    atoms = co2_water_mixture(4, 4, seed=seed)
+    ne = Atoms("Ne2", positions=[[-3.5, 0.5, 0.3], [1.0, -3.6, 2.0]])
+    ne.arrays["mol-id"] = np.array([100, 101])
+    atoms += ne
+    atoms.calc = CoulombLJ()
+    rigid_maxwell_boltzmann(atoms, 250, bodies="mol-id", rng=np.random.default_rng(seed))
+    return atoms
+
+
+def total_momenta(atoms):
+    p = atoms.get_momenta()
+    return p.sum(axis=0), np.cross(atoms.positions, p).sum(axis=0)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_energy_conservation(backend):
+    atoms = waters()
+    dyn = RigidVerlet(atoms, 1 * units.fs, backend=backend)
+    energies = []
+    dyn.attach(lambda: energies.append(atoms.get_total_energy()), interval=5)
+    dyn.run(2000)
+    e = np.array(energies)
+    t_ps = np.arange(len(e)) * 5e-3
+    drift = np.polyfit(t_ps, e, 1)[0]
+    # Measured: 8 waters heating from 250 K to ~600 K as the random start
+    # relaxes; max |E - E0| = 3.2e-3 eV (0.04 % of the 7.3 eV swing of kinetic
+    # energy), fitted drift 2e-5 eV/ps.  The bounds leave a factor ~3.
+    assert np.abs(e - e[0]).max() < 1e-2
+    assert abs(drift) < 1e-4
+
+
+def test_second_order_convergence():
+    """Error at t = 40 fs against a 1/16 fs reference falls 4x per halving of dt."""
+    final = {}
+    for dt in (2.0, 1.0, 0.5, 0.0625):
+        atoms = waters()
+        RigidVerlet(atoms, dt * units.fs).run(int(round(40 / dt)))
+        final[dt] = atoms.positions.copy()
+    err = {dt: np.abs(final[dt] - final[0.0625]).max() for dt in (2.0, 1.0, 0.5)}
+    orders = [np.log2(err[2.0] / err[1.0]), np.log2(err[1.0] / err[0.5])]
+    # Measured 2.00 and 2.01.
+    np.testing.assert_allclose(orders, 2.0, atol=0.1)
+
+
+def test_momentum_and_angular_momentum_conserved():
+    atoms = waters()
+    P0, L0 = total_momenta(atoms)
+    RigidVerlet(atoms, 1 * units.fs).run(500)
+    P1, L1 = total_momenta(atoms)
+    # Pairwise central forces: both are constants of the splitting; measured
+    # changes are 1e-14 (roundoff on |P|, |L| ~ 1-5).
+    np.testing.assert_allclose(P1, P0, atol=1e-11)
+    np.testing.assert_allclose(L1, L0, atol=1e-11)
+
+
+def test_angular_momentum_with_linear_bodies():
+    atoms = mixture()
+    dyn = RigidVerlet(atoms, 1 * units.fs, bodies="mol-id")
+    P0, L0 = total_momenta(atoms)
+    np.testing.assert_allclose(dyn.get_angular_momentum(), L0, atol=1e-13)
+    dyn.run(500)
+    P1, L1 = total_momenta(atoms)
+    np.testing.assert_allclose(P1, P0, atol=1e-11)
+    # The integrator's invariant includes the axial NO_SQUISH momentum of the
+    # CO2 molecules: conserved to 1e-13 (measured).
+    np.testing.assert_allclose(dyn.get_angular_momentum(), L0, atol=1e-11)
+    # The atoms cannot show that axial part, so their own angular momentum
+    # moves by the splitting error: measured 1.1e-5 of |L| = 23 over 500 fs
+    # (LAMMPS fix rigid/nve does the same).  A bound, not a tolerance.
+    assert 1e-9 < np.abs(L1 - L0).max() < 1e-3
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("make", [waters, mixture], ids=["waters", "co2-water-neon"])
+def test_time_reversal(make, backend):
+    atoms = make()
+    dyn = RigidVerlet(atoms, 1 * units.fs, bodies="mol-id", backend=backend)
+    start = atoms.positions.copy()
+    dyn.run(100)
+    assert np.abs(atoms.positions - start).max() > 0.1
+    atoms.set_momenta(-atoms.get_momenta())
+    dyn.run(100)
+    # Measured 4e-14 Å; chaos amplifies roundoff by < 1e3 over 200 fs.
+    assert np.abs(atoms.positions - start).max() < 1e-9
+
+
+def test_backends_agree():
+    runs = []
+    for backend in BACKENDS:
+        atoms = mixture()
+        RigidVerlet(atoms, 1 * units.fs, bodies="mol-id", backend=backend).run(100)
+        runs.append((atoms.positions.copy(), atoms.get_momenta()))
+    # Same arithmetic in a different order: roundoff, amplified by the chaos.
+    np.testing.assert_allclose(runs[0][0], runs[1][0], atol=1e-10)
+    np.testing.assert_allclose(runs[0][1], runs[1][1], atol=1e-9)
+
+
+def test_degrees_of_freedom_and_temperature():
+    atoms = mixture()
+    dyn = RigidVerlet(atoms, 1 * units.fs, bodies="mol-id")
+    # 4 linear CO2 (5), 4 waters (6), 2 point particles (3).
+    assert dyn.degrees_of_freedom == 4 * 5 + 4 * 6 + 2 * 3
+    assert atoms.get_number_of_degrees_of_freedom() == 50
+    ekin = atoms.get_kinetic_energy()
+    assert atoms.get_temperature() == pytest.approx(2 * ekin / (50 * units.kB))
+    parts = dyn.get_translational_kinetic_energy() + dyn.get_rotational_kinetic_energy()
+    assert parts == pytest.approx(ekin, rel=1e-12)
+    # Linear bodies carry no rotational energy about their axis.
+    assert np.all(dyn.moments_of_inertia[:4, 0] == 0) or np.all(
+        dyn.moments_of_inertia[dyn.geometry.linear, 0] == 0)
+
+
+def test_per_body_state_is_consistent():
+    atoms = waters(4)
+    dyn = RigidVerlet(atoms, 1 * units.fs)
+    dyn.run(10)
+    masses = atoms.get_masses().reshape(4, 3)
+    x = atoms.positions.reshape(4, 3, 3)
+    v = atoms.get_velocities().reshape(4, 3, 3)
+    com = np.einsum("bi,bik->bk", masses, x) / masses.sum(1)[:, None]
+    np.testing.assert_allclose(dyn.com_positions, com, atol=1e-12)
+    np.testing.assert_allclose(dyn.com_velocities, np.einsum("bi,bik->bk", masses, v)
+                               / masses.sum(1)[:, None], atol=1e-12)
+    L = np.einsum("bi,bik->bk", masses, np.cross(x - com[:, None], v - dyn.com_velocities[:, None]))
+    np.testing.assert_allclose(dyn.angular_momenta, L, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(dyn.quaternions, axis=1), 1.0, atol=1e-13)
+    omega = dyn.angular_velocities
+    np.testing.assert_allclose(v, dyn.com_velocities[:, None] + np.cross(
+        omega[:, None], x - com[:, None]), atol=1e-12)
+
+
+def test_projection_reports_removed_energy():
+    atoms = waters(4)
+    rng = np.random.default_rng(0)
+    atoms.set_momenta(atoms.get_momenta() + 0.05 * rng.normal(size=(12, 3)))
+    ekin = atoms.get_kinetic_energy()
+    with pytest.warns(UserWarning, match="removed .* eV of kinetic energy"):
+        dyn = RigidVerlet(atoms, 1 * units.fs)
+    assert dyn.removed_kinetic_energy > 0
+    assert atoms.get_kinetic_energy() == pytest.approx(ekin - dyn.removed_kinetic_energy, rel=1e-12)
+    # Rigid-consistent velocities lose nothing and warn nothing.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        dyn = RigidVerlet(atoms, 1 * units.fs)
+    assert abs(dyn.removed_kinetic_energy) < 1e-14
+
+
+def test_changes_between_runs_are_picked_up():
+    atoms = waters(4)
+    dyn = RigidVerlet(atoms, 1 * units.fs)
+    dyn.run(5)
+    d_ref = dyn.geometry.body_coordinates.copy()
+    # Move one molecule rigidly and redraw velocities.
+    atoms.positions[3:6] += [0.3, -0.2, 0.1]
+    rigid_maxwell_boltzmann(atoms, 100, rng=np.random.default_rng(5))
+    expected_com = dyn.com_positions[1] + [0.3, -0.2, 0.1]
+    ekin = atoms.get_kinetic_energy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # rigid changes: nothing to report
+        dyn.run(0)
+    np.testing.assert_allclose(dyn.com_positions[1], expected_com, atol=1e-12)
+    assert atoms.get_kinetic_energy() == pytest.approx(ekin, rel=1e-12)
+    np.testing.assert_array_equal(dyn.geometry.body_coordinates, d_ref)
+    # A deformed molecule is snapped back onto its rigid shape, with a warning.
+    atoms.positions[0] += [0.05, 0, 0]
+    with pytest.warns(UserWarning) as record:
+        dyn.run(1)
+    messages = " ".join(str(w.message) for w in record)
+    assert "atoms of body 0 are 0.0349 Å from a rigid image" in messages
+    assert "removed 2.91227e-05 eV of kinetic energy" in messages
+    oh = np.linalg.norm(atoms.positions[1] - atoms.positions[0])
+    assert oh == pytest.approx(0.9572, abs=1e-12)
+
+
+def test_trajectory_and_log(tmp_path):
+    atoms = waters(4)
+    traj, log = tmp_path / "md.traj", tmp_path / "md.log"
+    dyn = RigidVerlet(atoms, 1 * units.fs, trajectory=str(traj), logfile=str(log), loginterval=5)
+    dyn.run(20)
+    frames = read(traj, ":")  # plain ASE, no rigidmd import needed to read
+    assert len(frames) == 5
+    np.testing.assert_allclose(frames[-1].positions, atoms.positions)
+    np.testing.assert_allclose(frames[-1].get_momenta(), atoms.get_momenta())
+    assert frames[-1].constraints == []
+    lines = [ln.split() for ln in log.read_text().splitlines()[1:]]
+    assert len(lines) == 5
+    # The logger's temperature counts 6 degrees of freedom per water.
+    assert float(lines[-1][-1]) == pytest.approx(atoms.get_temperature(), abs=0.1)
+    assert atoms.get_temperature() == pytest.approx(
+        2 * atoms.get_kinetic_energy() / (24 * units.kB))
+    with Trajectory(traj) as t:
+        assert t.description["md-type"] == "RigidVerlet"
+
+
+def test_restart_from_trajectory(tmp_path):
+    atoms = waters(8)
+    traj = tmp_path / "run.traj"
+    RigidVerlet(atoms, 1 * units.fs, trajectory=str(traj), loginterval=10).run(200)
+    frame = read(traj, index=10)  # step 100
+    frame.calc = TIP3P(rc=40)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # frames hold rigid velocities
+        RigidVerlet(frame, 1 * units.fs).run(100)
+    # Measured 2e-13 Å: the restarted run rebuilds its body frames from the
+    # frame, which changes only roundoff.
+    assert np.abs(frame.positions - atoms.positions).max() < 1e-8
+
+
+class Exploding(Calculator):
+    """TIP3P until the n-th call, NaN forces after."""
+
+    implemented_properties = ["energy", "forces"]
+
+    def __init__(self, n):
+        super().__init__()
+        self.n, self.calls, self.tip3p = n, 0, TIP3P(rc=40)
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        self.calls += 1
+        self.results = {"energy": self.tip3p.get_potential_energy(atoms),
+                        "forces": self.tip3p.get_forces(atoms)}
+        if self.calls > self.n:
+            self.results["forces"][4, 1] = np.nan
+
+
+def test_non_finite_forces_stop_the_run_cleanly(tmp_path):
+    atoms = waters(4)
+    atoms.calc = Exploding(11)  # the first call is the start of the run
+    traj, log = tmp_path / "md.traj", tmp_path / "md.log"
+    dyn = RigidVerlet(atoms, 1 * units.fs, trajectory=str(traj), logfile=str(log))
+    with pytest.raises(NonFiniteForceError, match=r"atom\(s\) \[4\] after step 10"):
+        dyn.run(20)
+    frames = read(traj, ":")
+    assert len(frames) == 11  # steps 0..10
+    # The atoms are left at the last good step.
+    np.testing.assert_array_equal(frames[-1].positions, atoms.positions)
+    assert len(log.read_text().splitlines()) == 12
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, match",
+    [
+        (dict(timestep=-1.0), ValueError, "timestep must be positive"),
+        (dict(timestep="1 fs"), TypeError, "timestep must be a number"),
+        (dict(bodies=[[0, 1, 2], [2, 3]]), ValueError, "atom 2 is in both body 0 and body 1"),
+        (dict(backend="fortran"), ValueError, "backend must be"),
+    ],
+)
+def test_bad_arguments_change_nothing(tmp_path, kwargs, error, match):
+    atoms = waters(2)
+    before = atoms.copy()
+    traj = tmp_path / "keep.traj"
+    traj.write_text("precious")
+    args = dict(timestep=1 * units.fs) | kwargs
+    with pytest.raises(error, match=match):
+        RigidVerlet(atoms, trajectory=str(traj), **args)
+    assert traj.read_text() == "precious"
+    assert atoms == before and np.array_equal(atoms.get_momenta(), before.get_momenta())
+    assert atoms.constraints == []
+
+
+def test_refuses_other_constraints_and_bad_masses():
+    atoms = waters(2)
+    atoms.set_constraint(FixBondLengths([[0, 1]]))
+    with pytest.raises(ValueError, match="cannot honour other ASE constraints"):
+        RigidVerlet(atoms, 1 * units.fs)
+    atoms = waters(2)
+    masses = atoms.get_masses()
+    masses[2] = 0.0
+    atoms.set_masses(masses)
+    with pytest.raises(ValueError, match="atom 2 .* has mass 0.0"):
+        RigidVerlet(atoms, 1 * units.fs)
+    with pytest.raises(TypeError, match="must be an ase.Atoms"):
+        RigidVerlet([atoms], 1 * units.fs)
