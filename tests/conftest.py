@@ -70,3 +70,19 @@ class CoulombLJ(Calculator):
 @pytest.fixture
 def rng():
     return np.random.default_rng(20261122)
+
+
+def coulomb_lj_lammps(atoms, cutoff=60.0):
+    """LAMMPS commands, charges and type labels that reproduce :class:`CoulombLJ`.
+
+    ``lj/cut/coul/cut`` with a cut-off beyond the cluster, Lorentz–Berthelot
+    mixing and intramolecular pairs excluded (molecules are the bodies).
+    """
+    labels = site_labels(atoms)
+    charges = np.array([PARAMETERS[lab][0] for lab in labels])
+    cmds = [f"pair_style lj/cut/coul/cut {cutoff}", "pair_modify mix arithmetic"]
+    for lab in sorted(set(labels)):
+        _, sigma, epsilon = PARAMETERS[lab]
+        cmds.append(f"pair_coeff {lab} {lab} {epsilon!r} {sigma!r}")
+    cmds.append("neigh_modify exclude molecule/intra all")
+    return cmds, charges, labels

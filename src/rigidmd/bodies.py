@@ -252,6 +252,27 @@ class RigidBodies:
         )
 
     # ------------------------------------------------------------ geometry
+    def _layout(self):
+        order = self.body_atom_order
+        counts = np.bincount(self.body_ids[order], minlength=self.n_bodies)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        return order, starts, np.repeat(np.arange(self.n_bodies), counts)
+
+    def whole_positions(self, atoms):
+        """Atom positions with every body made whole (minimum image from its first atom).
+
+        Free atoms keep their positions.  See :func:`unwrap_bodies`.
+
+        Returns
+        -------
+        numpy.ndarray, shape (n_atoms, 3)
+            Å.
+        """
+        order, starts, atom_body = self._layout()
+        positions = atoms.positions.copy()
+        positions[order] = unwrap_bodies(atoms, order, starts, atom_body)
+        return positions
+
     def geometry(self, atoms):
         """Measure every body in the configuration of ``atoms``.
 
@@ -285,10 +306,7 @@ class RigidBodies:
                 f"atom {a} ({atoms[a].symbol}) has mass {float(masses[a])!r} amu; "
                 "every atom needs a positive finite mass"
             )
-        order = self.body_atom_order
-        counts = np.bincount(self.body_ids[order], minlength=self.n_bodies)
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-        atom_body = np.repeat(np.arange(self.n_bodies), counts)
+        order, starts, atom_body = self._layout()
         x = unwrap_bodies(atoms, order, starts, atom_body)
         m = masses[order]
         if self.n_bodies == 0:

@@ -45,6 +45,8 @@ import numpy as np
 from ase import Atoms, units
 from ase.calculators.tip3p import epsilon0, qH, sigma0
 
+from rigidmd.bodies import RigidBodies
+
 __all__ = [
     "DEFAULT_CMDARGS",
     "LAMMPS_METAL_FTM2V",
@@ -394,14 +396,15 @@ def write_data(
     Parameters
     ----------
     atoms : ase.Atoms
-        Positions (Å, unwrapped for periodic systems), masses (amu) and
+        Positions (Å), masses (amu) and
         velocities (``atoms.get_velocities()``, Å / ASE time unit).
         ``atoms.pbc`` must be all False (a cluster, written in a box with
         ``margin`` around the atoms, for ``boundary f f f``) or all True
         (``boundary p p p``; the cell must be in LAMMPS's lower-triangular
-        form, orthorhombic or triclinic).  Periodic positions are wrapped into
-        the box and image flags written so that LAMMPS's unwrapped
-        coordinates are the given positions.
+        form, orthorhombic or triclinic).  Periodic bodies are first made
+        whole by minimum image (:meth:`RigidBodies.whole_positions`), then
+        wrapped into the box with image flags such that LAMMPS's unwrapped
+        coordinates are those whole positions.
     body_ids : array_like of int, shape (n,)
         ``b >= 0``: the atom belongs to rigid body ``b`` (molecule ID
         ``b + 1``); ``-1``: free atom (its own molecule ID after the bodies').
@@ -444,6 +447,11 @@ def write_data(
     free = body_ids < 0
     molecule_ids[free] = n_body_ids + 1 + np.arange(int(free.sum()))
 
+    if atoms.pbc.any():
+        # Every body whole, as rigidmd sees it, so that LAMMPS's image flags
+        # put each molecule's atoms together.
+        atoms = atoms.copy()
+        atoms.positions = RigidBodies(body_ids).whole_positions(atoms)
     lo, hi, tilt, boundary, pos, image = _lammps_box(atoms, margin)
     vel = atoms.get_velocities()
     vel = np.zeros((n, 3)) if vel is None else vel * vfac
@@ -573,9 +581,9 @@ def lammps_energy_forces(
         See :func:`write_data`.
     workdir : str or os.PathLike, optional
         Directory for the data file (kept); default a temporary directory.
-
     type_labels : sequence of str, shape (n,), optional
         Per-atom type labels; see :func:`write_data`.
+
     Returns
     -------
     energy : float
@@ -771,9 +779,9 @@ def run_rigid_reference(
     ase_constants : bool, default True
         See the module docstring; if False the timestep is converted with
         ``1 ps = 1000 * ase.units.fs``.
-
     type_labels : sequence of str, shape (n,), optional
         Per-atom type labels; see :func:`write_data`.
+
     Returns
     -------
     RigidReference
