@@ -7,8 +7,8 @@ ASE's :class:`~ase.calculators.tip3p.TIP3P` expects) with a ``mol-id`` array
 """
 
 import numpy as np
-from ase import Atoms
-from ase.calculators.tip3p import angleHOH, rOH
+from ase import Atoms, units
+from ase.calculators.tip3p import angleHOH, epsilon0, qH, rOH, sigma0
 
 from rigidmd import quaternion as quat
 
@@ -61,11 +61,25 @@ def _lattice(n_side, spacing):
     return np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
 
 
-def water_cluster(n_molecules, seed=0, spacing=3.1, jitter=0.1):
-    """A compact cluster of randomly oriented waters, no periodicity.
+def _tip3p_pair_energy(a, b):
+    """TIP3P energy (eV) of candidate waters ``a`` (k, 3, 3) with waters ``b`` (m, 3)."""
+    charges = np.array([-2 * qH, qH, qH])
+    d = np.linalg.norm(a[:, :, None, :] - b[None, None, :, :], axis=-1)  # (k, 3, m)
+    qb = np.tile(charges, len(b) // 3)
+    coulomb = (units.Hartree * units.Bohr) * np.einsum("i,kij,j->k", charges, 1 / d, qb)
+    r_oo = d[:, 0, 0::3]
+    lj = 4 * epsilon0 * ((sigma0 / r_oo) ** 12 - (sigma0 / r_oo) ** 6)
+    return coulomb + lj.sum(axis=1)
+
+
+def water_cluster(n_molecules, seed=0, spacing=3.1, jitter=0.1, tries=64):
+    """A compact cluster of waters, no periodicity.
 
     The molecules sit on the simple-cubic lattice sites (``spacing`` Å) closest
-    to the lattice centre, displaced by up to ``jitter`` Å.
+    to the lattice centre, displaced by up to ``jitter`` Å.  Each is given, in
+    turn, the best of ``tries`` random orientations (lowest TIP3P energy with
+    the molecules placed before it), which builds a hydrogen-bonded start
+    instead of one that heats by hundreds of kelvin in the first picosecond.
 
     Parameters
     ----------
@@ -73,6 +87,8 @@ def water_cluster(n_molecules, seed=0, spacing=3.1, jitter=0.1):
     seed : int
     spacing, jitter : float
         Å.
+    tries : int
+        Orientations tried per molecule; 1 gives uniformly random orientations.
     """
     rng = np.random.default_rng(seed)
     n_side = int(np.ceil(n_molecules ** (1 / 3)))
@@ -80,7 +96,17 @@ def water_cluster(n_molecules, seed=0, spacing=3.1, jitter=0.1):
     centre = sites.mean(axis=0)
     sites = sites[np.argsort(np.linalg.norm(sites - centre, axis=1), kind="stable")]
     sites = sites[:n_molecules] + rng.uniform(-jitter, jitter, (n_molecules, 3))
-    return _place([water_molecule()] * n_molecules, sites, rng)
+    template = water_molecule()
+    local = template.positions - template.get_center_of_mass()
+    placed = np.zeros((0, 3))
+    for site in sites:
+        q = random_quaternions(tries, rng)
+        candidates = site + quat.rotate(q[:, None, :], local[None, :, :])
+        best = 0 if len(placed) == 0 else int(np.argmin(_tip3p_pair_energy(candidates, placed)))
+        placed = np.concatenate([placed, candidates[best]])
+    atoms = Atoms("OH2" * n_molecules, positions=placed)
+    atoms.arrays["mol-id"] = np.repeat(np.arange(1, n_molecules + 1), 3)
+    return atoms
 
 
 def water_box(n_side=3, seed=0, spacing=3.1, jitter=0.1):
