@@ -86,3 +86,13 @@ def coulomb_lj_lammps(atoms, cutoff=60.0):
         cmds.append(f"pair_coeff {lab} {lab} {epsilon!r} {sigma!r}")
     cmds.append("neigh_modify exclude molecule/intra all")
     return cmds, charges, labels
+
+
+class ZeroForce(Calculator):
+    """No interactions: zero energy and forces (a free rigid body)."""
+
+    implemented_properties = ["energy", "forces"]
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        self.results = {"energy": 0.0, "forces": np.zeros((len(self.atoms), 3))}

@@ -15,6 +15,7 @@ from rigidmd import _numba
 from rigidmd import operators as ops
 from rigidmd import quaternion as quat
 from rigidmd.bodies import RigidBodies, unwrap_bodies
+from rigidmd.schemes import BUILTIN_SCHEMES, Scheme, SchemeContext, resolve_scheme
 from rigidmd.state import RigidState
 
 __all__ = ["RigidVerlet", "RigidBodyDOF", "NonFiniteForceError"]
@@ -117,11 +118,22 @@ class RigidVerlet(MolecularDynamics):
         MD log (``"-"`` for stdout).
     loginterval : int, default 1
         Interval of the trajectory and log, in steps.
+    integrator : str, list or Scheme, default ``"no_squish"``
+        The rotational integrator: ``"no_squish"`` (LAMMPS ``fix rigid/nve``),
+        ``"richardson"`` (LAMMPS ``fix rigid``), ``"rozmanov_kusalik"``
+        (RMPCDMD), ``"pcdm"`` (Zhao & van Wachem, two force calls per step),
+        ``"exadem"`` (first order; a DEM scheme, not for molecules); or a
+        scheme of operators as a list, a :class:`~rigidmd.schemes.Scheme` or a
+        YAML file.  See :mod:`rigidmd.schemes`.
+    integrator_options : dict, optional
+        Parameters of a built-in integrator's operators, e.g.
+        ``{"tol": 1e-13, "max_iter": 100}`` for ``"rozmanov_kusalik"``.
     backend : {None, "numba", "numpy"}, optional
-        ``"numpy"`` is the readable reference path (:mod:`rigidmd.operators`);
-        ``"numba"`` runs the same arithmetic as compiled loops over bodies
-        (about 20 times faster per body).  ``None`` picks numba when it is
-        installed.
+        For ``"no_squish"``: ``"numpy"`` runs the scheme's operators
+        (:mod:`rigidmd.operators`, the readable reference path); ``"numba"``
+        runs the same arithmetic as two compiled loops over bodies (about 6
+        times faster per body).  ``None`` picks numba when it is installed.
+        Other integrators always run their operators.
     **kwargs
         Passed to :class:`ase.md.md.MolecularDynamics` (e.g. ``append_trajectory``).
 
@@ -140,7 +152,8 @@ class RigidVerlet(MolecularDynamics):
     """
 
     def __init__(self, atoms, timestep, bodies=None, trajectory=None, logfile=None,
-                 loginterval=1, backend=None, **kwargs):
+                 loginterval=1, integrator="no_squish", integrator_options=None, backend=None,
+                 **kwargs):
         # -- validate everything before touching the atoms or any file --
         if not isinstance(atoms, Atoms):
             raise TypeError(f"atoms must be an ase.Atoms, got {type(atoms).__name__}")
@@ -166,6 +179,7 @@ class RigidVerlet(MolecularDynamics):
         if not np.all(np.isfinite(momenta)):
             a = int(np.flatnonzero(~np.isfinite(momenta).all(axis=1))[0])
             raise ValueError(f"atom {a} has a non-finite momentum {momenta[a]}")
+        scheme = resolve_scheme(integrator, **(integrator_options or {}))
         rigid = RigidBodies.resolve(atoms, bodies)
         geom = rigid.geometry(atoms)
 
@@ -173,6 +187,8 @@ class RigidVerlet(MolecularDynamics):
         super().__init__(atoms, dt, trajectory=trajectory, logfile=logfile,
                          loginterval=loginterval, **kwargs)
         self.backend = backend
+        self.scheme = scheme
+        self._fused = backend == "numba" and scheme == Scheme(BUILTIN_SCHEMES["no_squish"])
         self.bodies = rigid
         self.geometry = geom
         self._free = rigid.free_indices
@@ -192,9 +208,9 @@ class RigidVerlet(MolecularDynamics):
             p=np.zeros((nb, 4)), x=atoms.positions[self._free].copy(), v=np.zeros((nf, 3)),
         )
         self._backup = self._state.copy()
-        self._F = np.zeros((nb, 3))
-        self._tau = np.zeros((nb, 3))
-        self._f = np.zeros((nf, 3))
+        self._ctx = SchemeContext(
+            state=self._state, geometry=geom, dt=dt, F=np.zeros((nb, 3)), tau=np.zeros((nb, 3)),
+            f=np.zeros((nf, 3)), free_masses=self._free_masses, evaluate=self._evaluate_forces)
         self._r = np.zeros((len(geom.order), 3))
         self.removed_kinetic_energy = 0.0
         self._synced = None
@@ -204,7 +220,9 @@ class RigidVerlet(MolecularDynamics):
     # ------------------------------------------------------------ ASE API
     def todict(self):
         d = super().todict()
-        d.update(integrator="no_squish", bodies_rule=self.bodies.rule,
+        integrator = (self.scheme.name if self.scheme.name in BUILTIN_SCHEMES
+                      else self.scheme.todict())
+        d.update(integrator=integrator, bodies_rule=self.bodies.rule,
                  n_bodies=self.geometry.n_bodies)
         return d
 
@@ -227,53 +245,39 @@ class RigidVerlet(MolecularDynamics):
 
     # ------------------------------------------------------------ the step
     def step(self):
-        """Advance one NO_SQUISH step of ``self.dt``."""
+        """Advance one step of ``self.dt`` with the integrator's scheme."""
+        ctx = self._ctx
         self._state.copy_into(self._backup)
+        saved = (ctx.F.copy(), ctx.tau.copy(), ctx.f.copy(), dict(ctx.scratch))
         try:
-            self._first_half()
-            forces = self._get_forces()
+            if self._fused:
+                self._fused_step()
+            else:
+                self.scheme.run(ctx)
+                self._write_momenta()
         except BaseException:
             self._backup.copy_into(self._state)
+            ctx.F, ctx.tau, ctx.f, ctx.scratch = saved
             self._place_atoms()
             raise
-        self._second_half(forces)
 
-    def _first_half(self):
-        s, g, dt = self._state, self.geometry, self.dt
+    def _fused_step(self):
+        """NO_SQUISH as two compiled loops over bodies (the same arithmetic as the scheme)."""
+        s, g, ctx, dt = self._state, self.geometry, self._ctx, self.dt
         positions = self.atoms.arrays["positions"]
-        if self.backend == "numba":
-            _numba.first_half(s.X, s.V, s.q, s.p, self._F, self._tau, self._inv_mass,
-                              self._inv4i, dt, g.body_coordinates, self._bounds,
-                              g.order, self._r, positions)
-        else:
-            ops.translational_kick(s, self._F, self._f, g.mass, self._free_masses, 0.5 * dt)
-            ops.drift(s, dt)
-            ops.rotational_kick(s, self._tau, 0.5 * dt)
-            ops.free_rotor(s, g.moments, dt)
-            self._r, positions[g.order] = ops.place_atoms(s, g)
+        _numba.first_half(s.X, s.V, s.q, s.p, ctx.F, ctx.tau, self._inv_mass, self._inv4i, dt,
+                          g.body_coordinates, self._bounds, g.order, self._r, positions)
         if len(self._free):
-            if self.backend == "numba":
-                s.v += (0.5 * dt) * self._f / self._free_masses[:, None]
-                s.x += dt * s.v
+            s.v += (0.5 * dt) * ctx.f / self._free_masses[:, None]
+            s.x += dt * s.v
             positions[self._free] = s.x
-
-    def _second_half(self, forces):
-        s, g, dt = self._state, self.geometry, self.dt
+        forces = self._get_forces()
         momenta = self.atoms.arrays["momenta"]
+        _numba.second_half(s.V, s.q, s.p, ctx.F, ctx.tau, self._inv_mass, self._inv_moments, dt,
+                           forces, self._bounds, g.order, g.atom_masses, self._r, momenta)
         if len(self._free):
-            self._f = forces[self._free]
-        if self.backend == "numba":
-            _numba.second_half(s.V, s.q, s.p, self._F, self._tau, self._inv_mass,
-                               self._inv_moments, dt, forces, self._bounds, g.order,
-                               g.atom_masses, self._r, momenta)
-            if len(self._free):
-                s.v += (0.5 * dt) * self._f / self._free_masses[:, None]
-        else:
-            self._F, self._tau = ops.reduce_forces(forces, self._r, g)
-            ops.translational_kick(s, self._F, self._f, g.mass, self._free_masses, 0.5 * dt)
-            ops.rotational_kick(s, self._tau, 0.5 * dt)
-            momenta[g.order] = g.atom_masses[:, None] * ops.atom_velocities(s, self._r, g)
-        if len(self._free):
+            ctx.f = forces[self._free]
+            s.v += (0.5 * dt) * ctx.f / self._free_masses[:, None]
             momenta[self._free] = self._free_masses[:, None] * s.v
 
     # ------------------------------------------------------------ forces
@@ -295,11 +299,12 @@ class RigidVerlet(MolecularDynamics):
         return forces
 
     def _evaluate_forces(self):
-        """Forces, body forces and torques at the current positions."""
+        """Place the atoms from the state, call the calculator, reduce to bodies."""
+        self._place_atoms()
         forces = self._get_forces()
-        self._F, self._tau = ops.reduce_forces(forces, self._r, self.geometry)
-        if len(self._free):
-            self._f = forces[self._free]
+        ctx = self._ctx
+        ctx.F, ctx.tau = ops.reduce_forces(forces, self._r, self.geometry)
+        ctx.f = forces[self._free]
 
     # ------------------------------------------------------------ atoms <-> state
     def _place_atoms(self):
@@ -314,13 +319,17 @@ class RigidVerlet(MolecularDynamics):
             self._r, positions[g.order] = ops.place_atoms(s, g)
         positions[self._free] = s.x
 
-    def _write_atoms(self):
-        """Write positions and rigid momenta of the current state to the atoms."""
+    def _write_momenta(self):
+        """Write rigid momenta of the current state to the atoms (positions placed already)."""
         s, g = self._state, self.geometry
-        self._place_atoms()
         momenta = self.atoms.arrays["momenta"]
         momenta[g.order] = g.atom_masses[:, None] * ops.atom_velocities(s, self._r, g)
         momenta[self._free] = self._free_masses[:, None] * s.v
+
+    def _write_atoms(self):
+        """Write positions and rigid momenta of the current state to the atoms."""
+        self._place_atoms()
+        self._write_momenta()
         self._remember_atoms()
 
     def _remember_atoms(self):
@@ -397,6 +406,7 @@ class RigidVerlet(MolecularDynamics):
         if moved or kicked:
             self._read_momenta(previous=None if moved else momenta)
             self._write_atoms()
+            self._ctx.scratch.clear()
 
     # ------------------------------------------------------------ per-body state
     @property

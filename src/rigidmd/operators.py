@@ -312,3 +312,231 @@ def uniform_rescale(new, old, geom, rtol=1e-12):
     diff = new - scale[geom.atom_body, None] * old
     misfit = np.add.reduceat(np.einsum("ij,ij->i", diff, diff), geom.starts)
     return scale, misfit <= rtol**2 * norm2
+
+
+# ---------------------------------------------------------------- conversions
+def _safe_inverse(moments):
+    """1/I componentwise, 0 where I = 0 (the axis of a linear body)."""
+    return np.where(moments > 0, 1.0 / np.where(moments > 0, moments, 1.0), 0.0)
+
+
+def lab_angular_momentum(q, p):
+    r"""Lab angular momentum :math:`L = R(q) L_b` from the NO_SQUISH momentum, (n_bodies, 3)."""
+    return quat.rotate(q, body_angular_momentum(q, p))
+
+
+def momentum_from_lab(q, L):
+    r"""NO_SQUISH momentum :math:`p = 2\, q \otimes (0, R(q)^\mathsf{T} L)` of a lab ``L``."""
+    return conjugate_momentum(q, quat.rotate_inverse(q, L))
+
+
+def omega_from_lab(q, L, moments):
+    r"""Lab angular velocity :math:`\omega = R\, I^{-1} R^\mathsf{T} L`.
+
+    Components about zero-moment axes are 0.
+    """
+    return quat.rotate(q, _safe_inverse(moments) * quat.rotate_inverse(q, L))
+
+
+def lab_from_omega(q, omega, moments):
+    r"""Lab angular momentum :math:`L = R\, I\, R^\mathsf{T} \omega`."""
+    return quat.rotate(q, moments * quat.rotate_inverse(q, omega))
+
+
+def euler_acceleration(omega_body, torque_body, moments):
+    r"""Body-frame angular acceleration from Euler's equations.
+
+    .. math:: \dot\omega_{b} = I^{-1}\left(\tau_b - \omega_b \times I \omega_b\right)
+
+    componentwise :math:`\dot\omega_i = (\tau_i - (I_k - I_j)\,\omega_j \omega_k) / I_i`
+    for cyclic :math:`(i, j, k)`; 0 about a zero-moment axis.
+
+    Parameters
+    ----------
+    omega_body, torque_body : numpy.ndarray, shape (n_bodies, 3)
+    moments : numpy.ndarray, shape (n_bodies, 3)
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_bodies, 3)
+        rad per ASE time unit squared.
+    """
+    rhs = torque_body - np.cross(omega_body, moments * omega_body)
+    return _safe_inverse(moments) * rhs
+
+
+def _advance_quaternion(q, omega_lab, h):
+    r""":math:`\mathrm{normalize}(q + h \cdot \tfrac12 (0, \omega) \otimes q)`, one Euler step."""
+    w = np.concatenate([np.zeros(omega_lab.shape[:-1] + (1,)), omega_lab], axis=-1)
+    return quat.normalize(q + 0.5 * h * quat.multiply(w, q))
+
+
+def _exact_rotation(q, omega_lab, h):
+    r"""Rotate ``q`` by the angle :math:`|\omega| h` about :math:`\hat\omega` (lab frame).
+
+    :math:`(\cos(|\omega| h/2), \sin(|\omega| h/2)\,\hat\omega) \otimes q`.
+
+    The identity where :math:`\omega = 0`.
+    """
+    norm = np.linalg.norm(omega_lab, axis=-1, keepdims=True)
+    half = 0.5 * h * norm
+    axis = np.divide(omega_lab, norm, out=np.zeros_like(omega_lab), where=norm > 0)
+    dq = np.concatenate([np.cos(half), np.sin(half) * axis], axis=-1)
+    return quat.multiply(dq, q)
+
+
+# ---------------------------------------------------------------- Richardson
+def richardson_rotate(state, moments, h):
+    r"""Richardson-iterated orientation update at fixed lab :math:`L` (LAMMPS ``fix rigid``).
+
+    With :math:`\delta = h/2`, :math:`W(\omega, q) = (0, \omega) \otimes q` and
+    :math:`\omega` from :math:`L, q`:
+
+    .. math::
+        q_\mathrm{full} = \mathrm{n}(q + \delta W(\omega, q)),\quad
+        q_\frac12 = \mathrm{n}(q + \tfrac{\delta}{2} W(\omega, q)),\quad
+        q_\frac12 \leftarrow \mathrm{n}(q_\frac12
+            + \tfrac{\delta}{2} W(\omega_\frac12, q_\frac12)),\quad
+        q \leftarrow \mathrm{n}(2 q_\frac12 - q_\mathrm{full})
+
+    where :math:`\omega_\frac12` is computed from :math:`L` and :math:`q_\frac12`
+    and :math:`\mathrm n` normalises.  The momentum ``p`` is rebuilt so that
+    the lab :math:`L` is unchanged.
+    """
+    L = lab_angular_momentum(state.q, state.p)
+    q = state.q
+    omega = omega_from_lab(q, L, moments)
+    delta = 0.5 * h
+    q_full = _advance_quaternion(q, omega, 2 * delta)
+    q_half = _advance_quaternion(q, omega, delta)
+    q_half = _advance_quaternion(q_half, omega_from_lab(q_half, L, moments), delta)
+    state.q = quat.normalize(2.0 * q_half - q_full)
+    state.p = momentum_from_lab(state.q, L)
+
+
+# ---------------------------------------------------------------- Rozmanov–Kusalik
+class ConvergenceError(ValueError):
+    """An iterative orientation update did not converge within its cap."""
+
+
+def rozmanov_kusalik_rotate(state, torque, moments, h, tol=1e-13, max_iter=100):
+    r"""Rozmanov–Kusalik half kick and iterated orientation update over ``h``.
+
+    Phys. Rev. E 81, 056706 (2010), sec. IV.A (RMPCDMD ``rigid_body_vv1``),
+    with :math:`T` the lab torque at the start:
+
+    1. :math:`L_b = R(q_0)^\mathsf{T} L`, :math:`T_b = R(q_0)^\mathsf{T} T`,
+       :math:`\dot L_b = T_b - \omega_b \times L_b`;
+    2. predictor :math:`\dot q = \tfrac12 q_0 \otimes (0, (L_b + \tfrac h2 \dot L_b)/I)`,
+       :math:`q_\frac12 = \mathrm n(q_0 + \tfrac h2 \dot q)`;
+    3. :math:`L_\frac12 = L + \tfrac h2 T`;
+    4. repeat
+       :math:`\dot q = \tfrac12 q_\frac12 \otimes (0, R(q_\frac12)^\mathsf{T} L_\frac12 / I)`,
+       :math:`q_\frac12 = \mathrm n(q_0 + \tfrac h2 \dot q)` until no component of
+       :math:`q_\frac12` moves by ``tol`` or more;
+    5. :math:`q = \mathrm n(q_0 + h \dot q)`.
+
+    Afterwards the state's lab angular momentum is :math:`L_\frac12`.
+
+    Raises
+    ------
+    ConvergenceError
+        After ``max_iter`` iterations, naming the worst body.
+    """
+    q0 = state.q
+    inv = _safe_inverse(moments)
+    L = lab_angular_momentum(q0, state.p)
+    L_body = quat.rotate_inverse(q0, L)
+    dL_body = quat.rotate_inverse(q0, torque) - np.cross(inv * L_body, L_body)
+    qdot = 0.5 * quat.vector_product(q0, inv * (L_body + 0.5 * h * dL_body))
+    q_half = quat.normalize(q0 + 0.5 * h * qdot)
+    L_half = L + 0.5 * h * torque
+    for _ in range(max_iter):
+        qdot = 0.5 * quat.vector_product(q_half, inv * quat.rotate_inverse(q_half, L_half))
+        new = quat.normalize(q0 + 0.5 * h * qdot)
+        change = np.abs(new - q_half).max(axis=1) if len(new) else np.zeros(0)
+        q_half = new
+        if not np.any(change >= tol):
+            break
+    else:
+        worst = int(np.argmax(change))
+        raise ConvergenceError(
+            f"rozmanov_kusalik: body {worst} did not converge in {max_iter} iterations "
+            f"(last change {change[worst]:.3g} > tol {tol:.3g}); "
+            "use a smaller time step or a larger max_iter"
+        )
+    state.q = quat.normalize(q0 + h * qdot)
+    state.p = momentum_from_lab(state.q, L_half)
+
+
+# ---------------------------------------------------------------- PCDM
+def pcdm_predict(q0, omega0, torque0, moments, h):
+    r"""PCDM predictor (Zhao & van Wachem, Acta Mech. 224, 3091 (2013)).
+
+    .. math::
+        \omega_{b0} = R(q_0)^\mathsf{T}\omega_0,\quad
+        \dot\omega_{b0} = I^{-1}(\tau_{b0} - \omega_{b0}\times I\omega_{b0}),\quad
+        \omega_{\frac14} = R(q_0)(\omega_{b0} + \tfrac14 \dot\omega_{b0} h),\quad
+        q'_\frac12 = (\cos(|\omega_\frac14| h/4),
+                     \sin(|\omega_\frac14| h/4)\,\hat\omega_\frac14)
+                     \otimes q_0
+
+    Returns
+    -------
+    q_half : numpy.ndarray, shape (n_bodies, 4)
+        Predicted midpoint orientation, where the torque is to be evaluated.
+    omega_body0, domega_body0 : numpy.ndarray, shape (n_bodies, 3)
+        :math:`\omega_{b0}` and :math:`\dot\omega_{b0}`, for :func:`pcdm_correct`.
+    """
+    omega_body0 = quat.rotate_inverse(q0, omega0)
+    domega_body0 = euler_acceleration(omega_body0, quat.rotate_inverse(q0, torque0), moments)
+    omega_quarter = quat.rotate(q0, omega_body0 + 0.25 * h * domega_body0)
+    return _exact_rotation(q0, omega_quarter, 0.5 * h), omega_body0, domega_body0
+
+
+def pcdm_correct(q0, q_half, omega_body0, domega_body0, torque_half, moments, h):
+    r"""PCDM corrector, with the torque evaluated at the predicted midpoint.
+
+    .. math::
+        \omega_{b\frac12} = \omega_{b0} + \tfrac12\dot\omega_{b0} h,\quad
+        \dot\omega_{b\frac12} = I^{-1}(\tau_{b\frac12}
+            - \omega_{b\frac12}\times I\omega_{b\frac12}),\\
+        q_1 = (\cos(|\omega_\frac12| h/2), \sin(|\omega_\frac12| h/2)\,\hat\omega_\frac12)
+              \otimes q_0,\quad \omega_\frac12 = R(q'_\frac12)\,\omega_{b\frac12},\quad
+        \omega_1 = R(q_1)(\omega_{b0} + \dot\omega_{b\frac12} h)
+
+    with :math:`\tau_{b\frac12} = R(q'_\frac12)^\mathsf{T} \tau(q'_\frac12)`.
+
+    Returns
+    -------
+    q1 : numpy.ndarray, shape (n_bodies, 4)
+    omega1 : numpy.ndarray, shape (n_bodies, 3)
+        Lab angular velocity at the end of the step.
+    """
+    omega_body_half = omega_body0 + 0.5 * h * domega_body0
+    domega_half = euler_acceleration(
+        omega_body_half, quat.rotate_inverse(q_half, torque_half), moments)
+    q1 = _exact_rotation(q0, quat.rotate(q_half, omega_body_half), h)
+    return q1, quat.rotate(q1, omega_body0 + h * domega_half)
+
+
+# ---------------------------------------------------------------- exaDEM
+def exadem_push_to_quaternion(q, omega, alpha, h):
+    r"""exaDEM ``push_to_quaternion`` (lab frame).
+
+    :math:`Q \leftarrow \mathrm n(Q + h\,\tfrac12 (0, \omega) \otimes Q)`, then
+    :math:`\omega \mathrel{+}= \tfrac h2 \alpha`.
+
+    Returns
+    -------
+    q, omega : numpy.ndarray
+    """
+    return _advance_quaternion(q, omega, h), omega + 0.5 * h * alpha
+
+
+def exadem_angular_acceleration(q, omega, torque, moments):
+    r"""exaDEM ``push_to_angular_acceleration``: :math:`\alpha = R(Q)\,\dot\omega_b`
+    with :math:`\dot\omega_b` from Euler's equations at :math:`\omega_b = R(Q)^\mathsf{T}\omega`,
+    :math:`M_b = R(Q)^\mathsf{T} M`."""
+    omega_body = quat.rotate_inverse(q, omega)
+    return quat.rotate(q, euler_acceleration(omega_body, quat.rotate_inverse(q, torque), moments))

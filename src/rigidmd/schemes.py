@@ -1,0 +1,467 @@
+r"""Time steps as lists of named operators, and the built-in integrators.
+
+As in exaDEM, a time step is a list of operators, each with parameters; every
+operator that advances time takes ``dt_scale``, a factor on the time step.  A
+scheme can be written as a Python list or as YAML::
+
+    - translational_kick: {dt_scale: 0.5}
+    - drift
+    - rotational_kick: {dt_scale: 0.5}
+    - no_squish_rotate
+    - compute_force
+    - translational_kick: {dt_scale: 0.5}
+    - rotational_kick: {dt_scale: 0.5}
+
+(the built-in ``no_squish``).  The built-in integrators are such lists, so
+each piece of math (in :mod:`rigidmd.operators`) exists once:
+
+============================  ======================================================  ======
+name                          what it is                                              order
+============================  ======================================================  ======
+``no_squish`` (default)       NO_SQUISH, LAMMPS ``fix rigid/nve``; symplectic         2
+``richardson``                Richardson iteration, LAMMPS ``fix rigid``              2
+``rozmanov_kusalik``          iterated quaternion velocity Verlet (RMPCDMD)           2
+``pcdm``                      Zhao & van Wachem predictor–corrector, 2 forces/step    2
+``exadem``                    exaDEM operator scheme (DEM; heats molecules)           1
+============================  ======================================================  ======
+
+Operators
+---------
+Translation (bodies' centres of mass and free atoms):
+``translational_kick`` (:math:`V \mathrel{+}= hF/M`), ``drift`` (:math:`X \mathrel{+}= hV`),
+and exaDEM's ``push_f_v_r`` (:math:`X \mathrel{+}= hV + \tfrac{h^2}{2}a`),
+``push_f_v`` (:math:`V \mathrel{+}= \tfrac h2 a`), ``force_to_accel`` (:math:`a = F/M`).
+Rotation: ``rotational_kick`` (:math:`L \mathrel{+}= h\tau`), ``no_squish_rotate``,
+``richardson_rotate``, ``rozmanov_kusalik_rotate`` (with ``tol``, ``max_iter``),
+``pcdm_predict`` / ``pcdm_correct``, and exaDEM's ``push_to_quaternion``,
+``push_to_angular_acceleration``, ``push_to_angular_velocity``.  Forces:
+``compute_force`` (place atoms, call the calculator, reduce to body forces and
+torques), ``reset_force_moment``.  Groups: ``combined_compute_prolog`` and
+``combined_compute_epilog`` (exaDEM's merged operators).  Here
+:math:`h = \mathrm{dt\_scale}\cdot\Delta t`.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rigidmd import operators as ops
+
+__all__ = ["Scheme", "SchemeContext", "OPERATORS", "BUILTIN_SCHEMES", "resolve_scheme"]
+
+
+@dataclass
+class SchemeContext:
+    """What operators read and write during a step.
+
+    Attributes
+    ----------
+    state : RigidState
+    geometry : BodyGeometry
+    dt : float
+        Time step (ASE time units).
+    F, tau : numpy.ndarray, shape (n_bodies, 3)
+        Body forces (eV/Å) and lab torques (eV) from the last force call.
+    f : numpy.ndarray, shape (n_free, 3)
+        Forces on the free atoms (eV/Å).
+    free_masses : numpy.ndarray, shape (n_free,)
+    evaluate : callable
+        ``evaluate()`` places the atoms from ``state``, calls the calculator
+        and sets ``F``, ``tau`` and ``f``.
+    scratch : dict
+        Quantities an operator hands to a later one (exaDEM's accelerations,
+        PCDM's start-of-step values).  Kept across steps.
+    """
+
+    state: object
+    geometry: object
+    dt: float
+    F: np.ndarray
+    tau: np.ndarray
+    f: np.ndarray
+    free_masses: np.ndarray
+    evaluate: object
+    scratch: dict = field(default_factory=dict)
+
+    @property
+    def moments(self):
+        return self.geometry.moments
+
+    def omega(self):
+        """Lab angular velocities of the bodies."""
+        return ops.omega_from_lab(self.state.q, ops.lab_angular_momentum(self.state.q,
+                                                                         self.state.p),
+                                  self.moments)
+
+    def set_omega(self, omega):
+        """Set the bodies' lab angular velocities (at the current orientations)."""
+        L = ops.lab_from_omega(self.state.q, omega, self.moments)
+        self.state.p = ops.momentum_from_lab(self.state.q, L)
+
+    def accelerations(self):
+        """exaDEM's stored accelerations ``(a_bodies, a_free)``, from the forces if absent."""
+        if "a" not in self.scratch:
+            force_to_accel(self)
+        return self.scratch["a"], self.scratch["a_free"]
+
+    def angular_acceleration(self):
+        """exaDEM's stored lab angular accelerations, from ω and τ if absent."""
+        if "alpha" not in self.scratch:
+            push_to_angular_acceleration(self)
+        return self.scratch["alpha"]
+
+
+# ---------------------------------------------------------------- operators
+# Each takes the context, h = dt_scale * dt, and its own keyword parameters.
+
+def translational_kick(ctx, h):
+    ops.translational_kick(ctx.state, ctx.F, ctx.f, ctx.geometry.mass, ctx.free_masses, h)
+
+
+def drift(ctx, h):
+    ops.drift(ctx.state, h)
+
+
+def rotational_kick(ctx, h):
+    ops.rotational_kick(ctx.state, ctx.tau, h)
+
+
+def no_squish_rotate(ctx, h):
+    ops.free_rotor(ctx.state, ctx.moments, h)
+
+
+def richardson_rotate(ctx, h):
+    ops.richardson_rotate(ctx.state, ctx.moments, h)
+
+
+def rozmanov_kusalik_rotate(ctx, h, tol=1e-13, max_iter=100):
+    ops.rozmanov_kusalik_rotate(ctx.state, ctx.tau, ctx.moments, h, tol=tol, max_iter=max_iter)
+
+
+def pcdm_predict(ctx, h):
+    s = ctx.state
+    q0 = s.q.copy()
+    q_half, omega_body0, domega_body0 = ops.pcdm_predict(q0, ctx.omega(), ctx.tau,
+                                                         ctx.moments, h)
+    ctx.scratch["pcdm"] = (q0, q_half, omega_body0, domega_body0)
+    L = ops.lab_angular_momentum(s.q, s.p)
+    s.q = q_half  # the midpoint force call places the atoms here
+    s.p = ops.momentum_from_lab(s.q, L)
+
+
+def pcdm_correct(ctx, h):
+    if "pcdm" not in ctx.scratch:
+        raise RuntimeError("pcdm_correct needs a pcdm_predict earlier in the step")
+    q0, q_half, omega_body0, domega_body0 = ctx.scratch.pop("pcdm")
+    q1, omega1 = ops.pcdm_correct(q0, q_half, omega_body0, domega_body0, ctx.tau,
+                                  ctx.moments, h)
+    ctx.state.q = q1
+    ctx.set_omega(omega1)
+
+
+def compute_force(ctx):
+    ctx.evaluate()
+
+
+def reset_force_moment(ctx):
+    ctx.F[...] = 0.0
+    ctx.tau[...] = 0.0
+    ctx.f[...] = 0.0
+
+
+def force_to_accel(ctx):
+    ctx.scratch["a"] = ctx.F / ctx.geometry.mass[:, None]
+    ctx.scratch["a_free"] = ctx.f / ctx.free_masses[:, None]
+
+
+def push_f_v_r(ctx, h):
+    a, a_free = ctx.accelerations()
+    s = ctx.state
+    s.X += h * s.V + 0.5 * h * h * a
+    s.x += h * s.v + 0.5 * h * h * a_free
+
+
+def push_f_v(ctx, h):
+    a, a_free = ctx.accelerations()
+    ctx.state.V += 0.5 * h * a
+    ctx.state.v += 0.5 * h * a_free
+
+
+def push_to_quaternion(ctx, h):
+    q, omega = ops.exadem_push_to_quaternion(ctx.state.q, ctx.omega(),
+                                             ctx.angular_acceleration(), h)
+    ctx.state.q = q
+    ctx.set_omega(omega)
+
+
+def push_to_angular_acceleration(ctx):
+    ctx.scratch["alpha"] = ops.exadem_angular_acceleration(ctx.state.q, ctx.omega(), ctx.tau,
+                                                           ctx.moments)
+
+
+def push_to_angular_velocity(ctx, h):
+    ctx.set_omega(ctx.omega() + 0.5 * h * ctx.angular_acceleration())
+
+
+@dataclass(frozen=True)
+class Operator:
+    """A named operator: its function, its parameters with defaults, what it does."""
+
+    function: object
+    params: dict
+    timed: bool = True       # takes dt_scale
+    moves: bool = False      # changes positions or orientations
+    forces: bool = False     # calls the calculator
+    group: tuple = ()        # a merged operator: the names it runs, in order
+
+
+def _op(function, moves=False, timed=True, **params):
+    return Operator(function, params, timed=timed, moves=moves)
+
+
+OPERATORS = {
+    "translational_kick": _op(translational_kick, dt_scale=0.5),
+    "drift": _op(drift, moves=True, dt_scale=1.0),
+    "rotational_kick": _op(rotational_kick, dt_scale=0.5),
+    "no_squish_rotate": _op(no_squish_rotate, moves=True, dt_scale=1.0),
+    "richardson_rotate": _op(richardson_rotate, moves=True, dt_scale=1.0),
+    "rozmanov_kusalik_rotate": _op(rozmanov_kusalik_rotate, moves=True, dt_scale=1.0,
+                                   tol=1e-13, max_iter=100),
+    "pcdm_predict": _op(pcdm_predict, moves=True, dt_scale=1.0),
+    "pcdm_correct": _op(pcdm_correct, moves=True, dt_scale=1.0),
+    "compute_force": Operator(compute_force, {}, timed=False, forces=True),
+    "reset_force_moment": Operator(reset_force_moment, {}, timed=False),
+    "force_to_accel": Operator(force_to_accel, {}, timed=False),
+    "push_f_v_r": _op(push_f_v_r, moves=True, dt_scale=1.0),
+    "push_f_v": _op(push_f_v, dt_scale=1.0),
+    "push_to_quaternion": _op(push_to_quaternion, moves=True, dt_scale=1.0),
+    "push_to_angular_acceleration": Operator(push_to_angular_acceleration, {}, timed=False),
+    "push_to_angular_velocity": _op(push_to_angular_velocity, dt_scale=1.0),
+    "combined_compute_prolog": Operator(None, {"dt_scale": 1.0}, moves=True, group=(
+        "push_f_v_r", "push_f_v", "push_to_quaternion")),
+    "combined_compute_epilog": Operator(None, {"dt_scale": 1.0}, group=(
+        "push_to_angular_acceleration", "push_to_angular_velocity", "push_f_v")),
+}
+
+_NO_SQUISH = [("translational_kick", {"dt_scale": 0.5}), ("drift", {"dt_scale": 1.0}),
+              ("rotational_kick", {"dt_scale": 0.5}), ("no_squish_rotate", {"dt_scale": 1.0}),
+              ("compute_force", {}),
+              ("translational_kick", {"dt_scale": 0.5}), ("rotational_kick", {"dt_scale": 0.5})]
+
+BUILTIN_SCHEMES = {
+    "no_squish": _NO_SQUISH,
+    "richardson": [(name if name != "no_squish_rotate" else "richardson_rotate", params)
+                   for name, params in _NO_SQUISH],
+    # The iteration includes its own half kick of L (its predictor needs L at the start).
+    "rozmanov_kusalik": [("translational_kick", {"dt_scale": 0.5}), ("drift", {"dt_scale": 1.0}),
+                         ("rozmanov_kusalik_rotate", {"dt_scale": 1.0}), ("compute_force", {}),
+                         ("translational_kick", {"dt_scale": 0.5}),
+                         ("rotational_kick", {"dt_scale": 0.5})],
+    # The midpoint torque is evaluated with the centres of mass at the
+    # velocity-Verlet midpoint X + (dt/2) V(t + dt/2) and the orientations at
+    # PCDM's predicted q'(dt/2); the force at the end of the step gives the
+    # translation's second kick and the next step's start torque.
+    "pcdm": [("translational_kick", {"dt_scale": 0.5}), ("drift", {"dt_scale": 0.5}),
+             ("pcdm_predict", {"dt_scale": 1.0}), ("compute_force", {}),
+             ("pcdm_correct", {"dt_scale": 1.0}), ("drift", {"dt_scale": 0.5}),
+             ("compute_force", {}), ("translational_kick", {"dt_scale": 0.5})],
+    "exadem": [("combined_compute_prolog", {"dt_scale": 1.0}), ("reset_force_moment", {}),
+               ("compute_force", {}), ("force_to_accel", {}),
+               ("combined_compute_epilog", {"dt_scale": 1.0})],
+}
+
+
+class Scheme:
+    """A validated list of operators making one time step.
+
+    Parameters
+    ----------
+    steps : list
+        Each entry a name (``"drift"``), a one-key mapping
+        (``{"drift": {"dt_scale": 0.5}}``) or a ``(name, params)`` pair.
+        Omitted parameters take the operator's defaults.
+    name : str, optional
+
+    Raises
+    ------
+    ValueError
+        An unknown operator or parameter (the message lists the known ones),
+        a non-positive ``dt_scale``, a scheme that never calls
+        ``compute_force``, or one that moves atoms after its last force call
+        (the forces it leaves would not belong to the final positions).
+    TypeError
+        An entry or parameter of the wrong type.
+    """
+
+    def __init__(self, steps, name="custom"):
+        if isinstance(steps, (str, bytes)) or not hasattr(steps, "__iter__"):
+            raise TypeError(f"a scheme is a list of operators, got {type(steps).__name__}")
+        self.name = name
+        self.steps = [_parse_entry(i, entry) for i, entry in enumerate(steps)]
+        expanded = self.expanded()
+        force_calls = [i for i, (op, _) in enumerate(expanded) if op.forces]
+        if not force_calls:
+            raise ValueError(f"scheme {name!r} never evaluates forces: add 'compute_force'")
+        moving = [n for n, (op, _) in zip(self._expanded_names(), expanded, strict=True)
+                  if op.moves]
+        last = force_calls[-1]
+        after = [n for n, (op, _) in list(zip(self._expanded_names(), expanded,
+                                               strict=True))[last + 1:] if op.moves]
+        if after:
+            raise ValueError(
+                f"scheme {name!r} moves atoms ({after[0]}) after its last compute_force: "
+                "the forces would not belong to the final positions"
+            )
+        self.moves = bool(moving)
+
+    def _expanded_names(self):
+        names = []
+        for name, _ in self.steps:
+            group = OPERATORS[name].group
+            names += list(group) if group else [name]
+        return names
+
+    def expanded(self):
+        """The steps with merged operators replaced by their members: ``[(Operator, params)]``."""
+        out = []
+        for name, params in self.steps:
+            op = OPERATORS[name]
+            if op.group:
+                for member in op.group:
+                    sub = OPERATORS[member]
+                    out.append((sub, {k: v for k, v in params.items() if k in sub.params}))
+            else:
+                out.append((op, params))
+        return out
+
+    @property
+    def force_calls_per_step(self):
+        """How many times a step calls the calculator."""
+        return sum(op.forces for op, _ in self.expanded())
+
+    def run(self, ctx):
+        """Apply every operator to ``ctx`` in order."""
+        dt = ctx.dt
+        for op, params in self._compiled:
+            if op.timed:
+                extra = {k: v for k, v in params.items() if k != "dt_scale"}
+                op.function(ctx, params["dt_scale"] * dt, **extra)
+            else:
+                op.function(ctx)
+
+    @property
+    def _compiled(self):
+        try:
+            return self.__compiled
+        except AttributeError:
+            self.__compiled = self.expanded()
+            return self.__compiled
+
+    def todict(self):
+        """A JSON- and YAML-friendly description: ``[{name: params}, ...]``."""
+        return [{name: dict(params)} if params else name for name, params in self.steps]
+
+    def __eq__(self, other):
+        return isinstance(other, Scheme) and self.steps == other.steps
+
+    def __repr__(self):
+        return f"Scheme({self.name!r}, {[name for name, _ in self.steps]})"
+
+
+def _parse_entry(i, entry):
+    if isinstance(entry, str):
+        name, params = entry, {}
+    elif isinstance(entry, dict) and len(entry) == 1:
+        ((name, params),) = entry.items()
+        params = {} if params is None else params
+    elif isinstance(entry, (tuple, list)) and len(entry) == 2 and isinstance(entry[0], str):
+        name, params = entry
+    else:
+        raise TypeError(
+            f"scheme entry {i}: expected a name, {{name: {{params}}}} or (name, params), "
+            f"got {entry!r}"
+        )
+    if name not in OPERATORS:
+        raise ValueError(
+            f"scheme entry {i}: unknown operator {name!r}; known: {', '.join(OPERATORS)}"
+        )
+    if not isinstance(params, dict):
+        raise TypeError(f"scheme entry {i} ({name}): parameters must be a mapping, got {params!r}")
+    op = OPERATORS[name]
+    unknown = set(params) - set(op.params)
+    if unknown:
+        allowed = ", ".join(op.params) or "none"
+        raise ValueError(
+            f"scheme entry {i} ({name}): unknown parameter {sorted(unknown)[0]!r}; "
+            f"it takes: {allowed}"
+        )
+    merged = dict(op.params) | dict(params)
+    for key, value in merged.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise TypeError(f"scheme entry {i} ({name}): {key} must be a number, got {value!r}")
+    if "dt_scale" in merged and not (np.isfinite(merged["dt_scale"])
+                                     and merged["dt_scale"] > 0):
+        raise ValueError(f"scheme entry {i} ({name}): dt_scale must be positive, "
+                         f"got {merged['dt_scale']!r}")
+    if "tol" in merged and not merged["tol"] > 0:
+        raise ValueError(f"scheme entry {i} ({name}): tol must be positive")
+    if "max_iter" in merged:
+        if int(merged["max_iter"]) != merged["max_iter"] or merged["max_iter"] < 1:
+            raise ValueError(f"scheme entry {i} ({name}): max_iter must be a positive integer")
+        merged["max_iter"] = int(merged["max_iter"])
+    return name, merged
+
+
+def load_yaml(path):
+    """Read a scheme from a YAML file: a list of operators, or ``{scheme: [...]}``."""
+    import yaml
+
+    with open(path) as fh:
+        data = yaml.safe_load(fh)
+    if isinstance(data, dict) and set(data) == {"scheme"}:
+        data = data["scheme"]
+    if not isinstance(data, list):
+        raise ValueError(f"{path}: expected a list of operators (or 'scheme:' and a list)")
+    return Scheme(data, name=str(path))
+
+
+def resolve_scheme(spec, **params):
+    """Turn an integrator specification into a :class:`Scheme`.
+
+    Parameters
+    ----------
+    spec : str, Scheme or list
+        A built-in name (``"no_squish"``, ``"richardson"``,
+        ``"rozmanov_kusalik"``, ``"pcdm"``, ``"exadem"``), a path to a YAML
+        file (``.yaml`` / ``.yml``), a :class:`Scheme`, or a list of operators.
+    **params
+        Parameters for a built-in scheme's operators, e.g. ``tol`` and
+        ``max_iter`` for ``rozmanov_kusalik``; each goes to every operator
+        of the scheme that takes it.
+    """
+    if isinstance(spec, Scheme):
+        scheme = spec
+    elif isinstance(spec, str) and spec in BUILTIN_SCHEMES:
+        steps = []
+        used = set()
+        for name, defaults in BUILTIN_SCHEMES[spec]:
+            own = {k: v for k, v in params.items() if k in OPERATORS[name].params}
+            used |= set(own)
+            steps.append((name, defaults | own))
+        unused = set(params) - used
+        if unused:
+            raise ValueError(f"integrator {spec!r} takes no parameter {sorted(unused)[0]!r}")
+        return Scheme(steps, name=spec)
+    elif isinstance(spec, str) and spec.endswith((".yaml", ".yml")):
+        scheme = load_yaml(spec)
+    elif isinstance(spec, str):
+        raise ValueError(
+            f"unknown integrator {spec!r}; built-in: {', '.join(BUILTIN_SCHEMES)}, "
+            "or a .yaml file, or a list of operators"
+        )
+    else:
+        scheme = Scheme(spec)
+    if params:
+        raise ValueError("integrator parameters go with a built-in name; "
+                         "put them in the scheme's entries instead")
+    return scheme
