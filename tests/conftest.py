@@ -9,13 +9,16 @@ from ase.calculators.calculator import Calculator, all_changes
 KE = units.Hartree * units.Bohr
 
 # TraPPE CO2 (C: 0.70 e, 2.80 Å, 27.0 K; O: -0.35 e, 3.05 Å, 79.0 K), TIP3P water,
-# and a neon-like neutral point particle.  (charge e, sigma Å, epsilon eV)
+# a neon-like neutral point particle and two ions.  (charge e, sigma Å, epsilon eV)
 PARAMETERS = {
     "C": (0.70, 2.80, 27.0 * units.kB),
     "O_co2": (-0.35, 3.05, 79.0 * units.kB),
     "O_water": (-0.834, 3.15061, 0.1521 * units.kcal / units.mol),
     "H": (0.417, 1.0, 0.0),
     "Ne": (0.0, 2.78, 36.0 * units.kB),
+    # Monovalent ions (roughly Joung-Cheatham sizes) as charged point particles.
+    "Na": (1.0, 2.4, 0.1 * units.kcal / units.mol),
+    "Cl": (-1.0, 4.4, 0.1 * units.kcal / units.mol),
 }
 
 
@@ -43,6 +46,12 @@ class CoulombLJ(Calculator):
 
     implemented_properties = ["energy", "forces"]
 
+    def __init__(self, wall=None):
+        """``wall=(centre, radius)``: a harmonic spherical wall (1 eV/Å² beyond ``radius`` Å)
+        on every atom, keeping a droplet from evaporating in long runs."""
+        super().__init__()
+        self.wall = wall
+
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         super().calculate(atoms, properties, system_changes)
         atoms = self.atoms
@@ -65,6 +74,13 @@ class CoulombLJ(Calculator):
         fr = np.where(mask, fr, 0.0)
         self.results["energy"] = 0.5 * energy_pair.sum()
         self.results["forces"] = np.einsum("ij,ijk->ik", fr, d)
+        if self.wall is not None:
+            centre, radius = self.wall
+            out = x - centre
+            dist = np.linalg.norm(out, axis=1)
+            excess = np.maximum(dist - radius, 0.0)
+            self.results["energy"] += 0.5 * np.sum(excess**2)
+            self.results["forces"] -= (excess / np.where(dist > 0, dist, 1.0))[:, None] * out
 
 
 @pytest.fixture

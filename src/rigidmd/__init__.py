@@ -7,10 +7,14 @@ body move as point particles in the same step.
 
 from rigidmd.bodies import BodyGeometry, RigidBodies
 from rigidmd.dynamics import NonFiniteForceError, RigidBodyDOF, RigidVerlet
+from rigidmd.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover
 from rigidmd.velocities import rigid_maxwell_boltzmann
 
 __all__ = [
     "RigidVerlet",
+    "RigidLangevin",
+    "RigidBussi",
+    "RigidNoseHoover",
     "RigidBodies",
     "BodyGeometry",
     "RigidBodyDOF",

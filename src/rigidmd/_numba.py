@@ -17,7 +17,7 @@ except ImportError:  # pragma: no cover - exercised only without numba
 
 AVAILABLE = numba is not None
 
-__all__ = ["AVAILABLE", "first_half", "second_half", "place"]
+__all__ = ["AVAILABLE", "first_half", "second_half", "place", "momenta"]
 
 
 def _jit(func):
@@ -171,24 +171,40 @@ def second_half(V, q, p, F, tau, inv_mass, inv_moments, dt, forces, bounds, orde
         w, x, y, z = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
         p0, p1, p2, p3 = _kick(w, x, y, z, p[b, 0], p[b, 1], p[b, 2], p[b, 3], tx, ty, tz, dt)
         p[b, 0], p[b, 1], p[b, 2], p[b, 3] = p0, p1, p2, p3
-        # L_b = ½ vec(q* ⊗ p); ω_b = L_b / I (0 about a zero-moment axis); ω = R ω_b.
-        l0 = 0.5 * (w * p1 - x * p0 - y * p3 + z * p2)
-        l1 = 0.5 * (w * p2 + x * p3 - y * p0 - z * p1)
-        l2 = 0.5 * (w * p3 - x * p2 + y * p1 - z * p0)
-        w0 = l0 * inv_moments[b, 0]
-        w1 = l1 * inv_moments[b, 1]
-        w2 = l2 * inv_moments[b, 2]
-        r00, r01, r02, r10, r11, r12, r20, r21, r22 = _matrix(w, x, y, z)
-        ox = r00 * w0 + r01 * w1 + r02 * w2
-        oy = r10 * w0 + r11 * w1 + r12 * w2
-        oz = r20 * w0 + r21 * w1 + r22 * w2
-        for j in range(bounds[b], bounds[b + 1]):
-            i = order[j]
-            mj = m[j]
-            r0, r1, r2 = r[j, 0], r[j, 1], r[j, 2]
-            momenta[i, 0] = mj * (vx + oy * r2 - oz * r1)
-            momenta[i, 1] = mj * (vy + oz * r0 - ox * r2)
-            momenta[i, 2] = mj * (vz + ox * r1 - oy * r0)
+        _body_momenta(b, vx, vy, vz, w, x, y, z, p0, p1, p2, p3, inv_moments, bounds, order, m,
+                      r, momenta)
+
+
+@_jit
+def _body_momenta(b, vx, vy, vz, w, x, y, z, p0, p1, p2, p3, inv_moments, bounds, order, m, r,
+                  momenta):
+    """Rigid momenta m_j (V + ω × r_j) of body b's atoms."""
+    # L_b = ½ vec(q* ⊗ p); ω_b = L_b / I (0 about a zero-moment axis); ω = R ω_b.
+    l0 = 0.5 * (w * p1 - x * p0 - y * p3 + z * p2)
+    l1 = 0.5 * (w * p2 + x * p3 - y * p0 - z * p1)
+    l2 = 0.5 * (w * p3 - x * p2 + y * p1 - z * p0)
+    w0 = l0 * inv_moments[b, 0]
+    w1 = l1 * inv_moments[b, 1]
+    w2 = l2 * inv_moments[b, 2]
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _matrix(w, x, y, z)
+    ox = r00 * w0 + r01 * w1 + r02 * w2
+    oy = r10 * w0 + r11 * w1 + r12 * w2
+    oz = r20 * w0 + r21 * w1 + r22 * w2
+    for j in range(bounds[b], bounds[b + 1]):
+        i = order[j]
+        mj = m[j]
+        r0, r1, r2 = r[j, 0], r[j, 1], r[j, 2]
+        momenta[i, 0] = mj * (vx + oy * r2 - oz * r1)
+        momenta[i, 1] = mj * (vy + oz * r0 - ox * r2)
+        momenta[i, 2] = mj * (vz + ox * r1 - oy * r0)
+
+
+@_jit
+def momenta(V, q, p, inv_moments, bounds, order, m, r, out):
+    """Rigid momenta of all body atoms from the state, as :func:`second_half` writes them."""
+    for b in range(V.shape[0]):
+        _body_momenta(b, V[b, 0], V[b, 1], V[b, 2], q[b, 0], q[b, 1], q[b, 2], q[b, 3],
+                      p[b, 0], p[b, 1], p[b, 2], p[b, 3], inv_moments, bounds, order, m, r, out)
 
 
 @_jit

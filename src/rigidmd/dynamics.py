@@ -220,9 +220,8 @@ class RigidVerlet(MolecularDynamics):
     # ------------------------------------------------------------ ASE API
     def todict(self):
         d = super().todict()
-        integrator = (self.scheme.name if self.scheme.name in BUILTIN_SCHEMES
-                      else self.scheme.todict())
-        d.update(integrator=integrator, bodies_rule=self.bodies.rule,
+        name = self.scheme.name if self.scheme.name in BUILTIN_SCHEMES else "custom"
+        d.update(integrator=name, scheme=self.scheme.todict(), bodies_rule=self.bodies.rule,
                  n_bodies=self.geometry.n_bodies)
         return d
 
@@ -245,21 +244,43 @@ class RigidVerlet(MolecularDynamics):
 
     # ------------------------------------------------------------ the step
     def step(self):
-        """Advance one step of ``self.dt`` with the integrator's scheme."""
+        """Advance one step of ``self.dt`` with the integrator's scheme.
+
+        If anything fails (the calculator, an iteration), the state, forces,
+        thermostat variables and atoms are put back as they were at the start
+        of the step.
+        """
         ctx = self._ctx
         self._state.copy_into(self._backup)
-        saved = (ctx.F.copy(), ctx.tau.copy(), ctx.f.copy(), dict(ctx.scratch))
+        if self._fused:
+            # The forces are only overwritten after the force call succeeded.
+            saved = (ctx.F, ctx.tau, ctx.f, ctx.scratch)
+        else:
+            saved = (ctx.F.copy(), ctx.tau.copy(), ctx.f.copy(), dict(ctx.scratch))
+        extra = self._save_extra()
         try:
-            if self._fused:
-                self._fused_step()
-            else:
-                self.scheme.run(ctx)
-                self._write_momenta()
+            self._advance()
         except BaseException:
             self._backup.copy_into(self._state)
             ctx.F, ctx.tau, ctx.f, ctx.scratch = saved
+            self._restore_extra(extra)
             self._place_atoms()
             raise
+
+    def _advance(self):
+        """The step proper; thermostats wrap it."""
+        if self._fused:
+            self._fused_step()
+        else:
+            self.scheme.run(self._ctx)
+            self._write_momenta()
+
+    def _save_extra(self):
+        """Variables beyond the state that a failed step must restore (thermostats)."""
+        return None
+
+    def _restore_extra(self, saved):
+        pass
 
     def _fused_step(self):
         """NO_SQUISH as two compiled loops over bodies (the same arithmetic as the scheme)."""
@@ -323,7 +344,11 @@ class RigidVerlet(MolecularDynamics):
         """Write rigid momenta of the current state to the atoms (positions placed already)."""
         s, g = self._state, self.geometry
         momenta = self.atoms.arrays["momenta"]
-        momenta[g.order] = g.atom_masses[:, None] * ops.atom_velocities(s, self._r, g)
+        if self.backend == "numba":
+            _numba.momenta(s.V, s.q, s.p, self._inv_moments, self._bounds, g.order,
+                           g.atom_masses, self._r, momenta)
+        else:
+            momenta[g.order] = g.atom_masses[:, None] * ops.atom_velocities(s, self._r, g)
         momenta[self._free] = self._free_masses[:, None] * s.v
 
     def _write_atoms(self):

@@ -74,7 +74,8 @@ LAMMPS_METAL_FTM2V = 1.0 / 1.0364269e-4
 LAMMPS_METAL_QQR2E = 14.399645
 
 #: Fix styles accepted by :func:`run_rigid_reference`.
-RIGID_FIX_STYLES = ("rigid", "rigid/nve", "rigid/small", "rigid/nve/small")
+RIGID_FIX_STYLES = ("rigid", "rigid/nve", "rigid/small", "rigid/nve/small", "rigid/nvt",
+                    "rigid/nvt/small")
 
 _MPI_PRELOADED = False
 
@@ -733,6 +734,8 @@ def run_rigid_reference(
     *,
     ase_constants: bool = True,
     type_labels=None,
+    temperature_K: float | None = None,
+    tdamp: float | None = None,
 ) -> RigidReference:
     """Run rigid-body MD in LAMMPS and return its trajectory in ASE units.
 
@@ -764,9 +767,13 @@ def run_rigid_reference(
         Number of steps.
     every : int, default 1
         Frame interval, steps.  Frames are taken at steps ``0, every, ...``.
-    fix : {"rigid/nve", "rigid", "rigid/nve/small", "rigid/small"}
+    fix : {"rigid/nve", "rigid", "rigid/nvt", "rigid/nve/small", "rigid/small", \
+"rigid/nvt/small"}
         LAMMPS fix style for the bodies: ``rigid/nve`` (NO_SQUISH),
-        ``rigid`` (Richardson iteration) or their ``/small`` variants.
+        ``rigid`` (Richardson iteration), ``rigid/nvt`` (NO_SQUISH with
+        Nosé–Hoover chains, needs ``temperature_K`` and ``tdamp``; free atoms
+        then get ``fix nvt`` with the same parameters) or their ``/small``
+        variants.
     charges : array_like, shape (n,), optional
         Charges, e; default ``atoms.get_initial_charges()``.
     extra_commands : iterable of str, optional
@@ -781,6 +788,9 @@ def run_rigid_reference(
         ``1 ps = 1000 * ase.units.fs``.
     type_labels : sequence of str, shape (n,), optional
         Per-atom type labels; see :func:`write_data`.
+    temperature_K, tdamp : float, optional
+        Target temperature (K) and damping time (ASE time units) of an
+        ``nvt`` fix (``temp T T tdamp``).
 
     Returns
     -------
@@ -798,6 +808,9 @@ def run_rigid_reference(
     """
     if fix not in RIGID_FIX_STYLES:
         raise ValueError(f"fix must be one of {RIGID_FIX_STYLES}, got {fix!r}")
+    nvt = "nvt" in fix
+    if nvt != (temperature_K is not None and tdamp is not None):
+        raise ValueError("temperature_K and tdamp go with (and only with) an nvt fix")
     nsteps = int(nsteps)
     every = int(every)
     if nsteps < 0 or every < 1:
@@ -825,13 +838,18 @@ def run_rigid_reference(
             one = max(2000, n)
             cmds.append(f"neigh_modify one {one} page {max(100000, 10 * one)}")
         cmds.append("neigh_modify every 1 delay 0 check yes")
+        thermostat = ""
+        if nvt:
+            tdamp_lammps = float(tdamp) / data.velocity_factor
+            thermostat = f" temp {temperature_K!r} {temperature_K!r} {tdamp_lammps!r}"
         if np.any(body_ids >= 0):
             cmds += [
                 f"group rigidgroup molecule <= {nb}",
-                f"fix 1 rigidgroup {fix} molecule",
+                f"fix 1 rigidgroup {fix} molecule{thermostat}",
             ]
         if np.any(body_ids < 0):
-            cmds += [f"group freegroup molecule > {nb}", "fix 2 freegroup nve"]
+            free_fix = f"nvt{thermostat}" if nvt else "nve"
+            cmds += [f"group freegroup molecule > {nb}", f"fix 2 freegroup {free_fix}"]
         cmds += [
             "compute rmd_ke all ke",
             (
