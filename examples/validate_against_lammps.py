@@ -13,12 +13,12 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from ase import Atoms, units
+from ase import units
 from ase.calculators.tip3p import TIP3P
 
 from rigidmd import RigidBodies, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.lammps import run_rigid_reference, tip3p_charges, tip3p_pair_commands
-from rigidmd.systems import co2_water_mixture, water_cluster
+from rigidmd.systems import water_cluster
 
 NSTEPS, EVERY = 500, 100
 
@@ -44,15 +44,12 @@ def water(n):
 
 
 def mixture():
+    """4 CO2, 4 waters and 2 neon atoms with the tests' charges + LJ force field."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    from conftest import CoulombLJ, coulomb_lj_lammps
+    from conftest import coulomb_lj_lammps
+    from test_dynamics import mixture as build
 
-    atoms = co2_water_mixture(4, 4, seed=3)
-    ne = Atoms("Ne2", positions=[[-3.5, 0.5, 0.3], [1.0, -3.6, 2.0]])
-    ne.arrays["mol-id"] = np.array([100, 101])
-    atoms += ne
-    atoms.calc = CoulombLJ()
-    rigid_maxwell_boltzmann(atoms, 250, bodies="mol-id", rng=np.random.default_rng(3))
+    atoms = build()
     return (atoms, *coulomb_lj_lammps(atoms))
 
 

@@ -15,7 +15,8 @@ from ase import units
 from ase.calculators.lammpslib import LAMMPSlib
 from ase.calculators.tip3p import TIP3P
 from ase.io import read
-from conftest import CoulombLJ, coulomb_lj_lammps
+from conftest import coulomb_lj_lammps
+from test_dynamics import mixture
 
 from rigidmd import RigidBodies, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.lammps import (
@@ -25,7 +26,7 @@ from rigidmd.lammps import (
     tip3p_charges,
     tip3p_pair_commands,
 )
-from rigidmd.systems import co2_water_mixture, water_cluster
+from rigidmd.systems import water_cluster
 
 NSTEPS, EVERY = 500, 10
 DATA = Path(__file__).with_name("data")
@@ -94,14 +95,7 @@ def test_water_clusters_with_lammps_constants(n):
 
 def test_co2_water_neon_mixture():
     """Linear bodies (CO2), waters and free atoms (neon, fix nve) together."""
-    from ase import Atoms
-
-    atoms = co2_water_mixture(4, 4, seed=3)
-    ne = Atoms("Ne2", positions=[[-3.5, 0.5, 0.3], [1.0, -3.6, 2.0]])
-    ne.arrays["mol-id"] = np.array([100, 101])
-    atoms += ne
-    atoms.calc = CoulombLJ()
-    rigid_maxwell_boltzmann(atoms, 250, bodies="mol-id", rng=np.random.default_rng(3))
+    atoms = mixture()
     cmds, charges, labels = coulomb_lj_lammps(atoms)
     gap, de = compare(atoms, "mol-id", cmds, charges, type_labels=labels)
     # Measured 6e-8 Å after 100 steps, 3e-6 Å after 500, 1e-8 eV.  Larger
