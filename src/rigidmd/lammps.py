@@ -38,7 +38,7 @@ import re
 import sys
 import tempfile
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -55,8 +55,10 @@ __all__ = [
     "RIGID_FIX_STYLES",
     "RigidReference",
     "charge_factor",
+    "export_lammps",
     "lammps_energy_forces",
     "load_lammps",
+    "read_dump",
     "run_rigid_reference",
     "tip3p_charges",
     "tip3p_pair_commands",
@@ -720,6 +722,38 @@ def _read_timing(path: Path) -> dict:
     return timing
 
 
+def _integration_commands(data, body_ids, timestep, fix, temperature_K=None, tdamp=None,
+                          langevin=None):
+    """Time step, neighbour settings and the fixes that move bodies and free atoms.
+
+    ``temperature_K`` with ``tdamp`` (ASE time) thermostats an ``nvt`` fix;
+    ``langevin=(temperature_K, damp, seed)`` adds the Langevin option of
+    ``fix rigid/nve(/small)`` and a ``fix langevin`` on free atoms.
+    """
+    vf = data.velocity_factor
+    n = len(body_ids)
+    nb = data.n_body_ids
+    cmds = [f"timestep {timestep / vf!r}"]
+    if data.boundary == "f f f":
+        one = max(2000, n)
+        cmds.append(f"neigh_modify one {one} page {max(100000, 10 * one)}")
+    cmds.append("neigh_modify every 1 delay 0 check yes")
+    option = free_fix = ""
+    if "nvt" in fix:
+        option = f" temp {temperature_K!r} {temperature_K!r} {float(tdamp) / vf!r}"
+        free_fix = f"nvt{option}"
+    elif langevin is not None:
+        temp, damp, seed = langevin
+        option = f" langevin {temp!r} {temp!r} {float(damp) / vf!r} {int(seed)}"
+    if np.any(body_ids >= 0):
+        cmds += [f"group rigidgroup molecule <= {nb}", f"fix 1 rigidgroup {fix} molecule{option}"]
+    if np.any(body_ids < 0):
+        cmds += [f"group freegroup molecule > {nb}", f"fix 2 freegroup {free_fix or 'nve'}"]
+        if langevin is not None:
+            cmds.append(f"fix 3 freegroup langevin{option[len(' langevin'):]}")
+    return cmds
+
+
 def run_rigid_reference(
     atoms: Atoms,
     body_ids,
@@ -831,25 +865,8 @@ def run_rigid_reference(
         dump_path = wd / "frames.dump"
         energy_path = wd / "energies.txt"
         log_path = wd / "log.lammps"
-        nb = data.n_body_ids
         cmds = _setup_commands(data, pair_commands)
-        cmds.append(f"timestep {timestep / data.velocity_factor!r}")
-        if data.boundary == "f f f":
-            one = max(2000, n)
-            cmds.append(f"neigh_modify one {one} page {max(100000, 10 * one)}")
-        cmds.append("neigh_modify every 1 delay 0 check yes")
-        thermostat = ""
-        if nvt:
-            tdamp_lammps = float(tdamp) / data.velocity_factor
-            thermostat = f" temp {temperature_K!r} {temperature_K!r} {tdamp_lammps!r}"
-        if np.any(body_ids >= 0):
-            cmds += [
-                f"group rigidgroup molecule <= {nb}",
-                f"fix 1 rigidgroup {fix} molecule{thermostat}",
-            ]
-        if np.any(body_ids < 0):
-            free_fix = f"nvt{thermostat}" if nvt else "nve"
-            cmds += [f"group freegroup molecule > {nb}", f"fix 2 freegroup {free_fix}"]
+        cmds += _integration_commands(data, body_ids, timestep, fix, temperature_K, tdamp)
         cmds += [
             "compute rmd_ke all ke",
             (
@@ -887,3 +904,110 @@ def run_rigid_reference(
         commands=tuple(cmds),
         data=data,
     )
+
+
+def export_lammps(
+    atoms: Atoms,
+    body_ids,
+    directory: str | os.PathLike,
+    pair_commands: Iterable[str],
+    timestep: float,
+    nsteps: int,
+    *,
+    temperature_K: float | None = None,
+    tdamp: float | None = None,
+    friction: float | None = None,
+    seed: int = 12345,
+    charges=None,
+    type_labels=None,
+    dump_every: int = 100,
+    thermo_every: int = 100,
+) -> dict:
+    """Write a LAMMPS data file and input deck equivalent to a rigidmd run.
+
+    The deck uses ``fix rigid/nve/small molecule`` (NO_SQUISH, the default
+    integrator of :class:`~rigidmd.RigidVerlet`), with ``temperature_K`` and
+    ``tdamp`` ``fix rigid/nvt/small`` (Nosé–Hoover chains, as
+    :class:`~rigidmd.RigidNoseHoover`), or with ``temperature_K`` and
+    ``friction`` the ``langevin`` option (as :class:`~rigidmd.RigidLangevin`);
+    free atoms get ``fix nve`` / ``nvt`` / ``langevin``.  LAMMPS's own
+    ``metal`` constants are used (the deck is for production runs, e.g.
+    ``mpirun -np 64 lmp -in in.rigidmd``), so it follows rigidmd to about
+    1e-7 Å over 100 steps, not to roundoff.  It writes thermo output, a
+    ``dump custom`` of unwrapped positions and velocities every
+    ``dump_every`` steps, and the LAMMPS ``log.lammps``.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+        Start configuration, masses and velocities.
+    body_ids : array_like of int, shape (n,)
+        As for :func:`write_data`.
+    directory : path
+        Created if needed; receives ``data.rigidmd`` and ``in.rigidmd``.
+    pair_commands : iterable of str
+        LAMMPS commands for the interactions.
+    timestep : float
+        ASE time units.
+    nsteps : int
+    temperature_K, tdamp, friction : float, optional
+        Thermostat: ``tdamp`` (ASE time) for Nosé–Hoover, ``friction`` (per
+        ASE time) for Langevin (LAMMPS damping time ``1 / friction``).
+    seed : int
+        Langevin random seed.
+    charges, type_labels :
+        As for :func:`write_data`.
+    dump_every, thermo_every : int
+        Steps between dump frames and thermo lines.
+
+    Returns
+    -------
+    dict
+        ``{"data": Path, "input": Path, "dump": "frames.dump"}``.
+    """
+    if tdamp is not None and friction is not None:
+        raise ValueError("give tdamp (Nose-Hoover) or friction (Langevin), not both")
+    if (tdamp is not None or friction is not None) != (temperature_K is not None):
+        raise ValueError("a thermostat needs temperature_K and one of tdamp or friction")
+    body_ids = _check_body_ids(atoms, body_ids)
+    sizes = np.bincount(body_ids[body_ids >= 0])
+    if np.any(sizes == 1):
+        raise ValueError("LAMMPS fix rigid refuses bodies of one atom; give them body_id -1")
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    data = write_data(atoms, body_ids, directory / "data.rigidmd", charges, ase_constants=False,
+                      type_labels=type_labels)
+    # A relative path, so the directory can be moved to another machine.
+    data = replace(data, path=Path("data.rigidmd"))
+    fix = "rigid/nvt/small" if tdamp is not None else "rigid/nve/small"
+    langevin = None
+    if friction is not None:
+        langevin = (temperature_K, 1.0 / float(friction), seed)
+    cmds = [
+        "# LAMMPS input written by rigidmd: the same bodies, interactions and",
+        "# integrator as the rigidmd run (metal units: eV, Å, ps).",
+        *_setup_commands(data, pair_commands),
+        *_integration_commands(data, body_ids, timestep, fix, temperature_K, tdamp, langevin),
+        "thermo_style custom step time temp pe ke etotal",
+        f"thermo {int(thermo_every)}",
+        f"dump frames all custom {int(dump_every)} frames.dump id xu yu zu vx vy vz",
+        "dump_modify frames sort id format float %.17g",
+        f"run {int(nsteps)}",
+    ]
+    path = directory / "in.rigidmd"
+    path.write_text("\n".join(cmds) + "\n")
+    return {"data": directory / "data.rigidmd", "input": path, "dump": "frames.dump"}
+
+
+def read_dump(path: str | os.PathLike, natoms: int):
+    """Frames of a ``dump custom ... id xu yu zu vx vy vz`` file sorted by id.
+
+    Returns
+    -------
+    steps : numpy.ndarray of int, shape (nframes,)
+    positions : numpy.ndarray, shape (nframes, natoms, 3)
+        Unwrapped, Å.
+    velocities : numpy.ndarray, shape (nframes, natoms, 3)
+        Å/ps (LAMMPS metal).
+    """
+    return _read_dump(Path(path), natoms)

@@ -1,0 +1,171 @@
+"""The rigidmd command, run as a subprocess like a user would."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from ase import units
+from ase.io import read, write
+
+from rigidmd import RigidBodies, RigidVerlet
+from rigidmd.lammps import load_lammps, read_dump
+from rigidmd.systems import water_cluster
+
+
+def rigidmd(*args, cwd):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.run([sys.executable, "-m", "rigidmd.cli", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, env=env, timeout=600)
+
+
+def test_demo(tmp_path):
+    result = rigidmd("demo", "--steps", 200, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    out = tmp_path / "rigidmd-demo"
+    frames = read(out / "demo.traj", ":")
+    assert len(frames) == 11  # steps 0, 20, ..., 200
+    assert (out / "demo-energy.png").stat().st_size > 10_000
+    assert "T = " in result.stdout and "drift" in result.stdout
+    assert "200/200 steps" in result.stderr and "steps/s" in result.stderr
+
+
+CONFIG = """
+structure: cluster.xyz
+read_options: {format: extxyz}
+bodies: mol-id
+calculator: {name: tip3p, options: {rc: 40.0}}
+velocities: {temperature: 250 K, seed: 1}
+thermostat: {kind: langevin, temperature: 250 K, friction: 0.01 1/fs, seed: 2}
+timestep: 2 fs
+steps: 50
+outputs: {directory: out, trajectory: md.traj, log: md.log, interval: 10, plot: md.png}
+"""
+
+
+@pytest.fixture
+def project(tmp_path):
+    atoms = water_cluster(8, seed=4)
+    write(tmp_path / "cluster.xyz", atoms, format="extxyz")
+    (tmp_path / "run.yaml").write_text(CONFIG)
+    return tmp_path
+
+
+def test_run_restart_and_plot(project):
+    result = rigidmd("run", "run.yaml", cwd=project)
+    assert result.returncode == 0, result.stderr
+    assert "RigidLangevin" in result.stdout and "conserved energy" in result.stdout
+    frames = read(project / "out" / "md.traj", ":")
+    assert len(frames) == 6
+    # Restart from the trajectory: continue and append to it.
+    result = rigidmd("run", "run.yaml", "--restart", "out/md.traj", "--steps", 20, cwd=project)
+    assert result.returncode == 0, result.stderr
+    assert len(read(project / "out" / "md.traj", ":")) == 6 + 3
+    result = rigidmd("plot", "out/md.log", "-o", "log.png", cwd=project)
+    assert result.returncode == 0, result.stderr
+    assert (project / "log.png").stat().st_size > 10_000
+
+
+def test_run_from_flags_only(tmp_path):
+    write(tmp_path / "w.xyz", water_cluster(2), format="extxyz")
+    result = rigidmd("run", "--structure", "w.xyz", "--steps", 5, "--timestep", "1 fs",
+                     "--outdir", "o", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+
+
+@pytest.mark.parametrize("change, field", [
+    ("thermostatt: {}", "thermostatt: unknown key"),
+    ("timestep: 2 fortnights", "timestep: unknown unit 'fortnights'"),
+    ("timestep: 2", "timestep: give a unit"),
+    ("structure: missing.xyz", "structure: no such file"),
+    ("calculator: {name: nowhere.Calculator}",
+     "calculator.name: cannot import 'nowhere.Calculator'"),
+    ("calculator: {name: tip3p, options: {rcut: 9}}", "calculator.options:"),
+    ("thermostat: {kind: bussi, temperature: 300 K}", "thermostat.taut: missing for bussi"),
+    ("steps: many", "steps: expected a whole number"),
+    ("bodies: [[0, 1, 2]]", "bodies: use connectivity, mol-id or tags"),
+    ("outputs: {directory: out, colour: red}", "outputs.colour: unknown key"),
+])
+def test_config_errors_are_one_line_and_status_2(project, change, field):
+    key = change.split(":")[0]
+    lines = [line for line in CONFIG.splitlines() if not line.startswith(key + ":")]
+    (project / "bad.yaml").write_text("\n".join(lines + [change]) + "\n")
+    result = rigidmd("run", "bad.yaml", cwd=project)
+    assert result.returncode == 2
+    assert "Traceback" not in result.stderr
+    assert result.stderr.count("\n") == 1, result.stderr
+    assert result.stderr.startswith(f"rigidmd: error: {field}"), result.stderr
+
+
+def test_missing_config_file(tmp_path):
+    result = rigidmd("run", "nowhere.yaml", cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stderr.strip() == "rigidmd: error: config: no such file 'nowhere.yaml'"
+
+
+def test_export_lammps_round_trip(project, monkeypatch):
+    """The exported deck, run in-process, follows rigidmd for its first 100 steps."""
+    (project / "nve.yaml").write_text(
+        CONFIG.replace("thermostat: {kind: langevin, temperature: 250 K, friction: 0.01 1/fs,"
+                       " seed: 2}\n", "").replace("timestep: 2 fs", "timestep: 1 fs")
+        .replace("steps: 50", "steps: 100"))
+    result = rigidmd("export-lammps", "nve.yaml", "deck", cwd=project)
+    assert result.returncode == 0, result.stderr
+    deck = (project / "deck" / "in.rigidmd").read_text()
+    assert "fix 1 rigidgroup rigid/nve/small molecule" in deck
+    monkeypatch.chdir(project / "deck")
+    lmp = load_lammps()
+    try:
+        lmp.file("in.rigidmd")
+    finally:
+        lmp.close()
+    result = rigidmd("run", "nve.yaml", cwd=project)
+    assert result.returncode == 0, result.stderr
+    ours = read(project / "out" / "md.traj", ":")
+    steps, positions, _ = read_dump(project / "deck" / "frames.dump", len(ours[0]))
+    np.testing.assert_array_equal(steps, np.arange(0, 101, 10))
+    gap = np.abs(np.array([a.positions for a in ours]) - positions).max(axis=(1, 2))
+    # LAMMPS's own metal constants: measured 1e-8 Å after 100 steps.
+    assert gap[-1] < 1e-6
+
+
+@pytest.mark.parametrize("change, message", [
+    ("thermostat: {kind: bussi, temperature: 300 K, taut: 100 fs}", "no Bussi thermostat"),
+    ("integrator: pcdm", "export-lammps writes fix rigid/nve/small"),
+    ("calculator: {name: tip3p, options: {rc: 5.0}}", "switches off each molecule pair"),
+])
+def test_export_refuses_what_lammps_cannot_do(project, change, message):
+    key = change.split(":")[0]
+    lines = [line for line in CONFIG.splitlines() if not line.startswith(key + ":")]
+    (project / "bad.yaml").write_text("\n".join(lines + [change]) + "\n")
+    result = rigidmd("export-lammps", "bad.yaml", "deck", cwd=project)
+    assert result.returncode == 2
+    assert message in result.stderr and "Traceback" not in result.stderr
+
+
+def test_interrupted_run_keeps_outputs(project):
+    """SIGINT in the middle of a run: traj and log readable up to the last step."""
+    import signal
+    import time
+
+    config = CONFIG.replace("steps: 50", "steps: 100000")
+    (project / "long.yaml").write_text(config)
+    proc = subprocess.Popen([sys.executable, "-m", "rigidmd.cli", "run", "long.yaml"],
+                            cwd=project, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    log = project / "out" / "md.log"
+    deadline = time.time() + 120
+    while time.time() < deadline and (not log.exists() or len(log.read_text().splitlines()) < 5):
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert "interrupted after step" in stdout
+    frames = read(project / "out" / "md.traj", ":")
+    lines = [ln for ln in log.read_text().splitlines()[1:] if ln.strip()]
+    assert len(frames) == len(lines) >= 4
+    # The last frame is a whole, rigid state.
+    bodies = RigidBodies.resolve(frames[-1])
+    assert bodies.n_bodies == 8
+    RigidVerlet(frames[-1], units.fs)  # readable and consistent enough to restart
