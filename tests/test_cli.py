@@ -40,8 +40,24 @@ velocities: {temperature: 250 K, seed: 1}
 thermostat: {kind: langevin, temperature: 250 K, friction: 0.01 1/fs, seed: 2}
 timestep: 2 fs
 steps: 50
-outputs: {directory: out, trajectory: md.traj, log: md.log, interval: 10, plot: md.png}
+outputs:
+  {directory: out, trajectory: md.traj, log: md.log, interval: 10, plot: md.png, mdanalysis: md.xtc}
 """
+
+
+def with_change(config, change):
+    """``config`` with the top-level key of ``change`` replaced by ``change``."""
+    key = change.split(":")[0]
+    kept, skipping = [], False
+    for line in config.splitlines():
+        if line.startswith(key + ":"):
+            skipping = True
+            continue
+        if skipping and line.startswith(" "):
+            continue
+        skipping = False
+        kept.append(line)
+    return "\n".join(kept + [change]) + "\n"
 
 
 @pytest.fixture
@@ -58,6 +74,12 @@ def test_run_restart_and_plot(project):
     assert "RigidLangevin" in result.stdout and "conserved energy" in result.stdout
     frames = read(project / "out" / "md.traj", ":")
     assert len(frames) == 6
+    import MDAnalysis as mda
+
+    universe = mda.Universe(str(project / "out" / "md.psf"), str(project / "out" / "md.xtc"))
+    assert universe.trajectory.n_frames == 6 and len(universe.residues) == 8
+    np.testing.assert_allclose(universe.trajectory[-1].positions, frames[-1].positions,
+                               atol=2e-3)
     # Restart from the trajectory: continue and append to it.
     result = rigidmd("run", "run.yaml", "--restart", "out/md.traj", "--steps", 20, cwd=project)
     assert result.returncode == 0, result.stderr
@@ -88,9 +110,7 @@ def test_run_from_flags_only(tmp_path):
     ("outputs: {directory: out, colour: red}", "outputs.colour: unknown key"),
 ])
 def test_config_errors_are_one_line_and_status_2(project, change, field):
-    key = change.split(":")[0]
-    lines = [line for line in CONFIG.splitlines() if not line.startswith(key + ":")]
-    (project / "bad.yaml").write_text("\n".join(lines + [change]) + "\n")
+    (project / "bad.yaml").write_text(with_change(CONFIG, change))
     result = rigidmd("run", "bad.yaml", cwd=project)
     assert result.returncode == 2
     assert "Traceback" not in result.stderr
@@ -136,9 +156,7 @@ def test_export_lammps_round_trip(project, monkeypatch):
     ("calculator: {name: tip3p, options: {rc: 5.0}}", "switches off each molecule pair"),
 ])
 def test_export_refuses_what_lammps_cannot_do(project, change, message):
-    key = change.split(":")[0]
-    lines = [line for line in CONFIG.splitlines() if not line.startswith(key + ":")]
-    (project / "bad.yaml").write_text("\n".join(lines + [change]) + "\n")
+    (project / "bad.yaml").write_text(with_change(CONFIG, change))
     result = rigidmd("export-lammps", "bad.yaml", "deck", cwd=project)
     assert result.returncode == 2
     assert message in result.stderr and "Traceback" not in result.stderr

@@ -188,9 +188,9 @@ def _run(config, stream=sys.stdout):
                interval=outputs["interval"])
     writer = None
     if "mdanalysis" in outputs:
-        from rigidmd.mdanalysis import TrajectoryWriter
+        from rigidmd.mdanalysis import MDAWriter
 
-        writer = TrajectoryWriter(outputs["mdanalysis"], dyn)
+        writer = MDAWriter(dyn, outputs["mdanalysis"])
         dyn.attach(writer, interval=outputs["interval"])
     steps = config["steps"]
     dyn.attach(Progress(dyn, steps), interval=max(1, steps // 200))
