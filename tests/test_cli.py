@@ -187,3 +187,31 @@ def test_interrupted_run_keeps_outputs(project):
     bodies = RigidBodies.resolve(frames[-1])
     assert bodies.n_bodies == 8
     RigidVerlet(frames[-1], units.fs)  # readable and consistent enough to restart
+
+
+@pytest.mark.parametrize("calculator", [
+    "{name: tip4p, options: {rc: 40.0}}",
+    "{name: ase.calculators.lj.LennardJones, options: {sigma: 3.0, epsilon: 0.005, rc: 9.0}}",
+    "{name: lammps, pair: ['pair_style lj/cut/coul/cut 30.0', 'pair_coeff * * 0.0 1.0',"
+    " 'pair_coeff 1 1 0.0065956819 3.15061'], charges: {O: -0.834, H: 0.417}}",
+])
+def test_calculators_and_lammps_data_input(tmp_path, calculator):
+    """A LAMMPS data file with molecule IDs as the structure, each kind of calculator."""
+    from rigidmd.lammps import write_data
+
+    atoms = water_cluster(4, seed=2)
+    body_ids = RigidBodies.resolve(atoms, "mol-id").body_ids
+    write_data(atoms, body_ids, tmp_path / "w.data", charges=np.zeros(12), ase_constants=False)
+    (tmp_path / "c.yaml").write_text(
+        "structure: w.data\n"
+        "read_options: {format: lammps-data, atom_style: full, units: metal}\n"
+        "bodies: mol-id\n"
+        f"calculator: {calculator}\n"
+        "velocities: {temperature: 200 K, seed: 0}\n"
+        "timestep: 1 fs\nsteps: 20\n"
+        "outputs: {trajectory: md.traj, interval: 10}\n")
+    result = rigidmd("run", "c.yaml", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "RigidBodies(n_bodies=4, n_free=0, rule='mol-id')" in result.stdout
+    frames = read(tmp_path / "md.traj", ":")
+    assert len(frames) == 3 and np.isfinite(frames[-1].get_potential_energy())
