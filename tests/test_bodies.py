@@ -123,3 +123,13 @@ def test_body_larger_than_half_the_cell_is_refused():
     message = "body 0 .* spans 2.500 Å across cell vector 0, more than half"
     with pytest.raises(ValueError, match=message):
         RigidBodies.resolve(chain, [[0, 1, 2]]).geometry(chain)
+
+
+def test_connectivity_warns_about_joined_molecules():
+    atoms = water_cluster(3, seed=0)
+    # Push the second water's oxygen within bonding reach of the first's hydrogen.
+    shift = atoms.positions[1] + [0.0, 0.0, 1.0] - atoms.positions[3]
+    atoms.positions[3:6] += shift
+    with pytest.warns(UserWarning, match=r"body 0 .* has 2 times the atoms of another body"):
+        bodies = RigidBodies.resolve(atoms)
+    assert bodies.n_bodies == 2

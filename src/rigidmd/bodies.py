@@ -15,6 +15,7 @@ moment below ``1e-7 * max(I)`` is set to exactly 0 (a linear body), the rule
 LAMMPS ``fix rigid`` uses.
 """
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -176,7 +177,37 @@ class RigidBodies:
             atoms, cutoffs=natural_cutoffs(atoms, mult=mult), self_interaction=False
         )
         _, labels = connected_components(nl.get_connectivity_matrix(sparse=True))
-        return cls(labels, rule="connectivity")
+        bodies = cls(labels, rule="connectivity")
+        bodies._warn_merged(atoms)
+        return bodies
+
+    def _warn_merged(self, atoms):
+        """Warn when a body's composition is a multiple of another body's.
+
+        Connectivity joins molecules whose atoms come within covalent reach
+        (two waters after a quench, say): such a body then holds twice the
+        atoms of its neighbours.
+        """
+        if self.n_bodies < 2:
+            return
+        inside = self.body_ids >= 0
+        elements, element_index = np.unique(atoms.numbers[inside], return_inverse=True)
+        counts = np.zeros((self.n_bodies, len(elements)), dtype=np.int64)
+        np.add.at(counts, (self.body_ids[inside], element_index), 1)
+        formulas, first = np.unique(counts, axis=0, return_index=True)
+        for i, big in enumerate(formulas):
+            for small in formulas:
+                ratio = big.sum() // max(small.sum(), 1)
+                if ratio >= 2 and np.array_equal(big, ratio * small):
+                    b = int(first[i])
+                    warnings.warn(
+                        f"bodies by connectivity: body {b} (atoms {_describe(self.atoms_of(b))}) "
+                        f"has {ratio} times the atoms of another body; molecules that came "
+                        "within covalent reach were joined. Give the bodies explicitly "
+                        "(bodies='mol-id', 'tags' or a list) if that is wrong",
+                        stacklevel=3,
+                    )
+                    return
 
     @classmethod
     def resolve(cls, atoms, spec=None):
