@@ -137,15 +137,8 @@ def plot_log(log, png):
 
 def _setup(config):
     """Atoms, bodies spec and dynamics from a checked configuration."""
-    from rigidmd import rigid_maxwell_boltzmann
-
-    atoms = build_atoms(config)
-    bodies = _bodies(atoms, config)
+    atoms, bodies = _start(config)
     atoms.calc = build_calculator(config["calculator"], atoms)
-    if "velocities" in config and "restart" not in config:
-        vel = config["velocities"]
-        rigid_maxwell_boltzmann(atoms, vel["temperature_K"], bodies=bodies,
-                                rng=np.random.default_rng(vel["seed"]))
     outputs = config["outputs"]
     outputs["directory"].mkdir(parents=True, exist_ok=True)
     cls, kwargs = thermostat_kwargs(config)
@@ -176,6 +169,19 @@ def _bodies(atoms, config):
     if not atoms.get_tags().any() and rule != "tags":
         atoms.set_tags(np.where(bodies.body_ids >= 0, bodies.body_ids + 1, 0))
     return bodies
+
+
+def _start(config):
+    """Starting atoms, their bodies, and (unless restarting) drawn rigid velocities."""
+    from rigidmd import rigid_maxwell_boltzmann
+
+    atoms = build_atoms(config)
+    bodies = _bodies(atoms, config)
+    if "velocities" in config and "restart" not in config:
+        vel = config["velocities"]
+        rigid_maxwell_boltzmann(atoms, vel["temperature_K"], bodies=bodies,
+                                rng=np.random.default_rng(vel["seed"]))
+    return atoms, bodies
 
 
 def _run(config, stream=sys.stdout):
@@ -246,17 +252,9 @@ def _apply_flags(config, args):
 
 
 def _export(config, directory, stream=sys.stdout):
-    from rigidmd import RigidBodies
     from rigidmd.lammps import export_lammps, tip3p_charges, tip3p_pair_commands
 
-    atoms = build_atoms(config)
-    if "velocities" in config and "restart" not in config:
-        from rigidmd import rigid_maxwell_boltzmann
-
-        vel = config["velocities"]
-        rigid_maxwell_boltzmann(atoms, vel["temperature_K"], bodies=config["bodies"],
-                                rng=np.random.default_rng(vel["seed"]))
-    bodies = RigidBodies.resolve(atoms, config["bodies"])
+    atoms, bodies = _start(config)
     atoms.positions = bodies.whole_positions(atoms)
     calc = config["calculator"]
     if calc["name"] == "tip3p":
