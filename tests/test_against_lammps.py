@@ -13,12 +13,10 @@ import numpy as np
 import pytest
 from ase import units
 from ase.calculators.lammpslib import LAMMPSlib
-from ase.calculators.tip3p import TIP3P
 from ase.io import read
-from conftest import coulomb_lj_lammps
-from test_dynamics import mixture
+from helpers import coulomb_lj_lammps, mixture, waters
 
-from rigidmd import RigidBodies, RigidVerlet, rigid_maxwell_boltzmann
+from rigidmd import RigidBodies, RigidVerlet
 from rigidmd.lammps import (
     charge_factor,
     load_lammps,
@@ -26,7 +24,8 @@ from rigidmd.lammps import (
     tip3p_charges,
     tip3p_pair_commands,
 )
-from rigidmd.systems import water_cluster
+
+pytestmark = pytest.mark.lammps
 
 NSTEPS, EVERY = 500, 10
 DATA = Path(__file__).with_name("data")
@@ -57,16 +56,9 @@ def compare(atoms, bodies, pair_commands, charges, type_labels=None, energy_shif
     return gap, np.abs(energies - energy_shift - ref.total_energy)
 
 
-def water(n, seed):
-    atoms = water_cluster(n, seed=seed)
-    atoms.calc = TIP3P(rc=40)
-    rigid_maxwell_boltzmann(atoms, 250, rng=np.random.default_rng(seed))
-    return atoms
-
-
 @pytest.mark.parametrize("n", [2, 8, 27])
 def test_water_clusters(n):
-    atoms = water(n, seed=n)
+    atoms = waters(n, seed=n)
     gap, de = compare(atoms, "mol-id", tip3p_pair_commands(40.0), tip3p_charges(atoms))
     # Measured (2, 8, 27 waters): after 100 steps 9e-15, 3e-14, 4e-14 Å;
     # after 500 steps 4e-13, 5e-11, 1e-10 Å; energies below 1e-13 eV.  The
@@ -85,7 +77,7 @@ def test_water_clusters_with_lammps_constants(n):
     and the chaos of the cluster amplifies that.  Measured (8, 27 waters):
     9e-8, 8e-8 Å at step 100; 3.4e-5, 4.5e-5 Å at step 500; 1e-8, 9e-8 eV.
     """
-    atoms = water(n, seed=n)
+    atoms = waters(n, seed=n)
     gap, de = compare(atoms, "mol-id", tip3p_pair_commands(40.0), tip3p_charges(atoms),
                       ase_constants=False)
     assert gap[100 // EVERY] < 1e-6

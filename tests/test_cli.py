@@ -68,6 +68,7 @@ def project(tmp_path):
     return tmp_path
 
 
+@pytest.mark.mdanalysis
 def test_run_restart_and_plot(project):
     result = rigidmd("run", "run.yaml", cwd=project)
     assert result.returncode == 0, result.stderr
@@ -124,6 +125,7 @@ def test_missing_config_file(tmp_path):
     assert result.stderr.strip() == "rigidmd: error: config: no such file 'nowhere.yaml'"
 
 
+@pytest.mark.lammps
 def test_export_lammps_round_trip(project, monkeypatch):
     """The exported deck, run in-process, follows rigidmd for its first 100 steps."""
     (project / "nve.yaml").write_text(
@@ -192,8 +194,10 @@ def test_interrupted_run_keeps_outputs(project):
 @pytest.mark.parametrize("calculator", [
     "{name: tip4p, options: {rc: 40.0}}",
     "{name: ase.calculators.lj.LennardJones, options: {sigma: 3.0, epsilon: 0.005, rc: 9.0}}",
-    "{name: lammps, pair: ['pair_style lj/cut/coul/cut 30.0', 'pair_coeff * * 0.0 1.0',"
-    " 'pair_coeff 1 1 0.0065956819 3.15061'], charges: {O: -0.834, H: 0.417}}",
+    pytest.param(
+        "{name: lammps, pair: ['pair_style lj/cut/coul/cut 30.0', 'pair_coeff * * 0.0 1.0',"
+        " 'pair_coeff 1 1 0.0065956819 3.15061'], charges: {O: -0.834, H: 0.417}}",
+        marks=pytest.mark.lammps, id="lammps"),
 ])
 def test_calculators_and_lammps_data_input(tmp_path, calculator):
     """A LAMMPS data file with molecule IDs as the structure, each kind of calculator."""

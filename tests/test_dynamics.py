@@ -5,40 +5,16 @@ import warnings
 
 import numpy as np
 import pytest
-from ase import Atoms, units
+from ase import units
 from ase.calculators.calculator import Calculator, all_changes
 from ase.calculators.tip3p import TIP3P
 from ase.constraints import FixBondLengths
 from ase.io import Trajectory, read
-from conftest import CoulombLJ
+from helpers import mixture, total_momenta, waters
 
 from rigidmd import NonFiniteForceError, RigidVerlet, rigid_maxwell_boltzmann
-from rigidmd.systems import co2_water_mixture, water_cluster
 
 BACKENDS = ["numpy", "numba"]
-
-
-def waters(n=8, seed=1, temperature_K=250):
-    atoms = water_cluster(n, seed=seed)
-    atoms.calc = TIP3P(rc=40)
-    rigid_maxwell_boltzmann(atoms, temperature_K, rng=np.random.default_rng(seed))
-    return atoms
-
-
-def mixture(seed=3):
-    """4 CO2 (linear), 4 waters and 2 neon atoms (point particles)."""
-    atoms = co2_water_mixture(4, 4, seed=seed)
-    ne = Atoms("Ne2", positions=[[-3.5, 0.5, 0.3], [1.0, -3.6, 2.0]])
-    ne.arrays["mol-id"] = np.array([100, 101])
-    atoms += ne
-    atoms.calc = CoulombLJ()
-    rigid_maxwell_boltzmann(atoms, 250, bodies="mol-id", rng=np.random.default_rng(seed))
-    return atoms
-
-
-def total_momenta(atoms):
-    p = atoms.get_momenta()
-    return p.sum(axis=0), np.cross(atoms.positions, p).sum(axis=0)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

@@ -3,10 +3,8 @@
 import numpy as np
 import pytest
 from ase import Atoms, units
-from conftest import ZeroForce
 from free_top import exact_body_angular_velocity
-from test_against_lammps import water
-from test_dynamics import mixture, waters
+from helpers import ZeroForce, mixture, waters
 
 from rigidmd import RigidBodies, RigidVerlet
 from rigidmd import quaternion as quat
@@ -90,9 +88,10 @@ def test_richardson_is_not_reversible():
     assert np.log2(misses[0] / misses[1]) == pytest.approx(3.0, abs=0.3)
 
 
+@pytest.mark.lammps
 @pytest.mark.parametrize("n", [8, 27])
 def test_richardson_against_lammps_fix_rigid(n):
-    atoms = water(n, seed=n)
+    atoms = waters(n, seed=n)
     body_ids = RigidBodies.resolve(atoms, "mol-id").body_ids
     ref = run_rigid_reference(atoms, body_ids, tip3p_pair_commands(40.0), units.fs, 500,
                               every=100, fix="rigid", charges=tip3p_charges(atoms))

@@ -17,6 +17,8 @@ from rigidmd.lammps import (
 )
 from rigidmd.systems import water_box, water_cluster
 
+pytestmark = pytest.mark.lammps
+
 
 def test_load_lammps_has_the_rigid_package():
     lmp = load_lammps()

@@ -14,14 +14,15 @@ import textwrap
 import warnings
 from pathlib import Path
 
-import MDAnalysis as mda
 import numpy as np
 import pytest
+
+mda = pytest.importorskip("MDAnalysis", reason='needs MDAnalysis (pip install "rigidmd[analysis]")')
 from ase import Atoms, units
 from ase.calculators.calculator import Calculator, all_changes
 from ase.calculators.tip3p import TIP3P, rOH
 from ase.io import read
-from conftest import ZeroForce
+from helpers import ZeroForce
 
 from rigidmd import RigidBodies, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd import quaternion as quat

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 from ase import units
-from test_dynamics import mixture, waters
+from helpers import mixture, waters
 
 from rigidmd import RigidVerlet
 from rigidmd.schemes import BUILTIN_SCHEMES, OPERATORS, Scheme, resolve_scheme

@@ -11,7 +11,7 @@ from functools import cache
 import numpy as np
 import pytest
 from ase import Atoms, units
-from conftest import CoulombLJ
+from helpers import CoulombLJ
 
 from rigidmd import (
     RigidBodies,
@@ -100,6 +100,7 @@ def block_error(values, statistic=np.mean):
     return statistic(values), max(errors)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("system", ["water", "mixture"])
 @pytest.mark.parametrize("name", THERMOSTATS)
 def test_equipartition(name, system):
@@ -121,6 +122,7 @@ def test_equipartition(name, system):
         assert dyn.rotational_dof == 8 * 2 + 8 * 3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", THERMOSTATS)
 def test_kinetic_energy_distribution_is_canonical(name):
     dyn, rows = sample(name, "water")
@@ -138,6 +140,7 @@ def test_kinetic_energy_distribution_is_canonical(name):
                                rtol=0.05)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", THERMOSTATS)
 def test_conserved_quantity_drifts_no_more_than_nve(name):
     _, nve = sample("nve", "water")
@@ -151,6 +154,8 @@ def test_conserved_quantity_drifts_no_more_than_nve(name):
     assert drift < 3 * nve_drift
 
 
+@pytest.mark.slow
+@pytest.mark.lammps
 def test_nose_hoover_against_lammps_fix_rigid_nvt():
     dyn, rows = sample("nose-hoover", "water")
     atoms = make("water")
