@@ -107,10 +107,10 @@ def body_forces_and_torques(atoms, bodies, forces):
     F, tau : numpy.ndarray, shape (n_bodies, 3)
     """
     g = bodies.geometry(atoms)
-    x = bodies.whole_positions(atoms)[g.order]
-    f = forces[g.order]
-    r = x - g.com[g.atom_body]
-    return np.add.reduceat(f, g.starts), np.add.reduceat(np.cross(r, f), g.starts)
+    x = bodies.whole_positions(atoms)[g.model.order]
+    f = forces[g.model.order]
+    r = x - g.com[g.model.atom_body]
+    return np.add.reduceat(f, g.model.starts), np.add.reduceat(np.cross(r, f), g.model.starts)
 
 
 def compare_kspace(atoms, bodies, kspace, accuracy, cutoff):

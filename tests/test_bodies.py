@@ -8,9 +8,9 @@ from rigidmd.systems import co2_water_mixture, water_box, water_cluster
 
 
 def reconstruct(geom):
-    """Unwrapped atom positions X + R(q) d, in geom.order."""
-    return geom.com[geom.atom_body] + quat.rotate(
-        geom.quaternions[geom.atom_body], geom.body_coordinates
+    """Unwrapped atom positions X + R(q) d, in geom.model.order."""
+    return geom.com[geom.model.atom_body] + quat.rotate(
+        geom.quaternions[geom.model.atom_body], geom.model.body_coordinates
     )
 
 
@@ -38,14 +38,15 @@ def test_free_atoms_and_single_atom_bodies():
     conn = RigidBodies.resolve(atoms)
     np.testing.assert_array_equal(conn.body_ids, [0, 0, 0, 1, 1, 1, -1, -1])
     geom = conn.geometry(atoms)
-    assert geom.degrees_of_freedom == 12
+    # Two waters (6 each) and two point particles (3 each).
+    assert geom.model.degrees_of_freedom == 18
 
 
 def test_geometry_is_principal_and_reconstructs(rng):
     atoms = co2_water_mixture(3, 3, seed=2)
     bodies = RigidBodies.resolve(atoms, "mol-id")
     g = bodies.geometry(atoms)
-    np.testing.assert_allclose(reconstruct(g), atoms.positions[g.order], atol=1e-13)
+    np.testing.assert_allclose(reconstruct(g), atoms.positions[g.model.order], atol=1e-13)
     masses = atoms.get_masses()
     for b in range(bodies.n_bodies):
         idx = bodies.atoms_of(b)
@@ -58,12 +59,12 @@ def test_geometry_is_principal_and_reconstructs(rng):
         # The body frame diagonalises the inertia tensor.
         R = quat.to_matrix(g.quaternions[b])
         diag = R.T @ tensor @ R
-        np.testing.assert_allclose(diag, np.diag(g.moments[b]), atol=1e-9)
-    linear = g.linear
+        np.testing.assert_allclose(diag, np.diag(g.model.moments[b]), atol=1e-9)
+    linear = g.model.linear
     is_co2 = np.array([atoms.symbols[bodies.atoms_of(b)[0]] == "C" for b in range(6)])
     np.testing.assert_array_equal(linear, is_co2)
-    assert g.degrees_of_freedom == 6 * 3 + 5 * 3
-    assert np.all(g.moments[linear, 0] == 0.0)
+    assert g.model.degrees_of_freedom == 6 * 3 + 5 * 3
+    assert np.all(g.model.moments[linear, 0] == 0.0)
 
 
 def test_periodic_molecules_are_made_whole():
@@ -71,7 +72,7 @@ def test_periodic_molecules_are_made_whole():
     g = RigidBodies.resolve(atoms, "mol-id").geometry(atoms)
     x = reconstruct(g)
     # Some molecules straddle the boundary, yet every O–H distance is the bond length.
-    wrapped = atoms.positions[g.order]
+    wrapped = atoms.positions[g.model.order]
     assert np.any(np.abs(x - wrapped) > 1.0)
     oh = np.linalg.norm(x.reshape(-1, 3, 3)[:, 1:] - x.reshape(-1, 3, 3)[:, :1], axis=2)
     np.testing.assert_allclose(oh, 0.9572, atol=1e-12)

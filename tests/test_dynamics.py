@@ -114,7 +114,7 @@ def test_degrees_of_freedom_and_temperature():
     assert parts == pytest.approx(ekin, rel=1e-12)
     # Linear bodies carry no rotational energy about their axis.
     assert np.all(dyn.moments_of_inertia[:4, 0] == 0) or np.all(
-        dyn.moments_of_inertia[dyn.geometry.linear, 0] == 0)
+        dyn.moments_of_inertia[dyn.model.linear, 0] == 0)
 
 
 def test_per_body_state_is_consistent():
@@ -156,7 +156,7 @@ def test_changes_between_runs_are_picked_up():
     atoms = waters(4)
     dyn = RigidVerlet(atoms, 1 * units.fs)
     dyn.run(5)
-    d_ref = dyn.geometry.body_coordinates.copy()
+    d_ref = dyn.model.body_coordinates.copy()
     # Move one molecule rigidly and redraw velocities.
     atoms.positions[3:6] += [0.3, -0.2, 0.1]
     rigid_maxwell_boltzmann(atoms, 100, rng=np.random.default_rng(5))
@@ -167,7 +167,7 @@ def test_changes_between_runs_are_picked_up():
         dyn.run(0)
     np.testing.assert_allclose(dyn.com_positions[1], expected_com, atol=1e-12)
     assert atoms.get_kinetic_energy() == pytest.approx(ekin, rel=1e-12)
-    np.testing.assert_array_equal(dyn.geometry.body_coordinates, d_ref)
+    np.testing.assert_array_equal(dyn.model.body_coordinates, d_ref)
     # A deformed molecule is snapped back onto its rigid shape, with a warning.
     atoms.positions[0] += [0.05, 0, 0]
     with pytest.warns(UserWarning) as record:

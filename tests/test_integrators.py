@@ -30,7 +30,7 @@ def free_top_error(integrator, dt, duration=5.0):
     steps = int(round(duration / dt))
     dyn.run(steps)
     t = np.arange(len(omega_body)) * 10 * dt
-    exact = exact_body_angular_velocity(geom.moments[0], OMEGA_B0, t)
+    exact = exact_body_angular_velocity(geom.model.moments[0], OMEGA_B0, t)
     return np.abs(np.array(omega_body) - exact).max()
 
 
@@ -118,7 +118,7 @@ def test_linear_bodies_and_free_atoms(integrator):
     # Translation is velocity Verlet in every scheme: momentum to roundoff.
     np.testing.assert_allclose(atoms.get_momenta().sum(axis=0), P0, atol=1e-11)
     # Linear bodies keep 5 degrees of freedom: no spin about the axis.
-    linear = dyn.geometry.linear
+    linear = dyn.model.linear
     axis_spin = quat.rotate_inverse(dyn.quaternions, dyn.angular_velocities)[linear, 0]
     # (0 to roundoff: the body-frame view of ω rotates it back.)
     np.testing.assert_allclose(axis_spin, 0.0, atol=1e-12)

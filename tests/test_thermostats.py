@@ -107,7 +107,7 @@ def test_equipartition(name, system):
     dyn, rows = sample(name, system)
     n_free = len(dyn.bodies.free_indices)
     groups = {
-        "centres of mass": (rows[:, 0], 3 * dyn.geometry.n_bodies),
+        "centres of mass": (rows[:, 0], 3 * dyn.model.n_bodies),
         "rotations": (rows[:, 1], dyn.rotational_dof),
     }
     if n_free:

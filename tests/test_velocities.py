@@ -18,7 +18,7 @@ def test_rigid_maxwell_boltzmann_is_rigid_and_equipartitioned():
         rigid_maxwell_boltzmann(atoms, 300, bodies="mol-id", rng=rng)
         dyn = RigidVerlet(atoms, units.fs, bodies="mol-id")
         assert abs(dyn.removed_kinetic_energy) < 1e-12  # already rigid
-        lin = dyn.geometry.linear
+        lin = dyn.model.linear
         rot = dyn.rotational_kinetic_energies
         temperatures["trans"].append(
             2 * dyn.get_translational_kinetic_energy() / (3 * (40 + 10) * units.kB))

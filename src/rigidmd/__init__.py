@@ -5,17 +5,20 @@ LAMMPS ``fix rigid/nve``) with forces from any ASE calculator; atoms in no
 body move as point particles in the same step.
 """
 
-from rigidmd.bodies import BodyGeometry, RigidBodies
-from rigidmd.dynamics import NonFiniteForceError, RigidBodyDOF, RigidVerlet
+from rigidmd.bodies import RigidBodies
+from rigidmd.dynamics import NonFiniteForceError, RigidBodyDOF, RigidDynamics, RigidVerlet
+from rigidmd.model import BodyGeometry, BodyModel
 from rigidmd.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover
 from rigidmd.velocities import rigid_maxwell_boltzmann
 
 __all__ = [
+    "RigidDynamics",
     "RigidVerlet",
     "RigidLangevin",
     "RigidBussi",
     "RigidNoseHoover",
     "RigidBodies",
+    "BodyModel",
     "BodyGeometry",
     "RigidBodyDOF",
     "NonFiniteForceError",

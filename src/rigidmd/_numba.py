@@ -140,11 +140,13 @@ def first_half(X, V, q, p, F, tau, inv_mass, inv4i, dt, d, bounds, order, r, pos
 
 @_jit
 def second_half(V, q, p, F, tau, inv_mass, inv_moments, dt, forces, bounds, order, m, r,
-                momenta):
-    """Reduce forces to bodies, kick (dt/2), and write rigid atom momenta.
+                momenta, write_momenta):
+    """Reduce forces to bodies, kick (dt/2), and (optionally) write rigid atom momenta.
 
     Overwrites ``F, tau`` with the new body forces and lab torques, updates
-    ``V, p`` in place and writes ``momenta`` (atom order) of the body atoms.
+    ``V, p`` in place and, if ``write_momenta``, writes ``momenta`` (atom
+    order) of the body atoms.  (A coupled dynamics changes ``V, p`` after this
+    and writes the momenta once, with :func:`momenta`.)
     ``inv_mass`` is 1/M; ``inv_moments`` is 1/I_k, 0 where I_k = 0.
     """
     half = 0.5 * dt
@@ -171,8 +173,9 @@ def second_half(V, q, p, F, tau, inv_mass, inv_moments, dt, forces, bounds, orde
         w, x, y, z = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
         p0, p1, p2, p3 = _kick(w, x, y, z, p[b, 0], p[b, 1], p[b, 2], p[b, 3], tx, ty, tz, dt)
         p[b, 0], p[b, 1], p[b, 2], p[b, 3] = p0, p1, p2, p3
-        _body_momenta(b, vx, vy, vz, w, x, y, z, p0, p1, p2, p3, inv_moments, bounds, order, m,
-                      r, momenta)
+        if write_momenta:
+            _body_momenta(b, vx, vy, vz, w, x, y, z, p0, p1, p2, p3, inv_moments, bounds, order,
+                          m, r, momenta)
 
 
 @_jit

@@ -1,41 +1,22 @@
-r"""Which atoms form which rigid body, and the geometry of each body.
+r"""Which atoms form which rigid body, and making periodic bodies whole.
 
 A :class:`RigidBodies` object partitions the atoms of a system: every atom
 belongs to at most one body.  Atoms in no body, and bodies of a single atom,
 move as point particles.  :meth:`RigidBodies.geometry` then measures, for a
-configuration, each body's mass, centre of mass, principal moments and axes,
-body-frame coordinates and orientation quaternion.
-
-Conventions (see also :mod:`rigidmd.quaternion`): atom :math:`i` of body
-:math:`b` sits at :math:`x_i = X_b + R(q_b)\, d_i`, where :math:`X_b` is the
-centre of mass and :math:`d_i` the body-frame coordinate.  The body frame is
-the principal frame, so the inertia tensor there is
-:math:`\mathrm{diag}(I_1, I_2, I_3)` with :math:`I_1 \le I_2 \le I_3`.  A
-moment below ``1e-7 * max(I)`` is set to exactly 0 (a linear body), the rule
-LAMMPS ``fix rigid`` uses.
+configuration, the time-invariant :class:`~rigidmd.model.BodyModel` (masses,
+principal moments and axes, body-frame coordinates) and each body's centre of
+mass and orientation (see :mod:`rigidmd.model` for the conventions).
 """
 
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 
-from rigidmd import quaternion as quat
+from rigidmd.model import LINEAR_TOLERANCE, BodyGeometry, describe_atoms, measure
 
-__all__ = ["RigidBodies", "BodyGeometry", "LINEAR_TOLERANCE"]
-
-#: Relative threshold below which a principal moment counts as zero.
-LINEAR_TOLERANCE = 1e-7
+__all__ = ["RigidBodies", "BodyGeometry", "LINEAR_TOLERANCE", "unwrap_bodies"]
 
 _RULES = ("mol-id", "tags", "connectivity")
-
-
-def _describe(atoms_idx, limit=6):
-    atoms_idx = [int(i) for i in atoms_idx]
-    text = ", ".join(str(i) for i in atoms_idx[:limit])
-    if len(atoms_idx) > limit:
-        text += ", ..."
-    return f"[{text}]"
 
 
 class RigidBodies:
@@ -201,7 +182,8 @@ class RigidBodies:
                 if ratio >= 2 and np.array_equal(big, ratio * small):
                     b = int(first[i])
                     warnings.warn(
-                        f"bodies by connectivity: body {b} (atoms {_describe(self.atoms_of(b))}) "
+                        f"bodies by connectivity: body {b} "
+                        f"(atoms {describe_atoms(self.atoms_of(b))}) "
                         f"has {ratio} times the atoms of another body; molecules that came "
                         "within covalent reach were joined. Give the bodies explicitly "
                         "(bodies='mol-id', 'tags' or a list) if that is wrong",
@@ -316,7 +298,9 @@ class RigidBodies:
 
         Returns
         -------
-        BodyGeometry
+        rigidmd.model.BodyGeometry
+            The :class:`~rigidmd.model.BodyModel` and the bodies' centres of
+            mass and orientations in this configuration.
 
         Raises
         ------
@@ -339,113 +323,7 @@ class RigidBodies:
             )
         order, starts, atom_body = self._layout()
         x = unwrap_bodies(atoms, order, starts, atom_body)
-        m = masses[order]
-        if self.n_bodies == 0:
-            return BodyGeometry(
-                order=order, starts=starts, atom_body=atom_body, atom_masses=m,
-                mass=np.zeros(0), com=np.zeros((0, 3)), moments=np.zeros((0, 3)),
-                quaternions=np.zeros((0, 4)), body_coordinates=np.zeros((0, 3)),
-            )
-        mass = np.add.reduceat(m, starts)
-        com = np.add.reduceat(m[:, None] * x, starts) / mass[:, None]
-        r = x - com[atom_body]
-        tensor = inertia_tensors(r, m, starts)
-        moments, axes = np.linalg.eigh(tensor)
-        # Right-handed principal frames: R(q) = axes (columns are body axes).
-        flip = np.linalg.det(axes) < 0
-        axes[flip, :, 2] *= -1.0
-        imax = moments[:, 2]
-        point = ~(imax > 0)
-        if np.any(point):
-            b = int(np.flatnonzero(point)[0])
-            raise ValueError(
-                f"body {b} (atoms {_describe(order[atom_body == b])}) has all its "
-                "atoms at one point: it has no orientation"
-            )
-        moments = np.where(moments < LINEAR_TOLERANCE * imax[:, None], 0.0, moments)
-        q = quat.from_matrix(axes)
-        d = np.einsum("nji,nj->ni", axes[atom_body], r)
-        return BodyGeometry(
-            order=order, starts=starts, atom_body=atom_body, atom_masses=m,
-            mass=mass, com=com, moments=moments, quaternions=q, body_coordinates=d,
-        )
-
-
-@dataclass
-class BodyGeometry:
-    """Geometry of every body in one configuration (arrays over bodies).
-
-    Body atoms are stored grouped by body: ``order[starts[b]:starts[b+1]]``
-    are the atom indices of body ``b``.
-
-    Attributes
-    ----------
-    order : numpy.ndarray of int, shape (n_body_atoms,)
-        Atom index of each body atom, grouped by body.
-    starts : numpy.ndarray of int, shape (n_bodies,)
-        Offset of each body's first atom in ``order``.
-    atom_body : numpy.ndarray of int, shape (n_body_atoms,)
-        Body of each entry of ``order``.
-    atom_masses : numpy.ndarray, shape (n_body_atoms,)
-        Masses of the body atoms (amu), in ``order``.
-    mass : numpy.ndarray, shape (n_bodies,)
-        Body masses (amu).
-    com : numpy.ndarray, shape (n_bodies, 3)
-        Centres of mass (Å), from unwrapped atom positions.
-    moments : numpy.ndarray, shape (n_bodies, 3)
-        Principal moments of inertia, ascending (amu Å²); 0 marks the axis of
-        a linear body.
-    quaternions : numpy.ndarray, shape (n_bodies, 4)
-        Orientations ``(w, x, y, z)``: ``R(q)`` maps body to lab frame.
-    body_coordinates : numpy.ndarray, shape (n_body_atoms, 3)
-        Body-frame coordinates :math:`d_i` (Å), in ``order``.
-    """
-
-    order: np.ndarray
-    starts: np.ndarray
-    atom_body: np.ndarray
-    atom_masses: np.ndarray
-    mass: np.ndarray
-    com: np.ndarray
-    moments: np.ndarray
-    quaternions: np.ndarray
-    body_coordinates: np.ndarray
-
-    @property
-    def n_bodies(self):
-        return len(self.mass)
-
-    @property
-    def linear(self):
-        """Boolean mask of linear bodies (one zero moment), shape (n_bodies,)."""
-        return self.moments[:, 0] == 0.0
-
-    @property
-    def degrees_of_freedom(self):
-        """Rigid degrees of freedom of all bodies: 6 per body, 5 per linear body."""
-        return 6 * self.n_bodies - int(np.count_nonzero(self.linear))
-
-
-def inertia_tensors(r, m, starts):
-    r"""Inertia tensors :math:`\sum_i m_i (|r_i|^2 \mathbb{1} - r_i r_i^\mathsf{T})`.
-
-    Parameters
-    ----------
-    r : numpy.ndarray, shape (n_body_atoms, 3)
-        Positions relative to each body's centre of mass (Å), grouped by body.
-    m : numpy.ndarray, shape (n_body_atoms,)
-        Atom masses (amu).
-    starts : numpy.ndarray of int, shape (n_bodies,)
-
-    Returns
-    -------
-    numpy.ndarray, shape (n_bodies, 3, 3)
-        amu Å².
-    """
-    outer = m[:, None, None] * r[:, :, None] * r[:, None, :]
-    sq = np.trace(outer, axis1=1, axis2=2)
-    per_atom = sq[:, None, None] * np.eye(3) - outer
-    return np.add.reduceat(per_atom, starts, axis=0)
+        return measure(order, starts, atom_body, self.free_indices, masses, x)
 
 
 def unwrap_bodies(atoms, order, starts, atom_body):
@@ -485,7 +363,7 @@ def unwrap_bodies(atoms, order, starts, atom_body):
         width = abs(np.linalg.det(cell)) / np.linalg.norm(
             np.cross(cell[(k + 1) % 3], cell[(k + 2) % 3]))
         raise ValueError(
-            f"body {b} (atoms {_describe(order[atom_body == b])}) spans "
+            f"body {b} (atoms {describe_atoms(order[atom_body == b])}) spans "
             f"{extent[b, k] * width:.3f} Å across cell vector {k}, more than half the "
             f"periodic cell's width there ({width:.3f} Å): cannot make it whole by "
             "minimum image"

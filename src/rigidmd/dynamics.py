@@ -1,24 +1,38 @@
 r"""Rigid-body molecular dynamics as an ASE integrator.
 
-:class:`RigidVerlet` advances rigid bodies with quaternion velocity Verlet
-(NO_SQUISH, as LAMMPS ``fix rigid/nve``) and atoms that belong to no body as
-point particles, in the same step, with forces from any ASE calculator.
+:class:`RigidDynamics` advances rigid bodies (centre of mass and orientation
+quaternion) and atoms that belong to no body (point particles) in the same
+step, with forces from any ASE calculator.  A step is one pipeline:
+
+1. changes the user made to the Atoms since the last step are read (only
+   when an observer or the caller of :meth:`irun` could have made them);
+2. the coupling parts (thermostats, barostats; :mod:`rigidmd.coupling`) act
+   for half a step;
+3. the integrator's scheme (:mod:`rigidmd.schemes`) makes the deterministic
+   step, through its compiled kernel when it has one;
+4. the coupling parts act for the second half step, in reverse order;
+5. the atom momenta are written, once.
+
+The time step is read from :attr:`RigidDynamics.dt` at every step.
+:class:`RigidVerlet` is the plain NVE case.
 """
 
 import warnings
 
 import numpy as np
 from ase import Atoms
+from ase.io.trajectory import TrajectoryWriter
+from ase.md.logger import MDLogger
 from ase.md.md import MolecularDynamics
 
 from rigidmd import _numba
 from rigidmd import operators as ops
-from rigidmd import quaternion as quat
 from rigidmd.bodies import RigidBodies, unwrap_bodies
-from rigidmd.schemes import BUILTIN_SCHEMES, Scheme, SchemeContext, resolve_scheme
+from rigidmd.coupling import Coupling
+from rigidmd.schemes import BUILTIN_SCHEMES, StepContext, resolve_scheme
 from rigidmd.state import RigidState
 
-__all__ = ["RigidVerlet", "RigidBodyDOF", "NonFiniteForceError"]
+__all__ = ["RigidDynamics", "RigidVerlet", "RigidBodyDOF", "NonFiniteForceError"]
 
 #: Largest rigid-fit residual (Å) accepted silently when re-reading positions.
 FIT_TOLERANCE = 1e-6
@@ -31,7 +45,7 @@ class NonFiniteForceError(ValueError):
 class RigidBodyDOF:
     """Marks rigid bodies for ASE's degree-of-freedom count.
 
-    :class:`RigidVerlet` puts one of these in ``atoms.constraints`` so that
+    A rigid dynamics puts one of these in ``atoms.constraints`` so that
     :meth:`ase.Atoms.get_temperature` and :class:`ase.md.MDLogger` count 6
     degrees of freedom per body (5 per linear body) and 3 per point particle.
     It never changes positions, momenta or forces.  It has no ``todict``, so
@@ -67,34 +81,47 @@ class RigidBodyDOF:
         return f"RigidBodyDOF(removed_dof={self.removed_dof})"
 
 
-class RigidVerlet(MolecularDynamics):
-    r"""NVE rigid-body molecular dynamics (NO_SQUISH quaternion velocity Verlet).
+def check_timestep(timestep):
+    """``timestep`` as a positive finite float (ASE time units), or a clear error."""
+    try:
+        dt = float(timestep)
+    except (TypeError, ValueError):
+        raise TypeError(f"timestep must be a number, got {timestep!r}") from None
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"timestep must be positive and finite, got {timestep!r}")
+    return dt
+
+
+def _observer_reads_only(function):
+    """True for observers known not to change the Atoms (ASE's logger and writer)."""
+    owner = getattr(function, "__self__", function)
+    return (isinstance(owner, (MDLogger, TrajectoryWriter))
+            or getattr(owner, "modifies_atoms", True) is False)
+
+
+class RigidDynamics(MolecularDynamics):
+    r"""Rigid-body molecular dynamics: an integrator scheme and optional coupling parts.
 
     Molecules are rigid bodies with centre of mass :math:`X`, velocity
     :math:`V`, orientation quaternion :math:`q = (w, x, y, z)` and NO_SQUISH
     conjugate momentum :math:`p = 2\,q \otimes (0, L_b)`; atoms in no body
-    are point particles.  One step of ``timestep`` is (Miller et al. 2002;
-    LAMMPS ``fix rigid/nve``)
+    are point particles.  Each step of :attr:`dt` is
 
-    1. :math:`V \mathrel{+}= \tfrac{\Delta t}{2} F/M`, :math:`X \mathrel{+}= \Delta t\,V`,
-       :math:`p \mathrel{+}= \Delta t\; q \otimes (0, R(q)^\mathsf{T}\tau)`;
-    2. free rotation :math:`R_3(\tfrac{\Delta t}{2}) R_2(\tfrac{\Delta t}{2})
-       R_1(\Delta t) R_2(\tfrac{\Delta t}{2}) R_3(\tfrac{\Delta t}{2})`;
-    3. atoms placed at :math:`x_i = X + R(q)\,d_i`, one force call;
-    4. :math:`V \mathrel{+}= \tfrac{\Delta t}{2} F/M`,
-       :math:`p \mathrel{+}= \Delta t\; q \otimes (0, R(q)^\mathsf{T}\tau)`;
-    5. atom momenta :math:`m_i (V + \omega \times (x_i - X))`.
+    .. math::
+        \prod_{c} e^{\mathcal L_c \Delta t/2}\;
+        e^{\mathcal L_\mathrm{scheme} \Delta t}\;
+        \prod_{c\ \mathrm{reversed}} e^{\mathcal L_c \Delta t/2}
 
-    It is symplectic, time reversible and second order, with one force
-    evaluation per step.
+    over the coupling parts :math:`c`, a symmetric splitting.
 
     At construction the atoms' velocities are projected onto rigid motion
     (as LAMMPS does at setup); the kinetic energy this removes is kept in
     :attr:`removed_kinetic_energy` and a warning reports it when it is more
     than roundoff.  After every step the Atoms hold the rigid positions and
-    momenta.  If the Atoms' positions or momenta are changed between runs,
-    the next :meth:`run` reads them again, keeping each body's reference
-    frame (positions are fitted by the best rigid rotation).
+    momenta.  Positions or momenta changed between steps (by an observer, by
+    code between :meth:`irun` yields, or between runs) are read again before
+    the next step, keeping each body's reference frame (positions are fitted
+    by the best rigid rotation).
 
     While the dynamics exists, ``atoms.constraints`` holds a
     :class:`RigidBodyDOF`, so ``atoms.get_temperature()`` and the MD logger
@@ -129,21 +156,25 @@ class RigidVerlet(MolecularDynamics):
         Parameters of a built-in integrator's operators, e.g.
         ``{"tol": 1e-13, "max_iter": 100}`` for ``"rozmanov_kusalik"``.
     backend : {None, "numba", "numpy"}, optional
-        For ``"no_squish"``: ``"numpy"`` runs the scheme's operators
-        (:mod:`rigidmd.operators`, the readable reference path); ``"numba"``
-        runs the same arithmetic as two compiled loops over bodies (about 6
-        times faster per body).  ``None`` picks numba when it is installed.
-        Other integrators always run their operators.
+        ``"numba"`` runs a scheme's compiled kernel when it has one (the
+        ``no_squish`` scheme, about 6 times faster per body); ``"numpy"`` runs
+        its operators (:mod:`rigidmd.operators`, the readable reference
+        path).  ``None`` picks numba when it is installed.  Schemes without a
+        kernel always run their operators.
+    couplings : sequence of rigidmd.coupling.Coupling, optional
+        Thermostat and barostat parts, applied in this order before the
+        scheme's step and in reverse order after it.
     **kwargs
         Passed to :class:`ase.md.md.MolecularDynamics` (e.g. ``append_trajectory``).
 
     Raises
     ------
     TypeError
-        ``atoms`` is not an :class:`ase.Atoms`.
+        ``atoms`` is not an :class:`ase.Atoms`, or a coupling is not a part.
     ValueError
-        A bad body definition, mass, geometry or time step, or other ASE
-        constraints on the atoms; raised before anything is changed.
+        A bad body definition, mass, geometry or time step, a coupling whose
+        parameters do not fit the system, or other ASE constraints on the
+        atoms; raised before anything is changed.
 
     References
     ----------
@@ -153,22 +184,12 @@ class RigidVerlet(MolecularDynamics):
 
     def __init__(self, atoms, timestep, bodies=None, trajectory=None, logfile=None,
                  loginterval=1, integrator="no_squish", integrator_options=None, backend=None,
-                 **kwargs):
+                 couplings=(), **kwargs):
         # -- validate everything before touching the atoms or any file --
         if not isinstance(atoms, Atoms):
             raise TypeError(f"atoms must be an ase.Atoms, got {type(atoms).__name__}")
-        try:
-            dt = float(timestep)
-        except (TypeError, ValueError):
-            raise TypeError(f"timestep must be a number, got {timestep!r}") from None
-        if not (np.isfinite(dt) and dt > 0):
-            raise ValueError(f"timestep must be positive and finite, got {timestep!r}")
-        others = [c for c in atoms.constraints if not isinstance(c, RigidBodyDOF)]
-        if others:
-            raise ValueError(
-                f"RigidVerlet cannot honour other ASE constraints ({others[0]!r}); "
-                "remove them (rigid bodies replace bond constraints)"
-            )
+        self._dt = check_timestep(timestep)
+        self._check_constraints(atoms)
         if backend is None:
             backend = "numba" if _numba.AVAILABLE else "numpy"
         if backend not in ("numba", "numpy"):
@@ -181,61 +202,134 @@ class RigidVerlet(MolecularDynamics):
             raise ValueError(f"atom {a} has a non-finite momentum {momenta[a]}")
         scheme = resolve_scheme(integrator, **(integrator_options or {}))
         rigid = RigidBodies.resolve(atoms, bodies)
-        geom = rigid.geometry(atoms)
+        geometry = rigid.geometry(atoms)
+        couplings = tuple(couplings)
+        for part in couplings:
+            if not isinstance(part, Coupling):
+                raise TypeError(f"couplings must be coupling parts (rigidmd.coupling), "
+                                f"got {type(part).__name__}")
+        self.model = geometry.model
+        for part in couplings:
+            part.check(self)
 
         # -- from here on the atoms and files change --
-        super().__init__(atoms, dt, trajectory=trajectory, logfile=logfile,
+        super().__init__(atoms, self._dt, trajectory=trajectory, logfile=logfile,
                          loginterval=loginterval, **kwargs)
         self.backend = backend
         self.scheme = scheme
-        self._fused = backend == "numba" and scheme == Scheme(BUILTIN_SCHEMES["no_squish"])
+        self.fused = backend == "numba" and scheme.kernel is not None
         self.bodies = rigid
-        self.geometry = geom
-        self._free = rigid.free_indices
-        self._free_masses = self.masses[self._free, 0].copy()
-        self._bounds = np.append(geom.starts, len(geom.order)).astype(np.int64)
-        # Reciprocals for the compiled loops (0 about a zero-moment axis).
-        moments = geom.moments
-        self._inv_moments = np.where(moments > 0, 1.0 / np.where(moments > 0, moments, 1.0), 0.0)
-        self._inv4i = 0.25 * self._inv_moments
-        self._inv_mass = 1.0 / geom.mass
-        self.degrees_of_freedom = geom.degrees_of_freedom + 3 * len(self._free)
-        dof = RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom)
-        atoms.constraints = [dof]
-        nb, nf = geom.n_bodies, len(self._free)
-        self._state = RigidState(
-            X=geom.com.copy(), V=np.zeros((nb, 3)), q=geom.quaternions.copy(),
-            p=np.zeros((nb, 4)), x=atoms.positions[self._free].copy(), v=np.zeros((nf, 3)),
+        self.couplings = couplings
+        for part in couplings:
+            part.bind(self)
+        model = self.model
+        atoms.constraints = [RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom)]
+        nb, nf = model.n_bodies, model.n_free
+        self.state = RigidState(
+            X=geometry.com.copy(), V=np.zeros((nb, 3)), q=geometry.quaternions.copy(),
+            p=np.zeros((nb, 4)), x=atoms.positions[model.free].copy(), v=np.zeros((nf, 3)),
+            cell=atoms.cell.array.copy(),
         )
-        self._backup = self._state.copy()
-        self._ctx = SchemeContext(
-            state=self._state, geometry=geom, dt=dt, F=np.zeros((nb, 3)), tau=np.zeros((nb, 3)),
-            f=np.zeros((nf, 3)), free_masses=self._free_masses, evaluate=self._evaluate_forces)
-        self._r = np.zeros((len(geom.order), 3))
+        self._backup = self.state.copy()
+        self._ctx = StepContext(
+            state=self.state, model=model, F=np.zeros((nb, 3)), tau=np.zeros((nb, 3)),
+            f=np.zeros((nf, 3)), r=np.zeros((len(model.order), 3)),
+            evaluate=self._evaluate_forces, calculator_forces=self._get_forces,
+            positions=atoms.arrays["positions"], momenta=atoms.arrays["momenta"],
+            write_momenta=not couplings)
         self.removed_kinetic_energy = 0.0
-        self._synced = None
+        self._synced = None          # (positions, momenta) at the end of the last run
+        self._changed = None         # (positions, momenta) written before a change was made
+        self._driven_by_run = False  # irun consumed by run(): no caller code between steps
         self._read_momenta()
         self._write_atoms()
+
+    @staticmethod
+    def _check_constraints(atoms):
+        others = [c for c in atoms.constraints if not isinstance(c, RigidBodyDOF)]
+        if others:
+            raise ValueError(
+                f"rigid-body dynamics cannot honour other ASE constraints ({others[0]!r}); "
+                "remove them (rigid bodies replace bond constraints; atoms in no body are "
+                "free point particles)"
+            )
+
+    # ------------------------------------------------------------ time step
+    @property
+    def dt(self):
+        """The time step (ASE time units), read at every step by every path."""
+        return self._dt
+
+    @dt.setter
+    def dt(self, timestep):
+        dt = check_timestep(timestep)
+        for part in getattr(self, "couplings", ()):
+            check = getattr(part, "check_timestep", None)
+            if check is not None:
+                check(dt)
+        self._dt = dt
+
+    def set_timestep(self, timestep):
+        """Change the time step (ASE time units), as ASE's ``Langevin.set_timestep``."""
+        self.dt = timestep
 
     # ------------------------------------------------------------ ASE API
     def todict(self):
         d = super().todict()
         name = self.scheme.name if self.scheme.name in BUILTIN_SCHEMES else "custom"
         d.update(integrator=name, scheme=self.scheme.todict(), bodies_rule=self.bodies.rule,
-                 n_bodies=self.geometry.n_bodies)
+                 n_bodies=self.model.n_bodies,
+                 couplings=[part.todict() for part in self.couplings])
         return d
+
+    def run(self, steps=50):
+        """Run ``steps`` steps; see :meth:`ase.md.md.MolecularDynamics.run`."""
+        self._driven_by_run = True
+        try:
+            return super().run(steps)
+        finally:
+            self._driven_by_run = False
 
     def irun(self, steps=50):
         """Run as a generator; see :meth:`ase.md.md.MolecularDynamics.irun`.
 
-        Changes made to the Atoms since the last step are read first.
+        Changes made to the Atoms since the last step, by observers or by the
+        code that drives this generator, are read before the next step.
         """
-        self._sync_from_atoms()
+        self._sync_from_atoms(self._synced)
         self._evaluate_forces()
         try:
-            yield from super().irun(steps)
+            for converged in super().irun(steps):
+                if self._driven_by_run:
+                    yield converged
+                    continue
+                written = self._snapshot()
+                yield converged
+                if self._changed is None and self._differs(written):
+                    self._changed = written
         finally:
-            self._remember_atoms()
+            self._synced = self._snapshot()
+
+    def call_observers(self):
+        """Call the observers due at this step, noting whether they changed the Atoms."""
+        due = [function for function, interval, _, _ in self.observers
+               if (interval > 0 and self.nsteps % interval == 0)
+               or (interval <= 0 and self.nsteps == abs(interval))]
+        if all(_observer_reads_only(function) for function in due):
+            super().call_observers()
+            return
+        written = self._snapshot()
+        super().call_observers()
+        if self._changed is None and self._differs(written):
+            self._changed = written
+
+    def _snapshot(self):
+        return self.atoms.arrays["positions"].copy(), self.atoms.arrays["momenta"].copy()
+
+    def _differs(self, snapshot):
+        positions, momenta = snapshot
+        return not (np.array_equal(self.atoms.arrays["positions"], positions)
+                    and np.array_equal(self.atoms.arrays["momenta"], momenta))
 
     def _refresh_properties(self):
         # Forces at the current positions were evaluated inside step() (or
@@ -244,62 +338,40 @@ class RigidVerlet(MolecularDynamics):
 
     # ------------------------------------------------------------ the step
     def step(self):
-        """Advance one step of ``self.dt`` with the integrator's scheme.
+        """Advance one step of :attr:`dt`: coupling halves around the scheme's step.
 
-        If anything fails (the calculator, an iteration), the state, forces,
-        thermostat variables and atoms are put back as they were at the start
-        of the step.
+        If anything fails (the calculator, an iteration, a coupling part),
+        the state, forces, coupling variables and atoms are put back as they
+        were at the start of the step.
         """
-        ctx = self._ctx
-        self._state.copy_into(self._backup)
-        if self._fused:
-            # The forces are only overwritten after the force call succeeded.
+        if self._changed is not None:
+            written, self._changed = self._changed, None
+            self._sync_from_atoms(written)
+        ctx, dt = self._ctx, self.dt
+        self.state.copy_into(self._backup)
+        if self.fused:
+            # The kernel overwrites the forces only after the force call succeeded.
             saved = (ctx.F, ctx.tau, ctx.f, ctx.scratch)
         else:
             saved = (ctx.F.copy(), ctx.tau.copy(), ctx.f.copy(), dict(ctx.scratch))
-        extra = self._save_extra()
+        coupled = [part.get_state() for part in self.couplings]
         try:
-            self._advance()
+            half = 0.5 * dt
+            for part in self.couplings:
+                part.first_half(half)
+            self.scheme.run(ctx, dt, fused=self.fused)
+            for part in reversed(self.couplings):
+                part.second_half(half)
+            if not ctx.write_momenta or not self.fused:
+                self._write_momenta()
         except BaseException:
-            self._backup.copy_into(self._state)
+            self._backup.copy_into(self.state)
             ctx.F, ctx.tau, ctx.f, ctx.scratch = saved
-            self._restore_extra(extra)
+            for part, variables in zip(self.couplings, coupled, strict=True):
+                part.set_state(variables)
             self._place_atoms()
-            raise
-
-    def _advance(self):
-        """The step proper; thermostats wrap it."""
-        if self._fused:
-            self._fused_step()
-        else:
-            self.scheme.run(self._ctx)
             self._write_momenta()
-
-    def _save_extra(self):
-        """Variables beyond the state that a failed step must restore (thermostats)."""
-        return None
-
-    def _restore_extra(self, saved):
-        pass
-
-    def _fused_step(self):
-        """NO_SQUISH as two compiled loops over bodies (the same arithmetic as the scheme)."""
-        s, g, ctx, dt = self._state, self.geometry, self._ctx, self.dt
-        positions = self.atoms.arrays["positions"]
-        _numba.first_half(s.X, s.V, s.q, s.p, ctx.F, ctx.tau, self._inv_mass, self._inv4i, dt,
-                          g.body_coordinates, self._bounds, g.order, self._r, positions)
-        if len(self._free):
-            s.v += (0.5 * dt) * ctx.f / self._free_masses[:, None]
-            s.x += dt * s.v
-            positions[self._free] = s.x
-        forces = self._get_forces()
-        momenta = self.atoms.arrays["momenta"]
-        _numba.second_half(s.V, s.q, s.p, ctx.F, ctx.tau, self._inv_mass, self._inv_moments, dt,
-                           forces, self._bounds, g.order, g.atom_masses, self._r, momenta)
-        if len(self._free):
-            ctx.f = forces[self._free]
-            s.v += (0.5 * dt) * ctx.f / self._free_masses[:, None]
-            momenta[self._free] = self._free_masses[:, None] * s.v
+            raise
 
     # ------------------------------------------------------------ forces
     def _get_forces(self):
@@ -324,41 +396,38 @@ class RigidVerlet(MolecularDynamics):
         self._place_atoms()
         forces = self._get_forces()
         ctx = self._ctx
-        ctx.F, ctx.tau = ops.reduce_forces(forces, self._r, self.geometry)
-        ctx.f = forces[self._free]
+        ctx.F, ctx.tau = ops.reduce_forces(forces, ctx.r, self.model)
+        ctx.f = forces[self.model.free]
 
     # ------------------------------------------------------------ atoms <-> state
     def _place_atoms(self):
-        """Write rigid positions of the current state to the atoms."""
-        s, g = self._state, self.geometry
+        """Write rigid positions of the current state to the atoms (and ``ctx.r``)."""
+        s, m, ctx = self.state, self.model, self._ctx
         positions = self.atoms.arrays["positions"]
         if self.backend == "numba":
-            # The same arithmetic as the step's, so a restored state gives
+            # The same arithmetic as the kernel's, so a restored state gives
             # bit-identical positions.
-            _numba.place(s.X, s.q, g.body_coordinates, self._bounds, g.order, self._r, positions)
+            _numba.place(s.X, s.q, m.body_coordinates, m.bounds, m.order, ctx.r, positions)
         else:
-            self._r, positions[g.order] = ops.place_atoms(s, g)
-        positions[self._free] = s.x
+            ctx.r, positions[m.order] = ops.place_atoms(s, m)
+        positions[m.free] = s.x
 
     def _write_momenta(self):
         """Write rigid momenta of the current state to the atoms (positions placed already)."""
-        s, g = self._state, self.geometry
+        s, m, r = self.state, self.model, self._ctx.r
         momenta = self.atoms.arrays["momenta"]
         if self.backend == "numba":
-            _numba.momenta(s.V, s.q, s.p, self._inv_moments, self._bounds, g.order,
-                           g.atom_masses, self._r, momenta)
+            _numba.momenta(s.V, s.q, s.p, m.inv_moments, m.bounds, m.order, m.atom_masses, r,
+                           momenta)
         else:
-            momenta[g.order] = g.atom_masses[:, None] * ops.atom_velocities(s, self._r, g)
-        momenta[self._free] = self._free_masses[:, None] * s.v
+            momenta[m.order] = m.atom_masses[:, None] * ops.atom_velocities(s, r, m)
+        momenta[m.free] = m.free_masses[:, None] * s.v
 
     def _write_atoms(self):
         """Write positions and rigid momenta of the current state to the atoms."""
         self._place_atoms()
         self._write_momenta()
-        self._remember_atoms()
-
-    def _remember_atoms(self):
-        self._synced = (self.atoms.positions.copy(), self.atoms.get_momenta())
+        self._synced = self._snapshot()
 
     def _read_momenta(self, previous=None):
         """Project the atoms' velocities onto rigid motion of the bodies.
@@ -370,60 +439,64 @@ class RigidVerlet(MolecularDynamics):
         NO_SQUISH momentum of a linear body, which its atoms' velocities
         cannot express, so that flipping velocities reverses a run exactly.
         """
-        s, g, atoms = self._state, self.geometry, self.atoms
+        s, m, atoms = self.state, self.model, self.atoms
         momenta = atoms.get_momenta()
         ke_atoms = 0.5 * np.sum(momenta**2 / self.masses)
-        r, _ = ops.place_atoms(s, g)
-        V, L_body = ops.rigid_projection(momenta[g.order], r, s.q, g)
+        r, _ = ops.place_atoms(s, m)
+        V, L_body = ops.rigid_projection(momenta[m.order], r, s.q, m)
         p = ops.conjugate_momentum(s.q, L_body)
         if previous is not None:
-            scale, uniform = ops.uniform_rescale(momenta[g.order], previous[g.order], g)
+            scale, uniform = ops.uniform_rescale(momenta[m.order], previous[m.order], m)
             V = np.where(uniform[:, None], scale[:, None] * s.V, V)
             p = np.where(uniform[:, None], scale[:, None] * s.p, p)
         s.V, s.p = V, p
-        s.v = momenta[self._free] / self._free_masses[:, None]
+        s.v = momenta[m.free] / m.free_masses[:, None]
         ke_rigid = self.get_translational_kinetic_energy() + self.get_rotational_kinetic_energy()
         self.removed_kinetic_energy = float(ke_atoms - ke_rigid)
         # Rigid input loses only roundoff (~1e-16 of the kinetic energy).
         if self.removed_kinetic_energy > 1e-10 * ke_atoms + 1e-12:
             warnings.warn(
-                f"RigidVerlet: projecting the atoms' velocities onto rigid-body motion "
-                f"removed {self.removed_kinetic_energy:.6g} eV of kinetic energy "
+                f"{type(self).__name__}: projecting the atoms' velocities onto rigid-body "
+                f"motion removed {self.removed_kinetic_energy:.6g} eV of kinetic energy "
                 f"({100 * self.removed_kinetic_energy / ke_atoms:.3g}% of {ke_atoms:.6g} eV)",
-                stacklevel=3,
+                stacklevel=4,
             )
-        self._backup = s.copy()
 
     def _read_positions(self):
         """Refit centres of mass and orientations to the atoms' positions."""
-        s, g, atoms = self._state, self.geometry, self.atoms
-        x = unwrap_bodies(atoms, g.order, g.starts, g.atom_body)
-        if g.n_bodies:
-            X, q, residual = ops.fit_bodies(x, g)
+        s, m, atoms = self.state, self.model, self.atoms
+        x = unwrap_bodies(atoms, m.order, m.starts, m.atom_body)
+        if m.n_bodies:
+            X, q, residual = ops.fit_bodies(x, m)
             worst = int(np.argmax(residual))
             if residual[worst] > FIT_TOLERANCE:
                 warnings.warn(
-                    f"RigidVerlet: the atoms of body {worst} are {residual[worst]:.3g} Å "
-                    "from a rigid image of the body; they were moved onto it",
-                    stacklevel=3,
+                    f"{type(self).__name__}: the atoms of body {worst} are "
+                    f"{residual[worst]:.3g} Å from a rigid image of the body; they were "
+                    "moved onto it",
+                    stacklevel=4,
                 )
             s.X, s.q = X, q
-        s.x = atoms.positions[self._free].copy()
+        s.x = atoms.positions[m.free].copy()
 
-    def _sync_from_atoms(self):
-        """Pick up changes the user made to the Atoms since our last write."""
+    def _sync_from_atoms(self, written):
+        """Pick up changes made to the Atoms since ``written`` (positions, momenta) was true.
+
+        Returns whether anything changed.  Moved atoms are refitted and their
+        forces evaluated again.
+        """
         atoms = self.atoms
-        if len(atoms) != len(self.bodies.body_ids):
+        if len(atoms) != self.model.n_atoms:
             raise ValueError(
-                f"the atoms changed from {len(self.bodies.body_ids)} to {len(atoms)}; "
-                "create a new RigidVerlet"
+                f"the atoms changed from {self.model.n_atoms} to {len(atoms)}; "
+                "create a new dynamics"
             )
         if not np.array_equal(atoms.get_masses(), self.masses[:, 0]):
-            raise ValueError("the atoms' masses changed; create a new RigidVerlet")
+            raise ValueError("the atoms' masses changed; create a new dynamics")
+        self._check_constraints(atoms)
         if not any(isinstance(c, RigidBodyDOF) for c in atoms.constraints):
-            atoms.constraints = list(atoms.constraints) + [
-                RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom)]
-        positions, momenta = self._synced
+            atoms.constraints = [RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom)]
+        positions, momenta = written
         moved = not np.array_equal(atoms.positions, positions)
         kicked = not np.array_equal(atoms.get_momenta(), momenta)
         if moved:
@@ -432,27 +505,45 @@ class RigidVerlet(MolecularDynamics):
             self._read_momenta(previous=None if moved else momenta)
             self._write_atoms()
             self._ctx.scratch.clear()
+        if moved:
+            self._evaluate_forces()
+        return moved or kicked
 
     # ------------------------------------------------------------ per-body state
     @property
+    def degrees_of_freedom(self):
+        """Rigid degrees of freedom: 6 per body, 5 per linear body, 3 per point particle."""
+        return self.model.degrees_of_freedom
+
+    @property
+    def translational_dof(self):
+        """Centre-of-mass and point-particle degrees of freedom: 3 each."""
+        return self.model.translational_dof
+
+    @property
+    def rotational_dof(self):
+        """Rotational degrees of freedom: 3 per body, 2 per linear body."""
+        return self.model.rotational_dof
+
+    @property
     def com_positions(self):
         """Centres of mass of the bodies (Å), unwrapped, shape (n_bodies, 3)."""
-        return self._state.X.copy()
+        return self.state.X.copy()
 
     @property
     def com_velocities(self):
         """Centre-of-mass velocities (Å per ASE time unit), shape (n_bodies, 3)."""
-        return self._state.V.copy()
+        return self.state.V.copy()
 
     @property
     def quaternions(self):
         """Orientations ``(w, x, y, z)``, body to lab frame, shape (n_bodies, 4)."""
-        return self._state.q.copy()
+        return self.state.q.copy()
 
     @property
     def moments_of_inertia(self):
         """Principal moments (amu Å²), ascending, shape (n_bodies, 3)."""
-        return self.geometry.moments.copy()
+        return self.model.moments.copy()
 
     @property
     def angular_momenta(self):
@@ -460,19 +551,19 @@ class RigidVerlet(MolecularDynamics):
 
         Units amu Å² per ASE time unit.
         """
-        s = self._state
-        return quat.rotate(s.q, ops.body_angular_momentum(s.q, s.p))
+        return ops.lab_angular_momentum(self.state.q, self.state.p)
 
     @property
     def angular_velocities(self):
         """Lab-frame angular velocities (rad / ASE time), shape (n_bodies, 3)."""
-        s = self._state
-        return ops.angular_velocity(s.q, s.p, self.geometry.moments)
+        s = self.state
+        return ops.angular_velocity(s.q, ops.body_angular_momentum(s.q, s.p),
+                                    self.model.inv_moments)
 
     @property
     def translational_kinetic_energies(self):
         r"""Per-body :math:`\tfrac12 M |V|^2` (eV), shape (n_bodies,)."""
-        return 0.5 * self.geometry.mass * np.sum(self._state.V**2, axis=1)
+        return 0.5 * self.model.mass * np.sum(self.state.V**2, axis=1)
 
     @property
     def rotational_kinetic_energies(self):
@@ -480,10 +571,8 @@ class RigidVerlet(MolecularDynamics):
 
         :math:`\tfrac12 \sum_k L_{b,k}^2 / I_k` over the axes with :math:`I_k > 0`.
         """
-        s, moments = self._state, self.geometry.moments
-        L_body = ops.body_angular_momentum(s.q, s.p)
-        safe = np.where(moments > 0, moments, 1.0)
-        return 0.5 * np.sum(np.where(moments > 0, L_body**2 / safe, 0.0), axis=1)
+        L_body = ops.body_angular_momentum(self.state.q, self.state.p)
+        return 0.5 * np.sum(L_body**2 * self.model.inv_moments, axis=1)
 
     def get_angular_momentum(self):
         r"""Total angular momentum about the origin (amu Å² / ASE time), shape (3,).
@@ -494,15 +583,56 @@ class RigidVerlet(MolecularDynamics):
         LAMMPS), which atom velocities cannot show; this total, not the atoms'
         :math:`\sum_i x_i \times p_i`, is what the integrator conserves.
         """
-        s, g = self._state, self.geometry
-        L = np.cross(s.X, g.mass[:, None] * s.V).sum(axis=0) + self.angular_momenta.sum(axis=0)
-        return L + np.cross(s.x, self._free_masses[:, None] * s.v).sum(axis=0)
+        s, m = self.state, self.model
+        L = np.cross(s.X, m.mass[:, None] * s.V).sum(axis=0) + self.angular_momenta.sum(axis=0)
+        return L + np.cross(s.x, m.free_masses[:, None] * s.v).sum(axis=0)
 
     def get_translational_kinetic_energy(self):
         """Kinetic energy of the centres of mass plus that of the point particles (eV)."""
-        free = 0.5 * np.sum(self._free_masses[:, None] * self._state.v**2)
+        free = 0.5 * np.sum(self.model.free_masses[:, None] * self.state.v**2)
         return float(self.translational_kinetic_energies.sum() + free)
 
     def get_rotational_kinetic_energy(self):
         """Rotational kinetic energy of all bodies (eV)."""
         return float(self.rotational_kinetic_energies.sum())
+
+    def get_conserved_energy(self):
+        """Total energy plus every coupling part's term (eV): what the dynamics conserves.
+
+        For NVE this is the total energy; a stochastic thermostat subtracts the
+        energy it put in, Nosé–Hoover chains add their own energy.
+        """
+        energy = self.atoms.get_total_energy()
+        return float(energy + sum(part.energy() for part in self.couplings))
+
+
+class RigidVerlet(RigidDynamics):
+    r"""NVE rigid-body molecular dynamics (NO_SQUISH quaternion velocity Verlet by default).
+
+    One step of ``timestep`` with the default integrator is (Miller et al.
+    2002; LAMMPS ``fix rigid/nve``)
+
+    1. :math:`V \mathrel{+}= \tfrac{\Delta t}{2} F/M`, :math:`X \mathrel{+}= \Delta t\,V`,
+       :math:`p \mathrel{+}= \Delta t\; q \otimes (0, R(q)^\mathsf{T}\tau)`;
+    2. free rotation :math:`R_3(\tfrac{\Delta t}{2}) R_2(\tfrac{\Delta t}{2})
+       R_1(\Delta t) R_2(\tfrac{\Delta t}{2}) R_3(\tfrac{\Delta t}{2})`;
+    3. atoms placed at :math:`x_i = X + R(q)\,d_i`, one force call;
+    4. :math:`V \mathrel{+}= \tfrac{\Delta t}{2} F/M`,
+       :math:`p \mathrel{+}= \Delta t\; q \otimes (0, R(q)^\mathsf{T}\tau)`;
+    5. atom momenta :math:`m_i (V + \omega \times (x_i - X))`.
+
+    It is symplectic, time reversible and second order, with one force
+    evaluation per step.  Parameters as :class:`RigidDynamics`, without
+    ``couplings``.
+    """
+
+    def __init__(self, atoms, timestep, bodies=None, trajectory=None, logfile=None,
+                 loginterval=1, integrator="no_squish", integrator_options=None, backend=None,
+                 **kwargs):
+        if "couplings" in kwargs:
+            raise TypeError("RigidVerlet is NVE and takes no couplings; use RigidDynamics "
+                            "or a thermostat class")
+        super().__init__(atoms, timestep, bodies=bodies, trajectory=trajectory,
+                         logfile=logfile, loginterval=loginterval, integrator=integrator,
+                         integrator_options=integrator_options, backend=backend, **kwargs)
+

@@ -1368,7 +1368,7 @@ def body_dipole_directions(dyn, charges=None):
     ValueError
         A body with no dipole (all charges zero).
     """
-    g = dyn.geometry
+    g = dyn.model
     q = _charges(dyn.atoms, charges)[g.order]
     d_body = np.stack([np.bincount(g.atom_body, weights=q * g.body_coordinates[:, k],
                                    minlength=g.n_bodies) for k in range(3)], axis=1)

@@ -27,16 +27,30 @@ __all__ = [
     "free_rotor",
     "body_angular_momentum",
     "conjugate_momentum",
+    "lab_angular_momentum",
+    "momentum_from_lab",
     "angular_velocity",
+    "lab_from_omega",
     "place_atoms",
     "reduce_forces",
     "atom_velocities",
+    "rigid_projection",
+    "fit_bodies",
+    "uniform_rescale",
+    "euler_acceleration",
+    "richardson_rotate",
+    "rozmanov_kusalik_rotate",
+    "ConvergenceError",
+    "pcdm_predict",
+    "pcdm_correct",
+    "exadem_push_to_quaternion",
+    "exadem_angular_acceleration",
 ]
 
 _PERMUTATIONS = (quat.p1, quat.p2, quat.p3)
 
 
-def translational_kick(state, F, f, M, m, h):
+def translational_kick(state, F, f, model, h):
     r"""Centre-of-mass and free-atom kick.
 
     :math:`V \mathrel{+}= h F/M`, :math:`v \mathrel{+}= h f/m`.
@@ -48,15 +62,13 @@ def translational_kick(state, F, f, M, m, h):
         Total force on each body (eV/Å).
     f : numpy.ndarray, shape (n_free, 3)
         Forces on the free atoms (eV/Å).
-    M : numpy.ndarray, shape (n_bodies,)
-        Body masses (amu).
-    m : numpy.ndarray, shape (n_free,)
-        Free-atom masses (amu).
+    model : rigidmd.model.BodyModel
+        Body and free-atom masses (amu).
     h : float
         Time (ASE units).
     """
-    state.V += h * F / M[:, None]
-    state.v += h * f / m[:, None]
+    state.V += h * F / model.mass[:, None]
+    state.v += h * f / model.free_masses[:, None]
 
 
 def drift(state, h):
@@ -86,7 +98,7 @@ def rotational_kick(state, tau, h):
     state.p += 2.0 * h * quat.vector_product(state.q, quat.rotate_inverse(state.q, tau))
 
 
-def no_squish_rotate(q, p, moments, k, h):
+def no_squish_rotate(q, p, inv_moments, k, h):
     r"""Exact free rotation about body axis ``k`` for a time ``h`` (in place).
 
     .. math::
@@ -99,8 +111,8 @@ def no_squish_rotate(q, p, moments, k, h):
     Parameters
     ----------
     q, p : numpy.ndarray, shape (n_bodies, 4)
-    moments : numpy.ndarray, shape (n_bodies, 3)
-        Principal moments (amu Å²).
+    inv_moments : numpy.ndarray, shape (n_bodies, 3)
+        :math:`1/I_k`, 0 about a zero-moment axis (amu⁻¹ Å⁻²).
     k : int
         Body axis, 0, 1 or 2 (:math:`P_1, P_2, P_3`).
     h : float
@@ -108,9 +120,7 @@ def no_squish_rotate(q, p, moments, k, h):
     perm = _PERMUTATIONS[k]
     kq = perm(q)
     kp = perm(p)
-    inertia = moments[:, k]
-    safe = np.where(inertia > 0, inertia, 1.0)
-    phi = np.where(inertia > 0, np.einsum("ij,ij->i", p, kq) / (4.0 * safe), 0.0)
+    phi = np.einsum("ij,ij->i", p, kq) * (0.25 * inv_moments[:, k])
     c = np.cos(phi * h)[:, None]
     s = np.sin(phi * h)[:, None]
     q *= c
@@ -119,14 +129,14 @@ def no_squish_rotate(q, p, moments, k, h):
     p += s * kp
 
 
-def free_rotor(state, moments, h):
+def free_rotor(state, inv_moments, h):
     r"""NO_SQUISH symmetric splitting of a free rotation over ``h``.
 
     :math:`R_3(h/2)\, R_2(h/2)\, R_1(h)\, R_2(h/2)\, R_3(h/2)`, applied in that
     order; no renormalisation (each sub-step is an exact rotation).
     """
     for k, scale in ((2, 0.5), (1, 0.5), (0, 1.0), (1, 0.5), (2, 0.5)):
-        no_squish_rotate(state.q, state.p, moments, k, scale * h)
+        no_squish_rotate(state.q, state.p, inv_moments, k, scale * h)
 
 
 def body_angular_momentum(q, p):
@@ -145,23 +155,47 @@ def conjugate_momentum(q, L_body):
     return 2.0 * quat.vector_product(q, L_body)
 
 
-def angular_velocity(q, p, moments):
+def lab_angular_momentum(q, p):
+    r"""Lab angular momentum :math:`L = R(q)\, L_b` from the NO_SQUISH momentum.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_bodies, 3)
+        amu Å² per ASE time unit.
+    """
+    return quat.rotate(q, body_angular_momentum(q, p))
+
+
+def momentum_from_lab(q, L):
+    r"""NO_SQUISH momentum :math:`p = 2\, q \otimes (0, R(q)^\mathsf{T} L)` of a lab ``L``."""
+    return conjugate_momentum(q, quat.rotate_inverse(q, L))
+
+
+def angular_velocity(q, L_body, inv_moments):
     r"""Lab-frame angular velocity :math:`\omega = R(q)\,(L_b / I)`.
 
-    Components about an axis with :math:`I_k = 0` are 0.
+    The one route from angular momentum to angular velocity: callers holding
+    the NO_SQUISH momentum pass :func:`body_angular_momentum`, callers
+    holding a lab :math:`L` pass :math:`R(q)^\mathsf{T} L`.  Components about
+    an axis with :math:`I_k = 0` are 0.
+
+    Parameters
+    ----------
+    q : numpy.ndarray, shape (n_bodies, 4)
+    L_body : numpy.ndarray, shape (n_bodies, 3)
+        Body-frame angular momenta (amu Å² per ASE time unit).
+    inv_moments : numpy.ndarray, shape (n_bodies, 3)
+        :math:`1/I_k`, 0 about a zero-moment axis.
 
     Returns
     -------
     numpy.ndarray, shape (n_bodies, 3)
         rad per ASE time unit.
     """
-    L_body = body_angular_momentum(q, p)
-    safe = np.where(moments > 0, moments, 1.0)
-    omega_body = np.where(moments > 0, L_body / safe, 0.0)
-    return quat.rotate(q, omega_body)
+    return quat.rotate(q, inv_moments * L_body)
 
 
-def place_atoms(state, geom):
+def place_atoms(state, model):
     r"""Lab displacements and positions of the body atoms.
 
     :math:`r_i = R(q_b)\, d_i`, :math:`x_i = X_b + r_i`.
@@ -169,18 +203,18 @@ def place_atoms(state, geom):
     Parameters
     ----------
     state : RigidState
-    geom : rigidmd.bodies.BodyGeometry
+    model : rigidmd.model.BodyModel
 
     Returns
     -------
     r, x : numpy.ndarray, shape (n_body_atoms, 3)
-        In ``geom.order``.
+        In ``model.order``.
     """
-    r = quat.rotate(state.q[geom.atom_body], geom.body_coordinates)
-    return r, state.X[geom.atom_body] + r
+    r = quat.rotate(state.q[model.atom_body], model.body_coordinates)
+    return r, state.X[model.atom_body] + r
 
 
-def reduce_forces(forces, r, geom):
+def reduce_forces(forces, r, model):
     r"""Body forces and lab torques about the centres of mass.
 
     :math:`F_b = \sum_{i\in b} f_i`, :math:`\tau_b = \sum_{i \in b} r_i \times f_i`.
@@ -191,36 +225,37 @@ def reduce_forces(forces, r, geom):
         Atom forces (eV/Å), in atom order.
     r : numpy.ndarray, shape (n_body_atoms, 3)
         Lab displacements from :func:`place_atoms`.
-    geom : rigidmd.bodies.BodyGeometry
+    model : rigidmd.model.BodyModel
 
     Returns
     -------
     F : numpy.ndarray, shape (n_bodies, 3)
     tau : numpy.ndarray, shape (n_bodies, 3)
     """
-    if geom.n_bodies == 0:
+    if model.n_bodies == 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
-    f = forces[geom.order]
+    f = forces[model.order]
     return (
-        np.add.reduceat(f, geom.starts, axis=0),
-        np.add.reduceat(np.cross(r, f), geom.starts, axis=0),
+        np.add.reduceat(f, model.starts, axis=0),
+        np.add.reduceat(np.cross(r, f), model.starts, axis=0),
     )
 
 
-def atom_velocities(state, r, geom):
+def atom_velocities(state, r, model):
     r"""Rigid velocities of the body atoms, :math:`v_i = V_b + \omega_b \times r_i`.
 
     Returns
     -------
     numpy.ndarray, shape (n_body_atoms, 3)
-        In ``geom.order``.
+        In ``model.order``.
     """
-    omega = angular_velocity(state.q, state.p, geom.moments)
-    b = geom.atom_body
+    omega = angular_velocity(state.q, body_angular_momentum(state.q, state.p),
+                             model.inv_moments)
+    b = model.atom_body
     return state.V[b] + np.cross(omega[b], r)
 
 
-def rigid_projection(momenta, r, q, geom):
+def rigid_projection(momenta, r, q, model):
     r"""Project atom momenta of the bodies onto rigid-body motion.
 
     :math:`V = \sum_i p_i / M`, :math:`L = \sum_i r_i \times p_i`,
@@ -230,26 +265,26 @@ def rigid_projection(momenta, r, q, geom):
     Parameters
     ----------
     momenta : numpy.ndarray, shape (n_body_atoms, 3)
-        Atom momenta in ``geom.order`` (amu Å / ASE time).
+        Atom momenta in ``model.order`` (amu Å / ASE time).
     r : numpy.ndarray, shape (n_body_atoms, 3)
-        Lab displacements from the centres of mass (Å), in ``geom.order``.
+        Lab displacements from the centres of mass (Å), in ``model.order``.
     q : numpy.ndarray, shape (n_bodies, 4)
-    geom : rigidmd.bodies.BodyGeometry
+    geom : rigidmd.model.BodyModel
 
     Returns
     -------
     V : numpy.ndarray, shape (n_bodies, 3)
     L_body : numpy.ndarray, shape (n_bodies, 3)
     """
-    if geom.n_bodies == 0:
+    if model.n_bodies == 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
-    V = np.add.reduceat(momenta, geom.starts, axis=0) / geom.mass[:, None]
-    L = np.add.reduceat(np.cross(r, momenta), geom.starts, axis=0)
+    V = np.add.reduceat(momenta, model.starts, axis=0) / model.mass[:, None]
+    L = np.add.reduceat(np.cross(r, momenta), model.starts, axis=0)
     L_body = quat.rotate_inverse(q, L)
-    return V, np.where(geom.moments > 0, L_body, 0.0)
+    return V, np.where(model.moments > 0, L_body, 0.0)
 
 
-def fit_bodies(x, geom):
+def fit_bodies(x, model):
     r"""Best rigid placement of each body's reference onto given positions.
 
     Minimises :math:`\sum_i m_i |X + R d_i - x_i|^2` over :math:`X` and
@@ -260,8 +295,8 @@ def fit_bodies(x, geom):
     Parameters
     ----------
     x : numpy.ndarray, shape (n_body_atoms, 3)
-        Unwrapped positions (Å) in ``geom.order``.
-    geom : rigidmd.bodies.BodyGeometry
+        Unwrapped positions (Å) in ``model.order``.
+    geom : rigidmd.model.BodyModel
 
     Returns
     -------
@@ -270,21 +305,21 @@ def fit_bodies(x, geom):
     residual : numpy.ndarray, shape (n_bodies,)
         Largest distance of an atom from its fitted place (Å).
     """
-    m, b, d = geom.atom_masses, geom.atom_body, geom.body_coordinates
-    X = np.add.reduceat(m[:, None] * x, geom.starts, axis=0) / geom.mass[:, None]
+    m, b, d = model.atom_masses, model.atom_body, model.body_coordinates
+    X = np.add.reduceat(m[:, None] * x, model.starts, axis=0) / model.mass[:, None]
     r = x - X[b]
-    B = np.add.reduceat(m[:, None, None] * r[:, :, None] * d[:, None, :], geom.starts, axis=0)
+    B = np.add.reduceat(m[:, None, None] * r[:, :, None] * d[:, None, :], model.starts, axis=0)
     U, _, Wt = np.linalg.svd(B)
     sign = np.sign(np.linalg.det(U @ Wt))
     sign[sign == 0] = 1.0
     U[:, :, 2] *= sign[:, None]
     q = quat.from_matrix(U @ Wt)
     misfit = np.linalg.norm(quat.rotate(q[b], d) - r, axis=1)
-    residual = np.maximum.reduceat(misfit, geom.starts)
+    residual = np.maximum.reduceat(misfit, model.starts)
     return X, q, residual
 
 
-def uniform_rescale(new, old, geom, rtol=1e-12):
+def uniform_rescale(new, old, model, rtol=1e-12):
     r"""Which bodies' atom momenta were scaled by one factor, and the factor.
 
     For each body, :math:`\lambda = \sum_i p'_i \cdot p_i / \sum_i |p_i|^2`;
@@ -295,8 +330,8 @@ def uniform_rescale(new, old, geom, rtol=1e-12):
     Parameters
     ----------
     new, old : numpy.ndarray, shape (n_body_atoms, 3)
-        Atom momenta in ``geom.order``.
-    geom : rigidmd.bodies.BodyGeometry
+        Atom momenta in ``model.order``.
+    geom : rigidmd.model.BodyModel
     rtol : float
 
     Returns
@@ -304,46 +339,27 @@ def uniform_rescale(new, old, geom, rtol=1e-12):
     scale : numpy.ndarray, shape (n_bodies,)
     uniform : numpy.ndarray of bool, shape (n_bodies,)
     """
-    if geom.n_bodies == 0:
+    if model.n_bodies == 0:
         return np.zeros(0), np.zeros(0, dtype=bool)
-    dot = np.add.reduceat(np.einsum("ij,ij->i", new, old), geom.starts)
-    norm2 = np.add.reduceat(np.einsum("ij,ij->i", old, old), geom.starts)
+    dot = np.add.reduceat(np.einsum("ij,ij->i", new, old), model.starts)
+    norm2 = np.add.reduceat(np.einsum("ij,ij->i", old, old), model.starts)
     scale = np.where(norm2 > 0, dot / np.where(norm2 > 0, norm2, 1.0), 0.0)
-    diff = new - scale[geom.atom_body, None] * old
-    misfit = np.add.reduceat(np.einsum("ij,ij->i", diff, diff), geom.starts)
+    diff = new - scale[model.atom_body, None] * old
+    misfit = np.add.reduceat(np.einsum("ij,ij->i", diff, diff), model.starts)
     return scale, misfit <= rtol**2 * norm2
 
 
 # ---------------------------------------------------------------- conversions
-def _safe_inverse(moments):
-    """1/I componentwise, 0 where I = 0 (the axis of a linear body)."""
-    return np.where(moments > 0, 1.0 / np.where(moments > 0, moments, 1.0), 0.0)
-
-
-def lab_angular_momentum(q, p):
-    r"""Lab angular momentum :math:`L = R(q) L_b` from the NO_SQUISH momentum, (n_bodies, 3)."""
-    return quat.rotate(q, body_angular_momentum(q, p))
-
-
-def momentum_from_lab(q, L):
-    r"""NO_SQUISH momentum :math:`p = 2\, q \otimes (0, R(q)^\mathsf{T} L)` of a lab ``L``."""
-    return conjugate_momentum(q, quat.rotate_inverse(q, L))
-
-
-def omega_from_lab(q, L, moments):
-    r"""Lab angular velocity :math:`\omega = R\, I^{-1} R^\mathsf{T} L`.
-
-    Components about zero-moment axes are 0.
-    """
-    return quat.rotate(q, _safe_inverse(moments) * quat.rotate_inverse(q, L))
-
-
 def lab_from_omega(q, omega, moments):
-    r"""Lab angular momentum :math:`L = R\, I\, R^\mathsf{T} \omega`."""
+    r"""Lab angular momentum :math:`L = R\, I\, R^\mathsf{T} \omega` of a lab angular velocity.
+
+    The inverse of :func:`angular_velocity` (for the exaDEM and PCDM
+    operators, which carry :math:`\omega`).
+    """
     return quat.rotate(q, moments * quat.rotate_inverse(q, omega))
 
 
-def euler_acceleration(omega_body, torque_body, moments):
+def euler_acceleration(omega_body, torque_body, moments, inv_moments):
     r"""Body-frame angular acceleration from Euler's equations.
 
     .. math:: \dot\omega_{b} = I^{-1}\left(\tau_b - \omega_b \times I \omega_b\right)
@@ -354,7 +370,8 @@ def euler_acceleration(omega_body, torque_body, moments):
     Parameters
     ----------
     omega_body, torque_body : numpy.ndarray, shape (n_bodies, 3)
-    moments : numpy.ndarray, shape (n_bodies, 3)
+    moments, inv_moments : numpy.ndarray, shape (n_bodies, 3)
+        :math:`I_k` and :math:`1/I_k` (0 about a zero-moment axis).
 
     Returns
     -------
@@ -362,7 +379,7 @@ def euler_acceleration(omega_body, torque_body, moments):
         rad per ASE time unit squared.
     """
     rhs = torque_body - np.cross(omega_body, moments * omega_body)
-    return _safe_inverse(moments) * rhs
+    return inv_moments * rhs
 
 
 def _advance_quaternion(q, omega_lab, h):
@@ -386,7 +403,7 @@ def _exact_rotation(q, omega_lab, h):
 
 
 # ---------------------------------------------------------------- Richardson
-def richardson_rotate(state, moments, h):
+def richardson_rotate(state, inv_moments, h):
     r"""Richardson-iterated orientation update at fixed lab :math:`L` (LAMMPS ``fix rigid``).
 
     With :math:`\delta = h/2`, :math:`W(\omega, q) = (0, \omega) \otimes q` and
@@ -405,11 +422,12 @@ def richardson_rotate(state, moments, h):
     """
     L = lab_angular_momentum(state.q, state.p)
     q = state.q
-    omega = omega_from_lab(q, L, moments)
+    omega = angular_velocity(q, quat.rotate_inverse(q, L), inv_moments)
     delta = 0.5 * h
     q_full = _advance_quaternion(q, omega, 2 * delta)
     q_half = _advance_quaternion(q, omega, delta)
-    q_half = _advance_quaternion(q_half, omega_from_lab(q_half, L, moments), delta)
+    q_half = _advance_quaternion(
+        q_half, angular_velocity(q_half, quat.rotate_inverse(q_half, L), inv_moments), delta)
     state.q = quat.normalize(2.0 * q_half - q_full)
     state.p = momentum_from_lab(state.q, L)
 
@@ -419,7 +437,7 @@ class ConvergenceError(ValueError):
     """An iterative orientation update did not converge within its cap."""
 
 
-def rozmanov_kusalik_rotate(state, torque, moments, h, tol=1e-13, max_iter=100):
+def rozmanov_kusalik_rotate(state, torque, inv_moments, h, tol=1e-13, max_iter=100):
     r"""Rozmanov–Kusalik half kick and iterated orientation update over ``h``.
 
     Phys. Rev. E 81, 056706 (2010), sec. IV.A (RMPCDMD ``rigid_body_vv1``),
@@ -444,7 +462,7 @@ def rozmanov_kusalik_rotate(state, torque, moments, h, tol=1e-13, max_iter=100):
         After ``max_iter`` iterations, naming the worst body.
     """
     q0 = state.q
-    inv = _safe_inverse(moments)
+    inv = inv_moments
     L = lab_angular_momentum(q0, state.p)
     L_body = quat.rotate_inverse(q0, L)
     dL_body = quat.rotate_inverse(q0, torque) - np.cross(inv * L_body, L_body)
@@ -470,7 +488,7 @@ def rozmanov_kusalik_rotate(state, torque, moments, h, tol=1e-13, max_iter=100):
 
 
 # ---------------------------------------------------------------- PCDM
-def pcdm_predict(q0, omega0, torque0, moments, h):
+def pcdm_predict(q0, omega0, torque0, moments, inv_moments, h):
     r"""PCDM predictor (Zhao & van Wachem, Acta Mech. 224, 3091 (2013)).
 
     .. math::
@@ -489,12 +507,13 @@ def pcdm_predict(q0, omega0, torque0, moments, h):
         :math:`\omega_{b0}` and :math:`\dot\omega_{b0}`, for :func:`pcdm_correct`.
     """
     omega_body0 = quat.rotate_inverse(q0, omega0)
-    domega_body0 = euler_acceleration(omega_body0, quat.rotate_inverse(q0, torque0), moments)
+    domega_body0 = euler_acceleration(omega_body0, quat.rotate_inverse(q0, torque0), moments,
+                                      inv_moments)
     omega_quarter = quat.rotate(q0, omega_body0 + 0.25 * h * domega_body0)
     return _exact_rotation(q0, omega_quarter, 0.5 * h), omega_body0, domega_body0
 
 
-def pcdm_correct(q0, q_half, omega_body0, domega_body0, torque_half, moments, h):
+def pcdm_correct(q0, q_half, omega_body0, domega_body0, torque_half, moments, inv_moments, h):
     r"""PCDM corrector, with the torque evaluated at the predicted midpoint.
 
     .. math::
@@ -515,7 +534,7 @@ def pcdm_correct(q0, q_half, omega_body0, domega_body0, torque_half, moments, h)
     """
     omega_body_half = omega_body0 + 0.5 * h * domega_body0
     domega_half = euler_acceleration(
-        omega_body_half, quat.rotate_inverse(q_half, torque_half), moments)
+        omega_body_half, quat.rotate_inverse(q_half, torque_half), moments, inv_moments)
     q1 = _exact_rotation(q0, quat.rotate(q_half, omega_body_half), h)
     return q1, quat.rotate(q1, omega_body0 + h * domega_half)
 
@@ -534,9 +553,10 @@ def exadem_push_to_quaternion(q, omega, alpha, h):
     return _advance_quaternion(q, omega, h), omega + 0.5 * h * alpha
 
 
-def exadem_angular_acceleration(q, omega, torque, moments):
+def exadem_angular_acceleration(q, omega, torque, moments, inv_moments):
     r"""exaDEM ``push_to_angular_acceleration``: :math:`\alpha = R(Q)\,\dot\omega_b`
     with :math:`\dot\omega_b` from Euler's equations at :math:`\omega_b = R(Q)^\mathsf{T}\omega`,
     :math:`M_b = R(Q)^\mathsf{T} M`."""
     omega_body = quat.rotate_inverse(q, omega)
-    return quat.rotate(q, euler_acceleration(omega_body, quat.rotate_inverse(q, torque), moments))
+    return quat.rotate(q, euler_acceleration(omega_body, quat.rotate_inverse(q, torque), moments,
+                                             inv_moments))

@@ -45,57 +45,70 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rigidmd import _numba
 from rigidmd import operators as ops
 
-__all__ = ["Scheme", "SchemeContext", "OPERATORS", "BUILTIN_SCHEMES", "resolve_scheme"]
+__all__ = ["Scheme", "StepContext", "OPERATORS", "BUILTIN_SCHEMES", "resolve_scheme"]
 
 
 @dataclass
-class SchemeContext:
+class StepContext:
     """What operators read and write during a step.
+
+    The time step is not stored here: :meth:`Scheme.run` receives it from
+    the dynamics at every step, so a changed ``dyn.dt`` takes effect at once
+    on every path.
 
     Attributes
     ----------
-    state : RigidState
-    geometry : BodyGeometry
-    dt : float
-        Time step (ASE time units).
+    state : rigidmd.state.RigidState
+    model : rigidmd.model.BodyModel
     F, tau : numpy.ndarray, shape (n_bodies, 3)
         Body forces (eV/Å) and lab torques (eV) from the last force call.
     f : numpy.ndarray, shape (n_free, 3)
         Forces on the free atoms (eV/Å).
-    free_masses : numpy.ndarray, shape (n_free,)
+    r : numpy.ndarray, shape (n_body_atoms, 3)
+        Lab displacements :math:`R(q) d_i` of the body atoms at the last
+        placement (Å), in ``model.order``.
     evaluate : callable
         ``evaluate()`` places the atoms from ``state``, calls the calculator
-        and sets ``F``, ``tau`` and ``f``.
+        and sets ``F``, ``tau``, ``f`` and ``r``.
+    calculator_forces : callable
+        ``calculator_forces()`` calls the calculator on the atoms as they
+        are and returns checked atom forces, shape (n_atoms, 3) (the fused
+        kernel places the atoms and reduces the forces itself).
+    positions, momenta : numpy.ndarray, shape (n_atoms, 3)
+        The Atoms' own position and momentum arrays, written in place.
+    write_momenta : bool
+        Whether the scheme writes the atom momenta at the end of its step
+        (False when coupling parts act after it; the dynamics then writes them).
     scratch : dict
         Quantities an operator hands to a later one (exaDEM's accelerations,
         PCDM's start-of-step values).  Kept across steps.
     """
 
     state: object
-    geometry: object
-    dt: float
+    model: object
     F: np.ndarray
     tau: np.ndarray
     f: np.ndarray
-    free_masses: np.ndarray
+    r: np.ndarray
     evaluate: object
+    calculator_forces: object
+    positions: np.ndarray
+    momenta: np.ndarray
+    write_momenta: bool = True
     scratch: dict = field(default_factory=dict)
 
-    @property
-    def moments(self):
-        return self.geometry.moments
-
     def omega(self):
-        """Lab angular velocities of the bodies."""
-        return ops.omega_from_lab(self.state.q, ops.lab_angular_momentum(self.state.q,
-                                                                         self.state.p),
-                                  self.moments)
+        """Lab angular velocities of the bodies (rad / ASE time), shape (n_bodies, 3)."""
+        s = self.state
+        return ops.angular_velocity(s.q, ops.body_angular_momentum(s.q, s.p),
+                                    self.model.inv_moments)
 
     def set_omega(self, omega):
         """Set the bodies' lab angular velocities (at the current orientations)."""
-        L = ops.lab_from_omega(self.state.q, omega, self.moments)
+        L = ops.lab_from_omega(self.state.q, omega, self.model.moments)
         self.state.p = ops.momentum_from_lab(self.state.q, L)
 
     def accelerations(self):
@@ -115,7 +128,7 @@ class SchemeContext:
 # Each takes the context, h = dt_scale * dt, and its own keyword parameters.
 
 def translational_kick(ctx, h):
-    ops.translational_kick(ctx.state, ctx.F, ctx.f, ctx.geometry.mass, ctx.free_masses, h)
+    ops.translational_kick(ctx.state, ctx.F, ctx.f, ctx.model, h)
 
 
 def drift(ctx, h):
@@ -127,22 +140,23 @@ def rotational_kick(ctx, h):
 
 
 def no_squish_rotate(ctx, h):
-    ops.free_rotor(ctx.state, ctx.moments, h)
+    ops.free_rotor(ctx.state, ctx.model.inv_moments, h)
 
 
 def richardson_rotate(ctx, h):
-    ops.richardson_rotate(ctx.state, ctx.moments, h)
+    ops.richardson_rotate(ctx.state, ctx.model.inv_moments, h)
 
 
 def rozmanov_kusalik_rotate(ctx, h, tol=1e-13, max_iter=100):
-    ops.rozmanov_kusalik_rotate(ctx.state, ctx.tau, ctx.moments, h, tol=tol, max_iter=max_iter)
+    ops.rozmanov_kusalik_rotate(ctx.state, ctx.tau, ctx.model.inv_moments, h, tol=tol,
+                                max_iter=max_iter)
 
 
 def pcdm_predict(ctx, h):
-    s = ctx.state
+    s, m = ctx.state, ctx.model
     q0 = s.q.copy()
-    q_half, omega_body0, domega_body0 = ops.pcdm_predict(q0, ctx.omega(), ctx.tau,
-                                                         ctx.moments, h)
+    q_half, omega_body0, domega_body0 = ops.pcdm_predict(q0, ctx.omega(), ctx.tau, m.moments,
+                                                         m.inv_moments, h)
     ctx.scratch["pcdm"] = (q0, q_half, omega_body0, domega_body0)
     L = ops.lab_angular_momentum(s.q, s.p)
     s.q = q_half  # the midpoint force call places the atoms here
@@ -153,8 +167,9 @@ def pcdm_correct(ctx, h):
     if "pcdm" not in ctx.scratch:
         raise RuntimeError("pcdm_correct needs a pcdm_predict earlier in the step")
     q0, q_half, omega_body0, domega_body0 = ctx.scratch.pop("pcdm")
-    q1, omega1 = ops.pcdm_correct(q0, q_half, omega_body0, domega_body0, ctx.tau,
-                                  ctx.moments, h)
+    m = ctx.model
+    q1, omega1 = ops.pcdm_correct(q0, q_half, omega_body0, domega_body0, ctx.tau, m.moments,
+                                  m.inv_moments, h)
     ctx.state.q = q1
     ctx.set_omega(omega1)
 
@@ -170,8 +185,8 @@ def reset_force_moment(ctx):
 
 
 def force_to_accel(ctx):
-    ctx.scratch["a"] = ctx.F / ctx.geometry.mass[:, None]
-    ctx.scratch["a_free"] = ctx.f / ctx.free_masses[:, None]
+    ctx.scratch["a"] = ctx.F / ctx.model.mass[:, None]
+    ctx.scratch["a_free"] = ctx.f / ctx.model.free_masses[:, None]
 
 
 def push_f_v_r(ctx, h):
@@ -195,12 +210,43 @@ def push_to_quaternion(ctx, h):
 
 
 def push_to_angular_acceleration(ctx):
+    m = ctx.model
     ctx.scratch["alpha"] = ops.exadem_angular_acceleration(ctx.state.q, ctx.omega(), ctx.tau,
-                                                           ctx.moments)
+                                                           m.moments, m.inv_moments)
 
 
 def push_to_angular_velocity(ctx, h):
     ctx.set_omega(ctx.omega() + 0.5 * h * ctx.angular_acceleration())
+
+
+# ---------------------------------------------------------------- fused kernel
+def fused_no_squish(ctx, dt):
+    """NO_SQUISH as two compiled loops over bodies: the ``no_squish`` scheme, fused.
+
+    The same arithmetic as the operator list ``translational_kick(1/2), drift,
+    rotational_kick(1/2), no_squish_rotate, compute_force,
+    translational_kick(1/2), rotational_kick(1/2)`` (checked operator by
+    operator in the tests), with each body touched twice: before the force
+    call (kick, drift, free rotor, placement) and after it (reduction, kick,
+    momenta).  Free atoms take plain velocity Verlet in NumPy.
+    """
+    s, m = ctx.state, ctx.model
+    half = 0.5 * dt
+    _numba.first_half(s.X, s.V, s.q, s.p, ctx.F, ctx.tau, m.inv_mass, 0.25 * m.inv_moments, dt,
+                      m.body_coordinates, m.bounds, m.order, ctx.r, ctx.positions)
+    if m.n_free:
+        s.v += half * ctx.f / m.free_masses[:, None]
+        s.x += dt * s.v
+        ctx.positions[m.free] = s.x
+    forces = ctx.calculator_forces()
+    # The body forces and torques are overwritten only after the force call succeeded.
+    _numba.second_half(s.V, s.q, s.p, ctx.F, ctx.tau, m.inv_mass, m.inv_moments, dt, forces,
+                       m.bounds, m.order, m.atom_masses, ctx.r, ctx.momenta, ctx.write_momenta)
+    if m.n_free:
+        ctx.f = forces[m.free]
+        s.v += half * ctx.f / m.free_masses[:, None]
+        if ctx.write_momenta:
+            ctx.momenta[m.free] = m.free_masses[:, None] * s.v
 
 
 @dataclass(frozen=True)
@@ -274,6 +320,9 @@ BUILTIN_SCHEMES = {
 class Scheme:
     """A validated list of operators making one time step.
 
+    :meth:`run` applies the operators in order (the readable NumPy path) or,
+    for a scheme with a compiled :attr:`kernel`, the fused equivalent.
+
     Parameters
     ----------
     steps : list
@@ -339,9 +388,32 @@ class Scheme:
         """How many times a step calls the calculator."""
         return sum(op.forces for op, _ in self.expanded())
 
-    def run(self, ctx):
-        """Apply every operator to ``ctx`` in order."""
-        dt = ctx.dt
+    @property
+    def kernel(self):
+        """The compiled, fused implementation of this scheme, or None.
+
+        The built-in ``no_squish`` (and any scheme equal to it, e.g. from
+        YAML) has one: :func:`fused_no_squish`, when numba is installed.
+        """
+        if not _numba.AVAILABLE:
+            return None
+        return fused_no_squish if self.steps == _BUILTIN_NO_SQUISH.steps else None
+
+    def run(self, ctx, dt, fused=False):
+        """Advance ``ctx`` by one step of ``dt`` (ASE time units).
+
+        Parameters
+        ----------
+        ctx : StepContext
+        dt : float
+            The time step, read from the dynamics at every step.
+        fused : bool
+            Run the compiled :attr:`kernel` instead of the operators (the
+            same arithmetic); ignored when the scheme has none.
+        """
+        if fused and self.kernel is not None:
+            self.kernel(ctx, dt)
+            return
         for op, params in self._compiled:
             if op.timed:
                 extra = {k: v for k, v in params.items() if k != "dt_scale"}
@@ -465,3 +537,6 @@ def resolve_scheme(spec, **params):
         raise ValueError("integrator parameters go with a built-in name; "
                          "put them in the scheme's entries instead")
     return scheme
+
+
+_BUILTIN_NO_SQUISH = Scheme(BUILTIN_SCHEMES["no_squish"], name="no_squish")

@@ -1,4 +1,4 @@
-"""The per-body arrays a time step changes, and nothing else."""
+"""The arrays a time step changes, and nothing else."""
 
 from dataclasses import dataclass, fields
 
@@ -9,7 +9,7 @@ __all__ = ["RigidState"]
 
 @dataclass
 class RigidState:
-    r"""Dynamical state of the rigid bodies and the free atoms.
+    r"""Dynamical state of the rigid bodies, the free atoms and the cell.
 
     Attributes
     ----------
@@ -27,6 +27,9 @@ class RigidState:
         Positions of the atoms that are point particles (Å).
     v : numpy.ndarray, shape (n_free, 3)
         Their velocities (Å per ASE time unit).
+    cell : numpy.ndarray, shape (3, 3)
+        Cell vectors as rows (Å), as :attr:`ase.Atoms.cell`; only a barostat
+        changes it.
     """
 
     X: np.ndarray
@@ -35,6 +38,7 @@ class RigidState:
     p: np.ndarray
     x: np.ndarray
     v: np.ndarray
+    cell: np.ndarray
 
     def copy(self):
         """A deep copy."""

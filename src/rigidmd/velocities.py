@@ -36,19 +36,17 @@ def rigid_maxwell_boltzmann(atoms, temperature_K, bodies=None, rng=None):
     if not (np.isfinite(temperature_K) and temperature_K >= 0):
         raise ValueError(f"temperature_K must be finite and >= 0, got {temperature_K!r}")
     rng = np.random.default_rng() if rng is None else rng
-    rigid = RigidBodies.resolve(atoms, bodies)
-    geom = rigid.geometry(atoms)
+    geometry = RigidBodies.resolve(atoms, bodies).geometry(atoms)
+    model, q = geometry.model, geometry.quaternions
     kT = units.kB * temperature_K
-    nb = geom.n_bodies
-    V = rng.normal(size=(nb, 3)) * np.sqrt(kT / geom.mass)[:, None]
-    L_body = rng.normal(size=(nb, 3)) * np.sqrt(kT * geom.moments)
-    q = geom.quaternions
-    state = RigidState(X=geom.com, V=V, q=q, p=ops.conjugate_momentum(q, L_body),
-                       x=np.zeros((0, 3)), v=np.zeros((0, 3)))
-    r = quat.rotate(q[geom.atom_body], geom.body_coordinates)
+    nb = model.n_bodies
+    V = rng.normal(size=(nb, 3)) * np.sqrt(kT / model.mass)[:, None]
+    L_body = rng.normal(size=(nb, 3)) * np.sqrt(kT * model.moments)
+    state = RigidState(X=geometry.com, V=V, q=q, p=ops.conjugate_momentum(q, L_body),
+                       x=np.zeros((0, 3)), v=np.zeros((0, 3)), cell=atoms.cell.array.copy())
+    r = quat.rotate(q[model.atom_body], model.body_coordinates)
     momenta = np.zeros((len(atoms), 3))
-    momenta[geom.order] = geom.atom_masses[:, None] * ops.atom_velocities(state, r, geom)
-    free = rigid.free_indices
-    masses = atoms.get_masses()[free]
-    momenta[free] = rng.normal(size=(len(free), 3)) * np.sqrt(kT * masses)[:, None]
+    momenta[model.order] = model.atom_masses[:, None] * ops.atom_velocities(state, r, model)
+    momenta[model.free] = rng.normal(size=(model.n_free, 3)) * np.sqrt(
+        kT * model.free_masses)[:, None]
     atoms.set_momenta(momenta, apply_constraint=False)

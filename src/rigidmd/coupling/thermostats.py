@@ -1,0 +1,463 @@
+r"""Thermostats as coupling parts: Langevin, Bussi and Nosé–Hoover chains.
+
+Each acts on the rigid degrees of freedom (centre-of-mass velocities,
+body-frame angular momenta about the axes with a moment, point particles)
+for half a step before and after the deterministic step.  Temperatures count
+degrees of freedom as ASE does (no centre-of-mass correction); LAMMPS
+subtracts 3 (``6N − 3`` for N rigid waters).
+
+The dynamics classes users construct (:class:`~rigidmd.RigidLangevin`,
+:class:`~rigidmd.RigidBussi`, :class:`~rigidmd.RigidNoseHoover`) are thin
+constructors around these parts.
+"""
+
+import numpy as np
+from ase import units
+
+from rigidmd import operators as ops
+from rigidmd.coupling import (
+    Coupling,
+    LammpsFix,
+    NotExportable,
+    Parameter,
+    check_rng,
+    register,
+    rng_state,
+    set_rng_state,
+)
+
+__all__ = ["Thermostat", "LangevinThermostat", "BussiThermostat", "NoseHooverThermostat",
+           "NoseHooverChain", "check_temperature", "check_time"]
+
+
+def check_temperature(temperature_K):
+    """``temperature_K`` as a float, >= 0 and finite, or a clear error."""
+    try:
+        value = float(temperature_K)
+    except (TypeError, ValueError):
+        raise TypeError(f"temperature_K must be a number (K), got {temperature_K!r}") from None
+    if not (np.isfinite(value) and value >= 0):
+        raise ValueError(f"temperature_K must be >= 0 K, got {temperature_K!r}")
+    return value
+
+
+def check_time(name, value):
+    """A positive finite time (ASE units) as a float, or a clear error naming ``name``."""
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a time in ASE units, got {value!r}") from None
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a positive time (ASE units), got {value!r}")
+    return value
+
+
+def check_positive_integer(name, value):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    return int(value)
+
+
+TEMPERATURE = Parameter("temperature_K", "temperature", "temperature", example="300 K")
+SEED = Parameter("rng", "seed", "seed", required=False)
+
+
+class Thermostat(Coupling):
+    """Shared parts of the thermostats: the target temperature and kinetic energies."""
+
+    section = "thermostat"
+
+    def __init__(self, temperature_K):
+        self.temperature_K = check_temperature(temperature_K)
+
+    @property
+    def kT(self):
+        """:math:`k_B T` (eV)."""
+        return units.kB * self.temperature_K
+
+    def set_temperature(self, temperature_K):
+        """Change the target temperature (K), as ASE's thermostats do."""
+        self.temperature_K = check_temperature(temperature_K)
+
+    def kinetic_energies(self):
+        """(translational, rotational) kinetic energy of the bound dynamics' state (eV)."""
+        return (self.dyn.get_translational_kinetic_energy(),
+                self.dyn.get_rotational_kinetic_energy())
+
+    def scale(self, translational, rotational):
+        """Multiply translational velocities and angular momenta by the given factors."""
+        s = self.dyn.state
+        s.V *= translational
+        s.v *= translational
+        s.p *= rotational
+
+    def todict(self):
+        return {"kind": self.kind, "temperature_K": self.temperature_K}
+
+
+class _Stochastic(Thermostat):
+    """A thermostat that draws random numbers and keeps count of the energy it adds."""
+
+    def __init__(self, temperature_K, rng=None):
+        super().__init__(temperature_K)
+        self.rng = check_rng(rng)
+        #: Energy the thermostat has put into the system so far (eV).
+        self.work = 0.0
+
+    def energy(self):
+        """Minus the energy the thermostat has added: total + this is conserved (eV)."""
+        return -self.work
+
+    def get_state(self):
+        return {"work": self.work, "rng": rng_state(self.rng)}
+
+    def set_state(self, state):
+        self.work = float(state["work"])
+        set_rng_state(self.rng, state["rng"])
+
+
+@register
+class LangevinThermostat(_Stochastic):
+    r"""Langevin friction and noise on every rigid degree of freedom.
+
+    Each half step :math:`h` is the exact Ornstein–Uhlenbeck update, with
+    :math:`c = e^{-\gamma h}` and :math:`\xi \sim \mathcal N(0, 1)`:
+
+    .. math::
+        V \leftarrow c V + \sqrt{(1 - c^2) k_B T / M}\;\xi,\qquad
+        L_{b,k} \leftarrow c L_{b,k} + \sqrt{(1 - c^2) k_B T I_k}\;\xi
+
+    (not about a zero-moment axis), and likewise for point particles, as
+    LAMMPS ``fix rigid/nve ... langevin`` does.  Around a deterministic step
+    this is the O–(NO_SQUISH)–O splitting, canonical with :math:`O(\Delta t^2)`
+    errors.
+
+    Parameters
+    ----------
+    temperature_K : float
+        K.
+    friction : float
+        :math:`\gamma`, per ASE time unit (``0.01 / ase.units.fs`` is 0.01 fs⁻¹),
+        as in ASE's ``Langevin``.  ``friction * timestep`` must not exceed 0.5.
+    rng : numpy.random.Generator, optional
+    """
+
+    kind = "langevin"
+    parameters = (TEMPERATURE, Parameter("friction", "friction", "rate", example="0.01 1/fs"),
+                  SEED)
+
+    def __init__(self, temperature_K, friction, rng=None):
+        super().__init__(temperature_K, rng)
+        self.friction = self._check_friction(friction)
+
+    @staticmethod
+    def _check_friction(friction):
+        try:
+            gamma = float(friction)
+        except (TypeError, ValueError):
+            raise TypeError(f"friction must be a number per ASE time unit, got {friction!r}"
+                            ) from None
+        if not (np.isfinite(gamma) and gamma >= 0):
+            raise ValueError(f"friction must be >= 0 (per ASE time unit), got {friction!r}")
+        return gamma
+
+    def check_timestep(self, dt):
+        """Refuse ``friction * dt > 0.5``: almost surely friction given in the wrong unit."""
+        # Typical values give friction * timestep ~ 0.001-0.05; above 0.5 the
+        # velocities forget themselves within a step.
+        if self.friction * dt > 0.5:
+            raise ValueError(
+                f"friction = {self.friction:g} per ASE time unit damps the velocities within "
+                f"one step of {dt:g}: friction is in 1/(ASE time), e.g. "
+                f"0.01 / ase.units.fs = {0.01 / units.fs:.4g}, not in 1/fs or 1/ps"
+            )
+
+    def set_friction(self, friction):
+        """Change the friction (per ASE time unit), as ASE's ``Langevin.set_friction``."""
+        gamma = self._check_friction(friction)
+        old, self.friction = self.friction, gamma
+        if self.dyn is not None:
+            try:
+                self.check_timestep(self.dyn.dt)
+            except ValueError:
+                self.friction = old
+                raise
+
+    def first_half(self, h):
+        s, m, kT, rng = self.dyn.state, self.dyn.model, self.kT, self.rng
+        before = sum(self.kinetic_energies())
+        c = np.exp(-self.friction * h)
+        sigma = np.sqrt((1.0 - c * c) * kT)
+        s.V[...] = c * s.V + sigma * rng.standard_normal(s.V.shape) / np.sqrt(m.mass)[:, None]
+        s.v[...] = c * s.v + sigma * rng.standard_normal(s.v.shape) / np.sqrt(
+            m.free_masses)[:, None]
+        L_body = ops.body_angular_momentum(s.q, s.p)
+        noise = sigma * np.sqrt(m.moments) * rng.standard_normal(L_body.shape)
+        s.p[...] = ops.conjugate_momentum(s.q, c * L_body + noise)
+        self.work += sum(self.kinetic_energies()) - before
+
+    def lammps_fix(self, time_unit, seed=12345):
+        """``langevin`` keyword of ``rigid/nve/small`` and ``fix langevin`` on free atoms.
+
+        ``time_unit`` is the LAMMPS time unit in ASE time units; LAMMPS's
+        damping time is ``1 / friction``.
+        """
+        if self.friction == 0:
+            raise NotExportable("thermostat.friction: LAMMPS needs a positive friction")
+        args = (f"{self.temperature_K!r} {self.temperature_K!r} "
+                f"{1.0 / self.friction / time_unit!r} {int(seed)}")
+        return LammpsFix("nve", f"langevin {args}", ("nve", f"langevin {args}"))
+
+    def todict(self):
+        return super().todict() | {"friction": self.friction}
+
+
+def bussi_kinetic_energy(K, K_target, ndof, c, rng):
+    r"""New kinetic energy of stochastic velocity rescaling (Bussi et al. 2007, eq. A7).
+
+    .. math::
+        K' = cK + (1-c)\frac{\bar K}{N_f}\Big(R_1^2 + \sum_{i=2}^{N_f} R_i^2\Big)
+             + 2 R_1 \sqrt{c (1-c) K \bar K / N_f}
+
+    with :math:`R_i \sim \mathcal N(0, 1)` and :math:`\sum_{i\ge2} R_i^2`
+    drawn as a :math:`\chi^2_{N_f-1}`.
+
+    Returns
+    -------
+    new : float
+        :math:`K'` (eV).
+    sign : float
+        Sign of the rescaling factor.
+    """
+    r1 = rng.standard_normal()
+    rest = 2.0 * rng.standard_gamma(0.5 * (ndof - 1)) if ndof > 1 else 0.0
+    ratio = K_target / ndof
+    new = (c * K + (1.0 - c) * ratio * (r1 * r1 + rest)
+           + 2.0 * r1 * np.sqrt(c * (1.0 - c) * K * ratio))
+    sign = np.sign(r1 + np.sqrt(c * K / ((1.0 - c) * ratio))) if c < 1 else 1.0
+    return new, sign
+
+
+@register
+class BussiThermostat(_Stochastic):
+    r"""Stochastic velocity rescaling (Bussi, Donadio & Parrinello 2007).
+
+    The translational kinetic energy (centres of mass and point particles)
+    and the rotational kinetic energy are each rescaled, half a step before
+    and after the deterministic step, to a value drawn so that each samples
+    its canonical distribution with :math:`N_f` degrees of freedom and
+    relaxes with time constant ``taut``.
+
+    Parameters
+    ----------
+    temperature_K : float
+        K.
+    taut : float
+        Relaxation time (ASE time units), as in ASE's ``Bussi``.
+    rng : numpy.random.Generator, optional
+
+    References
+    ----------
+    G. Bussi, D. Donadio and M. Parrinello, J. Chem. Phys. 126, 014101 (2007).
+    """
+
+    kind = "bussi"
+    parameters = (TEMPERATURE, Parameter("taut", "taut", "time", example="100 fs"), SEED)
+
+    def __init__(self, temperature_K, taut, rng=None):
+        super().__init__(temperature_K, rng)
+        self.taut = check_time("taut", taut)
+
+    def first_half(self, h):
+        c = np.exp(-h / self.taut)
+        m = self.dyn.model
+        factors = []
+        for K, ndof in zip(self.kinetic_energies(), (m.translational_dof, m.rotational_dof),
+                           strict=True):
+            if ndof == 0 or K <= 0:
+                factors.append(1.0)
+                continue
+            new, sign = bussi_kinetic_energy(K, 0.5 * ndof * self.kT, ndof, c, self.rng)
+            self.work += new - K
+            factors.append(sign * np.sqrt(new / K))
+        self.scale(*factors)
+
+    def lammps_fix(self, time_unit, seed=12345):
+        raise NotExportable("thermostat.kind: LAMMPS has no Bussi thermostat for rigid bodies; "
+                            "use langevin or nose_hoover")
+
+    def todict(self):
+        return super().todict() | {"taut": self.taut}
+
+
+class NoseHooverChain:
+    r"""One Nosé–Hoover chain acting on a group of :math:`N_f` degrees of freedom.
+
+    Masses :math:`Q_1 = N_f k_B T \tau^2`, :math:`Q_{j>1} = k_B T \tau^2`;
+    propagated by the Trotter factorisation of Martyna, Tuckerman, Tobias and
+    Klein (1996) with ``tloop`` sub-steps.  Its energy is
+    :math:`\sum_j \tfrac12 Q_j \xi_j^2 + N_f k_B T \eta_1 + k_B T \sum_{j>1}\eta_j`.
+
+    Parameters
+    ----------
+    ndof : int
+        Degrees of freedom of the group it acts on.
+    tdamp : float
+        Time constant (ASE time units).
+    tchain, tloop : int
+    """
+
+    def __init__(self, ndof, tdamp, tchain, tloop):
+        self.ndof, self.tdamp, self.tchain, self.tloop = ndof, tdamp, tchain, tloop
+        self.xi = np.zeros(tchain)
+        self.eta = np.zeros(tchain)
+
+    def masses(self, kT):
+        Q = np.full(self.tchain, kT * self.tdamp**2)
+        Q[0] *= self.ndof
+        return Q
+
+    def propagate(self, K, kT, h):
+        """Advance over ``h`` with the group's kinetic energy ``K``; returns its velocity scale."""
+        if self.ndof == 0:
+            return 1.0
+        xi, eta, ndof, M = self.xi, self.eta, self.ndof, self.tchain
+        Q = self.masses(kT)
+        scale = 1.0
+        delta = h / self.tloop
+
+        def force(j, K2):
+            if j == 0:
+                return (K2 - ndof * kT) / Q[0]
+            return (Q[j - 1] * xi[j - 1] ** 2 - kT) / Q[j]
+
+        for _ in range(self.tloop):
+            # Half kick of the chain over delta/2, from the end of the chain ...
+            K2 = 2.0 * K * scale**2
+            xi[M - 1] += 0.5 * delta * force(M - 1, K2)
+            for j in range(M - 2, -1, -1):
+                damp = np.exp(-0.25 * delta * xi[j + 1])
+                xi[j] = (xi[j] * damp + 0.5 * delta * force(j, K2)) * damp
+            # ... the particles' scaling and the positions of the chain ...
+            scale *= np.exp(-delta * xi[0])
+            eta += delta * xi
+            # ... and the other half kick, back to the end of the chain.
+            K2 = 2.0 * K * scale**2
+            for j in range(M - 1):
+                damp = np.exp(-0.25 * delta * xi[j + 1])
+                xi[j] = (xi[j] * damp + 0.5 * delta * force(j, K2)) * damp
+            xi[M - 1] += 0.5 * delta * force(M - 1, K2)
+        return scale
+
+    def energy(self, kT):
+        if self.ndof == 0:
+            return 0.0
+        Q = self.masses(kT)
+        return float(0.5 * np.sum(Q * self.xi**2) + self.ndof * kT * self.eta[0]
+                     + kT * np.sum(self.eta[1:]))
+
+    def get_state(self):
+        return {"xi": self.xi.copy(), "eta": self.eta.copy()}
+
+    def set_state(self, state):
+        self.xi[...] = state["xi"]
+        self.eta[...] = state["eta"]
+
+
+@register
+class NoseHooverThermostat(Thermostat):
+    r"""Nosé–Hoover chains on translation and rotation (LAMMPS ``fix rigid/nvt``).
+
+    Two :class:`NoseHooverChain` of length ``tchain``, one on the
+    translational and one on the rotational degrees of freedom (Kamberaj,
+    Low & Neal 2005), each propagated for half a step before and after the
+    deterministic step.  :meth:`energy` is the chains' energy.
+
+    Parameters
+    ----------
+    temperature_K : float
+        K, positive: the chain masses are proportional to it.
+    tdamp : float
+        Chain time constant (ASE time units), as in ASE's
+        ``NoseHooverChainNVT``; at least the time step (100 steps is typical).
+    tchain : int, default 3
+        Chain length.
+    tloop : int, default 1
+        Sub-steps of each half-step chain update.
+
+    References
+    ----------
+    H. Kamberaj, R. J. Low and M. P. Neal, J. Chem. Phys. 122, 224114 (2005);
+    G. J. Martyna, M. E. Tuckerman, D. J. Tobias and M. L. Klein, Mol. Phys. 87,
+    1117 (1996).
+    """
+
+    kind = "nose_hoover"
+    parameters = (TEMPERATURE, Parameter("tdamp", "tdamp", "time", example="100 fs"),
+                  Parameter("tchain", "tchain", "integer", required=False, default=3),
+                  Parameter("tloop", "tloop", "integer", required=False, default=1))
+
+    def __init__(self, temperature_K, tdamp, tchain=3, tloop=1):
+        super().__init__(temperature_K)
+        self._check_positive(self.temperature_K)
+        self.tdamp = check_time("tdamp", tdamp)
+        self.tchain = check_positive_integer("tchain", tchain)
+        self.tloop = check_positive_integer("tloop", tloop)
+        self.chains = ()
+
+    @staticmethod
+    def _check_positive(temperature_K):
+        if temperature_K == 0:
+            raise ValueError(
+                "temperature_K = 0: Nose-Hoover chain masses are N_f k_B T tdamp^2, so a "
+                "chain at 0 K has no mass and cannot act; cool with RigidLangevin or "
+                "RigidBussi, which reach 0 K")
+
+    def set_temperature(self, temperature_K):
+        value = check_temperature(temperature_K)
+        self._check_positive(value)
+        self.temperature_K = value
+
+    def check_timestep(self, dt):
+        if self.tdamp < dt:
+            raise ValueError(
+                f"tdamp = {self.tdamp:g} is shorter than the time step {dt:g}: "
+                "the chain cannot be integrated (100 time steps is typical)"
+            )
+
+    def bind(self, dyn):
+        super().bind(dyn)
+        m = dyn.model
+        self.chains = tuple(NoseHooverChain(ndof, self.tdamp, self.tchain, self.tloop)
+                            for ndof in (m.translational_dof, m.rotational_dof))
+
+    def first_half(self, h):
+        K_t, K_r = self.kinetic_energies()
+        translation, rotation = self.chains
+        self.scale(translation.propagate(K_t, self.kT, h), rotation.propagate(K_r, self.kT, h))
+
+    def energy(self):
+        """Energy of the two chains (eV)."""
+        return sum(chain.energy(self.kT) for chain in self.chains)
+
+    def get_state(self):
+        return {"chains": [chain.get_state() for chain in self.chains]}
+
+    def set_state(self, state):
+        for chain, saved in zip(self.chains, state["chains"], strict=True):
+            chain.set_state(saved)
+
+    def lammps_fix(self, time_unit, seed=None):
+        """``rigid/nvt/small ... temp T T tdamp tparam tchain tloop 3``; ``fix nvt`` on free atoms.
+
+        LAMMPS's chains use Yoshida–Suzuki weights of order 3 within each
+        sub-step, ours plain sub-steps: the same ensemble, not the same
+        trajectory.
+        """
+        temp = f"temp {self.temperature_K!r} {self.temperature_K!r} {self.tdamp / time_unit!r}"
+        return LammpsFix("nvt", f"{temp} tparam {self.tchain} {self.tloop} 3",
+                         (f"nvt {temp} tchain {self.tchain} tloop {self.tloop}",))
+
+    def todict(self):
+        return super().todict() | {"tdamp": self.tdamp, "tchain": self.tchain,
+                                   "tloop": self.tloop}
