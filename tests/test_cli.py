@@ -72,7 +72,8 @@ def project(tmp_path):
 def test_run_restart_and_plot(project):
     result = rigidmd("run", "run.yaml", cwd=project)
     assert result.returncode == 0, result.stderr
-    assert "RigidLangevin" in result.stdout and "conserved energy" in result.stdout
+    assert "langevin thermostat at 250 K" in result.stdout
+    assert "conserved energy" in result.stdout
     frames = read(project / "out" / "md.traj", ":")
     assert len(frames) == 6
     import MDAnalysis as mda

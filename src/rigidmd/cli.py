@@ -19,18 +19,17 @@ import time
 from pathlib import Path
 
 import numpy as np
+from ase import units
 
 from rigidmd.config import (
     DEMO_CONFIG,
     TIME_UNITS,
     ConfigError,
-    build_atoms,
-    build_calculator,
     check_config,
     load_config,
     parse_quantity,
-    thermostat_kwargs,
 )
+from rigidmd.coupling import NotExportable
 from rigidmd.dynamics import NonFiniteForceError
 from rigidmd.operators import ConvergenceError
 
@@ -136,75 +135,66 @@ def plot_log(log, png):
 
 
 def _setup(config):
-    """Atoms, bodies spec and dynamics from a checked configuration."""
+    """Atoms and dynamics from a checked configuration."""
+    from rigidmd.dynamics import RigidDynamics
+
     atoms, bodies = _start(config)
-    atoms.calc = build_calculator(config["calculator"], atoms)
-    outputs = config["outputs"]
-    outputs["directory"].mkdir(parents=True, exist_ok=True)
-    cls, kwargs = thermostat_kwargs(config)
-    trajectory = outputs.get("trajectory")
-    append = "restart" in config and trajectory is not None and Path(trajectory).exists() and (
-        Path(trajectory).resolve() == Path(config["restart"]).resolve())
-    dyn = cls(atoms, config["timestep"], bodies=bodies,
-              integrator=config["integrator"], integrator_options=config["integrator_options"],
-              trajectory=str(trajectory) if trajectory else None,
-              logfile=str(outputs["log"]) if "log" in outputs else None,
-              loginterval=outputs["interval"], append_trajectory=append, **kwargs)
+    atoms.calc = config.calculator.build(atoms)
+    outputs, restart = config.outputs, config.structure.restart
+    outputs.directory.mkdir(parents=True, exist_ok=True)
+    trajectory = outputs.trajectory
+    append = restart is not None and trajectory is not None and trajectory.exists() and (
+        trajectory.resolve() == restart.resolve())
+    dyn = RigidDynamics(atoms, config.run.timestep, bodies=bodies,
+                        integrator=config.run.integrator,
+                        integrator_options=config.run.integrator_options,
+                        couplings=config.coupling.parts(),
+                        trajectory=str(trajectory) if trajectory else None,
+                        logfile=str(outputs.log) if outputs.log else None,
+                        loginterval=outputs.interval, append_trajectory=append)
     return atoms, dyn
-
-
-def _bodies(atoms, config):
-    """The bodies of a run, recorded in the tags so that a restart finds them again.
-
-    ASE trajectories keep tags but not the ``mol-id`` array: when a structure
-    has no tags, each atom's tag is set to its body (1, 2, ...; 0 for atoms
-    in no body), and a restart configured with ``bodies: mol-id`` reads them.
-    """
-    from rigidmd import RigidBodies
-
-    rule = config["bodies"]
-    if rule == "mol-id" and "mol-id" not in atoms.arrays and "restart" in config:
-        rule = "tags"
-    bodies = RigidBodies.resolve(atoms, rule)
-    if not atoms.get_tags().any() and rule != "tags":
-        atoms.set_tags(np.where(bodies.body_ids >= 0, bodies.body_ids + 1, 0))
-    return bodies
 
 
 def _start(config):
     """Starting atoms, their bodies, and (unless restarting) drawn rigid velocities."""
     from rigidmd import rigid_maxwell_boltzmann
 
-    atoms = build_atoms(config)
-    bodies = _bodies(atoms, config)
-    if "velocities" in config and "restart" not in config:
-        vel = config["velocities"]
-        rigid_maxwell_boltzmann(atoms, vel["temperature_K"], bodies=bodies,
-                                rng=np.random.default_rng(vel["seed"]))
+    atoms = config.structure.build_atoms()
+    bodies = config.structure.resolve_bodies(atoms)
+    velocities = config.run.velocities
+    if velocities is not None and config.structure.restart is None:
+        rigid_maxwell_boltzmann(atoms, velocities["temperature_K"], bodies=bodies,
+                                rng=np.random.default_rng(velocities["seed"]))
     return atoms, bodies
+
+
+def _kind(dyn):
+    """What the run is, in words: NVE, or its coupling parts."""
+    parts = [f"{part.kind} {part.section}" + (
+        f" at {part.temperature_K:g} K" if hasattr(part, "temperature_K") else "")
+        for part in dyn.couplings]
+    return ", ".join(parts) or "NVE"
 
 
 def _run(config, stream=sys.stdout):
     """Run a checked configuration; returns the exit status."""
     atoms, dyn = _setup(config)
-    outputs = config["outputs"]
+    outputs = config.outputs
     energies = []
-    conserved = getattr(dyn, "get_conserved_energy", atoms.get_total_energy)
-    dyn.attach(lambda: energies.append((dyn.get_time(), conserved())),
-               interval=outputs["interval"])
+    dyn.attach(lambda: energies.append((dyn.get_time(), dyn.get_conserved_energy())),
+               interval=outputs.interval)
     writer = None
-    if "mdanalysis" in outputs:
+    if outputs.mdanalysis is not None:
         from rigidmd.mdanalysis import MDAWriter
 
-        writer = MDAWriter(dyn, outputs["mdanalysis"])
-        dyn.attach(writer, interval=outputs["interval"])
-    steps = config["steps"]
+        writer = MDAWriter(dyn, outputs.mdanalysis)
+        dyn.attach(writer, interval=outputs.interval)
+    steps = config.run.steps
     dyn.attach(Progress(dyn, steps), interval=max(1, steps // 200))
     interrupt = _DeferredInterrupt()
     dyn.attach(interrupt.check, interval=1)  # last: after every output of the step
-    print(f"{dyn.bodies} with {dyn.scheme.name} integrator, "
-          f"{type(dyn).__name__}, {steps} steps of "
-          f"{config['timestep'] / TIME_UNITS['fs']:g} fs", file=stream)
+    print(f"{dyn.bodies} with {dyn.scheme.name} integrator, {_kind(dyn)}, {steps} steps of "
+          f"{config.run.timestep / TIME_UNITS['fs']:g} fs", file=stream)
     status = 0
     t0 = time.perf_counter()
     try:
@@ -219,16 +209,15 @@ def _run(config, stream=sys.stdout):
             writer.close()
     elapsed = time.perf_counter() - t0
     _summary(dyn, energies, elapsed, stream)
-    if "plot" in outputs and "log" in outputs:
-        plot_log(outputs["log"], outputs["plot"])
-    for key in ("trajectory", "log", "plot", "mdanalysis"):
-        if key in outputs:
-            print(f"wrote {outputs[key]}", file=stream)
+    if outputs.plot is not None and outputs.log is not None:
+        plot_log(outputs.log, outputs.plot)
+    for path in outputs.files.values():
+        print(f"wrote {path}", file=stream)
     return status
 
 
 def _summary(dyn, energies, elapsed, stream):
-    label = "conserved energy" if hasattr(dyn, "get_conserved_energy") else "total energy"
+    label = "conserved energy" if dyn.couplings else "total energy"
     print(f"{dyn.nsteps} steps in {elapsed:.1f} s; T = {dyn.atoms.get_temperature():.1f} K "
           f"({dyn.degrees_of_freedom} degrees of freedom)", file=stream)
     if len(energies) >= 3:
@@ -256,10 +245,10 @@ def _export(config, directory, stream=sys.stdout):
 
     atoms, bodies = _start(config)
     atoms.positions = bodies.whole_positions(atoms)
-    calc = config["calculator"]
-    if calc["name"] == "tip3p":
-        rc = calc.get("options", {}).get("rc", 5.0)
-        width = calc.get("options", {}).get("width", 1.0)
+    calc = config.calculator
+    if calc.name == "tip3p":
+        rc = calc.options.get("rc", 5.0)
+        width = calc.options.get("width", 1.0)
         oxygens = atoms.positions[atoms.numbers == 8]
         span = np.linalg.norm(oxygens[:, None] - oxygens[None], axis=-1).max()
         if atoms.pbc.any() or span >= rc - width:
@@ -269,32 +258,31 @@ def _export(config, directory, stream=sys.stdout):
                 f"rc - width (here {span:.1f} Å >= {rc - width:g} Å) or with the lammps "
                 "calculator")
         pair, charges = tip3p_pair_commands(rc), tip3p_charges(atoms)
-    elif calc["name"] == "lammps":
-        pair = list(calc["pair"])
-        table = calc.get("charges") or {}
-        charges = np.array([table.get(s, 0.0) for s in atoms.get_chemical_symbols()])
+    elif calc.name == "lammps":
+        pair = list(calc.pair)
+        charges = np.array([calc.charges.get(s, 0.0) for s in atoms.get_chemical_symbols()])
     else:
-        raise ConfigError(f"calculator.name: {calc['name']!r} has no LAMMPS equivalent; "
+        raise ConfigError(f"calculator.name: {calc.name!r} has no LAMMPS equivalent; "
                           "export-lammps supports tip3p and lammps")
-    integrator = config["integrator"]
+    integrator = config.run.integrator
     if integrator != "no_squish":
         raise ConfigError(f"integrator: export-lammps writes fix rigid/nve/small (no_squish), "
                           f"not {integrator!r}")
-    th = config.get("thermostat")
     kwargs = {}
-    if th is not None:
-        if th["kind"] == "bussi":
-            raise ConfigError("thermostat.kind: LAMMPS has no Bussi thermostat for rigid "
-                              "bodies; use langevin or nose_hoover")
-        kwargs["temperature_K"] = th["temperature_K"]
-        if th["kind"] == "langevin":
-            kwargs["friction"] = th["friction"]
-            kwargs["seed"] = th.get("seed") or 12345
+    for spec in config.coupling.specs:
+        part = spec.part()
+        try:
+            part.lammps_fix(time_unit=1000 * units.fs, seed=spec.seed or 12345)
+        except NotExportable as err:
+            raise ConfigError(str(err)) from None
+        kwargs["temperature_K"] = part.temperature_K
+        if spec.kind == "langevin":
+            kwargs.update(friction=part.friction, seed=spec.seed or 12345)
         else:
-            kwargs["tdamp"] = th["tdamp"]
-    interval = config["outputs"]["interval"]
-    files = export_lammps(atoms, bodies.body_ids, directory, pair, config["timestep"],
-                          config["steps"], charges=charges, dump_every=interval,
+            kwargs["tdamp"] = part.tdamp
+    interval = config.outputs.interval
+    files = export_lammps(atoms, bodies.body_ids, directory, pair, config.run.timestep,
+                          config.run.steps, charges=charges, dump_every=interval,
                           thermo_every=interval, **kwargs)
     print(f"wrote {files['data']} and {files['input']}; run with "
           f"'cd {directory} && lmp -in in.rigidmd' (or mpirun -np N lmp -in in.rigidmd)",

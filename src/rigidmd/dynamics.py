@@ -238,6 +238,7 @@ class RigidDynamics(MolecularDynamics):
             positions=atoms.arrays["positions"], momenta=atoms.arrays["momenta"],
             write_momenta=not couplings)
         self.removed_kinetic_energy = 0.0
+        self._time = 0.0             # simulated time (ASE units), summed step by step
         self._synced = None          # (positions, momenta) at the end of the last run
         self._changed = None         # (positions, momenta) written before a change was made
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps
@@ -272,6 +273,13 @@ class RigidDynamics(MolecularDynamics):
     def set_timestep(self, timestep):
         """Change the time step (ASE time units), as ASE's ``Langevin.set_timestep``."""
         self.dt = timestep
+
+    def get_time(self):
+        """Simulated time (ASE time units): the sum of the steps taken, whatever their size.
+
+        ASE's ``nsteps * dt`` would misreport it after :attr:`dt` changed.
+        """
+        return self._time
 
     # ------------------------------------------------------------ ASE API
     def todict(self):
@@ -364,6 +372,7 @@ class RigidDynamics(MolecularDynamics):
                 part.second_half(half)
             if not ctx.write_momenta or not self.fused:
                 self._write_momenta()
+            self._time += dt
         except BaseException:
             self._backup.copy_into(self.state)
             ctx.F, ctx.tau, ctx.f, ctx.scratch = saved

@@ -1,0 +1,129 @@
+"""Run configurations for the ``rigidmd`` command: reading, checking, building.
+
+A configuration is a YAML mapping (every key optional except ``structure``
+(or ``restart``), ``timestep`` and ``steps``)::
+
+    structure: water.xyz          # any file ase.io.read reads, or a builder:
+    #   {builtin: water_cluster, n_molecules: 32, seed: 0}  (or water_box, n_side)
+    read_options: {format: lammps-data, atom_style: full}   # passed to ase.io.read
+    bodies: connectivity          # connectivity | mol-id | tags
+    calculator:
+      name: tip3p                 # tip3p | tip4p | lammps | a dotted class path
+      options: {rc: 9.0}          # keyword arguments of the calculator
+      pair: [...]                 # lammps: LAMMPS pair commands
+      charges: {O: -0.834, H: 0.417}   # lammps: charge per element
+    integrator: no_squish         # or richardson, rozmanov_kusalik, pcdm, exadem
+    integrator_options: {}
+    thermostat:                   # omit for NVE
+      kind: langevin              # langevin | bussi | nose_hoover
+      temperature: 300 K
+      friction: 0.01 1/fs         # langevin;  taut: 100 fs (bussi);  tdamp: 100 fs
+    velocities: {temperature: 250 K, seed: 0}   # draw rigid velocities first
+    timestep: 1 fs                # with a unit: fs, ps, or ase (ASE time units)
+    steps: 2000
+    restart: previous.traj        # continue from the last frame of a trajectory
+    outputs:
+      directory: .
+      trajectory: md.traj
+      log: md.log
+      interval: 10                # steps between frames and log lines
+      plot: energy.png            # energy and temperature against time
+      mdanalysis: md.xtc          # needs rigidmd[analysis]
+
+Quantities with units are strings ``"<number> <unit>"``.  Every mistake is
+a :class:`ConfigError` naming the field.  Each group of keys is checked by
+its section (:mod:`rigidmd.config.sections`); :func:`check_config` assembles
+them into a :class:`RunConfig`.
+"""
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from rigidmd.config.quantities import (
+    COMPRESSIBILITY_UNITS,
+    PRESSURE_UNITS,
+    RATE_UNITS,
+    TEMPERATURE_UNITS,
+    TIME_UNITS,
+    ConfigError,
+    parse_quantity,
+)
+from rigidmd.config.sections import (
+    CalculatorSection,
+    CouplingSection,
+    OutputsSection,
+    RunSection,
+    StructureSection,
+)
+
+__all__ = ["ConfigError", "RunConfig", "load_config", "check_config", "parse_quantity",
+           "DEMO_CONFIG", "TIME_UNITS", "RATE_UNITS", "TEMPERATURE_UNITS", "PRESSURE_UNITS",
+           "COMPRESSIBILITY_UNITS"]
+
+#: The built-in demo: a TIP3P water cluster, 2 ps at 1 fs.
+DEMO_CONFIG = {
+    "structure": {"builtin": "water_cluster", "n_molecules": 32, "seed": 0},
+    "calculator": {"name": "tip3p", "options": {"rc": 40.0}},
+    "velocities": {"temperature": "250 K", "seed": 0},
+    "timestep": "1 fs",
+    "steps": 2000,
+    "outputs": {"directory": "rigidmd-demo", "trajectory": "demo.traj", "log": "demo.log",
+                "interval": 20, "plot": "demo-energy.png"},
+}
+
+_SECTIONS = {"structure": StructureSection, "run": RunSection, "calculator": CalculatorSection,
+             "coupling": CouplingSection, "outputs": OutputsSection}
+
+
+@dataclass
+class RunConfig:
+    """A checked configuration: one object per section (quantities in ASE units)."""
+
+    structure: StructureSection
+    run: RunSection
+    calculator: CalculatorSection
+    coupling: CouplingSection
+    outputs: OutputsSection
+
+
+def load_config(path):
+    """Read a YAML configuration file (not yet checked).
+
+    Relative paths inside the file are resolved against the file's directory.
+    """
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config: no such file {str(path)!r}")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as err:
+        raise ConfigError(f"config: {path} is not valid YAML ({err})") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"config: {path} must hold a mapping of settings")
+    data.setdefault("_base", str(path.resolve().parent))
+    return data
+
+
+def check_config(config):
+    """Validate a raw configuration mapping and build its sections.
+
+    Parameters
+    ----------
+    config : dict
+        As :func:`load_config` returns; ``_base`` is the directory relative
+        paths are resolved against (default: the current directory).
+
+    Returns
+    -------
+    RunConfig
+    """
+    config = dict(config)
+    base = Path(config.pop("_base", "."))
+    known = {key for section in _SECTIONS.values() for key in section.KEYS}
+    unknown = sorted(set(config) - known, key=str)
+    if unknown:
+        raise ConfigError(f"{unknown[0]}: unknown key; allowed: {', '.join(sorted(known))}")
+    return RunConfig(**{name: section.from_config(config, base)
+                        for name, section in _SECTIONS.items()})

@@ -1,0 +1,85 @@
+"""Quantities with units in configuration files, and the configuration error.
+
+Quantities are strings ``"<number> <unit>"``: ``"2 fs"``, ``"300 K"``,
+``"0.01 1/fs"``, ``"1 bar"``.  They are converted to ASE units (ASE time,
+K, 1/ASE time, eV/Å³, Å³/eV).
+"""
+
+import math
+
+from ase import units
+
+__all__ = ["ConfigError", "parse_quantity", "mapping", "whole_number", "UNIT_TABLES",
+           "TIME_UNITS", "RATE_UNITS", "TEMPERATURE_UNITS", "PRESSURE_UNITS",
+           "COMPRESSIBILITY_UNITS"]
+
+TIME_UNITS = {"fs": units.fs, "ps": 1000 * units.fs, "ase": 1.0}
+RATE_UNITS = {"1/fs": 1 / units.fs, "1/ps": 1 / (1000 * units.fs), "1/ase": 1.0}
+TEMPERATURE_UNITS = {"K": 1.0}
+PRESSURE_UNITS = {"bar": units.bar, "atm": 1.01325 * units.bar, "GPa": units.GPa,
+                  "Pa": units.Pascal, "eV/A^3": 1.0}
+COMPRESSIBILITY_UNITS = {"1/bar": 1 / units.bar, "1/atm": 1 / (1.01325 * units.bar),
+                         "1/GPa": 1 / units.GPa, "A^3/eV": 1.0}
+
+#: Unit table of each kind of quantity.
+UNIT_TABLES = {"time": TIME_UNITS, "rate": RATE_UNITS, "temperature": TEMPERATURE_UNITS,
+               "pressure": PRESSURE_UNITS, "compressibility": COMPRESSIBILITY_UNITS}
+
+
+class ConfigError(ValueError):
+    """A configuration mistake; the message starts with the field at fault."""
+
+
+def parse_quantity(field, value, unit_table, default_unit=None):
+    """``"1 fs"`` → 1 fs in ASE units, with the unit looked up in ``unit_table``.
+
+    A bare number is accepted only when ``default_unit`` is given.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``field``: not a quantity, an unknown unit, or not finite.
+    """
+    example = f"'1 {next(iter(unit_table))}'"
+    if isinstance(value, bool) or value is None:
+        raise ConfigError(f"{field}: expected a quantity such as {example}, got {value!r}")
+    if isinstance(value, (int, float)):
+        if default_unit is None:
+            raise ConfigError(
+                f"{field}: give a unit, e.g. '{value} {next(iter(unit_table))}' "
+                f"(units: {', '.join(unit_table)})")
+        number, unit = float(value), default_unit
+    else:
+        parts = str(value).split()
+        if len(parts) != 2:
+            raise ConfigError(f"{field}: expected '<number> <unit>' such as {example}, "
+                              f"got {value!r}")
+        number, unit = parts
+        try:
+            number = float(number)
+        except ValueError:
+            raise ConfigError(f"{field}: {number!r} is not a number") from None
+    if unit not in unit_table:
+        raise ConfigError(f"{field}: unknown unit {unit!r}; use one of {', '.join(unit_table)}")
+    if not math.isfinite(number):
+        raise ConfigError(f"{field}: must be finite, got {value!r}")
+    return number * unit_table[unit]
+
+
+def mapping(field, value, allowed=None):
+    """``value`` if it is a mapping (with only ``allowed`` keys), else a ConfigError."""
+    if not isinstance(value, dict):
+        raise ConfigError(f"{field}: expected a mapping, got {type(value).__name__}")
+    if allowed is not None:
+        unknown = sorted(set(value) - set(allowed), key=str)
+        if unknown:
+            raise ConfigError(
+                f"{field}.{unknown[0]}: unknown key; allowed: {', '.join(sorted(allowed))}")
+    return value
+
+
+def whole_number(field, value, minimum=0):
+    """``value`` as an int >= ``minimum``, else a ConfigError naming ``field``."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ConfigError(f"{field}: expected a whole number >= {minimum}, got {value!r}")
+    return value

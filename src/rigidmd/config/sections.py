@@ -1,0 +1,431 @@
+"""The sections of a run configuration, each checking itself.
+
+=================  ===========================================================
+section            keys of the YAML file
+=================  ===========================================================
+structure          ``structure``, ``read_options``, ``bodies``, ``restart``
+run                ``integrator``, ``integrator_options``, ``timestep``,
+                   ``steps``, ``velocities``
+calculator         ``calculator``
+coupling           ``thermostat``
+outputs            ``outputs``
+=================  ===========================================================
+
+Each section's ``from_config(raw, base)`` reads its own keys from the raw
+mapping, converts quantities to ASE units and resolves paths against
+``base`` (the configuration file's directory), raising
+:class:`~rigidmd.config.quantities.ConfigError` with the field's name.  The
+coupling section reads the registry of coupling kinds
+(:data:`rigidmd.coupling.COUPLINGS`), so a new thermostat or barostat needs no
+change here.
+"""
+
+import importlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from rigidmd.config.quantities import (
+    TEMPERATURE_UNITS,
+    TIME_UNITS,
+    UNIT_TABLES,
+    ConfigError,
+    mapping,
+    parse_quantity,
+    whole_number,
+)
+
+__all__ = ["StructureSection", "RunSection", "CalculatorSection", "CouplingSection",
+           "OutputsSection", "BUILTIN_STRUCTURES", "BODY_RULES"]
+
+#: Builders of :mod:`rigidmd.systems` a configuration may name.
+BUILTIN_STRUCTURES = ("water_cluster", "water_box")
+#: Body rules a configuration may name.
+BODY_RULES = ("connectivity", "mol-id", "tags")
+
+
+@dataclass
+class StructureSection:
+    """Where the atoms come from and which of them form bodies.
+
+    Attributes
+    ----------
+    source : pathlib.Path, dict or None
+        A structure file, or ``{builtin: water_cluster, ...}``; None with a restart.
+    read_options : dict
+        Keyword arguments of :func:`ase.io.read`.
+    bodies : str
+        ``"connectivity"``, ``"mol-id"`` or ``"tags"``.
+    restart : pathlib.Path or None
+        A trajectory whose last frame starts the run.
+    """
+
+    KEYS = ("structure", "read_options", "bodies", "restart")
+
+    source: object
+    read_options: dict
+    bodies: str
+    restart: Path | None
+
+    @classmethod
+    def from_config(cls, raw, base):
+        if "structure" not in raw and "restart" not in raw:
+            raise ConfigError("structure: missing (a file name or {builtin: water_cluster, ...})")
+        source = raw.get("structure")
+        if isinstance(source, dict):
+            mapping("structure", source)
+            if source.get("builtin") not in BUILTIN_STRUCTURES:
+                raise ConfigError(f"structure.builtin: use {' or '.join(BUILTIN_STRUCTURES)}, "
+                                  f"got {source.get('builtin')!r}")
+            source = dict(source)
+        elif source is not None:
+            source = base / str(source)
+            if not source.is_file():
+                raise ConfigError(f"structure: no such file {str(source)!r}")
+        restart = None
+        if "restart" in raw:
+            restart = base / str(raw["restart"])
+            if not restart.is_file():
+                raise ConfigError(f"restart: no such file {str(restart)!r}")
+        bodies = raw.get("bodies", "connectivity")
+        if bodies not in BODY_RULES:
+            raise ConfigError(f"bodies: use connectivity, mol-id or tags, got {bodies!r}")
+        return cls(source, dict(mapping("read_options", raw.get("read_options", {}))), bodies,
+                   restart)
+
+    def build_atoms(self):
+        """The starting Atoms: the restart's last frame, the file, or the builder."""
+        from ase.io import read
+
+        if self.restart is not None:
+            try:
+                atoms = read(self.restart, index=-1)
+            except Exception as err:  # ASE raises many kinds for unreadable files
+                raise ConfigError(f"restart: cannot read {str(self.restart)!r} ({err})") from None
+            atoms.calc = None
+            return atoms
+        if isinstance(self.source, dict):
+            from rigidmd import systems
+
+            options = {k: v for k, v in self.source.items() if k != "builtin"}
+            try:
+                return getattr(systems, self.source["builtin"])(**options)
+            except TypeError as err:
+                raise ConfigError(f"structure: {err}") from None
+        try:
+            atoms = read(self.source, **self.read_options)
+        except Exception as err:  # noqa: BLE001 - any reader failure is a config mistake
+            raise ConfigError(f"structure: cannot read {str(self.source)!r} ({err})") from None
+        if isinstance(atoms, list):
+            atoms = atoms[-1]
+        return atoms
+
+    def resolve_bodies(self, atoms):
+        """The bodies of the run, recorded in the tags so that a restart finds them again.
+
+        ASE trajectories keep tags but not the ``mol-id`` array: when a structure
+        has no tags, each atom's tag is set to its body (1, 2, ...; 0 for atoms
+        in no body), and a restart configured with ``bodies: mol-id`` reads them.
+        """
+        from rigidmd import RigidBodies
+
+        rule = self.bodies
+        if rule == "mol-id" and "mol-id" not in atoms.arrays and self.restart is not None:
+            rule = "tags"
+        bodies = RigidBodies.resolve(atoms, rule)
+        if not atoms.get_tags().any() and rule != "tags":
+            atoms.set_tags(np.where(bodies.body_ids >= 0, bodies.body_ids + 1, 0))
+        return bodies
+
+
+@dataclass
+class RunSection:
+    """How to integrate: the scheme, the time step, the number of steps, start velocities.
+
+    Attributes
+    ----------
+    integrator : str or list
+        A built-in name, a YAML path (resolved) or a list of operators.
+    integrator_options : dict
+    timestep : float
+        ASE time units.
+    steps : int
+    velocities : dict or None
+        ``{"temperature_K": float, "seed": int or None}``.
+    """
+
+    KEYS = ("integrator", "integrator_options", "timestep", "steps", "velocities")
+
+    integrator: object
+    integrator_options: dict
+    timestep: float
+    steps: int
+    velocities: dict | None
+
+    @classmethod
+    def from_config(cls, raw, base):
+        from rigidmd.schemes import resolve_scheme
+
+        integrator = raw.get("integrator", "no_squish")
+        options = dict(mapping("integrator_options", raw.get("integrator_options", {})))
+        if isinstance(integrator, str) and integrator.endswith((".yaml", ".yml")):
+            integrator = str(base / integrator)
+        try:
+            resolve_scheme(integrator, **options)
+        except (ValueError, TypeError) as err:
+            raise ConfigError(f"integrator: {err}") from None
+        if "timestep" not in raw:
+            raise ConfigError("timestep: missing (e.g. '1 fs')")
+        timestep = parse_quantity("timestep", raw["timestep"], TIME_UNITS)
+        if not timestep > 0:
+            raise ConfigError(f"timestep: must be positive, got {raw['timestep']!r}")
+        steps = whole_number("steps", raw.get("steps"))
+        velocities = None
+        if "velocities" in raw:
+            vel = mapping("velocities", raw["velocities"], {"temperature", "seed"})
+            temperature = parse_quantity("velocities.temperature", vel.get("temperature"),
+                                         TEMPERATURE_UNITS)
+            if temperature < 0:
+                raise ConfigError(f"velocities.temperature: must be >= 0 K, got "
+                                  f"{vel.get('temperature')!r}")
+            seed = vel.get("seed")
+            if seed is not None:
+                whole_number("velocities.seed", seed)
+            velocities = {"temperature_K": temperature, "seed": seed}
+        return cls(integrator, options, timestep, steps, velocities)
+
+
+@dataclass
+class CalculatorSection:
+    """The calculator: ``tip3p``, ``tip4p``, ``lammps`` or a dotted class path.
+
+    Attributes
+    ----------
+    name : str
+    options : dict
+        Keyword arguments of the calculator.
+    pair : list of str
+        ``lammps``: the LAMMPS interaction commands.
+    charges : dict
+        ``lammps``: charge per element (e).
+    atom_types : dict
+        ``lammps``: LAMMPS type per element.
+    """
+
+    KEYS = ("calculator",)
+    FIELDS = ("name", "options", "pair", "charges", "atom_types")
+
+    name: str
+    options: dict = field(default_factory=dict)
+    pair: list = field(default_factory=list)
+    charges: dict = field(default_factory=dict)
+    atom_types: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_config(cls, raw, base):
+        calc = mapping("calculator", raw.get("calculator", {"name": "tip3p"}), cls.FIELDS)
+        if "name" not in calc:
+            raise ConfigError("calculator.name: missing (tip3p, tip4p, lammps or a dotted path)")
+        options = dict(mapping("calculator.options", calc.get("options", {})))
+        if calc["name"] == "lammps" and not calc.get("pair"):
+            raise ConfigError("calculator.pair: the lammps calculator needs LAMMPS pair commands")
+        charges = dict(mapping("calculator.charges", calc.get("charges", {})))
+        atom_types = dict(mapping("calculator.atom_types", calc.get("atom_types", {})))
+        return cls(calc["name"], options, list(calc.get("pair", [])), charges, atom_types)
+
+    def build(self, atoms):
+        """An ASE calculator for ``atoms`` (sets the atoms' charges for ``lammps``)."""
+        try:
+            if self.name == "tip3p":
+                from ase.calculators.tip3p import TIP3P
+
+                return TIP3P(**self.options)
+            if self.name == "tip4p":
+                from ase.calculators.tip4p import TIP4P
+
+                return TIP4P(**self.options)
+            if self.name == "lammps":
+                return self._lammps(atoms)
+            module_name, _, class_name = self.name.rpartition(".")
+            if not module_name:
+                raise ConfigError(f"calculator.name: {self.name!r} is not tip3p, tip4p, lammps "
+                                  "or a dotted path such as ase.calculators.emt.EMT")
+            try:
+                calc_class = getattr(importlib.import_module(module_name), class_name)
+            except (ImportError, AttributeError) as err:
+                raise ConfigError(f"calculator.name: cannot import {self.name!r} ({err})"
+                                  ) from None
+            return calc_class(**self.options)
+        except TypeError as err:
+            raise ConfigError(f"calculator.options: {err}") from None
+
+    def _lammps(self, atoms):
+        from rigidmd.lammps import load_lammps
+
+        load_lammps()
+        from ase.calculators.lammpslib import LAMMPSlib
+
+        if self.charges:
+            missing = sorted(set(atoms.get_chemical_symbols()) - set(self.charges))
+            if missing:
+                raise ConfigError(f"calculator.charges: no charge for {missing[0]}")
+            atoms.set_initial_charges([self.charges[s] for s in atoms.get_chemical_symbols()])
+        symbols = list(dict.fromkeys(atoms.get_chemical_symbols()))
+        atom_types = self.atom_types or {s: i + 1 for i, s in enumerate(symbols)}
+        return LAMMPSlib(lmpcmds=list(self.pair), atom_types=atom_types,
+                         lammps_header=["units metal", "atom_style full",
+                                        "atom_modify map array sort 0 0"],
+                         keep_alive=True, **self.options)
+
+
+def _check_sign(field_name, quantity, value, raw):
+    """Physical signs of parsed quantities: one wording for every field."""
+    if quantity == "temperature" and value < 0:
+        raise ConfigError(f"{field_name}: must be >= 0 K, got {raw!r}")
+    if quantity in ("time", "compressibility") and not value > 0:
+        raise ConfigError(f"{field_name}: must be positive, got {raw!r}")
+    if quantity == "rate" and value < 0:
+        raise ConfigError(f"{field_name}: must be >= 0, got {raw!r}")
+
+
+@dataclass
+class CouplingSpec:
+    """A checked coupling section: the kind and its constructor arguments (ASE units)."""
+
+    section: str
+    kind: str
+    kwargs: dict
+    seed: int | None = None
+
+    @property
+    def cls(self):
+        from rigidmd.coupling import COUPLINGS
+
+        return COUPLINGS[self.kind]
+
+    def part(self):
+        """A new coupling part (a fresh random generator from ``seed`` for stochastic kinds)."""
+        kwargs = dict(self.kwargs)
+        if any(p.quantity == "seed" for p in self.cls.parameters):
+            kwargs["rng"] = np.random.default_rng(self.seed)
+        return self.cls(**kwargs)
+
+
+def parse_coupling(section, raw):
+    """Check a ``thermostat:`` (or ``barostat:``) mapping against the registry.
+
+    Returns
+    -------
+    CouplingSpec
+    """
+    from rigidmd.coupling import COUPLINGS
+
+    raw = mapping(section, raw)
+    kinds = [kind for kind, cls in COUPLINGS.items() if cls.section == section]
+    kind = raw.get("kind")
+    if kind not in kinds:
+        raise ConfigError(f"{section}.kind: use {', '.join(kinds)}, got {kind!r}")
+    cls = COUPLINGS[kind]
+    mapping(section, raw, {"kind"} | {p.field for p in cls.parameters})
+    kwargs, seed = {}, None
+    for p in cls.parameters:
+        name = f"{section}.{p.field}"
+        if p.field not in raw:
+            if p.required:
+                example = f" (e.g. '{p.example}')" if p.example else ""
+                raise ConfigError(f"{name}: missing for {kind}{example}")
+            continue
+        value = raw[p.field]
+        if p.quantity in UNIT_TABLES:
+            parsed = parse_quantity(name, value, UNIT_TABLES[p.quantity])
+            _check_sign(name, p.quantity, parsed, value)
+            kwargs[p.name] = parsed
+        elif p.quantity == "integer":
+            kwargs[p.name] = whole_number(name, value, minimum=1)
+        elif p.quantity == "seed":
+            seed = whole_number(name, value)
+        elif p.quantity == "choice":
+            if value not in p.choices:
+                raise ConfigError(f"{name}: use {', '.join(p.choices)}, got {value!r}")
+            kwargs[p.name] = value
+        else:  # pragma: no cover - a registry entry with an unknown quantity
+            raise AssertionError(f"unknown quantity {p.quantity!r} of {name}")
+    spec = CouplingSpec(section, kind, kwargs, seed)
+    try:
+        spec.part()
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"{section}: {err}") from None
+    return spec
+
+
+@dataclass
+class CouplingSection:
+    """Thermostat (and, later, barostat) parts, from the registry of coupling kinds.
+
+    Attributes
+    ----------
+    thermostat : CouplingSpec or None
+    """
+
+    KEYS = ("thermostat",)
+
+    thermostat: CouplingSpec | None = None
+
+    @classmethod
+    def from_config(cls, raw, base):
+        thermostat = raw.get("thermostat")
+        return cls(None if thermostat is None else parse_coupling("thermostat", thermostat))
+
+    @property
+    def specs(self):
+        """The checked coupling sections present, in the order they act."""
+        return [spec for spec in (self.thermostat,) if spec is not None]
+
+    def parts(self):
+        """New coupling parts for a dynamics."""
+        return [spec.part() for spec in self.specs]
+
+
+@dataclass
+class OutputsSection:
+    """Where and how often the run writes.
+
+    Attributes
+    ----------
+    directory : pathlib.Path
+    interval : int
+        Steps between frames and log lines.
+    trajectory, log, plot, mdanalysis : pathlib.Path or None
+    """
+
+    KEYS = ("outputs",)
+    FIELDS = ("directory", "trajectory", "log", "interval", "plot", "mdanalysis")
+
+    directory: Path
+    interval: int = 10
+    trajectory: Path | None = None
+    log: Path | None = None
+    plot: Path | None = None
+    mdanalysis: Path | None = None
+
+    @classmethod
+    def from_config(cls, raw, base):
+        outputs = mapping("outputs", raw.get("outputs", {}), cls.FIELDS)
+        directory = base / str(outputs.get("directory", "."))
+        interval = whole_number("outputs.interval", outputs.get("interval", 10), minimum=1)
+        files = {key: directory / str(outputs[key])
+                 for key in ("trajectory", "log", "plot", "mdanalysis") if outputs.get(key)}
+        if "mdanalysis" in files:
+            try:
+                importlib.import_module("MDAnalysis")
+            except ImportError:
+                raise ConfigError('outputs.mdanalysis: needs MDAnalysis '
+                                  '(pip install "rigidmd[analysis]")') from None
+        return cls(directory, interval, **files)
+
+    @property
+    def files(self):
+        """The output files asked for, name -> path."""
+        return {key: getattr(self, key) for key in ("trajectory", "log", "plot", "mdanalysis")
+                if getattr(self, key) is not None}
