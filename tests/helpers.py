@@ -4,6 +4,7 @@ Test modules import their builders from here (never from each other), so
 every system used in two places is built in one place.
 """
 
+import numba
 import numpy as np
 from ase import Atoms, units
 from ase.calculators.calculator import Calculator, all_changes
@@ -139,3 +140,127 @@ def total_momenta(atoms):
     """Total linear momentum and angular momentum about the origin of the atoms."""
     p = atoms.get_momenta()
     return p.sum(axis=0), np.cross(atoms.positions, p).sum(axis=0)
+
+
+@numba.njit(cache=True)
+def _lj_pairs(positions, tags, cell, inverse, sigma, epsilon, rc):
+    """Shifted-force LJ energy, forces and virial over minimum-image pairs (compiled)."""
+    n = positions.shape[0]
+    forces = np.zeros((n, 3))
+    virial = np.zeros((3, 3))
+    energy = 0.0
+    src6 = (sigma / rc) ** 6
+    force_rc = 24.0 * epsilon * (2.0 * src6 * src6 - src6) / rc
+    energy_rc = 4.0 * epsilon * (src6 * src6 - src6)
+    d = np.empty(3)
+    for i in range(n - 1):
+        for j in range(i + 1, n):
+            if tags[i] == tags[j] and tags[i] > 0:
+                continue
+            for k in range(3):
+                d[k] = positions[i, k] - positions[j, k]
+            s0 = d[0] * inverse[0, 0] + d[1] * inverse[1, 0] + d[2] * inverse[2, 0]
+            s1 = d[0] * inverse[0, 1] + d[1] * inverse[1, 1] + d[2] * inverse[2, 1]
+            s2 = d[0] * inverse[0, 2] + d[1] * inverse[1, 2] + d[2] * inverse[2, 2]
+            s0 -= np.round(s0)
+            s1 -= np.round(s1)
+            s2 -= np.round(s2)
+            for k in range(3):
+                d[k] = s0 * cell[0, k] + s1 * cell[1, k] + s2 * cell[2, k]
+            r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+            if r2 >= rc * rc:
+                continue
+            r = np.sqrt(r2)
+            sr6 = (sigma * sigma / r2) ** 3
+            energy += 4.0 * epsilon * (sr6 * sr6 - sr6) - energy_rc + force_rc * (r - rc)
+            fr = (24.0 * epsilon * (2.0 * sr6 * sr6 - sr6) / r - force_rc) / r
+            for k in range(3):
+                forces[i, k] += fr * d[k]
+                forces[j, k] -= fr * d[k]
+                for m in range(3):
+                    virial[k, m] += d[k] * fr * d[m]
+    return energy, forces, virial
+
+
+class PeriodicLJ(Calculator):
+    """Lennard-Jones between atoms of different molecules in a periodic cell, with stress.
+
+    Shifted-force cut at ``rc`` (energy and force go to zero there, so the
+    energy is smooth), minimum image in fractional coordinates: ``rc`` must be
+    at most half the cell's smallest width.  Molecules come from the tags (as
+    the bodies); atoms with tag 0 or below interact with everything.  An
+    O(N²) compiled pair loop, for test systems of a few hundred atoms
+    (128 atoms: about 0.05 ms per call).
+
+    Parameters
+    ----------
+    sigma, epsilon : float
+        Å and eV, one pair of values for every atom pair.
+    rc : float
+        Cut-off (Å).
+    """
+
+    implemented_properties = ["energy", "forces", "stress"]
+
+    def __init__(self, sigma=3.3, epsilon=0.006, rc=7.0):
+        super().__init__()
+        self.sigma, self.epsilon, self.rc = sigma, epsilon, rc
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        atoms = self.atoms
+        cell = atoms.cell.array
+        widths = atoms.cell.volume / np.linalg.norm(np.cross(cell[[1, 2, 0]], cell[[2, 0, 1]]),
+                                                    axis=1)
+        if self.rc > 0.5 * widths.min():
+            raise ValueError(f"PeriodicLJ: rc = {self.rc} Å exceeds half the cell's smallest "
+                             f"width ({0.5 * widths.min():.3f} Å)")
+        energy, forces, virial = _lj_pairs(atoms.positions, atoms.get_tags(), cell,
+                                           np.linalg.inv(cell), self.sigma, self.epsilon,
+                                           self.rc)
+        self.results["energy"] = energy
+        self.results["forces"] = forces
+        stress = -virial / atoms.cell.volume
+        self.results["stress"] = stress[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
+
+
+def dimer_fluid(n_side=4, spacing=4.2, bond=1.1, seed=0, temperature_K=80, **lj):
+    """A periodic liquid of rigid LJ dimers (N2-like, 28 amu), tags = molecules.
+
+    ``n_side**3`` dimers on a simple cubic lattice (``spacing`` Å, about
+    liquid-nitrogen density at 4.2 Å), random orientations, rigid velocities
+    at ``temperature_K``, with :class:`PeriodicLJ` (keyword arguments ``lj``).
+    """
+    from rigidmd import quaternion as quat
+    from rigidmd.systems import random_quaternions
+
+    rng = np.random.default_rng(seed)
+    g = np.arange(n_side) * spacing
+    sites = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    half = quat.rotate(random_quaternions(len(sites), rng), np.array([0.5 * bond, 0, 0]))
+    positions = np.concatenate([sites + half, sites - half], axis=1).reshape(-1, 3)
+    atoms = Atoms(f"N{2 * len(sites)}", positions=positions,
+                  cell=np.eye(3) * n_side * spacing, pbc=True)
+    atoms.set_tags(np.repeat(np.arange(1, len(sites) + 1), 2))
+    atoms.wrap()
+    atoms.calc = PeriodicLJ(**lj)
+    rigid_maxwell_boltzmann(atoms, temperature_K, bodies="tags", rng=rng)
+    return atoms
+
+
+def argon_crystal(n=3, a=5.3, temperature_K=20, shear=0.0, seed=0):
+    """An fcc LJ argon crystal of free atoms (point particles), ``4 n³`` atoms, PeriodicLJ.
+
+    ``shear`` tilts the cell's second vector along x by that fraction of its
+    length (atoms moved with the cell): a crystal under shear stress.
+    """
+    from ase.build import bulk
+
+    atoms = bulk("Ar", "fcc", a=a, cubic=True).repeat(n)
+    atoms.calc = PeriodicLJ(sigma=3.4, epsilon=0.0104, rc=7.5)
+    rigid_maxwell_boltzmann(atoms, temperature_K, bodies=[], rng=np.random.default_rng(seed))
+    if shear:
+        cell = atoms.cell.array.copy()
+        cell[1, 0] += shear * cell[1, 1]
+        atoms.set_cell(cell, scale_atoms=True)
+    return atoms

@@ -129,7 +129,7 @@ def test_compiled_kernel_matches_its_operators():
     r, positions = np.zeros_like(r_ref), np.zeros((len(atoms), 3))
     _numba.first_half(fused.X, fused.V, fused.q, fused.p, F, tau, m.inv_mass,
                       0.25 * m.inv_moments, dt, m.body_coordinates, m.bounds, m.order, r,
-                      positions)
+                      positions, np.eye(3), np.eye(3), np.eye(3), False)
     # Measured: X and V identical, q and p within 5e-16 relative, lab
     # displacements and positions within 9e-16 Å (the kernel's Taylor sin/cos
     # below 0.25 rad and its fused sums round differently).

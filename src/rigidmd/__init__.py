@@ -8,6 +8,7 @@ body move as point particles in the same step.
 from rigidmd.bodies import RigidBodies
 from rigidmd.dynamics import NonFiniteForceError, RigidBodyDOF, RigidDynamics, RigidVerlet
 from rigidmd.model import BodyGeometry, BodyModel
+from rigidmd.npt import RigidCRescale, RigidNPT
 from rigidmd.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover
 from rigidmd.velocities import rigid_maxwell_boltzmann
 
@@ -17,6 +18,8 @@ __all__ = [
     "RigidLangevin",
     "RigidBussi",
     "RigidNoseHoover",
+    "RigidNPT",
+    "RigidCRescale",
     "RigidBodies",
     "BodyModel",
     "BodyGeometry",

@@ -110,20 +110,32 @@ def _rotate(q0, q1, q2, q3, p0, p1, p2, p3, inv4i, k, h):
 
 
 @_jit
-def first_half(X, V, q, p, F, tau, inv_mass, inv4i, dt, d, bounds, order, r, positions):
-    """Kick (dt/2), drift (dt), free rotor (dt), and place the body atoms.
+def first_half(X, V, q, p, F, tau, inv_mass, inv4i, dt, d, bounds, order, r, positions,
+               A, B, S, affine):
+    r"""Kick (dt/2), drift (dt), free rotor (dt), and place the body atoms.
 
     Updates ``X, V, q, p`` in place, writes the lab displacements ``r``
     (in body-atom order) and the atom ``positions`` (atom order).
     ``inv_mass`` is 1/M; ``inv4i`` is :math:`1/(4 I_k)` per body and axis, 0
-    where :math:`I_k = 0`.
+    where :math:`I_k = 0`.  With ``affine`` the drift moves the centres of
+    mass with the cell, :math:`X \leftarrow A X + B V`, :math:`V \leftarrow S V`
+    (3x3 matrices from a barostat); otherwise :math:`X \mathrel{+}= dt\, V`.
     """
     half = 0.5 * dt
     for b in range(X.shape[0]):
         hm = half * inv_mass[b]
         for a in range(3):
             V[b, a] += hm * F[b, a]
-            X[b, a] += dt * V[b, a]
+        if affine:
+            x0, x1, x2 = X[b, 0], X[b, 1], X[b, 2]
+            v0, v1, v2 = V[b, 0], V[b, 1], V[b, 2]
+            for a in range(3):
+                X[b, a] = (A[a, 0] * x0 + A[a, 1] * x1 + A[a, 2] * x2
+                           + B[a, 0] * v0 + B[a, 1] * v1 + B[a, 2] * v2)
+                V[b, a] = S[a, 0] * v0 + S[a, 1] * v1 + S[a, 2] * v2
+        else:
+            for a in range(3):
+                X[b, a] += dt * V[b, a]
         q0, q1, q2, q3 = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
         p0, p1, p2, p3 = _kick(q0, q1, q2, q3, p[b, 0], p[b, 1], p[b, 2], p[b, 3],
                                tau[b, 0], tau[b, 1], tau[b, 2], dt)

@@ -220,6 +220,8 @@ class RigidBodies:
                     f"bodies: unknown rule {spec!r}; expected one of {', '.join(_RULES)}, "
                     "a per-atom body-id array or a list of index lists"
                 )
+        elif hasattr(spec, "__len__") and len(spec) == 0:
+            bodies = cls.from_index_lists([], n)  # an empty list of bodies: every atom free
         else:
             try:
                 arr = np.asarray(spec)
@@ -268,7 +270,7 @@ class RigidBodies:
     def _layout(self):
         order = self.body_atom_order
         counts = np.bincount(self.body_ids[order], minlength=self.n_bodies)
-        starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        starts = (np.cumsum(counts) - counts).astype(np.int64)
         return order, starts, np.repeat(np.arange(self.n_bodies), counts)
 
     def whole_positions(self, atoms):

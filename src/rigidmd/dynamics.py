@@ -20,7 +20,8 @@ The time step is read from :attr:`RigidDynamics.dt` at every step.
 import warnings
 
 import numpy as np
-from ase import Atoms
+from ase import Atoms, units
+from ase.calculators.calculator import PropertyNotImplementedError
 from ase.io.trajectory import TrajectoryWriter
 from ase.md.logger import MDLogger
 from ase.md.md import MolecularDynamics
@@ -29,6 +30,7 @@ from rigidmd import _numba
 from rigidmd import operators as ops
 from rigidmd.bodies import RigidBodies, unwrap_bodies
 from rigidmd.coupling import Coupling
+from rigidmd.logger import RigidLogger
 from rigidmd.schemes import BUILTIN_SCHEMES, StepContext, resolve_scheme
 from rigidmd.state import RigidState
 
@@ -184,7 +186,7 @@ class RigidDynamics(MolecularDynamics):
 
     def __init__(self, atoms, timestep, bodies=None, trajectory=None, logfile=None,
                  loginterval=1, integrator="no_squish", integrator_options=None, backend=None,
-                 couplings=(), **kwargs):
+                 couplings=(), log_pressure=None, **kwargs):
         # -- validate everything before touching the atoms or any file --
         if not isinstance(atoms, Atoms):
             raise TypeError(f"atoms must be an ase.Atoms, got {type(atoms).__name__}")
@@ -208,12 +210,17 @@ class RigidDynamics(MolecularDynamics):
             if not isinstance(part, Coupling):
                 raise TypeError(f"couplings must be coupling parts (rigidmd.coupling), "
                                 f"got {type(part).__name__}")
+        movers = [part for part in couplings if getattr(part, "moves_cell", False)]
+        if len(movers) > 1:
+            raise ValueError(f"two parts move the cell ({movers[0].kind}, {movers[1].kind}); "
+                             "use one barostat")
         self.model = geometry.model
+        self.atoms = atoms
         for part in couplings:
             part.check(self)
 
         # -- from here on the atoms and files change --
-        super().__init__(atoms, self._dt, trajectory=trajectory, logfile=logfile,
+        super().__init__(atoms, self._dt, trajectory=trajectory, logfile=None,
                          loginterval=loginterval, **kwargs)
         self.backend = backend
         self.scheme = scheme
@@ -222,6 +229,9 @@ class RigidDynamics(MolecularDynamics):
         self.couplings = couplings
         for part in couplings:
             part.bind(self)
+        self._cell_moves = bool(movers)
+        self._needs_stress = any(getattr(part, "needs_stress", False) for part in couplings)
+        self._virial = None  # molecular virial at the last force call (when a part needs it)
         model = self.model
         atoms.constraints = [RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom)]
         nb, nf = model.n_bodies, model.n_free
@@ -236,7 +246,7 @@ class RigidDynamics(MolecularDynamics):
             f=np.zeros((nf, 3)), r=np.zeros((len(model.order), 3)),
             evaluate=self._evaluate_forces, calculator_forces=self._get_forces,
             positions=atoms.arrays["positions"], momenta=atoms.arrays["momenta"],
-            write_momenta=not couplings)
+            write_momenta=not couplings, cell_motion=movers[0] if movers else None)
         self.removed_kinetic_energy = 0.0
         self._time = 0.0             # simulated time (ASE units), summed step by step
         self._synced = None          # (positions, momenta) at the end of the last run
@@ -244,6 +254,10 @@ class RigidDynamics(MolecularDynamics):
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps
         self._read_momenta()
         self._write_atoms()
+        if logfile:
+            pressure = self._needs_stress if log_pressure is None else log_pressure
+            self.attach(self.closelater(RigidLogger(self, logfile, pressure=pressure)),
+                        loginterval)
 
     @staticmethod
     def _check_constraints(atoms):
@@ -332,12 +346,16 @@ class RigidDynamics(MolecularDynamics):
             self._changed = written
 
     def _snapshot(self):
-        return self.atoms.arrays["positions"].copy(), self.atoms.arrays["momenta"].copy()
+        atoms = self.atoms
+        return (atoms.arrays["positions"].copy(), atoms.arrays["momenta"].copy(),
+                atoms.cell.array.copy())
 
     def _differs(self, snapshot):
-        positions, momenta = snapshot
-        return not (np.array_equal(self.atoms.arrays["positions"], positions)
-                    and np.array_equal(self.atoms.arrays["momenta"], momenta))
+        positions, momenta, cell = snapshot
+        atoms = self.atoms
+        return not (np.array_equal(atoms.arrays["positions"], positions)
+                    and np.array_equal(atoms.arrays["momenta"], momenta)
+                    and np.array_equal(atoms.cell.array, cell))
 
     def _refresh_properties(self):
         # Forces at the current positions were evaluated inside step() (or
@@ -378,14 +396,25 @@ class RigidDynamics(MolecularDynamics):
             ctx.F, ctx.tau, ctx.f, ctx.scratch = saved
             for part, variables in zip(self.couplings, coupled, strict=True):
                 part.set_state(variables)
+            if self._cell_moves:
+                self.atoms.set_cell(self.state.cell)
             self._place_atoms()
             self._write_momenta()
             raise
 
     # ------------------------------------------------------------ forces
     def _get_forces(self):
-        """Call the calculator on the current positions and check the result."""
-        forces = np.asarray(self.atoms.get_forces(md=True), dtype=float)
+        """Call the calculator on the current positions and check the result.
+
+        With a barostat the cell is set first, the stress is asked for in
+        the same call, and the molecular virial is kept.
+        """
+        atoms = self.atoms
+        if self._cell_moves:
+            atoms.set_cell(self.state.cell)
+        if self._needs_stress and hasattr(atoms.calc, "get_properties"):
+            atoms.calc.get_properties(["energy", "forces", "stress"], atoms)
+        forces = np.asarray(atoms.get_forces(md=True), dtype=float)
         if forces.shape != (len(self.atoms), 3):
             raise ValueError(
                 f"calculator returned forces of shape {forces.shape}, "
@@ -398,7 +427,25 @@ class RigidDynamics(MolecularDynamics):
                 f"calculator returned non-finite forces on atom(s) {bad[:10].tolist()} "
                 f"after step {self.nsteps}; the atoms are left at step {self.nsteps}"
             )
+        if self._needs_stress:
+            self._virial = self._molecular_virial(forces)
         return forces
+
+    def _molecular_virial(self, forces):
+        r"""The molecular virial (eV, 3x3): the atomic virial less its intramolecular part."""
+        try:
+            stress = self.atoms.get_stress(voigt=False, include_ideal_gas=False)
+        except PropertyNotImplementedError:
+            raise PropertyNotImplementedError(
+                f"the calculator {type(self.atoms.calc).__name__} provides no stress, so the "
+                "pressure is unknown; use a calculator with stress (e.g. "
+                "rigidmd.lammps.LAMMPSCalculator)") from None
+        stress = np.asarray(stress, dtype=float)
+        if not np.isfinite(stress.sum()):
+            raise NonFiniteForceError(f"calculator returned a non-finite stress {stress.tolist()} "
+                                      f"after step {self.nsteps}")
+        virial = -self.get_volume() * stress
+        return virial - ops.intramolecular_virial(self._ctx.r, forces, self.model)
 
     def _evaluate_forces(self):
         """Place the atoms from the state, call the calculator, reduce to bodies."""
@@ -489,7 +536,7 @@ class RigidDynamics(MolecularDynamics):
         s.x = atoms.positions[m.free].copy()
 
     def _sync_from_atoms(self, written):
-        """Pick up changes made to the Atoms since ``written`` (positions, momenta) was true.
+        """Pick up changes made to the Atoms since ``written`` (positions, momenta, cell) was true.
 
         Returns whether anything changed.  Moved atoms are refitted and their
         forces evaluated again.
@@ -505,10 +552,12 @@ class RigidDynamics(MolecularDynamics):
         self._check_constraints(atoms)
         if not any(isinstance(c, RigidBodyDOF) for c in atoms.constraints):
             atoms.constraints = [RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom)]
-        positions, momenta = written
-        moved = not np.array_equal(atoms.positions, positions)
+        positions, momenta, cell = written
+        moved = not (np.array_equal(atoms.positions, positions)
+                     and np.array_equal(atoms.cell.array, cell))
         kicked = not np.array_equal(atoms.get_momenta(), momenta)
         if moved:
+            self.state.cell[...] = atoms.cell.array
             self._read_positions()
         if moved or kicked:
             self._read_momenta(previous=None if moved else momenta)
@@ -604,6 +653,70 @@ class RigidDynamics(MolecularDynamics):
     def get_rotational_kinetic_energy(self):
         """Rotational kinetic energy of all bodies (eV)."""
         return float(self.rotational_kinetic_energies.sum())
+
+    # ------------------------------------------------------------ pressure
+    def get_volume(self):
+        """Volume of the cell (Å³); a clear error for a cell that is not periodic."""
+        if not self.atoms.pbc.all():
+            raise ValueError("the volume and pressure need a cell periodic in all three "
+                             f"directions; atoms.pbc is {self.atoms.pbc.tolist()}")
+        return float(abs(np.linalg.det(self.state.cell)))
+
+    def get_density(self):
+        """Mass density (g/cm³)."""
+        grams = self.atoms.get_masses().sum() * units._amu * 1e3
+        return float(grams / (self.get_volume() * 1e-24))
+
+    def molecular_virial(self):
+        r"""Molecular virial :math:`\sum_b X_b \otimes F_b + \sum_{free} x\otimes f` (eV, 3x3).
+
+        The calculator's atomic virial :math:`-V\sigma` less the
+        intramolecular part :math:`\sum_b\sum_{i\in b} d_i \otimes f_i`
+        (symmetrised), at the current positions.
+        """
+        if self._needs_stress and self._virial is not None:
+            return self._virial
+        return self._molecular_virial(np.asarray(self.atoms.get_forces(md=True), dtype=float))
+
+    def get_stress(self, include_ideal_gas=True, voigt=True):
+        r"""Molecular stress (eV/Å³) in ASE's sign convention and Voigt order.
+
+        .. math::
+            \sigma = -\frac{1}{V}\Big(\sum_b X_b \otimes F_b
+                + \sum_b M_b V_b \otimes V_b + \sum_{free} m\, v \otimes v\Big)
+
+        with the positional part from :meth:`molecular_virial` (the kinetic
+        part only with ``include_ideal_gas``).  Centres of mass, not atoms,
+        carry the pressure of rigid molecules; the instantaneous atomic
+        pressure including the constraint forces that keep the molecules rigid
+        has the same trace.  The antisymmetric part of the intramolecular
+        virial (the bodies' torques, zero on average) is left out.
+
+        Parameters
+        ----------
+        include_ideal_gas : bool, default True
+        voigt : bool, default True
+            ``(xx, yy, zz, yz, xz, xy)``, else a 3x3 matrix.
+
+        Raises
+        ------
+        ase.calculators.calculator.PropertyNotImplementedError
+            The calculator provides no stress (the message names it).
+        ValueError
+            The cell is not periodic in all three directions.
+        """
+        volume = self.get_volume()
+        W = self.molecular_virial()
+        if include_ideal_gas:
+            W = W + ops.kinetic_tensor(self.state, self.model)
+        sigma = -W / volume
+        if voigt:
+            return sigma[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
+        return sigma
+
+    def get_pressure(self):
+        """Instantaneous molecular pressure, minus a third of the stress trace (eV/Å³)."""
+        return float(-np.trace(self.get_stress(voigt=False)) / 3.0)
 
     def get_conserved_energy(self):
         """Total energy plus every coupling part's term (eV): what the dynamics conserves.

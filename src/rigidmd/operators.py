@@ -45,6 +45,9 @@ __all__ = [
     "pcdm_correct",
     "exadem_push_to_quaternion",
     "exadem_angular_acceleration",
+    "kinetic_tensor",
+    "intramolecular_virial",
+    "affine_drift",
 ]
 
 _PERMUTATIONS = (quat.p1, quat.p2, quat.p3)
@@ -560,3 +563,69 @@ def exadem_angular_acceleration(q, omega, torque, moments, inv_moments):
     omega_body = quat.rotate_inverse(q, omega)
     return quat.rotate(q, euler_acceleration(omega_body, quat.rotate_inverse(q, torque), moments,
                                              inv_moments))
+
+
+# ---------------------------------------------------------------- pressure
+def kinetic_tensor(state, model):
+    r"""Kinetic tensor of the centres of mass and point particles.
+
+    .. math:: K_{\alpha\beta} = \sum_b M_b V_{b\alpha} V_{b\beta}
+              + \sum_{free} m\, v_\alpha v_\beta
+
+    (twice the translational kinetic energy on the trace).
+
+    Returns
+    -------
+    numpy.ndarray, shape (3, 3)
+        eV.
+    """
+    V, v = state.V, state.v
+    return (np.einsum("b,bi,bj->ij", model.mass, V, V)
+            + np.einsum("f,fi,fj->ij", model.free_masses, v, v))
+
+
+def intramolecular_virial(r, forces, model):
+    r"""The intramolecular part of the atomic virial, :math:`\sum_b \sum_{i\in b} d_i \otimes f_i`.
+
+    With :math:`d_i = r_i` the atom's lab displacement from its body's centre
+    of mass, subtracting this from the atomic virial :math:`\sum_i x_i \otimes
+    f_i` leaves the molecular virial :math:`\sum_b X_b \otimes F_b`.  Its
+    antisymmetric part is the bodies' total torque; the symmetric part is
+    returned.
+
+    Parameters
+    ----------
+    r : numpy.ndarray, shape (n_body_atoms, 3)
+        Lab displacements (Å), in ``model.order``.
+    forces : numpy.ndarray, shape (n_atoms, 3)
+        Atom forces (eV/Å), in atom order.
+    model : rigidmd.model.BodyModel
+
+    Returns
+    -------
+    numpy.ndarray, shape (3, 3)
+        eV, symmetric.
+    """
+    w = r.T @ forces[model.order]
+    return 0.5 * (w + w.T)
+
+
+def affine_drift(state, A, B, S):
+    r"""Drift with the cell's motion: :math:`X \leftarrow A X + B V`, :math:`V \leftarrow S V`.
+
+    For centres of mass and point particles (row vectors here, so
+    :math:`X \leftarrow X A^\mathsf{T} + V B^\mathsf{T}`), and
+    :math:`h \leftarrow A h` for the cell vectors.  Orientations do not
+    change.  A barostat supplies the matrices; a plain drift over ``t`` is
+    :math:`A = S = 1`, :math:`B = t`.
+
+    Parameters
+    ----------
+    state : RigidState
+    A, B, S : numpy.ndarray, shape (3, 3)
+    """
+    state.X = state.X @ A.T + state.V @ B.T
+    state.x = state.x @ A.T + state.v @ B.T
+    state.V = state.V @ S.T
+    state.v = state.v @ S.T
+    state.cell = state.cell @ A.T

@@ -82,6 +82,10 @@ class StepContext:
     write_momenta : bool
         Whether the scheme writes the atom momenta at the end of its step
         (False when coupling parts act after it; the dynamics then writes them).
+    cell_motion : object or None
+        A barostat: its ``drift_matrices(h)`` gives the matrices ``A, B, S``
+        of a drift over ``h`` in which the centres of mass, the point
+        particles and the cell move with the cell (:func:`~rigidmd.operators.affine_drift`).
     scratch : dict
         Quantities an operator hands to a later one (exaDEM's accelerations,
         PCDM's start-of-step values).  Kept across steps.
@@ -98,6 +102,7 @@ class StepContext:
     positions: np.ndarray
     momenta: np.ndarray
     write_momenta: bool = True
+    cell_motion: object = None
     scratch: dict = field(default_factory=dict)
 
     def omega(self):
@@ -132,7 +137,10 @@ def translational_kick(ctx, h):
 
 
 def drift(ctx, h):
-    ops.drift(ctx.state, h)
+    if ctx.cell_motion is None:
+        ops.drift(ctx.state, h)
+    else:
+        ops.affine_drift(ctx.state, *ctx.cell_motion.drift_matrices(h))
 
 
 def rotational_kick(ctx, h):
@@ -192,8 +200,17 @@ def force_to_accel(ctx):
 def push_f_v_r(ctx, h):
     a, a_free = ctx.accelerations()
     s = ctx.state
-    s.X += h * s.V + 0.5 * h * h * a
-    s.x += h * s.v + 0.5 * h * h * a_free
+    if ctx.cell_motion is None:
+        s.X += h * s.V + 0.5 * h * h * a
+        s.x += h * s.v + 0.5 * h * h * a_free
+        return
+    # With a barostat: the cell's drift, at the mean velocity V + (h/2) a.
+    A, B, S = ctx.cell_motion.drift_matrices(h)
+    s.X = s.X @ A.T + (s.V + 0.5 * h * a) @ B.T
+    s.x = s.x @ A.T + (s.v + 0.5 * h * a_free) @ B.T
+    s.V = s.V @ S.T
+    s.v = s.v @ S.T
+    s.cell = s.cell @ A.T
 
 
 def push_f_v(ctx, h):
@@ -220,6 +237,9 @@ def push_to_angular_velocity(ctx, h):
 
 
 # ---------------------------------------------------------------- fused kernel
+_IDENTITY = np.eye(3)
+
+
 def fused_no_squish(ctx, dt):
     """NO_SQUISH as two compiled loops over bodies: the ``no_squish`` scheme, fused.
 
@@ -232,11 +252,28 @@ def fused_no_squish(ctx, dt):
     """
     s, m = ctx.state, ctx.model
     half = 0.5 * dt
-    _numba.first_half(s.X, s.V, s.q, s.p, ctx.F, ctx.tau, m.inv_mass, 0.25 * m.inv_moments, dt,
-                      m.body_coordinates, m.bounds, m.order, ctx.r, ctx.positions)
-    if m.n_free:
+    affine = ctx.cell_motion is not None
+    if affine:
+        # A barostat reads the pressure after the half kick: kick first, then
+        # move the cell, and let the loop's own kick add nothing.
+        s.V += (half * m.inv_mass)[:, None] * ctx.F
         s.v += half * ctx.f / m.free_masses[:, None]
-        s.x += dt * s.v
+        A, B, S = ctx.cell_motion.drift_matrices(dt)
+        s.cell[...] = s.cell @ A.T
+        F = np.zeros_like(ctx.F)
+    else:
+        A = B = S = _IDENTITY
+        F = ctx.F
+    _numba.first_half(s.X, s.V, s.q, s.p, F, ctx.tau, m.inv_mass, 0.25 * m.inv_moments, dt,
+                      m.body_coordinates, m.bounds, m.order, ctx.r, ctx.positions, A, B, S,
+                      affine)
+    if m.n_free:
+        if affine:
+            s.x[...] = s.x @ A.T + s.v @ B.T
+            s.v[...] = s.v @ S.T
+        else:
+            s.v += half * ctx.f / m.free_masses[:, None]
+            s.x += dt * s.v
         ctx.positions[m.free] = s.x
     forces = ctx.calculator_forces()
     # The body forces and torques are overwritten only after the force call succeeded.

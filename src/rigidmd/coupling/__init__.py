@@ -121,6 +121,10 @@ class Coupling:
     parameters: ClassVar[tuple] = ()
 
     dyn = None
+    #: Whether the dynamics must ask the calculator for the stress at every force call.
+    needs_stress: ClassVar[bool] = False
+    #: Whether the part moves the cell (a barostat; at most one per dynamics).
+    moves_cell: ClassVar[bool] = False
 
     def check(self, dyn):
         """Check the parameters against a dynamics' system and time step; change nothing.
@@ -199,3 +203,11 @@ def set_rng_state(rng, state):
         rng.bit_generator.state = state["generator"]
     else:
         rng.set_state(state["legacy"])
+
+
+def _register_builtin_kinds():
+    """Import the modules that register the built-in kinds (thermostats, barostats)."""
+    from rigidmd.coupling import barostats, thermostats  # noqa: F401
+
+
+_register_builtin_kinds()

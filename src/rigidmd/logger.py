@@ -1,0 +1,67 @@
+"""The MD log of a rigid dynamics: ASE's columns, the conserved energy, and P, V, density.
+
+The first five columns are those of ASE's :class:`~ase.md.MDLogger`
+(``Time[ps] Etot[eV] Epot[eV] Ekin[eV] T[K]``), so tools that read ASE logs
+read these; then the quantity the dynamics conserves (``Econs[eV]``, the total
+energy for NVE) and, for a periodic cell, the molecular pressure (``P[bar]``,
+when a barostat runs or ``log_pressure`` asks for it), the volume
+(``V[A^3]``) and the density (``rho[g/cm3]``).  Energies carry 6 decimals
+(µeV), so a slow drift shows as a line, not as steps.
+"""
+
+from ase import units
+from ase.md.logger import MDLogger
+
+__all__ = ["RigidLogger", "LOG_COLUMNS"]
+
+#: Column names, in order; the last four are optional.
+LOG_COLUMNS = ("Time[ps]", "Etot[eV]", "Epot[eV]", "Ekin[eV]", "T[K]", "Econs[eV]", "P[bar]",
+               "V[A^3]", "rho[g/cm3]")
+
+
+class RigidLogger(MDLogger):
+    """Log lines of a :class:`~rigidmd.dynamics.RigidDynamics` (an ASE ``MDLogger``).
+
+    Parameters
+    ----------
+    dyn : rigidmd.dynamics.RigidDynamics
+    logfile : str or file
+        ``"-"`` for standard output.
+    pressure : bool
+        Log the molecular pressure (needs a calculator with stress).
+    mode : str, default ``"a"``
+        How a named file is opened.
+    header : bool, default True
+    """
+
+    def __init__(self, dyn, logfile, pressure=False, mode="a", header=True):
+        self.log_pressure = bool(pressure)
+        self.periodic = bool(dyn.atoms.pbc.all())
+        super().__init__(dyn, dyn.atoms, logfile, header=False, mode=mode, comm=dyn.comm)
+        columns = list(LOG_COLUMNS[:6])
+        self.fmt = "%-10.4f %14.6f %14.6f %14.6f %8.2f %14.6f"
+        if self.log_pressure:
+            columns.append("P[bar]")
+            self.fmt += " %11.3f"
+        if self.periodic:
+            columns += ["V[A^3]", "rho[g/cm3]"]
+            self.fmt += " %12.3f %10.5f"
+        self.fmt += "\n"
+        widths = [-10, 14, 14, 14, 8, 14, 11, 12, 10]
+        self.hdr = " ".join(f"{name:{'<' if w < 0 else '>'}{abs(w)}}"
+                            for name, w in zip(columns, widths, strict=False))
+        if header:
+            self.logfile.write(self.hdr + "\n")
+
+    def __call__(self):
+        dyn, atoms = self.dyn, self.atoms
+        epot = atoms.get_potential_energy()
+        ekin = atoms.get_kinetic_energy()
+        row = [dyn.get_time() / (1000 * units.fs), epot + ekin, epot, ekin,
+               atoms.get_temperature(), dyn.get_conserved_energy()]
+        if self.log_pressure:
+            row.append(dyn.get_pressure() / units.bar)
+        if self.periodic:
+            row += [dyn.get_volume(), dyn.get_density()]
+        self.logfile.write(self.fmt % tuple(row))
+        self.logfile.flush()
