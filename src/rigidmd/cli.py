@@ -181,8 +181,7 @@ def _run(config, stream=sys.stdout):
     atoms, dyn = _setup(config)
     outputs = config.outputs
     energies = []
-    dyn.attach(lambda: energies.append((dyn.get_time(), dyn.get_conserved_energy())),
-               interval=outputs.interval)
+    dyn.attach(lambda: energies.append(_observables(dyn)), interval=outputs.interval)
     writer = None
     if outputs.mdanalysis is not None:
         from rigidmd.mdanalysis import MDAWriter
@@ -216,16 +215,29 @@ def _run(config, stream=sys.stdout):
     return status
 
 
-def _summary(dyn, energies, elapsed, stream):
+def _observables(dyn):
+    """Time, conserved energy and, under a barostat, pressure (bar), volume, density."""
+    row = (dyn.get_time(), dyn.get_conserved_energy())
+    if dyn._cell_moves:
+        row += (dyn.get_pressure() / units.bar, dyn.get_volume(), dyn.get_density())
+    return row
+
+
+def _summary(dyn, rows, elapsed, stream):
     label = "conserved energy" if dyn.couplings else "total energy"
     print(f"{dyn.nsteps} steps in {elapsed:.1f} s; T = {dyn.atoms.get_temperature():.1f} K "
           f"({dyn.degrees_of_freedom} degrees of freedom)", file=stream)
-    if len(energies) >= 3:
-        t, e = np.array(energies).T
-        t_ps = t / TIME_UNITS["ps"]
+    if len(rows) >= 3:
+        data = np.array(rows)
+        t_ps, e = data[:, 0] / TIME_UNITS["ps"], data[:, 1]
         drift = np.polyfit(t_ps, e, 1)[0]
         print(f"{label}: drift {drift:+.2e} eV/ps, max |E - E0| {np.abs(e - e[0]).max():.2e} eV",
               file=stream)
+        if data.shape[1] > 2:
+            pressure, volume, density = data[:, 2:].T
+            print(f"mean P = {pressure.mean():.1f} bar, V = {volume.mean():.1f} Å³, "
+                  f"density = {density.mean():.4f} g/cm³ (final {density[-1]:.4f})",
+                  file=stream)
 
 
 def _apply_flags(config, args):

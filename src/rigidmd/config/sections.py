@@ -7,7 +7,7 @@ structure          ``structure``, ``read_options``, ``bodies``, ``restart``
 run                ``integrator``, ``integrator_options``, ``timestep``,
                    ``steps``, ``velocities``
 calculator         ``calculator``
-coupling           ``thermostat``
+coupling           ``thermostat``, ``barostat``
 outputs            ``outputs``
 =================  ===========================================================
 
@@ -312,8 +312,11 @@ class CouplingSpec:
         return self.cls(**kwargs)
 
 
-def parse_coupling(section, raw):
+def parse_coupling(section, raw, defaults=None):
     """Check a ``thermostat:`` (or ``barostat:``) mapping against the registry.
+
+    ``defaults`` (constructor keyword -> value) fill parameters the section
+    leaves out, e.g. the barostat's temperature from the thermostat.
 
     Returns
     -------
@@ -322,6 +325,7 @@ def parse_coupling(section, raw):
     from rigidmd.coupling import COUPLINGS
 
     raw = mapping(section, raw)
+    defaults = defaults or {}
     kinds = [kind for kind, cls in COUPLINGS.items() if cls.section == section]
     kind = raw.get("kind")
     if kind not in kinds:
@@ -332,6 +336,9 @@ def parse_coupling(section, raw):
     for p in cls.parameters:
         name = f"{section}.{p.field}"
         if p.field not in raw:
+            if p.name in defaults:
+                kwargs[p.name] = defaults[p.name]
+                continue
             if p.required:
                 example = f" (e.g. '{p.example}')" if p.example else ""
                 raise ConfigError(f"{name}: missing for {kind}{example}")
@@ -361,26 +368,38 @@ def parse_coupling(section, raw):
 
 @dataclass
 class CouplingSection:
-    """Thermostat (and, later, barostat) parts, from the registry of coupling kinds.
+    """Thermostat and barostat parts, from the registry of coupling kinds.
+
+    ``barostat:`` takes the thermostat's temperature unless it gives its
+    own; a barostat without a thermostat is NPH (MTK) or its stochastic
+    counterpart.
 
     Attributes
     ----------
-    thermostat : CouplingSpec or None
+    thermostat, barostat : CouplingSpec or None
     """
 
-    KEYS = ("thermostat",)
+    KEYS = ("thermostat", "barostat")
 
     thermostat: CouplingSpec | None = None
+    barostat: CouplingSpec | None = None
 
     @classmethod
     def from_config(cls, raw, base):
         thermostat = raw.get("thermostat")
-        return cls(None if thermostat is None else parse_coupling("thermostat", thermostat))
+        if thermostat is not None:
+            thermostat = parse_coupling("thermostat", thermostat)
+        barostat = raw.get("barostat")
+        if barostat is not None:
+            defaults = {} if thermostat is None else {
+                "temperature_K": thermostat.kwargs["temperature_K"]}
+            barostat = parse_coupling("barostat", barostat, defaults)
+        return cls(thermostat, barostat)
 
     @property
     def specs(self):
         """The checked coupling sections present, in the order they act."""
-        return [spec for spec in (self.thermostat,) if spec is not None]
+        return [spec for spec in (self.thermostat, self.barostat) if spec is not None]
 
     def parts(self):
         """New coupling parts for a dynamics."""

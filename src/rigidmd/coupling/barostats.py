@@ -338,7 +338,11 @@ class CRescaleBarostat(Barostat):
     the compressibility.  For ``"aniso"`` and ``"tri"`` the shape moves too:
     each traceless strain component :math:`\eta_k` (an orthonormal basis of
     the shape changes ``couple`` allows) follows
-    :math:`d\eta_k = \frac{\beta_T}{3\tau_p V} f_k\,dt + \sqrt{2 k_BT \beta_T\,dt/(3\tau_p V)}\,\xi_k`
+
+    .. math::
+        d\eta_k = \frac{\beta_T}{3\tau_p V} f_k\,dt
+                  + \sqrt{\frac{2 k_BT \beta_T\,dt}{3\tau_p V}}\,\xi_k
+
     with :math:`f_k = V\langle \mathsf P, E_k\rangle`, the mobility of the
     isotropic strain.  The cell strain of one step,
     :math:`\mu = \exp(\tfrac13\Delta\varepsilon_V + \Delta\eta)`, is applied in
