@@ -6,6 +6,7 @@ body move as point particles in the same step.
 """
 
 from rigidmd.bodies import RigidBodies
+from rigidmd.checkpoint import load_checkpoint
 from rigidmd.dynamics import NonFiniteForceError, RigidBodyDOF, RigidDynamics, RigidVerlet
 from rigidmd.model import BodyGeometry, BodyModel
 from rigidmd.npt import RigidCRescale, RigidNPT
@@ -26,6 +27,7 @@ __all__ = [
     "RigidBodyDOF",
     "NonFiniteForceError",
     "rigid_maxwell_boltzmann",
+    "load_checkpoint",
 ]
 
 __version__ = "0.1.0"

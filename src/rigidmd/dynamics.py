@@ -249,6 +249,7 @@ class RigidDynamics(MolecularDynamics):
             write_momenta=not couplings, cell_motion=movers[0] if movers else None)
         self.removed_kinetic_energy = 0.0
         self._time = 0.0             # simulated time (ASE units), summed step by step
+        self._forces_current = False  # forces restored from a checkpoint: no call at irun
         self._synced = None          # (positions, momenta) at the end of the last run
         self._changed = None         # (positions, momenta) written before a change was made
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps
@@ -318,8 +319,11 @@ class RigidDynamics(MolecularDynamics):
         Changes made to the Atoms since the last step, by observers or by the
         code that drives this generator, are read before the next step.
         """
-        self._sync_from_atoms(self._synced)
-        self._evaluate_forces()
+        if not self._sync_from_atoms(self._synced) and self._forces_current:
+            self._place_atoms()  # the restored forces belong to these positions
+        else:
+            self._evaluate_forces()
+        self._forces_current = False
         try:
             for converged in super().irun(steps):
                 if self._driven_by_run:
@@ -653,6 +657,16 @@ class RigidDynamics(MolecularDynamics):
     def get_rotational_kinetic_energy(self):
         """Rotational kinetic energy of all bodies (eV)."""
         return float(self.rotational_kinetic_energies.sum())
+
+    # ------------------------------------------------------------ checkpoints
+    def save_checkpoint(self, path, extra=None):
+        """Write everything an exact continuation needs to ``path`` (atomically).
+
+        See :mod:`rigidmd.checkpoint`; :func:`rigidmd.load_checkpoint` continues.
+        """
+        from rigidmd.checkpoint import save_checkpoint
+
+        save_checkpoint(self, path, extra)
 
     # ------------------------------------------------------------ pressure
     def get_volume(self):

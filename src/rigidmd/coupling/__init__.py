@@ -194,7 +194,7 @@ def rng_state(rng):
     """A copy of the state of an ``rng`` accepted by :func:`check_rng`."""
     if isinstance(rng, np.random.Generator):
         return {"generator": dict(rng.bit_generator.state)}
-    return {"legacy": rng.get_state()}
+    return {"legacy": rng.get_state(legacy=False)}
 
 
 def set_rng_state(rng, state):
