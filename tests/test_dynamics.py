@@ -291,10 +291,13 @@ def test_trajectory_and_log(tmp_path):
     np.testing.assert_allclose(frames[-1].positions, atoms.positions)
     np.testing.assert_allclose(frames[-1].get_momenta(), atoms.get_momenta())
     assert frames[-1].constraints == []
-    lines = [ln.split() for ln in log.read_text().splitlines()[1:]]
+    header, *lines = [ln.split() for ln in log.read_text().splitlines()]
+    assert header == ["Time[ps]", "Etot[eV]", "Epot[eV]", "Ekin[eV]", "T[K]", "Econs[eV]"]
     assert len(lines) == 5
     # The logger's temperature counts 6 degrees of freedom per water.
-    assert float(lines[-1][-1]) == pytest.approx(atoms.get_temperature(), abs=0.1)
+    assert float(lines[-1][4]) == pytest.approx(atoms.get_temperature(), abs=0.01)
+    # The conserved energy of NVE is the total energy, with 6 decimals (µeV).
+    assert lines[-1][5] == lines[-1][1] and len(lines[-1][1].split(".")[1]) == 6
     assert atoms.get_temperature() == pytest.approx(
         2 * atoms.get_kinetic_energy() / (24 * units.kB))
     with Trajectory(traj) as t:

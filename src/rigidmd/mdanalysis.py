@@ -458,15 +458,19 @@ def _drop_offset_cache(path):
 
 
 class _Handle:
-    """Owns the MDAnalysis writer so that a finaliser can close it without the observer."""
+    """Owns the open file or writer so that a finaliser can close it without the observer."""
 
     def __init__(self):
         self.writer = None
+        self.scratch = None
 
     def close(self):
         if self.writer is not None:
             self.writer.close()
             self.writer = None
+        if self.scratch is not None:
+            self.scratch.unlink(missing_ok=True)
+            self.scratch = None
 
 
 class MDAWriter:
@@ -530,9 +534,11 @@ class MDAWriter:
     """
 
     _FORMATS = ("XTC", "DCD")
+    #: An observer that only reads the atoms (the dynamics need not look for changes).
+    modifies_atoms = False
 
     def __init__(self, source, filename, topology=None, *, bodies=None, charges=None, dt=1.0,
-                 precision=4, water_resname="SOL"):
+                 precision=4, water_resname="SOL", append=False):
         _require_mdanalysis()
         if _is_dynamics(source):
             self.dynamics, atoms, bodies = source, source.atoms, source.bodies
@@ -555,6 +561,10 @@ class MDAWriter:
             )
         if self.topology_filename.resolve() == self.filename.resolve():
             raise ValueError("topology and trajectory must be different files")
+        self.append = bool(append)
+        if self.append and self.format != "XTC":
+            raise ValueError(f"MDAWriter: a {self.format} file cannot be continued (its header "
+                             "counts the frames); write .xtc to append to a trajectory")
         self.dt = float(dt)
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"dt must be a positive time in ps, got {dt!r}")
@@ -621,17 +631,42 @@ class MDAWriter:
             raise ValueError(f"{self!r} is closed")
         frame = self._frame()
         self._load(*frame)
-        if self.n_frames == 0:
+        if self.n_frames == 0 and not (self.append and self.topology_filename.exists()):
             self._write_topology()
         if self.format == "XTC":
-            if self._handle.writer is None:
-                _drop_offset_cache(self.filename)
-                self._handle.writer = mda.Writer(str(self.filename), n_atoms=len(self.atoms),
-                                                 precision=self.precision)
-            self._handle.writer.write(self.universe)
+            self._write_xtc(*frame)
         else:
             self._write_dcd(frame)
         self.n_frames += 1
+
+    def _write_xtc(self, positions, dims, time, step):
+        """Append one whole frame: encoded through a scratch file, then written in one call.
+
+        The file is an ordinary Python file opened for appending, flushed after
+        every frame, so a killed run loses no finished frame, a continued run
+        appends, and :meth:`flush` can sync it to disk for a checkpoint.
+        """
+        from MDAnalysis.lib.formats.libmdaxdr import XTCFile
+        from MDAnalysis.lib.mdamath import triclinic_vectors
+
+        if self._handle.writer is None:
+            _drop_offset_cache(self.filename)
+            self._handle.writer = open(self.filename, "ab" if self.append else "wb")
+            self._handle.scratch = self.filename.with_name(f".{self.filename.name}.frame")
+        box = (triclinic_vectors(dims) if dims is not None else np.zeros((3, 3))) / 10.0
+        with XTCFile(str(self._handle.scratch), "w") as scratch:
+            scratch.write(np.asarray(positions, dtype=np.float32) / 10.0,
+                          box.astype(np.float32), int(step), float(time),
+                          float(10**self.precision))
+        self._handle.writer.write(self._handle.scratch.read_bytes())
+        self._handle.writer.flush()
+
+    def flush(self):
+        """Make every frame written so far durable (``fsync``), e.g. before a checkpoint."""
+        fh = self._handle.writer
+        if fh is not None and self.format == "XTC":
+            fh.flush()
+            os.fsync(fh.fileno())
 
     def _write_topology(self):
         path = self.topology_filename

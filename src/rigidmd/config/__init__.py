@@ -34,6 +34,8 @@ A configuration is a YAML mapping (every key optional except ``structure``
       interval: 10                # steps between frames and log lines
       plot: energy.png            # energy and temperature against time
       mdanalysis: md.xtc          # needs rigidmd[analysis]
+      checkpoint: checkpoint.npz  # the default; written every checkpoint_interval steps
+      checkpoint_interval: 1000   # (default) and at every stop; rigidmd run --resume reads it
 
 Quantities with units are strings ``"<number> <unit>"``.  Every mistake is
 a :class:`ConfigError` naming the field.  Each group of keys is checked by

@@ -416,10 +416,17 @@ class OutputsSection:
     interval : int
         Steps between frames and log lines.
     trajectory, log, plot, mdanalysis : pathlib.Path or None
+    checkpoint : pathlib.Path
+        Default ``checkpoint.npz`` in the directory.
+    checkpoint_interval : int
+        Steps between checkpoints (default: every 1000 steps, rounded up to
+        a multiple of ``interval``); a checkpoint is also written at every
+        clean stop.
     """
 
     KEYS = ("outputs",)
-    FIELDS = ("directory", "trajectory", "log", "interval", "plot", "mdanalysis")
+    FIELDS = ("directory", "trajectory", "log", "interval", "plot", "mdanalysis", "checkpoint",
+              "checkpoint_interval")
 
     directory: Path
     interval: int = 10
@@ -427,6 +434,8 @@ class OutputsSection:
     log: Path | None = None
     plot: Path | None = None
     mdanalysis: Path | None = None
+    checkpoint: Path | None = None
+    checkpoint_interval: int = 1000
 
     @classmethod
     def from_config(cls, raw, base):
@@ -435,6 +444,15 @@ class OutputsSection:
         interval = whole_number("outputs.interval", outputs.get("interval", 10), minimum=1)
         files = {key: directory / str(outputs[key])
                  for key in ("trajectory", "log", "plot", "mdanalysis") if outputs.get(key)}
+        files["checkpoint"] = directory / str(outputs.get("checkpoint", "checkpoint.npz"))
+        # Default: every 1000 steps, on a frame (a multiple of the interval).
+        default = interval * max(1, -(-1000 // interval))
+        every = whole_number("outputs.checkpoint_interval",
+                             outputs.get("checkpoint_interval", default), minimum=1)
+        if every % interval:
+            raise ConfigError(f"outputs.checkpoint_interval: {every} is not a multiple of "
+                              f"outputs.interval ({interval}): a checkpoint must fall on a frame")
+        files["checkpoint_interval"] = every
         if "mdanalysis" in files:
             try:
                 importlib.import_module("MDAnalysis")

@@ -1,0 +1,201 @@
+"""Output files of a run: one run per directory, lengths at a checkpoint, trimming on resume.
+
+* :class:`OutputLock`: a lock file holding the process id and host; a second
+  run into the same directory is refused while the first lives, and a lock
+  left by a process that died (``kill -9``, a node failure) is taken over.
+* :func:`output_lengths` records how long each output file is when a
+  checkpoint is written; :func:`trim_outputs` cuts every file back to those
+  lengths before a resumed run appends, which also removes a truncated last
+  frame or line.
+* ASE ``.traj`` files (ULM) are append-only apart from two header fields, the
+  number of frames and the position of the frame table: trimming restores
+  both and truncates, which gives back the file as it was at the checkpoint.
+"""
+
+import errno
+import json
+import os
+import socket
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["OutputLock", "OutputError", "output_lengths", "trim_outputs", "LOCK_NAME"]
+
+#: Name of the lock file in an output directory.
+LOCK_NAME = ".rigidmd.lock"
+
+
+class OutputError(RuntimeError):
+    """An output directory or file that cannot be used as asked (the message says which)."""
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # pragma: no cover - another user's live process
+        return True
+    return True
+
+
+class OutputLock:
+    """Exclusive use of an output directory by one run.
+
+    Parameters
+    ----------
+    directory : pathlib.Path
+
+    Attributes
+    ----------
+    stale : dict or None
+        The lock a dead process left behind, when it was taken over.
+    """
+
+    def __init__(self, directory):
+        self.path = Path(directory) / LOCK_NAME
+        self.stale = None
+        self._held = False
+
+    def acquire(self):
+        """Take the lock, or raise :class:`OutputError` naming the run that holds it."""
+        record = {"pid": os.getpid(), "host": socket.gethostname()}
+        for _ in range(2):
+            try:
+                fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+            except FileExistsError:
+                holder = self._holder()
+                if holder is not None and self._lives(holder):
+                    raise OutputError(
+                        f"outputs.directory: {self.path.parent} is in use by process "
+                        f"{holder.get('pid')} on {holder.get('host')} (lock {self.path}); "
+                        "wait for it, or choose another directory") from None
+                self.stale = holder
+                self.path.unlink(missing_ok=True)
+                continue
+            with os.fdopen(fd, "w") as fh:
+                json.dump(record, fh)
+            self._held = True
+            return self
+        raise OutputError(f"outputs.directory: cannot take the lock {self.path}")
+
+    def _holder(self):
+        try:
+            return json.loads(self.path.read_text())
+        except (OSError, ValueError):
+            return None  # unreadable or half-written: treated as stale
+
+    @staticmethod
+    def _lives(holder):
+        if holder.get("host") != socket.gethostname():
+            return True  # another machine's process: cannot check, assume alive
+        pid = holder.get("pid")
+        return isinstance(pid, int) and pid != os.getpid() and _alive(pid)
+
+    def release(self):
+        if self._held:
+            self.path.unlink(missing_ok=True)
+            self._held = False
+
+    def __enter__(self):
+        return self.acquire()
+
+    def __exit__(self, *exc):
+        self.release()
+
+
+def _ulm_header(path):
+    """(nitems, pos0) of an ASE ULM (.traj) file."""
+    with open(path, "rb") as fh:
+        head = fh.read(48)
+    if len(head) < 48 or not head.startswith(b"- of Ulm"):
+        raise OutputError(f"{path}: not an ASE trajectory (ULM) file")
+    _, nitems, pos0 = np.frombuffer(head[24:48], dtype="<i8")
+    return int(nitems), int(pos0)
+
+
+def output_lengths(files):
+    """Sizes of the output files now, for a checkpoint.
+
+    Parameters
+    ----------
+    files : dict
+        Output name -> path (``"trajectory"`` is an ASE ``.traj``; other
+        files are appended byte streams).
+
+    Returns
+    -------
+    dict
+        Name -> ``{"size": bytes}`` (plus ``"nitems"`` and ``"pos0"`` for a
+        ``.traj``); files that do not exist yet are left out.
+    """
+    lengths = {}
+    for name, path in files.items():
+        path = Path(path)
+        if not path.exists():
+            continue
+        entry = {"size": path.stat().st_size}
+        if name == "trajectory" and entry["size"] > 0:
+            entry["nitems"], entry["pos0"] = _ulm_header(path)
+        lengths[name] = entry
+    return lengths
+
+
+def trim_outputs(files, lengths):
+    """Cut each output file back to its recorded length (before a resumed run appends).
+
+    A file shorter than recorded (lost after the checkpoint) is an error:
+    the run cannot continue it.  Returns the names of the files trimmed.
+    """
+    trimmed = []
+    for name, path in files.items():
+        path = Path(path)
+        recorded = lengths.get(name)
+        if recorded is None:
+            if path.exists() and path.stat().st_size > 0:
+                # Written after the checkpoint only: start it again.
+                path.unlink()
+                trimmed.append(name)
+            continue
+        if not path.exists() or path.stat().st_size < recorded["size"]:
+            raise OutputError(
+                f"outputs.{name}: {path} is shorter than at the checkpoint "
+                f"({path.stat().st_size if path.exists() else 0} < {recorded['size']} bytes); "
+                "it cannot be continued: rerun with --overwrite")
+        if path.stat().st_size == recorded["size"]:
+            if name == "trajectory" and "nitems" in recorded:
+                _restore_ulm(path, recorded)
+            continue
+        with open(path, "r+b") as fh:
+            fh.truncate(recorded["size"])
+            if name == "trajectory" and "nitems" in recorded:
+                _restore_ulm_header(fh, recorded)
+            fh.flush()
+            os.fsync(fh.fileno())
+        if name == "mdanalysis":
+            for suffix in ("_offsets.npz", "_offsets.lock"):
+                path.with_name(f".{path.name}{suffix}").unlink(missing_ok=True)
+        trimmed.append(name)
+    return trimmed
+
+
+def _restore_ulm(path, recorded):
+    nitems, pos0 = _ulm_header(path)
+    if (nitems, pos0) != (recorded["nitems"], recorded["pos0"]):
+        with open(path, "r+b") as fh:
+            _restore_ulm_header(fh, recorded)
+
+
+def _restore_ulm_header(fh, recorded):
+    fh.seek(32)
+    fh.write(np.array([recorded["nitems"], recorded["pos0"]], dtype="<i8").tobytes())
+
+
+def describe_os_error(err, path=None):
+    """One line for a failed write: the file and the reason (disk full, permission)."""
+    reason = {errno.ENOSPC: "the disk is full", errno.EDQUOT: "the disk quota is exceeded",
+              errno.EACCES: "permission denied", errno.EROFS: "the file system is read-only"
+              }.get(err.errno, err.strerror or str(err))
+    where = path or getattr(err, "filename", None) or "an output file"
+    return f"cannot write {where}: {reason}"
