@@ -66,10 +66,13 @@ def test_reference_run_refuses_bad_input():
     atoms = water_cluster(2)
     with pytest.raises(ValueError, match="fix must be one of"):
         run_rigid_reference(atoms, [0, 0, 0, 1, 1, 1], tip3p_pair_commands(), units.fs, 1,
-                            fix="rigid/npt", charges=tip3p_charges(atoms))
-    with pytest.raises(ValueError, match="go with .* an nvt fix"):
+                            fix="rigid/xyz", charges=tip3p_charges(atoms))
+    with pytest.raises(ValueError, match="does not match the couplings, which need rigid/nve"):
         run_rigid_reference(atoms, [0, 0, 0, 1, 1, 1], tip3p_pair_commands(), units.fs, 1,
                             fix="rigid/nvt", charges=tip3p_charges(atoms))
+    with pytest.raises(ValueError, match="temperature_K and tdamp go together"):
+        run_rigid_reference(atoms, [0, 0, 0, 1, 1, 1], tip3p_pair_commands(), units.fs, 1,
+                            fix="rigid/nvt", charges=tip3p_charges(atoms), temperature_K=300)
     with pytest.raises(ValueError, match="one atom"):
         run_rigid_reference(atoms, [0, 0, 0, 1, 1, 2], tip3p_pair_commands(), units.fs, 1,
                             charges=tip3p_charges(atoms))

@@ -19,7 +19,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from ase import units
 
 from rigidmd.config import (
     DEMO_CONFIG,
@@ -87,22 +86,16 @@ def _export(config, directory, stream=sys.stdout):
     if integrator != "no_squish":
         raise ConfigError(f"integrator: export-lammps writes fix rigid/nve/small (no_squish), "
                           f"not {integrator!r}")
-    kwargs = {}
-    for spec in config.coupling.specs:
-        part = spec.part()
-        try:
-            part.lammps_fix(time_unit=1000 * units.fs, seed=spec.seed or 12345)
-        except NotExportable as err:
-            raise ConfigError(str(err)) from None
-        kwargs["temperature_K"] = part.temperature_K
-        if spec.kind == "langevin":
-            kwargs.update(friction=part.friction, seed=spec.seed or 12345)
-        else:
-            kwargs["tdamp"] = part.tdamp
+    couplings = config.coupling.parts()
+    seeds = [spec.seed for spec in config.coupling.specs if spec.seed is not None]
+    seed = seeds[0] if seeds else 12345
     interval = config.outputs.interval
-    files = export_lammps(atoms, bodies.body_ids, directory, pair, config.run.timestep,
-                          config.run.steps, charges=charges, dump_every=interval,
-                          thermo_every=interval, **kwargs)
+    try:
+        files = export_lammps(atoms, bodies.body_ids, directory, pair, config.run.timestep,
+                              config.run.steps, couplings=couplings, seed=seed, charges=charges,
+                              dump_every=interval, thermo_every=interval)
+    except NotExportable as err:
+        raise ConfigError(str(err)) from None
     print(f"wrote {files['data']} and {files['input']}; run with "
           f"'cd {directory} && lmp -in in.rigidmd' (or mpirun -np N lmp -in in.rigidmd)",
           file=stream)
