@@ -58,10 +58,14 @@ class RigidBodyDOF:
     ----------
     removed_dof : int
         ``3 * len(atoms)`` minus the rigid degrees of freedom.
+    body_ids : array_like of int, shape (n_atoms,), optional
+        Each atom's body (-1: none), for calculators that need molecules
+        (:class:`rigidmd.lammps.LAMMPSCalculator` excludes pairs within one).
     """
 
-    def __init__(self, removed_dof):
+    def __init__(self, removed_dof, body_ids=None):
         self.removed_dof = int(removed_dof)
+        self.body_ids = None if body_ids is None else np.array(body_ids) + 1
 
     def get_removed_dof(self, atoms):
         return self.removed_dof
@@ -233,7 +237,8 @@ class RigidDynamics(MolecularDynamics):
         self._needs_stress = any(getattr(part, "needs_stress", False) for part in couplings)
         self._virial = None  # molecular virial at the last force call (when a part needs it)
         model = self.model
-        atoms.constraints = [RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom)]
+        atoms.constraints = [RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom,
+                                                self.bodies.body_ids)]
         nb, nf = model.n_bodies, model.n_free
         self.state = RigidState(
             X=geometry.com.copy(), V=np.zeros((nb, 3)), q=geometry.quaternions.copy(),
@@ -250,6 +255,7 @@ class RigidDynamics(MolecularDynamics):
         self.removed_kinetic_energy = 0.0
         self._time = 0.0             # simulated time (ASE units), summed step by step
         self._forces_current = False  # forces restored from a checkpoint: no call at irun
+        self._stepping = False        # inside step(): observers run after it, at nsteps + 1
         self._synced = None          # (positions, momenta) at the end of the last run
         self._changed = None         # (positions, momenta) written before a change was made
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps
@@ -378,6 +384,7 @@ class RigidDynamics(MolecularDynamics):
             written, self._changed = self._changed, None
             self._sync_from_atoms(written)
         ctx, dt = self._ctx, self.dt
+        self._stepping = True
         self.state.copy_into(self._backup)
         if self.fused:
             # The kernel overwrites the forces only after the force call succeeded.
@@ -396,6 +403,7 @@ class RigidDynamics(MolecularDynamics):
                 self._write_momenta()
             self._time += dt
         except BaseException:
+            self._stepping = False
             self._backup.copy_into(self.state)
             ctx.F, ctx.tau, ctx.f, ctx.scratch = saved
             for part, variables in zip(self.couplings, coupled, strict=True):
@@ -405,6 +413,7 @@ class RigidDynamics(MolecularDynamics):
             self._place_atoms()
             self._write_momenta()
             raise
+        self._stepping = False
 
     # ------------------------------------------------------------ forces
     def _get_forces(self):
@@ -416,8 +425,13 @@ class RigidDynamics(MolecularDynamics):
         atoms = self.atoms
         if self._cell_moves:
             atoms.set_cell(self.state.cell)
-        if self._needs_stress and hasattr(atoms.calc, "get_properties"):
-            atoms.calc.get_properties(["energy", "forces", "stress"], atoms)
+        wanted = ["forces"]
+        if self._needs_stress:
+            wanted.append("stress")
+        if self._observed_next():
+            wanted.append("energy")  # a logger will ask: one calculator call, not two
+        if len(wanted) > 1 and hasattr(atoms.calc, "get_properties"):
+            atoms.calc.get_properties(wanted, atoms)
         forces = np.asarray(atoms.get_forces(md=True), dtype=float)
         if forces.shape != (len(self.atoms), 3):
             raise ValueError(
@@ -434,6 +448,13 @@ class RigidDynamics(MolecularDynamics):
         if self._needs_stress:
             self._virial = self._molecular_virial(forces)
         return forces
+
+    def _observed_next(self):
+        """Whether an observer is due after the step being taken (or at a run's start)."""
+        step = self.nsteps + 1 if self._stepping else self.nsteps
+        return any((interval > 0 and step % interval == 0) or
+                   (interval <= 0 and step == abs(interval))
+                   for _, interval, _, _ in self.observers)
 
     def _molecular_virial(self, forces):
         r"""The molecular virial (eV, 3x3): the atomic virial less its intramolecular part."""
@@ -555,7 +576,8 @@ class RigidDynamics(MolecularDynamics):
             raise ValueError("the atoms' masses changed; create a new dynamics")
         self._check_constraints(atoms)
         if not any(isinstance(c, RigidBodyDOF) for c in atoms.constraints):
-            atoms.constraints = [RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom)]
+            atoms.constraints = [RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom,
+                                                self.bodies.body_ids)]
         positions, momenta, cell = written
         moved = not (np.array_equal(atoms.positions, positions)
                      and np.array_equal(atoms.cell.array, cell))

@@ -15,6 +15,7 @@ Everything here speaks ASE units (eV, Å, amu, ASE time); see
 """
 
 from rigidmd.forcefields import tip3p_charges, tip3p_pair_commands
+from rigidmd.lammps.calculator import LAMMPSCalculator
 from rigidmd.lammps.data import LammpsData, write_data
 from rigidmd.lammps.deck import export_lammps
 from rigidmd.lammps.library import (
@@ -38,6 +39,7 @@ __all__ = [
     "DEFAULT_CMDARGS",
     "LAMMPS_METAL_FTM2V",
     "LAMMPS_METAL_QQR2E",
+    "LAMMPSCalculator",
     "LammpsData",
     "LammpsError",
     "RIGID_FIX_STYLES",

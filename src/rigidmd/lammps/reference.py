@@ -35,7 +35,8 @@ def lammps_energy_forces(
     ase_constants: bool = True,
     type_labels=None,
     workdir: str | os.PathLike | None = None,
-) -> tuple[float, np.ndarray]:
+    stress: bool = False,
+):
     """Potential energy and forces of one configuration from LAMMPS (``run 0``).
 
     Parameters
@@ -59,12 +60,19 @@ def lammps_energy_forces(
     type_labels : sequence of str, shape (n,), optional
         Per-atom type labels; see :func:`write_data`.
 
+    stress : bool, default False
+        Also return the stress of a periodic system.
+
     Returns
     -------
     energy : float
         Potential energy (LAMMPS ``pe``), eV.
     forces : numpy.ndarray, shape (n, 3)
         Forces in ASE atom order, eV/Å.
+    stress : numpy.ndarray, shape (6,)
+        With ``stress=True``: the virial stress in ASE's convention (eV/Å³,
+        ``xx yy zz yz xz xy``), from ``compute pressure NULL virial`` and
+        LAMMPS's ``nktv2p``.
     """
     with _WorkDir(workdir) as wd:
         data = write_data(atoms, body_ids, wd / "data.lmp", charges, ase_constants=ase_constants,
@@ -72,9 +80,15 @@ def lammps_energy_forces(
         lmp = load_lammps()
         try:
             cmds = setup_commands(data, pair_commands)
-            cmds += flatten(extra_commands) + ["run 0"]
+            cmds += flatten(extra_commands)
+            cmds += ["compute rmd_virial all pressure NULL virial",
+                     "thermo_style custom step pe c_rmd_virial[1]", "run 0"]
             execute_checked(lmp, cmds)
             energy = float(lmp.get_thermo("pe"))
+            if stress:
+                xx, yy, zz, xy, xz, yz = np.asarray(
+                    lmp.numpy.extract_compute("rmd_virial", 0, 1), dtype=float)[:6]
+                sigma = -np.array([xx, yy, zz, yz, xz, xy]) / lmp.extract_global("nktv2p")
             nlocal = lmp.extract_global("nlocal")
             ids = np.array(lmp.numpy.extract_atom("id")[:nlocal], dtype=np.int64)
             f = np.array(lmp.numpy.extract_atom("f")[:nlocal], dtype=float)
@@ -82,6 +96,8 @@ def lammps_energy_forces(
             lmp.close()
     forces = np.empty((len(atoms), 3))
     forces[ids - 1] = f
+    if stress:
+        return energy, forces, sigma
     return energy, forces
 
 

@@ -1,0 +1,397 @@
+r"""LAMMPS forces at LAMMPS speed: an ASE calculator on one persistent LAMMPS instance.
+
+:class:`LAMMPSCalculator` takes the interaction commands of a LAMMPS input
+(``pair_style``, ``pair_coeff``, ``kspace_style``, ...: the same list an
+exported deck uses) and creates the atoms once.  Each later call writes the
+positions straight into LAMMPS's own array, in LAMMPS's current periodic
+image of each atom (so only real motion counts against the neighbour skin),
+runs one step without set-up and without an integrator
+(``run 1 pre no post no``), and reads energy, forces and the virial back: one
+force evaluation per call, about one native LAMMPS step.
+
+When the cell changes (a barostat), the box is changed with ``change_box``
+and that call runs with LAMMPS's set-up (``run 0 pre yes``), which rebuilds
+the neighbour lists and the k-space set-up (PPPM's Green's function) for the
+new box, as LAMMPS's own barostats do: energies, forces and stress then equal
+those of a fresh LAMMPS at that cell.  Cells that are not in LAMMPS's
+lower-triangular form are rotated into it (positions, forces and stress
+rotated back); a change in the number or kind of atoms, their charges or
+their molecules builds a new instance.
+
+Molecules (for ``neigh_modify exclude molecule/intra all``) come from the
+``mol-id`` array (ASE's ``lammps-data`` reader sets it), else from non-zero
+tags, else from ``molecule_ids``, else from the bodies of a rigid dynamics the
+atoms are in.
+"""
+
+import warnings
+
+import numpy as np
+from ase.calculators.calculator import Calculator, all_changes
+
+from rigidmd.lammps.library import (
+    LAMMPS_METAL_QQR2E,
+    LammpsError,
+    charge_factor,
+    flatten,
+    load_lammps,
+)
+
+__all__ = ["LAMMPSCalculator"]
+
+_COULOMB = ("coul", "kspace_style", "tip4p")
+
+
+def _lower_triangular(cell):
+    """Rotation ``Q`` with ``cell @ Q`` lower triangular with a positive diagonal.
+
+    Returns
+    -------
+    Q : numpy.ndarray, shape (3, 3) or None
+        None when the cell is lower triangular already.
+    lammps_cell : numpy.ndarray, shape (3, 3)
+    """
+    if abs(cell[0, 1]) + abs(cell[0, 2]) + abs(cell[1, 2]) == 0 and np.all(np.diag(cell) > 0):
+        return None, cell
+    if np.linalg.det(cell) <= 0:
+        raise ValueError("LAMMPSCalculator: the cell is left-handed (negative determinant); "
+                         "LAMMPS needs a right-handed cell")
+    Q, R = np.linalg.qr(cell.T)
+    signs = np.sign(np.diag(R))
+    Q, R = Q * signs, (R.T * signs).T
+    lammps_cell = R.T
+    lammps_cell[np.abs(lammps_cell) < 1e-14 * np.abs(lammps_cell).max()] = 0.0
+    return Q, lammps_cell
+
+
+class LAMMPSCalculator(Calculator):
+    r"""An ASE calculator on one persistent LAMMPS instance (``units metal``).
+
+    Parameters
+    ----------
+    commands : sequence of str
+        Interaction commands: ``pair_style``, ``pair_coeff``, ``pair_modify``,
+        ``kspace_style``, ``kspace_modify``, ... (a multi-line string is split
+        into lines).  Types in ``pair_coeff`` are numbers (see ``atom_types``)
+        or the element symbols (type labels are defined).
+    atom_types : dict of str to int, optional
+        LAMMPS type of each element; default: the elements numbered 1, 2, ...
+        in order of first appearance in the atoms.
+    molecule_ids : array_like of int, shape (n_atoms,), optional
+        Molecule of each atom, when the atoms have neither a ``mol-id`` array
+        nor tags.
+    exclude_intramolecular : bool, default True
+        ``neigh_modify exclude molecule/intra all``: no interactions inside a
+        molecule, so energy, forces and stress equal native LAMMPS with that
+        setting (and those of rigid molecules have no constant offset).
+    ase_constants : bool, default False
+        Scale the charges so that Coulomb energies use ASE's Coulomb constant
+        instead of LAMMPS's ``metal`` one (2.4e-8 apart); see
+        :mod:`rigidmd.lammps.library`.  The default reproduces native LAMMPS.
+    skin : float, default 2.0
+        Neighbour skin (Å), LAMMPS's ``neighbor`` default for metal units.
+    cmdargs : sequence of str, optional
+        LAMMPS command-line arguments (default: no log, no screen output).
+
+    Notes
+    -----
+    Properties: ``energy`` (and ``free_energy``), ``forces`` (eV/Å) and
+    ``stress`` (eV/Å³, ASE's sign and Voigt order ``xx yy zz yz xz xy``; the
+    virial only, from LAMMPS's ``compute pressure NULL virial`` converted
+    with LAMMPS's own ``nktv2p``).  LAMMPS errors raise
+    :class:`~rigidmd.lammps.LammpsError` with LAMMPS's message; the next call
+    starts a fresh instance.
+    """
+
+    implemented_properties = ["energy", "free_energy", "forces", "stress"]
+    _lmp = None
+
+    def __init__(self, commands, *, atom_types=None, molecule_ids=None,
+                 exclude_intramolecular=True, ase_constants=False, skin=2.0, cmdargs=None,
+                 **kwargs):
+        super().__init__(**kwargs)
+        if isinstance(commands, str):
+            commands = [commands]
+        self.commands = flatten(commands)
+        if not any(c.split()[0] == "pair_style" for c in self.commands):
+            raise ValueError("LAMMPSCalculator: the commands need a pair_style")
+        self.atom_types = None if atom_types is None else dict(atom_types)
+        self.molecule_ids = None if molecule_ids is None else np.asarray(molecule_ids)
+        self.exclude_intramolecular = bool(exclude_intramolecular)
+        self.ase_constants = bool(ase_constants)
+        self.skin = float(skin)
+        self.cmdargs = cmdargs
+        self._lmp = None
+        self._signature = None  # what a new instance is needed for
+        self._cell = None       # the cell LAMMPS has
+        self._rotation = None
+
+    # ------------------------------------------------------------ set-up
+    def _types(self, atoms):
+        symbols = atoms.get_chemical_symbols()
+        if self.atom_types is None:
+            table = {s: i + 1 for i, s in enumerate(dict.fromkeys(symbols))}
+        else:
+            table = self.atom_types
+            missing = sorted(set(symbols) - set(table))
+            if missing:
+                raise ValueError(f"LAMMPSCalculator: element {missing[0]} has no LAMMPS type in "
+                                 f"atom_types {table}")
+        types = np.array([table[s] for s in symbols], dtype=np.int64)
+        masses = atoms.get_masses()
+        type_mass = {}
+        for t in range(1, max(table.values()) + 1):
+            members = np.flatnonzero(types == t)
+            if members.size == 0:
+                type_mass[t] = 1.0  # a type no atom has: LAMMPS still needs a mass
+                continue
+            values, counts = np.unique(masses[members], return_counts=True)
+            common = values[np.argmax(counts)]
+            if len(values) > 1:
+                i = int(members[np.argmax(masses[members] != common)])
+                raise ValueError(f"LAMMPSCalculator: atom {i} ({symbols[i]}) has mass "
+                                 f"{masses[i]} but the other atoms of type {t} have {common}: "
+                                 "give atoms of different masses different types")
+            type_mass[t] = float(common)
+        labels = {t: s for s, t in table.items()}
+        return types, type_mass, labels
+
+    def _molecules(self, atoms):
+        """Molecule ID of each atom (1-based) and where they came from."""
+        n = len(atoms)
+        if "mol-id" in atoms.arrays:
+            return np.asarray(atoms.arrays["mol-id"], dtype=np.int64), "mol-id"
+        tags = atoms.get_tags()
+        if np.any(tags != 0):
+            return np.asarray(tags, dtype=np.int64), "tags"
+        if self.molecule_ids is not None:
+            if self.molecule_ids.shape != (n,):
+                raise ValueError(f"LAMMPSCalculator: molecule_ids has shape "
+                                 f"{self.molecule_ids.shape}, the atoms are {n}")
+            return self.molecule_ids.astype(np.int64), "molecule_ids"
+        for constraint in atoms.constraints:
+            body_ids = getattr(constraint, "body_ids", None)
+            if body_ids is not None:
+                return np.asarray(body_ids, dtype=np.int64), "bodies"
+        return None, None
+
+    def _signature_of(self, atoms, molecules):
+        return (len(atoms), atoms.numbers.tobytes(), atoms.get_initial_charges().tobytes(),
+                tuple(atoms.pbc), None if molecules is None else molecules.tobytes())
+
+    def _check(self, atoms):
+        charges = atoms.get_initial_charges()
+        if any(word in command for command in self.commands for word in _COULOMB) \
+                and not np.any(charges):
+            raise ValueError("LAMMPSCalculator: the commands have Coulomb interactions but the "
+                             "atoms have no charges; set them with atoms.set_initial_charges()")
+        if atoms.pbc.any() and not atoms.pbc.all():
+            raise ValueError(f"LAMMPSCalculator: mixed periodicity {atoms.pbc.tolist()}; "
+                             "make the cell periodic in all or no directions")
+
+    def _start(self, atoms, molecules, source):
+        self._close()
+        types, type_mass, labels = self._types(atoms)
+        n = len(atoms)
+        if molecules is None:
+            molecules = np.arange(1, n + 1)  # every atom its own molecule: nothing excluded
+            if self.exclude_intramolecular:
+                warnings.warn("LAMMPSCalculator: the atoms carry no molecules (no mol-id "
+                              "array, no tags, no molecule_ids): no pair is excluded",
+                              stacklevel=4)
+        else:
+            # LAMMPS excludes pairs of equal molecule IDs: atoms in no molecule (ID <= 0)
+            # get IDs of their own.
+            molecules = molecules.copy()
+            alone = molecules <= 0
+            molecules[alone] = molecules.max(initial=0) + 1 + np.arange(int(alone.sum()))
+        lmp = load_lammps(self.cmdargs)
+        self._lmp = lmp
+        periodic = bool(atoms.pbc.all())
+        try:
+            cmds = ["units metal", "atom_style full", "atom_modify map array",
+                    f"boundary {'p p p' if periodic else 's s s'}"]
+            self._execute(cmds)
+            if periodic:
+                self._rotation, cell = _lower_triangular(atoms.cell.array)
+                self._triclinic = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
+                region = self._region(cell)
+            else:
+                self._rotation, cell = None, None
+                lo, hi = atoms.positions.min(axis=0) - 1.0, atoms.positions.max(axis=0) + 1.0
+                self._triclinic = False
+                bounds = " ".join(f"{a:.17g} {b:.17g}" for a, b in zip(lo, hi, strict=True))
+                region = f"region rmd_box block {bounds} units box"
+            ntypes = max(type_mass)
+            self._execute([region, f"create_box {ntypes} rmd_box"])
+            self._execute([f"mass {t} {m:.17g}" for t, m in type_mass.items()])
+            self._execute([f"labelmap atom {t} {s}" for t, s in labels.items()])
+            positions = self._to_lammps(atoms.positions)
+            if periodic:
+                frac = np.linalg.solve(cell.T, positions.T).T
+                image = np.floor(frac).astype(np.int64)
+                positions = positions - image @ cell
+            else:
+                image = np.zeros((n, 3), dtype=np.int64)
+            created = lmp.create_atoms(n, list(range(1, n + 1)), types.tolist(),
+                                       positions.ravel().tolist(),
+                                       image=[self._encode(i) for i in image.tolist()])
+            if created != n:
+                raise LammpsError(f"LAMMPSCalculator: LAMMPS created {created} of {n} atoms")
+            nlocal = lmp.extract_global("nlocal")
+            ids = np.array(lmp.numpy.extract_atom("id")[:nlocal], dtype=np.int64) - 1
+            charge = atoms.get_initial_charges() * charge_factor(self.ase_constants)
+            lmp.numpy.extract_atom("q")[:nlocal] = charge[ids]
+            lmp.numpy.extract_atom("molecule")[:nlocal] = molecules[ids]
+            setup = [f"neighbor {self.skin:.17g} bin", "neigh_modify every 1 delay 0 check yes"]
+            if self.exclude_intramolecular:
+                setup.append("neigh_modify exclude molecule/intra all")
+            self._execute(setup)
+            self._execute(self.commands)
+            self._execute([
+                "compute rmd_pressure all pressure NULL virial",
+                "thermo_style custom step",
+                "thermo_modify norm no lost error",
+                "thermo 0",
+            ])
+            if self.ase_constants and lmp.extract_global("qqr2e") != LAMMPS_METAL_QQR2E:
+                raise LammpsError("LAMMPSCalculator: unexpected LAMMPS Coulomb constant")
+        except BaseException:
+            self._close()
+            raise
+        self._signature = self._signature_of(atoms, None if source is None else molecules)
+        self._cell = atoms.cell.array.copy()
+        self._ids = ids
+        self._nktv2p = lmp.extract_global("nktv2p")
+        self._imgbits = lmp.extract_setting("IMGBITS")
+        self._img2bits = lmp.extract_setting("IMG2BITS")
+        self._imgmask = lmp.extract_setting("IMGMASK")
+        self._imgmax = lmp.extract_setting("IMGMAX")
+        self._setup_needed = True
+
+    def _region(self, cell):
+        lengths = " ".join(f"0 {cell[k, k]:.17g}" for k in range(3))
+        if cell[1, 0] or cell[2, 0] or cell[2, 1]:
+            tilts = f"{cell[1, 0]:.17g} {cell[2, 0]:.17g} {cell[2, 1]:.17g}"
+            return f"region rmd_box prism {lengths} {tilts} units box"
+        return f"region rmd_box block {lengths} units box"
+
+    def _encode(self, image):
+        """LAMMPS image flags (x, y, z) packed into one integer."""
+        ix, iy, iz = (int(v) + 512 for v in image)
+        return ix | (iy << 10) | (iz << 20)
+
+    def _images(self, nlocal):
+        img = np.asarray(self._lmp.numpy.extract_atom("image")[:nlocal], dtype=np.int64)
+        mask, bits, bits2, offset = self._imgmask, self._imgbits, self._img2bits, self._imgmax
+        return np.stack([(img & mask) - offset, ((img >> bits) & mask) - offset,
+                         (img >> bits2) - offset], axis=1)
+
+    def _to_lammps(self, vectors):
+        return vectors if self._rotation is None else vectors @ self._rotation
+
+    def _execute(self, commands):
+        for command in commands:
+            try:
+                self._lmp.command(command)
+            except Exception as err:  # LAMMPS raises a bare Exception with its message
+                self._close()
+                raise LammpsError(f"LAMMPS command {command!r} failed: {err}") from None
+
+    def _close(self):
+        if self._lmp is not None:
+            try:
+                self._lmp.close()
+            except Exception:  # noqa: BLE001 - closing a broken instance must not mask an error
+                pass
+        self._lmp = None
+        self._signature = None
+
+    def __del__(self):
+        self._close()
+
+    # ------------------------------------------------------------ a call
+    def _change_box(self, cell):
+        """Give LAMMPS a new cell (it must have the same rotation to LAMMPS's frame)."""
+        rotation, lammps_cell = _lower_triangular(cell)
+        if (rotation is None) != (self._rotation is None) or (
+                rotation is not None and not np.allclose(rotation, self._rotation,
+                                                         rtol=0, atol=1e-12)):
+            return False  # the cell turned: start again in the new frame
+        tilted = bool(lammps_cell[1, 0] or lammps_cell[2, 0] or lammps_cell[2, 1])
+        if tilted and not self._triclinic:
+            # An orthogonal box that gets tilted: k-space styles must be defined again
+            # for a triclinic box, so start a triclinic instance (once).
+            return False
+        commands = []
+        box = "change_box all " + " ".join(
+            f"{axis} final 0 {lammps_cell[k, k]:.17g}" for k, axis in enumerate("xyz"))
+        if self._triclinic:
+            box += (f" xy final {lammps_cell[1, 0]:.17g} xz final {lammps_cell[2, 0]:.17g} "
+                    f"yz final {lammps_cell[2, 1]:.17g}")
+        self._execute(commands + [box + " units box"])
+        self._cell = cell.copy()
+        self._setup_needed = True
+        return True
+
+    def _lammps_cell(self):
+        boxlo, boxhi, xy, yz, xz, _, _ = self._lmp.extract_box()
+        lengths = np.array(boxhi) - np.array(boxlo)
+        return np.array([[lengths[0], 0, 0], [xy, lengths[1], 0], [xz, yz, lengths[2]]])
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        atoms = self.atoms
+        self._check(atoms)
+        molecules, source = self._molecules(atoms)
+        signature = self._signature_of(atoms, None if source is None else molecules)
+        if self._lmp is None or signature != self._signature:
+            self._start(atoms, molecules, source)
+        elif atoms.pbc.all() and not np.array_equal(atoms.cell.array, self._cell):
+            if not self._change_box(atoms.cell.array):
+                self._start(atoms, molecules, source)
+        lmp = self._lmp
+        nlocal = lmp.extract_global("nlocal")
+        ids = np.asarray(lmp.numpy.extract_atom("id")[:nlocal], dtype=np.int64) - 1
+        positions = self._to_lammps(atoms.positions)[ids]
+        if atoms.pbc.all():
+            # LAMMPS's own image of each atom: only real motion counts against the skin.
+            positions -= self._images(nlocal) @ self._lammps_cell()
+        lmp.numpy.extract_atom("x")[:nlocal] = positions
+        # LAMMPS tallies energy and virial only on the steps computes ask for them
+        # (as a native run does on its thermo steps): ask only for what was asked for.
+        want_energy = bool({"energy", "free_energy"} & set(properties))
+        want_stress = "stress" in properties and atoms.pbc.all()
+        moved = "positions" in system_changes or "cell" in system_changes
+        step = lmp.extract_global("ntimestep")
+        if self._setup_needed:
+            command = "run 0 pre yes post no"
+        else:  # a step without set-up (also for the same positions asked for more)
+            command, step = "run 1 pre no post no", step + 1
+        if want_energy or want_stress:
+            lmp.addstep_compute(step)
+        self._execute([command])
+        self._setup_needed = False
+        # LAMMPS sorts its atoms now and then (for locality): map by ID after the run.
+        nlocal = lmp.extract_global("nlocal")
+        ids = np.asarray(lmp.numpy.extract_atom("id")[:nlocal], dtype=np.int64) - 1
+        forces = np.empty((len(atoms), 3))
+        forces[ids] = lmp.numpy.extract_atom("f")[:nlocal]
+        if self._rotation is not None:
+            forces = forces @ self._rotation.T
+        results = {"forces": forces}
+        if want_energy:
+            energy = float(lmp.numpy.extract_compute("thermo_pe", 0, 0))
+            results.update(energy=energy, free_energy=energy)
+        if want_stress:
+            xx, yy, zz, xy, xz, yz = np.asarray(lmp.numpy.extract_compute(
+                "rmd_pressure", 0, 1), dtype=float)[:6]
+            pressure = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]) / self._nktv2p
+            if self._rotation is not None:
+                pressure = self._rotation @ pressure @ self._rotation.T
+            stress = -pressure  # σ = -W/V, and LAMMPS's virial pressure is W/V
+            results["stress"] = stress[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
+        if moved:
+            self.results = results
+        else:
+            self.results.update(results)
