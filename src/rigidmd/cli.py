@@ -77,8 +77,11 @@ def _export(config, directory, stream=sys.stdout):
                 "calculator")
         pair, charges = tip3p_pair_commands(rc), tip3p_charges(atoms)
     elif calc.name == "lammps":
-        pair = list(calc.pair)
-        charges = np.array([calc.charges.get(s, 0.0) for s in atoms.get_chemical_symbols()])
+        pair = list(calc.commands)
+        if calc.options.get("exclude_intramolecular", True):
+            pair.append("neigh_modify exclude molecule/intra all")  # as the calculator does
+        charges = (np.array([calc.charges.get(s, 0.0) for s in atoms.get_chemical_symbols()])
+                   if calc.charges else atoms.get_initial_charges())
     else:
         raise ConfigError(f"calculator.name: {calc.name!r} has no LAMMPS equivalent; "
                           "export-lammps supports tip3p and lammps")

@@ -10,7 +10,7 @@ A configuration is a YAML mapping (every key optional except ``structure``
     calculator:
       name: tip3p                 # tip3p | tip4p | lammps | a dotted class path
       options: {rc: 9.0}          # keyword arguments of the calculator
-      pair: [...]                 # lammps: LAMMPS pair commands
+      commands: [...]             # lammps: pair_style, pair_coeff, kspace_style, ...
       charges: {O: -0.834, H: 0.417}   # lammps: charge per element
     integrator: no_squish         # or richardson, rozmanov_kusalik, pcdm, exadem
     integrator_options: {}

