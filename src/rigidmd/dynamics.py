@@ -87,6 +87,30 @@ class RigidBodyDOF:
         return f"RigidBodyDOF(removed_dof={self.removed_dof})"
 
 
+def _calculate_together(calc, atoms, names):
+    """Have an ASE calculator compute several properties in one call.
+
+    What :meth:`ase.calculators.calculator.BaseCalculator.get_property` does
+    for one property, for several: a calculator asked for forces and later
+    for the energy or stress of the same positions would otherwise be called
+    twice (and LAMMPS, for one, would evaluate the forces twice).
+    Calculators without ASE's ``calculate``/``check_state`` are left alone
+    (their properties are then asked one by one).
+    """
+    if not (hasattr(calc, "calculate") and hasattr(calc, "check_state")):
+        return
+    names = [name for name in names if name in getattr(calc, "implemented_properties", names)]
+    changes = calc.check_state(atoms)
+    if changes:
+        calc.atoms = None
+        calc.results = {}
+    missing = [name for name in names if name not in calc.results]
+    if missing:
+        if getattr(calc, "use_cache", True):
+            calc.atoms = atoms.copy()
+        calc.calculate(atoms, missing, changes)
+
+
 def check_timestep(timestep):
     """``timestep`` as a positive finite float (ASE time units), or a clear error."""
     try:
@@ -430,8 +454,8 @@ class RigidDynamics(MolecularDynamics):
             wanted.append("stress")
         if self._observed_next():
             wanted.append("energy")  # a logger will ask: one calculator call, not two
-        if len(wanted) > 1 and hasattr(atoms.calc, "get_properties"):
-            atoms.calc.get_properties(wanted, atoms)
+        if len(wanted) > 1:
+            _calculate_together(atoms.calc, atoms, wanted)
         forces = np.asarray(atoms.get_forces(md=True), dtype=float)
         if forces.shape != (len(self.atoms), 3):
             raise ValueError(
