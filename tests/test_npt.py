@@ -438,3 +438,17 @@ def test_tri_holds_a_liquid_in_mechanical_equilibrium(kind):
         mean, error = block_mean(stress[:, component])
         target = -P_LIQUID if component < 3 else 0.0  # σ = -P0 on the diagonal, 0 off it
         assert abs(mean - target) < 4 * error, (component, mean, error)
+
+
+def test_crescale_every_n_steps_moves_the_cell_only_then():
+    atoms = dimer_fluid(n_side=4, rc=7.0)
+    dyn = RigidCRescale(atoms, 5 * units.fs, T, units.bar, 100 * units.fs, 500 * units.fs,
+                        1e-4 / units.bar, bodies="tags", rng=np.random.default_rng(3), every=5)
+    volumes = []
+    dyn.attach(lambda: volumes.append(dyn.get_volume()), interval=1)
+    dyn.run(20)
+    changed = np.flatnonzero(np.diff(volumes)) + 1  # steps after which the volume moved
+    np.testing.assert_array_equal(changed, [1, 6, 11, 16])
+    with pytest.raises(ValueError, match="under 10 moves of the cell"):
+        RigidCRescale(dimer_fluid(n_side=4, rc=7.0), 5 * units.fs, T, units.bar,
+                      100 * units.fs, 500 * units.fs, 1e-4 / units.bar, bodies="tags", every=20)

@@ -110,16 +110,19 @@ class RigidCRescale(_Barostatted):
     couple : {"iso", "aniso", "tri"}, default "iso"
     rng : numpy.random.Generator, optional
         Shared by the thermostat and the barostat.
+    every : int, default 1
+        Move the cell every ``every`` steps (see
+        :class:`~rigidmd.coupling.barostats.CRescaleBarostat`).
     **kwargs
         As for :class:`~rigidmd.dynamics.RigidDynamics`.
     """
 
     def __init__(self, atoms, timestep, temperature_K, pressure_au, taut, taup,
-                 compressibility_au, *, couple="iso", rng=None, **kwargs):
+                 compressibility_au, *, couple="iso", rng=None, every=1, **kwargs):
         from rigidmd.coupling import check_rng
 
         rng = check_rng(rng)
         super().__init__(
             atoms, timestep, BussiThermostat(temperature_K, taut, rng),
-            CRescaleBarostat(temperature_K, pressure_au, taup, compressibility_au, couple, rng),
-            **kwargs)
+            CRescaleBarostat(temperature_K, pressure_au, taup, compressibility_au, couple, rng,
+                             every), **kwargs)

@@ -366,6 +366,12 @@ class CRescaleBarostat(Barostat):
         ``4.5e-5 / ase.units.bar``).  It only sets the speed of the relaxation.
     couple : {"iso", "aniso", "tri"}
     rng : numpy.random.Generator, optional
+    every : int, default 1
+        Move the cell every ``every`` steps, by the move of ``every`` time
+        steps (GROMACS's ``nstpcouple``; the reference implementation's
+        ``nstbaro``).  A calculator for which a cell change is expensive (a
+        LAMMPS set-up with PPPM) then pays it once in ``every`` steps; 10 is
+        common, and fine while ``every`` time steps stay well below ``taup``.
 
     References
     ----------
@@ -376,11 +382,13 @@ class CRescaleBarostat(Barostat):
     parameters = (TEMPERATURE, PRESSURE, Parameter("taup", "taup", "time", example="1 ps"),
                   Parameter("compressibility_au", "compressibility", "compressibility",
                             example="4.5e-5 1/bar"),
-                  COUPLING, Parameter("rng", "seed", "seed", required=False))
+                  COUPLING, Parameter("rng", "seed", "seed", required=False),
+                  Parameter("every", "every", "integer", required=False, default=1))
 
     def __init__(self, temperature_K, pressure_au, taup, compressibility_au, couple="iso",
-                 rng=None):
+                 rng=None, every=1):
         super().__init__(temperature_K, pressure_au, couple)
+        self.every = check_positive_integer("every", every)
         self.taup = check_time("taup", taup)
         try:
             beta = float(compressibility_au)
@@ -396,11 +404,13 @@ class CRescaleBarostat(Barostat):
         #: The scheme's bookkeeping (eV): P0 V + this is the barostat's energy term.
         self.work = 0.0
         self._move = None  # this step's move, between the drift and the second half
+        self._due = False
 
     def check_timestep(self, dt):
-        if self.taup < 10 * dt:
-            raise ValueError(f"taup = {self.taup:g} is under 10 time steps ({10 * dt:g}): "
-                             "the volume cannot relax smoothly (1000 steps is typical)")
+        if self.taup < 10 * self.every * dt:
+            raise ValueError(f"taup = {self.taup:g} is under 10 moves of the cell "
+                             f"({10 * self.every * dt:g}): the volume cannot relax smoothly "
+                             "(1000 steps is typical)")
 
     def _forces(self, pressure, volume):
         """(f_λ, f_η): the forces on λ = √V and on the shape components."""
@@ -411,11 +421,12 @@ class CRescaleBarostat(Barostat):
 
     def first_half(self, h):
         self._move = None
+        self._due = self.dyn.nsteps % self.every == 0
 
     def drift_matrices(self, h):
-        if self._move is not None:  # the cell moved in an earlier drift of this step
+        if self._move is not None or not self._due:  # moved already, or not this step
             return np.eye(3), h * np.eye(3), np.eye(3)
-        dyn, kT, dt = self.dyn, self.kT, self.dyn.dt
+        dyn, kT, dt = self.dyn, self.kT, self.every * self.dyn.dt
         volume = dyn.get_volume()
         pressure = self.pressure_tensor()
         f_lambda, f_eta = self._forces(pressure, volume)
@@ -446,7 +457,7 @@ class CRescaleBarostat(Barostat):
         if self._move is None:
             return
         step_lambda, step_eta, d_lambda, d_eta, (V, v) = self._move
-        dyn, kT, dt = self.dyn, self.kT, self.dyn.dt
+        dyn, kT, dt = self.dyn, self.kT, self.every * self.dyn.dt
         volume = dyn.get_volume()
         # The pressure right after the force call: the velocities as the drift left them.
         m = dyn.model
@@ -469,6 +480,7 @@ class CRescaleBarostat(Barostat):
         self.work = float(state["work"])
         set_rng_state(self.rng, state["rng"])
         self._move = None
+        self._due = False
 
     def lammps_fix(self, time_unit, seed=None):
         raise NotExportable("barostat.kind: LAMMPS has no stochastic cell rescaling for rigid "
@@ -476,4 +488,5 @@ class CRescaleBarostat(Barostat):
 
     def todict(self):
         return super().todict() | {"taup": self.taup,
-                                   "compressibility_au": self.compressibility_au}
+                                   "compressibility_au": self.compressibility_au,
+                                   "every": self.every}
