@@ -38,6 +38,7 @@ from rigidmd.mdanalysis import (
     orientational_correlation,
     relaxation_time,
     to_universe,
+    write_psf,
 )
 from rigidmd.systems import co2_water_mixture, random_quaternions, water_box, water_molecule
 
@@ -313,7 +314,7 @@ def test_rdf_of_simple_cubic_lattice(tmp_path):
     shifted.positions += [0.3, -0.7, 1.1]  # a second frame, translated and wrapped
     shifted.wrap()
     u = to_universe([atoms, shifted])
-    rdf = RadialDistribution(u, "name Ar", bin_width=0.05).run()
+    rdf = RadialDistribution(u, "name AR", bin_width=0.05).run()
     res = rdf.results
     assert res.edges[-1] == pytest.approx(7.5)  # whole bins within half the 15.05 Å box
     shells = a * np.sqrt([1, 2, 3, 4, 5, 6])
@@ -393,12 +394,17 @@ def test_msd_of_ballistic_rigid_waters_across_the_box(tmp_path):
     u.trajectory[-1]
     end = np.array([res.atoms.center_of_mass() for res in u.residues])
     assert np.abs(end - start).max() > 3.1  # some jumped by a box length when wrapped
-    msd = MeanSquaredDisplacement(u, "all").run()
+    # Ballistic motion: the MSD grows as t^2, so no diffusion coefficient is given.
+    with pytest.warns(RuntimeWarning, match=r"t\^2\.00"):
+        msd = MeanSquaredDisplacement(u, "all").run()
+    assert msd.results.msd_exponent == pytest.approx(2.0, abs=1e-3)
+    assert np.isnan(msd.results.diffusion_coefficient)
     lag = msd.results.lagtimes * PS  # ASE time
     expected = speed2.mean() * lag**2
     np.testing.assert_allclose(msd.results.timeseries, expected, rtol=1e-4, atol=1e-4)
     # Unwrapped input needs no unwrapping and gives the same.
-    same = MeanSquaredDisplacement(u, "all", unwrap=False).run()
+    with pytest.warns(RuntimeWarning, match="not linearly"):
+        same = MeanSquaredDisplacement(u, "all", unwrap=False).run()
     assert np.abs(same.results.timeseries - expected).max() > 1.0
     assert msd.plot(tmp_path / "msd.png") is not None
 
@@ -422,8 +428,11 @@ def test_diffusion_coefficient_of_a_random_walk():
     t = np.arange(len(x)) * dt
     drifting = [Atoms("Ar400", positions=p + 0.3 * tk) for p, tk in zip(x, t, strict=True)]
     u = to_universe(drifting, dt=dt, bodies=np.full(400, -1))
-    plain = MeanSquaredDisplacement(u, "all", compound="atoms").run()
-    assert plain.results.diffusion_coefficient > 1.5 * D
+    # The drift makes the MSD grow faster than linearly (exponent 1.6 measured): no D.
+    with pytest.warns(RuntimeWarning, match="not linearly"):
+        plain = MeanSquaredDisplacement(u, "all", compound="atoms").run()
+    assert plain.results.msd_exponent > 1.25 and not plain.results.diffusive
+    assert np.isnan(plain.results.diffusion_coefficient)
     fixed = MeanSquaredDisplacement(u, "all", compound="atoms", remove_com_motion=True).run()
     assert fixed.results.diffusion_coefficient == pytest.approx(D, rel=0.05)
 
@@ -521,3 +530,72 @@ def test_rotational_correlation_needs_charges_for_dipoles(tmp_path):
     assert (tmp_path / "rot.png").stat().st_size > 0
     with pytest.raises(ValueError, match="matches no atoms"):
         RotationalCorrelation(u, select="resname XYZ")
+
+
+# ---------------------------------------------------------------------------- refusals and labels
+
+
+@pytest.mark.filterwarnings("ignore:No coordinate reader found")
+def test_bodies_with_scattered_atoms_are_refused_for_psf_and_writer(tmp_path):
+    """All oxygens first, then all hydrogens: readers would see 3 residues per water."""
+    atoms = water_frames(1)[0]
+    order = np.r_[np.arange(0, len(atoms), 3), np.arange(1, len(atoms), 3),
+                  np.arange(2, len(atoms), 3)]
+    scattered = atoms[order]
+    scattered.set_array("mol-id", atoms.get_array("mol-id")[order])
+    with pytest.raises(ValueError, match=r"atom 8 belongs to residue 1 .* 24 residues inst"):
+        write_psf(to_universe(scattered, bodies="mol-id"), tmp_path / "md.psf")
+    with pytest.raises(ValueError, match="not consecutive"):
+        MDAWriter(scattered, tmp_path / "md.xtc", bodies="mol-id")
+    assert not (tmp_path / "md.psf").exists() and not (tmp_path / "md.xtc").exists()
+    # The reordering named in the message gives a file that reads back as 8 waters.
+    ids = RigidBodies.resolve(scattered, "mol-id").body_ids
+    fixed = scattered[np.argsort(ids, kind="stable")]
+    write_psf(to_universe(fixed, bodies="mol-id"), tmp_path / "md.psf")
+    assert len(mda.Universe(str(tmp_path / "md.psf")).residues) == 8
+
+
+def test_rdf_of_a_cluster_is_refused():
+    cluster = water_frames(1)[0]
+    cluster.pbc, cluster.cell = False, None
+    u = to_universe(cluster)
+    with pytest.raises(ValueError, match="needs a periodic cell"):
+        RadialDistribution(u, "name O")
+
+
+def test_ions_are_left_out_of_rotation_and_named_like_their_residue(tmp_path):
+    frames = water_frames(6)
+    with_ions = []
+    for f in frames:
+        ions = Atoms("NaCl", positions=[[0.5, 0.5, 0.5], [3.0, 3.0, 3.0]], charges=[1.0, -1.0])
+        g = f + ions
+        g.set_array("mol-id", np.r_[f.get_array("mol-id"), [100, 101]])
+        with_ions.append(g)
+    u = to_universe(with_ions, bodies="mol-id", dt=0.01)
+    assert list(u.residues.resnames[-2:]) == ["NA", "CL"]
+    assert list(u.atoms.names[-2:]) == ["NA", "CL"]  # atom name = residue name, as in PSFs
+    rot = RotationalCorrelation(u, "all", vector="dipole").run()
+    assert rot.results.n_molecules == 8  # the two ions have no orientation
+    np.testing.assert_allclose(rot.results.c1, 1.0, atol=1e-5)
+    with pytest.raises(ValueError, match="single atoms have no orientation"):
+        RotationalCorrelation(u, "resname NA CL")
+
+
+def test_plot_labels_say_what_is_shown(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    # RDF of a carbon lattice: the label names C–C, and n(r) is in the legend.
+    a, n = 3.0, 5
+    grid = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), -1).reshape(-1, 3) * a
+    lattice = Atoms(f"C{n**3}", positions=grid, cell=[n * a] * 3, pbc=True)
+    u = to_universe(lattice, bodies=np.full(len(lattice), -1))
+    fig = RadialDistribution(u, "element C", r_max=6.0).run().plot()
+    texts = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert texts[0] == "g(r) C–C" and "n(r)" in texts
+    # A correlation that never decays into the fit window: no τ, and the label says why.
+    rot = RotationalCorrelation(to_universe(water_frames(6), dt=0.01)).run()
+    fig = rot.plot()
+    labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert all("no τ" in label and "nan" not in label for label in labels)
+    assert fig.axes[0].get_ylabel().startswith("$C_\\ell(t)$")
