@@ -114,6 +114,8 @@ def test_run_from_flags_only(tmp_path):
     ("calculator: {name: tip3p, options: {rcut: 9}}", "calculator.options:"),
     ("thermostat: {kind: bussi, temperature: 300 K}", "thermostat.taut: missing for bussi"),
     ("steps: many", "steps: expected a whole number"),
+    ("thermostat: {kind: bussi, temperature: 300 K, taut: 100 fs, fixcm: 1}",
+     "thermostat.fixcm: use true or false, got 1"),
     ("bodies: [[0, 1, 2]]", "bodies: use connectivity, mol-id or tags"),
     ("outputs: {directory: out, colour: red}", "outputs.colour: unknown key"),
 ])

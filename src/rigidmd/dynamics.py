@@ -238,6 +238,9 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         if len(movers) > 1:
             raise ValueError(f"two parts move the cell ({movers[0].kind}, {movers[1].kind}); "
                              "use one barostat")
+        if movers and any(getattr(part, "fixcm", False) for part in couplings):
+            raise ValueError("thermostat fixcm=True with a barostat: the barostat's equations "
+                             "count the centre of mass's degrees of freedom; use fixcm=False")
         self.model = geometry.model
         self.atoms = atoms
         for part in couplings:

@@ -79,6 +79,8 @@ class RigidLangevin(_Thermostatted):
         :math:`\gamma`, per ASE time unit (``0.01 / ase.units.fs`` is 0.01 fs⁻¹),
         as in ASE's ``Langevin``.  ``friction * timestep`` must not exceed 0.5.
     rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
+    fixcm : bool, default True
+        Keep the total momentum (no drift of the whole system), as ASE's ``Langevin``.
     **kwargs
         ``bodies``, ``integrator``, ``integrator_options``, ``trajectory``,
         ``logfile``, ``loginterval``, ``backend`` as for
@@ -86,10 +88,10 @@ class RigidLangevin(_Thermostatted):
     """
 
     def __init__(self, atoms, timestep, temperature_K=None, friction=None, *, rng=None,
-                 **kwargs):
+                 fixcm=True, **kwargs):
         _required("RigidLangevin", temperature_K=temperature_K, friction=friction)
-        super().__init__(atoms, timestep, LangevinThermostat(temperature_K, friction, rng),
-                         **kwargs)
+        super().__init__(atoms, timestep,
+                         LangevinThermostat(temperature_K, friction, rng, fixcm), **kwargs)
 
     @property
     def friction(self):
@@ -116,6 +118,8 @@ class RigidBussi(_Thermostatted):
     taut : float
         Relaxation time (ASE time units), as in ASE's ``Bussi``.
     rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
+    fixcm : bool, default False
+        Keep the total momentum (no drift of the whole system).
     **kwargs
         As for :class:`~rigidmd.dynamics.RigidDynamics`.
 
@@ -124,9 +128,11 @@ class RigidBussi(_Thermostatted):
     G. Bussi, D. Donadio and M. Parrinello, J. Chem. Phys. 126, 014101 (2007).
     """
 
-    def __init__(self, atoms, timestep, temperature_K=None, taut=None, *, rng=None, **kwargs):
+    def __init__(self, atoms, timestep, temperature_K=None, taut=None, *, rng=None,
+                 fixcm=False, **kwargs):
         _required("RigidBussi", temperature_K=temperature_K, taut=taut)
-        super().__init__(atoms, timestep, BussiThermostat(temperature_K, taut, rng), **kwargs)
+        super().__init__(atoms, timestep, BussiThermostat(temperature_K, taut, rng, fixcm),
+                         **kwargs)
 
     @property
     def taut(self):
@@ -153,6 +159,8 @@ class RigidNoseHoover(_Thermostatted):
         Chain length.
     tloop : int, default 1
         Sub-steps of each half-step chain update.
+    fixcm : bool, default False
+        Keep the total momentum (no drift of the whole system).
     **kwargs
         As for :class:`~rigidmd.dynamics.RigidDynamics`.
 
@@ -164,10 +172,11 @@ class RigidNoseHoover(_Thermostatted):
     """
 
     def __init__(self, atoms, timestep, temperature_K=None, tdamp=None, tchain=3, tloop=1,
-                 **kwargs):
+                 *, fixcm=False, **kwargs):
         _required("RigidNoseHoover", temperature_K=temperature_K, tdamp=tdamp)
         super().__init__(atoms, timestep,
-                         NoseHooverThermostat(temperature_K, tdamp, tchain, tloop), **kwargs)
+                         NoseHooverThermostat(temperature_K, tdamp, tchain, tloop, fixcm),
+                         **kwargs)
 
     @property
     def tdamp(self):

@@ -362,6 +362,10 @@ def parse_coupling(section, raw, defaults=None):
             kwargs[p.name] = whole_number(name, value, minimum=1)
         elif p.quantity == "seed":
             seed = whole_number(name, value)
+        elif p.quantity == "flag":
+            if not isinstance(value, bool):
+                raise ConfigError(f"{name}: use true or false, got {value!r}")
+            kwargs[p.name] = value
         elif p.quantity == "choice":
             if value not in p.choices:
                 raise ConfigError(f"{name}: use {', '.join(p.choices)}, got {value!r}")

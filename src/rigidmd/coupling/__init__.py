@@ -51,7 +51,8 @@ class Parameter:
         ``"time"`` (``"100 fs"``, to ASE time), ``"rate"`` (``"0.01 1/fs"``, to
         1/ASE time), ``"pressure"`` (``"1 bar"``, to eV/Å³),
         ``"compressibility"`` (``"4.5e-5 1/bar"``, to Å³/eV), ``"integer"``,
-        ``"seed"`` (an integer or absent, becomes ``rng``), ``"choice"``.
+        ``"seed"`` (an integer or absent, becomes ``rng``), ``"choice"``,
+        ``"flag"`` (``true`` or ``false``).
     required : bool
     default : object
         Value used when the field is absent and not required.
@@ -85,11 +86,14 @@ class LammpsFix:
     free_fixes : tuple of str
         Fix styles with arguments for the atoms in no body (``"nvt temp ..."``,
         ``"langevin ..."``), without ``fix ID group``.
+    notes : tuple of str
+        Where LAMMPS does something else than the part; written as comments.
     """
 
     body_style: str
     body_keywords: str = ""
     free_fixes: tuple = ()
+    notes: tuple = ()
 
 
 def register(cls):

@@ -52,6 +52,13 @@ def check_time(name, value):
     return value
 
 
+def check_flag(name, value):
+    """A bool (``True``/``False``, not a string or number), or a clear error naming ``name``."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
 def check_positive_integer(name, value):
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise ValueError(f"{name} must be a positive integer, got {value!r}")
@@ -62,13 +69,27 @@ TEMPERATURE = Parameter("temperature_K", "temperature", "temperature", example="
 SEED = Parameter("rng", "seed", "seed", required=False)
 
 
+def fixcm_parameter(default):
+    return Parameter("fixcm", "fixcm", "flag", required=False, default=default)
+
+
 class Thermostat(Coupling):
-    """Shared parts of the thermostats: the target temperature and kinetic energies."""
+    r"""Shared parts of the thermostats: the target temperature and kinetic energies.
+
+    With ``fixcm`` the thermostat leaves the total momentum
+    :math:`P = \sum_b M_b V_b + \sum_{free} m v` (and so the centre of mass's
+    motion) as it finds it: it acts on the velocities relative to the centre
+    of mass velocity :math:`U = P / M` and on :math:`N_f - 3` translational
+    degrees of freedom, as ASE's ``Langevin(fixcm=True)`` does.  Long
+    thermostatted runs then do not drift as a whole (a drift adds to a
+    measured diffusion coefficient).
+    """
 
     section = "thermostat"
 
-    def __init__(self, temperature_K):
+    def __init__(self, temperature_K, fixcm=False):
         self.temperature_K = check_temperature(temperature_K)
+        self.fixcm = check_flag("fixcm", fixcm)
 
     @property
     def kT(self):
@@ -79,27 +100,63 @@ class Thermostat(Coupling):
         """Change the target temperature (K), as ASE's thermostats do."""
         self.temperature_K = check_temperature(temperature_K)
 
+    def translational_dof(self):
+        """Translational degrees of freedom the thermostat acts on (3 fewer with fixcm)."""
+        n = self.dyn.model.translational_dof
+        return max(n - 3, 0) if self.fixcm else n
+
+    def centre_velocity(self):
+        """:math:`U = P / M` (Å / ASE time), shape (3,); zero without fixcm."""
+        s, m = self.dyn.state, self.dyn.model
+        if not self.fixcm:
+            return np.zeros(3)
+        P = m.mass @ s.V + m.free_masses @ s.v
+        return P / (m.mass.sum() + m.free_masses.sum())
+
+    def set_centre_velocity(self, U):
+        """Shift all translational velocities so that :math:`P/M` is ``U`` again (fixcm)."""
+        if self.fixcm:
+            shift = U - self.centre_velocity()
+            s = self.dyn.state
+            s.V += shift
+            s.v += shift
+
     def kinetic_energies(self):
-        """(translational, rotational) kinetic energy of the bound dynamics' state (eV)."""
-        return (self.dyn.get_translational_kinetic_energy(),
+        """(translational, rotational) kinetic energy the thermostat acts on (eV).
+
+        With fixcm the translational part is that relative to the centre of mass.
+        """
+        m = self.dyn.model
+        U = self.centre_velocity()
+        K_cm = 0.5 * (m.mass.sum() + m.free_masses.sum()) * float(U @ U)
+        return (self.dyn.get_translational_kinetic_energy() - K_cm,
                 self.dyn.get_rotational_kinetic_energy())
 
     def scale(self, translational, rotational):
-        """Multiply translational velocities and angular momenta by the given factors."""
+        """Multiply translational velocities (relative to U with fixcm) and angular momenta."""
         s = self.dyn.state
-        s.V *= translational
-        s.v *= translational
+        U = self.centre_velocity()
+        s.V[...] = U + translational * (s.V - U)
+        s.v[...] = U + translational * (s.v - U)
         s.p *= rotational
 
+    def fixcm_notes(self):
+        """What the deck says about ``fixcm``, which LAMMPS's rigid thermostats do not have."""
+        if not self.fixcm:
+            return ()
+        return (f"rigidmd's {self.kind} thermostat keeps the total momentum (fixcm=True); "
+                "LAMMPS's rigid thermostat acts on it too, so statistics differ by 3 "
+                "degrees of freedom",)
+
     def todict(self):
-        return {"kind": self.kind, "temperature_K": self.temperature_K}
+        return {"kind": self.kind, "temperature_K": self.temperature_K, "fixcm": self.fixcm}
 
 
 class _Stochastic(Thermostat):
     """A thermostat that draws random numbers and keeps count of the energy it adds."""
 
-    def __init__(self, temperature_K, rng=None):
-        super().__init__(temperature_K)
+    def __init__(self, temperature_K, rng=None, fixcm=False):
+        super().__init__(temperature_K, fixcm)
         self.rng = check_rng(rng)
         #: Energy the thermostat has put into the system so far (eV).
         self.work = 0.0
@@ -140,14 +197,16 @@ class LangevinThermostat(_Stochastic):
         :math:`\gamma`, per ASE time unit (``0.01 / ase.units.fs`` is 0.01 fs⁻¹),
         as in ASE's ``Langevin``.  ``friction * timestep`` must not exceed 0.5.
     rng : numpy.random.Generator, optional
+    fixcm : bool, default True
+        Keep the total momentum (see :class:`Thermostat`), as ASE's ``Langevin``.
     """
 
     kind = "langevin"
     parameters = (TEMPERATURE, Parameter("friction", "friction", "rate", example="0.01 1/fs"),
-                  SEED)
+                  SEED, fixcm_parameter(True))
 
-    def __init__(self, temperature_K, friction, rng=None):
-        super().__init__(temperature_K, rng)
+    def __init__(self, temperature_K, friction, rng=None, fixcm=True):
+        super().__init__(temperature_K, rng, fixcm)
         self.friction = self._check_friction(friction)
 
     @staticmethod
@@ -185,7 +244,9 @@ class LangevinThermostat(_Stochastic):
 
     def first_half(self, h):
         s, m, kT, rng = self.dyn.state, self.dyn.model, self.kT, self.rng
-        before = sum(self.kinetic_energies())
+        dyn = self.dyn
+        before = dyn.get_translational_kinetic_energy() + dyn.get_rotational_kinetic_energy()
+        U = self.centre_velocity()
         c = np.exp(-self.friction * h)
         sigma = np.sqrt((1.0 - c * c) * kT)
         s.V[...] = c * s.V + sigma * rng.standard_normal(s.V.shape) / np.sqrt(m.mass)[:, None]
@@ -194,7 +255,9 @@ class LangevinThermostat(_Stochastic):
         L_body = ops.body_angular_momentum(s.q, s.p)
         noise = sigma * np.sqrt(m.moments) * rng.standard_normal(L_body.shape)
         s.p[...] = ops.conjugate_momentum(s.q, c * L_body + noise)
-        self.work += sum(self.kinetic_energies()) - before
+        self.set_centre_velocity(U)
+        self.work += (self.dyn.get_translational_kinetic_energy()
+                      + self.dyn.get_rotational_kinetic_energy() - before)
 
     def lammps_fix(self, time_unit, seed=12345):
         """``langevin`` keyword of ``rigid/nve/small`` and ``fix langevin`` on free atoms.
@@ -206,7 +269,8 @@ class LangevinThermostat(_Stochastic):
             raise NotExportable("thermostat.friction: LAMMPS needs a positive friction")
         args = (f"{self.temperature_K!r} {self.temperature_K!r} "
                 f"{1.0 / self.friction / time_unit!r} {int(seed)}")
-        return LammpsFix("nve", f"langevin {args}", ("nve", f"langevin {args}"))
+        return LammpsFix("nve", f"langevin {args}", ("nve", f"langevin {args}"),
+                         notes=self.fixcm_notes())
 
     def todict(self):
         return super().todict() | {"friction": self.friction}
@@ -255,6 +319,8 @@ class BussiThermostat(_Stochastic):
     taut : float
         Relaxation time (ASE time units), as in ASE's ``Bussi``.
     rng : numpy.random.Generator, optional
+    fixcm : bool, default False
+        Keep the total momentum (see :class:`Thermostat`).
 
     References
     ----------
@@ -262,17 +328,18 @@ class BussiThermostat(_Stochastic):
     """
 
     kind = "bussi"
-    parameters = (TEMPERATURE, Parameter("taut", "taut", "time", example="100 fs"), SEED)
+    parameters = (TEMPERATURE, Parameter("taut", "taut", "time", example="100 fs"), SEED,
+                  fixcm_parameter(False))
 
-    def __init__(self, temperature_K, taut, rng=None):
-        super().__init__(temperature_K, rng)
+    def __init__(self, temperature_K, taut, rng=None, fixcm=False):
+        super().__init__(temperature_K, rng, fixcm)
         self.taut = check_time("taut", taut)
 
     def first_half(self, h):
         c = np.exp(-h / self.taut)
         m = self.dyn.model
         factors = []
-        for K, ndof in zip(self.kinetic_energies(), (m.translational_dof, m.rotational_dof),
+        for K, ndof in zip(self.kinetic_energies(), (self.translational_dof(), m.rotational_dof),
                            strict=True):
             if ndof == 0 or K <= 0:
                 factors.append(1.0)
@@ -384,6 +451,8 @@ class NoseHooverThermostat(Thermostat):
         Chain length.
     tloop : int, default 1
         Sub-steps of each half-step chain update.
+    fixcm : bool, default False
+        Keep the total momentum (see :class:`Thermostat`).
 
     References
     ----------
@@ -395,10 +464,11 @@ class NoseHooverThermostat(Thermostat):
     kind = "nose_hoover"
     parameters = (TEMPERATURE, Parameter("tdamp", "tdamp", "time", example="100 fs"),
                   Parameter("tchain", "tchain", "integer", required=False, default=3),
-                  Parameter("tloop", "tloop", "integer", required=False, default=1))
+                  Parameter("tloop", "tloop", "integer", required=False, default=1),
+                  fixcm_parameter(False))
 
-    def __init__(self, temperature_K, tdamp, tchain=3, tloop=1):
-        super().__init__(temperature_K)
+    def __init__(self, temperature_K, tdamp, tchain=3, tloop=1, fixcm=False):
+        super().__init__(temperature_K, fixcm)
         self._check_positive(self.temperature_K)
         self.tdamp = check_time("tdamp", tdamp)
         self.tchain = check_positive_integer("tchain", tchain)
@@ -429,7 +499,7 @@ class NoseHooverThermostat(Thermostat):
         super().bind(dyn)
         m = dyn.model
         self.chains = tuple(NoseHooverChain(ndof, self.tdamp, self.tchain, self.tloop)
-                            for ndof in (m.translational_dof, m.rotational_dof))
+                            for ndof in (self.translational_dof(), m.rotational_dof))
 
     def first_half(self, h):
         K_t, K_r = self.kinetic_energies()
@@ -456,7 +526,8 @@ class NoseHooverThermostat(Thermostat):
         """
         temp = f"temp {self.temperature_K!r} {self.temperature_K!r} {self.tdamp / time_unit!r}"
         return LammpsFix("nvt", f"{temp} tparam {self.tchain} {self.tloop} 3",
-                         (f"nvt {temp} tchain {self.tchain} tloop {self.tloop}",))
+                         (f"nvt {temp} tchain {self.tchain} tloop {self.tloop}",),
+                         notes=self.fixcm_notes())
 
     def todict(self):
         return super().todict() | {"tdamp": self.tdamp, "tchain": self.tchain,

@@ -76,7 +76,8 @@ def coupling_fix(couplings=(), time_unit=1.0, seed=12345, free_atoms=False):
                             "body with the box; export works for systems of bodies only")
     if thermostat is None:
         return LammpsFix("nph", barostat.body_keywords)
-    return LammpsFix("npt", f"{thermostat.body_keywords} {barostat.body_keywords}")
+    return LammpsFix("npt", f"{thermostat.body_keywords} {barostat.body_keywords}",
+                     notes=thermostat.notes)
 
 
 def integration_commands(data, body_ids, timestep, fix, couplings=(), seed=12345):
@@ -103,7 +104,8 @@ def integration_commands(data, body_ids, timestep, fix, couplings=(), seed=12345
     if fix != "rigid" and fix.split("/")[1] != combined.body_style:
         raise ValueError(f"fix {fix!r} does not match the couplings, which need "
                          f"rigid/{combined.body_style}")
-    cmds = [f"timestep {number(timestep / vf)}"]
+    cmds = [f"# note: {note}" for note in combined.notes]
+    cmds.append(f"timestep {number(timestep / vf)}")
     if data.boundary == "f f f":
         one = max(2000, n)
         cmds.append(f"neigh_modify one {one} page {max(100000, 10 * one)}")
