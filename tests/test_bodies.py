@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 from ase import Atoms
@@ -18,7 +20,8 @@ def test_rules_agree_on_waters():
     atoms = water_cluster(5, seed=3)
     expected = np.repeat(np.arange(5), 3)
     atoms.set_tags(expected + 7)
-    for spec, rule in [(None, "connectivity"), ("mol-id", "mol-id"), ("tags", "tags"),
+    for spec, rule in [(None, "mol-id"), ("connectivity", "connectivity"), ("mol-id", "mol-id"),
+                       ("tags", "tags"),
                        (expected, "body-ids"), ([[0, 1, 2], [3, 4, 5], [6, 7, 8], [9, 10, 11],
                                                  [12, 13, 14]], "index-lists")]:
         bodies = RigidBodies.resolve(atoms, spec)
@@ -35,7 +38,11 @@ def test_free_atoms_and_single_atom_bodies():
     np.testing.assert_array_equal(bodies.free_indices, [6, 7])
     # Unlisted atoms are free; connectivity finds the isolated atoms too.
     assert list(RigidBodies.resolve(atoms, [[0, 1, 2]]).free_indices) == [3, 4, 5, 6, 7]
-    conn = RigidBodies.resolve(atoms)
+    # ASE filled the neons' mol-id with 0, so the default rule (mol-id) makes them one
+    # body, and says so; connectivity finds them free.
+    with pytest.warns(UserWarning, match=r"body 0 \(atoms \[6, 7\]\) falls into 2 pieces"):
+        assert RigidBodies.resolve(atoms).n_bodies == 3
+    conn = RigidBodies.resolve(atoms, "connectivity")
     np.testing.assert_array_equal(conn.body_ids, [0, 0, 0, 1, 1, 1, -1, -1])
     geom = conn.geometry(atoms)
     # Two waters (6 each) and two point particles (3 each).
@@ -132,5 +139,36 @@ def test_connectivity_warns_about_joined_molecules():
     shift = atoms.positions[1] + [0.0, 0.0, 1.0] - atoms.positions[3]
     atoms.positions[3:6] += shift
     with pytest.warns(UserWarning, match=r"body 0 .* has 2 times the atoms of another body"):
-        bodies = RigidBodies.resolve(atoms)
+        bodies = RigidBodies.resolve(atoms, "connectivity")
     assert bodies.n_bodies == 2
+    # The default rule uses the molecule ids the atoms carry, without a word.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert RigidBodies.resolve(atoms).n_bodies == 3
+
+
+@pytest.mark.parametrize("n", [4, 8])
+def test_default_rule_prefers_molecule_ids_then_tags(n):
+    """Connectivity joins a CO2 and a water of a dense mixture; mol-id and tags do not."""
+    atoms = co2_water_mixture(n_co2=n, n_water=n, box=True)
+    assert RigidBodies.resolve(atoms).n_bodies == 2 * n
+    mol = atoms.arrays.pop("mol-id")
+    atoms.set_tags(mol)
+    assert RigidBodies.resolve(atoms).n_bodies == 2 * n
+    atoms.set_tags(0)
+    # Connectivity alone: (4, 4) joins two waters, (8, 8) a CO2 and a water (CH2O3).
+    message = "2 times the atoms" if n == 4 else "the only CH2O3 among 15 bodies"
+    with pytest.warns(UserWarning, match=message):
+        assert RigidBodies.resolve(atoms).n_bodies == 2 * n - 1
+
+
+def test_bonded_body_longer_than_half_the_cell_is_not_folded():
+    """A whole water in a 1.8 Å wide cell: the minimum image would make O–H 0.843 Å."""
+    water = Atoms("OH2", positions=[[0, 0, 0], [0.96, 0, 0], [-0.24, 0.93, 0]],
+                  cell=[1.8, 10, 10], pbc=True)
+    with pytest.raises(ValueError, match=r"body 0 \(atoms \[0, 1, 2\]\) spans 1.200 Å "
+                       r"across cell vector 0, .* would fold it"):
+        RigidBodies.resolve(water, [[0, 1, 2]]).geometry(water)
+    water.cell[0, 0] = 2.5  # wider than twice the molecule: fine, and nothing moves
+    g = RigidBodies.resolve(water, [[0, 1, 2]]).geometry(water)
+    np.testing.assert_allclose(g.com[0], water.get_center_of_mass(), atol=1e-12)

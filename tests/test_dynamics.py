@@ -5,7 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
-from ase import units
+from ase import Atoms, units
 from ase.calculators.calculator import Calculator, all_changes
 from ase.calculators.tip3p import TIP3P
 from ase.constraints import FixBondLengths
@@ -350,6 +350,44 @@ def test_non_finite_forces_stop_the_run_cleanly(tmp_path):
     assert len(log.read_text().splitlines()) == 12
 
 
+class NaNEnergy(Calculator):
+    """TIP3P forces with a NaN energy."""
+
+    implemented_properties = ["energy", "forces"]
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        self.results = {"energy": np.nan, "forces": TIP3P(rc=40).get_forces(atoms)}
+
+
+def test_non_finite_input_is_named():
+    """NaN positions, momenta set between runs, and a NaN energy: atom and quantity named."""
+    atoms = waters(4)
+    atoms.positions[5, 1] = np.nan
+    with pytest.raises(ValueError, match=r"^atom 5 has a non-finite position \[.*nan"):
+        RigidVerlet(atoms, units.fs)
+    atoms = waters(4)
+    atoms.calc = TIP3P(rc=40)
+    dyn = RigidVerlet(atoms, units.fs)
+    dyn.run(2)
+    before = atoms.positions.copy()
+    p = atoms.get_momenta()
+    p[7, 2] = np.inf
+    atoms.set_momenta(p)
+    with pytest.raises(ValueError, match=r"atom 7 has a non-finite momentum .* after step 2"):
+        dyn.run(2)
+    np.testing.assert_array_equal(atoms.positions, before)
+    atoms.positions[[3, 9], 0] = np.nan
+    with pytest.raises(ValueError, match=r"atom 3 has a non-finite position .* 2 in all"):
+        dyn.run(1)
+    # A NaN energy stops the run where a logger would write it.
+    atoms = waters(4)
+    atoms.calc = NaNEnergy()
+    dyn = RigidVerlet(atoms, units.fs, logfile="-", loginterval=5)
+    with pytest.raises(NonFiniteForceError, match=r"non-finite energy \(nan\) with finite "):
+        dyn.run(10)
+
+
 @pytest.mark.parametrize(
     "kwargs, error, match",
     [
@@ -385,3 +423,106 @@ def test_refuses_other_constraints_and_bad_masses():
         RigidVerlet(atoms, 1 * units.fs)
     with pytest.raises(TypeError, match="must be an ase.Atoms"):
         RigidVerlet([atoms], 1 * units.fs)
+
+
+def test_trajectory_frames_carry_the_bodies_in_their_tags(tmp_path):
+    """ASE's .traj drops the mol-id array; the tags rigidmd sets keep the bodies."""
+    from rigidmd import RigidBodies
+    from rigidmd.systems import co2_water_mixture
+
+    atoms = co2_water_mixture(n_co2=8, n_water=8, box=True)  # connectivity would join two
+    atoms.calc = ZeroForce()
+    dyn = RigidVerlet(atoms, units.fs, trajectory=str(tmp_path / "md.traj"))
+    dyn.run(4)
+    dyn.close()
+    assert dyn.model.n_bodies == 16
+    for frame in read(tmp_path / "md.traj", ":"):
+        assert "mol-id" not in frame.arrays
+        again = RigidBodies.resolve(frame)  # default rule: the tags
+        assert again.rule == "tags" and again.n_bodies == 16
+        np.testing.assert_array_equal(again.body_ids, dyn.bodies.body_ids)
+    # Tags that mean something else are kept, with a warning.
+    other = co2_water_mixture(n_co2=2, n_water=2)
+    other.set_tags(np.arange(len(other)) % 2)
+    other.calc = ZeroForce()
+    with pytest.warns(UserWarning, match="tags group them differently"):
+        RigidVerlet(other, units.fs, bodies="mol-id")
+    np.testing.assert_array_equal(other.get_tags(), np.arange(len(other)) % 2)
+
+
+def test_a_too_large_time_step_is_reported_once():
+    """100 fs: the waters spin by tens of radians per step, and the run says so, once."""
+    atoms = waters(4)
+    atoms.calc = TIP3P(rc=40)
+    rigid_maxwell_boltzmann(atoms, 300, rng=np.random.default_rng(0))
+    dyn = RigidVerlet(atoms, 100 * units.fs)
+    with pytest.warns(UserWarning, match=r"body \d turns by .* rad per step at step 10 .* "
+                      r"time step 100 fs is probably too large") as record:
+        dyn.run(50)
+    assert len([w for w in record if "too large" in str(w.message)]) == 1
+    # Point particles: the energy check (where a logger has the energy computed anyway).
+    from ase.calculators.lj import LennardJones
+
+    argon = Atoms("Ar3", positions=[[0, 0, 0], [3.8, 0, 0], [1.9, 3.3, 0]])
+    argon.calc = LennardJones(sigma=3.4, epsilon=0.0104, rc=10.0)
+    argon.set_momenta([[0.0, 0.0, 0.0], [-20.0, 0.0, 0.0], [0.0, -20.0, 0.0]])
+    dyn = RigidVerlet(argon, 20 * units.fs, bodies=[], logfile="/dev/null")
+    with pytest.warns(UserWarning, match=r"the conserved energy changed by .* kinetic energy"):
+        dyn.run(20)
+    # 2 fs: no warning (measured largest |omega| dt 0.14 rad, energy change 0.2 % of K).
+    atoms = waters(4)
+    atoms.calc = TIP3P(rc=40)
+    rigid_maxwell_boltzmann(atoms, 300, rng=np.random.default_rng(0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        RigidVerlet(atoms, 2 * units.fs, logfile="/dev/null").run(100)
+
+
+def test_rigid_temperature_of_stored_frames(tmp_path):
+    """A frame read back reports 2/3 of the logged temperature; rigid_temperature the same."""
+    from rigidmd import rigid_temperature
+
+    atoms = waters(4)
+    atoms.calc = TIP3P(rc=40)
+    rigid_maxwell_boltzmann(atoms, 300, rng=np.random.default_rng(5))
+    traj = tmp_path / "md.traj"
+    dyn = RigidVerlet(atoms, units.fs, trajectory=str(traj), loginterval=5)
+    logged = []
+    dyn.attach(lambda: logged.append(atoms.get_temperature()), interval=5)
+    dyn.run(20)
+    dyn.close()
+    frames = read(traj, ":")
+    np.testing.assert_allclose(rigid_temperature(traj), logged, rtol=1e-12)
+    np.testing.assert_allclose(rigid_temperature(frames), logged, rtol=1e-12)
+    assert rigid_temperature(frames[-1]) == pytest.approx(logged[-1], rel=1e-12)
+    # 12 atoms, 4 rigid waters: 36 / 24 of the rigid count in plain ASE.
+    assert frames[-1].get_temperature() == pytest.approx(logged[-1] * 24 / 36, rel=1e-12)
+    with pytest.raises(ValueError, match="frame 1 has 9 atoms"):
+        rigid_temperature([frames[0], frames[1][:9]])
+
+
+def test_import_without_a_writable_numba_cache():
+    """numba refuses cache=True when it finds no writable place; rigidmd then compiles."""
+    pytest.importorskip("numba")
+    import subprocess
+    import sys
+
+    code = """
+import numba.core.caching as caching
+caching.CacheImpl._locator_classes = []  # what a read-only install with no home gives
+import numpy as np
+from ase import units
+from ase.calculators.tip3p import TIP3P
+import rigidmd._numba as compiled
+from rigidmd import RigidVerlet
+from rigidmd.systems import water_cluster
+assert not compiled.CACHED
+atoms = water_cluster(2)
+atoms.calc = TIP3P(rc=40)
+RigidVerlet(atoms, units.fs, backend="numba").run(3)
+print("ran")
+"""
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.strip() == "ran"

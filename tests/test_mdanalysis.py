@@ -560,7 +560,7 @@ def test_rdf_of_a_cluster_is_refused():
     cluster.pbc, cluster.cell = False, None
     u = to_universe(cluster)
     with pytest.raises(ValueError, match="needs a periodic cell"):
-        RadialDistribution(u, "name O")
+        RadialDistribution(u, "element O")
 
 
 def test_ions_are_left_out_of_rotation_and_named_like_their_residue(tmp_path):

@@ -11,7 +11,7 @@ from rigidmd.dynamics import NonFiniteForceError, RigidBodyDOF, RigidDynamics, R
 from rigidmd.model import BodyGeometry, BodyModel
 from rigidmd.npt import RigidCRescale, RigidNPT
 from rigidmd.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover
-from rigidmd.velocities import rigid_maxwell_boltzmann
+from rigidmd.velocities import rigid_maxwell_boltzmann, rigid_temperature
 
 __all__ = [
     "RigidDynamics",
@@ -27,6 +27,7 @@ __all__ = [
     "RigidBodyDOF",
     "NonFiniteForceError",
     "rigid_maxwell_boltzmann",
+    "rigid_temperature",
     "load_checkpoint",
 ]
 

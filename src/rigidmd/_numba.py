@@ -20,10 +20,29 @@ AVAILABLE = numba is not None
 __all__ = ["AVAILABLE", "first_half", "second_half", "place", "momenta"]
 
 
+#: Whether compiled functions are cached on disk (False when numba finds no writable place).
+CACHED = True
+
+
 def _jit(func):
+    """``numba.njit`` with an on-disk cache, or without one when no cache can be written.
+
+    numba caches next to the package or under the user's home (or
+    ``NUMBA_CACHE_DIR``); on a read-only install with no writable home it
+    refuses ``cache=True`` with a RuntimeError at decoration.  The functions
+    are then compiled at every start (a few seconds) instead.
+    """
+    global CACHED
     if numba is None:  # pragma: no cover
         return func
-    return numba.njit(cache=True, fastmath=False, nogil=True)(func)
+    if CACHED:
+        try:
+            return numba.njit(cache=True, fastmath=False, nogil=True)(func)
+        except RuntimeError as err:
+            if "cannot cache" not in str(err):
+                raise
+            CACHED = False
+    return numba.njit(cache=False, fastmath=False, nogil=True)(func)
 
 
 @_jit

@@ -158,16 +158,16 @@ class RigidBodies:
             atoms, cutoffs=natural_cutoffs(atoms, mult=mult), self_interaction=False
         )
         _, labels = connected_components(nl.get_connectivity_matrix(sparse=True))
-        bodies = cls(labels, rule="connectivity")
-        bodies._warn_merged(atoms)
-        return bodies
+        return cls(labels, rule="connectivity")
 
-    def _warn_merged(self, atoms):
-        """Warn when a body's composition is a multiple of another body's.
+    def _warn_merged(self, atoms, unique_formulas=False):
+        """Warn when connectivity probably joined or split molecules.
 
-        Connectivity joins molecules whose atoms come within covalent reach
-        (two waters after a quench, say): such a body then holds twice the
-        atoms of its neighbours.
+        A body whose composition is a multiple of another body's (two waters
+        that came within covalent reach, say) is reported; with
+        ``unique_formulas`` (the default rule) so is a body whose formula no
+        other body has while other formulas repeat (a CO2 joined to a water
+        among CO2 and water molecules, or a water split by a stretched bond).
         """
         if self.n_bodies < 2:
             return
@@ -175,7 +175,10 @@ class RigidBodies:
         elements, element_index = np.unique(atoms.numbers[inside], return_inverse=True)
         counts = np.zeros((self.n_bodies, len(elements)), dtype=np.int64)
         np.add.at(counts, (self.body_ids[inside], element_index), 1)
-        formulas, first = np.unique(counts, axis=0, return_index=True)
+        formulas, first, repeats = np.unique(counts, axis=0, return_index=True,
+                                             return_counts=True)
+        advice = ("Give the bodies explicitly (bodies='mol-id', 'tags' or a list) if that is "
+                  "wrong")
         for i, big in enumerate(formulas):
             for small in formulas:
                 ratio = big.sum() // max(small.sum(), 1)
@@ -185,11 +188,46 @@ class RigidBodies:
                         f"bodies by connectivity: body {b} "
                         f"(atoms {describe_atoms(self.atoms_of(b))}) "
                         f"has {ratio} times the atoms of another body; molecules that came "
-                        "within covalent reach were joined. Give the bodies explicitly "
-                        "(bodies='mol-id', 'tags' or a list) if that is wrong",
-                        stacklevel=3,
+                        f"within covalent reach were joined. {advice}",
+                        stacklevel=4,
                     )
                     return
+        if unique_formulas and repeats.max() >= 2 and np.any(repeats == 1):
+            i = int(np.flatnonzero(repeats == 1)[0])
+            b = int(first[i])
+            formula = atoms[self.atoms_of(b)].get_chemical_formula()
+            warnings.warn(
+                f"bodies by connectivity: body {b} (atoms {describe_atoms(self.atoms_of(b))}) "
+                f"is the only {formula} among {self.n_bodies} bodies whose other formulas "
+                f"repeat; molecules may have been joined or split by the covalent cutoffs. "
+                f"{advice}",
+                stacklevel=4,
+            )
+
+    def _warn_unbonded(self, atoms):
+        """Warn when a body holds atoms that no chain of covalent bonds joins.
+
+        Used for the default rule: ASE fills a missing ``mol-id`` with 0 when
+        Atoms are added together, so appended ions would silently become one
+        body.  Bonds are ASE's natural cutoffs (minimum image).
+        """
+        if self.n_bodies == 0:
+            return
+        piece = RigidBodies.from_connectivity(atoms).body_ids
+        piece = np.where(piece < 0, -1 - np.arange(len(piece)), piece)
+        inside = self.body_ids >= 0
+        pairs = np.unique(np.stack([self.body_ids[inside], piece[inside]], axis=1), axis=0)
+        pieces = np.bincount(pairs[:, 0], minlength=self.n_bodies)
+        if pieces.max() > 1:
+            b = int(np.argmax(pieces > 1))
+            warnings.warn(
+                f"bodies by {self.rule} (the default rule): body {b} "
+                f"(atoms {describe_atoms(self.atoms_of(b))}) falls into {int(pieces[b])} "
+                "pieces that no covalent bond joins (ASE fills a missing mol-id with 0 when "
+                "Atoms are added); give the bodies explicitly (bodies='mol-id', 'tags', "
+                "'connectivity' or a list) if that is wrong",
+                stacklevel=4,
+            )
 
     @classmethod
     def resolve(cls, atoms, spec=None):
@@ -199,15 +237,31 @@ class RigidBodies:
         ----------
         atoms : ase.Atoms
         spec : None, str, RigidBodies, array_like of int, or list of lists
-            ``None`` uses covalent connectivity; ``"mol-id"``, ``"tags"`` or
+            ``None`` uses the ``mol-id`` array when the atoms have one (what
+            ASE's ``lammps-data`` reader sets), else the tags when they are not
+            all equal (what rigidmd stores in every trajectory frame), else
+            covalent connectivity, with a warning when that probably joined
+            or split molecules; ``"mol-id"``, ``"tags"`` or
             ``"connectivity"`` name a rule; a :class:`RigidBodies` is used as
             is; a flat integer sequence of length ``len(atoms)`` gives a body
             id per atom; a sequence of sequences gives the atom indices of
             each body.
         """
         n = len(atoms)
-        if spec is None or (isinstance(spec, str) and spec == "connectivity"):
+        if spec is None:
+            tags = atoms.get_tags()
+            if "mol-id" in atoms.arrays:
+                bodies = cls.from_mol_id(atoms)
+                bodies._warn_unbonded(atoms)
+            elif n and np.any(tags != tags[0]):
+                bodies = cls.from_tags(atoms)
+                bodies._warn_unbonded(atoms)
+            else:
+                bodies = cls.from_connectivity(atoms)
+                bodies._warn_merged(atoms, unique_formulas=True)
+        elif isinstance(spec, str) and spec == "connectivity":
             bodies = cls.from_connectivity(atoms)
+            bodies._warn_merged(atoms)
         elif isinstance(spec, RigidBodies):
             bodies = spec
         elif isinstance(spec, str):
@@ -328,6 +382,47 @@ class RigidBodies:
         return measure(order, starts, atom_body, self.free_indices, masses, x)
 
 
+def _bonded_bodies_moved(raw, unwrapped, numbers, atom_body):
+    """Bodies that the minimum image would change although their atoms as given are bonded.
+
+    A body whose atoms, as given, form one covalently bonded piece (ASE's
+    natural cutoffs, no periodicity) is whole already; if the minimum image
+    moves one of its atoms, the body is longer than half the cell and would
+    be folded.  Only bodies the minimum image changes are examined.
+
+    Returns
+    -------
+    numpy.ndarray of int
+        Body indices, ascending.
+    """
+    moved = np.unique(atom_body[np.any(np.abs(unwrapped - raw) > 1e-9, axis=1)])
+    if len(moved) == 0:
+        return moved
+    from ase.data import covalent_radii
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    pick = np.flatnonzero(np.isin(atom_body, moved))  # grouped by body (``order``)
+    x, body, radius = raw[pick], atom_body[pick], covalent_radii[numbers[pick]]
+    # Every pair within a body, without a per-body loop: atom a, the l-th of its body of
+    # n atoms starting at s, pairs with s + l + 1, ..., s + n - 1.
+    _, first, size = np.unique(body, return_index=True, return_counts=True)
+    local = np.arange(len(pick)) - np.repeat(first, size)
+    partners = np.repeat(size, size) - local - 1
+    i = np.repeat(np.arange(len(pick)), partners)
+    offset = np.arange(len(i)) - np.repeat(np.cumsum(partners) - partners, partners)
+    j = i + 1 + offset
+    # Covalent radii with a 25 % margin over ASE's natural cutoffs: a stretched bond of a
+    # body given whole still counts as bonded.
+    bonded = np.linalg.norm(x[i] - x[j], axis=1) < 1.25 * (radius[i] + radius[j])
+    graph = coo_matrix((np.ones(bonded.sum()), (i[bonded], j[bonded])),
+                       shape=(len(pick), len(pick)))
+    _, label = connected_components(graph, directed=False)
+    pairs = np.unique(np.stack([body, label], axis=1), axis=0)
+    pieces = np.bincount(np.searchsorted(moved, pairs[:, 0]), minlength=len(moved))
+    return moved[pieces == 1]
+
+
 def unwrap_bodies(atoms, order, starts, atom_body):
     """Positions of the body atoms with every body made whole.
 
@@ -354,6 +449,20 @@ def unwrap_bodies(atoms, order, starts, atom_body):
     cell = atoms.cell.complete()
     anchor = x[starts][atom_body]
     d, _ = find_mic(x - anchor, cell, pbc)
+    folded = _bonded_bodies_moved(x, anchor + d, atoms.numbers[order], atom_body)
+    if len(folded):
+        b = int(folded[0])
+        raw = np.linalg.solve(cell.T, x[atom_body == b].T).T
+        extent = np.where(pbc, raw.max(axis=0) - raw.min(axis=0), 0.0)
+        k = int(np.argmax(extent))
+        width = abs(np.linalg.det(cell)) / np.linalg.norm(
+            np.cross(cell[(k + 1) % 3], cell[(k + 2) % 3]))
+        raise ValueError(
+            f"body {b} (atoms {describe_atoms(order[atom_body == b])}) spans "
+            f"{extent[k] * width:.3f} Å across cell vector {k}, more than half the "
+            f"periodic cell's width there ({width:.3f} Å): the minimum image would fold "
+            "it (its atoms as given are bonded); enlarge the cell"
+        )
     x = anchor + d
     # Extent of each body along each periodic direction, in fractions of the
     # cell's width there: the minimum image is unambiguous only below 1/2.
