@@ -1,8 +1,9 @@
 """Liquid TIP3P water with rigid bodies: LAMMPS forces, MDAnalysis analyses.
 
 A periodic box of rigid TIP3P waters (216 by default, 18.6 Å, 1.0 g/cm³)
-with forces from LAMMPS through ASE's ``LAMMPSlib`` (``lj/cut/coul/long``,
-long-range electrostatics by PPPM or Ewald).  The random lattice start is
+with forces from LAMMPS through :class:`rigidmd.lammps.LAMMPSCalculator`
+(``lj/cut/coul/long``, long-range electrostatics by PPPM or Ewald;
+intramolecular pairs excluded, as in native LAMMPS).  The random lattice start is
 quenched with strong Langevin friction, equilibrated at 298 K with the Bussi
 thermostat, its centre-of-mass motion removed, then run in NVE at 2 fs with
 ``RigidVerlet`` while
@@ -12,7 +13,7 @@ coefficient from the mean-squared displacement of the molecular centres of
 mass, and the rotational correlation of the molecular dipoles with their
 relaxation times, printed beside published values.
 
-Run (about 8 minutes on two cores; ``--quick`` about half a minute)::
+Run (a few minutes on two cores; ``--quick`` about half a minute)::
 
     python examples/tip3p_water.py [--outdir DIR] [--quick]
         [--equilibration-ps 20] [--production-ps 50] [--kspace pppm|ewald]
@@ -22,10 +23,6 @@ Writes to ``--outdir``: ``tip3p.psf`` and ``tip3p.xtc`` (read them with
 ``MDAnalysis.Universe("tip3p.psf", "tip3p.xtc")``), ``tip3p_rdf.png``,
 ``tip3p_msd.png``, ``tip3p_rotation.png``, ``tip3p_results.json`` and the MD
 log ``tip3p.log``.
-
-LAMMPSlib sends no molecule IDs, so intramolecular pairs are not excluded:
-their forces cancel in every rigid body's force and torque (the dynamics is
-exact) and shift the potential energy by a constant.
 """
 
 import argparse
@@ -39,7 +36,7 @@ from ase import units
 from ase.md.velocitydistribution import Stationary
 
 from rigidmd import RigidBodies, RigidBussi, RigidLangevin, RigidVerlet
-from rigidmd.lammps import load_lammps, tip3p_charges
+from rigidmd.lammps import tip3p_charges
 from rigidmd.mdanalysis import (
     PS,
     MDAWriter,
@@ -76,7 +73,10 @@ WATER_VISCOSITY_MPAS = 0.896
 
 
 def lammps_calculator(kspace="pppm", accuracy=1e-5, cutoff=9.0):
-    """ASE ``LAMMPSlib`` calculator for TIP3P with long-range electrostatics.
+    """:class:`~rigidmd.lammps.LAMMPSCalculator` for TIP3P with long-range electrostatics.
+
+    Molecules come from the atoms' ``mol-id`` array; pairs within a molecule
+    are excluded.
 
     Parameters
     ----------
@@ -86,17 +86,13 @@ def lammps_calculator(kspace="pppm", accuracy=1e-5, cutoff=9.0):
     cutoff : float
         Real-space cut-off of LJ and Coulomb (Å), at most half the box.
     """
-    load_lammps().close()  # puts the MPI library where LAMMPSlib's import finds it
-    from ase.calculators.lammpslib import LAMMPSlib
+    from rigidmd.lammps import LAMMPSCalculator
 
     commands = [f"pair_style lj/cut/coul/long {cutoff}",
                 "pair_coeff * * 0.0 1.0",  # no LJ on H (original TIP3P)
                 f"pair_coeff 1 1 {EPSILON_OO!r} {SIGMA_OO}",
                 f"kspace_style {kspace} {accuracy}"]
-    return LAMMPSlib(lmpcmds=commands, atom_types={"O": 1, "H": 2},
-                     lammps_header=["units metal", "atom_style full",
-                                    "atom_modify map array sort 0 0"],
-                     keep_alive=True)
+    return LAMMPSCalculator(commands, atom_types={"O": 1, "H": 2})
 
 
 def body_forces_and_torques(atoms, bodies, forces):

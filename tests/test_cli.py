@@ -6,6 +6,7 @@ import sys
 
 import numpy as np
 import pytest
+from ase.build import molecule
 from ase.io import read, write
 
 from rigidmd import RigidBodies
@@ -98,10 +99,22 @@ def test_run_restart_and_plot(project):
 
 
 def test_run_from_flags_only(tmp_path):
+    """Without a configuration file the defaults are stated and the usual outputs written."""
     write(tmp_path / "w.xyz", water_cluster(2), format="extxyz")
-    result = rigidmd("run", "--structure", "w.xyz", "--steps", 5, "--timestep", "1 fs",
-                     "--outdir", "o", cwd=tmp_path)
+    result = rigidmd("run", "--structure", "w.xyz", "--steps", 20, "--timestep", "1 fs",
+                     cwd=tmp_path)
     assert result.returncode == 0, result.stderr
+    assert result.stderr.startswith("rigidmd: no configuration file, so: calculator tip3p")
+    assert "rigidmd-run/" in result.stderr
+    assert len(read(tmp_path / "rigidmd-run" / "md.traj", ":")) == 3  # steps 0, 10, 20
+    assert len((tmp_path / "rigidmd-run" / "md.log").read_text().splitlines()) == 4
+    write(tmp_path / "methane.xyz", molecule("CH4"), format="extxyz")
+    result = rigidmd("run", "--structure", "methane.xyz", "--steps", 5, "--timestep", "1 fs",
+                     "--outdir", "m", cwd=tmp_path)
+    assert result.returncode == 2
+    assert "takes waters only, atoms in the order O, H, H; the structure is CH4" in \
+        result.stderr
+    assert not (tmp_path / "m" / "md.traj").exists()
 
 
 @pytest.mark.parametrize("change, field", [
@@ -116,6 +129,17 @@ def test_run_from_flags_only(tmp_path):
     ("steps: many", "steps: expected a whole number"),
     ("thermostat: {kind: bussi, temperature: 300 K, taut: 100 fs, fixcm: 1}",
      "thermostat.fixcm: use true or false, got 1"),
+    ("thermostat: {kind: nose_hoover, temperature: 0 K, tdamp: 100 fs}",
+     "thermostat.temperature = 0: Nose-Hoover"),
+    ("structure: {builtin: water_cluster, n_molecules: -3}",
+     "structure.n_molecules: expected a whole number >= 1, got -3"),
+    ("structure: {builtin: water_cluster, n_molecules: 100000000}",
+     "structure.n_molecules: at most 100000"),
+    ("structure: {builtin: water_box, n_side: 0}", "structure.n_side: expected a whole number"),
+    ("structure: {builtin: water_cluster, n_molecules: 4, seed: abc}",
+     "structure.seed: expected a whole number >= 0, got 'abc'"),
+    ("structure: {builtin: water_box, n_side: 3}",  # a 9.3 Å box and rc 40 Å
+     "calculator.options.rc: 40 Å is more than half the periodic cell's width (9.30 Å)"),
     ("bodies: [[0, 1, 2]]", "bodies: use connectivity, mol-id or tags"),
     ("outputs: {directory: out, colour: red}", "outputs.colour: unknown key"),
 ])
@@ -126,6 +150,19 @@ def test_config_errors_are_one_line_and_status_2(project, change, field):
     assert "Traceback" not in result.stderr
     assert result.stderr.count("\n") == 1, result.stderr
     assert result.stderr.startswith(f"rigidmd: error: {field}"), result.stderr
+
+
+@pytest.mark.parametrize("text, message", [
+    (b"steps: 5\nsteps: 10\n", "steps: given twice (lines 1 and 2); keep one"),
+    (bytes(range(256)), "config: bad.yaml is not a text (UTF-8) file"),
+    (b"steps: [1,\n", "config: bad.yaml is not valid YAML at line 2"),
+])
+def test_unreadable_config_files(tmp_path, text, message):
+    (tmp_path / "bad.yaml").write_bytes(text)
+    result = rigidmd("run", "bad.yaml", cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stderr.startswith(f"rigidmd: error: {message}"), result.stderr
+    assert result.stderr.count("\n") == 1
 
 
 def test_missing_config_file(tmp_path):

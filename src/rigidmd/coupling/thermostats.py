@@ -480,8 +480,8 @@ class NoseHooverThermostat(Thermostat):
         if temperature_K == 0:
             raise ValueError(
                 "temperature_K = 0: Nose-Hoover chain masses are N_f k_B T tdamp^2, so a "
-                "chain at 0 K has no mass and cannot act; cool with RigidLangevin or "
-                "RigidBussi, which reach 0 K")
+                "chain at 0 K has no mass and cannot act; cool with a Langevin or Bussi "
+                "thermostat, which reach 0 K")
 
     def set_temperature(self, temperature_K):
         value = check_temperature(temperature_K)
