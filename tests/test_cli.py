@@ -45,6 +45,11 @@ outputs:
 """
 
 
+#: The same run without the MDAnalysis output, for tests that do not need MDAnalysis.
+PLAIN = CONFIG.replace(", mdanalysis: md.xtc", "")
+assert PLAIN != CONFIG
+
+
 def with_change(config, change):
     """``config`` with the top-level key of ``change`` replaced by ``change``."""
     key = change.split(":")[0]
@@ -144,7 +149,7 @@ def test_run_from_flags_only(tmp_path):
     ("outputs: {directory: out, colour: red}", "outputs.colour: unknown key"),
 ])
 def test_config_errors_are_one_line_and_status_2(project, change, field):
-    (project / "bad.yaml").write_text(with_change(CONFIG, change))
+    (project / "bad.yaml").write_text(with_change(PLAIN, change))
     result = rigidmd("run", "bad.yaml", cwd=project)
     assert result.returncode == 2
     assert "Traceback" not in result.stderr
@@ -175,7 +180,7 @@ def test_missing_config_file(tmp_path):
 def test_export_lammps_round_trip(project, monkeypatch):
     """The exported deck, run in-process, follows rigidmd for its first 100 steps."""
     (project / "nve.yaml").write_text(
-        CONFIG.replace("thermostat: {kind: langevin, temperature: 250 K, friction: 0.01 1/fs,"
+        PLAIN.replace("thermostat: {kind: langevin, temperature: 250 K, friction: 0.01 1/fs,"
                        " seed: 2}\n", "").replace("timestep: 2 fs", "timestep: 1 fs")
         .replace("steps: 50", "steps: 100"))
     result = rigidmd("export-lammps", "nve.yaml", "deck", cwd=project)
@@ -204,7 +209,7 @@ def test_export_lammps_round_trip(project, monkeypatch):
     ("calculator: {name: tip3p, options: {rc: 5.0}}", "switches off each molecule pair"),
 ])
 def test_export_refuses_what_lammps_cannot_do(project, change, message):
-    (project / "bad.yaml").write_text(with_change(CONFIG, change))
+    (project / "bad.yaml").write_text(with_change(PLAIN, change))
     result = rigidmd("export-lammps", "bad.yaml", "deck", cwd=project)
     assert result.returncode == 2
     assert message in result.stderr and "Traceback" not in result.stderr
