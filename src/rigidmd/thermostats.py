@@ -42,6 +42,7 @@ class _Thermostatted(RigidDynamics):
         """Change the target temperature, as ASE's thermostats do (``temperature_K`` in K)."""
         self.thermostat.set_temperature(
             self._process_temperature(temperature, temperature_K, "K"))
+        self._energy_ref = None  # the chains' energy jumps with the target: a new reference
 
     @property
     def thermostat_work(self):
