@@ -382,6 +382,16 @@ class RigidBodies:
         return measure(order, starts, atom_body, self.free_indices, masses, x)
 
 
+def _refuse_long_body(atoms_of_body, b, k, fraction, cell, why):
+    """Raise the error for body ``b`` spanning ``fraction`` of the cell's width along vector k."""
+    width = abs(np.linalg.det(cell)) / np.linalg.norm(
+        np.cross(cell[(k + 1) % 3], cell[(k + 2) % 3]))
+    raise ValueError(
+        f"body {b} (atoms {describe_atoms(atoms_of_body)}) spans {fraction * width:.3f} Å "
+        f"across cell vector {k}, more than half the periodic cell's width there "
+        f"({width:.3f} Å): {why}")
+
+
 def _bonded_bodies_moved(raw, unwrapped, numbers, atom_body):
     """Bodies that the minimum image would change although their atoms as given are bonded.
 
@@ -455,14 +465,9 @@ def unwrap_bodies(atoms, order, starts, atom_body):
         raw = np.linalg.solve(cell.T, x[atom_body == b].T).T
         extent = np.where(pbc, raw.max(axis=0) - raw.min(axis=0), 0.0)
         k = int(np.argmax(extent))
-        width = abs(np.linalg.det(cell)) / np.linalg.norm(
-            np.cross(cell[(k + 1) % 3], cell[(k + 2) % 3]))
-        raise ValueError(
-            f"body {b} (atoms {describe_atoms(order[atom_body == b])}) spans "
-            f"{extent[k] * width:.3f} Å across cell vector {k}, more than half the "
-            f"periodic cell's width there ({width:.3f} Å): the minimum image would fold "
-            "it (its atoms as given are bonded); enlarge the cell"
-        )
+        _refuse_long_body(order[atom_body == b], b, k, extent[k], cell,
+                          "the minimum image would fold it (its atoms as given are bonded); "
+                          "enlarge the cell")
     x = anchor + d
     # Extent of each body along each periodic direction, in fractions of the
     # cell's width there: the minimum image is unambiguous only below 1/2.
@@ -471,12 +476,6 @@ def unwrap_bodies(atoms, order, starts, atom_body):
     extent[:, ~pbc] = 0.0
     b, k = np.unravel_index(np.argmax(extent), extent.shape)
     if extent[b, k] >= 0.5:
-        width = abs(np.linalg.det(cell)) / np.linalg.norm(
-            np.cross(cell[(k + 1) % 3], cell[(k + 2) % 3]))
-        raise ValueError(
-            f"body {b} (atoms {describe_atoms(order[atom_body == b])}) spans "
-            f"{extent[b, k] * width:.3f} Å across cell vector {k}, more than half the "
-            f"periodic cell's width there ({width:.3f} Å): cannot make it whole by "
-            "minimum image"
-        )
+        _refuse_long_body(order[atom_body == b], int(b), int(k), extent[b, k], cell,
+                          "cannot make it whole by minimum image")
     return x
