@@ -133,11 +133,11 @@ class StructureSection:
         return atoms
 
     def resolve_bodies(self, atoms):
-        """The bodies of the run, recorded in the tags so that a restart finds them again.
+        """The bodies of the run (``bodies`` absent: the library's default rule).
 
-        ASE trajectories keep tags but not the ``mol-id`` array: when a structure
-        has no tags, each atom's tag is set to its body (1, 2, ...; 0 for atoms
-        in no body), and a restart configured with ``bodies: mol-id`` reads them.
+        ASE trajectories keep tags but not the ``mol-id`` array; the dynamics
+        stores each atom's body in its tag (body ``b``: ``b + 1``, free atoms
+        -1), so a restart configured with ``bodies: mol-id`` reads the tags.
         """
         from rigidmd import RigidBodies
 
