@@ -54,17 +54,19 @@ class CoulombLJ(Calculator):
 
     implemented_properties = ["energy", "forces"]
 
-    def __init__(self, wall=None):
+    def __init__(self, wall=None, parameters=None):
         """``wall=(centre, radius)``: a harmonic spherical wall (1 eV/Å² beyond ``radius`` Å)
-        on every atom, keeping a droplet from evaporating in long runs."""
+        on every atom, keeping a droplet from evaporating in long runs.  ``parameters``:
+        (charge, sigma, epsilon) per label (:func:`site_labels`), default ``PARAMETERS``."""
         super().__init__()
         self.wall = wall
+        self.parameters = PARAMETERS if parameters is None else parameters
 
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         super().calculate(atoms, properties, system_changes)
         atoms = self.atoms
         labels = site_labels(atoms)
-        q, s, e = (np.array([PARAMETERS[lab][k] for lab in labels]) for k in range(3))
+        q, s, e = (np.array([self.parameters[lab][k] for lab in labels]) for k in range(3))
         mol = atoms.arrays.get("mol-id", np.arange(len(atoms)) + 10**6)
         x = atoms.positions
         d = x[:, None, :] - x[None, :, :]
@@ -89,6 +91,13 @@ class CoulombLJ(Calculator):
             excess = np.maximum(dist - radius, 0.0)
             self.results["energy"] += 0.5 * np.sum(excess**2)
             self.results["forces"] -= (excess / np.where(dist > 0, dist, 1.0))[:, None] * out
+
+
+def water_parameters(model):
+    """:class:`CoulombLJ` parameters of a water model of :mod:`rigidmd.water` (M labelled X)."""
+    charges = dict(zip(("O_water", "H", "H", "X"), model.charges(), strict=False))
+    return {"O_water": (charges["O_water"], model.sigma, model.epsilon),
+            "H": (model.q_h, 1.0, 0.0), "X": (charges.get("X", 0.0), 1.0, 0.0)}
 
 
 def coulomb_lj_lammps(atoms, cutoff=60.0):

@@ -419,7 +419,12 @@ def test_refuses_other_constraints_and_bad_masses():
     masses = atoms.get_masses()
     masses[2] = 0.0
     atoms.set_masses(masses)
-    with pytest.raises(ValueError, match="atom 2 .* has mass 0.0"):
+    # O and one H left with mass: a linear body cannot carry a massless atom off its axis.
+    with pytest.raises(ValueError, match="atom 2 is massless and .* off the axis"):
+        RigidVerlet(atoms, 1 * units.fs)
+    masses[2] = -1.0
+    atoms.set_masses(masses)
+    with pytest.raises(ValueError, match="atom 2 .* has mass -1.0"):
         RigidVerlet(atoms, 1 * units.fs)
     with pytest.raises(TypeError, match="must be an ase.Atoms"):
         RigidVerlet([atoms], 1 * units.fs)

@@ -5,9 +5,10 @@ LAMMPS ``fix rigid/nve``) with forces from any ASE calculator; atoms in no
 body move as point particles in the same step.
 """
 
+from rigidmd.atomslink import RigidBodyDOF
 from rigidmd.bodies import RigidBodies
 from rigidmd.checkpoint import load_checkpoint
-from rigidmd.dynamics import NonFiniteForceError, RigidBodyDOF, RigidDynamics, RigidVerlet
+from rigidmd.dynamics import NonFiniteForceError, RigidDynamics, RigidVerlet
 from rigidmd.model import BodyGeometry, BodyModel
 from rigidmd.npt import RigidCRescale, RigidNPT
 from rigidmd.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover

@@ -361,25 +361,71 @@ class RigidBodies:
         Raises
         ------
         ValueError
-            An atom with zero, negative or non-finite mass; a body larger than
-            half the cell in a periodic direction; a body whose atoms all sit
-            at one point.
+            An atom with negative or non-finite mass, or massless outside a
+            body; a body without mass, or whose mass sits at one point, or a
+            linear body with a massless atom off its axis (see
+            :func:`check_masses`); a body larger than half the cell in a
+            periodic direction.
         """
         if len(atoms) != len(self.body_ids):
             raise ValueError(
                 f"bodies cover {len(self.body_ids)} atoms, the system has {len(atoms)}"
             )
         masses = atoms.get_masses()
-        bad = np.flatnonzero(~(masses > 0) | ~np.isfinite(masses))
-        if bad.size:
-            a = int(bad[0])
-            raise ValueError(
-                f"atom {a} ({atoms[a].symbol}) has mass {float(masses[a])!r} amu; "
-                "every atom needs a positive finite mass"
-            )
         order, starts, atom_body = self._layout()
+        check_masses(masses, atoms.get_chemical_symbols(), self.free_indices, order, starts)
         x = unwrap_bodies(atoms, order, starts, atom_body)
         return measure(order, starts, atom_body, self.free_indices, masses, x)
+
+
+def check_masses(masses, symbols, free, order, starts):
+    """Refuse masses that no rigid-body dynamics can move.
+
+    Every atom needs a finite mass, positive or 0.  A massless atom (a virtual
+    site such as the M site of TIP4P water) must belong to a body, which
+    places it rigidly and takes the force on it into its own force and
+    torque; a body needs some mass.
+
+    Parameters
+    ----------
+    masses : numpy.ndarray, shape (n_atoms,)
+        amu.
+    symbols : sequence of str
+        Chemical symbols, for the messages.
+    free : numpy.ndarray of int
+        Atoms in no body.
+    order, starts : numpy.ndarray of int
+        Body layout, as in :class:`~rigidmd.model.BodyModel`.
+
+    Raises
+    ------
+    ValueError
+        Naming the first atom or body at fault.
+    """
+    bad = np.flatnonzero(~(masses >= 0) | ~np.isfinite(masses))
+    if bad.size:
+        a = int(bad[0])
+        raise ValueError(
+            f"atom {a} ({symbols[a]}) has mass {float(masses[a])!r} amu; every atom needs "
+            "a finite mass, positive (or 0 for a virtual site inside a rigid body)"
+        )
+    massless = free[masses[free] == 0]
+    if massless.size:
+        a = int(massless[0])
+        raise ValueError(
+            f"atom {a} ({symbols[a]}) has mass 0 and belongs to no rigid body: a massless "
+            "atom (a virtual site) must ride in a body with atoms of positive mass"
+        )
+    if len(starts):
+        body_mass = np.add.reduceat(masses[order], starts)
+        empty = np.flatnonzero(~(body_mass > 0))
+        if empty.size:
+            b = int(empty[0])
+            stop = starts[b + 1] if b + 1 < len(starts) else len(order)
+            raise ValueError(
+                f"body {b} (atoms {describe_atoms(order[starts[b]:stop])}) has no mass: "
+                "a body of massless atoms (virtual sites only) cannot move"
+            )
 
 
 def _refuse_long_body(atoms_of_body, b, k, fraction, cell, why):

@@ -27,6 +27,14 @@ from ase.md.md import MolecularDynamics
 
 from rigidmd import _numba
 from rigidmd import operators as ops
+from rigidmd.atomslink import (
+    RigidBodyDOF,
+    calculate_together,
+    check_finite,
+    check_massless_momenta,
+    kinetic_energy,
+    store_bodies_in_tags,
+)
 from rigidmd.bodies import RigidBodies, unwrap_bodies
 from rigidmd.coupling import Coupling
 from rigidmd.logger import RigidLogger
@@ -45,121 +53,6 @@ MAX_ROTATION_PER_STEP = 0.5
 #: Change of the conserved energy, as a fraction of the kinetic energy, that means the
 #: step is too large.  Same runs: at most 0.07 %, 0.23 %, 0.7 % and 2.5 % at 1-6 fs.
 MAX_ENERGY_CHANGE = 0.1
-
-
-class RigidBodyDOF:
-    """Marks rigid bodies for ASE's degree-of-freedom count.
-
-    A rigid dynamics puts one of these in ``atoms.constraints`` so that
-    :meth:`ase.Atoms.get_temperature` and :class:`ase.md.MDLogger` count 6
-    degrees of freedom per body (5 per linear body) and 3 per point particle.
-    It never changes positions, momenta or forces.  It has no ``todict``, so
-    trajectory writers skip it and ``.traj`` files stay readable by plain
-    :func:`ase.io.read`.
-
-    Parameters
-    ----------
-    removed_dof : int
-        ``3 * len(atoms)`` minus the rigid degrees of freedom.
-    body_ids : array_like of int, shape (n_atoms,), optional
-        Each atom's body (-1: none), for calculators that need molecules
-        (:class:`rigidmd.lammps.LAMMPSCalculator` excludes pairs within one).
-    """
-
-    def __init__(self, removed_dof, body_ids=None):
-        self.removed_dof = int(removed_dof)
-        self.body_ids = None if body_ids is None else np.array(body_ids) + 1
-
-    def get_removed_dof(self, atoms):
-        return self.removed_dof
-
-    def adjust_positions(self, atoms, new):
-        pass
-
-    def adjust_momenta(self, atoms, momenta):
-        pass
-
-    def adjust_forces(self, atoms, forces):
-        pass
-
-    def index_shuffle(self, atoms, ind):
-        # A subset of atoms is no longer the same set of bodies: drop it.
-        raise NotImplementedError
-
-    def __repr__(self):
-        return f"RigidBodyDOF(removed_dof={self.removed_dof})"
-
-
-def _calculate_together(calc, atoms, names):
-    """Have an ASE calculator compute several properties in one call.
-
-    What :meth:`ase.calculators.calculator.BaseCalculator.get_property` does
-    for one property, for several: a calculator asked for forces and later
-    for the energy or stress of the same positions would otherwise be called
-    twice (and LAMMPS, for one, would evaluate the forces twice).
-    Calculators without ASE's ``calculate``/``check_state`` are left alone
-    (their properties are then asked one by one).
-    """
-    if not (hasattr(calc, "calculate") and hasattr(calc, "check_state")):
-        return
-    names = [name for name in names if name in getattr(calc, "implemented_properties", names)]
-    changes = calc.check_state(atoms)
-    if changes:
-        calc.atoms = None
-        calc.results = {}
-    missing = [name for name in names if name not in calc.results]
-    if missing:
-        if getattr(calc, "use_cache", True):
-            calc.atoms = atoms.copy()
-        calc.calculate(atoms, missing, changes)
-
-
-def check_finite(values, quantity, unit, when=""):
-    """Raise a ValueError naming the first atom whose ``quantity`` is NaN or infinite.
-
-    One reduction when everything is finite (a NaN or an infinity anywhere
-    makes the sum non-finite).
-    """
-    values = np.asarray(values, dtype=float)
-    if np.isfinite(values.sum()):
-        return
-    bad = np.flatnonzero(~np.isfinite(values.reshape(len(values), -1)).all(axis=1))
-    what = "cell vector" if quantity == "cell" else "atom"
-    raise ValueError(f"{what} {int(bad[0])} has a non-finite {quantity} "
-                     f"{values[bad[0]].tolist()} ({unit}){' ' + when if when else ''}"
-                     f"{f'; {len(bad)} in all' if len(bad) > 1 else ''}")
-
-
-def same_partition(a, b):
-    """Whether two labellings of the atoms group them the same way (labels may differ)."""
-    pairs = np.unique(np.stack([a, b], axis=1), axis=0)
-    return len(pairs) == len(np.unique(a)) == len(np.unique(b))
-
-
-def _store_bodies_in_tags(atoms, body_ids):
-    """Tags = body index + 1 (-1 for free atoms): every ``.traj`` frame carries the bodies.
-
-    Body ``b`` gets tag ``b + 1``, the molecule ID LAMMPS data files and
-    :class:`rigidmd.lammps.LAMMPSCalculator` use (which read IDs <= 0 as "no
-    molecule").
-
-    ASE's trajectory files keep tags but drop custom arrays such as
-    ``mol-id``; ``bodies=None`` (or ``"tags"``) on a frame read back then finds
-    the same bodies.  Tags that already group the atoms as the bodies do are
-    kept; other non-zero tags are kept too, with a warning.
-    """
-    def distinct(ids):  # free atoms (negative) each in a group of their own
-        return np.where(ids < 0, -1 - np.arange(len(ids)), ids)
-
-    tags = atoms.get_tags()
-    if same_partition(distinct(RigidBodies.from_tags(atoms).body_ids), distinct(body_ids)):
-        return
-    if np.any(tags != 0):
-        warnings.warn("the atoms' tags group them differently from the rigid bodies; "
-                      "rigidmd keeps the tags, so trajectory frames do not carry the bodies "
-                      "(give bodies=... when reading them back)", stacklevel=4)
-        return
-    atoms.set_tags(np.where(body_ids >= 0, body_ids + 1, -1))
 
 
 def check_timestep(timestep):
@@ -286,6 +179,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         scheme = resolve_scheme(integrator, **(integrator_options or {}))
         rigid = RigidBodies.resolve(atoms, bodies)
         geometry = rigid.geometry(atoms)
+        check_massless_momenta(atoms)
         couplings = tuple(couplings)
         for part in couplings:
             if not isinstance(part, Coupling):
@@ -304,8 +198,12 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             part.check(self)
 
         # -- from here on the atoms and files change --
-        super().__init__(atoms, self._dt, trajectory=trajectory, logfile=None,
-                         loginterval=loginterval, **kwargs)
+        with warnings.catch_warnings():
+            # ASE warns of every massless atom; ours are virtual sites that their bodies
+            # carry (check_masses refused any other).
+            warnings.filterwarnings("ignore", message="Zero mass encountered in atoms")
+            super().__init__(atoms, self._dt, trajectory=trajectory, logfile=None,
+                             loginterval=loginterval, **kwargs)
         self.backend = backend
         self.scheme = scheme
         self.fused = backend == "numba" and scheme.kernel is not None
@@ -319,7 +217,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         model = self.model
         atoms.constraints = [RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom,
                                                 self.bodies.body_ids)]
-        _store_bodies_in_tags(atoms, self.bodies.body_ids)
+        store_bodies_in_tags(atoms, self.bodies.body_ids)
         nb, nf = model.n_bodies, model.n_free
         self.state = RigidState(
             X=geometry.com.copy(), V=np.zeros((nb, 3)), q=geometry.quaternions.copy(),
@@ -527,7 +425,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             else:
                 first, reference = self._energy_ref
                 change = energy - reference
-                kinetic = self.atoms.get_kinetic_energy()
+                kinetic = kinetic_energy(self.atoms)
                 if abs(change) > MAX_ENERGY_CHANGE * kinetic + 1e-6:
                     message = (f"the conserved energy changed by {change:+.4g} eV from step "
                                f"{first} to step {step}, {abs(change) / kinetic:.0%} of the "
@@ -553,7 +451,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         if self._observed_next():
             wanted.append("energy")  # a logger will ask: one calculator call, not two
         if len(wanted) > 1:
-            _calculate_together(atoms.calc, atoms, wanted)
+            calculate_together(atoms.calc, atoms, wanted)
         forces = np.asarray(atoms.get_forces(md=True), dtype=float)
         if forces.shape != (len(self.atoms), 3):
             raise ValueError(
@@ -636,7 +534,9 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         """
         s, m, atoms = self.state, self.model, self.atoms
         momenta = atoms.get_momenta()
-        ke_atoms = 0.5 * np.sum(momenta**2 / self.masses)
+        # Massless atoms (virtual sites) carry no momentum (check_massless_momenta).
+        massive = self.masses[:, 0] > 0
+        ke_atoms = 0.5 * np.sum(momenta[massive] ** 2 / self.masses[massive])
         r, _ = ops.place_atoms(s, m)
         V, L_body = ops.rigid_projection(momenta[m.order], r, s.q, m)
         p = ops.conjugate_momentum(s.q, L_body)
@@ -702,6 +602,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             check_finite(atoms.cell.array, "cell", "Å", when)
         if kicked:
             check_finite(atoms.get_momenta(), "momentum", "amu Å / ASE time", when)
+            check_massless_momenta(atoms, when)
         if moved:
             self.state.cell[...] = atoms.cell.array
             self._read_positions()

@@ -12,6 +12,8 @@ when a barostat runs or ``log_pressure`` asks for it), the volume
 from ase import units
 from ase.md.logger import MDLogger
 
+from rigidmd.atomslink import kinetic_energy, temperature
+
 __all__ = ["RigidLogger", "LOG_COLUMNS"]
 
 #: Column names, in order; the last four are optional.
@@ -56,9 +58,9 @@ class RigidLogger(MDLogger):
     def __call__(self):
         dyn, atoms = self.dyn, self.atoms
         epot = atoms.get_potential_energy()
-        ekin = atoms.get_kinetic_energy()
+        ekin = kinetic_energy(atoms)  # ASE's is NaN with a massless site
         row = [dyn.get_time() / (1000 * units.fs), epot + ekin, epot, ekin,
-               atoms.get_temperature(), dyn.get_conserved_energy()]
+               temperature(atoms), dyn.get_conserved_energy()]
         if self.log_pressure:
             row.append(dyn.get_pressure() / units.bar)
         if self.periodic:

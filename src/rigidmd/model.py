@@ -15,6 +15,11 @@ the principal frame, so the inertia tensor there is
 :math:`\mathrm{diag}(I_1, I_2, I_3)` with :math:`I_1 \le I_2 \le I_3`.  A
 moment below ``LINEAR_TOLERANCE * max(I)`` is set to exactly 0 (a linear
 body), the rule LAMMPS ``fix rigid`` uses.
+
+Atoms of mass 0 (virtual sites, such as the M site of TIP4P water) belong to
+a body like any other atom: they are placed at :math:`X_b + R(q_b)\, d_i`
+every step and the force on them enters the body's force and torque, but
+they add nothing to its mass, inertia, momenta or degrees of freedom.
 """
 
 from dataclasses import dataclass, field
@@ -196,6 +201,30 @@ def inertia_tensors(r, m, starts):
     return np.add.reduceat(per_atom, starts, axis=0)
 
 
+def _refuse_off_axis_sites(d, m, moments, mass, order, atom_body):
+    """Refuse a massless atom off the axis of a linear body.
+
+    A linear body has no orientation about its axis (no moment there), so a
+    site off the axis would have no defined place and its force no torque to
+    act through.  "Off" uses the tolerance that made the body linear: a
+    squared distance from the axis above ``LINEAR_TOLERANCE`` times the body's
+    largest moment per unit mass.
+    """
+    linear = moments[:, 0] == 0.0
+    if not np.any(linear):
+        return
+    scale = LINEAR_TOLERANCE * moments[:, 2] / mass
+    off = (m == 0) & linear[atom_body] & (d[:, 1] ** 2 + d[:, 2] ** 2 > scale[atom_body])
+    if np.any(off):
+        i = int(np.flatnonzero(off)[0])
+        b = int(atom_body[i])
+        raise ValueError(
+            f"atom {int(order[i])} is massless and {np.hypot(d[i, 1], d[i, 2]):.3g} Å off the "
+            f"axis of the linear body {b} (atoms {describe_atoms(order[atom_body == b])}): "
+            "a linear body has no orientation about its axis to carry it"
+        )
+
+
 def measure(order, starts, atom_body, free, masses, x):
     """Build the model of given bodies from one configuration.
 
@@ -206,7 +235,8 @@ def measure(order, starts, atom_body, free, masses, x):
     free : numpy.ndarray of int, shape (n_free,)
         Indices of the free atoms.
     masses : numpy.ndarray, shape (n_atoms,)
-        Atom masses (amu), already checked positive and finite.
+        Atom masses (amu), already checked finite, positive or 0 in a body
+        (:func:`rigidmd.bodies.check_masses`).
     x : numpy.ndarray, shape (n_body_atoms, 3)
         Unwrapped positions of the body atoms (Å), in ``order``.
 
@@ -217,7 +247,8 @@ def measure(order, starts, atom_body, free, masses, x):
     Raises
     ------
     ValueError
-        A body whose atoms all sit at one point (it has no orientation).
+        A body whose mass sits at one point (it has no orientation); a
+        massless atom off the axis of a linear body.
     """
     m = masses[order]
     n_bodies = len(starts)
@@ -240,10 +271,11 @@ def measure(order, starts, atom_body, free, masses, x):
         b = int(np.flatnonzero(point)[0])
         raise ValueError(
             f"body {b} (atoms {describe_atoms(order[atom_body == b])}) has all its "
-            "atoms at one point: it has no orientation"
+            "mass at one point: it has no orientation"
         )
     moments = np.where(moments < LINEAR_TOLERANCE * imax[:, None], 0.0, moments)
     d = np.einsum("nji,nj->ni", axes[atom_body], r)
+    _refuse_off_axis_sites(d, m, moments, mass, order, atom_body)
     model = BodyModel(
         n_atoms=len(masses), order=order, starts=starts, atom_body=atom_body, atom_masses=m,
         mass=mass, moments=moments, body_coordinates=d, free=free, free_masses=masses[free])

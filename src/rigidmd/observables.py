@@ -12,6 +12,7 @@ from ase import units
 from ase.calculators.calculator import PropertyNotImplementedError
 
 from rigidmd import operators as ops
+from rigidmd.atomslink import kinetic_energy
 
 __all__ = ["RigidObservables", "NonFiniteForceError"]
 
@@ -196,5 +197,5 @@ class RigidObservables:
         For NVE this is the total energy; a stochastic thermostat subtracts the
         energy it put in, Nosé–Hoover chains add their own energy.
         """
-        energy = self.atoms.get_total_energy()
+        energy = self.atoms.get_potential_energy() + kinetic_energy(self.atoms)
         return float(energy + sum(part.energy() for part in self.couplings))

@@ -29,6 +29,7 @@ from dataclasses import asdict
 import numpy as np
 from ase import units
 
+from rigidmd.atomslink import temperature
 from rigidmd.config import TIME_UNITS, ConfigError
 from rigidmd.outputs import OutputError, OutputLock, output_lengths, trim_outputs
 
@@ -100,7 +101,7 @@ class Progress:
         rate = done / (now - self.t0) if now > self.t0 else 0.0
         bar = "#" * int(self.width * fraction)
         line = (f"[{bar:<{self.width}}] {done:>{len(str(self.total))}}/{self.total} steps "
-                f"{rate:8.1f} steps/s  T {self.dyn.atoms.get_temperature():7.1f} K")
+                f"{rate:8.1f} steps/s  T {temperature(self.dyn.atoms):7.1f} K")
         if self.tty:
             self.stream.write("\r" + line + ("\n" if done >= self.total else ""))
         elif fraction + 1e-12 >= self.next_report or done >= self.total or now - self.last > 30:
@@ -335,7 +336,7 @@ def summary(dyn, rows, elapsed, stream):
     """Steps, speed, temperature, energy drift and (NPT) mean pressure, volume, density."""
     label = "conserved energy" if dyn.couplings else "total energy"
     print(f"{dyn.nsteps} steps ({elapsed:.1f} s for this run); "
-          f"T = {dyn.atoms.get_temperature():.1f} K ({dyn.degrees_of_freedom} degrees of "
+          f"T = {temperature(dyn.atoms):.1f} K ({dyn.degrees_of_freedom} degrees of "
           "freedom)", file=stream)
     if len(rows) >= 3:
         data = np.array(rows)

@@ -2,15 +2,17 @@ r"""Small molecular systems for examples, tests and the demo.
 
 Every builder is deterministic for a given ``seed`` and returns an
 :class:`ase.Atoms` whose molecules are contiguous (water as O, H, H, as
-ASE's :class:`~ase.calculators.tip3p.TIP3P` expects) with a ``mol-id`` array
+ASE's :class:`~ase.calculators.tip3p.TIP3P` expects, or O, H, H, M for a
+four-site model of :mod:`rigidmd.water`, M massless) with a ``mol-id`` array
 (1-based, one per molecule) as ASE's LAMMPS data reader would give.
 """
 
 import numpy as np
 from ase import Atoms, units
-from ase.calculators.tip3p import angleHOH, epsilon0, qH, rOH, sigma0
+from ase.calculators.tip3p import epsilon0, qH, sigma0
 
 from rigidmd import quaternion as quat
+from rigidmd.water import water_model
 
 __all__ = ["water_molecule", "co2_molecule", "water_cluster", "water_box",
            "co2_water_mixture", "random_quaternions"]
@@ -19,14 +21,12 @@ __all__ = ["water_molecule", "co2_molecule", "water_cluster", "water_box",
 R_CO = 1.16
 
 
-def water_molecule():
-    """One TIP3P-geometry water (O, H, H) with its oxygen at the origin, in the xy plane."""
-    half = np.radians(angleHOH) / 2
-    return Atoms("OH2", positions=[
-        [0.0, 0.0, 0.0],
-        [rOH * np.sin(half), rOH * np.cos(half), 0.0],
-        [-rOH * np.sin(half), rOH * np.cos(half), 0.0],
-    ])
+def water_molecule(model="tip3p"):
+    """One water of ``model`` (:data:`rigidmd.water.WATER_MODELS`), oxygen at the origin.
+
+    O, H, H (, M) in the xy plane; see :meth:`rigidmd.water.WaterModel.molecule`.
+    """
+    return water_model(model).molecule()
 
 
 def co2_molecule():
@@ -45,13 +45,16 @@ def random_quaternions(n, rng):
 def _place(molecules, centres, rng):
     """Copies of template molecules, randomly rotated about their centres of mass."""
     q = random_quaternions(len(centres), rng)
-    symbols, positions, mol_id = [], [], []
+    symbols, positions, masses, mol_id = [], [], [], []
     for k, (mol, centre) in enumerate(zip(molecules, centres, strict=True)):
         local = mol.positions - mol.get_center_of_mass()
         positions.append(centre + quat.rotate(q[k], local))
         symbols += mol.get_chemical_symbols()
+        masses.append(mol.get_masses())
         mol_id += [k + 1] * len(mol)
     atoms = Atoms(symbols, positions=np.concatenate(positions))
+    if any(mol.has("masses") for mol in molecules):
+        atoms.set_masses(np.concatenate(masses))
     atoms.arrays["mol-id"] = np.array(mol_id)
     return atoms
 
@@ -72,7 +75,7 @@ def _tip3p_pair_energy(a, b):
     return coulomb + lj.sum(axis=1)
 
 
-def water_cluster(n_molecules, seed=0, spacing=3.1, jitter=0.1, tries=64):
+def water_cluster(n_molecules, seed=0, spacing=3.1, jitter=0.1, tries=64, model="tip3p"):
     """A compact cluster of waters, no periodicity.
 
     The molecules sit on the simple-cubic lattice sites (``spacing`` Å) closest
@@ -89,6 +92,9 @@ def water_cluster(n_molecules, seed=0, spacing=3.1, jitter=0.1, tries=64):
         Å.
     tries : int
         Orientations tried per molecule; 1 gives uniformly random orientations.
+    model : str, default "tip3p"
+        Water model (:data:`rigidmd.water.WATER_MODELS`); orientations are
+        chosen by the TIP3P energy of the O, H, H sites whatever the model.
     """
     rng = np.random.default_rng(seed)
     n_side = int(np.ceil(n_molecules ** (1 / 3)))
@@ -96,30 +102,35 @@ def water_cluster(n_molecules, seed=0, spacing=3.1, jitter=0.1, tries=64):
     centre = sites.mean(axis=0)
     sites = sites[np.argsort(np.linalg.norm(sites - centre, axis=1), kind="stable")]
     sites = sites[:n_molecules] + rng.uniform(-jitter, jitter, (n_molecules, 3))
-    template = water_molecule()
+    template = water_molecule(model)
+    k = len(template)
     local = template.positions - template.get_center_of_mass()
-    placed = np.zeros((0, 3))
+    placed = np.zeros((0, k, 3))
     for site in sites:
         q = random_quaternions(tries, rng)
         candidates = site + quat.rotate(q[:, None, :], local[None, :, :])
-        best = 0 if len(placed) == 0 else int(np.argmin(_tip3p_pair_energy(candidates, placed)))
-        placed = np.concatenate([placed, candidates[best]])
-    atoms = Atoms("OH2" * n_molecules, positions=placed)
-    atoms.arrays["mol-id"] = np.repeat(np.arange(1, n_molecules + 1), 3)
+        best = 0 if len(placed) == 0 else int(np.argmin(_tip3p_pair_energy(
+            candidates[:, :3], placed[:, :3].reshape(-1, 3))))
+        placed = np.concatenate([placed, candidates[best][None]])
+    atoms = Atoms(template.get_chemical_symbols() * n_molecules, positions=placed.reshape(-1, 3))
+    if template.has("masses"):
+        atoms.set_masses(np.tile(template.get_masses(), n_molecules))
+    atoms.arrays["mol-id"] = np.repeat(np.arange(1, n_molecules + 1), k)
     return atoms
 
 
-def water_box(n_side=3, seed=0, spacing=3.1, jitter=0.1):
+def water_box(n_side=3, seed=0, spacing=3.1, jitter=0.1, model="tip3p"):
     """A periodic cubic box of ``n_side**3`` randomly oriented waters.
 
     About liquid density at the default spacing (1.0 g/cm³ at 3.1 Å).  The
     lattice is offset by half a spacing and every atom wrapped into the cell,
-    so molecules straddle the boundaries.
+    so molecules straddle the boundaries.  ``model`` names the water model
+    (:data:`rigidmd.water.WATER_MODELS`; four-site models carry M explicitly).
     """
     rng = np.random.default_rng(seed)
     n = n_side**3
     sites = _lattice(n_side, spacing) + rng.uniform(-jitter, jitter, (n, 3))
-    atoms = _place([water_molecule()] * n, sites, rng)
+    atoms = _place([water_molecule(model)] * n, sites, rng)
     atoms.cell = np.eye(3) * n_side * spacing
     atoms.pbc = True
     atoms.wrap()

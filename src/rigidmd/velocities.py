@@ -7,10 +7,11 @@ from ase import units
 
 from rigidmd import operators as ops
 from rigidmd import quaternion as quat
+from rigidmd.atomslink import kinetic_energy
 from rigidmd.bodies import RigidBodies
 from rigidmd.state import RigidState
 
-__all__ = ["rigid_maxwell_boltzmann", "rigid_temperature"]
+__all__ = ["rigid_maxwell_boltzmann", "rigid_temperature", "rigid_velocities"]
 
 
 def rigid_maxwell_boltzmann(atoms, temperature_K, bodies=None, rng=None):
@@ -51,6 +52,39 @@ def rigid_maxwell_boltzmann(atoms, temperature_K, bodies=None, rng=None):
     momenta[model.free] = rng.normal(size=(model.n_free, 3)) * np.sqrt(
         kT * model.free_masses)[:, None]
     atoms.set_momenta(momenta, apply_constraint=False)
+
+
+def rigid_velocities(atoms, bodies=None):
+    r"""Velocities of all atoms, massless ones included, from the bodies' rigid motion.
+
+    Each body's centre-of-mass velocity :math:`V` and angular momentum come
+    from its atoms' momenta (the projection a rigid dynamics makes); every
+    body atom then gets :math:`V + \omega \times r_i`, a massless site (whose
+    momentum says nothing, and whose ``atoms.get_velocities()`` is 0/0) as
+    well.  Free atoms keep :math:`p/m`.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+    bodies : optional
+        Body specification, as for :class:`~rigidmd.RigidVerlet`.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_atoms, 3)
+        Å / ASE time unit.
+    """
+    geometry = RigidBodies.resolve(atoms, bodies).geometry(atoms)
+    model, q = geometry.model, geometry.quaternions
+    momenta = atoms.get_momenta()
+    r = quat.rotate(q[model.atom_body], model.body_coordinates)
+    V, L_body = ops.rigid_projection(momenta[model.order], r, q, model)
+    state = RigidState(X=geometry.com, V=V, q=q, p=ops.conjugate_momentum(q, L_body),
+                       x=np.zeros((0, 3)), v=np.zeros((0, 3)), cell=atoms.cell.array.copy())
+    velocities = np.zeros((len(atoms), 3))
+    velocities[model.order] = ops.atom_velocities(state, r, model)
+    velocities[model.free] = momenta[model.free] / model.free_masses[:, None]
+    return velocities
 
 
 def rigid_temperature(frames, bodies=None):
@@ -107,6 +141,6 @@ def rigid_temperature(frames, bodies=None):
     ndof = model.degrees_of_freedom
     if ndof == 0:
         raise ValueError("rigid_temperature: the frames have no degrees of freedom")
-    temperature = np.array([2.0 * frame.get_kinetic_energy() / (ndof * units.kB)
+    temperature = np.array([2.0 * kinetic_energy(frame) / (ndof * units.kB)
                             for frame in frames])
     return float(temperature[0]) if single else temperature

@@ -29,6 +29,7 @@ import warnings
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
+from rigidmd.lammps.data import MASSLESS_SITE_MASS
 from rigidmd.lammps.library import (
     LAMMPS_METAL_QQR2E,
     LammpsError,
@@ -152,7 +153,8 @@ class LAMMPSCalculator(Calculator):
                 raise ValueError(f"LAMMPSCalculator: atom {i} ({symbols[i]}) has mass "
                                  f"{masses[i]} but the other atoms of type {t} have {common}: "
                                  "give atoms of different masses different types")
-            type_mass[t] = float(common)
+            # Masses never enter a force call, but LAMMPS refuses a mass of 0 (a virtual site).
+            type_mass[t] = float(common) if common > 0 else MASSLESS_SITE_MASS
         labels = {t: s for s, t in table.items()}
         return types, type_mass, labels
 

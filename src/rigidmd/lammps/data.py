@@ -11,8 +11,15 @@ from ase import Atoms
 
 from rigidmd.bodies import RigidBodies
 from rigidmd.lammps.library import charge_factor, velocity_factor
+from rigidmd.velocities import rigid_velocities
 
-__all__ = ["LammpsData", "write_data", "check_body_ids", "atom_types_of", "lammps_box"]
+__all__ = ["LammpsData", "write_data", "check_body_ids", "atom_types_of", "lammps_box",
+           "MASSLESS_SITE_MASS"]
+
+#: Mass (amu) written for a massless site: LAMMPS needs every mass positive.  Inside a
+#: ``fix rigid/small`` body it shifts the centre of mass by about 1e-22 Å (M of TIP4P
+#: water: 1e-20 amu at 0.15 Å in 18 amu), far below roundoff.
+MASSLESS_SITE_MASS = 1e-20
 
 
 @dataclass(frozen=True)
@@ -107,7 +114,9 @@ def atom_types_of(atoms: Atoms, type_labels=None):
         else:
             seen[sym] = seen.get(sym, 0) + 1
             labels[f"{sym}_{seen[sym]}"] = t
-    type_masses = np.array([m for _, m in keys])
+    # LAMMPS refuses a mass of 0 ("Invalid mass value"): a massless site (TIP4P's M) gets
+    # MASSLESS_SITE_MASS, as the LAMMPS manual advises for explicit M sites in fix rigid.
+    type_masses = np.array([m if m > 0 else MASSLESS_SITE_MASS for _, m in keys])
     return labels, type_masses, atom_types
 
 
@@ -217,8 +226,12 @@ def write_data(
         atoms = atoms.copy()
         atoms.positions = RigidBodies(body_ids).whole_positions(atoms)
     lo, hi, tilt, boundary, pos, image = lammps_box(atoms, margin)
-    vel = atoms.get_velocities()
-    vel = np.zeros((n, 3)) if vel is None else vel * vfac
+    masses = atoms.get_masses()
+    if np.all(masses > 0):
+        vel = atoms.get_momenta() / masses[:, None]
+    else:  # a massless site moves with its body (its p / m is 0 / 0)
+        vel = rigid_velocities(atoms, RigidBodies(body_ids))
+    vel = vel * vfac
 
     g = "{!r}".format
     lines = [

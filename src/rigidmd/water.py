@@ -1,0 +1,217 @@
+r"""Rigid water models: geometry, charges, Lennard-Jones parameters and LAMMPS commands.
+
+Three-site models put the negative charge on the oxygen; four-site models put
+it on a massless site M on the H–O–H bisector, ``d_om`` from the oxygen.
+rigidmd carries M as an explicit atom (chemical symbol ``X``, mass 0) inside
+the rigid body of its molecule: any calculator that sees it as a charged atom
+gives the right forces, the body takes the force on M into its own force and
+torque, and M adds no mass and no degree of freedom (see
+:mod:`rigidmd.model`).  Molecules are ordered O, H, H (, M).
+
+==============  ========  =========  ========  ========  ========  =============
+model           r_OH (Å)  HOH (deg)  d_OM (Å)  q_H (e)   σ_OO (Å)  ε_OO (kJ/mol)
+==============  ========  =========  ========  ========  ========  =============
+``tip3p``       0.9572    104.52     0         0.417     3.15061   0.6364
+``tip4p``       0.9572    104.52     0.15      0.52      3.15365   0.6480
+``tip4p2005``   0.9572    104.52     0.1546    0.5564    3.1589    0.7749
+``tip4pew``     0.9572    104.52     0.125     0.52422   3.16435   0.680946
+``opc``         0.8724    103.6      0.1594    0.6791    3.16655   0.89036
+==============  ========  =========  ========  ========  ========  =============
+
+``tip3p`` and ``tip4p`` are the parameters of ASE's
+:class:`~ase.calculators.tip3p.TIP3P` and :class:`~ase.calculators.tip4p.TIP4P`
+(Jorgensen et al. 1983), so explicit-site runs can be checked against them.
+
+References
+----------
+.. [1] W. L. Jorgensen, J. Chandrasekhar, J. D. Madura, R. W. Impey and
+   M. L. Klein, J. Chem. Phys. 79, 926 (1983) (TIP3P, TIP4P).
+.. [2] J. L. F. Abascal and C. Vega, J. Chem. Phys. 123, 234505 (2005)
+   (TIP4P/2005: ε/k = 93.2 K).
+.. [3] H. W. Horn, W. C. Swope, J. W. Pitera, J. D. Madura, T. J. Dick,
+   G. L. Hura and T. Head-Gordon, J. Chem. Phys. 120, 9665 (2004) (TIP4P-Ew).
+.. [4] S. Izadi, R. Anandakrishnan and A. V. Onufriev, J. Phys. Chem. Lett.
+   5, 3863 (2014) (OPC).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from ase import Atoms, units
+from ase.calculators import tip3p as ase_tip3p
+from ase.calculators import tip4p as ase_tip4p
+from ase.data import atomic_masses
+
+__all__ = ["WaterModel", "WATER_MODELS", "water_model", "M_SYMBOL"]
+
+#: Chemical symbol of the massless charge site M (ASE's dummy element, Z = 0).
+M_SYMBOL = "X"
+
+_KJ = units.kJ / units.mol
+
+
+@dataclass(frozen=True)
+class WaterModel:
+    """One rigid water model.
+
+    Attributes
+    ----------
+    name : str
+        Key in :data:`WATER_MODELS`.
+    r_oh : float
+        O–H bond length, Å.
+    angle_hoh : float
+        H–O–H angle, degrees.
+    d_om : float
+        O–M distance, Å; 0 for a three-site model (charge on O).
+    q_h : float
+        Charge of each hydrogen, e (O or M carries ``-2 q_h``).
+    sigma : float
+        O–O Lennard-Jones σ, Å (no Lennard-Jones on H or M).
+    epsilon : float
+        O–O Lennard-Jones ε, eV.
+    reference : str
+        Where the parameters come from.
+    """
+
+    name: str
+    r_oh: float
+    angle_hoh: float
+    d_om: float
+    q_h: float
+    sigma: float
+    epsilon: float
+    reference: str
+
+    @property
+    def sites(self):
+        """Atoms per molecule: 3, or 4 with the M site."""
+        return 4 if self.d_om > 0 else 3
+
+    @property
+    def symbols(self):
+        """Chemical symbols of one molecule: ``OH2`` or ``OH2X``."""
+        return "OH2" + (M_SYMBOL if self.sites == 4 else "")
+
+    def molecule(self):
+        """One molecule, oxygen at the origin, in the xy plane, bisector along +y.
+
+        Returns
+        -------
+        ase.Atoms
+            O, H, H (, M); with M, the masses are set (ASE's for O and H, 0
+            for M).
+        """
+        half = np.radians(self.angle_hoh) / 2
+        positions = [[0.0, 0.0, 0.0],
+                     [self.r_oh * np.sin(half), self.r_oh * np.cos(half), 0.0],
+                     [-self.r_oh * np.sin(half), self.r_oh * np.cos(half), 0.0]]
+        if self.sites == 4:
+            positions.append([0.0, self.d_om, 0.0])
+        atoms = Atoms(self.symbols, positions=positions)
+        if self.sites == 4:
+            atoms.set_masses(self.masses())  # ASE's default for X is 1 amu
+        return atoms
+
+    def masses(self):
+        """Masses of one molecule's sites, amu: O, H, H (, 0)."""
+        m = [atomic_masses[8], atomic_masses[1], atomic_masses[1]]
+        return np.array(m + [0.0] * (self.sites - 3))
+
+    def charges(self, n_molecules=1):
+        """Charges of ``n_molecules`` molecules in order (e).
+
+        ``(-2 q_h, q_h, q_h)`` per molecule, or ``(0, q_h, q_h, -2 q_h)``
+        with the M site.
+        """
+        one = [-2 * self.q_h, self.q_h, self.q_h] if self.sites == 3 else [
+            0.0, self.q_h, self.q_h, -2 * self.q_h]
+        return np.tile(one, int(n_molecules))
+
+    def check(self, atoms):
+        """Refuse atoms that are not whole molecules of this model in order.
+
+        Raises
+        ------
+        ValueError
+            Naming the first molecule whose symbols differ, or a count that
+            is not a multiple of :attr:`sites`.
+        """
+        k = self.sites
+        if len(atoms) % k:
+            raise ValueError(f"{self.name}: {len(atoms)} atoms is not a whole number of "
+                             f"{k}-site molecules ({self.symbols})")
+        expected = np.tile(self.molecule().numbers, len(atoms) // k)
+        bad = np.flatnonzero(atoms.numbers != expected)
+        if bad.size:
+            a = int(bad[0])
+            raise ValueError(f"{self.name}: atom {a} is {atoms[a].symbol}, expected "
+                             f"{Atoms(expected[a:a + 1]).get_chemical_symbols()[0]} "
+                             f"(molecules in the order {self.symbols})")
+
+    def lammps_commands(self, cutoff, kspace="pppm", accuracy=1e-5, tail=True,
+                        oxygen_type="O"):
+        """LAMMPS interaction commands for explicit sites (``lj/cut/coul/long``).
+
+        Lennard-Jones between oxygens only, Coulomb between all charged
+        sites, long-range electrostatics by ``kspace``; pairs within a
+        molecule excluded (:class:`~rigidmd.lammps.LAMMPSCalculator` and
+        exported decks exclude them through the molecule IDs).  M is a type
+        of its own with neither Lennard-Jones nor a special pair style.
+
+        Parameters
+        ----------
+        cutoff : float
+            Real-space cut-off of Lennard-Jones and Coulomb, Å.
+        kspace : {"pppm", "ewald"} or None
+            ``None``: plain cut-off Coulomb (``lj/cut/coul/cut``), for clusters.
+        accuracy : float
+            Relative force accuracy of the k-space solver.
+        tail : bool
+            Long-range Lennard-Jones corrections to energy and pressure
+            (``pair_modify tail yes``), as the TIP4P/2005, TIP4P-Ew and OPC
+            papers use.
+        oxygen_type : str or int
+            The oxygens' LAMMPS type (label or number).
+        """
+        coulomb = "cut" if kspace is None else "long"
+        cmds = [f"pair_style lj/cut/coul/{coulomb} {float(cutoff)!r}",
+                "pair_coeff * * 0.0 1.0",
+                f"pair_coeff {oxygen_type} {oxygen_type} {self.epsilon!r} {self.sigma!r}"]
+        if tail:
+            cmds.append("pair_modify tail yes")
+        if kspace is not None:
+            cmds.append(f"kspace_style {kspace} {float(accuracy)!r}")
+        return cmds
+
+
+WATER_MODELS = {
+    "tip3p": WaterModel("tip3p", ase_tip3p.rOH, ase_tip3p.angleHOH, 0.0, ase_tip3p.qH,
+                        ase_tip3p.sigma0, ase_tip3p.epsilon0,
+                        "Jorgensen et al. 1983, as ase.calculators.tip3p"),
+    "tip4p": WaterModel("tip4p", ase_tip4p.rOH, ase_tip4p.angleHOH, 0.15, ase_tip4p.qH,
+                        ase_tip4p.sigma0, ase_tip4p.epsilon0,
+                        "Jorgensen et al. 1983, as ase.calculators.tip4p"),
+    "tip4p2005": WaterModel("tip4p2005", 0.9572, 104.52, 0.1546, 0.5564, 3.1589,
+                            93.2 * units.kB, "Abascal & Vega, J. Chem. Phys. 123, 234505 (2005)"),
+    "tip4pew": WaterModel("tip4pew", 0.9572, 104.52, 0.125, 0.52422, 3.16435, 0.680946 * _KJ,
+                          "Horn et al., J. Chem. Phys. 120, 9665 (2004)"),
+    "opc": WaterModel("opc", 0.8724, 103.6, 0.1594, 0.6791, 3.16655, 0.89036 * _KJ,
+                      "Izadi, Anandakrishnan & Onufriev, J. Phys. Chem. Lett. 5, 3863 (2014)"),
+}
+
+
+def water_model(name):
+    """The :class:`WaterModel` called ``name`` (a :data:`WATER_MODELS` key, any case).
+
+    Raises
+    ------
+    ValueError
+        An unknown name, listing the known ones.
+    """
+    key = str(name).lower().replace("/", "").replace("-", "")
+    if key not in WATER_MODELS:
+        raise ValueError(f"unknown water model {name!r}; use one of {', '.join(WATER_MODELS)}")
+    return WATER_MODELS[key]
