@@ -25,6 +25,7 @@ atoms are in.
 """
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
@@ -126,6 +127,8 @@ class LAMMPSCalculator(Calculator):
         self._signature = None  # what a new instance is needed for
         self._cell = None       # the cell LAMMPS has
         self._rotation = None
+        #: The ``kspace_modify`` command that fixed the k-space parameters (None before).
+        self.kspace_parameters = None
 
     # ------------------------------------------------------------ set-up
     def _types(self, atoms):
@@ -270,6 +273,48 @@ class LAMMPSCalculator(Calculator):
         self._imgmask = lmp.extract_setting("IMGMASK")
         self._imgmax = lmp.extract_setting("IMGMAX")
         self._setup_needed = True
+        if periodic and any(c.split()[0] == "kspace_style" for c in self.commands):
+            self._pin_kspace()
+
+    def _pin_kspace(self):
+        """Keep the k-space parameters LAMMPS chooses for the first cell for every later cell.
+
+        LAMMPS chooses the Ewald parameter (and PPPM's mesh and order, or
+        Ewald's k-vectors) for the requested accuracy at each full set-up.  Its
+        own barostats set up once and keep them while the box changes; here a
+        new cell runs a full set-up (see :meth:`_change_box`), which would
+        choose them anew.  With intramolecular pairs excluded by
+        ``neigh_modify exclude``, the reciprocal-space energy of those pairs
+        depends on the Ewald parameter, so each new choice would shift the
+        energy by up to tenths of an eV for 216 waters (no force on a rigid
+        body changes, but the conserved energy of an NPT run jumps).  One
+        set-up here reads the choices from LAMMPS's log and fixes them with
+        ``kspace_modify``, as a native NPT run has them.
+        """
+        import re
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            log = Path(tmp) / "setup.log"
+            self._execute([f"log {log}", "run 0 pre yes post no", "log none"])
+            text = log.read_text()
+        number = r"([-+0-9.eE]+)"
+        g = re.search(r"G vector \(1/distance\)\s*=\s*" + number, text)
+        mesh = re.search(r"grid\s*=\s*(\d+)\s+(\d+)\s+(\d+)", text)
+        order = re.search(r"stencil order\s*=\s*(\d+)", text)
+        kmax = re.search(r"kxmax kymax kzmax\s*=\s*(\d+)\s+(\d+)\s+(\d+)", text)
+        if g is None or (mesh is None or order is None) and kmax is None:
+            warnings.warn("LAMMPSCalculator: could not read the k-space parameters LAMMPS "
+                          "chose; they are chosen anew at every cell change, so the energy "
+                          "of a run that changes the cell jumps", stacklevel=5)
+            return
+        modify = f"kspace_modify gewald {g.group(1)}"
+        if mesh is not None and order is not None:
+            modify += f" mesh {' '.join(mesh.groups())} order {order.group(1)}"
+        else:
+            modify += f" kmax/ewald {' '.join(kmax.groups())}"
+        self._execute([modify])
+        self.kspace_parameters = modify
 
     def _region(self, cell):
         lengths = " ".join(f"0 {cell[k, k]:.17g}" for k in range(3))
