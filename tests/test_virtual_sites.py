@@ -190,3 +190,48 @@ def test_momentum_on_a_massless_site_is_refused():
     with pytest.raises(ValueError, match=r"atom 3 \(X\) has mass 0 but momentum .*set after"):
         dyn.run(1)
     assert np.array_equal(atoms.positions, positions)
+
+
+@pytest.mark.lammps
+def test_lammps_follows_explicit_m_sites():
+    """LAMMPS sees M as an atom: same forces, and fix rigid/nve with M follows rigidmd.
+
+    Forces of ``lj/cut/coul/cut`` (cut-off beyond the cluster, intramolecular pairs
+    excluded) through LAMMPSCalculator equal CoulombLJ's to 1.1e-15 relative.  LAMMPS
+    ``fix rigid/nve`` with M at 1e-20 amu (LAMMPS refuses a mass of 0) and RigidVerlet
+    with M massless: measured gap 1.1e-11 Å and 3.5e-14 eV after 500 steps of 1 fs
+    (roundoff growing in a chaotic cluster, as for three-site water in
+    test_against_lammps.py); bounds 1e-8 Å and 1e-10 eV.
+    """
+    from rigidmd.lammps import LAMMPSCalculator, run_rigid_reference
+
+    model = water_model("tip4p2005")
+    atoms = water_cluster(8, seed=4, model="tip4p2005")
+    rigid_maxwell_boltzmann(atoms, 300.0, rng=np.random.default_rng(2))
+    atoms.set_initial_charges(model.charges(8))
+    lammps = atoms.copy()
+    lammps.calc = LAMMPSCalculator(model.lammps_commands(40.0, None, tail=False),
+                                   atom_types={"O": 1, "H": 2, "X": 3}, ase_constants=True)
+    reference = atoms.copy()
+    reference.calc = CoulombLJ(parameters=water_parameters(model))
+    f = reference.get_forces()
+    assert np.abs(lammps.get_forces() - f).max() < 1e-12 * np.abs(f).max()
+    assert lammps.get_potential_energy() == pytest.approx(reference.get_potential_energy(),
+                                                          abs=1e-12)
+
+    commands = model.lammps_commands(40.0, None, tail=False) + [
+        "neigh_modify exclude molecule/intra all"]
+    body_ids = RigidBodies.resolve(atoms, "mol-id").body_ids
+    ref = run_rigid_reference(atoms, body_ids, commands, 1 * units.fs, 500, every=10,
+                              charges=model.charges(8))
+    ours = atoms.copy()
+    ours.set_momenta(atoms.get_momenta(), apply_constraint=False)
+    ours.calc = CoulombLJ(parameters=water_parameters(model))
+    dyn = RigidVerlet(ours, 1 * units.fs)
+    positions, energies = [], []
+    dyn.attach(lambda: (positions.append(ours.positions.copy()),
+                        energies.append(ours.get_potential_energy() + kinetic_energy(ours))),
+               interval=10)
+    dyn.run(500)
+    assert np.abs(np.array(positions) - ref.positions).max() < 1e-8
+    assert np.abs(np.array(energies) - ref.total_energy).max() < 1e-10
