@@ -84,6 +84,8 @@ def _export(config, directory, stream=sys.stdout):
         pair = list(calc.commands)
         if calc.options.get("exclude_intramolecular", True):
             pair.append("neigh_modify exclude molecule/intra all")  # as the calculator does
+        if calc.water is not None:
+            calc.build(atoms)  # checks the molecules against the model, sets its charges
         charges = (np.array([calc.charges.get(s, 0.0) for s in atoms.get_chemical_symbols()])
                    if calc.charges else atoms.get_initial_charges())
     else:

