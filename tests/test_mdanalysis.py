@@ -602,3 +602,31 @@ def test_plot_labels_say_what_is_shown(tmp_path):
     labels = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
     assert all("no τ" in label and "nan" not in label for label in labels)
     assert fig.axes[0].get_ylabel().startswith("$C_\\ell(t)$")
+
+
+def test_four_site_water_topology(tmp_path):
+    """M of a four-site model: named MW, mass 0, its charge; the molecule is still SOL."""
+    from rigidmd.mdanalysis import MDAWriter
+    from rigidmd.systems import water_cluster
+    from rigidmd.water import water_model
+
+    model = water_model("tip4p2005")
+    atoms = water_cluster(4, seed=1, model="tip4p2005")
+    atoms.set_initial_charges(model.charges(4))
+    atoms.calc = ZeroForce()
+    rigid_maxwell_boltzmann(atoms, 300, rng=np.random.default_rng(0))
+    dyn = RigidVerlet(atoms, units.fs)
+    with MDAWriter(dyn, tmp_path / "w.xtc") as writer:
+        dyn.attach(writer, interval=5)
+        dyn.run(10)
+    u = mda.Universe(str(tmp_path / "w.psf"), str(tmp_path / "w.xtc"))
+    assert list(u.residues.resnames) == ["SOL"] * 4
+    assert list(u.atoms.names[:4]) == ["OW", "HW1", "HW2", "MW"]
+    mw = u.select_atoms("name MW")
+    assert mw.n_atoms == 4 and np.all(mw.masses == 0)
+    np.testing.assert_allclose(mw.charges, -2 * model.q_h, atol=1e-6)
+    # Centres of mass ignore M: the last frame's are the dynamics' own, to the XTC's
+    # precision (positions rounded to 0.01 Å, so centres of mass to 0.005 Å).
+    u.trajectory[-1]
+    com = np.array([r.atoms.center_of_mass() for r in u.residues])
+    np.testing.assert_allclose(com, dyn.com_positions, atol=5e-3)

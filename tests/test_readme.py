@@ -10,8 +10,9 @@ The README's fenced blocks are run in order in one scratch directory:
 
 Two kinds of bash line are not run here, and the test says where they are
 checked: ``pip install`` lines (``.ci/run`` runs the README's install and test
-command on a clean checkout) and the full-length TIP3P example (its ``--quick``
-form is run by ``tests/test_examples.py``; the full run takes minutes).
+command on a clean checkout) and the full-length TIP3P and TIP4P/2005 examples
+(their ``--quick`` forms are run by ``tests/test_examples.py``; the full runs take
+minutes).
 """
 
 import os
@@ -33,6 +34,7 @@ FENCE = re.compile(r"^```(\w*)\n(.*?)^```", re.MULTILINE | re.DOTALL)
 CHECKED_ELSEWHERE = (
     ("pip install", ".ci/run installs and tests a clean checkout"),
     ("examples/tip3p_water.py --outdir out  ", "tests/test_examples.py runs --quick"),
+    ("examples/tip4p2005.py --outdir out4  ", "tests/test_examples.py runs --quick"),
 )
 
 

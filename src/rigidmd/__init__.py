@@ -5,7 +5,7 @@ LAMMPS ``fix rigid/nve``) with forces from any ASE calculator; atoms in no
 body move as point particles in the same step.
 """
 
-from rigidmd.atomslink import RigidBodyDOF
+from rigidmd.atomslink import RigidBodyDOF, kinetic_energy, temperature
 from rigidmd.bodies import RigidBodies
 from rigidmd.checkpoint import load_checkpoint
 from rigidmd.dynamics import NonFiniteForceError, RigidDynamics, RigidVerlet
@@ -28,6 +28,8 @@ __all__ = [
     "RigidBodyDOF",
     "NonFiniteForceError",
     "rigid_maxwell_boltzmann",
+    "kinetic_energy",
+    "temperature",
     "rigid_temperature",
     "load_checkpoint",
 ]

@@ -127,7 +127,7 @@ def _residue_names(resindex, numbers, water_resname):
     is_water = []
     for row in compositions:
         comp = {chemical_symbols[z]: int(c) for z, c in zip(elements, row, strict=True) if c}
-        water = comp == {"O": 1, "H": 2}
+        water = comp in ({"O": 1, "H": 2}, {"O": 1, "H": 2, "X": 1})  # X: TIP4P's M
         is_water.append(water)
         if water:
             names.append(water_resname)
@@ -141,7 +141,8 @@ def _residue_names(resindex, numbers, water_resname):
 
 
 def _atom_names(resindex, numbers, symbols, water):
-    """Atom names: OW/HW1/HW2 in water, else element plus a number if it repeats."""
+    """Atom names: OW/HW1/HW2 (MW for a four-site model's M) in water, else element plus a
+    number if it repeats."""
     n = len(numbers)
     key = resindex * 256 + numbers
     order = np.lexsort((np.arange(n), key))
@@ -159,6 +160,7 @@ def _atom_names(resindex, numbers, symbols, water):
     names[in_water & (numbers == 8)] = "OW"
     hw = in_water & (numbers == 1)
     names[hw] = np.char.add("HW", (rank[hw] + 1).astype(str))
+    names[in_water & (numbers == 0)] = "MW"
     # A single atom (an ion) is named as its residue, in capitals (NA, CL), as in GROMACS.
     alone = np.bincount(resindex)[resindex] == 1
     names[alone] = np.char.upper(symbols[alone].astype(str))
