@@ -17,7 +17,7 @@ density with its standard error (block averages), beside 0.9979 g/cm³
 centres of mass (Einstein relation, from the production run) beside 0.21 Å²/ps
 for 216 molecules at 298 K (SklogWiki, citing the same authors).
 
-Run (about 20 minutes on two cores; ``--quick`` about a minute)::
+Run (about 25 minutes, LAMMPS on one core; ``--quick`` about 15 s)::
 
     python examples/tip4p2005.py [--outdir DIR] [--quick]
         [--equilibration-ps 20] [--production-ps 200]
