@@ -10,9 +10,9 @@ The README's fenced blocks are run in order in one scratch directory:
 
 Two kinds of bash line are not run here, and the test says where they are
 checked: ``pip install`` lines (``.ci/run`` runs the README's install and test
-command on a clean checkout), the full-length TIP3P and TIP4P/2005 examples
-(their ``--quick`` forms are run by ``tests/test_examples.py``; the full runs take
-minutes) and the MACE example (``tests/test_ml_potential.py``, where mace-torch is
+command on a clean checkout), the TIP3P and TIP4P/2005 examples (their
+``--quick`` forms are run, with checks on their results, by
+``tests/test_examples.py``; the full runs take minutes) and the MACE example (``tests/test_ml_potential.py``, where mace-torch is
 installed).
 """
 
@@ -34,8 +34,8 @@ FENCE = re.compile(r"^```(\w*)\n(.*?)^```", re.MULTILINE | re.DOTALL)
 #: Bash lines covered elsewhere (see the module docstring).
 CHECKED_ELSEWHERE = (
     ("pip install", ".ci/run installs and tests a clean checkout"),
-    ("examples/tip3p_water.py --outdir out  ", "tests/test_examples.py runs --quick"),
-    ("examples/tip4p2005.py --outdir out4  ", "tests/test_examples.py runs --quick"),
+    ("examples/tip3p_water.py --outdir out", "tests/test_examples.py runs it with --quick"),
+    ("examples/tip4p2005.py --outdir out4", "tests/test_examples.py runs it with --quick"),
     ("examples/mace_water.py --quick", "tests/test_ml_potential.py runs it where mace-torch "
      "is installed (the ml extra, not the test extra)"),
 )

@@ -136,10 +136,15 @@ def test_equipartition(name, system):
 def test_kinetic_energy_distribution_is_canonical(name):
     dyn, rows = sample(name, "water")
     kinetic = rows[:, 0] + rows[:, 1]
-    dof = dyn.translational_dof + dyn.rotational_dof
+    # With fixcm (Langevin's default) the total momentum stays zero: 3 fewer quadratic
+    # terms, so a gamma distribution of shape (dof - 3)/2 (as in test_equipartition).
+    removed = 3 if getattr(dyn, "thermostat", None) and dyn.thermostat.fixcm else 0
+    dof = dyn.translational_dof + dyn.rotational_dof - removed
     variance, error = block_error(kinetic, np.var)
     expected = 0.5 * dof * KT**2
-    # Measured ratios 1.00, 1.05, 0.97 with errors of 5-6 %.
+    # Measured ratios (numba 0.68, numpy 2.4): Langevin 0.90 ± 0.03 (with the 3
+    # removed; 0.87 against the full count, which failed), Bussi and Nose-Hoover within
+    # their 5-6 % errors of 1.
     assert abs(variance / expected - 1) < 4 * error / expected
     # The distribution itself: a gamma distribution of shape dof/2, scale kT.
     from scipy.stats import gamma
