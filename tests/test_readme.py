@@ -8,12 +8,12 @@ The README's fenced blocks are run in order in one scratch directory:
   before the blocks after them run;
 * ``bash`` blocks line by line (comments after ``#`` are shell comments).
 
-Two kinds of bash line are not run here, and the test says where they are
-checked: ``pip install`` lines (``.ci/run`` runs the README's install and test
-command on a clean checkout), the TIP3P and TIP4P/2005 examples (their
-``--quick`` forms are run, with checks on their results, by
-``tests/test_examples.py``; the full runs take minutes) and the MACE example (``tests/test_ml_potential.py``, where mace-torch is
-installed).
+Some bash lines are not run here, and the test says where they are checked:
+``pip install`` lines (``.ci/run`` runs the README's install and test command
+on a clean checkout), the TIP3P and TIP4P/2005 examples (their ``--quick``
+forms are run, with checks on their results, by ``tests/test_examples.py``;
+the full runs take minutes) and the MACE example
+(``tests/test_ml_potential.py``, where mace-torch is installed).
 """
 
 import os

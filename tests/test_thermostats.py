@@ -142,9 +142,9 @@ def test_kinetic_energy_distribution_is_canonical(name):
     dof = dyn.translational_dof + dyn.rotational_dof - removed
     variance, error = block_error(kinetic, np.var)
     expected = 0.5 * dof * KT**2
-    # Measured ratios (numba 0.68, numpy 2.4): Langevin 0.90 ± 0.03 (with the 3
-    # removed; 0.87 against the full count, which failed), Bussi and Nose-Hoover within
-    # their 5-6 % errors of 1.
+    # Measured (numba 0.68, numpy 2.4): Langevin 0.90 ± 0.03 with the 3 removed (0.87
+    # against the full count, which failed this bound); earlier, before fixcm, ratios
+    # 1.00, 1.05, 0.97 with errors of 5-6 %.
     assert abs(variance / expected - 1) < 4 * error / expected
     # The distribution itself: a gamma distribution of shape dof/2, scale kT.
     from scipy.stats import gamma

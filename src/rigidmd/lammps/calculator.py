@@ -24,6 +24,8 @@ tags, else from ``molecule_ids``, else from the bodies of a rigid dynamics the
 atoms are in.
 """
 
+import re
+import tempfile
 import warnings
 from pathlib import Path
 
@@ -291,9 +293,6 @@ class LAMMPSCalculator(Calculator):
         set-up here reads the choices from LAMMPS's log and fixes them with
         ``kspace_modify``, as a native NPT run has them.
         """
-        import re
-        import tempfile
-
         with tempfile.TemporaryDirectory() as tmp:
             log = Path(tmp) / "setup.log"
             self._execute([f"log {log}", "run 0 pre yes post no", "log none"])
