@@ -184,6 +184,16 @@ def test_missing_config_file(tmp_path):
     assert result.stderr.strip() == "rigidmd: error: config: no such file 'nowhere.yaml'"
 
 
+def run_deck(directory, monkeypatch):
+    """Run an exported deck (``in.rigidmd``) in-process, in its directory."""
+    monkeypatch.chdir(directory)
+    lmp = load_lammps()
+    try:
+        lmp.file("in.rigidmd")
+    finally:
+        lmp.close()
+
+
 @pytest.mark.lammps
 def test_export_lammps_round_trip(project, monkeypatch):
     """The exported deck, run in-process, follows rigidmd for its first 100 steps."""
@@ -195,12 +205,7 @@ def test_export_lammps_round_trip(project, monkeypatch):
     assert result.returncode == 0, result.stderr
     deck = (project / "deck" / "in.rigidmd").read_text()
     assert "fix 1 rigidgroup rigid/nve/small molecule" in deck
-    monkeypatch.chdir(project / "deck")
-    lmp = load_lammps()
-    try:
-        lmp.file("in.rigidmd")
-    finally:
-        lmp.close()
+    run_deck(project / "deck", monkeypatch)
     result = rigidmd("run", "nve.yaml", cwd=project)
     assert result.returncode == 0, result.stderr
     ours = read(project / "out" / "md.traj", ":")
@@ -285,12 +290,7 @@ def test_four_site_water_run_and_export(tmp_path, monkeypatch):
     assert result.returncode == 0, result.stderr
     data = (tmp_path / "deck" / "data.rigidmd").read_text()
     assert "3 X" in data and "3 1e-20" in data  # M: its own type, a LAMMPS-legal mass
-    monkeypatch.chdir(tmp_path / "deck")
-    lmp = load_lammps()
-    try:
-        lmp.file("in.rigidmd")
-    finally:
-        lmp.close()
+    run_deck(tmp_path / "deck", monkeypatch)
     steps, positions, _ = read_dump(tmp_path / "deck" / "frames.dump", 108)
     np.testing.assert_array_equal(steps, [0, 10, 20])
     unwrap = [RigidBodies.resolve(a, "tags").whole_positions(a) for a in ours]
