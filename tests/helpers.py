@@ -95,9 +95,9 @@ class CoulombLJ(Calculator):
 
 def water_parameters(model):
     """:class:`CoulombLJ` parameters of a water model of :mod:`rigidmd.water` (M labelled X)."""
-    charges = dict(zip(("O_water", "H", "H", "X"), model.charges(), strict=False))
-    return {"O_water": (charges["O_water"], model.sigma, model.epsilon),
-            "H": (model.q_h, 1.0, 0.0), "X": (charges.get("X", 0.0), 1.0, 0.0)}
+    on_m = model.sites == 4  # the negative charge sits on M, else on O
+    return {"O_water": (0.0 if on_m else -2 * model.q_h, model.sigma, model.epsilon),
+            "H": (model.q_h, 1.0, 0.0), "X": (-2 * model.q_h if on_m else 0.0, 1.0, 0.0)}
 
 
 def coulomb_lj_lammps(atoms, cutoff=60.0):
