@@ -1,5 +1,9 @@
 """Checkpoints: exact continuation of every kind of dynamics, and what a file holds."""
 
+import os
+import stat
+from pathlib import Path
+
 import numpy as np
 import pytest
 from ase import units
@@ -14,7 +18,7 @@ from rigidmd import (
     RigidVerlet,
     load_checkpoint,
 )
-from rigidmd.checkpoint import CheckpointError, read_checkpoint
+from rigidmd.checkpoint import CheckpointError, read_checkpoint, remove_stale_temporaries
 
 KINDS = ["nve", "langevin", "bussi", "nose_hoover", "mtk", "crescale"]
 
@@ -135,3 +139,116 @@ def test_legacy_random_state_is_checkpointed(tmp_path):
             dyn.run(20 - split)
         runs.append(dyn.atoms.positions.copy())
     np.testing.assert_array_equal(runs[0], runs[1])
+
+
+def test_checkpoint_mode_follows_the_umask(tmp_path):
+    """Like every other output (ASE's trajectory, the log), not mkstemp's 0600."""
+    dyn = build("nve")
+    previous = os.umask(0o022)
+    try:
+        dyn.save_checkpoint(tmp_path / "state.npz")
+        (tmp_path / "other").write_text("")
+    finally:
+        os.umask(previous)
+    assert stat.S_IMODE((tmp_path / "state.npz").stat().st_mode) == 0o644
+    assert stat.S_IMODE((tmp_path / "other").stat().st_mode) == 0o644
+
+
+def test_temporaries_left_by_a_kill_are_found_and_removed(tmp_path, monkeypatch):
+    """A write killed before its rename leaves ``.NAME.*.tmp``; nothing else is touched."""
+    dyn = build("nve")
+
+    def killed(fh, **arrays):
+        fh.write(b"half a checkpoint")
+        raise SystemExit  # stands for SIGKILL: the cleanup below it never runs
+
+    monkeypatch.setattr(np, "savez", killed)
+    monkeypatch.setattr(Path, "unlink", lambda self, missing_ok=False: None)
+    with pytest.raises(SystemExit):
+        dyn.save_checkpoint(tmp_path / "state.npz")
+    monkeypatch.undo()
+    (tmp_path / ".other.npz.1-ab.tmp").write_text("not ours")
+    left = [p.name for p in tmp_path.glob(".state.npz.*.tmp")]
+    assert len(left) == 1
+    assert remove_stale_temporaries(tmp_path / "state.npz") == left
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".other.npz.1-ab.tmp"]
+
+
+def test_a_write_error_names_the_checkpoint_not_its_temporary(tmp_path, monkeypatch):
+    dyn = build("nve")
+
+    def full_disk(fh, **arrays):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(np, "savez", full_disk)
+    with pytest.raises(OSError) as err:
+        dyn.save_checkpoint(tmp_path / "state.npz")
+    assert err.value.filename == str(tmp_path / "state.npz")
+    assert err.value.errno == 28
+
+
+def damaged_copies(good):
+    """Empty, truncated at many lengths, and with bytes flipped at many places."""
+    yield "empty", b""
+    for cut in (1, 10, 30, 100, len(good) // 3, len(good) // 2, len(good) - 100,
+                len(good) - 22, len(good) - 1):
+        yield f"truncated at {cut}", good[:cut]
+    for where in range(0, len(good), max(1, len(good) // 97)):
+        flipped = bytearray(good)
+        flipped[where] ^= 0x5A
+        yield f"byte {where} flipped", bytes(flipped)
+
+
+def test_damaged_checkpoints_are_one_clear_error(tmp_path):
+    """No BadZipFile, EOFError or KeyError: a CheckpointError, or a checkpoint that loads."""
+    dyn = build("langevin")
+    dyn.run(3)
+    dyn.save_checkpoint(tmp_path / "good.npz")
+    good = (tmp_path / "good.npz").read_bytes()
+    refused = 0
+    for name, data in damaged_copies(good):
+        path = tmp_path / "damaged.npz"
+        path.write_bytes(data)
+        try:
+            checkpoint = read_checkpoint(path)
+        except CheckpointError as err:
+            assert "\n" not in str(err) and str(path) in str(err), name
+            refused += 1
+            continue
+        # A flip the archive cannot see (in a zip comment or padding) changes nothing.
+        resumed = load_checkpoint(checkpoint, calculator("langevin"))
+        np.testing.assert_array_equal(resumed.atoms.positions, dyn.atoms.positions)
+    assert refused > 90
+    (tmp_path / "empty.npz").write_bytes(b"")
+    with pytest.raises(CheckpointError, match="the file is empty"):
+        read_checkpoint(tmp_path / "empty.npz")
+
+
+def test_incomplete_checkpoint_names_what_is_missing(tmp_path):
+    dyn = build("nve")
+    dyn.save_checkpoint(tmp_path / "state.npz")
+    with np.load(tmp_path / "state.npz") as data:
+        arrays = {key: data[key] for key in data.files if key != "positions"}
+    np.savez(tmp_path / "cut.npz", **arrays)
+    with pytest.raises(CheckpointError, match="is incomplete \\(no 'positions'\\)"):
+        read_checkpoint(tmp_path / "cut.npz")
+
+
+@pytest.mark.parametrize("masses, charges", [(False, False), (True, True)])
+def test_loaded_atoms_have_the_arrays_the_saved_ones_had(tmp_path, masses, charges):
+    """Masses and charges are set only where they were: ASE writes set arrays to .traj frames."""
+    atoms = mixture()
+    if masses:
+        atoms.set_masses(atoms.get_masses() * 1.5)
+    if charges:
+        atoms.set_initial_charges(np.linspace(-1, 1, len(atoms)))
+    else:
+        atoms.arrays.pop("initial_charges", None)
+        atoms.arrays.pop("masses", None)
+    dyn = RigidVerlet(atoms, 2 * units.fs, bodies="mol-id")
+    dyn.save_checkpoint(tmp_path / "state.npz")
+    loaded = read_checkpoint(tmp_path / "state.npz").atoms()
+    for name in ("masses", "initial_charges"):
+        assert (name in loaded.arrays) == (name in dyn.atoms.arrays), name
+    np.testing.assert_array_equal(loaded.get_masses(), dyn.atoms.get_masses())
+    np.testing.assert_array_equal(loaded.get_initial_charges(), dyn.atoms.get_initial_charges())

@@ -25,16 +25,17 @@ more steps are bit-identical to those of the run that was never stopped.
 neighbour list built at another step, agree to roundoff instead.)
 """
 
+import glob
 import json
 import os
-import tempfile
+import secrets
 from pathlib import Path
 
 import numpy as np
 from ase import Atoms
 
 __all__ = ["save_checkpoint", "load_checkpoint", "read_checkpoint", "atomic_write",
-           "CheckpointError", "FORMAT"]
+           "remove_stale_temporaries", "CheckpointError", "FORMAT"]
 
 #: Identifies the file format (with a version number).
 FORMAT = "rigidmd-checkpoint-1"
@@ -53,18 +54,34 @@ def atomic_write(path, write):
     """Write a file atomically: ``write(fh)`` into a temporary file, fsync, rename.
 
     A reader sees the old file or the new one, never a partial one, also
-    after a crash or a full disk (the temporary file is removed then).
+    after a crash or a full disk (the temporary file is removed then; one
+    left by ``kill -9`` is named ``.NAME.*.tmp`` and :func:`remove_stale_temporaries`
+    removes it).  The file's mode follows the umask, as ``open()``'s does.
+    An ``OSError`` (a full disk, ...) carries ``path`` as its ``filename``.
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+    for _ in range(100):
+        tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
+        try:
+            fd = os.open(tmp, flags, 0o666)  # the umask applies, as for every other output
+            break
+        except FileExistsError:  # pragma: no cover - 32 random bits taken already
+            continue
+        except OSError as err:
+            raise _naming(err, path) from None
+    else:  # pragma: no cover
+        raise FileExistsError(f"cannot create a temporary file beside {path}")
     try:
         with os.fdopen(fd, "wb") as fh:
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(err, OSError):
+            raise _naming(err, path) from None
         raise
     try:
         directory = os.open(path.parent, os.O_RDONLY)
@@ -76,6 +93,27 @@ def atomic_write(path, write):
         pass
     finally:
         os.close(directory)
+
+
+def _naming(err, path):
+    """``err`` with ``filename`` set to the file meant (not its temporary name)."""
+    if err.filename is None or str(err.filename).endswith(".tmp"):
+        err = type(err)(err.errno, err.strerror or str(err), str(path))
+    return err
+
+
+def remove_stale_temporaries(path):
+    """Remove the temporary files a killed :func:`atomic_write` of ``path`` left behind.
+
+    Call it only while no other process writes ``path`` (the command line
+    holds the output directory's lock).  Returns the names removed.
+    """
+    path = Path(path)
+    removed = []
+    for tmp in sorted(path.parent.glob(f".{glob.escape(path.name)}.*.tmp")):
+        tmp.unlink(missing_ok=True)
+        removed.append(tmp.name)
+    return removed
 
 
 def _jsonable(value):
@@ -161,6 +199,7 @@ def save_checkpoint(dyn, path, extra=None):
         "scratch": {k: v for k, v in ctx.scratch.items() if isinstance(v, np.ndarray)},
         "info": {k: v for k, v in atoms.info.items() if _is_json(v)},
         "extra": extra or {},
+        "atoms_arrays": sorted(atoms.arrays),  # which arrays the Atoms had set
     }
     arrays["meta"] = np.array(json.dumps(_jsonable(meta)))
     atomic_write(path, lambda fh: np.savez(fh, **arrays))
@@ -185,7 +224,13 @@ class Checkpoint:
         a = self.arrays
         atoms = Atoms(numbers=a["numbers"], positions=a["positions"], cell=a["cell"],
                       pbc=a["pbc"], tags=a["tags"], charges=a["charges"])
-        atoms.set_masses(a["masses"])
+        # Masses and charges as the saved Atoms had them: an array set only where it was
+        # (ASE writes the arrays an Atoms has to every trajectory frame).
+        present = self.meta.get("atoms_arrays")
+        if present is None or "masses" in present:
+            atoms.set_masses(a["masses"])
+        if present is not None and "initial_charges" not in present:
+            del atoms.arrays["initial_charges"]
         atoms.set_momenta(a["momenta"], apply_constraint=False)
         for key, values in a.items():
             if key.startswith("atoms_"):
@@ -194,23 +239,51 @@ class Checkpoint:
         return atoms
 
 
+#: What every checkpoint holds (a file without one of them is damaged or not ours).
+_REQUIRED_ARRAYS = ("numbers", "positions", "momenta", "masses", "tags", "charges", "cell",
+                    "pbc", "body_ids", "F", "tau", "f")
+_REQUIRED_META = ("nsteps", "time", "dt", "scheme", "scheme_name", "backend", "bodies_rule",
+                  "model_n_atoms", "couplings", "scratch", "extra")
+
+
 def read_checkpoint(path):
-    """Read a checkpoint file; a :class:`CheckpointError` names what is wrong."""
+    """Read a checkpoint file; a :class:`CheckpointError` names what is wrong.
+
+    An empty, truncated or corrupted file (the archive's checksums fail),
+    or one that lacks a part every checkpoint has, is a :class:`CheckpointError`.
+    """
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {key: data[key] for key in data.files}
     except FileNotFoundError:
         raise CheckpointError(f"checkpoint: no such file {str(path)!r}") from None
-    except (OSError, ValueError) as err:
+    except IsADirectoryError:
+        raise CheckpointError(f"checkpoint: {str(path)!r} is a directory") from None
+    except Exception as err:  # a damaged archive raises BadZipFile, EOFError, KeyError, ...
+        reason = " ".join(str(err).split()) or type(err).__name__
+        if path.is_file() and path.stat().st_size == 0:
+            reason = "the file is empty"
         raise CheckpointError(f"checkpoint: {str(path)!r} is not a readable checkpoint "
-                              f"({err})") from None
+                              f"({reason})") from None
     if "meta" not in arrays:
         raise CheckpointError(f"checkpoint: {str(path)!r} holds no rigidmd metadata")
-    meta = _from_json(json.loads(str(arrays.pop("meta"))))
+    try:
+        meta = _from_json(json.loads(str(arrays.pop("meta"))))
+    except (ValueError, TypeError, KeyError) as err:
+        raise CheckpointError(f"checkpoint: {str(path)!r} has unreadable metadata "
+                              f"({err})") from None
+    if not isinstance(meta, dict):
+        raise CheckpointError(f"checkpoint: {str(path)!r} has unreadable metadata")
     if meta.get("format") != FORMAT:
         raise CheckpointError(f"checkpoint: {str(path)!r} has format {meta.get('format')!r}, "
                               f"this rigidmd reads {FORMAT!r}")
+    missing = [name for name in _REQUIRED_ARRAYS if name not in arrays]
+    missing += [f"model_{name}" for name in _MODEL_FIELDS if f"model_{name}" not in arrays]
+    missing += [f"state_{name}" for name in _STATE_FIELDS if f"state_{name}" not in arrays]
+    missing += [name for name in _REQUIRED_META if name not in meta]
+    if missing:
+        raise CheckpointError(f"checkpoint: {str(path)!r} is incomplete (no {missing[0]!r})")
     return Checkpoint(meta, arrays)
 
 
