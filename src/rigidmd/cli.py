@@ -33,7 +33,7 @@ from rigidmd.dynamics import NonFiniteForceError
 from rigidmd.logplot import LogError, plot_log
 from rigidmd.operators import ConvergenceError
 from rigidmd.outputs import OutputError, describe_os_error
-from rigidmd.runner import Run
+from rigidmd.runner import Run, RunStopped
 
 __all__ = ["main"]
 
@@ -190,6 +190,11 @@ def main(argv=None):
             raise
         print(f"rigidmd: error: {' '.join(str(err).split())}", file=sys.stderr)
         return 2
+    except RunStopped as err:
+        # The run started and stopped: a failed write, a failure in a step.  The message
+        # names the step and the checkpoint to continue from.
+        print(f"rigidmd: run stopped: {err}", file=sys.stderr)
+        return 1
     except (NonFiniteForceError, ConvergenceError) as err:
         # The run stopped; its outputs and checkpoint hold every step before the failure.
         print(f"rigidmd: run stopped: {err}", file=sys.stderr)
@@ -197,8 +202,7 @@ def main(argv=None):
     except OSError as err:
         if os.environ.get("RIGIDMD_DEBUG"):
             raise
-        print(f"rigidmd: run stopped: {describe_os_error(err)}; the last checkpoint is intact",
-              file=sys.stderr)
+        print(f"rigidmd: error: {describe_os_error(err)}", file=sys.stderr)
         return 1
     except (ValueError, TypeError) as err:
         # Raised by rigidmd before anything runs: a bad body definition, mass, ...

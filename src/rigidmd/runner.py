@@ -21,19 +21,27 @@
 
 import hashlib
 import json
+import os
 import signal
 import sys
 import time
 from dataclasses import asdict
+from pathlib import Path
 
 import numpy as np
 from ase import units
 
 from rigidmd.atomslink import temperature
 from rigidmd.config import TIME_UNITS, ConfigError
-from rigidmd.outputs import OutputError, OutputLock, output_lengths, trim_outputs
+from rigidmd.outputs import (
+    OutputError,
+    OutputLock,
+    describe_os_error,
+    output_lengths,
+    trim_outputs,
+)
 
-__all__ = ["Run", "Progress", "StopSignals", "StopRequest"]
+__all__ = ["Run", "RunStopped", "Progress", "StopSignals", "StopRequest", "fingerprint"]
 
 #: Exit status of a run stopped by each signal (128 + signal number).
 EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGUSR1: 138}
@@ -111,18 +119,62 @@ class Progress:
         self.stream.flush()
 
 
-def fingerprint(config):
-    """A digest of what defines the trajectory (all but ``steps`` and output names)."""
-    run = asdict(config.run)
-    run.pop("steps")
-    data = {
-        "structure": str(config.structure.source), "bodies": config.structure.bodies,
-        "calculator": asdict(config.calculator), "run": run,
-        "coupling": [[spec.kind, spec.kwargs, spec.seed] for spec in config.coupling.specs],
-        "interval": config.outputs.interval,
-    }
-    text = json.dumps(data, sort_keys=True, default=str)
+class RunStopped(RuntimeError):
+    """The run stopped after it started (a failed write, a failure in a step); one line."""
+
+
+def _digest(value):
+    text = json.dumps(value, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _file_digest(path):
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()[:16]
+
+
+def fingerprint(config):
+    """What defines the trajectory, field by field: a digest per configuration field.
+
+    ``steps`` and the output file names are left out, and so is where the
+    files lie: a structure file or an integrator ``.yaml`` counts by its
+    content, so a moved or copied run directory resumes.
+
+    Returns
+    -------
+    dict
+        Field name (as in the configuration) -> 16 hexadecimal digits.
+    """
+    structure = config.structure
+    source = structure.source
+    if isinstance(source, Path):
+        source = {"file content": _file_digest(source)}
+    integrator = config.run.integrator
+    if isinstance(integrator, str) and integrator.endswith((".yaml", ".yml")):
+        integrator = {"file content": _file_digest(integrator)}
+    calculator = {key: value for key, value in asdict(config.calculator).items()
+                  if not key.startswith("_")}
+    fields = {
+        "structure": source, "read_options": structure.read_options,
+        "bodies": structure.bodies, "calculator": calculator,
+        "integrator": integrator, "integrator_options": config.run.integrator_options,
+        "timestep": config.run.timestep, "velocities": config.run.velocities,
+        "outputs.interval": config.outputs.interval,
+    }
+    for section in ("thermostat", "barostat"):
+        spec = getattr(config.coupling, section)
+        fields[section] = None if spec is None else [spec.kind, spec.kwargs, spec.seed]
+    return {name: _digest(value) for name, value in fields.items()}
+
+
+def _differing_fields(recorded, current):
+    """The configuration fields whose digests differ (all of them for an old record)."""
+    if not isinstance(recorded, dict):
+        return None
+    return [name for name in current if recorded.get(name) != current[name]]
 
 
 def _observables(dyn):
@@ -133,14 +185,36 @@ def _observables(dyn):
     return row
 
 
+class _NamedOutput:
+    """An output observer whose write errors name its file (ASE's carry no file name)."""
+
+    modifies_atoms = False
+
+    def __init__(self, function, path):
+        self.function, self.path = function, path
+
+    def __call__(self, *args, **kwargs):
+        try:
+            return self.function(*args, **kwargs)
+        except OSError as err:
+            if err.filename is None:
+                raise type(err)(err.errno, err.strerror or str(err), str(self.path)) from None
+            raise
+
+
 class Run:
     """One ``rigidmd run`` (or ``demo``) of a checked configuration.
+
+    Everything the run reads (the structure or restart file, the checkpoint)
+    is read, and the calculator and the dynamics are checked, before any
+    output is removed or written.
 
     Parameters
     ----------
     config : rigidmd.config.RunConfig
     mode : {"new", "resume", "overwrite", "demo"}
-        ``"demo"`` replaces the directory's earlier outputs, saying so.
+        ``"demo"`` replaces an earlier demo's outputs in the directory, saying
+        so, and refuses to touch any other run's.
     config_path : str, optional
         The configuration file, for the resume hint.
     stream : file
@@ -150,6 +224,7 @@ class Run:
         self.config, self.mode, self.stream = config, mode, stream
         self.config_path = config_path
         self.outputs = config.outputs
+        self.checkpoint_step = None  # step of the last checkpoint on disk, once known
 
     # ------------------------------------------------------------ outputs
     def _appended_files(self):
@@ -165,15 +240,39 @@ class Run:
         files += [p for p in (self.outputs.plot, self.outputs.checkpoint) if p]
         return files
 
+    def _resume_hint(self):
+        return f"rigidmd run {self.config_path or 'CONFIG'} --resume"
+
+    def _is_earlier_demo(self):
+        """The checkpoint in the directory is a demo's (same fingerprint, any steps)."""
+        from rigidmd.checkpoint import CheckpointError, read_checkpoint
+
+        try:
+            checkpoint = read_checkpoint(self.outputs.checkpoint)
+        except CheckpointError:
+            return False
+        return checkpoint.extra.get("fingerprint") == fingerprint(self.config)
+
     def _prepare_directory(self):
+        from rigidmd.checkpoint import remove_stale_temporaries
+
         existing = [p for p in self._all_files() if p.exists()]
-        if self.mode == "resume" or not existing:
-            return
         names = ", ".join(p.name for p in existing)
-        if self.mode == "new":
+        if self.mode == "new" and existing:
             raise ConfigError(
                 f"outputs: {self.outputs.directory} already holds {names} from an earlier run; "
                 "continue it with --resume, or replace it with --overwrite")
+        if self.mode == "demo" and existing and not self._is_earlier_demo():
+            raise ConfigError(
+                f"outputs: {self.outputs.directory} holds {names}, which are not an earlier "
+                "demo's; give the demo another --outdir")
+        # No other run writes here (the lock is ours): a temporary file is a killed write's.
+        stale = remove_stale_temporaries(self.outputs.checkpoint)
+        if stale:
+            print(f"removed {', '.join(stale)}, left by a checkpoint write that was killed",
+                  file=self.stream)
+        if self.mode == "resume" or not existing:
+            return
         verb = "replacing the earlier demo's" if self.mode == "demo" else "removing"
         print(f"{verb} {names} in {self.outputs.directory}", file=self.stream)
         for path in existing:
@@ -192,44 +291,82 @@ class Run:
                                     rng=np.random.default_rng(velocities["seed"]))
         return atoms, bodies
 
+    def _dynamics_arguments(self):
+        return dict(integrator=self.config.run.integrator,
+                    integrator_options=self.config.run.integrator_options)
+
     def _new_dynamics(self):
+        """Read the inputs and check the dynamics on a copy; build it after the outputs' turn."""
+        import warnings
+
         from rigidmd.dynamics import RigidDynamics
 
         atoms, bodies = self._start_atoms()
         atoms.calc = self.config.calculator.build(atoms)
+        probe = atoms.copy()
+        probe.calc = atoms.calc
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the real construction below warns, once
+            RigidDynamics(probe, self.config.run.timestep, bodies=bodies,
+                          couplings=self.config.coupling.parts(), **self._dynamics_arguments())
+        self._prepare_directory()
         out = self.outputs
         return RigidDynamics(atoms, self.config.run.timestep, bodies=bodies,
-                             integrator=self.config.run.integrator,
-                             integrator_options=self.config.run.integrator_options,
                              couplings=self.config.coupling.parts(),
                              trajectory=str(out.trajectory) if out.trajectory else None,
                              logfile=str(out.log) if out.log else None,
-                             loginterval=out.interval)
+                             loginterval=out.interval, **self._dynamics_arguments())
 
-    def _resumed_dynamics(self):
-        from rigidmd.checkpoint import CheckpointError, load_checkpoint, read_checkpoint
-        from rigidmd.logger import RigidLogger
+    def _read_checkpoint(self):
+        from rigidmd.checkpoint import CheckpointError, read_checkpoint
 
         out = self.outputs
+        if not out.checkpoint.exists():
+            others = [p.name for p in self._all_files() if p.exists()]
+            if others:
+                raise ConfigError(
+                    f"--resume: there is no checkpoint {out.checkpoint} beside "
+                    f"{', '.join(others)}, so that run cannot be continued; start it again "
+                    "with --overwrite")
+            raise ConfigError(f"--resume: there is no run to continue in {out.directory} (no "
+                              f"{out.checkpoint.name}); start one without --resume")
         try:
             checkpoint = read_checkpoint(out.checkpoint)
         except CheckpointError as err:
-            raise ConfigError(f"--resume: {err}; start the run without --resume") from None
-        recorded = checkpoint.extra.get("fingerprint")
-        if recorded != fingerprint(self.config):
+            raise ConfigError(f"--resume: {err}; the run cannot be continued: start it again "
+                              "with --overwrite") from None
+        differing = _differing_fields(checkpoint.extra.get("fingerprint"), fingerprint(self.config))
+        if differing is None:
+            raise ConfigError("--resume: the checkpoint was written by an earlier rigidmd, "
+                              "whose record of the configuration cannot be compared; start "
+                              "anew with --overwrite")
+        if differing:
             raise ConfigError(
-                "--resume: the configuration differs from the checkpoint's (only steps may "
-                "change between a run and its continuation); restore it, or start anew "
-                "with --overwrite")
-        trimmed = trim_outputs(self._appended_files(), checkpoint.extra.get("outputs", {}))
-        atoms = checkpoint.atoms()
-        calc = self.config.calculator.build(atoms)
+                f"--resume: {', '.join(differing)} differ{'s' if len(differing) == 1 else ''} "
+                "from the checkpoint's run (only steps may change between a run and its "
+                "continuation); restore it, or start anew with --overwrite")
+        return checkpoint
+
+    def _resumed_dynamics(self):
+        from rigidmd.checkpoint import load_checkpoint
+        from rigidmd.logger import RigidLogger
+
+        out = self.outputs
+        checkpoint = self._read_checkpoint()
+        calc = self.config.calculator.build(checkpoint.atoms())
+        self._prepare_directory()
+        # At step 0 the dynamics writes its first frame and log line again (ASE calls the
+        # observers before the first step): the outputs start anew.
+        fresh = checkpoint.nsteps == 0
+        lengths = {} if fresh else checkpoint.extra.get("outputs", {})
+        trimmed = trim_outputs(self._appended_files(), lengths)
+        self.checkpoint_step = checkpoint.nsteps
         dyn = load_checkpoint(checkpoint, calc,
                               trajectory=str(out.trajectory) if out.trajectory else None,
-                              append_trajectory=True, loginterval=out.interval)
+                              append_trajectory=not fresh, loginterval=out.interval)
         if out.log:
             dyn.attach(dyn.closelater(RigidLogger(dyn, str(out.log), pressure=dyn._needs_stress,
-                                                  header=False)), out.interval)
+                                                  header=fresh)), out.interval)
         cut = f" (cut back: {', '.join(trimmed)})" if trimmed else ""
         print(f"resuming from step {dyn.nsteps} of {out.checkpoint}{cut}", file=self.stream)
         return dyn
@@ -241,6 +378,22 @@ class Run:
         extra = {"outputs": output_lengths(self._appended_files()),
                  "fingerprint": fingerprint(self.config), "steps": self.config.run.steps}
         dyn.save_checkpoint(self.outputs.checkpoint, extra=extra)
+        self.checkpoint_step = dyn.nsteps
+
+    def _name_outputs(self, dyn):
+        """Wrap the trajectory and log observers so that their write errors name the file.
+
+        Called before the run attaches its own observers: the dynamics has only
+        these two (ASE's trajectory writer, an ``MDLogger``) then.
+        """
+        from ase.md.logger import MDLogger
+
+        named = []
+        for function, interval, args, kwargs in dyn.observers:
+            owner = getattr(function, "__self__", function)
+            path = self.outputs.log if isinstance(owner, MDLogger) else self.outputs.trajectory
+            named.append((_NamedOutput(function, path), interval, args, kwargs))
+        dyn.observers[:] = named
 
     # ------------------------------------------------------------ the run
     def execute(self):
@@ -250,13 +403,14 @@ class Run:
             out.directory.mkdir(parents=True, exist_ok=True)
         except OSError as err:
             raise OutputError(f"outputs.directory: cannot create {out.directory} "
-                              f"({err.strerror})") from None
+                              f"({describe_os_error(err).split(': ', 1)[-1]})") from None
         lock = OutputLock(out.directory)
         try:
             lock.acquire()
-        except PermissionError:
+        except OSError as err:
+            reason = describe_os_error(err).rsplit(": ", 1)[-1]
             raise OutputError(f"outputs.directory: cannot write in {out.directory} "
-                              "(permission denied)") from None
+                              f"({reason})") from None
         if lock.stale:
             print(f"taking over the lock left by process {lock.stale.get('pid')}, which is gone",
                   file=self.stream)
@@ -265,24 +419,39 @@ class Run:
         finally:
             lock.release()
 
+    def _set_up(self):
+        """The dynamics, ready to run; nothing has run yet (errors are the set-up's)."""
+        try:
+            return self._resumed_dynamics() if self.mode == "resume" else self._new_dynamics()
+        except OSError as err:
+            raise OutputError(describe_os_error(err)) from None
+
+    def _stopped(self, dyn, reason):
+        if self.checkpoint_step is None:
+            where = "no checkpoint was written"
+        else:
+            where = (f"the last checkpoint is intact (step {self.checkpoint_step}): continue "
+                     f"with {self._resume_hint()}")
+        return RunStopped(f"{reason} (at step {dyn.nsteps}); {where}")
+
     def _execute(self):
         out, config = self.outputs, self.config
-        self._prepare_directory()
-        dyn = self._resumed_dynamics() if self.mode == "resume" else self._new_dynamics()
+        dyn = self._set_up()
         total = config.run.steps
         remaining = total - dyn.nsteps
         if remaining <= 0:
             print(f"the run is complete ({dyn.nsteps} of {total} steps); raise steps to go on",
                   file=self.stream)
             return 0
+        self._name_outputs(dyn)
         rows = []
         dyn.attach(lambda: rows.append(_observables(dyn)), interval=out.interval)
         writer = None
         if out.mdanalysis is not None:
             from rigidmd.mdanalysis import MDAWriter
 
-            writer = MDAWriter(dyn, out.mdanalysis, append=self.mode == "resume")
-            dyn.attach(writer, interval=out.interval)
+            writer = MDAWriter(dyn, out.mdanalysis, append=self.mode == "resume" and dyn.nsteps > 0)
+            dyn.attach(_NamedOutput(writer, out.mdanalysis), interval=out.interval)
         dyn.attach(Progress(dyn, remaining), interval=max(1, remaining // 1000))
         dyn.attach(lambda: self._checkpoint(dyn, writer), interval=out.checkpoint_interval)
         stop = StopSignals()
@@ -292,6 +461,7 @@ class Run:
               file=self.stream)
         status = 0
         t0 = time.perf_counter()
+        interrupted = False
         try:
             with stop:
                 dyn.run(remaining)
@@ -299,21 +469,44 @@ class Run:
             status = EXIT_STATUS[request.signum]
             print(f"\nstopped by {request} after step {dyn.nsteps}", file=self.stream)
         except KeyboardInterrupt:
-            status = 130
-            print(f"\ninterrupted during step {dyn.nsteps + 1}; it was undone", file=self.stream)
+            # A second Ctrl-C: anywhere in a step or between one output and the next.  The
+            # outputs may end mid-step, so no checkpoint records them; --resume cuts them
+            # back to the last checkpoint.
+            status, interrupted = 130, True
+        except (OSError, ValueError, ArithmeticError, RuntimeError) as err:
+            if os.environ.get("RIGIDMD_DEBUG"):
+                raise
+            reason = describe_os_error(err) if isinstance(err, OSError) else \
+                " ".join(str(err).split()) or type(err).__name__
+            raise self._stopped(dyn, reason) from None
         finally:
             if writer is not None:
                 writer.close()
-        self._checkpoint(dyn, None)
+        if interrupted:
+            if self.checkpoint_step is None:
+                print("\ninterrupted at once (second Ctrl-C) before any checkpoint; start "
+                      "again with --overwrite", file=self.stream)
+            else:
+                print(f"\ninterrupted at once (second Ctrl-C) near step {dyn.nsteps}; the "
+                      f"checkpoint of step {self.checkpoint_step} is kept: {self._resume_hint()} "
+                      "continues from it (cutting back the outputs written after it)",
+                      file=self.stream)
+            return status
+        try:
+            self._checkpoint(dyn, None)
+        except OSError as err:
+            raise self._stopped(dyn, describe_os_error(err)) from None
         if status:
-            again = f"rigidmd run {self.config_path or 'CONFIG'} --resume"
-            print(f"checkpoint {out.checkpoint} written; continue with: {again}",
+            print(f"checkpoint {out.checkpoint} written; continue with: {self._resume_hint()}",
                   file=self.stream)
         summary(dyn, rows, time.perf_counter() - t0, self.stream)
         if out.plot is not None and out.log is not None:
             from rigidmd.logplot import plot_log
 
-            plot_log(out.log, out.plot)
+            try:
+                plot_log(out.log, out.plot)
+            except OSError as err:
+                raise self._stopped(dyn, describe_os_error(err)) from None
         for path in out.files.values():
             print(f"wrote {path}", file=self.stream)
         return status

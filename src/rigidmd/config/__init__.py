@@ -76,7 +76,7 @@ DEMO_CONFIG = {
     "timestep": "1 fs",
     "steps": 2000,
     "outputs": {"directory": "rigidmd-demo", "trajectory": "demo.traj", "log": "demo.log",
-                "interval": 20, "plot": "demo-energy.png"},
+                "interval": 20, "plot": "demo-energy.png", "checkpoint": "demo-checkpoint.npz"},
 }
 
 _SECTIONS = {"structure": StructureSection, "run": RunSection, "calculator": CalculatorSection,

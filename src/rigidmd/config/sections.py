@@ -261,7 +261,8 @@ class RunSection:
         timestep = parse_quantity("timestep", raw["timestep"], TIME_UNITS)
         if not timestep > 0:
             raise ConfigError(f"timestep: must be positive, got {raw['timestep']!r}")
-        steps = whole_number("steps", raw.get("steps"))
+        # At least one step: a run of none would write nothing worth continuing.
+        steps = whole_number("steps", raw.get("steps"), minimum=1)
         velocities = None
         if "velocities" in raw:
             vel = mapping("velocities", raw["velocities"], {"temperature", "seed"})
@@ -554,6 +555,33 @@ class CouplingSection:
         return [spec.part() for spec in self.specs]
 
 
+def _check_output_paths(directory, files):
+    """Every output its own file, in a folder that exists (or is the output directory).
+
+    Two outputs on one path would overwrite each other (the MDAnalysis output
+    also writes its topology, ``.psf``, and the directory holds the lock file).
+    """
+    from rigidmd.outputs import LOCK_NAME
+
+    claimed = {(directory / LOCK_NAME).resolve(): "the lock file"}
+    paths = dict(files)
+    if "mdanalysis" in files:
+        paths["mdanalysis topology"] = files["mdanalysis"].with_suffix(".psf")
+    for name, path in paths.items():
+        field_name = f"outputs.{name.split()[0]}"
+        resolved = path.resolve()
+        if resolved in claimed:
+            raise ConfigError(f"{field_name}: {path.name} is also {claimed[resolved]}; give "
+                              "each output its own file")
+        claimed[resolved] = f"outputs.{name}" if " " not in name else f"the {name}"
+        if path.is_dir():
+            raise ConfigError(f"{field_name}: {path} is a folder; give a file name")
+        parent = path.parent
+        if parent.resolve() != directory.resolve() and not parent.is_dir():
+            raise ConfigError(f"{field_name}: the folder {parent} does not exist; create it, "
+                              "or put the file in outputs.directory")
+
+
 @dataclass
 class OutputsSection:
     """Where and how often the run writes.
@@ -600,6 +628,7 @@ class OutputsSection:
         if every % interval:
             raise ConfigError(f"outputs.checkpoint_interval: {every} is not a multiple of "
                               f"outputs.interval ({interval}): a checkpoint must fall on a frame")
+        _check_output_paths(directory, files)
         files["checkpoint_interval"] = every
         if "mdanalysis" in files:
             try:
