@@ -246,3 +246,290 @@ def test_full_disk_stops_with_one_line_and_keeps_the_checkpoint(tmp_path, monkey
     assert "md.log: the disk is full" in messages[0] and "last checkpoint is intact" in err
     checkpoint = read_checkpoint(path / "out" / "checkpoint.npz")
     assert checkpoint.nsteps == 100  # the last one before the failure at step 110
+
+
+# ---------------------------------------------------------------------------------------
+# Short runs in this process (40 steps of the 8 waters, NVE unless said): faults found
+# from outside (issue 22).
+# ---------------------------------------------------------------------------------------
+
+
+def short_project(path, steps=40, checkpoint_interval=20, thermostat="nve"):
+    project(path, thermostat, xtc=False)
+    text = config_text(thermostat, xtc=False).replace(f"steps: {STEPS}", f"steps: {steps}")
+    (path / "run.yaml").write_text(text.replace("checkpoint_interval: 50",
+                                                f"checkpoint_interval: {checkpoint_interval}"))
+    return path
+
+
+def run_here(path, monkeypatch, capsys, *args):
+    """``rigidmd run run.yaml ARGS`` in this process: (status, stdout, stderr)."""
+    monkeypatch.chdir(path)
+    status = cli.main(["run", "run.yaml", *map(str, args)])
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
+def messages(err):
+    """stderr without the progress lines."""
+    return [line for line in err.splitlines() if not line.startswith("[")]
+
+
+def file_bytes(path):
+    return {name: (path / "out" / name).read_bytes() for name in ("md.traj", "md.log")}
+
+
+@pytest.fixture(scope="module")
+def short_reference(tmp_path_factory):
+    """The bytes of md.traj and md.log of the short run, left alone."""
+    path = short_project(tmp_path_factory.mktemp("short"))
+    status, _, stderr = finish(start(path))
+    assert status == 0, stderr
+    return file_bytes(path)
+
+
+def test_resumed_files_equal_an_uninterrupted_runs_byte_for_byte(tmp_path, monkeypatch, capsys,
+                                                               short_reference):
+    """Not only the frames: the .traj file (no masses or charges array the run did not have)."""
+    path = short_project(tmp_path)
+    assert run_here(path, monkeypatch, capsys, "--steps", 20)[0] == 0
+    status, stdout, stderr = run_here(path, monkeypatch, capsys, "--resume")
+    assert status == 0, stderr
+    assert "resuming from step 20" in stdout
+    assert file_bytes(path) == short_reference
+
+
+def test_restart_from_this_directorys_trajectory_with_overwrite(tmp_path, monkeypatch, capsys):
+    """--restart out/md.traj --overwrite reads the frame before removing the outputs."""
+    path = short_project(tmp_path, steps=20)
+    assert run_here(path, monkeypatch, capsys)[0] == 0
+    last = read(path / "out" / "md.traj", -1)
+    status, stdout, stderr = run_here(path, monkeypatch, capsys, "--restart", "out/md.traj",
+                                      "--overwrite")
+    assert status == 0, stderr
+    assert "removing md.traj" in stdout
+    first = read(path / "out" / "md.traj", 0)
+    # The start is projected onto rigid motion again: equal to roundoff.
+    np.testing.assert_allclose(first.positions, last.positions, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(first.get_momenta(), last.get_momenta(), rtol=0, atol=1e-12)
+    assert len(read(path / "out" / "md.traj", ":")) == 3
+
+
+def test_overwrite_keeps_the_outputs_when_the_new_run_cannot_start(tmp_path, monkeypatch,
+                                                                  capsys):
+    """A dynamics that refuses to start removes nothing (it is checked on a copy first)."""
+    from rigidmd.dynamics import RigidDynamics
+
+    path = short_project(tmp_path, steps=20)
+    assert run_here(path, monkeypatch, capsys)[0] == 0
+    before = file_bytes(path)
+
+    def refuse(atoms):
+        raise ValueError("body 3 spans more than half the cell")
+
+    monkeypatch.setattr(RigidDynamics, "_check_constraints", staticmethod(refuse))
+    status, _, stderr = run_here(path, monkeypatch, capsys, "--overwrite")
+    assert status == 2 and "body 3 spans" in stderr
+    assert file_bytes(path) == before
+
+
+def test_a_run_killed_before_its_first_checkpoint_resumes_without_repeats(
+        tmp_path, monkeypatch, capsys, short_reference):
+    """Only the step-0 checkpoint exists: frame 0 and the step-0 log line are written once."""
+    from rigidmd.logger import RigidLogger
+
+    path = short_project(tmp_path, checkpoint_interval=40)
+    original, calls = RigidLogger.__call__, []
+
+    def killed(self):
+        calls.append(1)
+        if len(calls) == 3:  # after the frame of step 20: the process dies here
+            raise SystemExit(137)
+        original(self)
+
+    monkeypatch.setattr(RigidLogger, "__call__", killed)
+    with pytest.raises(SystemExit):
+        run_here(path, monkeypatch, capsys)
+    monkeypatch.setattr(RigidLogger, "__call__", original)
+    assert read_checkpoint(path / "out" / "checkpoint.npz").nsteps == 0
+    status, stdout, stderr = run_here(path, monkeypatch, capsys, "--resume")
+    assert status == 0, stderr
+    assert "is at step 0: starting the run again" in stdout
+    assert file_bytes(path) == short_reference
+
+
+def test_a_second_ctrl_c_between_a_frame_and_its_log_line(tmp_path, monkeypatch, capsys,
+                                                        short_reference):
+    """Stopping at once keeps the last whole checkpoint; --resume loses no log line."""
+    from rigidmd.logger import RigidLogger
+
+    path = short_project(tmp_path, checkpoint_interval=20)
+    original, calls = RigidLogger.__call__, []
+
+    def interrupted(self):
+        calls.append(1)
+        if len(calls) == 4:  # step 30: its frame is written, its log line is not
+            raise KeyboardInterrupt
+        original(self)
+
+    monkeypatch.setattr(RigidLogger, "__call__", interrupted)
+    status, stdout, _ = run_here(path, monkeypatch, capsys)
+    monkeypatch.setattr(RigidLogger, "__call__", original)
+    assert status == 130
+    assert "the checkpoint of step 20 is kept" in stdout and "undone" not in stdout
+    assert read_checkpoint(path / "out" / "checkpoint.npz").nsteps == 20
+    status, stdout, stderr = run_here(path, monkeypatch, capsys, "--resume")
+    assert status == 0, stderr
+    assert "resuming from step 20" in stdout and "cut back" in stdout
+    assert file_bytes(path) == short_reference
+
+
+@pytest.mark.parametrize("mode", ["--resume", "--overwrite"])
+def test_resume_and_overwrite_remove_temporaries_of_a_killed_checkpoint_write(
+        tmp_path, monkeypatch, capsys, mode):
+    path = short_project(tmp_path, steps=20)
+    assert run_here(path, monkeypatch, capsys)[0] == 0
+    stale = path / "out" / ".checkpoint.npz.4242-0a1b2c3d.tmp"
+    stale.write_bytes(b"PK half a checkpoint")
+    status, stdout, stderr = run_here(path, monkeypatch, capsys, mode, "--steps", 40)
+    assert status == 0, stderr
+    assert f"removed {stale.name}" in stdout
+    assert sorted(p.name for p in (path / "out").iterdir()) == [
+        "checkpoint.npz", "md.log", "md.traj"]
+
+
+def test_demo_leaves_another_runs_checkpoint_alone(tmp_path, monkeypatch, capsys):
+    """The demo into a run's directory: that run can still be resumed."""
+    path = short_project(tmp_path, steps=20)
+    assert run_here(path, monkeypatch, capsys)[0] == 0
+    checkpoint = (path / "out" / "checkpoint.npz").read_bytes()
+    for _ in range(2):  # the second demo replaces the first's outputs
+        assert cli.main(["demo", "--steps", "20", "--outdir", str(path / "out")]) == 0
+    assert (path / "out" / "checkpoint.npz").read_bytes() == checkpoint
+    capsys.readouterr()
+    status, stdout, stderr = run_here(path, monkeypatch, capsys, "--resume", "--steps", 40)
+    assert status == 0, stderr
+    assert "resuming from step 20" in stdout
+
+
+def test_demo_refuses_to_replace_another_runs_files(tmp_path, monkeypatch, capsys):
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "demo.log").write_text("a log of mine\n")
+    assert cli.main(["demo", "--steps", "20", "--outdir", str(tmp_path / "out")]) == 2
+    assert "holds demo.log, which are not an earlier demo's" in capsys.readouterr().err
+    assert (tmp_path / "out" / "demo.log").read_text() == "a log of mine\n"
+
+
+def test_a_copied_run_directory_resumes(tmp_path, monkeypatch, capsys, short_reference):
+    """The record compares the structure file's content, not where it lay."""
+    import shutil
+
+    path = short_project(tmp_path / "first")
+    assert run_here(path, monkeypatch, capsys, "--steps", 20)[0] == 0
+    copy = tmp_path / "elsewhere" / "copy"
+    shutil.copytree(path, copy)
+    status, stdout, stderr = run_here(copy, monkeypatch, capsys, "--resume")
+    assert status == 0, stderr
+    assert file_bytes(copy) == short_reference
+    atoms = read(path / "cluster.xyz")
+    atoms.positions[0, 0] += 0.01
+    write(path / "cluster.xyz", atoms, format="extxyz")
+    status, _, stderr = run_here(path, monkeypatch, capsys, "--resume")
+    assert status == 2
+    assert messages(stderr) == ["rigidmd: error: --resume: structure differs from the "
+                                "checkpoint's run (only steps may change between a run and its "
+                                "continuation); restore it, or start anew with --overwrite"]
+
+
+@pytest.mark.parametrize("damage", ["empty", "truncated", "corrupted"])
+def test_resume_from_a_damaged_checkpoint_is_one_line(tmp_path, monkeypatch, capsys, damage):
+    path = short_project(tmp_path, steps=20)
+    assert run_here(path, monkeypatch, capsys)[0] == 0
+    checkpoint = path / "out" / "checkpoint.npz"
+    data = bytearray(checkpoint.read_bytes())
+    if damage == "corrupted":
+        data[len(data) // 2] ^= 0xFF
+    checkpoint.write_bytes(b"" if damage == "empty" else
+                           bytes(data[:len(data) // 2] if damage == "truncated" else data))
+    status, _, stderr = run_here(path, monkeypatch, capsys, "--resume", "--steps", 40)
+    assert status == 2
+    assert len(messages(stderr)) == 1 and "Traceback" not in stderr
+    assert stderr.startswith(f"rigidmd: error: --resume: checkpoint: '{checkpoint}' is not a "
+                             "readable checkpoint (")
+    assert stderr.rstrip().endswith("start it again with --overwrite")
+
+
+def test_resume_without_a_checkpoint_says_what_to_do(tmp_path, monkeypatch, capsys):
+    """A deleted checkpoint: --overwrite (a new run would be refused), not 'without --resume'."""
+    path = short_project(tmp_path, steps=20)
+    status, _, stderr = run_here(path, monkeypatch, capsys, "--resume")
+    assert status == 2 and "there is no run to continue" in stderr
+    assert "start one without --resume" in stderr
+    assert run_here(path, monkeypatch, capsys)[0] == 0
+    (path / "out" / "checkpoint.npz").unlink()
+    status, _, stderr = run_here(path, monkeypatch, capsys, "--resume")
+    assert status == 2
+    assert messages(stderr) == [
+        f"rigidmd: error: --resume: there is no checkpoint {path / 'out' / 'checkpoint.npz'} "
+        "beside md.traj, md.log, so that run cannot be continued; start it again with "
+        "--overwrite"]
+
+
+def test_a_read_only_directory_is_refused_before_anything_runs(tmp_path, monkeypatch, capsys):
+    import rigidmd.outputs
+
+    path = short_project(tmp_path, steps=20)
+    (path / "out").mkdir()
+
+    def read_only(*args, **kwargs):
+        raise OSError(errno.EROFS, "Read-only file system", args[0])
+
+    monkeypatch.setattr(rigidmd.outputs.os, "open", read_only)
+    status, _, stderr = run_here(path, monkeypatch, capsys)
+    assert status == 2
+    assert messages(stderr) == [f"rigidmd: error: outputs.directory: cannot write in "
+                                f"{path / 'out'} (the file system is read-only)"]
+
+
+def test_a_full_disk_names_the_trajectory(tmp_path, monkeypatch, capsys):
+    """ASE's writer raises ENOSPC without a file name: the message names md.traj."""
+    from ase.io.trajectory import TrajectoryWriter
+
+    path = short_project(tmp_path, checkpoint_interval=20)
+    original, calls = TrajectoryWriter.write, []
+
+    def full(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 4:  # step 30
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(TrajectoryWriter, "write", full)
+    status, _, stderr = run_here(path, monkeypatch, capsys)
+    assert status == 1
+    assert messages(stderr) == [
+        f"rigidmd: run stopped: cannot write {path / 'out' / 'md.traj'}: the disk is full (at "
+        "step 30); the last checkpoint is intact (step 20): continue with rigidmd run run.yaml "
+        "--resume"]
+
+
+def test_a_failure_during_the_run_exits_1_not_2(tmp_path, monkeypatch, capsys):
+    """A part that fails mid-run (a barostat's ValueError, say) is no configuration mistake."""
+    from rigidmd.coupling import COUPLINGS
+
+    path = short_project(tmp_path, checkpoint_interval=20, thermostat="bussi")
+    bussi = COUPLINGS["bussi"]
+    original, calls = bussi.first_half, []
+
+    def failing(self, h):
+        calls.append(1)
+        if len(calls) == 51:  # in step 26 (two calls a step)
+            raise ValueError("the cell collapsed")
+        return original(self, h)
+
+    monkeypatch.setattr(bussi, "first_half", failing)
+    status, _, stderr = run_here(path, monkeypatch, capsys)
+    assert status == 1
+    assert messages(stderr) == [
+        "rigidmd: run stopped: the cell collapsed (at step 25); the last checkpoint is intact "
+        "(step 20): continue with rigidmd run run.yaml --resume"]

@@ -217,11 +217,13 @@ class Run:
         so, and refuses to touch any other run's.
     config_path : str, optional
         The configuration file, for the resume hint.
-    stream : file
+    stream : file, optional
+        Where messages go (default: standard output at construction).
     """
 
-    def __init__(self, config, mode="new", config_path=None, stream=sys.stdout):
-        self.config, self.mode, self.stream = config, mode, stream
+    def __init__(self, config, mode="new", config_path=None, stream=None):
+        self.config, self.mode = config, mode
+        self.stream = sys.stdout if stream is None else stream
         self.config_path = config_path
         self.outputs = config.outputs
         self.checkpoint_step = None  # step of the last checkpoint on disk, once known
@@ -253,7 +255,7 @@ class Run:
             return False
         return checkpoint.extra.get("fingerprint") == fingerprint(self.config)
 
-    def _prepare_directory(self):
+    def _prepare_directory(self, replace=False):
         from rigidmd.checkpoint import remove_stale_temporaries
 
         existing = [p for p in self._all_files() if p.exists()]
@@ -271,7 +273,7 @@ class Run:
         if stale:
             print(f"removed {', '.join(stale)}, left by a checkpoint write that was killed",
                   file=self.stream)
-        if self.mode == "resume" or not existing:
+        if (self.mode == "resume" and not replace) or not existing:
             return
         verb = "replacing the earlier demo's" if self.mode == "demo" else "removing"
         print(f"{verb} {names} in {self.outputs.directory}", file=self.stream)
@@ -295,8 +297,11 @@ class Run:
         return dict(integrator=self.config.run.integrator,
                     integrator_options=self.config.run.integrator_options)
 
-    def _new_dynamics(self):
-        """Read the inputs and check the dynamics on a copy; build it after the outputs' turn."""
+    def _new_dynamics(self, replace=False):
+        """Read the inputs and check the dynamics on a copy; build it after the outputs' turn.
+
+        ``replace``: remove the directory's outputs (a resume from step 0).
+        """
         import warnings
 
         from rigidmd.dynamics import RigidDynamics
@@ -309,7 +314,7 @@ class Run:
             warnings.simplefilter("ignore")  # the real construction below warns, once
             RigidDynamics(probe, self.config.run.timestep, bodies=bodies,
                           couplings=self.config.coupling.parts(), **self._dynamics_arguments())
-        self._prepare_directory()
+        self._prepare_directory(replace)
         out = self.outputs
         return RigidDynamics(atoms, self.config.run.timestep, bodies=bodies,
                              couplings=self.config.coupling.parts(),
@@ -353,20 +358,22 @@ class Run:
 
         out = self.outputs
         checkpoint = self._read_checkpoint()
+        if checkpoint.nsteps == 0:
+            # Killed before its first interval checkpoint: the step-0 checkpoint holds the
+            # configuration's start, so the run starts again (writing step 0 once).
+            print(f"the checkpoint {out.checkpoint.name} is at step 0: starting the run again",
+                  file=self.stream)
+            return self._new_dynamics(replace=True)
         calc = self.config.calculator.build(checkpoint.atoms())
         self._prepare_directory()
-        # At step 0 the dynamics writes its first frame and log line again (ASE calls the
-        # observers before the first step): the outputs start anew.
-        fresh = checkpoint.nsteps == 0
-        lengths = {} if fresh else checkpoint.extra.get("outputs", {})
-        trimmed = trim_outputs(self._appended_files(), lengths)
+        trimmed = trim_outputs(self._appended_files(), checkpoint.extra.get("outputs", {}))
         self.checkpoint_step = checkpoint.nsteps
         dyn = load_checkpoint(checkpoint, calc,
                               trajectory=str(out.trajectory) if out.trajectory else None,
-                              append_trajectory=not fresh, loginterval=out.interval)
+                              append_trajectory=True, loginterval=out.interval)
         if out.log:
             dyn.attach(dyn.closelater(RigidLogger(dyn, str(out.log), pressure=dyn._needs_stress,
-                                                  header=fresh)), out.interval)
+                                                  header=False)), out.interval)
         cut = f" (cut back: {', '.join(trimmed)})" if trimmed else ""
         print(f"resuming from step {dyn.nsteps} of {out.checkpoint}{cut}", file=self.stream)
         return dyn
@@ -450,7 +457,7 @@ class Run:
         if out.mdanalysis is not None:
             from rigidmd.mdanalysis import MDAWriter
 
-            writer = MDAWriter(dyn, out.mdanalysis, append=self.mode == "resume" and dyn.nsteps > 0)
+            writer = MDAWriter(dyn, out.mdanalysis, append=dyn.nsteps > 0)
             dyn.attach(_NamedOutput(writer, out.mdanalysis), interval=out.interval)
         dyn.attach(Progress(dyn, remaining), interval=max(1, remaining // 1000))
         dyn.attach(lambda: self._checkpoint(dyn, writer), interval=out.checkpoint_interval)
