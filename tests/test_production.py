@@ -447,8 +447,12 @@ def test_resume_from_a_damaged_checkpoint_is_one_line(tmp_path, monkeypatch, cap
     assert run_here(path, monkeypatch, capsys)[0] == 0
     checkpoint = path / "out" / "checkpoint.npz"
     data = bytearray(checkpoint.read_bytes())
-    if damage == "corrupted":
-        data[len(data) // 2] ^= 0xFF
+    if damage == "corrupted":  # a byte of the positions' data (the archive's checksum fails)
+        import zipfile
+
+        with zipfile.ZipFile(checkpoint) as archive:
+            member = archive.getinfo("positions.npy")
+        data[member.header_offset + 30 + len(member.filename) + len(member.extra) + 200] ^= 0xFF
     checkpoint.write_bytes(b"" if damage == "empty" else
                            bytes(data[:len(data) // 2] if damage == "truncated" else data))
     status, _, stderr = run_here(path, monkeypatch, capsys, "--resume", "--steps", 40)
