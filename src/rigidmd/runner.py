@@ -156,7 +156,7 @@ def fingerprint(config):
     if isinstance(integrator, str) and integrator.endswith((".yaml", ".yml")):
         integrator = {"file content": _file_digest(integrator)}
     calculator = {key: value for key, value in asdict(config.calculator).items()
-                  if not key.startswith("_")}
+                  if key != "calculator_class"}
     fields = {
         "structure": source, "read_options": structure.read_options,
         "bodies": structure.bodies, "calculator": calculator,
@@ -406,6 +406,7 @@ class Run:
     def execute(self):
         """Run; returns the exit status (0, or 130/143/138 after a stop signal)."""
         out = self.outputs
+        created = not out.directory.exists()
         try:
             out.directory.mkdir(parents=True, exist_ok=True)
         except OSError as err:
@@ -423,6 +424,14 @@ class Run:
                   file=self.stream)
         try:
             return self._execute()
+        except BaseException:
+            lock.release()
+            if created:  # a run that could not start leaves no empty directory behind
+                try:
+                    out.directory.rmdir()
+                except OSError:
+                    pass  # it holds outputs: the run had started
+            raise
         finally:
             lock.release()
 

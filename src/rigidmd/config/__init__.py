@@ -9,7 +9,7 @@ A configuration is a YAML mapping (every key optional except ``structure``
     bodies: mol-id                # mol-id | tags | connectivity (default: the first
                                   # the atoms have: mol-id, tags, else connectivity)
     calculator:
-      name: tip3p                 # tip3p | tip4p | lammps | a dotted class path
+      name: tip3p                 # tip3p | tip4p | lammps | an ASE calculator class's path
       options: {rc: 9.0}          # keyword arguments of the calculator
       commands: [...]             # lammps: pair_style, pair_coeff, kspace_style, ...
       charges: {O: -0.834, H: 0.417}   # lammps: charge per element
@@ -146,7 +146,7 @@ def load_config(path):
     return data
 
 
-def check_config(config):
+def check_config(config, trust=False):
     """Validate a raw configuration mapping and build its sections.
 
     Parameters
@@ -154,6 +154,10 @@ def check_config(config):
     config : dict
         As :func:`load_config` returns; ``_base`` is the directory relative
         paths are resolved against (default: the current directory).
+    trust : bool, default False
+        Allow what could run code: LAMMPS commands beyond the interactions
+        (``shell``, ``python``, ...), calculator classes that start programs
+        (``rigidmd run --trust``; see :mod:`rigidmd.config.trust`).
 
     Returns
     -------
@@ -165,5 +169,7 @@ def check_config(config):
     unknown = sorted(set(config) - known, key=str)
     if unknown:
         raise ConfigError(f"{unknown[0]}: unknown key; allowed: {', '.join(sorted(known))}")
-    return RunConfig(**{name: section.from_config(config, base)
-                        for name, section in _SECTIONS.items()})
+    checked = RunConfig(**{name: section.from_config(config, base)
+                           for name, section in _SECTIONS.items()})
+    checked.calculator.check_trust(trust)
+    return checked

@@ -36,6 +36,7 @@ from rigidmd.config.quantities import (
     parse_quantity,
     whole_number,
 )
+from rigidmd.config.trust import calculator_class, check_lammps_calculator
 
 __all__ = ["StructureSection", "RunSection", "CalculatorSection", "CouplingSection",
            "OutputsSection", "BUILTIN_STRUCTURES", "BODY_RULES"]
@@ -310,6 +311,20 @@ class CalculatorSection:
     charges: dict = field(default_factory=dict)
     atom_types: dict = field(default_factory=dict)
     water: object = None
+    #: The class a dotted ``name`` names, once :meth:`check_trust` resolved it.
+    calculator_class: type | None = field(default=None, repr=False, compare=False)
+
+    def check_trust(self, trust=False):
+        """Refuse what could run code (see :mod:`rigidmd.config.trust`); resolve a dotted name.
+
+        ``trust`` (``--trust``) lifts the refusals, not the check that a
+        dotted name is an ASE calculator class.
+        """
+        if self.name == "lammps":
+            if not trust and self.water is None:
+                check_lammps_calculator(self.options, self.commands)
+        elif self.name not in ("tip3p", "tip4p"):
+            self.calculator_class = calculator_class(self.name, self.options, trust)
 
     @classmethod
     def from_config(cls, raw, base):
@@ -356,15 +371,8 @@ class CalculatorSection:
                 return TIP4P(**self.options)
             if self.name == "lammps":
                 return self._lammps(atoms)
-            module_name, _, class_name = self.name.rpartition(".")
-            if not module_name:
-                raise ConfigError(f"calculator.name: {self.name!r} is not tip3p, tip4p, lammps "
-                                  "or a dotted path such as ase.calculators.emt.EMT")
-            try:
-                calc_class = getattr(importlib.import_module(module_name), class_name)
-            except (ImportError, AttributeError) as err:
-                raise ConfigError(f"calculator.name: cannot import {self.name!r} ({err})"
-                                  ) from None
+            calc_class = self.calculator_class or calculator_class(self.name, self.options,
+                                                                   trust=True)
             return calc_class(**self.options)
         except ConfigError:
             raise
