@@ -74,7 +74,8 @@ def outputs(path, xtc=True):
     """Positions of every .traj frame, the log text, and the XTC frames (if any)."""
     out = path / "out"
     frames = np.array([a.positions for a in read(out / "md.traj", ":")])
-    result = {"traj": frames, "log": (out / "md.log").read_text()}
+    result = {"traj": frames, "log": (out / "md.log").read_text(),
+              "traj_bytes": (out / "md.traj").read_bytes()}
     if xtc:
         import MDAnalysis as mda
 
@@ -95,6 +96,7 @@ def uninterrupted(root, thermostat, xtc=True):
 def assert_same(resumed, reference):
     np.testing.assert_array_equal(resumed["traj"], reference["traj"])
     assert resumed["log"] == reference["log"]
+    assert resumed["traj_bytes"] == reference["traj_bytes"]  # the file, not only its frames
     if "xtc" in reference:
         assert resumed["xtc_steps"] == reference["xtc_steps"]
         np.testing.assert_array_equal(resumed["xtc"], reference["xtc"])

@@ -3,20 +3,28 @@
 * **One run per directory.**  A lock file refuses a second run into a
   directory in use (a lock left by a dead process is taken over).  A new run
   into a directory that already holds outputs is refused unless
-  ``--overwrite`` (which removes them first) or ``--resume`` is given.
+  ``--overwrite`` (which removes them) or ``--resume`` is given.  Every input
+  (structure, restart trajectory, checkpoint) is read and the dynamics is
+  checked before any output is removed.
 * **Checkpoints** every ``outputs.checkpoint_interval`` steps and at every
   clean stop: every output file is flushed to disk first and its length is
-  recorded in the checkpoint (written atomically).
-* **Resume** (``--resume``): every output is cut back to its length at the
-  checkpoint (which also removes a truncated last frame after ``kill -9``), the
-  dynamics is rebuilt from the checkpoint and the outputs are appended to; the
-  finished files equal those of an uninterrupted run.
+  recorded in the checkpoint (written atomically), with a digest of each
+  configuration field that defines the trajectory (:func:`fingerprint`).
+* **Resume** (``--resume``): the configuration is compared field by field
+  (a changed field is named), temporary files of a killed checkpoint write
+  are removed, every output is cut back to its length at the checkpoint
+  (which also removes a truncated last frame after ``kill -9``), the
+  dynamics is rebuilt from the checkpoint and the outputs are appended to;
+  the finished files equal those of an uninterrupted run byte for byte.  A
+  checkpoint at step 0 starts the run again from its configuration.
 * **Signals**: SIGTERM (what batch schedulers send), SIGINT (Ctrl-C) and
   SIGUSR1 finish the current step and its outputs, write a checkpoint, close
   the files and exit with 143, 130 or 138, saying how to resume.  A second
-  Ctrl-C stops at once (the step in progress is undone).
-* **Write failures** (a full disk, no permission) end the run with one line
-  naming the file and status 1; the last checkpoint stays intact.
+  Ctrl-C stops at once without a checkpoint (the outputs may end mid-step);
+  ``--resume`` continues from the last one.
+* **Failures after the start** (a full disk, a step that fails) raise
+  :class:`RunStopped`: one line naming the file or the reason, the step and
+  the last checkpoint, which stays intact (status 1).
 """
 
 import hashlib
