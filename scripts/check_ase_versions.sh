@@ -2,7 +2,8 @@
 # Run the fast test subset (-m "not slow") against given ASE versions, each in a
 # fresh virtual environment with the package and its test extras installed.
 #
-# Usage: scripts/check_ase_versions.sh [VERSION ...]     (default: 3.23.0 and the newest)
+# Usage: scripts/check_ase_versions.sh [VERSION ...]
+#        (default: the oldest ASE pyproject.toml declares, "ase>=X", and the newest on PyPI)
 # Environment: WORKDIR (default: a new temporary folder) holds the environments and logs;
 #              PYTEST_ARGS (default: "-n auto") is passed on to pytest.
 # Exit status: 0 when every version passed; otherwise the number of versions that failed.
@@ -11,8 +12,10 @@ repo="$(cd "$(dirname "$0")/.." && pwd)"
 workdir="${WORKDIR:-$(mktemp -d -t rigidmd-ase-XXXXXX)}"
 mkdir -p "$workdir"
 if [ "$#" -eq 0 ]; then
+    oldest="$(sed -n 's/.*"ase>=\([0-9.]*\).*/\1/p' "$repo/pyproject.toml" | head -n 1)"
     newest="$(python -m pip index versions ase 2>/dev/null | sed -n 's/^ase (\(.*\))$/\1/p')"
-    set -- 3.23.0 "${newest:?cannot find the newest ASE on the package index}"
+    set -- "${oldest:?no ase>=X in pyproject.toml}" \
+        "${newest:?cannot find the newest ASE on the package index}"
 fi
 failed=0
 for version in "$@"; do

@@ -520,8 +520,9 @@ def test_a_full_disk_names_the_trajectory(tmp_path, monkeypatch, capsys):
 
 
 def test_a_failure_during_the_run_exits_1_not_2(tmp_path, monkeypatch, capsys):
-    """A part that fails mid-run (a barostat's ValueError, say) is no configuration mistake."""
+    """A part that fails mid-run (a BarostatError, say) is no configuration mistake."""
     from rigidmd.coupling import COUPLINGS
+    from rigidmd.coupling.barostats import BarostatError
 
     path = short_project(tmp_path, checkpoint_interval=20, thermostat="bussi")
     bussi = COUPLINGS["bussi"]
@@ -530,7 +531,7 @@ def test_a_failure_during_the_run_exits_1_not_2(tmp_path, monkeypatch, capsys):
     def failing(self, h):
         calls.append(1)
         if len(calls) == 51:  # in step 26 (two calls a step)
-            raise ValueError("the cell collapsed")
+            raise BarostatError("the cell collapsed")
         return original(self, h)
 
     monkeypatch.setattr(bussi, "first_half", failing)
