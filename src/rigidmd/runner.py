@@ -235,6 +235,14 @@ class Run:
         self.config_path = config_path
         self.outputs = config.outputs
         self.checkpoint_step = None  # step of the last checkpoint on disk, once known
+        self._fingerprint = None
+
+    @property
+    def fingerprint(self):
+        """:func:`fingerprint` of the configuration, taken once (files are read once)."""
+        if self._fingerprint is None:
+            self._fingerprint = fingerprint(self.config)
+        return self._fingerprint
 
     # ------------------------------------------------------------ outputs
     def _appended_files(self):
@@ -261,7 +269,7 @@ class Run:
             checkpoint = read_checkpoint(self.outputs.checkpoint)
         except CheckpointError:
             return False
-        return checkpoint.extra.get("fingerprint") == fingerprint(self.config)
+        return checkpoint.extra.get("fingerprint") == self.fingerprint
 
     def _prepare_directory(self, replace=False):
         from rigidmd.checkpoint import remove_stale_temporaries
@@ -348,7 +356,7 @@ class Run:
         except CheckpointError as err:
             raise ConfigError(f"--resume: {err}; the run cannot be continued: start it again "
                               "with --overwrite") from None
-        differing = _differing_fields(checkpoint.extra.get("fingerprint"), fingerprint(self.config))
+        differing = _differing_fields(checkpoint.extra.get("fingerprint"), self.fingerprint)
         if differing is None:
             raise ConfigError("--resume: the checkpoint was written by an earlier rigidmd, "
                               "whose record of the configuration cannot be compared; start "
@@ -391,7 +399,7 @@ class Run:
         if writer is not None:
             writer.flush()
         extra = {"outputs": output_lengths(self._appended_files()),
-                 "fingerprint": fingerprint(self.config), "steps": self.config.run.steps}
+                 "fingerprint": self.fingerprint, "steps": self.config.run.steps}
         dyn.save_checkpoint(self.outputs.checkpoint, extra=extra)
         self.checkpoint_step = dyn.nsteps
 
