@@ -12,16 +12,25 @@ force evaluation per call, about one native LAMMPS step.
 When the cell changes (a barostat), the box is changed with ``change_box``
 and that call runs with LAMMPS's set-up (``run 0 pre yes``), which rebuilds
 the neighbour lists and the k-space set-up (PPPM's Green's function) for the
-new box, as LAMMPS's own barostats do: energies, forces and stress then equal
-those of a fresh LAMMPS at that cell.  Cells that are not in LAMMPS's
-lower-triangular form are rotated into it (positions, forces and stress
-rotated back); a change in the number or kind of atoms, their charges or
-their molecules builds a new instance.
+new box, as LAMMPS's own barostats do, with the k-space parameters of the
+first cell (:attr:`LAMMPSCalculator.kspace_parameters`): energies, forces and
+stress then equal those of a fresh LAMMPS at that cell given those
+parameters.  The instance stays whatever the cell does: cells that are not in
+LAMMPS's lower-triangular form are rotated into it anew at each cell
+(positions, forces and stress rotated back), and an orthogonal box that gets
+tilted becomes triclinic once.  A change in the number or kind of atoms,
+their charges or their molecules builds a new instance.
 
-Molecules (for ``neigh_modify exclude molecule/intra all``) come from the
-``mol-id`` array (ASE's ``lammps-data`` reader sets it), else from non-zero
-tags, else from ``molecule_ids``, else from the bodies of a rigid dynamics the
-atoms are in.
+Molecules (for ``neigh_modify exclude molecule/intra all``) are the bodies of
+the rigid dynamics the atoms are in (a ``mol-id`` array, tags or
+``molecule_ids`` that group the atoms otherwise are refused); outside a
+dynamics they come from the ``mol-id`` array (ASE's ``lammps-data`` reader
+sets it), else from non-zero tags, else from ``molecule_ids``.
+
+Masses never enter a force call: atoms of one element share a type whatever
+their masses (H and D).  LAMMPS's warnings at set-up are passed on as Python
+warnings; positions and cells that are not finite are refused before LAMMPS
+sees them (LAMMPS would hang on them).
 """
 
 import re
@@ -151,6 +160,10 @@ class LAMMPSCalculator(Calculator):
         Neighbour skin (Å), LAMMPS's ``neighbor`` default for metal units.
     cmdargs : sequence of str, optional
         LAMMPS command-line arguments (default: no log, no screen output).
+    kspace_parameters : str, optional
+        A ``kspace_modify gewald ...`` command that fixes the k-space
+        parameters (see :attr:`kspace_parameters`); default: those LAMMPS
+        chooses for the first cell.
 
     Notes
     -----
@@ -159,7 +172,14 @@ class LAMMPSCalculator(Calculator):
     virial only, from LAMMPS's ``compute pressure NULL virial`` converted
     with LAMMPS's own ``nktv2p``).  LAMMPS errors raise
     :class:`~rigidmd.lammps.LammpsError` with LAMMPS's message; the next call
-    starts a fresh instance.
+    starts a fresh instance.  LAMMPS's warnings when an instance is set up
+    are issued as :class:`UserWarning` (``LAMMPSCalculator: LAMMPS warns:
+    ...``), except the ones every rigid-molecule set-up gets (no integrator
+    fix; excluded pairs with k-space, whose reciprocal-space part is a
+    constant of a rigid molecule); a net charge with a ``kspace_style`` is
+    warned of too.  :meth:`get_checkpoint_state` and
+    :meth:`set_checkpoint_state` carry the k-space parameters through
+    :func:`rigidmd.checkpoint.save_checkpoint` and ``load_checkpoint``.
     """
 
     implemented_properties = ["energy", "free_energy", "forces", "stress"]
