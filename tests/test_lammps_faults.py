@@ -100,6 +100,43 @@ def test_a_shearing_cell_keeps_one_instance_and_its_kspace_parameters(monkeypatc
     assert np.ptp(energies) < 0.1, np.ptp(energies)
 
 
+def test_any_cell_change_equals_a_fresh_lammps_with_the_same_kspace_parameters(monkeypatch):
+    """Large jumps of the cell in one instance: an orthogonal box tilted past LAMMPS's
+    old tilt limits (it becomes triclinic), the tilt reversed, the whole system turned.
+    Each call equals a fresh LAMMPS given the first cell's k-space parameters: measured
+    2e-16 relative in energy, 2e-16 in forces and 1.3e-15 in stress (relative to the
+    largest component; the largest tilt squeezes molecules to +1900 eV); bounds 1e-9.  Before the fix, a tilt or a turn started a new
+    LAMMPS, which chose other parameters (energies 1e-3-1 eV apart); a change of the
+    tilt by 2 box lengths lost atoms (the previous image flags kept)."""
+    atoms = liquid()
+    atoms.calc = LAMMPSCalculator(PPPM)
+    count = lammps_instances(monkeypatch, lammps_calculator)
+    atoms.get_potential_energy()
+    parameters = atoms.calc.kspace_parameters
+    lengths = atoms.cell.lengths()
+    turn = np.linalg.qr(np.random.default_rng(4).normal(size=(3, 3)))[0]
+    turn *= np.sign(np.linalg.det(turn))
+    for shear, rotation in ((0.3, None), (1.3, None), (-0.8, None), (-0.8, turn), (0.2, turn)):
+        cell = np.diag(lengths)
+        cell[1, 0], cell[2, 0], cell[2, 1] = shear * lengths[0], -0.4 * shear * lengths[0], \
+            0.7 * shear * lengths[1]
+        if rotation is not None:
+            cell = cell @ rotation.T
+        atoms.set_cell(cell, scale_atoms=True)
+        fresh = atoms.copy()
+        fresh.calc = LAMMPSCalculator(PPPM, kspace_parameters=parameters)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # LAMMPS: "Triclinic box skew is large"
+            energy, forces, stress = (fresh.get_potential_energy(), fresh.get_forces(),
+                                      fresh.get_stress())
+        assert atoms.get_potential_energy() == pytest.approx(energy, rel=1e-9, abs=0)
+        np.testing.assert_allclose(atoms.get_forces(), forces, rtol=0,
+                                   atol=1e-9 * np.abs(forces).max())
+        np.testing.assert_allclose(atoms.get_stress(), stress, rtol=0,
+                                   atol=1e-9 * np.abs(stress).max())
+    assert count() == 5 + 1  # the fresh ones, and one for atoms
+
+
 def test_an_npt_run_continues_with_the_kspace_parameters_it_had(tmp_path):
     """Before: the continued run chose new k-space parameters at the checkpoint's cell
     and its potential energy jumped (by 1e-3-1 eV, as the cell had moved).  Now the

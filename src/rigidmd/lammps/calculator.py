@@ -184,6 +184,7 @@ class LAMMPSCalculator(Calculator):
 
     implemented_properties = ["energy", "free_energy", "forces", "stress"]
     _lmp = None
+    _grouping_checked = None  # the bodies and molecules last found to agree
 
     def __init__(self, commands, *, atom_types=None, molecule_ids=None,
                  exclude_intramolecular=True, ase_constants=False, skin=2.0, cmdargs=None,
@@ -305,7 +306,10 @@ class LAMMPSCalculator(Calculator):
             raise ValueError(f"LAMMPSCalculator: the rigid bodies cover {bodies.size} atoms, "
                              f"the atoms are {n}")
         if given is not None:
-            _check_same_grouping(bodies, given, source)
+            key = (bodies.tobytes(), given.tobytes())  # checked once, not at every step
+            if key != self._grouping_checked:
+                _check_same_grouping(bodies, given, source)
+                self._grouping_checked = key
         return bodies, "bodies"
 
     def _signature_of(self, atoms, molecules):
@@ -470,6 +474,11 @@ class LAMMPSCalculator(Calculator):
         ix, iy, iz = (int(v) + 512 for v in image)
         return ix | (iy << 10) | (iz << 20)
 
+    def _encode_all(self, image):
+        """Image flags, shape (n, 3), packed as LAMMPS packs them (its own bit widths)."""
+        packed = (image + self._imgmax) & self._imgmask
+        return packed[:, 0] | (packed[:, 1] << self._imgbits) | (packed[:, 2] << self._img2bits)
+
     def _images(self, nlocal):
         img = np.asarray(self._lmp.numpy.extract_atom("image")[:nlocal], dtype=np.int64)
         mask, bits, bits2, offset = self._imgmask, self._imgbits, self._img2bits, self._imgmax
@@ -556,7 +565,15 @@ class LAMMPSCalculator(Calculator):
         nlocal = lmp.extract_global("nlocal")
         ids = np.asarray(lmp.numpy.extract_atom("id")[:nlocal], dtype=np.int64) - 1
         positions = self._to_lammps(atoms.positions)[ids]
-        if atoms.pbc.all():
+        if atoms.pbc.all() and self._setup_needed:
+            # A new cell (a set-up follows anyway): every atom into the box, with image
+            # flags to match.  LAMMPS's change_box re-mapped the previous positions into
+            # the new box, and their images need not suit these after a large change.
+            cell = self._lammps_cell()
+            image = np.floor(np.linalg.solve(cell.T, positions.T).T)
+            positions -= image @ cell
+            lmp.numpy.extract_atom("image")[:nlocal] = self._encode_all(image.astype(np.int64))
+        elif atoms.pbc.all():
             # LAMMPS's own image of each atom: only real motion counts against the skin.
             positions -= self._images(nlocal) @ self._lammps_cell()
         lmp.numpy.extract_atom("x")[:nlocal] = positions
