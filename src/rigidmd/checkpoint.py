@@ -253,7 +253,8 @@ def load_checkpoint(path, calculator, **kwargs):
     ----------
     path : str or os.PathLike
     calculator : ase.calculators.calculator.Calculator
-        Attached to the rebuilt atoms (the checkpoint holds no calculator).
+        Attached to the rebuilt atoms (the checkpoint holds no calculator; one with
+        ``set_checkpoint_state`` gets what its ``get_checkpoint_state`` gave).
     **kwargs
         ``trajectory``, ``logfile``, ``loginterval``, ``append_trajectory``, ...
         as for :class:`~rigidmd.dynamics.RigidDynamics`.
