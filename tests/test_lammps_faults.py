@@ -180,6 +180,15 @@ def test_kspace_parameters_are_a_checked_public_setting():
     other.calc = LAMMPSCalculator(PPPM)
     other.calc.set_checkpoint_state(state)
     assert other.get_potential_energy() == energy
+    # Other atoms get parameters of their own, unless they were given.
+    smaller = atoms[:-3]
+    smaller.calc = atoms.calc
+    smaller.get_potential_energy()
+    assert atoms.calc.kspace_parameters.startswith("kspace_modify gewald ")
+    assert atoms.calc.kspace_parameters != state["kspace_parameters"]
+    smaller.calc = other.calc
+    smaller.get_potential_energy()
+    assert other.calc.kspace_parameters == state["kspace_parameters"]
     with pytest.raises(ValueError, match="kspace_parameters must be one 'kspace_modify gewald"):
         LAMMPSCalculator(PPPM, kspace_parameters="kspace_style ewald 1e-4")
     with pytest.raises(ValueError, match="unknown checkpoint state 'gewald'"):

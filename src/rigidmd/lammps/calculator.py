@@ -203,6 +203,7 @@ class LAMMPSCalculator(Calculator):
         self.cmdargs = cmdargs
         self._lmp = None
         self._kspace_parameters = None
+        self._pinned_for = None  # the system whose first cell chose the parameters
         self.kspace_parameters = kspace_parameters
         self._signature = None  # what a new instance is needed for
         self._cell = None       # the cell LAMMPS has
@@ -214,8 +215,11 @@ class LAMMPSCalculator(Calculator):
 
         LAMMPS chooses the Ewald parameter and PPPM's mesh and order (or
         Ewald's k-vectors) for the first cell; they are then kept for every
-        later cell (see :meth:`_pin_kspace`).  None until a periodic system
-        with a ``kspace_style`` has been set up, unless given.  Setting it
+        later cell, and for a new LAMMPS instance after an error (see
+        :meth:`_pin_kspace`); other atoms (another number, kind, charges or
+        molecules) get their own.  None until a periodic system with a
+        ``kspace_style`` has been set up, unless given.  Given ones (here or
+        to the constructor) are kept for any atoms.  Setting it
         (a ``kspace_modify gewald ... mesh ... order ...`` or ``... kmax/ewald
         ...`` command) makes the next call start LAMMPS with these parameters:
         how a continued run keeps the energy of the run it continues.
@@ -231,6 +235,7 @@ class LAMMPSCalculator(Calculator):
         if value != self._kspace_parameters:
             self._close()  # the next call sets up LAMMPS with these parameters
         self._kspace_parameters = value
+        self._pinned_for = None  # given: kept for any system
 
     def get_checkpoint_state(self):
         """What a checkpoint must hold to continue with the same energies (JSON-able dict).
@@ -328,6 +333,10 @@ class LAMMPSCalculator(Calculator):
 
     def _start(self, atoms, molecules, source):
         self._close()
+        signature = self._signature_of(atoms, None if source is None else molecules)
+        if self._pinned_for is not None and self._pinned_for != signature:
+            # Other atoms (not a restart after an error): LAMMPS chooses for them anew.
+            self._kspace_parameters = self._pinned_for = None
         types, type_mass, labels = self._types(atoms)
         n = len(atoms)
         if molecules is None:
@@ -408,7 +417,7 @@ class LAMMPSCalculator(Calculator):
             raise
         finally:
             tmp.cleanup()
-        self._signature = self._signature_of(atoms, None if source is None else molecules)
+        self._signature = signature
         self._cell = atoms.cell.array.copy()
         self._ids = ids
         self._nktv2p = lmp.extract_global("nktv2p")
@@ -461,6 +470,7 @@ class LAMMPSCalculator(Calculator):
             modify += f" kmax/ewald {' '.join(kmax.groups())}"
         self._execute([modify])
         self._kspace_parameters = modify
+        self._pinned_for = self._signature
 
     def _region(self, cell):
         lengths = " ".join(f"0 {cell[k, k]:.17g}" for k in range(3))
