@@ -506,8 +506,8 @@ class Run:
             # back to the last checkpoint.
             status, interrupted = 130, True
         except (OSError, ValueError, ArithmeticError, RuntimeError) as err:
-            if os.environ.get("RIGIDMD_DEBUG"):
-                raise
+            if os.environ.get("RIGIDMD_DEBUG") or getattr(err, "setup", False):
+                raise  # a LammpsError of the set-up (the input's fault) is the command's
             reason = describe_os_error(err) if isinstance(err, OSError) else \
                 " ".join(str(err).split()) or type(err).__name__
             raise self._stopped(dyn, reason) from None
