@@ -1,0 +1,289 @@
+"""LAMMPS in its own process (``fix ipi``) against the in-process calculator; its life cycle.
+
+The periodic liquid is ``tests/data/water_box_27.traj`` (27 TIP3P waters in a
+9.3 Å box) with ``lj/cut/coul/long 4.5`` and PPPM at 1e-5, as in
+``test_lammps_calculator.py``.
+"""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from ase import units
+from ase.io import read
+
+from rigidmd import RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
+from rigidmd.ipi import EngineError, IPICalculator
+from rigidmd.lammps import LAMMPSCalculator, tip3p_charges
+from rigidmd.lammps.engine import LAMMPSEngine
+
+pytestmark = pytest.mark.lammps
+
+DATA = Path(__file__).with_name("data")
+PPPM = ["pair_style lj/cut/coul/long 4.5", "pair_coeff * * 0.0 1.0",
+        "pair_coeff O O 0.0065956819 3.15061", "kspace_style pppm 1e-5"]
+
+
+def liquid():
+    atoms = read(DATA / "water_box_27.traj")
+    atoms.set_initial_charges(tip3p_charges(atoms))
+    return atoms
+
+
+def processes_named(name):
+    """PIDs of running processes whose executable is ``name`` (zombies excluded)."""
+    found = []
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                stat = f.read()
+        except OSError:
+            continue
+        comm, state = stat[stat.index("(") + 1:stat.rindex(")")], stat[stat.rindex(")") + 2]
+        if comm == name and state != "Z":
+            found.append(int(pid))
+    return found
+
+
+def children_of(pid):
+    """All descendants of ``pid`` (by /proc's parent links)."""
+    parents = {}
+    for p in os.listdir("/proc"):
+        if p.isdigit():
+            try:
+                with open(f"/proc/{p}/stat") as f:
+                    stat = f.read()
+            except OSError:
+                continue
+            parents[int(p)] = int(stat[stat.rindex(")") + 2:].split()[1])
+    found, frontier = [], [pid]
+    while frontier:
+        frontier = [p for p, parent in parents.items() if parent in frontier]
+        found += frontier
+    return found
+
+
+def assert_same(atoms, reference):
+    """Energy, forces and stress of ``atoms`` (engine) equal ``reference`` (in-process).
+
+    Both run LAMMPS with the same k-space parameters; the engine's numbers come
+    through ``fix ipi``'s 8-digit Bohr and Hartree and back with the same constants:
+    measured 0 eV in energy (27 waters), 6e-15 eV/Å in forces, 5e-15 relative in
+    stress.  The tolerances leave a factor of 100 for roundoff.
+    """
+    reference.positions = atoms.positions
+    reference.set_cell(atoms.cell)
+    energy = reference.get_potential_energy()
+    assert atoms.get_potential_energy() == pytest.approx(energy, rel=1e-13, abs=1e-12)
+    np.testing.assert_allclose(atoms.get_forces(), reference.get_forces(), rtol=0, atol=1e-12)
+    stress = reference.get_stress()
+    np.testing.assert_allclose(atoms.get_stress(), stress, rtol=0,
+                               atol=1e-12 * np.abs(stress).max())
+
+
+def test_engine_equals_the_in_process_calculator_through_cell_changes():
+    """Orthorhombic, scaled, tilted (the engine restarts with a triclinic box) and a
+    triclinic cell scaled again; shear stresses included (fix ipi's upper triangle)."""
+    atoms = liquid()
+    with LAMMPSEngine(PPPM) as engine:
+        atoms.calc = engine
+        atoms.get_potential_energy()
+        reference = atoms.copy()
+        reference.calc = LAMMPSCalculator(PPPM + [engine.kspace_parameters])
+        assert_same(atoms, reference)
+        rng = np.random.default_rng(0)
+        atoms.positions += rng.normal(scale=0.05, size=atoms.positions.shape)
+        assert_same(atoms, reference)
+        atoms.set_cell(atoms.cell * 1.01, scale_atoms=True)
+        assert_same(atoms, reference)
+        cell = atoms.cell.array.copy()
+        cell[1, 0] += 0.6
+        cell[2, 1] -= 0.4
+        atoms.set_cell(cell, scale_atoms=True)
+        assert_same(atoms, reference)
+        assert abs(atoms.get_stress()[3]) > 1e-5  # a shear stress to compare
+        atoms.set_cell(atoms.cell * 0.995, scale_atoms=True)
+        assert_same(atoms, reference)
+        log = engine.log
+        assert log.exists()
+    assert not log.exists()  # close() removes the engine's temporary folder
+
+
+def test_a_rotated_triclinic_cell_and_two_ranks():
+    """A general (rotated, tilted) cell on 2 MPI ranks: rotated into LAMMPS's frame."""
+    atoms = liquid()
+    cell = atoms.cell.array.copy()
+    cell[1, 0], cell[2, 0] = 0.5, -0.3
+    atoms.set_cell(cell, scale_atoms=True)
+    rotation = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))[0]
+    rotation *= np.sign(np.linalg.det(rotation))
+    atoms.set_cell(atoms.cell.array @ rotation.T)
+    atoms.positions = atoms.positions @ rotation.T
+    with LAMMPSEngine(PPPM, processes=2) as engine:
+        atoms.calc = engine
+        atoms.get_potential_energy()
+        reference = atoms.copy()
+        reference.calc = LAMMPSCalculator(PPPM + [engine.kspace_parameters])
+        assert_same(atoms, reference)
+        atoms.set_cell(atoms.cell * 1.003, scale_atoms=True)
+        assert_same(atoms, reference)
+
+
+def test_virial_lower_triangle_is_mirrored():
+    """fix ipi sends xy, xz, yz only; a full virial (ASE's client) is symmetrised."""
+    from rigidmd.ipi import _symmetric
+
+    upper = np.array([[1.0, 2.0, 3.0], [0.0, 4.0, 5.0], [0.0, 0.0, 6.0]])
+    full = np.array([[1.0, 2.0, 3.0], [2.0, 4.0, 5.0], [3.0, 5.0, 6.0]])
+    np.testing.assert_array_equal(_symmetric(upper), full)
+    np.testing.assert_array_equal(_symmetric(upper.T), full)
+    np.testing.assert_array_equal(_symmetric(full), full)
+
+
+def test_a_dead_engine_raises_naming_its_log_and_the_step_is_undone():
+    atoms = liquid()
+    rigid_maxwell_boltzmann(atoms, 300, bodies="tags", rng=np.random.default_rng(2))
+    engine = LAMMPSEngine(PPPM, timeout=30)
+    atoms.calc = engine
+    dyn = RigidVerlet(atoms, units.fs, bodies="tags")
+    dyn.run(2)
+    before = atoms.positions.copy(), atoms.get_momenta().copy()
+    lmp = [p for p in children_of(os.getpid()) if p in processes_named("lmp")]
+    assert len(lmp) == 1
+    os.kill(lmp[0], signal.SIGKILL)
+    start = time.monotonic()
+    with pytest.raises(EngineError, match=r"closed the connection.*log.lammps") as err:
+        dyn.run(1)
+    assert time.monotonic() - start < 10
+    log = Path(str(err.value).rsplit(" ", 1)[-1])
+    assert log.exists()  # kept, to be read
+    np.testing.assert_array_equal(atoms.positions, before[0])
+    np.testing.assert_array_equal(atoms.get_momenta(), before[1])
+    dyn.run(1)  # a fresh engine takes over
+    assert dyn.nsteps == 3
+    engine.close()
+
+
+def test_a_hung_engine_raises_within_the_timeout():
+    atoms = liquid()
+    with LAMMPSEngine(PPPM, timeout=2) as engine:
+        atoms.calc = engine
+        atoms.get_potential_energy()
+        lmp = [p for p in children_of(os.getpid()) if p in processes_named("lmp")]
+        os.kill(lmp[0], signal.SIGSTOP)
+        atoms.positions[0] += 0.01
+        start = time.monotonic()
+        with pytest.raises(EngineError, match=r"no forces within 2 s.*log.lammps"):
+            atoms.get_forces()
+        assert time.monotonic() - start < 5
+        assert not any(p in processes_named("lmp") for p in lmp)  # killed, even stopped
+
+
+@pytest.mark.parametrize("processes", [1, 2])
+def test_sigkill_of_its_python_leaves_no_engine(tmp_path, processes):
+    script = tmp_path / "run.py"
+    script.write_text(textwrap.dedent(f"""
+        import sys
+        from ase.io import read
+        from rigidmd.lammps import tip3p_charges
+        from rigidmd.lammps.engine import LAMMPSEngine
+        atoms = read({str(DATA / "water_box_27.traj")!r})
+        atoms.set_initial_charges(tip3p_charges(atoms))
+        atoms.calc = LAMMPSEngine({PPPM!r}, processes={processes})
+        atoms.get_forces()
+        print("ready", flush=True)
+        sys.stdin.read()
+    """))
+    proc = subprocess.Popen([sys.executable, str(script)], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "ready"
+        engine = children_of(proc.pid)
+        ranks = [p for p in engine if p in processes_named("lmp")]
+        assert len(ranks) == processes
+        for rank in ranks:  # busy ranks: they would never notice the socket closing
+            os.kill(rank, signal.SIGSTOP)
+        proc.kill()
+        proc.wait()
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and any(
+                os.path.exists(f"/proc/{p}") and p in processes_named(name)
+                for p in engine for name in ("lmp", "mpirun", "mpiexec.hydra",
+                                             "hydra_pmi_proxy")):
+            time.sleep(0.2)
+        left = [p for p in engine for name in ("lmp", "mpirun", "mpiexec.hydra",
+                                               "hydra_pmi_proxy", "python")
+                if p in processes_named(name)]
+        assert not left, f"processes left: {left}"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+def test_npt_through_the_engine_follows_the_in_process_calculator():
+    """RigidNPT (MTK): the cell moves every step; 20 steps on both calculators agree
+    to roundoff growth (measured 1e-12 Å)."""
+    atoms = liquid()
+    rigid_maxwell_boltzmann(atoms, 300, bodies="tags", rng=np.random.default_rng(3))
+    runs = []
+    with LAMMPSEngine(PPPM) as engine:
+        for calc in (engine, None):
+            a = atoms.copy()
+            a.calc = calc if calc is not None else LAMMPSCalculator(
+                PPPM + [engine.kspace_parameters])
+            dyn = RigidNPT(a, units.fs, 300, 1.01325 * units.bar, 50 * units.fs,
+                           200 * units.fs, bodies="tags")
+            dyn.run(20)
+            runs.append((a.positions.copy(), a.cell.array.copy()))
+    assert not np.allclose(runs[0][1], atoms.cell.array, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(runs[0][1], runs[1][1], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(runs[0][0], runs[1][0], rtol=0, atol=1e-9)
+
+
+ASE_CLIENT = """
+import sys
+from ase.calculators.socketio import SocketClient
+from ase.calculators.tip3p import TIP3P
+from ase.io import read
+atoms = read(sys.argv[1])
+atoms.calc = TIP3P(rc=4.5)
+SocketClient(unixsocket=sys.argv[2]).run(atoms, use_stress=False)
+"""
+
+
+def test_an_ase_calculator_in_asess_socket_client_gives_the_same_trajectory(tmp_path):
+    """Any i-PI engine: ASE's TIP3P in ASE's SocketClient, in a subprocess."""
+    atoms = liquid()
+    rigid_maxwell_boltzmann(atoms, 300, bodies="tags", rng=np.random.default_rng(4))
+    atoms.write(tmp_path / "start.traj")
+    (tmp_path / "client.py").write_text(ASE_CLIENT)
+    name = f"rigidmd-test-{os.getpid()}"
+    from ase.calculators.tip3p import TIP3P
+
+    local = atoms.copy()
+    local.calc = TIP3P(rc=4.5)
+    RigidVerlet(local, units.fs, bodies="tags").run(20)
+    with IPICalculator(unixsocket=name, timeout=30) as calc:
+        remote = atoms.copy()
+        remote.calc = calc
+        client = None
+        try:
+            calc.listen()
+            client = subprocess.Popen([sys.executable, str(tmp_path / "client.py"),
+                                       str(tmp_path / "start.traj"), name])
+            RigidVerlet(remote, units.fs, bodies="tags").run(20)
+        finally:
+            calc.close()
+            if client is not None:
+                client.wait(timeout=10)
+    np.testing.assert_allclose(remote.positions, local.positions, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(remote.get_velocities(), local.get_velocities(), rtol=0,
+                               atol=1e-12)
