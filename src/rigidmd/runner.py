@@ -196,8 +196,8 @@ class Run:
         from rigidmd.dynamics import RigidDynamics
 
         atoms, bodies = self._start_atoms()
-        atoms.calc = self.config.calculator.build(atoms)
         out = self.outputs
+        atoms.calc = self.config.calculator.build(atoms, out.directory / "engine")
         return RigidDynamics(atoms, self.config.run.timestep, bodies=bodies,
                              integrator=self.config.run.integrator,
                              integrator_options=self.config.run.integrator_options,
@@ -223,7 +223,7 @@ class Run:
                 "with --overwrite")
         trimmed = trim_outputs(self._appended_files(), checkpoint.extra.get("outputs", {}))
         atoms = checkpoint.atoms()
-        calc = self.config.calculator.build(atoms)
+        calc = self.config.calculator.build(atoms, out.directory / "engine")
         dyn = load_checkpoint(checkpoint, calc,
                               trajectory=str(out.trajectory) if out.trajectory else None,
                               append_trajectory=True, loginterval=out.interval)
@@ -266,9 +266,18 @@ class Run:
             lock.release()
 
     def _execute(self):
-        out, config = self.outputs, self.config
         self._prepare_directory()
         dyn = self._resumed_dynamics() if self.mode == "resume" else self._new_dynamics()
+        try:
+            return self._drive(dyn)
+        finally:
+            # A calculator with a process of its own (LAMMPSEngine) stops with the run.
+            close = getattr(dyn.atoms.calc, "close", None)
+            if callable(close):
+                close()
+
+    def _drive(self, dyn):
+        out, config = self.outputs, self.config
         total = config.run.steps
         remaining = total - dyn.nsteps
         if remaining <= 0:
