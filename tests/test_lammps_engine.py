@@ -9,7 +9,9 @@ import os
 import signal
 import subprocess
 import sys
+import socket
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -135,6 +137,38 @@ def test_a_rotated_triclinic_cell_and_two_ranks():
         assert_same(atoms, reference)
         atoms.set_cell(atoms.cell * 1.003, scale_atoms=True)
         assert_same(atoms, reference)
+
+
+def test_an_engine_started_elsewhere_over_tcp(tmp_path):
+    """launch=False: the input is written, someone starts lmp, it connects over TCP."""
+    with socket.socket() as probe:
+        probe.bind(("localhost", 0))
+        port = probe.getsockname()[1]
+    engine = LAMMPSEngine(PPPM, launch=False, port=port, workdir=tmp_path, timeout=60)
+    started = []
+
+    def start_elsewhere():
+        while not (tmp_path / "in.engine").exists():
+            time.sleep(0.05)
+        time.sleep(0.2)
+        cmd, env = engine.command_line()
+        started.append(subprocess.Popen(cmd, cwd=tmp_path, env=env))
+
+    thread = threading.Thread(target=start_elsewhere)
+    thread.start()
+    atoms = liquid()
+    try:
+        atoms.calc = engine
+        atoms.get_potential_energy()
+        reference = atoms.copy()
+        reference.calc = LAMMPSCalculator(PPPM + [engine.kspace_parameters])
+        assert_same(atoms, reference)
+    finally:
+        engine.close()
+        thread.join()
+        for proc in started:
+            proc.wait(timeout=30)  # EXIT: LAMMPS leaves (by MPI_Abort)
+    assert f"fix rmd_ipi all ipi localhost {port}" in (tmp_path / "in.engine").read_text()
 
 
 def test_virial_lower_triangle_is_mirrored():
