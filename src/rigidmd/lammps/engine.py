@@ -198,7 +198,7 @@ class LAMMPSEngine(IPICalculator):
         lines += self.commands
         if self.kspace_parameters is not None:
             lines.append(self.kspace_parameters)
-        lines += ["thermo_style custom step pe", "thermo_modify norm no lost error",
+        lines += ["thermo_style custom step pe", "thermo_modify norm no lost error flush yes",
                   "thermo 0", self._fix_ipi(), f"run {_RUN_STEPS}"]
         path = directory / "in.engine"
         path.write_text("\n".join(lines) + "\n")
