@@ -352,10 +352,11 @@ def start_run(path, processes, *args):
 
 @pytest.mark.slow
 def test_rigidmd_run_with_an_engine_stops_on_sigterm_and_resumes(tmp_path):
-    """``processes: 2``: SIGTERM checkpoints and stops the engine; --resume continues.
+    """``processes: 2``: SIGTERM checkpoints and stops the engine; --resume continues
+    (on 1 process: where the forces run is not part of the run's identity).
 
     The resumed engine builds its neighbour lists at other steps, so the forces differ
-    in the last bits: after 60 NVT steps the positions measured 2e-15 Å from the run
+    in the last bits: after 60 NVT steps the positions measured 3e-15 Å from the run
     left alone (bound 1e-12 Å).  (Under NPT a resumed run chooses its k-space
     parameters for the checkpoint's cell, as LAMMPSCalculator and a native LAMMPS
     restart do, and follows the run left alone only to PPPM's accuracy.)"""
@@ -376,7 +377,7 @@ def test_rigidmd_run_with_an_engine_stops_on_sigterm_and_resumes(tmp_path):
     assert "--resume" in stdout
     time.sleep(1.0)  # the watchdog's SIGTERM, then SIGKILL, 0.5 s apart
     assert not [p for p in engine if p in processes_named("lmp")]
-    resumed = start_run(tmp_path / "stopped", 2, "--resume")
+    resumed = start_run(tmp_path / "stopped", 1, "--resume")  # processes may change
     _, stderr = resumed.communicate(timeout=600)
     assert resumed.returncode == 0, stderr
     ours = read(tmp_path / "stopped" / "out" / "md.traj", ":")

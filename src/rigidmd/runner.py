@@ -115,9 +115,12 @@ def fingerprint(config):
     """A digest of what defines the trajectory (all but ``steps`` and output names)."""
     run = asdict(config.run)
     run.pop("steps")
+    calculator = asdict(config.calculator)
+    for how in ("processes", "threads", "address"):  # where the forces run, not what they are
+        calculator.pop(how)
     data = {
         "structure": str(config.structure.source), "bodies": config.structure.bodies,
-        "calculator": asdict(config.calculator), "run": run,
+        "calculator": calculator, "run": run,
         "coupling": [[spec.kind, spec.kwargs, spec.seed] for spec in config.coupling.specs],
         "interval": config.outputs.interval,
     }
