@@ -409,3 +409,41 @@ def test_threads_in_one_process_and_in_the_engine(tmp_path):
             LAMMPSCalculator(PPPM, threads=bad)
         with pytest.raises(ValueError, match="threads must be a positive whole number"):
             LAMMPSEngine(PPPM, threads=bad)
+
+
+@pytest.mark.slow
+def test_rigidmd_run_with_an_engine_started_elsewhere(tmp_path):
+    """``address: unix:NAME``: the input is written to out/engine; lmp started there
+    connects and the run completes."""
+    from rigidmd.lammps.engine import lammps_executable
+
+    name = f"rigidmd-cli-{os.getpid()}"
+    path = tmp_path / "elsewhere"
+    path.mkdir()
+    (path / "run.yaml").write_text(RUN.replace("processes: PROCESSES", f"address: unix:{name}")
+                                   .replace("steps: 60", "steps: 20"))
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "rigidmd.cli", "run", "run.yaml"], cwd=path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    engine = None
+    try:
+        deck = path / "out" / "engine" / "in.engine"
+        deadline = time.monotonic() + 120
+        while not deck.exists():
+            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
+            time.sleep(0.05)
+        time.sleep(0.2)
+        assert f"fix rmd_ipi all ipi {name} 0 unix" in deck.read_text()
+        lmp, lmp_env = lammps_executable()
+        engine = subprocess.Popen([str(lmp), "-in", "in.engine", "-screen", "none"],
+                                  cwd=deck.parent, env=lmp_env)
+        stdout, stderr = proc.communicate(timeout=300)
+        assert proc.returncode == 0, stderr
+        assert "waiting for an engine" in stderr
+        assert len(read(path / "out" / "md.traj", ":")) == 3
+    finally:
+        for p in (proc, engine):
+            if p is not None and p.poll() is None:
+                p.kill()
+        if engine is not None:
+            engine.wait(timeout=30)  # EXIT at the end of the run: LAMMPS leaves
