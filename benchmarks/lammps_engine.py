@@ -21,8 +21,8 @@ Two cores, 1728 waters: native LAMMPS on 2 MPI ranks against
 ``LAMMPSEngine(processes=2)``; native on 2 OpenMP threads against
 ``LAMMPSCalculator(threads=2)`` and ``LAMMPSEngine(threads=2)``.
 
-Run ``python benchmarks/lammps_engine.py`` (about 15 minutes on a busy
-machine); the tables are stored in ``benchmarks/lammps_engine.txt``.
+Run ``python benchmarks/lammps_engine.py`` (20 minutes on a 2-core machine
+busy with other jobs); the tables are stored in ``benchmarks/lammps_engine.txt``.
 """
 
 import argparse
