@@ -43,7 +43,7 @@ import numpy as np
 from ase import units
 from ase.calculators.calculator import Calculator, PropertyNotImplementedError, all_changes
 
-__all__ = ["EngineError", "IPICalculator"]
+__all__ = ["EngineError", "IPICalculator", "symmetric_virial"]
 
 MSGLEN = 12
 
@@ -278,7 +278,7 @@ class IPICalculator(Calculator):
         if extra:
             self._recv(extra, deadline, "forces")
         hartree = self.hartree
-        return energy * hartree, forces * (hartree / bohr), _symmetric(virial) * hartree
+        return energy * hartree, forces * (hartree / bohr), symmetric_virial(virial) * hartree
 
     # ------------------------------------------------------------ ASE
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
@@ -345,8 +345,19 @@ class IPICalculator(Calculator):
             pass
 
 
-def _symmetric(virial):
-    """The symmetric virial from what an engine sent (see the module notes)."""
+def symmetric_virial(virial):
+    """The symmetric virial from what an engine sent (see the module notes).
+
+    Parameters
+    ----------
+    virial : numpy.ndarray, shape (3, 3)
+
+    Returns
+    -------
+    numpy.ndarray, shape (3, 3)
+        The upper triangle mirrored when the lower one is all zero (LAMMPS's
+        ``fix ipi``), the lower one when the upper is, else ``(W + W.T) / 2``.
+    """
     lower = virial[np.tril_indices(3, -1)]
     upper = virial[np.triu_indices(3, 1)]
     if not np.any(lower):
