@@ -221,6 +221,7 @@ def test_a_hung_engine_raises_within_the_timeout():
         assert not any(p in processes_named("lmp") for p in lmp)  # killed, even stopped
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("processes", [1, 2])
 def test_sigkill_of_its_python_leaves_no_engine(tmp_path, processes):
     script = tmp_path / "run.py"
@@ -300,7 +301,8 @@ SocketClient(unixsocket=sys.argv[2]).run(atoms, use_stress=False)
 """
 
 
-def test_an_ase_calculator_in_asess_socket_client_gives_the_same_trajectory(tmp_path):
+@pytest.mark.slow
+def test_an_ase_calculator_in_ases_socket_client_gives_the_same_trajectory(tmp_path):
     """Any i-PI engine: ASE's TIP3P in ASE's SocketClient, in a subprocess.
 
     20 steps of 27 periodic waters; positions and forces cross the socket in Bohr
