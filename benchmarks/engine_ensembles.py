@@ -38,6 +38,8 @@ COMMANDS = ["pair_style lj/cut/coul/long 6.0", "pair_coeff * * 0.0 1.0",
             "pair_coeff 1 1 0.0065956802 3.15061", "kspace_style pppm 1e-4"]
 TYPES = {"O": 1, "H": 2}
 AMU_PER_A3 = 1.66053906660  # g/cm³ per amu/Å³
+RUNS = {"LAMMPSCalculator aniso": ("calc", "aniso"), "LAMMPSEngine aniso": ("engine", "aniso"),
+        "LAMMPSEngine tri": ("engine", "tri"), "LAMMPSCalculator iso": ("calc", "iso")}
 
 
 def run(kind, couple, ps, seed, equilibration_ps=5.0):
@@ -75,21 +77,23 @@ def main():
     parser.add_argument("--ps", type=float, default=20.0)
     parser.add_argument("--equilibration-ps", type=float, default=5.0)
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--runs", nargs="*", default=list(RUNS), choices=list(RUNS))
+    parser.add_argument("--append", action="store_true", help="add to the .txt")
     args = parser.parse_args()
     lines = [f"64 TIP3P waters, 298 K, 1 atm, RigidNPT (MTK 1 ps), 2 fs; "
              f"{args.equilibration_ps:g} ps equilibration, "
              f"{args.ps:g} ps sampled, seed {args.seed}; means ± standard error (10 blocks)",
              f"{'run':>34} {'density g/cm3':>17} {'a Å':>14} {'b Å':>14} {'c Å':>14} "
              f"{'alpha':>13} {'beta':>13} {'gamma':>13}"]
-    for name, kind, couple in (("LAMMPSCalculator aniso", "calc", "aniso"),
-                               ("LAMMPSEngine aniso", "engine", "aniso"),
-                               ("LAMMPSEngine tri", "engine", "tri"),
-                               ("LAMMPSCalculator iso", "calc", "iso")):
+    for name in args.runs:
+        kind, couple = RUNS[name]
         mean, error = block_mean(run(kind, couple, args.ps, args.seed, args.equilibration_ps))
         cells = " ".join(f"{m:7.4f}±{e:6.4f}" for m, e in zip(mean, error, strict=True))
         lines.append(f"{name:>34} {cells}")
         print(lines[-1], flush=True)
-    Path(__file__).with_suffix(".txt").write_text("\n".join(lines) + "\n")
+    path = Path(__file__).with_suffix(".txt")
+    before = path.read_text() + "\n" if args.append and path.exists() else ""
+    path.write_text(before + "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

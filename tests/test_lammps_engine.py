@@ -139,6 +139,40 @@ def test_a_rotated_triclinic_cell_and_two_ranks():
         assert_same(atoms, reference)
 
 
+def test_a_tilt_past_half_a_box_is_reduced_and_a_flip_restarts_the_engine():
+    """LAMMPS keeps |xy| <= lx/2 (its minimum image assumes it): a barostat's cell may
+    go further.  The engine gets the same lattice in the reduced basis (equal, to
+    roundoff, to LAMMPSCalculator given that basis); when the basis flips, as native
+    LAMMPS re-neighbours, a new engine starts.  Before: "Out of range atoms - cannot
+    compute PPPM" in a 64-water triclinic RigidNPT run."""
+    atoms = liquid()
+    length = atoms.cell[0, 0]
+    with LAMMPSEngine(PPPM) as engine:
+        atoms.calc = engine
+        for xy, flips in ((0.45, 0), (0.55, 1), (1.3, 1)):
+            cell = atoms.cell.array.copy()
+            cell[1, 0] = xy * length
+            atoms.set_cell(cell, scale_atoms=True)
+            atoms.get_potential_energy()
+            if xy == 0.45:
+                first = engine.pid
+                reference = atoms.copy()
+                reference.calc = LAMMPSCalculator(PPPM + [engine.kspace_parameters])
+            else:
+                assert engine.pid != first  # the basis flipped: a new engine
+            reduced = atoms.copy()
+            reduced_cell = cell.copy()
+            reduced_cell[1] -= flips * cell[0]
+            reduced.set_cell(reduced_cell)
+            reduced.calc = reference.calc
+            assert atoms.get_potential_energy() == pytest.approx(
+                reduced.get_potential_energy(), rel=1e-13)
+            np.testing.assert_allclose(atoms.get_forces(), reduced.get_forces(), atol=1e-12)
+            stress = reduced.get_stress()
+            np.testing.assert_allclose(atoms.get_stress(), stress,
+                                       atol=1e-12 * np.abs(stress).max())
+
+
 def test_an_engine_started_elsewhere_over_tcp(tmp_path):
     """launch=False: the input is written, someone starts lmp, it connects over TCP."""
     with socket.socket() as probe:

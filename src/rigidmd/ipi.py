@@ -132,6 +132,10 @@ class IPICalculator(Calculator):
         """Rotation ``Q`` taking the cell into the engine's frame (None: no rotation)."""
         return None
 
+    def engine_cell(self, cell):
+        """The cell sent for ``cell`` (in the engine's frame): the same lattice, any basis."""
+        return cell
+
     def origin(self, cell):
         """Where the engine puts the cell's origin (Å, in its frame): added to positions."""
         return None
@@ -292,6 +296,8 @@ class IPICalculator(Calculator):
         positions = atoms.positions
         if rotation is not None:
             cell, positions = cell @ rotation, positions @ rotation
+        if periodic:
+            cell = self.engine_cell(cell)
         origin = self.origin(cell) if periodic else None
         if origin is not None:
             positions = positions + origin

@@ -55,7 +55,8 @@ from rigidmd.ipi import IPICalculator
 from rigidmd.lammps.calculator import LAMMPSCalculator, lower_triangular
 from rigidmd.lammps.library import flatten
 
-__all__ = ["LAMMPSEngine", "LAMMPS_IPI_BOHR", "LAMMPS_IPI_HARTREE", "lammps_executable"]
+__all__ = ["LAMMPSEngine", "LAMMPS_IPI_BOHR", "LAMMPS_IPI_HARTREE", "lammps_executable",
+           "reduce_tilt"]
 
 #: Bohr (Å) in LAMMPS's ``fix ipi`` (``posconv`` for ``units metal``).
 LAMMPS_IPI_BOHR = 0.52917721
@@ -85,6 +86,31 @@ def _mpirun():
     if found is None:
         raise FileNotFoundError("LAMMPSEngine: processes > 1 needs mpirun (pip install mpich)")
     return found
+
+
+def reduce_tilt(cell):
+    """The same lattice with LAMMPS's tilt limits: ``|xy|, |xz| <= lx/2``, ``|yz| <= ly/2``.
+
+    Parameters
+    ----------
+    cell : numpy.ndarray, shape (3, 3)
+        Lower triangular (LAMMPS's frame), rows a, b, c.
+
+    Returns
+    -------
+    reduced : numpy.ndarray, shape (3, 3)
+        ``b - kxy a`` and ``c - kyz b - kxz a`` for the nearest whole numbers.
+    flips : tuple of int
+        ``(kxy, kxz, kyz)``.
+    """
+    reduced = np.array(cell, dtype=float)
+    kyz = int(np.rint(reduced[2, 1] / reduced[1, 1]))
+    reduced[2] -= kyz * reduced[1]
+    kxz = int(np.rint(reduced[2, 0] / reduced[0, 0]))
+    reduced[2] -= kxz * reduced[0]
+    kxy = int(np.rint(reduced[1, 0] / reduced[0, 0]))
+    reduced[1] -= kxy * reduced[0]
+    return reduced, (kxy, kxz, kyz)
 
 
 def _positive(name, value):
@@ -160,6 +186,7 @@ class LAMMPSEngine(IPICalculator):
         self._workdir = None
         self._engine_triclinic = None
         self._signature = None
+        self._flips = None
 
     # ------------------------------------------------------------ the input
     def _fix_ipi(self):
@@ -177,6 +204,10 @@ class LAMMPSEngine(IPICalculator):
         """
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
+        rotation, cell = lower_triangular(atoms.cell.array)
+        cell, self._flips = reduce_tilt(cell)
+        atoms = atoms.copy()
+        atoms.set_cell(cell if rotation is None else cell @ rotation.T)  # the same lattice
         probe = LAMMPSCalculator(self.commands, **self.calculator_options)
         try:
             probe.write_data(atoms, directory / "engine.data")
@@ -184,7 +215,6 @@ class LAMMPSEngine(IPICalculator):
                 self.kspace_parameters = probe.kspace_parameters
         finally:
             del probe
-        _, cell = lower_triangular(atoms.cell.array)
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
         self._engine_triclinic = bool(self.triclinic) or tilted
         opts = self.calculator_options
@@ -254,6 +284,11 @@ class LAMMPSEngine(IPICalculator):
     def frame(self, cell):
         return lower_triangular(cell)[0]
 
+    def engine_cell(self, cell):
+        # LAMMPS keeps tilts within half a box length (its minimum image and ghost atoms
+        # assume it); a barostat's cell may go further: the same lattice, reduced.
+        return reduce_tilt(cell)[0]
+
     def origin(self, cell):
         # fix ipi centres the box (boxlo = -diag/2).  PPPM is not exactly translation
         # invariant (its mesh is fixed to the box), so positions are shifted to sit where
@@ -288,11 +323,13 @@ class LAMMPSEngine(IPICalculator):
                              f"{target.pbc.tolist()}); use LAMMPSCalculator for a cluster")
         signature = (len(target), target.numbers.tobytes(),
                      target.get_initial_charges().tobytes())
-        _, cell = lower_triangular(target.cell.array)
+        cell, flips = reduce_tilt(lower_triangular(target.cell.array)[1])
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
-        if self.connected and (signature != self._signature
+        if self.connected and (signature != self._signature or flips != self._flips
                                or tilted and not self._engine_triclinic):
-            self.close()  # other atoms, or a tilted cell in an orthogonal box: a new engine
+            # Other atoms; a tilted cell in an orthogonal box; or a flip of the basis
+            # (native LAMMPS re-neighbours there; fix ipi cannot): a new engine.
+            self.close()
             if tilted:
                 self.triclinic = True
         self._signature = signature
