@@ -143,8 +143,9 @@ def test_a_tilt_past_half_a_box_is_reduced_and_a_flip_restarts_the_engine():
     """LAMMPS keeps |xy| <= lx/2 (its minimum image assumes it): a barostat's cell may
     go further.  The engine gets the same lattice in the reduced basis (equal, to
     roundoff, to LAMMPSCalculator given that basis); when the basis flips, as native
-    LAMMPS re-neighbours, a new engine starts.  Before: "Out of range atoms - cannot
-    compute PPPM" in a 64-water triclinic RigidNPT run."""
+    LAMMPS re-neighbours, a new engine starts.  (Without it a 64-water triclinic
+    RigidNPT run, its cell sheared far, stopped with LAMMPS's "Out of range atoms -
+    cannot compute PPPM".)"""
     atoms = liquid()
     length = atoms.cell[0, 0]
     with LAMMPSEngine(PPPM) as engine:

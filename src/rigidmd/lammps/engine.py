@@ -26,7 +26,9 @@ Numbers
     same amount, so that they sit in the box as in one from the origin (PPPM
     is translation invariant only to its discretisation error, 1e-7 relative
     here); they are sent in any image (LAMMPS wraps them and keeps its own
-    images against its neighbour list).
+    images against its neighbour list).  The cell is sent in the basis with
+    LAMMPS's tilt limits (:func:`reduce_tilt`: the same lattice); when that
+    basis flips, where native LAMMPS re-neighbours, a new engine is started.
 
 Life cycle
     The engine starts at the first force call, and stops with :meth:`close`,
