@@ -161,6 +161,10 @@ def save_checkpoint(dyn, path, extra=None):
         "scratch": {k: v for k, v in ctx.scratch.items() if isinstance(v, np.ndarray)},
         "info": {k: v for k, v in atoms.info.items() if _is_json(v)},
         "extra": extra or {},
+        # What the calculator needs to continue with the same energies (LAMMPS's k-space
+        # parameters), when it offers it.
+        "calculator_state": (atoms.calc.get_checkpoint_state()
+                             if hasattr(atoms.calc, "get_checkpoint_state") else None),
     }
     arrays["meta"] = np.array(json.dumps(_jsonable(meta)))
     atomic_write(path, lambda fh: np.savez(fh, **arrays))
@@ -249,7 +253,8 @@ def load_checkpoint(path, calculator, **kwargs):
     ----------
     path : str or os.PathLike
     calculator : ase.calculators.calculator.Calculator
-        Attached to the rebuilt atoms (the checkpoint holds no calculator).
+        Attached to the rebuilt atoms (the checkpoint holds no calculator; one with
+        ``set_checkpoint_state`` gets what its ``get_checkpoint_state`` gave).
     **kwargs
         ``trajectory``, ``logfile``, ``loginterval``, ``append_trajectory``, ...
         as for :class:`~rigidmd.dynamics.RigidDynamics`.
@@ -269,6 +274,8 @@ def load_checkpoint(path, calculator, **kwargs):
     meta, arrays = checkpoint.meta, checkpoint.arrays
     atoms = checkpoint.atoms()
     atoms.calc = calculator
+    if meta.get("calculator_state") is not None and hasattr(calculator, "set_checkpoint_state"):
+        calculator.set_checkpoint_state(meta["calculator_state"])
     scheme = Scheme(meta["scheme"], name=meta["scheme_name"])
     dyn = RigidDynamics(atoms, meta["dt"], bodies=arrays["body_ids"], integrator=scheme,
                         backend=meta["backend"], couplings=_parts(meta), **kwargs)

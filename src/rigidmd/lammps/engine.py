@@ -210,7 +210,8 @@ class LAMMPSEngine(IPICalculator):
         cell, self._flips = reduce_tilt(cell)
         atoms = atoms.copy()
         atoms.set_cell(cell if rotation is None else cell @ rotation.T)  # the same lattice
-        probe = LAMMPSCalculator(self.commands, **self.calculator_options)
+        probe = LAMMPSCalculator(self.commands, kspace_parameters=self.kspace_parameters,
+                                 **self.calculator_options)
         try:
             probe.write_data(atoms, directory / "engine.data")
             if self.kspace_parameters is None:
@@ -311,6 +312,18 @@ class LAMMPSEngine(IPICalculator):
             shutil.rmtree(self._workdir, ignore_errors=True)
             self.log = None
         self._workdir = None
+
+    def get_checkpoint_state(self):
+        """``{"kspace_parameters": str or None}``: a resumed run keeps the k-space parameters
+        (see :meth:`rigidmd.lammps.LAMMPSCalculator.get_checkpoint_state`)."""
+        return {"kspace_parameters": self.kspace_parameters}
+
+    def set_checkpoint_state(self, state):
+        """Take back what :meth:`get_checkpoint_state` returned (before the first call)."""
+        unknown = sorted(set(state) - {"kspace_parameters"})
+        if unknown:
+            raise ValueError(f"LAMMPSEngine: unknown checkpoint state {unknown[0]!r}")
+        self.kspace_parameters = state.get("kspace_parameters")
 
     @property
     def pid(self):
