@@ -377,6 +377,7 @@ bodies: mol-id
 calculator: {name: lammps, water_model: {name: tip3p, cutoff: 4.5, kspace: pppm},
              processes: PROCESSES}
 thermostat: {kind: nose_hoover, temperature: 300 K, tdamp: 50 fs}
+barostat: {kind: mtk, pressure: 1 atm, pdamp: 200 fs}
 velocities: {temperature: 300 K, seed: 1}
 timestep: 1 fs
 steps: 60
@@ -399,11 +400,10 @@ def test_rigidmd_run_with_an_engine_stops_on_sigterm_and_resumes(tmp_path):
     """``processes: 2``: SIGTERM checkpoints and stops the engine; --resume continues
     (on 1 process: where the forces run is not part of the run's identity).
 
-    The resumed engine builds its neighbour lists at other steps, so the forces differ
-    in the last bits: after 60 NVT steps the positions measured 3e-15 Å from the run
-    left alone (bound 1e-12 Å).  (Under NPT a resumed run chooses its k-space
-    parameters for the checkpoint's cell, as LAMMPSCalculator and a native LAMMPS
-    restart do, and follows the run left alone only to PPPM's accuracy.)"""
+    NPT (MTK): the checkpoint carries the engine's k-space parameters; the resumed
+    engine builds its neighbour lists at other steps, so the forces differ in the last
+    bits: after 60 steps the positions measured 9e-15 Å and the cell 5e-15 Å from the
+    run left alone (bound 1e-12 Å)."""
     plain = start_run(tmp_path / "plain", 2)
     _, stderr = plain.communicate(timeout=600)
     assert plain.returncode == 0, stderr
@@ -427,6 +427,7 @@ def test_rigidmd_run_with_an_engine_stops_on_sigterm_and_resumes(tmp_path):
     ours = read(tmp_path / "stopped" / "out" / "md.traj", ":")
     theirs = read(tmp_path / "plain" / "out" / "md.traj", ":")
     assert len(ours) == len(theirs) == 7
+    np.testing.assert_allclose(ours[-1].cell.array, theirs[-1].cell.array, rtol=0, atol=1e-12)
     np.testing.assert_allclose(ours[-1].positions, theirs[-1].positions, rtol=0, atol=1e-12)
 
 
