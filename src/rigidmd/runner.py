@@ -163,8 +163,9 @@ def fingerprint(config):
     integrator = config.run.integrator
     if isinstance(integrator, str) and integrator.endswith((".yaml", ".yml")):
         integrator = {"file content": _file_digest(integrator)}
+    # Where the forces run (processes, threads, address) is not what they are.
     calculator = {key: value for key, value in asdict(config.calculator).items()
-                  if key != "calculator_class"}
+                  if key not in ("calculator_class", "processes", "threads", "address")}
     fields = {
         "structure": source, "read_options": structure.read_options,
         "bodies": structure.bodies, "calculator": calculator,
@@ -323,7 +324,7 @@ class Run:
         from rigidmd.dynamics import RigidDynamics
 
         atoms, bodies = self._start_atoms()
-        atoms.calc = self.config.calculator.build(atoms)
+        atoms.calc = self.config.calculator.build(atoms, self.outputs.directory / "engine")
         probe = atoms.copy()
         probe.calc = atoms.calc
         with warnings.catch_warnings():
@@ -380,7 +381,7 @@ class Run:
             print(f"the checkpoint {out.checkpoint.name} is at step 0: starting the run again",
                   file=self.stream)
             return self._new_dynamics(replace=True)
-        calc = self.config.calculator.build(checkpoint.atoms())
+        calc = self.config.calculator.build(checkpoint.atoms(), out.directory / "engine")
         self._prepare_directory()
         trimmed = trim_outputs(self._appended_files(), checkpoint.extra.get("outputs", {}))
         self.checkpoint_step = checkpoint.nsteps
@@ -467,8 +468,17 @@ class Run:
         return RunStopped(f"{reason} (at step {dyn.nsteps}); {where}")
 
     def _execute(self):
-        out, config = self.outputs, self.config
         dyn = self._set_up()
+        try:
+            return self._drive(dyn)
+        finally:
+            # A calculator with a process of its own (LAMMPSEngine) stops with the run.
+            close = getattr(dyn.atoms.calc, "close", None)
+            if callable(close):
+                close()
+
+    def _drive(self, dyn):
+        out, config = self.outputs, self.config
         total = config.run.steps
         remaining = total - dyn.nsteps
         if remaining <= 0:

@@ -300,10 +300,22 @@ class CalculatorSection:
         ``lammps`` with ``water_model: {name, cutoff, kspace, accuracy, tail}``: the
         model whose commands, charges and types (O 1, H 2, M 3) are used; the
         structure must be its molecules (M explicit for four-site models).
+    processes : int or None
+        ``lammps``: run LAMMPS in its own process(es) on this many MPI ranks
+        (:class:`~rigidmd.lammps.engine.LAMMPSEngine`); absent: in-process.
+    threads : int or None
+        ``lammps``: OpenMP threads (per rank).
+    address : str or None
+        An engine started elsewhere connects here: ``unix:NAME`` (the socket
+        ``/tmp/ipi_NAME``) or ``HOST:PORT``.  With ``lammps`` the engine's
+        input is written to ``<outputs.directory>/engine`` (``lmp -in in.engine``
+        there); ``ipi`` takes any i-PI engine (CP2K, Quantum ESPRESSO, ASE's
+        ``SocketClient``, ...).
     """
 
     KEYS = ("calculator",)
-    FIELDS = ("name", "options", "commands", "pair", "charges", "atom_types", "water_model")
+    FIELDS = ("name", "options", "commands", "pair", "charges", "atom_types", "water_model",
+              "processes", "threads", "address")
 
     name: str
     options: dict = field(default_factory=dict)
@@ -311,6 +323,9 @@ class CalculatorSection:
     charges: dict = field(default_factory=dict)
     atom_types: dict = field(default_factory=dict)
     water: object = None
+    processes: int | None = None
+    threads: int | None = None
+    address: str | None = None
     #: The class a dotted ``name`` names, once :meth:`check_trust` resolved it.
     calculator_class: type | None = field(default=None, repr=False, compare=False)
 
@@ -323,7 +338,7 @@ class CalculatorSection:
         if self.name == "lammps":
             if not trust and self.water is None:
                 check_lammps_calculator(self.options, self.commands)
-        elif self.name not in ("tip3p", "tip4p"):
+        elif self.name not in ("tip3p", "tip4p", "ipi"):
             self.calculator_class = calculator_class(self.name, self.options, trust)
 
     @classmethod
@@ -353,11 +368,33 @@ class CalculatorSection:
         if calc["name"] == "lammps" and not commands:
             raise ConfigError("calculator.commands: the lammps calculator needs LAMMPS commands "
                               "(pair_style, pair_coeff, ...) or a water_model")
+        processes = calc.get("processes")
+        threads = calc.get("threads")
+        address = calc.get("address")
+        for key, value in (("processes", processes), ("threads", threads)):
+            if value is not None:
+                if calc["name"] != "lammps":
+                    raise ConfigError(f"calculator.{key}: goes with name: lammps")
+                whole_number(f"calculator.{key}", value, minimum=1)
+        if address is not None:
+            if calc["name"] not in ("lammps", "ipi"):
+                raise ConfigError("calculator.address: goes with name: lammps or ipi")
+            _address(address)
+            if processes is not None:
+                raise ConfigError("calculator.processes: an engine started elsewhere (address) "
+                                  "chooses its own processes; give one or the other")
+        elif calc["name"] == "ipi":
+            raise ConfigError("calculator.address: name: ipi needs the address an engine "
+                              "connects to (unix:NAME or HOST:PORT)")
         return cls(calc["name"], options, [str(c) for c in commands], charges, atom_types,
-                   water)
+                   water, processes, threads, address)
 
-    def build(self, atoms):
-        """An ASE calculator for ``atoms`` (sets the atoms' charges for ``lammps``)."""
+    def build(self, atoms, engine_directory="engine"):
+        """An ASE calculator for ``atoms`` (sets the atoms' charges for ``lammps``).
+
+        ``engine_directory``: where ``lammps`` with an ``address`` writes the input of
+        the engine started elsewhere.
+        """
         try:
             if self.name == "tip3p":
                 from ase.calculators.tip3p import TIP3P
@@ -370,7 +407,11 @@ class CalculatorSection:
                 self._check_water(atoms)
                 return TIP4P(**self.options)
             if self.name == "lammps":
-                return self._lammps(atoms)
+                return self._lammps(atoms, engine_directory)
+            if self.name == "ipi":
+                from rigidmd.ipi import IPICalculator
+
+                return IPICalculator(**_address(self.address), **self.options)
             calc_class = self.calculator_class or calculator_class(self.name, self.options,
                                                                    trust=True)
             return calc_class(**self.options)
@@ -403,7 +444,7 @@ class CalculatorSection:
                     f"width ({shortest:.2f} Å), which ASE's {self.name.upper()} refuses; use "
                     f"rc up to {0.5 * shortest:.2f} Å, or the lammps calculator with PPPM")
 
-    def _lammps(self, atoms):
+    def _lammps(self, atoms, engine_directory):
         try:
             from rigidmd.lammps import LAMMPSCalculator, load_lammps
 
@@ -422,8 +463,30 @@ class CalculatorSection:
             if missing:
                 raise ConfigError(f"calculator.charges: no charge for {missing[0]}")
             atoms.set_initial_charges([self.charges[s] for s in atoms.get_chemical_symbols()])
-        return LAMMPSCalculator(self.commands, atom_types=self.atom_types or None,
-                                **self.options)
+        if self.processes is None and self.address is None:
+            if self.threads is not None:
+                self.options.setdefault("threads", self.threads)
+            return LAMMPSCalculator(self.commands, atom_types=self.atom_types or None,
+                                    **self.options)
+        from rigidmd.lammps.engine import LAMMPSEngine
+
+        where = {} if self.address is None else dict(
+            _address(self.address), launch=False, workdir=engine_directory)
+        return LAMMPSEngine(self.commands, atom_types=self.atom_types or None,
+                            processes=self.processes or 1, threads=self.threads,
+                            **where, **self.options)
+
+
+def _address(address):
+    """``unix:NAME`` or ``HOST:PORT`` as IPICalculator keywords, else a ConfigError."""
+    text = str(address)
+    if text.startswith("unix:") and len(text) > 5:
+        return {"unixsocket": text[5:]}
+    host, _, port = text.rpartition(":")
+    if host and port.isdigit() and 1024 < int(port) < 65536:
+        return {"host": host, "port": int(port)}
+    raise ConfigError(f"calculator.address: expected unix:NAME or HOST:PORT (port 1025-65535), "
+                      f"got {address!r}")
 
 
 def _check_sign(field_name, quantity, value, raw):

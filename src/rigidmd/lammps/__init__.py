@@ -8,6 +8,7 @@ module                 owns
 ``deck``               set-up and integration commands, :func:`export_lammps`
 ``reference``          rigid-body reference runs and single-point energies
 ``calculator``         :class:`LAMMPSCalculator`, LAMMPS forces at LAMMPS speed
+``engine``             :class:`LAMMPSEngine`, LAMMPS in its own process(es) (i-PI)
 =====================  ======================================================
 
 Everything here speaks ASE units (eV, Å, amu, ASE time); see
@@ -18,6 +19,7 @@ from rigidmd.forcefields import tip3p_charges, tip3p_pair_commands
 from rigidmd.lammps.calculator import LAMMPSCalculator
 from rigidmd.lammps.data import LammpsData, write_data
 from rigidmd.lammps.deck import export_lammps
+from rigidmd.lammps.engine import LAMMPSEngine
 from rigidmd.lammps.library import (
     DEFAULT_CMDARGS,
     LAMMPS_METAL_FTM2V,
@@ -40,6 +42,7 @@ __all__ = [
     "LAMMPS_METAL_FTM2V",
     "LAMMPS_METAL_QQR2E",
     "LAMMPSCalculator",
+    "LAMMPSEngine",
     "LammpsData",
     "LammpsError",
     "RIGID_FIX_STYLES",

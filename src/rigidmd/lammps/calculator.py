@@ -44,6 +44,7 @@ from ase.calculators.calculator import Calculator, all_changes
 from rigidmd.atomslink import check_finite
 from rigidmd.lammps.data import MASSLESS_SITE_MASS
 from rigidmd.lammps.library import (
+    DEFAULT_CMDARGS,
     LAMMPS_METAL_QQR2E,
     LammpsError,
     charge_factor,
@@ -51,7 +52,7 @@ from rigidmd.lammps.library import (
     load_lammps,
 )
 
-__all__ = ["LAMMPSCalculator"]
+__all__ = ["LAMMPSCalculator", "lower_triangular"]
 
 _COULOMB = ("coul", "kspace_style", "tip4p")
 
@@ -76,6 +77,17 @@ def _lower_triangular(cell):
     lammps_cell = R.T
     lammps_cell[np.abs(lammps_cell) < 1e-14 * np.abs(lammps_cell).max()] = 0.0
     return Q, lammps_cell
+
+
+#: Public name of the rotation into LAMMPS's frame (used by :mod:`rigidmd.lammps.engine`).
+lower_triangular = _lower_triangular
+
+
+def _threads(threads):
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise ValueError(f"LAMMPSCalculator: threads must be a positive whole number, got "
+                         f"{threads!r}")
+    return int(threads)
 
 
 #: LAMMPS warnings that say nothing here: no integrator is the design; the net charge
@@ -160,6 +172,10 @@ class LAMMPSCalculator(Calculator):
         Neighbour skin (Å), LAMMPS's ``neighbor`` default for metal units.
     cmdargs : sequence of str, optional
         LAMMPS command-line arguments (default: no log, no screen output).
+    threads : int, optional
+        OpenMP threads: LAMMPS's OPENMP styles with ``-sf omp -pk omp threads``
+        added to the instance's command line (``package omp`` cannot be given
+        once the box exists).
     kspace_parameters : str, optional
         A ``kspace_modify gewald ...`` command that fixes the k-space
         parameters (see :attr:`kspace_parameters`); default: those LAMMPS
@@ -188,7 +204,7 @@ class LAMMPSCalculator(Calculator):
 
     def __init__(self, commands, *, atom_types=None, molecule_ids=None,
                  exclude_intramolecular=True, ase_constants=False, skin=2.0, cmdargs=None,
-                 kspace_parameters=None, **kwargs):
+                 threads=None, kspace_parameters=None, **kwargs):
         super().__init__(**kwargs)
         if isinstance(commands, str):
             commands = [commands]
@@ -201,6 +217,10 @@ class LAMMPSCalculator(Calculator):
         self.ase_constants = bool(ase_constants)
         self.skin = float(skin)
         self.cmdargs = cmdargs
+        self.threads = None if threads is None else _threads(threads)
+        if self.threads is not None:
+            self.cmdargs = list(DEFAULT_CMDARGS if cmdargs is None else cmdargs) + [
+                "-sf", "omp", "-pk", "omp", str(self.threads)]
         self._lmp = None
         self._kspace_parameters = None
         self._pinned_for = None  # the system whose first cell chose the parameters
@@ -624,3 +644,15 @@ class LAMMPSCalculator(Calculator):
             self.results = results
         else:
             self.results.update(results)
+
+    def write_data(self, atoms, path):
+        """Write ``atoms`` as this calculator gives them to LAMMPS to a data file.
+
+        Types, masses, charges, molecule IDs, the box in LAMMPS's frame (see
+        :func:`lower_triangular`) and image flags, by LAMMPS's ``write_data``
+        (``nocoeff``), after one force call (which also fixes
+        :attr:`kspace_parameters`).  An engine in another process reads it
+        (:class:`rigidmd.lammps.engine.LAMMPSEngine`).
+        """
+        self.get_forces(atoms)
+        self._execute([f"write_data {Path(path)} nocoeff"])

@@ -1,0 +1,373 @@
+r"""Forces from an engine in another process: an ASE calculator speaking the i-PI protocol.
+
+i-PI's socket protocol (Ceriotti, More and Manolopoulos, Comput. Phys. Commun.
+185, 1019 (2014)) is spoken by LAMMPS (``fix ipi``), CP2K, Quantum ESPRESSO,
+FHI-aims, DFTB+ and ASE's own :class:`ase.calculators.socketio.SocketClient`
+(which wraps any ASE calculator).  :class:`IPICalculator` is the server side:
+it listens on a Unix socket ``/tmp/ipi_<name>`` or a TCP port, an engine
+connects, and every force call is one exchange of fixed-size messages (12-byte
+headers, then native-endian ``float64``/``int32`` arrays)::
+
+    server                     engine
+    STATUS            ->
+                      <-       READY (or NEEDINIT: the server sends INIT first)
+    POSDATA h h^-1 N x ->      (the cell h = cell.T, Bohr; positions, Bohr)
+    GETFORCE          ->
+                      <-       FORCEREADY E N f W len extra
+                               (Hartree, Hartree/Bohr, virial W in Hartree)
+
+After the first exchange the ``STATUS`` polls are skipped: positions and the
+request for forces go out in one write, the answer comes back in one read.
+
+Units on the wire are atomic units.  Engines convert with their own Bohr and
+Hartree: ASE's client with ASE's (the default here), LAMMPS's ``fix ipi``
+with 8-digit ones (``bohr``, ``hartree`` take the engine's values, so that its
+numbers come back to roundoff).
+
+The virial ``W = -V σ`` (eV) gives the stress.  LAMMPS's ``fix ipi`` fills
+only the upper triangle (xy, xz, yz) and leaves the lower one zero (ASE's own
+server would symmetrise that with the zeros and halve every shear stress):
+here a zero lower (or upper) triangle is mirrored from the other, and a full
+virial is symmetrised.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import socket
+import time
+import uuid
+
+import numpy as np
+from ase import units
+from ase.calculators.calculator import Calculator, PropertyNotImplementedError, all_changes
+
+__all__ = ["EngineError", "IPICalculator", "symmetric_virial"]
+
+MSGLEN = 12
+
+
+class EngineError(RuntimeError):
+    """An i-PI engine died, hung or broke the protocol (the message says which and where)."""
+
+
+def _word(text):
+    return text.encode("ascii").ljust(MSGLEN)
+
+
+class IPICalculator(Calculator):
+    r"""An ASE calculator whose forces come from an i-PI engine in another process.
+
+    Parameters
+    ----------
+    unixsocket : str, optional
+        Listen on the Unix socket ``/tmp/ipi_<unixsocket>`` (the engine is
+        told ``unixsocket``).  Default when ``port`` is not given: a fresh name.
+    port : int, optional
+        Listen on this TCP port instead (an engine on another host).
+    host : str, default "localhost"
+        Interface the TCP server binds to (``""``: all of them).
+    timeout : float, default 120.0
+        Seconds an engine may take to answer one force call (and to connect,
+        see ``connect_timeout``) before :class:`EngineError` is raised.
+    connect_timeout : float, optional
+        Seconds to wait for the engine to connect (default ``timeout``).
+    bohr, hartree : float
+        The engine's Bohr (Å) and Hartree (eV): ASE's by default.
+
+    Notes
+    -----
+    Properties: ``energy`` (``free_energy``), ``forces`` and, for a periodic
+    cell, ``stress`` (from the virial; see the module notes).  Every call
+    computes all of them (the protocol has no cheaper call).  An engine that
+    closes the connection, or does not answer within ``timeout``, raises
+    :class:`EngineError`; the connection is dropped, and the next call waits
+    for a new engine (subclasses start one).
+    """
+
+    implemented_properties = ["energy", "free_energy", "forces", "stress"]
+
+    def __init__(self, unixsocket=None, *, port=None, host="localhost", timeout=120.0,
+                 connect_timeout=None, bohr=units.Bohr, hartree=units.Hartree, **kwargs):
+        super().__init__(**kwargs)
+        if unixsocket is not None and port is not None:
+            raise ValueError("IPICalculator: give unixsocket or port, not both")
+        if port is not None and not (1024 < int(port) < 65536):
+            raise ValueError(f"IPICalculator: port {port} is not in 1025-65535")
+        if not timeout > 0:
+            raise ValueError(f"IPICalculator: timeout must be positive, got {timeout!r}")
+        if port is None and unixsocket is None:
+            unixsocket = f"rigidmd-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        self.unixsocket = unixsocket
+        self.port = None if port is None else int(port)
+        self.host = host
+        self.timeout = float(timeout)
+        self.connect_timeout = self.timeout if connect_timeout is None else float(
+            connect_timeout)
+        self.bohr = float(bohr)
+        self.hartree = float(hartree)
+        self._server = None
+        self._conn = None
+        self._handshaken = False
+
+    # ------------------------------------------------------------ hooks
+    @property
+    def socketfile(self):
+        """The Unix socket's path (None for TCP)."""
+        return None if self.unixsocket is None else f"/tmp/ipi_{self.unixsocket}"
+
+    def launch(self, atoms):
+        """Start the engine (here: none; it is started elsewhere and connects)."""
+
+    def engine_failure(self):
+        """Why the engine is gone (a sentence), or None while it runs."""
+        return None
+
+    def where_to_look(self):
+        """Where the engine's own messages are (appended to errors)."""
+        return ""
+
+    def frame(self, cell):
+        """Rotation ``Q`` taking the cell into the engine's frame (None: no rotation)."""
+        return None
+
+    def engine_cell(self, cell):
+        """The cell sent for ``cell`` (in the engine's frame): the same lattice, any basis."""
+        return cell
+
+    def origin(self, cell):
+        """Where the engine puts the cell's origin (Å, in its frame): added to positions."""
+        return None
+
+    def stop_engine(self, keep_files=False):
+        """Stop the engine (here: none; only the connection is closed).
+
+        ``keep_files``: the engine failed; keep what names the failure (its log).
+        """
+
+    @property
+    def connected(self):
+        """Whether an engine is connected."""
+        return self._conn is not None
+
+    # ------------------------------------------------------------ the socket
+    def listen(self):
+        """Open the socket now (it is opened at the first call otherwise), so that an
+        engine started elsewhere can connect; idempotent."""
+        if self._server is None:
+            self._listen()
+
+    def _listen(self):
+        if self.port is None:
+            if len(self.socketfile) > 100:
+                raise ValueError(f"IPICalculator: unixsocket name too long: {self.socketfile}")
+            if os.path.exists(self.socketfile):
+                os.unlink(self.socketfile)
+            server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            server.bind(self.socketfile)
+        else:
+            server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+            server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            server.bind((self.host, self.port))
+        server.listen(1)
+        self._server = server
+
+    def _fail(self, message):
+        """Drop the engine and raise one error naming where to look."""
+        why = self.engine_failure()
+        self._shutdown(keep_files=True)
+        detail = f": {why}" if why else ""
+        raise EngineError(f"{message}{detail}{self.where_to_look()}")
+
+    def _wait_readable(self, sock, deadline, what):
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                self._fail(f"i-PI engine: no {what} within {self._limit:g} s")
+            ready, _, _ = select.select([sock], [], [], min(left, 0.5))
+            if ready:
+                return
+            if self.engine_failure() is not None:
+                self._fail(f"i-PI engine died before its {what}")
+
+    def _connect(self, atoms):
+        self.listen()
+        try:
+            self.launch(atoms)
+            self._limit = self.connect_timeout
+            self._wait_readable(self._server, time.monotonic() + self.connect_timeout,
+                                "connection")
+            conn, _ = self._server.accept()
+        except BaseException:
+            self._shutdown(keep_files=True)
+            raise
+        if conn.family != socket.AF_UNIX:
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        conn.setblocking(True)
+        self._conn = conn
+        self._handshaken = False
+
+    def _closed(self, detail):
+        """The engine closed the connection: wait a little for it to end, then say why."""
+        deadline = time.monotonic() + 2.0
+        while self.engine_failure() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        self._fail(f"i-PI engine closed the connection{detail}")
+
+    def _send(self, *parts):
+        try:
+            self._conn.sendall(b"".join(parts))
+        except OSError as err:
+            self._closed(f" ({err.strerror})")
+
+    def _recv(self, nbytes, deadline, what):
+        buf = bytearray(nbytes)
+        view = memoryview(buf)
+        got = 0
+        while got < nbytes:
+            self._wait_readable(self._conn, deadline, what)
+            try:
+                n = self._conn.recv_into(view[got:])
+            except OSError as err:
+                self._closed(f" ({err.strerror})")
+            if n == 0:
+                self._closed("")
+            got += n
+        return bytes(buf)
+
+    def _header(self, deadline, what):
+        return self._recv(MSGLEN, deadline, what).decode("ascii", "replace").strip()
+
+    def _handshake(self, deadline):
+        self._send(_word("STATUS"))
+        status = self._header(deadline, "status")
+        if status == "NEEDINIT":
+            self._send(_word("INIT"), np.array([0, 1], np.int32).tobytes(), b"\0")
+            self._send(_word("STATUS"))
+            status = self._header(deadline, "status")
+        if status != "READY":
+            self._fail(f"i-PI engine answered STATUS with {status!r}, expected READY")
+        self._handshaken = True
+
+    def _exchange(self, cell, positions):
+        """Energy (eV), forces (eV/Å) and virial (eV) for positions in the engine's frame."""
+        self._limit = self.timeout
+        deadline = time.monotonic() + self.timeout
+        if not self._handshaken:
+            self._handshake(deadline)
+        bohr, n = self.bohr, len(positions)
+        h = cell.T / bohr
+        ih = np.linalg.pinv(cell) * bohr if np.any(cell) else np.zeros((3, 3))
+        self._send(_word("POSDATA"), np.ascontiguousarray(h, np.float64).tobytes(),
+                   np.ascontiguousarray(ih, np.float64).tobytes(),
+                   np.array([n], np.int32).tobytes(),
+                   np.ascontiguousarray(positions / bohr, np.float64).tobytes(),
+                   _word("GETFORCE"))
+        while True:
+            header = self._header(deadline, "forces")
+            if header != "HAVEDATA":  # an engine may still answer a poll
+                break
+        if header != "FORCEREADY":
+            self._fail(f"i-PI engine answered GETFORCE with {header!r}, expected FORCEREADY")
+        head = self._recv(12, deadline, "forces")
+        energy = float(np.frombuffer(head[:8], np.float64)[0])
+        natoms = int(np.frombuffer(head[8:], np.int32)[0])
+        if natoms != n:
+            self._fail(f"i-PI engine sent forces on {natoms} atoms, expected {n}")
+        body = self._recv(8 * (3 * n + 9) + 4, deadline, "forces")
+        forces = np.frombuffer(body[:24 * n], np.float64).reshape(n, 3)
+        virial = np.frombuffer(body[24 * n:24 * n + 72], np.float64).reshape(3, 3)
+        extra = int(np.frombuffer(body[-4:], np.int32)[0])
+        if extra:
+            self._recv(extra, deadline, "forces")
+        hartree = self.hartree
+        return energy * hartree, forces * (hartree / bohr), symmetric_virial(virial) * hartree
+
+    # ------------------------------------------------------------ ASE
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        atoms = self.atoms
+        periodic = bool(atoms.pbc.any())
+        if "stress" in properties and not periodic:
+            raise PropertyNotImplementedError("IPICalculator: no stress without a periodic cell")
+        cell = atoms.cell.array.copy()
+        rotation = self.frame(cell) if periodic else None
+        positions = atoms.positions
+        if rotation is not None:
+            cell, positions = cell @ rotation, positions @ rotation
+        if periodic:
+            cell = self.engine_cell(cell)
+        origin = self.origin(cell) if periodic else None
+        if origin is not None:
+            positions = positions + origin
+        if self._conn is None:
+            self._connect(atoms)
+        energy, forces, virial = self._exchange(cell, positions)
+        if rotation is not None:
+            forces = forces @ rotation.T
+            virial = rotation @ virial @ rotation.T
+        self.results = {"energy": energy, "free_energy": energy, "forces": forces.copy()}
+        if periodic:
+            stress = -virial / abs(np.linalg.det(atoms.cell.array))
+            self.results["stress"] = stress[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
+
+    def close(self):
+        """Close the connection, stop the engine and remove the socket file."""
+        self._shutdown(keep_files=False)
+
+    def _shutdown(self, keep_files):
+        if self._conn is not None and not keep_files:
+            try:  # a polite engine ends on EXIT (LAMMPS aborts; its watchdog cleans up)
+                self._conn.setblocking(False)
+                self._conn.send(_word("EXIT"))
+            except OSError:
+                pass
+        for sock in (self._conn, self._server):
+            if sock is not None:
+                try:
+                    sock.close()
+                except OSError:
+                    pass
+        self._conn = self._server = None
+        self._handshaken = False
+        self.stop_engine(keep_files)
+        if self.socketfile is not None and os.path.exists(self.socketfile):
+            try:
+                os.unlink(self.socketfile)
+            except OSError:
+                pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - nothing to report to at interpreter exit
+            pass
+
+
+def symmetric_virial(virial):
+    """The symmetric virial from what an engine sent (see the module notes).
+
+    Parameters
+    ----------
+    virial : numpy.ndarray, shape (3, 3)
+
+    Returns
+    -------
+    numpy.ndarray, shape (3, 3)
+        The upper triangle mirrored when the lower one is all zero (LAMMPS's
+        ``fix ipi``), the lower one when the upper is, else ``(W + W.T) / 2``.
+    """
+    lower = virial[np.tril_indices(3, -1)]
+    upper = virial[np.triu_indices(3, 1)]
+    if not np.any(lower):
+        return np.triu(virial) + np.triu(virial, 1).T
+    if not np.any(upper):
+        return np.tril(virial) + np.tril(virial, -1).T
+    return 0.5 * (virial + virial.T)

