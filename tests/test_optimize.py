@@ -7,8 +7,8 @@ from ase.calculators.tip3p import TIP3P
 from ase.calculators.tip4p import TIP4P
 from ase.constraints import FixAtoms, FixBondLengths, FixCom
 from ase.optimize import BFGS
-
 from helpers import CoulombLJ, dimer_fluid, water_dimer, water_parameters
+
 from rigidmd.optimize import RigidFilter, relax
 from rigidmd.systems import water_cluster
 from rigidmd.water import water_model
@@ -187,3 +187,75 @@ def test_rigid_relaxation_needs_fewer_calls_than_fix_bond_lengths():
     assert result.steps < atomic_steps
     # Same minimum: measured within 1e-6 eV per molecule (benchmarks/relax.py for more).
     assert result.energy == pytest.approx(reference.get_potential_energy(), abs=8e-6)
+
+
+def rigidmd(*args, cwd):
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.run([sys.executable, "-m", "rigidmd.cli", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, env=env, timeout=600)
+
+
+RELAX_CONFIG = """
+structure: {builtin: water_cluster, n_molecules: 6, seed: 2}
+calculator: {name: tip3p, options: {rc: 40.0}}
+velocities: {temperature: 50 K, seed: 1}
+timestep: 1 fs
+steps: 20
+outputs: {directory: out, trajectory: md.traj, log: md.log, interval: 10}
+relax: {fmax: 0.01, steps: STEPS, optimizer: FIRE}
+"""
+
+
+def test_relax_command_and_relax_section_before_md(tmp_path):
+    from ase.io import read
+
+    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "2000"))
+    result = rigidmd("relax", "relax.yaml", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "relaxed RigidBodies(n_bodies=6" in result.stdout
+    frames = read(tmp_path / "out" / "relax.traj", ":")
+    last = frames[-1]
+    last.calc = TIP3P(rc=40.0)
+    generalized = RigidFilter(last, bodies="tags").get_forces()  # frames carry bodies in tags
+    assert np.linalg.norm(generalized, axis=1).max() < 0.01
+    assert "FIRE:" in (tmp_path / "out" / "relax.log").read_text()
+    assert not (tmp_path / "out" / "md.traj").exists()
+    # rigidmd run: relaxes, then MD from the relaxed structure.
+    result = rigidmd("run", "relax.yaml", "--overwrite", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    md = read(tmp_path / "out" / "md.traj", ":")
+    assert np.abs(md[0].positions - last.positions).max() < 1e-9
+    assert md[0].get_kinetic_energy() > 0
+
+
+def test_relaxation_short_of_its_steps_is_one_line_and_keeps_the_structure(tmp_path):
+    from ase.io import read
+
+    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "3"))
+    result = rigidmd("run", "relax.yaml", cwd=tmp_path)
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "did not reach fmax 0.01 eV/Å in 3 steps" in lines[0]
+    assert len(read(tmp_path / "out" / "relax.traj", ":")) == 4  # start and 3 steps
+    assert not (tmp_path / "out" / "md.traj").exists()
+
+
+@pytest.mark.parametrize("relax_section, message", [
+    ("{fmax: -1}", "relax.fmax: must be positive"),
+    ("{optimizer: Newton}", "relax.optimizer: 'Newton' is not one of"),
+    ("{cell: cubic}", "relax.cell: expected false, true or one of"),
+    ("{pressure: 1 bar}", "relax.pressure: a target pressure needs relax.cell"),
+    ("{cell: iso}", "cell='iso' needs a cell periodic in all three directions"),
+    ("{tol: 1}", "relax.tol: unknown key"),
+])
+def test_relax_section_errors_are_one_line(tmp_path, relax_section, message):
+    text = RELAX_CONFIG.replace("{fmax: 0.01, steps: STEPS, optimizer: FIRE}", relax_section)
+    (tmp_path / "relax.yaml").write_text(text)
+    result = rigidmd("relax", "relax.yaml", cwd=tmp_path)
+    assert result.returncode == 2
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert message in result.stderr

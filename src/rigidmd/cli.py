@@ -2,6 +2,7 @@
 
 ``rigidmd demo``                      a TIP3P water cluster, 2 ps, with plots
 ``rigidmd run CONFIG.yaml [flags]``   any system from a configuration file
+``rigidmd relax CONFIG.yaml``         relax its rigid bodies (and cell) only
 ``rigidmd plot LOG``                  energies and temperature of an MD log, to PNG
 ``rigidmd export-lammps CONFIG DIR``  the same run as a LAMMPS data file and deck
 
@@ -33,6 +34,7 @@ from rigidmd.dynamics import NonFiniteForceError
 from rigidmd.logplot import LogError, plot_log
 from rigidmd.operators import ConvergenceError
 from rigidmd.outputs import OutputError, describe_os_error
+from rigidmd.relaxrun import RelaxationNotConverged, relax_only
 from rigidmd.runner import Run
 
 __all__ = ["main"]
@@ -135,6 +137,7 @@ def _parser():
                       help="continue the run from the checkpoint in the output directory")
     mode.add_argument("--overwrite", action="store_true",
                       help="replace the outputs of an earlier run in the output directory")
+    _relax_parser(sub)
     plot = sub.add_parser("plot", help="plot energies and temperature of an MD log")
     plot.add_argument("log", help="an MD log written by rigidmd (or by ASE's MDLogger)")
     plot.add_argument("-o", "--output", help="PNG file (default: the log's name with .png)")
@@ -143,6 +146,14 @@ def _parser():
     export.add_argument("directory", help="directory for data.rigidmd and in.rigidmd")
     export.add_argument("--steps", type=int, help="number of steps in the deck")
     return parser
+
+
+def _relax_parser(sub):
+    relax = sub.add_parser("relax", help="relax the rigid bodies (and the cell) of a "
+                                         "configuration's structure")
+    relax.add_argument("config", help="YAML configuration; its relax: section (default "
+                                      "BFGS to fmax 0.05 eV/Å) says how")
+    relax.add_argument("--outdir", help="output directory")
 
 
 def main(argv=None):
@@ -179,6 +190,8 @@ def main(argv=None):
                 parse_quantity("--timestep", args.timestep, TIME_UNITS)
             mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
             return Run(check_config(config), mode=mode, config_path=args.config).execute()
+        if args.command == "relax":
+            return relax_only(_apply_flags(load_config(args.config), args))
         if args.command == "export-lammps":
             config = _apply_flags(load_config(args.config), args)
             return _export(check_config(config), Path(args.directory))
@@ -190,7 +203,7 @@ def main(argv=None):
             raise
         print(f"rigidmd: error: {' '.join(str(err).split())}", file=sys.stderr)
         return 2
-    except (NonFiniteForceError, ConvergenceError) as err:
+    except (NonFiniteForceError, ConvergenceError, RelaxationNotConverged) as err:
         # The run stopped; its outputs and checkpoint hold every step before the failure.
         print(f"rigidmd: run stopped: {err}", file=sys.stderr)
         return 1

@@ -180,23 +180,39 @@ class Run:
             path.unlink()
 
     # ------------------------------------------------------------ set-up
-    def _start_atoms(self):
+    def _start_atoms(self, relax=False):
         from rigidmd import rigid_maxwell_boltzmann
 
         config = self.config
         atoms = config.structure.build_atoms()
         bodies = config.structure.resolve_bodies(atoms)
+        if relax:
+            self._relax(atoms, bodies)
         velocities = config.run.velocities
         if velocities is not None and config.structure.restart is None:
             rigid_maxwell_boltzmann(atoms, velocities["temperature_K"], bodies=bodies,
                                     rng=np.random.default_rng(velocities["seed"]))
         return atoms, bodies
 
+    def _relax(self, atoms, bodies):
+        """The ``relax:`` section: relax a new run's structure before velocities are drawn."""
+        section = self.config.relax
+        if section is None:
+            return
+        if self.config.structure.restart is not None:
+            raise ConfigError("relax: a restart continues a run's dynamics; relax its last "
+                              "frame with 'rigidmd relax' and start a new run from that")
+        from rigidmd.relaxrun import relax_structure
+
+        atoms.calc = self.config.calculator.build(atoms)
+        relax_structure(atoms, bodies, section, self.outputs.directory, self.stream)
+
     def _new_dynamics(self):
         from rigidmd.dynamics import RigidDynamics
 
-        atoms, bodies = self._start_atoms()
-        atoms.calc = self.config.calculator.build(atoms)
+        atoms, bodies = self._start_atoms(relax=True)
+        if atoms.calc is None:
+            atoms.calc = self.config.calculator.build(atoms)
         out = self.outputs
         return RigidDynamics(atoms, self.config.run.timestep, bodies=bodies,
                              integrator=self.config.run.integrator,
