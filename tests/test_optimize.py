@@ -321,3 +321,17 @@ def test_tip4p2005_ice_relaxes_with_its_cell_and_stays_there_at_10_K():
     dyn.attach(lambda: volumes.append(atoms.get_volume()), interval=10)
     dyn.run(400)
     assert abs(np.mean(volumes[len(volumes) // 2:]) / volume - 1) < 0.005
+
+
+def test_relax_section_refuses_a_restart_before_touching_the_outputs(tmp_path):
+    from ase.io import write
+
+    write(tmp_path / "start.traj", water_cluster(6, seed=2))
+    text = RELAX_CONFIG.replace("STEPS", "10") + "restart: start.traj\n"
+    (tmp_path / "relax.yaml").write_text(text)
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "md.traj").write_text("earlier run")
+    result = rigidmd("run", "relax.yaml", "--overwrite", cwd=tmp_path)
+    assert result.returncode == 2
+    assert "relax: a restart continues a run's dynamics" in result.stderr
+    assert (tmp_path / "out" / "md.traj").read_text() == "earlier run"

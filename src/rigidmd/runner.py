@@ -197,11 +197,8 @@ class Run:
     def _relax(self, atoms, bodies):
         """The ``relax:`` section: relax a new run's structure before velocities are drawn."""
         section = self.config.relax
-        if section is None:
+        if section is None:  # (a restart with relax: is refused by the configuration)
             return
-        if self.config.structure.restart is not None:
-            raise ConfigError("relax: a restart continues a run's dynamics; relax its last "
-                              "frame with 'rigidmd relax' and start a new run from that")
         from rigidmd.relaxrun import relax_structure
 
         atoms.calc = self.config.calculator.build(atoms)

@@ -69,6 +69,9 @@ class RelaxSection:
         if "relax" not in raw or raw["relax"] is None:
             return None
         section = mapping("relax", raw["relax"], cls.FIELDS)
+        if raw.get("restart") is not None:
+            raise ConfigError("relax: a restart continues a run's dynamics; relax its last "
+                              "frame with 'rigidmd relax' and start a new run from that")
         out = cls()
         if "fmax" in section:
             out.fmax = parse_quantity("relax.fmax", section["fmax"], FORCE_UNITS,
