@@ -23,7 +23,7 @@ Jacobian :math:`J_r(\varphi)` has singular values between
 :math:`\sin(|\varphi|/2)/(|\varphi|/2) \ge 0.84` and 1 below 2 rad).  The
 body-frame torque :math:`\tau_b` (eV) becomes a force in eV/Å through the
 body's length :math:`\ell_b`, the root-mean-square distance of its atoms
-from its centre of mass (0.73 Å for a TIP3P water): a torque :math:`\tau`
+from its centre of mass (0.75 Å for a TIP3P water): a torque :math:`\tau`
 reads as the force :math:`\tau/\ell_b` on an atom at the body's typical
 radius.  For a linear body the component about its axis is no coordinate:
 its gradient is 0 and its value is ignored (2 rotational degrees of freedom).
