@@ -294,3 +294,22 @@ def lammps_instances(monkeypatch, module):
 
     monkeypatch.setattr(module, "load_lammps", counting)
     return lambda: len(created)
+
+
+def water_dimer(seed, model="tip3p"):
+    """Two waters of ``model`` in random orientations, centres 3-4 Å apart, ``mol-id`` set."""
+    from rigidmd import quaternion as quat
+    from rigidmd.systems import random_quaternions, water_molecule
+
+    rng = np.random.default_rng(seed)
+    molecule = water_molecule(model)
+    local = molecule.positions - molecule.get_center_of_mass()
+    q = random_quaternions(2, rng)
+    shift = rng.normal(size=3)
+    shift *= (3.0 + rng.random()) / np.linalg.norm(shift)
+    atoms = Atoms(molecule.get_chemical_symbols() * 2,
+                  positions=np.concatenate([quat.rotate(q[0], local),
+                                            shift + quat.rotate(q[1], local)]))
+    atoms.set_masses(np.tile(molecule.get_masses(), 2))
+    atoms.arrays["mol-id"] = np.repeat([1, 2], len(molecule))
+    return atoms

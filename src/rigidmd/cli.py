@@ -2,6 +2,7 @@
 
 ``rigidmd demo``                      a TIP3P water cluster, 2 ps, with plots
 ``rigidmd run CONFIG.yaml [flags]``   any system from a configuration file
+``rigidmd relax CONFIG.yaml``         relax its rigid bodies (and cell) only
 ``rigidmd plot LOG``                  energies and temperature of an MD log, to PNG
 ``rigidmd export-lammps CONFIG DIR``  the same run as a LAMMPS data file and deck
 
@@ -34,6 +35,7 @@ from rigidmd.lammps.library import LammpsError
 from rigidmd.logplot import LogError, plot_log
 from rigidmd.operators import ConvergenceError
 from rigidmd.outputs import OutputError, describe_os_error
+from rigidmd.relaxrun import RelaxationNotConverged, relax_only
 from rigidmd.runner import Run, RunStopped
 
 __all__ = ["main"]
@@ -66,7 +68,7 @@ def _apply_flags(config, args):
 def _export(config, directory, stream=sys.stdout):
     from rigidmd.lammps import export_lammps, tip3p_charges, tip3p_pair_commands
 
-    atoms, bodies = Run(config)._start_atoms()
+    atoms, bodies = Run(config).start_atoms()
     atoms.positions = bodies.whole_positions(atoms)
     calc = config.calculator
     if calc.name == "tip3p":
@@ -139,6 +141,7 @@ def _parser():
                       help="continue the run from the checkpoint in the output directory")
     mode.add_argument("--overwrite", action="store_true",
                       help="replace the outputs of an earlier run in the output directory")
+    _relax_parser(sub, trust_help)
     plot = sub.add_parser("plot", help="plot energies and temperature of an MD log")
     plot.add_argument("log", help="an MD log written by rigidmd (or by ASE's MDLogger)")
     plot.add_argument("-o", "--output", help="PNG file (default: the log's name with .png)")
@@ -148,6 +151,15 @@ def _parser():
     export.add_argument("--steps", type=int, help="number of steps in the deck")
     export.add_argument("--trust", action="store_true", help=trust_help)
     return parser
+
+
+def _relax_parser(sub, trust_help):
+    relax = sub.add_parser("relax", help="relax the rigid bodies (and the cell) of a "
+                                         "configuration's structure")
+    relax.add_argument("config", help="YAML configuration; its relax: section (default "
+                                      "BFGS to fmax 0.05 eV/Å) says how")
+    relax.add_argument("--outdir", help="output directory")
+    relax.add_argument("--trust", action="store_true", help=trust_help)
 
 
 def main(argv=None):
@@ -185,6 +197,8 @@ def main(argv=None):
             mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
             return Run(check_config(config, trust=args.trust), mode=mode,
                        config_path=args.config).execute()
+        if args.command == "relax":
+            return relax_only(_apply_flags(load_config(args.config), args), trust=args.trust)
         if args.command == "export-lammps":
             config = _apply_flags(load_config(args.config), args)
             return _export(check_config(config, trust=args.trust), Path(args.directory))
@@ -210,7 +224,7 @@ def main(argv=None):
             return 2
         print(f"rigidmd: run stopped: {message}", file=sys.stderr)
         return 1
-    except (NonFiniteForceError, ConvergenceError) as err:
+    except (NonFiniteForceError, ConvergenceError, RelaxationNotConverged) as err:
         # The run stopped; its outputs and checkpoint hold every step before the failure.
         print(f"rigidmd: run stopped: {err}", file=sys.stderr)
         return 1

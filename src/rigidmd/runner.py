@@ -298,17 +298,27 @@ class Run:
             path.unlink()
 
     # ------------------------------------------------------------ set-up
-    def _start_atoms(self):
-        from rigidmd import rigid_maxwell_boltzmann
+    def start_atoms(self):
+        """The configuration's structure, its bodies, and its velocities if it draws any.
 
+        Returns
+        -------
+        atoms : ase.Atoms
+        bodies : rigidmd.RigidBodies
+        """
         config = self.config
         atoms = config.structure.build_atoms()
         bodies = config.structure.resolve_bodies(atoms)
-        velocities = config.run.velocities
-        if velocities is not None and config.structure.restart is None:
+        self._draw_velocities(atoms, bodies)
+        return atoms, bodies
+
+    def _draw_velocities(self, atoms, bodies):
+        from rigidmd import rigid_maxwell_boltzmann
+
+        velocities = self.config.run.velocities
+        if velocities is not None and self.config.structure.restart is None:
             rigid_maxwell_boltzmann(atoms, velocities["temperature_K"], bodies=bodies,
                                     rng=np.random.default_rng(velocities["seed"]))
-        return atoms, bodies
 
     def _dynamics_arguments(self):
         return dict(integrator=self.config.run.integrator,
@@ -317,13 +327,16 @@ class Run:
     def _new_dynamics(self, replace=False):
         """Read the inputs and check the dynamics on a copy; build it after the outputs' turn.
 
-        ``replace``: remove the directory's outputs (a resume from step 0).
+        ``replace``: remove the directory's outputs (a resume from step 0).  A
+        ``relax:`` section relaxes the structure after that (relaxing is not
+        reading an input: it writes its own trajectory and log), and the
+        velocities are drawn again for the relaxed bodies.
         """
         import warnings
 
         from rigidmd.dynamics import RigidDynamics
 
-        atoms, bodies = self._start_atoms()
+        atoms, bodies = self.start_atoms()
         atoms.calc = self.config.calculator.build(atoms, self.outputs.directory / "engine")
         probe = atoms.copy()
         probe.calc = atoms.calc
@@ -332,6 +345,12 @@ class Run:
             RigidDynamics(probe, self.config.run.timestep, bodies=bodies,
                           couplings=self.config.coupling.parts(), **self._dynamics_arguments())
         self._prepare_directory(replace)
+        if self.config.relax is not None:  # (a restart with relax: is refused by the config)
+            from rigidmd.relaxrun import relax_structure
+
+            relax_structure(atoms, bodies, self.config.relax, self.outputs.directory,
+                            self.stream)
+            self._draw_velocities(atoms, bodies)
         out = self.outputs
         return RigidDynamics(atoms, self.config.run.timestep, bodies=bodies,
                              couplings=self.config.coupling.parts(),

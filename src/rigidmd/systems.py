@@ -15,7 +15,7 @@ from rigidmd import quaternion as quat
 from rigidmd.water import water_model
 
 __all__ = ["water_molecule", "co2_molecule", "water_cluster", "water_box",
-           "co2_water_mixture", "random_quaternions"]
+           "co2_water_mixture", "random_quaternions", "ice_ih"]
 
 #: C=O bond length of the TraPPE CO2 model (Å).
 R_CO = 1.16
@@ -160,4 +160,153 @@ def co2_water_mixture(n_co2=4, n_water=4, seed=0, spacing=3.6, box=None):
         atoms.cell = np.eye(3) * n_side * spacing
         atoms.pbc = True
         atoms.wrap()
+    return atoms
+
+
+def _ice_oxygens(repeat, a, c):
+    """Oxygens of hexagonal ice (the wurtzite lattice, u = 3/8) in an orthorhombic cell."""
+    from ase.build import bulk
+
+    lattice = bulk("OO", "wurtzite", a=a, c=c, u=0.375, orthorhombic=True)
+    return lattice.repeat(repeat)
+
+
+def _hydrogen_bonds(oxygens, distance):
+    """Each oxygen's four neighbours: the bonds (i, j) with i < j and their vectors i -> j."""
+    from ase.neighborlist import neighbor_list
+
+    # The next shell of the wurtzite lattice is 1.63 times as far as the first.
+    i, j, d = neighbor_list("ijD", oxygens, 1.3 * distance)
+    keep = i < j
+    i, j, d = i[keep], j[keep], d[keep]
+    counts = np.bincount(np.concatenate([i, j]), minlength=len(oxygens))
+    if np.any(counts != 4):
+        raise ValueError("ice_ih: the cell is too small for four distinct neighbours per "
+                         "oxygen; repeat it more")
+    return i, j, d
+
+
+def _out_degree(donor, n):
+    return np.bincount(donor, minlength=n)
+
+
+def ice_ih(repeat=(3, 2, 2), seed=0, a=4.50, c=7.33, model="tip4p2005", sweeps=20):
+    r"""Proton-disordered hexagonal ice Ih with zero net dipole, in an orthorhombic cell.
+
+    Oxygens sit on the wurtzite lattice (8 per orthorhombic cell of
+    :math:`a \times \sqrt3 a \times c`, repeated ``repeat`` times).  Every
+    hydrogen bond gets a direction (which oxygen donates) obeying the
+    Bernal–Fowler ice rules, two donated and two accepted bonds per oxygen
+    (J. D. Bernal and R. H. Fowler, J. Chem. Phys. 1, 515 (1933)): random
+    directions first, then each defect (an oxygen donating more than two) is
+    walked off along its bonds, reversing them, until it meets its opposite
+    (Rick and Haymet's defect annihilation).  Closed loops of bonds, each
+    reversed as a whole (which keeps the ice rules), then disorder the
+    protons further and bring the net dipole, the sum of the donated bond
+    vectors, to zero: a loop is kept when it does not raise the dipole's
+    length (loops that wind around the periodic cell change the dipole,
+    local ones do not).  Each molecule of ``model`` is then placed with its
+    oxygen on the site, its bisector along the sum of its two donated bond
+    directions and its hydrogens in their plane (the model's angle, not the
+    tetrahedral one).
+
+    Parameters
+    ----------
+    repeat : tuple of int
+        Orthorhombic cells along x, y, z (8 molecules each).
+    seed : int
+    a, c : float
+        Hexagonal lattice constants (Å); the oxygen-oxygen distance is
+        :math:`3c/8`.
+    model : str
+        Water model of :mod:`rigidmd.water` (four-site models carry M).
+    sweeps : int
+        Loop moves per bond, at least, while disordering.
+
+    Returns
+    -------
+    ase.Atoms
+        Periodic, molecules O, H, H (, M) with ``mol-id``.
+
+    Raises
+    ------
+    ValueError
+        A cell too small for four distinct neighbours per oxygen, or a
+        dipole that the loop moves did not bring to zero.
+    """
+    rng = np.random.default_rng(seed)
+    oxygens = _ice_oxygens(repeat, a, c)
+    n = len(oxygens)
+    i, j, vectors = _hydrogen_bonds(oxygens, 3 * c / 8)
+    bonds = np.stack([i, j], axis=1)
+    flip = rng.random(len(bonds)) < 0.5
+    donor = np.where(flip, j, i)
+    acceptor = np.where(flip, i, j)
+    # Bonds of each oxygen, for the walks.
+    incident = [[] for _ in range(n)]
+    for b, (p, q) in enumerate(bonds):
+        incident[p].append(b)
+        incident[q].append(b)
+    incident = np.array(incident)
+    # Defect annihilation: walk from an oxygen donating more than two.
+    out = _out_degree(donor, n)
+    while np.any(out > 2):
+        v = int(np.flatnonzero(out > 2)[0])
+        while out[v] > 2:
+            mine = incident[v][donor[incident[v]] == v]
+            b = int(rng.choice(mine))
+            w = int(acceptor[b])
+            donor[b], acceptor[b] = w, v
+            out[v] -= 1
+            out[w] += 1
+            v = w
+    sign = np.where(donor == i, 1.0, -1.0)
+    dipole = (sign[:, None] * vectors).sum(axis=0)
+    scale = np.linalg.norm(vectors, axis=1).mean()
+    moves = 0
+    while moves < sweeps * len(bonds) or np.linalg.norm(dipole) > 1e-6 * scale:
+        moves += 1
+        if moves > 1000 * len(bonds):
+            raise ValueError(f"ice_ih: no zero-dipole proton arrangement found in {moves} loop "
+                             f"moves (dipole {np.linalg.norm(dipole) / scale:.2f} bonds); try "
+                             "another seed or a larger repeat")
+        # A directed loop: follow donated bonds until an oxygen repeats.
+        start = int(rng.integers(n))
+        seen = {start: 0}
+        path = []
+        v = start
+        while True:
+            mine = incident[v][donor[incident[v]] == v]
+            b = int(rng.choice(mine))
+            path.append(b)
+            v = int(acceptor[b])
+            if v in seen:
+                loop = np.array(path[seen[v]:])
+                break
+            seen[v] = len(path)
+        change = -2.0 * (sign[loop, None] * vectors[loop]).sum(axis=0)
+        if np.linalg.norm(dipole + change) <= np.linalg.norm(dipole) + 1e-9 * scale:
+            donor[loop], acceptor[loop] = acceptor[loop], donor[loop]
+            sign[loop] *= -1.0
+            dipole = dipole + change
+    # Molecules: each oxygen's two donated bond directions.
+    unit = vectors / np.linalg.norm(vectors, axis=1, keepdims=True)
+    directions = sign[:, None] * unit  # from donor to acceptor
+    order = np.argsort(donor, kind="stable")
+    pairs = directions[order].reshape(n, 2, 3)
+    water = water_model(model)
+    bisector = pairs.sum(axis=1)
+    bisector /= np.linalg.norm(bisector, axis=1, keepdims=True)
+    across = pairs[:, 0] - pairs[:, 1]
+    across /= np.linalg.norm(across, axis=1, keepdims=True)
+    half = np.radians(water.angle_hoh) / 2
+    o = oxygens.positions
+    h1 = o + water.r_oh * (np.cos(half) * bisector + np.sin(half) * across)
+    h2 = o + water.r_oh * (np.cos(half) * bisector - np.sin(half) * across)
+    sites = [o, h1, h2] + ([o + water.d_om * bisector] if water.sites == 4 else [])
+    atoms = Atoms(water.symbols * n, positions=np.stack(sites, axis=1).reshape(-1, 3),
+                  cell=oxygens.cell, pbc=True)
+    atoms.set_masses(np.tile(water.masses(), n))
+    atoms.arrays["mol-id"] = np.repeat(np.arange(1, n + 1), water.sites)
+    atoms.wrap()
     return atoms

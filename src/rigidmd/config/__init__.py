@@ -37,6 +37,9 @@ A configuration is a YAML mapping (every key optional except ``structure``
       mdanalysis: md.xtc          # needs rigidmd[analysis]
       checkpoint: checkpoint.npz  # the default; written every checkpoint_interval steps
       checkpoint_interval: 1000   # (default) and at every stop; rigidmd run --resume reads it
+    relax:                        # relax first (rigid bodies, optionally the cell); see
+      fmax: 0.05                  # rigidmd.config.relaxsection; rigidmd relax CONFIG
+      optimizer: BFGS             # relaxes only
 
 Quantities with units are strings ``"<number> <unit>"``.  Every mistake is
 a :class:`ConfigError` naming the field.  Each group of keys is checked by
@@ -56,6 +59,7 @@ from rigidmd.config.quantities import (
     ConfigError,
     parse_quantity,
 )
+from rigidmd.config.relaxsection import RelaxSection
 from rigidmd.config.sections import (
     CalculatorSection,
     CouplingSection,
@@ -65,6 +69,7 @@ from rigidmd.config.sections import (
 )
 
 __all__ = ["ConfigError", "RunConfig", "load_config", "check_config", "parse_quantity",
+           "known_keys", "RelaxSection",
            "DEMO_CONFIG", "TIME_UNITS", "RATE_UNITS", "TEMPERATURE_UNITS", "PRESSURE_UNITS",
            "COMPRESSIBILITY_UNITS"]
 
@@ -80,7 +85,7 @@ DEMO_CONFIG = {
 }
 
 _SECTIONS = {"structure": StructureSection, "run": RunSection, "calculator": CalculatorSection,
-             "coupling": CouplingSection, "outputs": OutputsSection}
+             "coupling": CouplingSection, "outputs": OutputsSection, "relax": RelaxSection}
 
 
 @dataclass
@@ -92,6 +97,12 @@ class RunConfig:
     calculator: CalculatorSection
     coupling: CouplingSection
     outputs: OutputsSection
+    relax: RelaxSection | None = None
+
+
+def known_keys():
+    """Every top-level key a configuration may hold."""
+    return {key for section in _SECTIONS.values() for key in section.KEYS}
 
 
 def _strict_loader():
@@ -165,7 +176,7 @@ def check_config(config, trust=False):
     """
     config = dict(config)
     base = Path(config.pop("_base", "."))
-    known = {key for section in _SECTIONS.values() for key in section.KEYS}
+    known = known_keys()
     unknown = sorted(set(config) - known, key=str)
     if unknown:
         raise ConfigError(f"{unknown[0]}: unknown key; allowed: {', '.join(sorted(known))}")

@@ -1,0 +1,108 @@
+"""The ``relax:`` section of a run configuration: a rigid relaxation before MD.
+
+::
+
+    relax:
+      fmax: 0.05                  # eV/Å (a bare number, or '0.05 eV/A')
+      steps: 1000                 # optimizer steps allowed
+      optimizer: BFGS             # BFGS | LBFGS | FIRE | BFGSLineSearch | GPMin | MDMin
+      cell: false                 # false | true (full) | iso | aniso | full
+      pressure: 0 bar             # target pressure with the cell (bar, atm, GPa, Pa, eV/A^3)
+      trajectory: relax.traj      # in outputs.directory; every optimizer step
+      log: relax.log              # the optimizer's log
+
+``rigidmd run`` relaxes the structure first (a new run, not a restart or a
+resume), then draws velocities and runs MD from the relaxed structure;
+``rigidmd relax CONFIG`` only relaxes (see :mod:`rigidmd.relaxrun`).
+"""
+
+from dataclasses import dataclass
+
+from rigidmd.config.quantities import (
+    PRESSURE_UNITS,
+    ConfigError,
+    mapping,
+    parse_quantity,
+    whole_number,
+)
+
+__all__ = ["RelaxSection"]
+
+FORCE_UNITS = {"eV/A": 1.0}
+
+
+@dataclass
+class RelaxSection:
+    """How to relax the structure before MD (quantities in ASE units).
+
+    Attributes
+    ----------
+    fmax : float
+        eV/Å.
+    steps : int
+    optimizer : str
+    cell : bool or str
+        False, or one of ``iso``, ``aniso``, ``full``.
+    pressure : float
+        eV/Å³.
+    trajectory, log : str
+        File names in the output directory.
+    """
+
+    KEYS = ("relax",)
+    FIELDS = ("fmax", "steps", "optimizer", "cell", "pressure", "trajectory", "log")
+
+    fmax: float = 0.05
+    steps: int = 1000
+    optimizer: str = "BFGS"
+    cell: object = False
+    pressure: float = 0.0
+    trajectory: str = "relax.traj"
+    log: str = "relax.log"
+
+    @classmethod
+    def from_config(cls, raw, base=None):
+        """The section of ``raw["relax"]``, or None when there is none."""
+        from rigidmd.optimize import OPTIMIZERS
+        from rigidmd.relaxcell import CELL_MODES
+
+        if "relax" not in raw or raw["relax"] is None:
+            return None
+        section = mapping("relax", raw["relax"], cls.FIELDS)
+        if raw.get("restart") is not None:
+            raise ConfigError("relax: a restart continues a run's dynamics; relax its last "
+                              "frame with 'rigidmd relax' and start a new run from that")
+        out = cls()
+        if "fmax" in section:
+            out.fmax = parse_quantity("relax.fmax", section["fmax"], FORCE_UNITS,
+                                      default_unit="eV/A")
+            if not out.fmax > 0:
+                raise ConfigError(f"relax.fmax: must be positive, got {section['fmax']!r}")
+        if "steps" in section:
+            out.steps = whole_number("relax.steps", section["steps"])
+        if "optimizer" in section:
+            if section["optimizer"] not in OPTIMIZERS:
+                raise ConfigError(f"relax.optimizer: {section['optimizer']!r} is not one of "
+                                  f"{', '.join(OPTIMIZERS)}")
+            out.optimizer = section["optimizer"]
+        if "cell" in section:
+            cell = section["cell"]
+            if cell is True:
+                cell = "full"
+            if not (cell is False or cell in CELL_MODES):
+                raise ConfigError(f"relax.cell: expected false, true or one of "
+                                  f"{', '.join(CELL_MODES)}, got {cell!r}")
+            out.cell = cell
+        if "pressure" in section:
+            if out.cell is False:
+                raise ConfigError("relax.pressure: a target pressure needs relax.cell "
+                                  "(iso, aniso or full)")
+            out.pressure = parse_quantity("relax.pressure", section["pressure"],
+                                          PRESSURE_UNITS)
+        for key in ("trajectory", "log"):
+            if key in section:
+                name = section[key]
+                if not isinstance(name, str) or not name:
+                    raise ConfigError(f"relax.{key}: expected a file name, got {name!r}")
+                setattr(out, key, name)
+        return out
