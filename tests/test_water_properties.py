@@ -236,3 +236,48 @@ def test_dielectric_takes_the_m_site_charges_from_the_topology():
     expected = model.charges(8) @ d
     assert np.linalg.norm(model.charges(8) @ box.positions - expected) > 1.0  # not whole
     assert np.allclose(res.dipoles[0], expected, atol=1e-4)
+
+
+# ------------------------------------------------------ the benchmark script
+@pytest.mark.lammps
+@pytest.mark.slow
+def test_water_models_benchmark_quick(tmp_path):
+    """``benchmarks/water_models.py --quick`` runs every stage for one model and writes the
+    table (each property with error, published value and citation) and the plot; a
+    second call resumes: the finished model is not run again."""
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "water_models.py"
+    spec = importlib.util.spec_from_file_location("water_models", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    assert set(bench.PUBLISHED) == set(bench.SETUP) == {
+        "tip3p", "spce", "tip4p", "tip4pew", "tip4p2005", "opc"}
+    for name, values in bench.PUBLISHED.items():
+        water_model(name)
+        assert set(values) == {key for key, _ in bench.PROPERTIES}
+    (result,) = bench.main(["--quick", "--models", "spce", "--outdir", str(tmp_path)])
+    text = (tmp_path / "water_models.txt").read_text()
+    assert (tmp_path / "water_models.png").stat().st_size > 10_000
+    assert "spce: 64 molecules" in text and "QUICK" in text
+    for _, label in bench.PROPERTIES:
+        line = next(s for s in text.splitlines() if s.strip().startswith(label))
+        assert "±" in line and "published" in line
+    assert "corrected" in text  # SPC/E's polarisation-corrected ΔH_vap
+    for key in ("density", "dhvap", "D", "eta", "eps"):
+        value, err = result[key]
+        assert np.isfinite(value) and np.isfinite(err) and err >= 0, key
+    assert 0.9 < result["density"][0] < 1.1
+    stored = json.loads((tmp_path / "runs" / "spce" / "results.json").read_text())
+    assert stored == result
+    for stage in ("npt_eq", "npt", "nvt_eq", "nvt"):
+        assert (tmp_path / "runs" / "spce" / f"{stage}.done").exists()
+    assert bench.main(["--quick", "--models", "spce", "--outdir", str(tmp_path)]) == [result]
+    # Interrupted after the last chunk of NVT: continues from the checkpoints and series.
+    (tmp_path / "runs" / "spce" / "results.json").unlink()
+    (tmp_path / "runs" / "spce" / "nvt.done").unlink()
+    (again,) = bench.main(["--quick", "--models", "spce", "--outdir", str(tmp_path)])
+    for key in ("density", "dhvap", "eta", "eps", "D"):
+        assert again[key] == pytest.approx(result[key]), key
