@@ -303,6 +303,7 @@ def run_model(name, outdir, quick, n_side, seed):
     frame = max(int(round(0.1 * PS / dt)), 1) if not quick else 5
     if not nvt.done.exists():
         a = dyn4.atoms
+        dyn4.stress_on_observed_steps = True  # the stress with the forces: one LAMMPS call
         observers = {"stress": (lambda: dyn4.get_stress(include_ideal_gas=True), STRESS_EVERY),
                      "dipole": (lambda: total_dipole(a, charges, k), 10),
                      "com": (lambda: dyn4.com_positions.copy(), frame)}

