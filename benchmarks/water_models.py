@@ -32,23 +32,26 @@ finished model is not run again.  ``--jobs 2`` runs two models at a time, one
 process each, LAMMPS single-threaded.
 
 Full mode (default): NPT 50 ps equilibration + 500 ps production; NVT 20 ps
-+ 1000 ps; 785 k steps of 2 fs per model.  Cost, measured for 216 waters
-(60 steps each, RigidBussi, LAMMPS on one thread) on this 2-core machine while
-six other jobs shared it (load average 13, so absolute times are about ten
-times the idle machine's): TIP3P 75 ms/step, 138 with the stress recorded
-every step; TIP4P/2005 93 and 216.  Recording the stress costs a second
-LAMMPS call on the recorded step (the dynamics asks the calculator for
-stress only when a barostat needs it), hence one record every 2 steps here.
-With the README's 5.8 ms/step for 216 TIP3P waters on an idle core and the
-ratios above (×1.4 with a record every other step, ×1.25 for four sites):
-about 0.5 h of NPT and 1.2 h of NVT per three-site model, 2.1 h per
-four-site one, so the six models with ``--jobs 2`` take about 6.5 h on an
-idle 2-core machine (three rounds of two), far longer on a shared one.
++ 1000 ps; 785 k steps of 2 fs per model (``--npt-ps`` and ``--nvt-ps`` change
+the two productions).  Cost per step, 216 waters, RigidBussi, LAMMPS on one
+thread, measured interleaved (best of 3 × 30 steps) on this 2-core machine
+while other jobs loaded it to a load average of 20, so absolute times are
+several times an idle machine's and only the ratios mean much: TIP3P 55 ms
+plain, 75 with the stress recorded every step (×1.37), 127 (×2.3) before
+``stress_on_observed_steps`` made the stress come with the forces;
+TIP4P/2005 35.5, 54.4 (×1.53), 85.0.  Here the stress is recorded every 2
+steps (4 fs), about ×1.2.  Estimate for an idle machine from the README's
+measured 5.8 ms/step (216 TIP3P, NVE) and 12.3 ms/step (216 TIP4P/2005,
+NPT): per three-site model about 0.45 h of NPT and 1.0 h of NVT, per
+four-site model about 0.95 h and 2.1 h, so the six models (two three-site,
+four four-site) take about 15 h of CPU, about 8 h with ``--jobs 2`` on an
+idle 2-core machine.
 
-ε converges slowly: the total dipole of 216 waters decorrelates in about
-10 ps, so the relative jackknife error falls as sqrt(20 ps / t_NVT): about
-15 % after 1 ns (the full mode's NVT), 5 % after 10 ns.  The table gives for
-each model the NVT length its measured error says 15 % needs.
+ε converges slowly.  For a Gaussian total dipole with correlation time τ_M
+the relative error of ε − 1 after t ps is about sqrt(4 τ_M / (3 t)); with
+τ_M ≈ 10 ps for 216 waters that is 12 % after the full mode's 1 ns, 15 %
+after 0.6 ns, 5 % after about 5 ns.  The table gives for each model the NVT
+length its own jackknife error says 15 % needs.
 
 Run::
 
@@ -150,8 +153,17 @@ PROPERTIES = [("density", "density (g/cm³)"), ("dhvap", "ΔH_vap (kJ/mol)"),
               ("D", "D∞ (1e-5 cm²/s)"), ("eta", "η (mPa s)"), ("eps", "ε")]
 
 
-def lengths(quick):
+def lengths(quick, npt_ps=None, nvt_ps=None):
     """Stage lengths (ps) and analysis windows of the full or the quick mode."""
+    out = _lengths(quick)
+    if npt_ps is not None:
+        out["npt_prod"] = float(npt_ps)
+    if nvt_ps is not None:
+        out["nvt_prod"] = float(nvt_ps)
+    return out
+
+
+def _lengths(quick):
     if quick:
         return {"quench": 0.02, "npt_eq": 0.1, "npt_prod": 0.2, "nvt_eq": 0.04,
                 "nvt_prod": 0.6, "chunk": 0.2, "max_lag": 0.05, "plateau": (0.02, 0.04)}
@@ -223,7 +235,7 @@ class Stage:
         return json.dumps(read_checkpoint(self.checkpoint).extra)
 
 
-def run_model(name, outdir, quick, n_side, seed):
+def run_model(name, outdir, quick, n_side, seed, npt_ps=None, nvt_ps=None):
     """All stages of one model; returns its results (also written to results.json)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     from rigidmd import RigidBussi, RigidCRescale, RigidLangevin, load_checkpoint
@@ -244,7 +256,7 @@ def run_model(name, outdir, quick, n_side, seed):
     result_file = directory / "results.json"
     if result_file.exists():
         return json.loads(result_file.read_text())
-    L = lengths(quick)
+    L = lengths(quick, npt_ps, nvt_ps)
     model = water_model(name)
     k = model.sites
     dt = 2.0 * units.fs
@@ -367,6 +379,8 @@ def table(results):
             mark = "" if checked else " [to check]"
             lines.append(f"  {label:<18} {value:10.4g} ± {err:<9.2g}{extra}  published "
                          f"{published:>7}  {cite}{mark}")
+        lines.append(f"  {'D_PBC (this box)':<18} {r['D_pbc'][0]:10.4g} ± {r['D_pbc'][1]:<9.2g}"
+                     "  (published D values are for the box sizes their papers say)")
         lines.append(f"  ε to 15 %: about {r['nvt_ps_for_eps_15_percent']:.3g} ps of NVT")
         lines.append("")
     return "\n".join(lines)
@@ -402,6 +416,8 @@ def parse(argv=None):
     p.add_argument("--quick", action="store_true",
                    help="a smoke run (64 waters, well under a ps per stage): checks the "
                         "pipeline, gives no results")
+    p.add_argument("--npt-ps", type=float, help="NPT production (ps; full mode 500)")
+    p.add_argument("--nvt-ps", type=float, help="NVT production (ps; full mode 1000)")
     args = p.parse_args(argv)
     if args.quick and args.n_side == 6:
         args.n_side = 4
@@ -411,7 +427,8 @@ def parse(argv=None):
 def main(argv=None):
     args = parse(argv)
     args.outdir.mkdir(parents=True, exist_ok=True)
-    jobs = [(m, args.outdir, args.quick, args.n_side, args.seed) for m in args.models]
+    jobs = [(m, args.outdir, args.quick, args.n_side, args.seed, args.npt_ps, args.nvt_ps)
+            for m in args.models]
     if args.jobs > 1:
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
             results = list(pool.map(run_model, *zip(*jobs, strict=True)))
