@@ -87,7 +87,8 @@ def test_every_readme_example_runs(tmp_path):
                     args = [sys.executable, "-m", "rigidmd.cli", *args[1:]]
                 elif args[0] == "python":
                     args = [sys.executable, *args[1:]]
-                    args = [str(ROOT / a) if a.startswith("examples/") else a for a in args]
+                    args = [str(ROOT / a) if a.startswith(("examples/", "benchmarks/")) else a
+                            for a in args]
                 result = subprocess.run(args, cwd=tmp_path, capture_output=True, text=True,
                                         env=env, timeout=900)
                 assert result.returncode == 0, (command, result.stderr[-3000:])
