@@ -36,6 +36,8 @@ CHECKED_ELSEWHERE = (
     ("pip install", ".ci/run installs and tests a clean checkout"),
     ("examples/tip3p_water.py --outdir out", "tests/test_examples.py runs it with --quick"),
     ("examples/tip4p2005.py --outdir out4", "tests/test_examples.py runs it with --quick"),
+    ("benchmarks/water_models.py --jobs 2", "hours; tests/test_water_properties.py runs its "
+     "--quick form"),
     ("examples/mace_water.py --quick", "tests/test_ml_potential.py runs it where mace-torch "
      "is installed (the ml extra, not the test extra)"),
 )
@@ -85,7 +87,8 @@ def test_every_readme_example_runs(tmp_path):
                     args = [sys.executable, "-m", "rigidmd.cli", *args[1:]]
                 elif args[0] == "python":
                     args = [sys.executable, *args[1:]]
-                    args = [str(ROOT / a) if a.startswith("examples/") else a for a in args]
+                    args = [str(ROOT / a) if a.startswith(("examples/", "benchmarks/")) else a
+                            for a in args]
                 result = subprocess.run(args, cwd=tmp_path, capture_output=True, text=True,
                                         env=env, timeout=900)
                 assert result.returncode == 0, (command, result.stderr[-3000:])

@@ -214,6 +214,9 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self._cell_moves = bool(movers)
         self._needs_stress = any(getattr(part, "needs_stress", False) for part in couplings)
         self._virial = None  # molecular virial at the last force call (when a part needs it)
+        #: Ask the calculator for the stress with the forces on every step an observer is
+        #: due (set by :class:`rigidmd.mdanalysis.StressRecorder`): one call, not two.
+        self.stress_on_observed_steps = False
         model = self.model
         atoms.constraints = [RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom,
                                                 self.bodies.body_ids)]
@@ -450,6 +453,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             wanted.append("stress")
         if self._observed_next():
             wanted.append("energy")  # a logger will ask: one calculator call, not two
+            if self.stress_on_observed_steps and not self._needs_stress and atoms.pbc.all():
+                wanted.append("stress")
         if len(wanted) > 1:
             calculate_together(atoms.calc, atoms, wanted)
         forces = np.asarray(atoms.get_forces(md=True), dtype=float)

@@ -12,6 +12,7 @@ torque, and M adds no mass and no degree of freedom (see
 model           r_OH (Å)  HOH (deg)  d_OM (Å)  q_H (e)   σ_OO (Å)  ε_OO (kJ/mol)
 ==============  ========  =========  ========  ========  ========  =============
 ``tip3p``       0.9572    104.52     0         0.417     3.15061   0.6364
+``spce``        1.0       109.47     0         0.4238    3.166     0.650
 ``tip4p``       0.9572    104.52     0.15      0.52      3.15365   0.6480
 ``tip4p2005``   0.9572    104.52     0.1546    0.5564    3.1589    0.7749
 ``tip4pew``     0.9572    104.52     0.125     0.52422   3.16435   0.680946
@@ -21,6 +22,9 @@ model           r_OH (Å)  HOH (deg)  d_OM (Å)  q_H (e)   σ_OO (Å)  ε_OO (kJ
 ``tip3p`` and ``tip4p`` are the parameters of ASE's
 :class:`~ase.calculators.tip3p.TIP3P` and :class:`~ase.calculators.tip4p.TIP4P`
 (Jorgensen et al. 1983), so explicit-site runs can be checked against them.
+``spce`` is SPC/E [5]_: SPC's tetrahedral geometry and Lennard-Jones with the
+charges raised to a dipole of 2.35 D, its paper's liquid energy counting the
+self-polarisation cost (see :mod:`rigidmd.mdanalysis.thermo`).
 
 References
 ----------
@@ -32,6 +36,8 @@ References
    G. L. Hura and T. Head-Gordon, J. Chem. Phys. 120, 9665 (2004) (TIP4P-Ew).
 .. [4] S. Izadi, R. Anandakrishnan and A. V. Onufriev, J. Phys. Chem. Lett.
    5, 3863 (2014) (OPC).
+.. [5] H. J. C. Berendsen, J. R. Grigera and T. P. Straatsma, J. Phys. Chem.
+   91, 6269 (1987) (SPC/E: σ = 3.166 Å, ε = 0.650 kJ/mol, q_O = −0.8476 e).
 """
 
 from __future__ import annotations
@@ -248,6 +254,8 @@ WATER_MODELS = {
     "tip3p": WaterModel("tip3p", ase_tip3p.rOH, ase_tip3p.angleHOH, 0.0, ase_tip3p.qH,
                         ase_tip3p.sigma0, ase_tip3p.epsilon0,
                         "Jorgensen et al. 1983, as ase.calculators.tip3p"),
+    "spce": WaterModel("spce", 1.0, 109.47, 0.0, 0.4238, 3.166, 0.650 * _KJ,
+                       "Berendsen, Grigera & Straatsma, J. Phys. Chem. 91, 6269 (1987)"),
     "tip4p": WaterModel("tip4p", ase_tip4p.rOH, ase_tip4p.angleHOH, 0.15, ase_tip4p.qH,
                         ase_tip4p.sigma0, ase_tip4p.epsilon0,
                         "Jorgensen et al. 1983, as ase.calculators.tip4p"),

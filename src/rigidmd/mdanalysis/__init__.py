@@ -20,6 +20,13 @@ This module makes a rigid-body run one call away from `MDAnalysis
   \mathbf u(t))\rangle` (:math:`\ell = 1, 2`) of a molecular axis with its
   relaxation times.
 
+For water's properties: :class:`HeatOfVaporization` (with the polarisation
+correction of the models fitted with one), :class:`DielectricConstant`
+(MDAnalysis's, with a jackknife error), :class:`ShearViscosity` (Green–Kubo
+from the molecular stress that :class:`StressRecorder` records during a run)
+and :func:`yeh_hummer_correction` (also
+``MeanSquaredDisplacement.finite_size_corrected``).
+
 The package is split by concern: :mod:`~rigidmd.mdanalysis.topology`
 (:func:`to_universe`, :func:`write_psf`), :mod:`~rigidmd.mdanalysis.writer`
 (:class:`MDAWriter`), :mod:`~rigidmd.mdanalysis.rdf`,
@@ -42,7 +49,13 @@ ps (MDAnalysis's units), diffusion coefficients Å²/ps (also given in cm²/s;
 """
 
 from rigidmd.mdanalysis._base import ANGSTROM2_PER_PS_IN_CM2_PER_S, PS
-from rigidmd.mdanalysis.diffusion import MeanSquaredDisplacement, mean_squared_displacement
+from rigidmd.mdanalysis.dielectric import DielectricConstant, dielectric_from_dipoles
+from rigidmd.mdanalysis.diffusion import (
+    YEH_HUMMER_XI,
+    MeanSquaredDisplacement,
+    mean_squared_displacement,
+    yeh_hummer_correction,
+)
 from rigidmd.mdanalysis.rdf import RadialDistribution
 from rigidmd.mdanalysis.rotation import (
     RotationalCorrelation,
@@ -50,7 +63,14 @@ from rigidmd.mdanalysis.rotation import (
     orientational_correlation,
     relaxation_time,
 )
+from rigidmd.mdanalysis.thermo import (
+    HeatOfVaporization,
+    block_average,
+    excluded_kspace_energy,
+    polarization_energy,
+)
 from rigidmd.mdanalysis.topology import to_universe, write_psf
+from rigidmd.mdanalysis.viscosity import ShearViscosity, StressRecorder, shear_components
 from rigidmd.mdanalysis.writer import MDAWriter
 
 __all__ = [
@@ -66,4 +86,15 @@ __all__ = [
     "orientational_correlation",
     "relaxation_time",
     "body_dipole_directions",
+    "DielectricConstant",
+    "dielectric_from_dipoles",
+    "YEH_HUMMER_XI",
+    "yeh_hummer_correction",
+    "HeatOfVaporization",
+    "block_average",
+    "excluded_kspace_energy",
+    "polarization_energy",
+    "ShearViscosity",
+    "StressRecorder",
+    "shear_components",
 ]

@@ -48,6 +48,38 @@ def mean_squared_displacement(x):
     return np.maximum(s1 - 2.0 * s2, 0.0)
 
 
+#: Yeh & Hummer's constant ξ for a cubic box (J. Phys. Chem. B 108, 15873 (2004)).
+YEH_HUMMER_XI = 2.837297
+
+
+def yeh_hummer_correction(temperature_K, viscosity_mPa_s, box_length_A):
+    r"""Finite-size correction of a diffusion coefficient in a cubic periodic box (Å²/ps).
+
+    :math:`D_\infty = D_\mathrm{PBC} + \xi k_B T / (6 \pi \eta L)`, ξ = 2.837297
+    (Yeh & Hummer, J. Phys. Chem. B 108, 15873 (2004)).  η must be the model's own
+    shear viscosity (measured, or its published value), not real water's.
+
+    Parameters
+    ----------
+    temperature_K : float
+    viscosity_mPa_s : float
+        The model's shear viscosity (mPa s).
+    box_length_A : float
+        Edge of the cubic box (Å).
+
+    Returns
+    -------
+    float
+        The term to add to :math:`D_\mathrm{PBC}`, Å²/ps (1e-4 of it in cm²/s).
+    """
+    if not (temperature_K > 0 and viscosity_mPa_s > 0 and box_length_A > 0):
+        raise ValueError("yeh_hummer_correction: temperature_K, viscosity_mPa_s and "
+                         "box_length_A must be positive")
+    kt = 1.380649e-23 * temperature_K  # J
+    d = YEH_HUMMER_XI * kt / (6 * np.pi * viscosity_mPa_s * 1e-3 * box_length_A * 1e-10)  # m²/s
+    return float(d * 1e8)  # 1 m²/s = 1e20 Å² / 1e12 ps
+
+
 #: Largest |α - 1| of MSD ∝ t^α in the fit window for which a diffusion coefficient is given.
 #: Liquid water after 1 ps gives α within 0.05 of 1; the ballistic regime gives 2.
 MAX_EXPONENT_DEVIATION = 0.25
@@ -204,6 +236,25 @@ class MeanSquaredDisplacement(AnalysisBase):
             slope = float("nan")
         res.diffusion_coefficient = float(slope) / (2 * self.dim_fac)
         res.diffusion_coefficient_cm2_s = res.diffusion_coefficient * ANGSTROM2_PER_PS_IN_CM2_PER_S
+
+    def finite_size_corrected(self, temperature_K, viscosity_mPa_s):
+        """:math:`D_\\infty` (Å²/ps): the fitted D plus :func:`yeh_hummer_correction`.
+
+        The box edge is the mean over the frames of the cube root of the
+        volume (the correction is for cubic boxes).
+
+        Parameters
+        ----------
+        temperature_K : float
+        viscosity_mPa_s : float
+            The model's shear viscosity (measured or published).
+        """
+        boxes = self._boxes
+        if not self._has_box:
+            raise ValueError("finite_size_corrected: the trajectory has no periodic box")
+        length = float(np.mean(np.prod(boxes[:, :3], axis=1) ** (1 / 3)))
+        return self.results.diffusion_coefficient + yeh_hummer_correction(
+            temperature_K, viscosity_mPa_s, length)
 
     def plot(self, path=None):
         """Plot MSD(t) with the fitted line; save a PNG if ``path``.
