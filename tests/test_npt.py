@@ -17,7 +17,7 @@ from helpers import PeriodicLJ, argon_crystal, dimer_fluid, waters
 
 from rigidmd import RigidCRescale, RigidNPT, RigidVerlet
 from rigidmd import quaternion as quat
-from rigidmd.coupling.barostats import BarostatError
+from rigidmd.barostats import BarostatError
 
 T = 80.0
 

@@ -29,8 +29,8 @@ from dataclasses import asdict
 import numpy as np
 from ase import units
 
-from rigidmd.atomslink import temperature
 from rigidmd.config import TIME_UNITS, ConfigError
+from rigidmd.dof import temperature
 from rigidmd.outputs import OutputError, OutputLock, output_lengths, trim_outputs
 
 __all__ = ["Run", "Progress", "StopSignals", "StopRequest"]

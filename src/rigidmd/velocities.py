@@ -7,8 +7,8 @@ from ase import units
 
 from rigidmd import operators as ops
 from rigidmd import quaternion as quat
-from rigidmd.atomslink import kinetic_energy
 from rigidmd.bodies import RigidBodies
+from rigidmd.dof import kinetic_energy
 from rigidmd.state import RigidState
 
 __all__ = ["rigid_maxwell_boltzmann", "rigid_temperature", "rigid_velocities"]
