@@ -36,7 +36,7 @@ from rigidmd import observables as obs
 from rigidmd.bodies import RigidBodies, molecule_ids, store_bodies_in_tags
 from rigidmd.checkpoint import Checkpoint, read_checkpoint, save_checkpoint
 from rigidmd.checks import check_finite, check_massless_momenta, check_timestep
-from rigidmd.coupling import COUPLINGS, Coupling, CouplingView, rng_kind
+from rigidmd.coupling import Coupling, CouplingView, rng_kind
 from rigidmd.dof import RigidBodyDOF, kinetic_energy
 from rigidmd.forces import ForceEvaluator, NonFiniteForceError
 from rigidmd.link import BodyLink
@@ -731,7 +731,7 @@ def load_checkpoint(path, calculator, **kwargs) -> RigidDynamics:
     atoms.calc = calculator
     scheme = Scheme(saved["scheme"], name=saved["scheme_name"])
     dyn = RigidDynamics(atoms, saved["dt"], bodies=saved["body_ids"], integrator=scheme,
-                        backend=saved["backend"], couplings=checkpoint.couplings(COUPLINGS),
+                        backend=saved["backend"], couplings=checkpoint.couplings(),
                         **kwargs)
     dyn.set_state(saved)
     return dyn
