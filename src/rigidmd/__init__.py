@@ -8,8 +8,9 @@ body move as point particles in the same step.
 from rigidmd.barostats import RigidCRescale, RigidNPT
 from rigidmd.bodies import RigidBodies
 from rigidmd.dof import RigidBodyDOF, kinetic_energy, temperature
-from rigidmd.dynamics import NonFiniteForceError, RigidDynamics, RigidVerlet, load_checkpoint
+from rigidmd.dynamics import NonFiniteForceError, RigidDynamics, RigidVerlet
 from rigidmd.model import BodyGeometry, BodyModel
+from rigidmd.restart import load_checkpoint
 from rigidmd.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover
 from rigidmd.velocities import rigid_maxwell_boltzmann, rigid_temperature
 

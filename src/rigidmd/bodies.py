@@ -160,7 +160,7 @@ class RigidBodies:
         _, labels = connected_components(nl.get_connectivity_matrix(sparse=True))
         return cls(labels, rule="connectivity")
 
-    def _warn_merged(self, atoms, unique_formulas=False):
+    def warn_merged(self, atoms, unique_formulas=False):
         """Warn when connectivity probably joined or split molecules.
 
         A body whose composition is a multiple of another body's (two waters
@@ -204,7 +204,7 @@ class RigidBodies:
                 stacklevel=4,
             )
 
-    def _warn_unbonded(self, atoms):
+    def warn_unbonded(self, atoms):
         """Warn when a body holds atoms that no chain of covalent bonds joins.
 
         Used for the default rule: ASE fills a missing ``mol-id`` with 0 when
@@ -252,16 +252,16 @@ class RigidBodies:
             tags = atoms.get_tags()
             if "mol-id" in atoms.arrays:
                 bodies = cls.from_mol_id(atoms)
-                bodies._warn_unbonded(atoms)
+                bodies.warn_unbonded(atoms)
             elif n and np.any(tags != tags[0]):
                 bodies = cls.from_tags(atoms)
-                bodies._warn_unbonded(atoms)
+                bodies.warn_unbonded(atoms)
             else:
                 bodies = cls.from_connectivity(atoms)
-                bodies._warn_merged(atoms, unique_formulas=True)
+                bodies.warn_merged(atoms, unique_formulas=True)
         elif isinstance(spec, str) and spec == "connectivity":
             bodies = cls.from_connectivity(atoms)
-            bodies._warn_merged(atoms)
+            bodies.warn_merged(atoms)
         elif isinstance(spec, RigidBodies):
             bodies = spec
         elif isinstance(spec, str):

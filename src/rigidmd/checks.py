@@ -6,8 +6,11 @@ vector or the parameter at fault.
 
 import numpy as np
 from ase import Atoms
+from ase.constraints import FixCom
 
-__all__ = ["check_finite", "check_massless_momenta", "check_timestep"]
+from rigidmd.dof import RigidBodyDOF
+
+__all__ = ["check_finite", "check_massless_momenta", "check_timestep", "check_constraints"]
 
 
 def check_timestep(timestep: float) -> float:
@@ -55,3 +58,15 @@ def check_massless_momenta(atoms: Atoms, when: str = "") -> None:
             f"atom {a} ({atoms[a].symbol}) has mass 0 but momentum {momenta[a].tolist()} "
             f"(amu Å / ASE time){' ' + when if when else ''}: a massless atom (a virtual site) "
             "moves with its body; give it zero momentum")
+
+
+def check_constraints(atoms: Atoms) -> bool:
+    """Refuse ASE constraints other than FixCom; returns whether FixCom is there."""
+    others = [c for c in atoms.constraints if not isinstance(c, (RigidBodyDOF, FixCom))]
+    if others:
+        raise ValueError(
+            f"rigid-body dynamics cannot honour other ASE constraints ({others[0]!r}); "
+            "remove them (rigid bodies replace bond constraints; atoms in no body are "
+            "free point particles; FixCom is honoured)"
+        )
+    return any(isinstance(c, FixCom) for c in atoms.constraints)

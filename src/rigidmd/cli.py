@@ -65,7 +65,7 @@ def _apply_flags(config, args):
 def _export(config, directory, stream=sys.stdout):
     from rigidmd.lammps import export_lammps, tip3p_charges, tip3p_pair_commands
 
-    atoms, bodies = Run(config)._start_atoms()
+    atoms, bodies = Run(config).start_atoms()
     atoms.positions = bodies.whole_positions(atoms)
     calc = config.calculator
     if calc.name == "tip3p":

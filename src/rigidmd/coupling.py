@@ -38,7 +38,7 @@ from rigidmd.state import RigidState
 
 __all__ = ["Coupling", "CouplingView", "Parameter", "COUPLINGS", "register", "NotExportable",
            "LammpsFix", "NoseHooverChain", "check_rng", "rng_state", "set_rng_state",
-           "rng_kind", "new_rng",
+           "rng_kind", "new_rng", "check_composition",
            "check_temperature", "check_time", "check_flag", "check_positive_integer",
            "TEMPERATURE"]
 
@@ -393,3 +393,31 @@ class NoseHooverChain:
     def set_state(self, state):
         self.xi[...] = state["xi"]
         self.eta[...] = state["eta"]
+
+
+def check_composition(couplings, fixcom: bool):
+    """Refuse what no dynamics can compose; returns the part that moves the cell, or None."""
+    for part in couplings:
+        if not isinstance(part, Coupling):
+            raise TypeError(f"couplings must be coupling parts (rigidmd.coupling), "
+                            f"got {type(part).__name__}")
+    movers = [part for part in couplings if part.moves_cell]
+    if len(movers) > 1:
+        raise ValueError(f"two parts move the cell ({movers[0].kind}, {movers[1].kind}); "
+                         "use one barostat")
+    if movers and any(part.fixcm for part in couplings):
+        raise ValueError("thermostat fixcm=True with a barostat: the barostat's equations "
+                         "count the centre of mass's degrees of freedom; use fixcm=False")
+    if movers and fixcom:
+        raise ValueError("ase.constraints.FixCom with a barostat: the barostat's equations "
+                         "count the centre of mass's degrees of freedom; remove FixCom")
+    targets = [(part, part.temperature_K) for part in couplings
+               if getattr(part, "temperature_K", None) is not None]
+    for part, value in targets[1:]:
+        first, reference = targets[0]
+        if value != reference:
+            raise ValueError(
+                f"{part.section} temperature_K = {value:g} K differs from the {first.section}'s "
+                f"{reference:g} K: one dynamics has one target temperature "
+                "(set_temperature changes every part)")
+    return movers[0] if movers else None

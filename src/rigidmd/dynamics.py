@@ -18,7 +18,7 @@ step, with forces from any ASE calculator.  It keeps ASE's interface
    undone.
 
 The time step is read from :attr:`RigidDynamics.dt` at every step.
-:class:`RigidVerlet` is the plain NVE case.  :func:`load_checkpoint`
+:class:`RigidVerlet` is the plain NVE case.  :func:`rigidmd.restart.load_checkpoint`
 rebuilds a dynamics from a file :mod:`rigidmd.checkpoint` wrote.
 """
 
@@ -34,22 +34,27 @@ from ase.md.md import MolecularDynamics
 from rigidmd import _numba
 from rigidmd import observables as obs
 from rigidmd.bodies import RigidBodies, molecule_ids, store_bodies_in_tags
-from rigidmd.checkpoint import Checkpoint, read_checkpoint, save_checkpoint
-from rigidmd.checks import check_finite, check_massless_momenta, check_timestep
-from rigidmd.coupling import Coupling, CouplingView, rng_kind
+from rigidmd.checkpoint import save_checkpoint
+from rigidmd.checks import (
+    check_constraints,
+    check_finite,
+    check_massless_momenta,
+    check_timestep,
+)
+from rigidmd.coupling import CouplingView, check_composition, rng_kind
 from rigidmd.dof import RigidBodyDOF, kinetic_energy
 from rigidmd.forces import ForceEvaluator, NonFiniteForceError
 from rigidmd.link import BodyLink
 from rigidmd.logger import RigidLogger
 from rigidmd.model import BodyModel
 from rigidmd.record import StepRecord
-from rigidmd.schemes import BUILTIN_SCHEMES, Scheme, resolve_scheme
+from rigidmd.schemes import BUILTIN_SCHEMES, resolve_scheme
 from rigidmd.state import STATE_FIELDS
 from rigidmd.stepcontext import StepContext
 from rigidmd.stepper import Stepper, remove_centre_velocity
 
 __all__ = ["RigidDynamics", "RigidVerlet", "RigidBodyDOF", "NonFiniteForceError",
-           "load_checkpoint", "check_timestep"]
+           "check_timestep"]
 
 #: A body turning more than this per step (rad) means the step is too large.  Measured on
 #: 27 TIP3P waters at 300 K over 1 ps: the largest |omega| dt is 0.07, 0.14, 0.25 and
@@ -65,46 +70,6 @@ def _observer_reads_only(function):
     owner = getattr(function, "__self__", function)
     return (isinstance(owner, (MDLogger, TrajectoryWriter))
             or getattr(owner, "modifies_atoms", True) is False)
-
-
-def _check_constraints(atoms):
-    """Refuse ASE constraints other than FixCom; returns whether FixCom is there."""
-    others = [c for c in atoms.constraints if not isinstance(c, (RigidBodyDOF, FixCom))]
-    if others:
-        raise ValueError(
-            f"rigid-body dynamics cannot honour other ASE constraints ({others[0]!r}); "
-            "remove them (rigid bodies replace bond constraints; atoms in no body are "
-            "free point particles; FixCom is honoured)"
-        )
-    return any(isinstance(c, FixCom) for c in atoms.constraints)
-
-
-def _check_couplings(couplings, fixcom):
-    """Refuse what no dynamics can compose; returns the part that moves the cell, or None."""
-    for part in couplings:
-        if not isinstance(part, Coupling):
-            raise TypeError(f"couplings must be coupling parts (rigidmd.coupling), "
-                            f"got {type(part).__name__}")
-    movers = [part for part in couplings if part.moves_cell]
-    if len(movers) > 1:
-        raise ValueError(f"two parts move the cell ({movers[0].kind}, {movers[1].kind}); "
-                         "use one barostat")
-    if movers and any(part.fixcm for part in couplings):
-        raise ValueError("thermostat fixcm=True with a barostat: the barostat's equations "
-                         "count the centre of mass's degrees of freedom; use fixcm=False")
-    if movers and fixcom:
-        raise ValueError("ase.constraints.FixCom with a barostat: the barostat's equations "
-                         "count the centre of mass's degrees of freedom; remove FixCom")
-    targets = [(part, part.temperature_K) for part in couplings
-               if getattr(part, "temperature_K", None) is not None]
-    for part, value in targets[1:]:
-        first, reference = targets[0]
-        if value != reference:
-            raise ValueError(
-                f"{part.section} temperature_K = {value:g} K differs from the {first.section}'s "
-                f"{reference:g} K: one dynamics has one target temperature "
-                "(set_temperature changes every part)")
-    return movers[0] if movers else None
 
 
 class RigidDynamics(MolecularDynamics):
@@ -214,7 +179,7 @@ class RigidDynamics(MolecularDynamics):
         if not isinstance(atoms, Atoms):
             raise TypeError(f"atoms must be an ase.Atoms, got {type(atoms).__name__}")
         self._dt = check_timestep(timestep)
-        fixcom = _check_constraints(atoms)
+        fixcom = check_constraints(atoms)
         backend = _numba.resolve_backend(backend)
         check_finite(atoms.positions, "position", "Å")
         check_finite(atoms.get_momenta(), "momentum", "amu Å / ASE time")
@@ -223,7 +188,7 @@ class RigidDynamics(MolecularDynamics):
         geometry = rigid.geometry(atoms)
         check_massless_momenta(atoms)
         couplings = tuple(couplings)
-        mover = _check_couplings(couplings, fixcom)
+        mover = check_composition(couplings, fixcom)
         model = geometry.model
         for part in couplings:
             part.check(atoms, model, self._dt)
@@ -472,7 +437,7 @@ class RigidDynamics(MolecularDynamics):
         """
         atoms, link = self.atoms, self.link
         link.check_unchanged_system()
-        fixcom = _check_constraints(atoms)
+        fixcom = check_constraints(atoms)
         if fixcom != self.fixcom:
             raise ValueError("FixCom was added to or removed from the atoms; create a new "
                              "dynamics")
@@ -586,7 +551,7 @@ class RigidDynamics(MolecularDynamics):
 
     def get_density(self) -> float:
         """Mass density (g/cm³)."""
-        grams = self.atoms.get_masses().sum() * units._amu * 1e3
+        grams = self.atoms.get_masses().sum() / units.kg * 1e3
         return float(grams / (self.get_volume() * 1e-24))
 
     def molecular_virial(self) -> np.ndarray:
@@ -606,16 +571,12 @@ class RigidDynamics(MolecularDynamics):
     def get_stress(self, include_ideal_gas: bool = True, voigt: bool = True) -> np.ndarray:
         r"""Molecular stress (eV/Å³) in ASE's sign convention and Voigt order.
 
-        .. math::
-            \sigma = -\frac{1}{V}\Big(\sum_b X_b \otimes F_b
-                + \sum_b M_b V_b \otimes V_b + \sum_{free} m\, v \otimes v\Big)
-
-        with the positional part from :meth:`molecular_virial` (the kinetic
-        part only with ``include_ideal_gas``).  Centres of mass, not atoms,
-        carry the pressure of rigid molecules; the instantaneous atomic
-        pressure including the constraint forces that keep the molecules rigid
-        has the same trace.  The antisymmetric part of the intramolecular
-        virial (the bodies' torques, zero on average) is left out.
+        :math:`\sigma = -(\mathsf W + \mathsf K)/V` with the positional part
+        :math:`\mathsf W` from :meth:`molecular_virial` and the kinetic tensor
+        :math:`\mathsf K` of the centres of mass and point particles (only with
+        ``include_ideal_gas``); see :func:`rigidmd.observables.stress_tensor`.
+        Centres of mass, not atoms, carry the pressure of rigid molecules; the
+        atomic pressure including the constraint forces has the same trace.
 
         Raises
         ------
@@ -704,37 +665,6 @@ class RigidDynamics(MolecularDynamics):
         See :mod:`rigidmd.checkpoint`; :func:`rigidmd.load_checkpoint` continues.
         """
         save_checkpoint(self, path, extra)
-
-
-def load_checkpoint(path, calculator, **kwargs) -> RigidDynamics:
-    """Rebuild a rigid dynamics from a checkpoint, ready to continue exactly.
-
-    Parameters
-    ----------
-    path : str, os.PathLike or rigidmd.checkpoint.Checkpoint
-    calculator : ase.calculators.calculator.Calculator
-        Attached to the rebuilt atoms (the checkpoint holds no calculator).
-    **kwargs
-        ``trajectory``, ``logfile``, ``loginterval``, ``append_trajectory``, ...
-        as for :class:`RigidDynamics`.
-
-    Returns
-    -------
-    RigidDynamics
-        At the checkpoint's step and time; ``dyn.atoms`` are new Atoms.  The
-        class is :class:`RigidDynamics` with the stored coupling parts
-        (``dyn.couplings``).
-    """
-    checkpoint = path if isinstance(path, Checkpoint) else read_checkpoint(path)
-    saved = checkpoint.dynamics_state()
-    atoms = checkpoint.atoms()
-    atoms.calc = calculator
-    scheme = Scheme(saved["scheme"], name=saved["scheme_name"])
-    dyn = RigidDynamics(atoms, saved["dt"], bodies=saved["body_ids"], integrator=scheme,
-                        backend=saved["backend"], couplings=checkpoint.couplings(),
-                        **kwargs)
-    dyn.set_state(saved)
-    return dyn
 
 
 class RigidVerlet(RigidDynamics):

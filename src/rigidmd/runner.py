@@ -128,7 +128,7 @@ def fingerprint(config):
 def _observables(dyn):
     """Time, conserved energy and, under a barostat, pressure (bar), volume, density."""
     row = (dyn.get_time(), dyn.get_conserved_energy())
-    if dyn._cell_moves:
+    if dyn.evaluator.cell_moves:
         row += (dyn.get_pressure() / units.bar, dyn.get_volume(), dyn.get_density())
     return row
 
@@ -180,7 +180,7 @@ class Run:
             path.unlink()
 
     # ------------------------------------------------------------ set-up
-    def _start_atoms(self):
+    def start_atoms(self):
         from rigidmd import rigid_maxwell_boltzmann
 
         config = self.config
@@ -195,7 +195,7 @@ class Run:
     def _new_dynamics(self):
         from rigidmd.dynamics import RigidDynamics
 
-        atoms, bodies = self._start_atoms()
+        atoms, bodies = self.start_atoms()
         atoms.calc = self.config.calculator.build(atoms)
         out = self.outputs
         return RigidDynamics(atoms, self.config.run.timestep, bodies=bodies,
@@ -207,8 +207,9 @@ class Run:
                              loginterval=out.interval)
 
     def _resumed_dynamics(self):
-        from rigidmd.checkpoint import CheckpointError, load_checkpoint, read_checkpoint
+        from rigidmd.checkpoint import CheckpointError, read_checkpoint
         from rigidmd.logger import RigidLogger
+        from rigidmd.restart import load_checkpoint
 
         out = self.outputs
         try:
@@ -228,7 +229,7 @@ class Run:
                               trajectory=str(out.trajectory) if out.trajectory else None,
                               append_trajectory=True, loginterval=out.interval)
         if out.log:
-            dyn.attach(dyn.closelater(RigidLogger(dyn, str(out.log), pressure=dyn._needs_stress,
+            dyn.attach(dyn.closelater(RigidLogger(dyn, str(out.log), pressure=dyn.evaluator.stress,
                                                   header=False)), out.interval)
         cut = f" (cut back: {', '.join(trimmed)})" if trimmed else ""
         print(f"resuming from step {dyn.nsteps} of {out.checkpoint}{cut}", file=self.stream)
