@@ -546,3 +546,30 @@ def test_one_npt_step_evaluates_everything_once(monkeypatch):
     assert dyn.nsteps == 4
     assert counts == {"calculator": 1, "stress": 1, "volume": 1, "kinetic_tensor": 1,
                       "rotational_kinetic_energy": 1}
+
+
+def test_trial_energy_of_a_cell_and_restore_without_a_call():
+    """The seam a Monte Carlo barostat uses: the energy of a trial cell in one call, and a
+    rejection that puts atoms and calculator back without another call."""
+    atoms = dimer_fluid(n_side=4, rc=7.0)
+    dyn = npt(atoms, "mtk")
+    dyn.run(2)
+    evaluator, state, calc = dyn.evaluator, dyn.state, atoms.calc
+    forces, energy = atoms.get_forces().copy(), atoms.get_potential_energy()
+    calls = []
+    calculate = calc.calculate
+    calc.calculate = lambda *args, **kwargs: calls.append(1) or calculate(*args, **kwargs)
+    trial = state.copy()
+    trial.X *= 1.01
+    trial.cell *= 1.01
+    saved = evaluator.save_results()
+    trial_energy = evaluator.trial_energy(trial)
+    assert len(calls) == 1 and trial_energy != energy
+    np.testing.assert_allclose(trial_energy, strained_energy(atoms, dyn, 0.01 * np.eye(3)),
+                               rtol=1e-12)
+    evaluator.restore_results(saved, state)
+    np.testing.assert_array_equal(atoms.get_forces(), forces)
+    assert atoms.get_potential_energy() == energy
+    assert dyn.get_volume() == pytest.approx(np.linalg.det(state.cell), rel=1e-15)
+    dyn.run(1)
+    assert len(calls) == 2  # the step's own call only

@@ -15,6 +15,11 @@ was when the trial is rejected, without another call::
     energy = evaluator.trial_energy(trial_state)     # one call, energy only
     if rejected:
         evaluator.restore_results(saved, state)      # atoms and calculator as before
+    else:
+        evaluator.evaluate(trial_state)              # the forces the next kick needs
+
+``trial_state`` is a :class:`~rigidmd.state.RigidState` (``state.copy()`` with
+centres of mass, point particles and cell moved); the evaluator never keeps it.
 """
 
 import numpy as np
@@ -139,10 +144,10 @@ class ForceEvaluator:
             raise NonFiniteForceError(
                 f"calculator returned non-finite forces on atom(s) {bad[:10].tolist()} "
                 f"after step {self.step}; the atoms are left at step {self.step}")
-        results = getattr(atoms.calc, "results", {})
-        self.energy_known = self.want_energy and "energy" in results
         record.energy = None
+        self.energy_known = self.want_energy and "energy" in getattr(atoms.calc, "results", {})
         if self.energy_known:
+            results = atoms.calc.results
             energy = results["energy"]
             if not np.isfinite(energy):
                 raise NonFiniteForceError(
@@ -190,6 +195,7 @@ class ForceEvaluator:
         if not np.array_equal(atoms.cell.array, state.cell):
             check_bodies_fit(r, self.model, state.cell, atoms.pbc, "a trial cell")
             atoms.set_cell(state.cell)
+            self.record.cell_changed()
         energy = float(atoms.get_potential_energy())
         if not np.isfinite(energy):
             raise NonFiniteForceError(f"calculator returned a non-finite energy ({energy}) "
@@ -203,6 +209,7 @@ class ForceEvaluator:
         """
         results, cached, cell = saved
         self.atoms.set_cell(cell)
+        self.record.cell_changed()
         self.record.r = self.link.place(state, self.record.r)
         calc = self.atoms.calc
         if hasattr(calc, "results"):

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rigidmd import _numba
+from rigidmd import observables as obs
 from rigidmd import operators as ops
 from rigidmd.forces import ForceEvaluator
 from rigidmd.model import BodyModel
@@ -88,9 +89,7 @@ class StepContext:
 
     def omega(self):
         """Lab angular velocities of the bodies (rad / ASE time), shape (n_bodies, 3)."""
-        s = self.state
-        return ops.angular_velocity(s.q, ops.body_angular_momentum(s.q, s.p),
-                                    self.model.inv_moments)
+        return obs.angular_velocities(self.state, self.model)
 
     def set_omega(self, omega):
         """Set the bodies' lab angular velocities (at the current orientations)."""

@@ -79,9 +79,10 @@ class Stepper:
             record.cell_move = None
             view.step = step
             half = 0.5 * dt
-            for part in couplings:
-                part.first_half(view, half)
-            record.velocities_changed()
+            if couplings:
+                for part in couplings:
+                    part.first_half(view, half)
+                record.velocities_changed()  # what the scheme's drift may ask is fresh
             self.scheme.run(ctx, dt, fused=self.fused)
             record.velocities_changed()
             if self.fixcom:
