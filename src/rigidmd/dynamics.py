@@ -338,6 +338,8 @@ class RigidDynamics(MolecularDynamics):
 
     def call_observers(self):
         """Call the observers due at this step, noting whether they changed the Atoms."""
+        if not self.observers:
+            return
         due = [function for function, interval, _, _ in self.observers
                if (interval > 0 and self.nsteps % interval == 0)
                or (interval <= 0 and self.nsteps == abs(interval))]

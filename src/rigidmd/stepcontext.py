@@ -79,6 +79,7 @@ class StepContext:
         self.model = model
         # The free rotor's 1/(4 I), once: the fused kernel's only derived array.
         self.quarter_inv_moments = 0.25 * model.inv_moments
+        self.n_free = model.n_free
 
     def cell_move(self, h):
         """The barostat's drift matrices ``A, B, S`` over ``h``; its note goes to the record."""
@@ -249,7 +250,7 @@ def fused_no_squish(ctx, dt):
     _numba.first_half(s.X, s.V, s.q, s.p, F, record.tau, m.inv_mass, ctx.quarter_inv_moments, dt,
                       m.body_coordinates, m.bounds, m.order, record.r, positions, A, B, S,
                       affine)
-    if m.n_free:
+    if ctx.n_free:
         if affine:
             s.x[...] = s.x @ A.T + s.v @ B.T
             s.v[...] = s.v @ S.T
@@ -261,7 +262,7 @@ def fused_no_squish(ctx, dt):
     # The body forces and torques are overwritten only after the force call succeeded.
     _numba.second_half(s.V, s.q, s.p, record.F, record.tau, m.inv_mass, m.inv_moments, dt, forces,
                        m.bounds, m.order, m.atom_masses, record.r, momenta, ctx.write_momenta)
-    if m.n_free:
+    if ctx.n_free:
         record.f = forces[m.free]
         s.v += half * record.f / m.free_masses[:, None]
         if ctx.write_momenta:

@@ -61,7 +61,9 @@ class Stepper:
                  view: CouplingView, link: BodyLink, fused: bool = False,
                  fixcom: bool = False):
         self.scheme, self.context, self.couplings = scheme, context, tuple(couplings)
-        self.view, self.link, self.fused, self.fixcom = view, link, fused, fixcom
+        self.view, self.link, self.fixcom = view, link, fixcom
+        #: The compiled kernel this stepper runs, or None (the scheme's operators).
+        self.kernel = scheme.kernel if fused else None
         self.cell_moves = context.cell_motion is not None
         self.state, self.record = context.state, context.record
         self._backup = self.state.copy()
@@ -72,7 +74,7 @@ class Stepper:
         ctx, state, record, view = self.context, self.state, self.record, self.view
         backup = self._backup
         state.copy_into(backup)
-        saved = record.backup(copy=not self.fused)
+        saved = record.backup(copy=self.kernel is None)
         couplings = self.couplings
         coupled = [part.get_state() for part in couplings] if couplings else ()
         try:
@@ -83,13 +85,16 @@ class Stepper:
                 for part in couplings:
                     part.first_half(view, half)
                 record.velocities_changed()  # what the scheme's drift may ask is fresh
-            self.scheme.run(ctx, dt, fused=self.fused)
+            if self.kernel is not None:
+                self.kernel(ctx, dt)
+            else:
+                self.scheme.run(ctx, dt)
             record.velocities_changed()
             if self.fixcom:
                 remove_centre_velocity(state, ctx.model)
             for part in reversed(couplings):
                 part.second_half(view, half)
-            if not ctx.write_momenta or not self.fused:
+            if not ctx.write_momenta or self.kernel is None:
                 self.link.write_momenta(state, record.r)
             self.time += dt
         except BaseException:
