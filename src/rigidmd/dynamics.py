@@ -352,9 +352,7 @@ class RigidDynamics(MolecularDynamics):
             self._changed = written
 
     def _refresh_properties(self):
-        # Forces at the current positions were evaluated inside step() (or
-        # at the start of irun); nothing to refresh.
-        pass
+        pass  # the forces of the current positions were evaluated in step() or at irun's start
 
     # ------------------------------------------------------------ the step
     def step(self):
