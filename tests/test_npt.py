@@ -573,3 +573,28 @@ def test_trial_energy_of_a_cell_and_restore_without_a_call():
     assert dyn.get_volume() == pytest.approx(np.linalg.det(state.cell), rel=1e-15)
     dyn.run(1)
     assert len(calls) == 2  # the step's own call only
+
+
+def test_a_part_that_needs_the_energy_reads_it_from_every_force_call():
+    """A coupling part with needs_energy (a Monte Carlo move's old energy) finds the potential
+    energy of the last force call in the record, without a call of its own."""
+    from rigidmd import RigidDynamics
+    from rigidmd.coupling import Coupling
+
+    class Watcher(Coupling):
+        kind, section, needs_energy = "watcher", "thermostat", True
+
+        def __init__(self):
+            self.seen = []
+
+        def first_half(self, view, h):
+            self.seen.append(view.record.energy)
+
+    atoms = dimer_fluid(n_side=4, rc=7.0)
+    watcher = Watcher()
+    dyn = RigidDynamics(atoms, 5 * units.fs, bodies="tags", couplings=[watcher])
+    energies = []
+    dyn.attach(lambda: energies.append(atoms.get_potential_energy()), interval=1)
+    dyn.run(3)
+    assert None not in watcher.seen and len(watcher.seen) == 6
+    assert watcher.seen[2::2] == energies[1:3]  # first halves: the previous step's energy

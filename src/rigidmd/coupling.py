@@ -179,6 +179,9 @@ class Coupling:
     needs_stress: ClassVar[bool] = False
     #: Whether the part moves the cell (a barostat; at most one per dynamics).
     moves_cell: ClassVar[bool] = False
+    #: Whether the part reads the potential energy (``view.record.energy``) at every step,
+    #: so that every force call asks the calculator for it (a Monte Carlo move's old energy).
+    needs_energy: ClassVar[bool] = False
     #: Whether the part keeps the total momentum (a thermostat's ``fixcm``).
     fixcm: bool = False
 

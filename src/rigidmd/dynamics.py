@@ -209,6 +209,7 @@ class RigidDynamics(MolecularDynamics):
         self.fixcom = fixcom
         #: Whether the total momentum is held (FixCom, or a thermostat's fixcm).
         self.holds_momentum = fixcom or any(part.fixcm for part in couplings)
+        self.needs_energy = any(part.needs_energy for part in couplings)
         self._mark_atoms()
         store_bodies_in_tags(atoms, rigid.body_ids)
         self.link = BodyLink(atoms, model, backend)
@@ -270,10 +271,7 @@ class RigidDynamics(MolecularDynamics):
         self.dt = timestep
 
     def get_time(self) -> float:
-        """Simulated time (ASE time units): the sum of the steps taken, whatever their size.
-
-        ASE's ``nsteps * dt`` would misreport it after :attr:`dt` changed.
-        """
+        """Simulated time (ASE units): the sum of the steps taken (not ``nsteps * dt``)."""
         return self.stepper.time
 
     def set_temperature(self, temperature=None, *, temperature_K=None) -> None:
@@ -368,7 +366,8 @@ class RigidDynamics(MolecularDynamics):
         self._stepping = True
         evaluator = self.evaluator
         evaluator.step = self.nsteps
-        evaluator.want_energy = self._observed_next() if self.observers else False
+        evaluator.want_energy = self.needs_energy or (self._observed_next() if self.observers
+                                                      else False)
         try:
             self.stepper.step(self._dt, self.nsteps)
         finally:
@@ -420,7 +419,7 @@ class RigidDynamics(MolecularDynamics):
     def _evaluate_forces(self):
         """Place the atoms from the state, call the calculator, reduce to bodies."""
         self.evaluator.step = self.nsteps
-        self.evaluator.want_energy = self._observed_next()
+        self.evaluator.want_energy = self.needs_energy or self._observed_next()
         self.evaluator.evaluate(self.state)
 
     def _write_atoms(self):
