@@ -4,6 +4,8 @@ Test modules import their builders from here (never from each other), so
 every system used in two places is built in one place.
 """
 
+from pathlib import Path
+
 import numba
 import numpy as np
 from ase import Atoms, units
@@ -12,6 +14,9 @@ from ase.calculators.tip3p import TIP3P
 
 from rigidmd import rigid_maxwell_boltzmann
 from rigidmd.systems import co2_water_mixture, water_cluster
+
+#: The tests' data files.
+DATA = Path(__file__).with_name("data")
 
 # Coulomb constant in eV Å / e².
 KE = units.Hartree * units.Bohr
@@ -273,3 +278,19 @@ def argon_crystal(n=3, a=5.3, temperature_K=20, shear=0.0, seed=0):
         cell[1, 0] += shear * cell[1, 1]
         atoms.set_cell(cell, scale_atoms=True)
     return atoms
+
+
+def lammps_instances(monkeypatch, module):
+    """Count the LAMMPS instances ``module`` (which imported ``load_lammps``) creates.
+
+    Returns a function that gives the count so far.
+    """
+    created = []
+    original = module.load_lammps
+
+    def counting(*args, **kwargs):
+        created.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(module, "load_lammps", counting)
+    return lambda: len(created)

@@ -161,13 +161,6 @@ def test_bad_input_is_refused_before_lammps_starts():
     a.calc = LAMMPSCalculator(PPPM, atom_types={"O": 1})
     with pytest.raises(ValueError, match="element H has no LAMMPS type"):
         a.get_forces()
-    a = atoms.copy()
-    masses = a.get_masses()
-    masses[1] = 2.014  # one deuterium among the hydrogens
-    a.set_masses(masses)
-    a.calc = LAMMPSCalculator(PPPM)
-    with pytest.raises(ValueError, match="atom 1 .H. has mass 2.014 but the other atoms of type 2"):
-        a.get_forces()
 
 
 def test_lammps_errors_carry_lammps_message_and_the_calculator_recovers():
@@ -177,7 +170,8 @@ def test_lammps_errors_carry_lammps_message_and_the_calculator_recovers():
         atoms.get_forces()
     atoms.calc = calc = LAMMPSCalculator(PPPM)
     good = atoms.get_forces().copy()
-    atoms.positions[0] = np.nan
+    # Lost atoms (one far outside the box) stop a call; the next call starts afresh.
+    atoms.positions[0] += 10 * atoms.cell.lengths()
     with pytest.raises(LammpsError, match="ERROR"):
         atoms.get_forces()
     atoms.positions = liquid().positions

@@ -37,3 +37,55 @@ def test_bad_temperature():
     atoms = co2_water_mixture(1, 1)
     with pytest.raises(ValueError, match="temperature_K"):
         rigid_maxwell_boltzmann(atoms, -5, bodies="mol-id")
+
+
+def _four_site_cluster():
+    from rigidmd.systems import water_cluster
+
+    atoms = water_cluster(8, model="tip4p2005", seed=2)
+    rigid_maxwell_boltzmann(atoms, 300, rng=np.random.default_rng(0))
+    return atoms
+
+
+def test_ase_stationary_zeroes_four_site_water_and_rigid_stationary_does_not():
+    from ase.md.velocitydistribution import Stationary
+
+    from rigidmd import kinetic_energy, rigid_stationary
+
+    # ASE's Stationary reads a 0/0 temperature on the massless M and zeroes
+    # every momentum: the reason rigidmd has its own.
+    broken = _four_site_cluster()
+    with np.errstate(invalid="ignore"):
+        Stationary(broken)
+    assert not np.any(broken.get_momenta())
+
+    atoms = _four_site_cluster()
+    kinetic0 = kinetic_energy(atoms)
+    total0 = atoms.get_momenta().sum(axis=0)
+    assert np.linalg.norm(total0) > 1e-3  # something to remove
+    rigid_stationary(atoms)
+    assert np.abs(atoms.get_momenta().sum(axis=0)).max() < 1e-13
+    assert kinetic_energy(atoms) == pytest.approx(kinetic0, rel=1e-13)
+    assert not np.any(atoms.get_momenta()[atoms.get_masses() == 0])
+    dyn = RigidVerlet(atoms, units.fs)
+    assert abs(dyn.removed_kinetic_energy) < 1e-13  # still rigid
+
+
+def test_rigid_zero_rotation_on_four_site_water():
+    from rigidmd import kinetic_energy, rigid_stationary, rigid_zero_rotation
+
+    atoms = _four_site_cluster()
+    kinetic0 = kinetic_energy(atoms)
+    rigid_stationary(atoms)
+    rigid_zero_rotation(atoms)
+    p = atoms.get_momenta()
+    r = atoms.get_positions() - atoms.get_center_of_mass()
+    assert np.abs(np.cross(r, p).sum(axis=0)).max() < 1e-12
+    assert np.abs(p.sum(axis=0)).max() < 1e-13  # the rotation removed no momentum
+    assert kinetic_energy(atoms) == pytest.approx(kinetic0, rel=1e-13)
+    dyn = RigidVerlet(atoms, units.fs)
+    assert abs(dyn.removed_kinetic_energy) < 1e-13
+    # Without preserve_temperature the kinetic energy drops by what was removed.
+    atoms = _four_site_cluster()
+    rigid_zero_rotation(atoms, preserve_temperature=False)
+    assert kinetic_energy(atoms) < kinetic0

@@ -174,6 +174,19 @@ def test_massless_site_off_a_linear_body_is_refused():
     assert model.degrees_of_freedom == 5
 
 
+def test_tiny_mass_off_a_linear_body_is_refused():
+    """A tiny mass keeps the body linear (m d² = 9e-12 amu Å² against 1e-7 of 43
+    amu Å²) and would lose the axial part of its torque: refused like M."""
+    co2 = Atoms("CO2H", positions=[[0, 0, 0], [1.16, 0, 0], [-1.16, 0, 0], [0, 0.3, 0]])
+    co2.set_masses([12, 16, 16, 1e-10])
+    with pytest.raises(ValueError, match=r"atom 3 is of mass 1e-10 amu and 0.3 Å off the axis"):
+        RigidBodies([0, 0, 0, 0]).geometry(co2)
+    # A CO2 given with 4-decimal coordinates (1e-4 Å off) is still a linear body.
+    nearly = co2[:3]
+    nearly.positions[1, 1] = 1e-4
+    assert RigidBodies([0, 0, 0]).geometry(nearly).model.degrees_of_freedom == 5
+
+
 def test_momentum_on_a_massless_site_is_refused():
     atoms = water_cluster(2, model="tip4p2005")
     atoms.calc = CoulombLJ(parameters=water_parameters(WATER_MODELS["tip4p2005"]))

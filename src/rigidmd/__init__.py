@@ -12,7 +12,12 @@ from rigidmd.dynamics import NonFiniteForceError, RigidDynamics, RigidVerlet
 from rigidmd.model import BodyGeometry, BodyModel
 from rigidmd.restart import load_checkpoint
 from rigidmd.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover
-from rigidmd.velocities import rigid_maxwell_boltzmann, rigid_temperature
+from rigidmd.velocities import (
+    rigid_maxwell_boltzmann,
+    rigid_stationary,
+    rigid_temperature,
+    rigid_zero_rotation,
+)
 
 __all__ = [
     "RigidDynamics",
@@ -31,6 +36,8 @@ __all__ = [
     "kinetic_energy",
     "temperature",
     "rigid_temperature",
+    "rigid_stationary",
+    "rigid_zero_rotation",
     "load_checkpoint",
 ]
 

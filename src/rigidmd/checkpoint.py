@@ -152,6 +152,10 @@ def save_checkpoint(dyn, path, extra=None):
         "record": {key: record[key] for key in ("volume", "kinetic", "rotational")},
         "info": {k: v for k, v in atoms.info.items() if _is_json(v)},
         "extra": extra or {},
+        # What the calculator needs to continue with the same energies (LAMMPS's k-space
+        # parameters), when it offers it.
+        "calculator_state": (atoms.calc.get_checkpoint_state()
+                             if hasattr(atoms.calc, "get_checkpoint_state") else None),
     }
     arrays["meta"] = np.array(json.dumps(_jsonable(meta)))
     atomic_write(path, lambda fh: np.savez(fh, **arrays))

@@ -30,6 +30,7 @@ from rigidmd.config import (
 )
 from rigidmd.coupling import NotExportable
 from rigidmd.dynamics import NonFiniteForceError
+from rigidmd.lammps.library import LammpsError
 from rigidmd.logplot import LogError, plot_log
 from rigidmd.operators import ConvergenceError
 from rigidmd.outputs import OutputError, describe_os_error
@@ -190,6 +191,15 @@ def main(argv=None):
             raise
         print(f"rigidmd: error: {' '.join(str(err).split())}", file=sys.stderr)
         return 2
+    except LammpsError as err:
+        if os.environ.get("RIGIDMD_DEBUG"):
+            raise
+        message = " ".join(str(err).split())  # LAMMPS's message spans lines
+        if err.setup:  # the commands, the cut-off for the box, ...: the input
+            print(f"rigidmd: error: {message}", file=sys.stderr)
+            return 2
+        print(f"rigidmd: run stopped: {message}", file=sys.stderr)
+        return 1
     except (NonFiniteForceError, ConvergenceError) as err:
         # The run stopped; its outputs and checkpoint hold every step before the failure.
         print(f"rigidmd: run stopped: {err}", file=sys.stderr)

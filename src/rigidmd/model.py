@@ -207,24 +207,28 @@ def inertia_tensors(r, m, starts):
 
 
 def _refuse_off_axis_sites(d, m, moments, mass, order, atom_body):
-    """Refuse a massless atom off the axis of a linear body.
+    """Refuse an atom off the axis of a linear body.
 
-    A linear body has no orientation about its axis (no moment there), so a
-    site off the axis would have no defined place and its force no torque to
-    act through.  "Off" uses the tolerance that made the body linear: a
-    squared distance from the axis above ``LINEAR_TOLERANCE`` times the body's
-    largest moment per unit mass.
+    A linear body has no orientation about its axis (no moment there), so an
+    atom off the axis would have no defined place and the axial part of its
+    torque would be dropped.  A body is linear when its smallest moment is
+    below ``LINEAR_TOLERANCE`` of its largest, which a massless site, or an
+    atom of tiny mass, far from the axis does not prevent; so every atom is
+    checked by distance.  "Off" uses the same tolerance: a squared distance
+    from the axis above ``LINEAR_TOLERANCE`` times the body's largest moment
+    per unit mass (3e-4 Å for CO2).
     """
     linear = moments[:, 0] == 0.0
     if not np.any(linear):
         return
     scale = LINEAR_TOLERANCE * moments[:, 2] / mass
-    off = (m == 0) & linear[atom_body] & (d[:, 1] ** 2 + d[:, 2] ** 2 > scale[atom_body])
+    off = linear[atom_body] & (d[:, 1] ** 2 + d[:, 2] ** 2 > scale[atom_body])
     if np.any(off):
         i = int(np.flatnonzero(off)[0])
         b = int(atom_body[i])
+        what = "massless" if m[i] == 0 else f"of mass {m[i]:.3g} amu"
         raise ValueError(
-            f"atom {int(order[i])} is massless and {np.hypot(d[i, 1], d[i, 2]):.3g} Å off the "
+            f"atom {int(order[i])} is {what} and {np.hypot(d[i, 1], d[i, 2]):.3g} Å off the "
             f"axis of the linear body {b} (atoms {describe_atoms(order[atom_body == b])}): "
             "a linear body has no orientation about its axis to carry it"
         )

@@ -18,7 +18,8 @@ def load_checkpoint(path, calculator, **kwargs) -> RigidDynamics:
     ----------
     path : str, os.PathLike or rigidmd.checkpoint.Checkpoint
     calculator : ase.calculators.calculator.Calculator
-        Attached to the rebuilt atoms (the checkpoint holds no calculator).
+        Attached to the rebuilt atoms (the checkpoint holds no calculator; one with
+        ``set_checkpoint_state`` gets what its ``get_checkpoint_state`` gave).
     **kwargs
         ``trajectory``, ``logfile``, ``loginterval``, ``append_trajectory``, ...
         as for :class:`RigidDynamics`.
@@ -34,6 +35,9 @@ def load_checkpoint(path, calculator, **kwargs) -> RigidDynamics:
     saved = checkpoint.dynamics_state()
     atoms = checkpoint.atoms()
     atoms.calc = calculator
+    calculator_state = checkpoint.meta.get("calculator_state")
+    if calculator_state is not None and hasattr(calculator, "set_checkpoint_state"):
+        calculator.set_checkpoint_state(calculator_state)
     scheme = Scheme(saved["scheme"], name=saved["scheme_name"])
     dyn = RigidDynamics(atoms, saved["dt"], bodies=saved["body_ids"], integrator=scheme,
                         backend=saved["backend"], couplings=checkpoint.couplings(),

@@ -11,7 +11,8 @@ from rigidmd.bodies import RigidBodies
 from rigidmd.dof import kinetic_energy
 from rigidmd.state import RigidState
 
-__all__ = ["rigid_maxwell_boltzmann", "rigid_temperature", "rigid_velocities"]
+__all__ = ["rigid_maxwell_boltzmann", "rigid_temperature", "rigid_velocities",
+           "rigid_stationary", "rigid_zero_rotation"]
 
 
 def rigid_maxwell_boltzmann(atoms, temperature_K, bodies=None, rng=None):
@@ -87,6 +88,79 @@ def rigid_velocities(atoms, bodies=None):
     velocities[model.order] = ops.atom_velocities(state, r, model)
     velocities[model.free] = momenta[model.free] / model.free_masses[:, None]
     return velocities
+
+
+def _restore_kinetic_energy(atoms, kinetic0):
+    """Scale all momenta so that :func:`kinetic_energy` is ``kinetic0`` again (eV)."""
+    kinetic1 = kinetic_energy(atoms)
+    scale = np.sqrt(kinetic0 / kinetic1) if kinetic1 > 0 else 0.0
+    atoms.set_momenta(atoms.get_momenta() * scale, apply_constraint=False)
+
+
+def rigid_stationary(atoms, preserve_temperature=True):
+    r"""Zero the total momentum; what :func:`ase.md.velocitydistribution.Stationary` does.
+
+    Every atom with mass loses the centre-of-mass velocity,
+    :math:`p_i \leftarrow p_i - m_i P/M`; a uniform velocity is a rigid
+    motion of every body, so rigid velocities stay rigid, and a massless
+    site keeps its zero momentum.  With ``preserve_temperature`` the momenta
+    are then scaled back to the kinetic energy they had, as ASE does.
+
+    ASE's own ``Stationary`` reads ``atoms.get_temperature()`` first, which
+    is 0/0 (NaN) when the atoms hold a massless site (four-site water), and
+    then sets every momentum to zero: use this function there.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+        Changed in place (momenta only).
+    preserve_temperature : bool
+        Scale the momenta back to the initial kinetic energy (default True).
+    """
+    masses = atoms.get_masses()
+    kinetic0 = kinetic_energy(atoms)
+    momenta = atoms.get_momenta()
+    velocity = momenta.sum(axis=0) / masses.sum()
+    atoms.set_momenta(momenta - masses[:, None] * velocity, apply_constraint=False)
+    if preserve_temperature:
+        _restore_kinetic_energy(atoms, kinetic0)
+
+
+def rigid_zero_rotation(atoms, preserve_temperature=True):
+    r"""Zero the total angular momentum; what :func:`ase.md.velocitydistribution.ZeroRotation` does.
+
+    The rigid rotation :math:`\omega = I^{-1} L` of the whole system about its
+    centre of mass (:math:`I` the inertia tensor of the atoms, :math:`L` their
+    angular momentum) is subtracted from every atom with mass,
+    :math:`p_i \leftarrow p_i - m_i\, \omega \times (x_i - X)`.  A rotation of
+    the whole system is a rigid motion of each body, so rigid velocities stay
+    rigid and massless sites keep zero momentum.  Positions are used as
+    stored: give a cluster whose molecules are whole.  With
+    ``preserve_temperature`` the momenta are scaled back to the initial
+    kinetic energy, as ASE does.
+
+    ASE's own ``ZeroRotation`` forms ``atoms.get_velocities()``, which is 0/0
+    (NaN) on a massless site, and writes NaN momenta back: use this function
+    on systems with massless sites.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+        Changed in place (momenta only).
+    preserve_temperature : bool
+        Scale the momenta back to the initial kinetic energy (default True).
+    """
+    masses = atoms.get_masses()
+    kinetic0 = kinetic_energy(atoms)
+    momenta = atoms.get_momenta()
+    r = atoms.get_positions() - atoms.get_center_of_mass()
+    angular = np.cross(r, momenta).sum(axis=0)
+    inertia = (np.einsum("i,ij,ij->", masses, r, r) * np.eye(3)
+               - np.einsum("i,ij,ik->jk", masses, r, r))
+    omega = np.linalg.lstsq(inertia, angular, rcond=None)[0]  # a line of atoms: no axial part
+    atoms.set_momenta(momenta - masses[:, None] * np.cross(omega, r), apply_constraint=False)
+    if preserve_temperature:
+        _restore_kinetic_energy(atoms, kinetic0)
 
 
 def rigid_temperature(frames, bodies=None):

@@ -163,6 +163,7 @@ class WaterModel:
                              f"(molecules in the order {self.symbols})")
         if len(atoms) == 0:
             return
+        self._check_masses(atoms)
         x = atoms.positions.reshape(-1, k, 3)
         d = (x[:, 1:] - x[:, :1]).reshape(-1, 3)
         if atoms.pbc.any():
@@ -186,6 +187,27 @@ class WaterModel:
                 f"{self.name}: molecule {m} (atoms {k * m}-{k * m + k - 1}) is not in this "
                 f"model's geometry (a distance off by {worst[m]:.3g} Å; O-H {oh:.4f} Å, "
                 f"the model's {self.r_oh} Å); build it with this model")
+
+    def _check_masses(self, atoms):
+        """Refuse an M site with mass (it would move as an atom) or an O or H without.
+
+        Isotopes (D, 18O) are masses like any other: only the sign is checked.
+        """
+        masses = atoms.get_masses()
+        massless = atoms.numbers == 0
+        bad = np.flatnonzero(massless & (masses != 0))
+        if bad.size:
+            a = int(bad[0])
+            raise ValueError(
+                f"{self.name}: atom {a} (X, the M site of molecule {a // self.sites}) has mass "
+                f"{masses[a]:g} amu but M is massless; give the M sites mass 0 "
+                "(atoms.set_masses), or keep the structure in a format that stores masses "
+                "(.traj, extended XYZ): PDB and XYZ files have none, and ASE gives X 1 amu")
+        bad = np.flatnonzero(~massless & ~(masses > 0))
+        if bad.size:
+            a = int(bad[0])
+            raise ValueError(f"{self.name}: atom {a} ({atoms[a].symbol}) has mass "
+                             f"{masses[a]:g} amu; O and H need a positive mass")
 
     def lammps_commands(self, cutoff, kspace="pppm", accuracy=1e-5, tail=True,
                         oxygen_type="O"):

@@ -12,16 +12,25 @@ force evaluation per call, about one native LAMMPS step.
 When the cell changes (a barostat), the box is changed with ``change_box``
 and that call runs with LAMMPS's set-up (``run 0 pre yes``), which rebuilds
 the neighbour lists and the k-space set-up (PPPM's Green's function) for the
-new box, as LAMMPS's own barostats do: energies, forces and stress then equal
-those of a fresh LAMMPS at that cell.  Cells that are not in LAMMPS's
-lower-triangular form are rotated into it (positions, forces and stress
-rotated back); a change in the number or kind of atoms, their charges or
-their molecules builds a new instance.
+new box, as LAMMPS's own barostats do, with the k-space parameters of the
+first cell (:attr:`LAMMPSCalculator.kspace_parameters`): energies, forces and
+stress then equal those of a fresh LAMMPS at that cell given those
+parameters.  The instance stays whatever the cell does: cells that are not in
+LAMMPS's lower-triangular form are rotated into it anew at each cell
+(positions, forces and stress rotated back), and an orthogonal box that gets
+tilted becomes triclinic once.  A change in the number or kind of atoms,
+their charges or their molecules builds a new instance.
 
-Molecules (for ``neigh_modify exclude molecule/intra all``) come from the
-``mol-id`` array (ASE's ``lammps-data`` reader sets it), else from non-zero
-tags, else from ``molecule_ids``, else from the bodies of a rigid dynamics the
-atoms are in.
+Molecules (for ``neigh_modify exclude molecule/intra all``) are the bodies of
+the rigid dynamics the atoms are in (a ``mol-id`` array, tags or
+``molecule_ids`` that group the atoms otherwise are refused); outside a
+dynamics they come from the ``mol-id`` array (ASE's ``lammps-data`` reader
+sets it), else from non-zero tags, else from ``molecule_ids``.
+
+Masses never enter a force call: atoms of one element share a type whatever
+their masses (H and D).  LAMMPS's warnings at set-up are passed on as Python
+warnings; positions and cells that are not finite are refused before LAMMPS
+sees them (LAMMPS would hang on them).
 """
 
 import re
@@ -32,6 +41,7 @@ from pathlib import Path
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
+from rigidmd.checks import check_finite
 from rigidmd.lammps.data import MASSLESS_SITE_MASS
 from rigidmd.lammps.library import (
     LAMMPS_METAL_QQR2E,
@@ -68,6 +78,60 @@ def _lower_triangular(cell):
     return Q, lammps_cell
 
 
+#: LAMMPS warnings that say nothing here: no integrator is the design; the net charge
+#: is said by the calculator itself; and the reciprocal-space part of the excluded
+#: intramolecular pairs is a constant of rigid molecules (the k-space parameters are
+#: pinned) whose forces cancel in each body's force and torque.
+_QUIET = ("No fixes with time integration", "System is not charge neutral",
+          "Neighbor exclusions used with KSpace solver")
+
+
+def _lammps_warnings(text):
+    """The ``WARNING:`` lines of a LAMMPS log, each with the manual page it points to."""
+    lines = text.splitlines()
+    found = []
+    for k, line in enumerate(lines):
+        if not line.startswith("WARNING: ") or any(q in line for q in _QUIET):
+            continue
+        message = re.sub(r"\s*\(src/\S+:\d+\)$", "", line[len("WARNING: "):].strip())
+        more = lines[k + 1] if k + 1 < len(lines) else ""
+        page = re.search(r"https://docs\.lammps\.org/\S+", more)
+        found.append(message + (f" (see {page.group(0)})" if page else ""))
+    return list(dict.fromkeys(found))
+
+
+def _distinct(ids):
+    """Molecule IDs with every atom in no molecule (ID <= 0) in a group of its own."""
+    return np.where(ids > 0, ids, -np.arange(len(ids)))
+
+
+def _check_same_grouping(bodies, given, source):
+    """Refuse molecules (``source``) that merge or split the rigid bodies, naming two atoms.
+
+    ``bodies``: body index + 1 of each atom (0: a free atom); ``given``: the
+    molecule IDs read from ``source`` (<= 0: no molecule).
+    """
+    b, m = _distinct(bodies), _distinct(given)
+    pairs = np.unique(np.stack([b, m], axis=1), axis=0)
+    if len(pairs) == len(np.unique(b)) == len(np.unique(m)):
+        return
+    for key, other, verb in ((m, b, "put atoms {i} and {j} in one molecule but they are in "
+                              "different rigid bodies"),
+                             (b, m, "split a rigid body: atoms {i} and {j} are in one body but "
+                              "in different molecules")):
+        order = np.lexsort((other, key))
+        k, o = key[order], other[order]
+        clash = np.flatnonzero((k[1:] == k[:-1]) & (o[1:] != o[:-1]))
+        if clash.size:
+            i, j = sorted((int(order[clash[0]]), int(order[clash[0] + 1])))
+            remedy = {"tags": "atoms.set_tags(0)", "mol-id array": "del atoms.arrays['mol-id']",
+                      "molecule_ids": "molecule_ids=None"}[source]
+            raise ValueError(
+                f"LAMMPSCalculator: the atoms' {source} {verb.format(i=i, j=j)}; in a rigid "
+                f"dynamics the bodies are the molecules: remove them ({remedy}) "
+                "or make them group the atoms as the bodies do")
+
+
 class LAMMPSCalculator(Calculator):
     r"""An ASE calculator on one persistent LAMMPS instance (``units metal``).
 
@@ -96,6 +160,10 @@ class LAMMPSCalculator(Calculator):
         Neighbour skin (Å), LAMMPS's ``neighbor`` default for metal units.
     cmdargs : sequence of str, optional
         LAMMPS command-line arguments (default: no log, no screen output).
+    kspace_parameters : str, optional
+        A ``kspace_modify gewald ...`` command that fixes the k-space
+        parameters (see :attr:`kspace_parameters`); default: those LAMMPS
+        chooses for the first cell.
 
     Notes
     -----
@@ -104,15 +172,23 @@ class LAMMPSCalculator(Calculator):
     virial only, from LAMMPS's ``compute pressure NULL virial`` converted
     with LAMMPS's own ``nktv2p``).  LAMMPS errors raise
     :class:`~rigidmd.lammps.LammpsError` with LAMMPS's message; the next call
-    starts a fresh instance.
+    starts a fresh instance.  LAMMPS's warnings when an instance is set up
+    are issued as :class:`UserWarning` (``LAMMPSCalculator: LAMMPS warns:
+    ...``), except the ones every rigid-molecule set-up gets (no integrator
+    fix; excluded pairs with k-space, whose reciprocal-space part is a
+    constant of a rigid molecule); a net charge with a ``kspace_style`` is
+    warned of too.  :meth:`get_checkpoint_state` and
+    :meth:`set_checkpoint_state` carry the k-space parameters through
+    :func:`rigidmd.checkpoint.save_checkpoint` and ``load_checkpoint``.
     """
 
     implemented_properties = ["energy", "free_energy", "forces", "stress"]
     _lmp = None
+    _grouping_checked = None  # the bodies and molecules last found to agree
 
     def __init__(self, commands, *, atom_types=None, molecule_ids=None,
                  exclude_intramolecular=True, ase_constants=False, skin=2.0, cmdargs=None,
-                 **kwargs):
+                 kspace_parameters=None, **kwargs):
         super().__init__(**kwargs)
         if isinstance(commands, str):
             commands = [commands]
@@ -126,11 +202,63 @@ class LAMMPSCalculator(Calculator):
         self.skin = float(skin)
         self.cmdargs = cmdargs
         self._lmp = None
+        self._kspace_parameters = None
+        self._pinned_for = None  # the system whose first cell chose the parameters
+        self.kspace_parameters = kspace_parameters
         self._signature = None  # what a new instance is needed for
         self._cell = None       # the cell LAMMPS has
         self._rotation = None
-        #: The ``kspace_modify`` command that fixed the k-space parameters (None before).
-        self.kspace_parameters = None
+
+    @property
+    def kspace_parameters(self):
+        """The ``kspace_modify`` command that fixes the k-space parameters (str or None).
+
+        LAMMPS chooses the Ewald parameter and PPPM's mesh and order (or
+        Ewald's k-vectors) for the first cell; they are then kept for every
+        later cell, and for a new LAMMPS instance after an error (see
+        :meth:`_pin_kspace`); other atoms (another number, kind, charges or
+        molecules) get their own.  None until a periodic system with a
+        ``kspace_style`` has been set up, unless given.  Given ones (here or
+        to the constructor) are kept for any atoms.  Setting it
+        (a ``kspace_modify gewald ... mesh ... order ...`` or ``... kmax/ewald
+        ...`` command) makes the next call start LAMMPS with these parameters:
+        how a continued run keeps the energy of the run it continues.
+        """
+        return self._kspace_parameters
+
+    @kspace_parameters.setter
+    def kspace_parameters(self, value):
+        if value is not None and (not isinstance(value, str) or "\n" in value
+                                  or value.split()[:2] != ["kspace_modify", "gewald"]):
+            raise ValueError("LAMMPSCalculator: kspace_parameters must be one "
+                             f"'kspace_modify gewald ...' command or None, got {value!r}")
+        if value != self._kspace_parameters:
+            self._close()  # the next call sets up LAMMPS with these parameters
+        self._kspace_parameters = value
+        self._pinned_for = None  # given: kept for any system
+
+    def get_checkpoint_state(self):
+        """What a checkpoint must hold to continue with the same energies (JSON-able dict).
+
+        Returns
+        -------
+        dict
+            ``{"kspace_parameters": str or None}``, see :attr:`kspace_parameters`.
+        """
+        return {"kspace_parameters": self.kspace_parameters}
+
+    def set_checkpoint_state(self, state):
+        """Take back what :meth:`get_checkpoint_state` returned (before the first call).
+
+        Parameters
+        ----------
+        state : dict
+            ``{"kspace_parameters": str or None}``; other keys are refused.
+        """
+        unknown = sorted(set(state) - {"kspace_parameters"})
+        if unknown:
+            raise ValueError(f"LAMMPSCalculator: unknown checkpoint state {unknown[0]!r}")
+        self.kspace_parameters = state.get("kspace_parameters")
 
     # ------------------------------------------------------------ set-up
     def _types(self, atoms):
@@ -144,43 +272,50 @@ class LAMMPSCalculator(Calculator):
                 raise ValueError(f"LAMMPSCalculator: element {missing[0]} has no LAMMPS type in "
                                  f"atom_types {table}")
         types = np.array([table[s] for s in symbols], dtype=np.int64)
+        # Masses never enter a force call (LAMMPS's per-type mass is only stored): atoms
+        # of one type may differ in mass (H and D, 16O and 18O).  LAMMPS refuses a mass of
+        # 0 (a virtual site), so a type gets the largest mass of its atoms, or a tiny one.
         masses = atoms.get_masses()
-        type_mass = {}
-        for t in range(1, max(table.values()) + 1):
-            members = np.flatnonzero(types == t)
-            if members.size == 0:
-                type_mass[t] = 1.0  # a type no atom has: LAMMPS still needs a mass
-                continue
-            values, counts = np.unique(masses[members], return_counts=True)
-            common = values[np.argmax(counts)]
-            if len(values) > 1:
-                i = int(members[np.argmax(masses[members] != common)])
-                raise ValueError(f"LAMMPSCalculator: atom {i} ({symbols[i]}) has mass "
-                                 f"{masses[i]} but the other atoms of type {t} have {common}: "
-                                 "give atoms of different masses different types")
-            # Masses never enter a force call, but LAMMPS refuses a mass of 0 (a virtual site).
-            type_mass[t] = float(common) if common > 0 else MASSLESS_SITE_MASS
+        largest = np.zeros(max(table.values()) + 1)
+        np.maximum.at(largest, types, masses)
+        type_mass = {t: float(largest[t]) if largest[t] > 0 else MASSLESS_SITE_MASS
+                     for t in range(1, len(largest))}
         labels = {t: s for s, t in table.items()}
         return types, type_mass, labels
 
     def _molecules(self, atoms):
-        """Molecule ID of each atom (1-based) and where they came from."""
+        """Molecule ID of each atom (1-based; <= 0: in no molecule) and where they came from.
+
+        The bodies of a rigid dynamics the atoms are in come first: they are the
+        molecules.  A ``mol-id`` array, non-zero tags or ``molecule_ids`` that group
+        the atoms otherwise are refused (they would exclude pairs between bodies, or
+        count pairs inside one).  Without a rigid dynamics: ``mol-id``, else non-zero
+        tags, else ``molecule_ids``.
+        """
         n = len(atoms)
+        given, source = None, None
         if "mol-id" in atoms.arrays:
-            return np.asarray(atoms.arrays["mol-id"], dtype=np.int64), "mol-id"
-        tags = atoms.get_tags()
-        if np.any(tags != 0):
-            return np.asarray(tags, dtype=np.int64), "tags"
-        if self.molecule_ids is not None:
+            given, source = np.asarray(atoms.arrays["mol-id"], dtype=np.int64), "mol-id array"
+        elif np.any(atoms.get_tags() != 0):
+            given, source = np.asarray(atoms.get_tags(), dtype=np.int64), "tags"
+        elif self.molecule_ids is not None:
             if self.molecule_ids.shape != (n,):
                 raise ValueError(f"LAMMPSCalculator: molecule_ids has shape "
                                  f"{self.molecule_ids.shape}, the atoms are {n}")
-            return self.molecule_ids.astype(np.int64), "molecule_ids"
-        for constraint in atoms.constraints:
-            body_ids = getattr(constraint, "body_ids", None)
-            if body_ids is not None:
-                return np.asarray(body_ids, dtype=np.int64), "bodies"
-        return None, None
+            given, source = self.molecule_ids.astype(np.int64), "molecule_ids"
+        bodies = next((np.asarray(c.body_ids, dtype=np.int64) for c in atoms.constraints
+                       if getattr(c, "body_ids", None) is not None), None)
+        if bodies is None:
+            return given, source
+        if bodies.shape != (n,):
+            raise ValueError(f"LAMMPSCalculator: the rigid bodies cover {bodies.size} atoms, "
+                             f"the atoms are {n}")
+        if given is not None:
+            key = (bodies.tobytes(), given.tobytes())  # checked once, not at every step
+            if key != self._grouping_checked:
+                _check_same_grouping(bodies, given, source)
+                self._grouping_checked = key
+        return bodies, "bodies"
 
     def _signature_of(self, atoms, molecules):
         return (len(atoms), atoms.numbers.tobytes(), atoms.get_initial_charges().tobytes(),
@@ -198,6 +333,10 @@ class LAMMPSCalculator(Calculator):
 
     def _start(self, atoms, molecules, source):
         self._close()
+        signature = self._signature_of(atoms, None if source is None else molecules)
+        if self._pinned_for is not None and self._pinned_for != signature:
+            # Other atoms (not a restart after an error): LAMMPS chooses for them anew.
+            self._kspace_parameters = self._pinned_for = None
         types, type_mass, labels = self._types(atoms)
         n = len(atoms)
         if molecules is None:
@@ -215,8 +354,11 @@ class LAMMPSCalculator(Calculator):
         lmp = load_lammps(self.cmdargs)
         self._lmp = lmp
         periodic = bool(atoms.pbc.all())
+        kspace = periodic and any(c.split()[0] == "kspace_style" for c in self.commands)
+        tmp = tempfile.TemporaryDirectory(prefix="rigidmd-lammps-")
+        log = Path(tmp.name) / "setup.log"
         try:
-            cmds = ["units metal", "atom_style full", "atom_modify map array",
+            cmds = [f"log {log}", "units metal", "atom_style full", "atom_modify map array",
                     f"boundary {'p p p' if periodic else 's s s'}"]
             self._execute(cmds)
             if periodic:
@@ -263,10 +405,19 @@ class LAMMPSCalculator(Calculator):
             ])
             if self.ase_constants and lmp.extract_global("qqr2e") != LAMMPS_METAL_QQR2E:
                 raise LammpsError("LAMMPSCalculator: unexpected LAMMPS Coulomb constant")
-        except BaseException:
+            if kspace and self.kspace_parameters is not None:
+                self._execute([self.kspace_parameters])
+            # One set-up with a log: LAMMPS's warnings, and the k-space parameters it chose.
+            self._execute(["run 0 pre yes post no", "log none"])
+            text = log.read_text()
+        except BaseException as err:
+            if isinstance(err, LammpsError):
+                err.setup = True
             self._close()
             raise
-        self._signature = self._signature_of(atoms, None if source is None else molecules)
+        finally:
+            tmp.cleanup()
+        self._signature = signature
         self._cell = atoms.cell.array.copy()
         self._ids = ids
         self._nktv2p = lmp.extract_global("nktv2p")
@@ -275,11 +426,19 @@ class LAMMPSCalculator(Calculator):
         self._imgmask = lmp.extract_setting("IMGMASK")
         self._imgmax = lmp.extract_setting("IMGMAX")
         self._setup_needed = True
-        if periodic and any(c.split()[0] == "kspace_style" for c in self.commands):
-            self._pin_kspace()
+        net = float(atoms.get_initial_charges().sum())
+        if kspace and abs(net) > 1e-6:
+            warnings.warn(f"LAMMPSCalculator: the atoms carry a net charge of {net:.6g} e and "
+                          "the commands have a kspace_style: k-space adds a uniform neutralising "
+                          "background; check the charges if the system should be neutral",
+                          stacklevel=4)
+        for line in _lammps_warnings(text):
+            warnings.warn(f"LAMMPSCalculator: LAMMPS warns: {line}", stacklevel=4)
+        if kspace and self.kspace_parameters is None:
+            self._pin_kspace(text)
 
-    def _pin_kspace(self):
-        """Keep the k-space parameters LAMMPS chooses for the first cell for every later cell.
+    def _pin_kspace(self, text):
+        """Keep the k-space parameters LAMMPS chose for the first cell for every later cell.
 
         LAMMPS chooses the Ewald parameter (and PPPM's mesh and order, or
         Ewald's k-vectors) for the requested accuracy at each full set-up.  Its
@@ -289,14 +448,11 @@ class LAMMPSCalculator(Calculator):
         ``neigh_modify exclude``, the reciprocal-space energy of those pairs
         depends on the Ewald parameter, so each new choice would shift the
         energy by up to tenths of an eV for 216 waters (no force on a rigid
-        body changes, but the conserved energy of an NPT run jumps).  One
-        set-up here reads the choices from LAMMPS's log and fixes them with
-        ``kspace_modify``, as a native NPT run has them.
+        body changes, but the conserved energy of an NPT run jumps).  The
+        choices are read from the log ``text`` of the first set-up and fixed
+        with ``kspace_modify`` (:attr:`kspace_parameters`), as a native NPT run
+        has them.
         """
-        with tempfile.TemporaryDirectory() as tmp:
-            log = Path(tmp) / "setup.log"
-            self._execute([f"log {log}", "run 0 pre yes post no", "log none"])
-            text = log.read_text()
         number = r"([-+0-9.eE]+)"
         g = re.search(r"G vector \(1/distance\)\s*=\s*" + number, text)
         mesh = re.search(r"grid\s*=\s*(\d+)\s+(\d+)\s+(\d+)", text)
@@ -313,7 +469,8 @@ class LAMMPSCalculator(Calculator):
         else:
             modify += f" kmax/ewald {' '.join(kmax.groups())}"
         self._execute([modify])
-        self.kspace_parameters = modify
+        self._kspace_parameters = modify
+        self._pinned_for = self._signature
 
     def _region(self, cell):
         lengths = " ".join(f"0 {cell[k, k]:.17g}" for k in range(3))
@@ -326,6 +483,11 @@ class LAMMPSCalculator(Calculator):
         """LAMMPS image flags (x, y, z) packed into one integer."""
         ix, iy, iz = (int(v) + 512 for v in image)
         return ix | (iy << 10) | (iz << 20)
+
+    def _encode_all(self, image):
+        """Image flags, shape (n, 3), packed as LAMMPS packs them (its own bit widths)."""
+        packed = (image + self._imgmax) & self._imgmask
+        return packed[:, 0] | (packed[:, 1] << self._imgbits) | (packed[:, 2] << self._img2bits)
 
     def _images(self, nlocal):
         img = np.asarray(self._lmp.numpy.extract_atom("image")[:nlocal], dtype=np.int64)
@@ -358,27 +520,37 @@ class LAMMPSCalculator(Calculator):
 
     # ------------------------------------------------------------ a call
     def _change_box(self, cell):
-        """Give LAMMPS a new cell (it must have the same rotation to LAMMPS's frame)."""
+        """Give LAMMPS a new cell, in the same instance with the same k-space parameters.
+
+        The cell is rotated into LAMMPS's lower-triangular frame anew (a
+        barostat that shears a general cell turns that frame a little at every
+        step): positions are written in the new frame at the next call, and
+        forces and stress rotated back, so a turned frame costs nothing more
+        than a changed box.  An orthogonal box that gets tilted becomes
+        triclinic once; LAMMPS then needs its ``kspace_style`` again, given
+        with the same commands and the pinned :attr:`kspace_parameters`.
+        LAMMPS takes any tilt (a large one only runs less efficiently), so
+        the cell is never flipped or re-mapped.
+        """
         rotation, lammps_cell = _lower_triangular(cell)
-        if (rotation is None) != (self._rotation is None) or (
-                rotation is not None and not np.allclose(rotation, self._rotation,
-                                                         rtol=0, atol=1e-12)):
-            return False  # the cell turned: start again in the new frame
         tilted = bool(lammps_cell[1, 0] or lammps_cell[2, 0] or lammps_cell[2, 1])
-        if tilted and not self._triclinic:
-            # An orthogonal box that gets tilted: k-space styles must be defined again
-            # for a triclinic box, so start a triclinic instance (once).
-            return False
         commands = []
+        if tilted and not self._triclinic:
+            commands.append("change_box all triclinic")
+            commands += [c for c in self.commands
+                         if c.split()[0] in ("kspace_style", "kspace_modify")]
+            if self.kspace_parameters is not None:
+                commands.append(self.kspace_parameters)
+            self._triclinic = True
         box = "change_box all " + " ".join(
             f"{axis} final 0 {lammps_cell[k, k]:.17g}" for k, axis in enumerate("xyz"))
         if self._triclinic:
             box += (f" xy final {lammps_cell[1, 0]:.17g} xz final {lammps_cell[2, 0]:.17g} "
                     f"yz final {lammps_cell[2, 1]:.17g}")
         self._execute(commands + [box + " units box"])
+        self._rotation = rotation
         self._cell = cell.copy()
         self._setup_needed = True
-        return True
 
     def _lammps_cell(self):
         boxlo, boxhi, xy, yz, xz, _, _ = self._lmp.extract_box()
@@ -388,19 +560,30 @@ class LAMMPSCalculator(Calculator):
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         super().calculate(atoms, properties, system_changes)
         atoms = self.atoms
+        # NaN or infinite coordinates hang LAMMPS (deaf to Ctrl-C): refused first.
+        check_finite(atoms.positions, "position", "Å", "given to LAMMPSCalculator")
+        if atoms.pbc.any():
+            check_finite(atoms.cell.array, "cell", "Å", "given to LAMMPSCalculator")
         self._check(atoms)
         molecules, source = self._molecules(atoms)
         signature = self._signature_of(atoms, None if source is None else molecules)
         if self._lmp is None or signature != self._signature:
             self._start(atoms, molecules, source)
         elif atoms.pbc.all() and not np.array_equal(atoms.cell.array, self._cell):
-            if not self._change_box(atoms.cell.array):
-                self._start(atoms, molecules, source)
+            self._change_box(atoms.cell.array)
         lmp = self._lmp
         nlocal = lmp.extract_global("nlocal")
         ids = np.asarray(lmp.numpy.extract_atom("id")[:nlocal], dtype=np.int64) - 1
         positions = self._to_lammps(atoms.positions)[ids]
-        if atoms.pbc.all():
+        if atoms.pbc.all() and self._setup_needed:
+            # A new cell (a set-up follows anyway): every atom into the box, with image
+            # flags to match.  LAMMPS's change_box re-mapped the previous positions into
+            # the new box, and their images need not suit these after a large change.
+            cell = self._lammps_cell()
+            image = np.floor(np.linalg.solve(cell.T, positions.T).T)
+            positions -= image @ cell
+            lmp.numpy.extract_atom("image")[:nlocal] = self._encode_all(image.astype(np.int64))
+        elif atoms.pbc.all():
             # LAMMPS's own image of each atom: only real motion counts against the skin.
             positions -= self._images(nlocal) @ self._lammps_cell()
         lmp.numpy.extract_atom("x")[:nlocal] = positions

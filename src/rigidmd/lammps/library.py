@@ -155,7 +155,17 @@ def charge_factor(ase_constants: bool = True) -> float:
 
 
 class LammpsError(RuntimeError):
-    """A LAMMPS command failed; the message carries the command and LAMMPS's own message."""
+    """A LAMMPS command failed; the message carries the command and LAMMPS's own message.
+
+    Attributes
+    ----------
+    setup : bool
+        True when it failed while a new LAMMPS instance was being set up (the
+        commands, the cut-off for the box, the atoms: the input is at fault),
+        False when a set-up that worked fails later (lost atoms, say).
+    """
+
+    setup = False
 
 
 # ----------------------------------------------------------------------------
