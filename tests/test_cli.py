@@ -142,6 +142,11 @@ def test_run_from_flags_only(tmp_path):
      "thermostat.fixcm: use true or false, got 1"),
     ("thermostat: {kind: nose_hoover, temperature: 0 K, tdamp: 100 fs}",
      "thermostat.temperature = 0: Nose-Hoover"),
+    ("barostat: {kind: crescale, temperature: 0 K, pressure: 1 bar, taup: 1 ps, "
+     "compressibility: 4.5e-5 1/bar}",
+     "barostat.temperature = 0: stochastic cell rescaling's drift"),
+    ("barostat: {kind: mtk, temperature: 300 K, pressure: 1 bar, pdamp: 1 ps}",
+     "barostat.temperature: 300 K differs from thermostat.temperature 250 K"),
     ("structure: {builtin: water_cluster, n_molecules: -3}",
      "structure.n_molecules: expected a whole number >= 1, got -3"),
     ("structure: {builtin: water_cluster, n_molecules: 100000000}",

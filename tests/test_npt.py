@@ -17,7 +17,7 @@ from helpers import PeriodicLJ, argon_crystal, dimer_fluid, waters
 
 from rigidmd import RigidCRescale, RigidNPT, RigidVerlet
 from rigidmd import quaternion as quat
-from rigidmd.coupling.barostats import BarostatError
+from rigidmd.barostats import BarostatError
 
 T = 80.0
 
@@ -452,3 +452,149 @@ def test_crescale_every_n_steps_moves_the_cell_only_then():
     with pytest.raises(ValueError, match="under 10 moves of the cell"):
         RigidCRescale(dimer_fluid(n_side=4, rc=7.0), 5 * units.fs, T, units.bar,
                       100 * units.fs, 500 * units.fs, 1e-4 / units.bar, bodies="tags", every=20)
+
+
+# ---------------------------------------------------------------- seams and faults
+class ZeroStress(Calculator):
+    """No interactions, with stress: an ideal gas of rigid bodies."""
+
+    implemented_properties = ["energy", "forces", "stress"]
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        self.results = {"energy": 0.0, "forces": np.zeros((len(self.atoms), 3)),
+                        "stress": np.zeros(6)}
+
+
+def test_a_cell_shrinking_below_a_body_stops_and_rolls_back():
+    """One water under MTK at a high pressure: the step that makes the body span half the
+    cell stops with one line naming the body, and the step is undone (issue 22, item 14)."""
+    from rigidmd.systems import water_molecule
+
+    atoms = water_molecule()
+    atoms.set_cell([3.5, 3.5, 3.5], scale_atoms=False)  # around a 1.5 Å molecule
+    atoms.center()
+    atoms.pbc = True
+    atoms.calc = ZeroStress()
+    dyn = RigidNPT(atoms, 1 * units.fs, 300, 1e-3, 100 * units.fs, 100 * units.fs)
+    with pytest.raises(ValueError, match=r"^body 0 \(atoms \[0, 1, 2\]\) spans .* more than "
+                       r"half the periodic cell's width .*the step was undone$"):
+        dyn.run(2000)
+    assert dyn.nsteps > 0
+    np.testing.assert_array_equal(atoms.cell.array, dyn.state.cell)
+    positions = atoms.positions.copy()
+    dyn.link.place(dyn.state)
+    np.testing.assert_array_equal(atoms.positions, positions)  # the atoms of the last good step
+
+
+def test_one_target_temperature_per_dynamics():
+    """A barostat at another temperature than the thermostat is refused; set_temperature
+    changes both (issue 22, item 15)."""
+    from rigidmd import RigidDynamics
+    from rigidmd.barostats import MTKBarostat
+    from rigidmd.thermostats import NoseHooverThermostat
+
+    atoms = dimer_fluid(n_side=4, rc=7.0)
+    before = atoms.positions.copy()
+    parts = [NoseHooverThermostat(T, 100 * units.fs),
+             MTKBarostat(T + 20, units.bar, 1000 * units.fs)]
+    with pytest.raises(ValueError, match="barostat temperature_K = 100 K differs from the "
+                       "thermostat's 80 K"):
+        RigidDynamics(atoms, 5 * units.fs, bodies="tags", couplings=parts)
+    np.testing.assert_array_equal(atoms.positions, before)
+    assert atoms.constraints == []
+    for kind in ("mtk", "crescale"):
+        dyn = npt(dimer_fluid(n_side=4, rc=7.0), kind)
+        dyn.set_temperature(temperature_K=120)
+        assert dyn.thermostat.temperature_K == dyn.barostat.temperature_K == 120
+        with pytest.raises(ValueError, match="temperature_K = 0"):
+            dyn.set_temperature(temperature_K=0)  # the barostats have no 0 K limit
+        assert dyn.thermostat.temperature_K == dyn.barostat.temperature_K == 120
+
+
+def test_crescale_at_0_K_is_one_clear_error():
+    """Issue 22, item 17: a ZeroDivisionError deep in the step before."""
+    atoms = dimer_fluid(n_side=4, rc=7.0)
+    with pytest.raises(ValueError, match="temperature_K = 0: stochastic cell rescaling"):
+        npt(atoms, "crescale", temperature_K=0)
+
+
+def test_one_npt_step_evaluates_everything_once(monkeypatch):
+    """Nosé–Hoover + MTK: one calculator call, one stress, one volume, one kinetic tensor and
+    one rotational kinetic energy per step (the per-step record)."""
+    from rigidmd import observables
+
+    atoms = dimer_fluid(n_side=4, rc=7.0)
+    dyn = npt(atoms, "mtk")
+    dyn.run(3)
+    counts = {}
+
+    def counting(name, function):
+        def wrapped(*args, **kwargs):
+            counts[name] = counts.get(name, 0) + 1
+            return function(*args, **kwargs)
+        return wrapped
+
+    steps = dyn.irun(2)
+    next(steps)  # the run's start: forces of the current positions, known already
+    for name in ("volume", "kinetic_tensor", "rotational_kinetic_energy"):
+        monkeypatch.setattr(observables, name, counting(name, getattr(observables, name)))
+    calc = atoms.calc
+    monkeypatch.setattr(calc, "calculate", counting("calculator", calc.calculate))
+    monkeypatch.setattr(calc, "get_stress", counting("stress", calc.get_stress))
+    next(steps)
+    assert dyn.nsteps == 4
+    assert counts == {"calculator": 1, "stress": 1, "volume": 1, "kinetic_tensor": 1,
+                      "rotational_kinetic_energy": 1}
+
+
+def test_trial_energy_of_a_cell_and_restore_without_a_call():
+    """The seam a Monte Carlo barostat uses: the energy of a trial cell in one call, and a
+    rejection that puts atoms and calculator back without another call."""
+    atoms = dimer_fluid(n_side=4, rc=7.0)
+    dyn = npt(atoms, "mtk")
+    dyn.run(2)
+    evaluator, state, calc = dyn.evaluator, dyn.state, atoms.calc
+    forces, energy = atoms.get_forces().copy(), atoms.get_potential_energy()
+    calls = []
+    calculate = calc.calculate
+    calc.calculate = lambda *args, **kwargs: calls.append(1) or calculate(*args, **kwargs)
+    trial = state.copy()
+    trial.X *= 1.01
+    trial.cell *= 1.01
+    saved = evaluator.save_results()
+    trial_energy = evaluator.trial_energy(trial)
+    assert len(calls) == 1 and trial_energy != energy
+    np.testing.assert_allclose(trial_energy, strained_energy(atoms, dyn, 0.01 * np.eye(3)),
+                               rtol=1e-12)
+    evaluator.restore_results(saved, state)
+    np.testing.assert_array_equal(atoms.get_forces(), forces)
+    assert atoms.get_potential_energy() == energy
+    assert dyn.get_volume() == pytest.approx(np.linalg.det(state.cell), rel=1e-15)
+    dyn.run(1)
+    assert len(calls) == 2  # the step's own call only
+
+
+def test_a_part_that_needs_the_energy_reads_it_from_every_force_call():
+    """A coupling part with needs_energy (a Monte Carlo move's old energy) finds the potential
+    energy of the last force call in the record, without a call of its own."""
+    from rigidmd import RigidDynamics
+    from rigidmd.coupling import Coupling
+
+    class Watcher(Coupling):
+        kind, section, needs_energy = "watcher", "thermostat", True
+
+        def __init__(self):
+            self.seen = []
+
+        def first_half(self, view, h):
+            self.seen.append(view.record.energy)
+
+    atoms = dimer_fluid(n_side=4, rc=7.0)
+    watcher = Watcher()
+    dyn = RigidDynamics(atoms, 5 * units.fs, bodies="tags", couplings=[watcher])
+    energies = []
+    dyn.attach(lambda: energies.append(atoms.get_potential_energy()), interval=1)
+    dyn.run(3)
+    assert None not in watcher.seen and len(watcher.seen) == 6
+    assert watcher.seen[2::2] == energies[1:3]  # first halves: the previous step's energy

@@ -521,8 +521,8 @@ def test_a_full_disk_names_the_trajectory(tmp_path, monkeypatch, capsys):
 
 def test_a_failure_during_the_run_exits_1_not_2(tmp_path, monkeypatch, capsys):
     """A part that fails mid-run (a BarostatError, say) is no configuration mistake."""
+    from rigidmd.barostats import BarostatError
     from rigidmd.coupling import COUPLINGS
-    from rigidmd.coupling.barostats import BarostatError
 
     path = short_project(tmp_path, checkpoint_interval=20, thermostat="bussi")
     bussi = COUPLINGS["bussi"]

@@ -117,7 +117,7 @@ def test_compiled_kernel_matches_its_operators():
     m, dt = dyn.model, 2 * units.fs
     forces = atoms.get_forces()
     ref, fused = dyn.state.copy(), dyn.state.copy()
-    F, tau = ops.reduce_forces(forces, dyn._ctx.r, m)
+    F, tau = ops.reduce_forces(forces, dyn.record.r, m)
 
     # First loop: translational_kick(dt/2), drift(dt), rotational_kick(dt/2),
     # no_squish_rotate(dt), placement.

@@ -22,10 +22,10 @@ from rigidmd import (
     RigidVerlet,
     rigid_maxwell_boltzmann,
 )
-from rigidmd.coupling.barostats import CRescaleBarostat
-from rigidmd.coupling.thermostats import BussiThermostat
+from rigidmd.barostats import CRescaleBarostat
 from rigidmd.lammps import run_rigid_reference, tip3p_charges, tip3p_pair_commands
 from rigidmd.systems import co2_water_mixture, water_box, water_cluster
+from rigidmd.thermostats import BussiThermostat
 
 T = 250.0
 KT = units.kB * T
@@ -260,3 +260,71 @@ def test_fixcm_is_refused_with_a_barostat():
              CRescaleBarostat(300, 1e-6, 1000 * units.fs, 4.5e-5)]
     with pytest.raises(ValueError, match="fixcm=True with a barostat"):
         RigidDynamics(atoms, units.fs, bodies="mol-id", couplings=parts)
+
+
+# ---------------------------------------------------------------- the total momentum
+def test_fixcm_removes_the_centre_of_mass_from_the_temperature(tmp_path):
+    """fixcm=True holds the total momentum, so ASE's temperature and the log count 3 fewer
+    degrees of freedom, as FixCom does in ASE and LAMMPS always (issue 22, item 22)."""
+    from helpers import mixture
+
+    from rigidmd import temperature
+
+    atoms = mixture()
+    dyn = RigidLangevin(atoms, units.fs, temperature_K=T, friction=0.01 / units.fs,
+                        bodies="mol-id", rng=np.random.default_rng(0),
+                        logfile=tmp_path / "md.log", loginterval=5)
+    dyn.run(10)
+    ndof = dyn.degrees_of_freedom - 3
+    expected = 2 * atoms.get_kinetic_energy() / (ndof * units.kB)
+    assert atoms.get_temperature() == pytest.approx(expected, rel=1e-12)
+    assert temperature(atoms) == pytest.approx(expected, rel=1e-12)
+    logged = float((tmp_path / "md.log").read_text().splitlines()[-1].split()[4])
+    assert logged == pytest.approx(expected, abs=0.01)
+    # Without fixcm the centre of mass moves and counts.
+    free = mixture()
+    dyn = RigidLangevin(free, units.fs, temperature_K=T, friction=0.01 / units.fs,
+                        bodies="mol-id", fixcm=False)
+    assert free.get_temperature() == pytest.approx(
+        2 * free.get_kinetic_energy() / (dyn.degrees_of_freedom * units.kB), rel=1e-12)
+
+
+@pytest.mark.parametrize("name", ["verlet", *THERMOSTATS])
+def test_ase_fixcom_is_honoured(name):
+    """ase.constraints.FixCom: total momentum zero at every step, 3 fewer degrees of freedom."""
+    from ase.constraints import FixCom
+    from helpers import mixture, total_momenta
+
+    atoms = mixture()
+    atoms.set_momenta(atoms.get_momenta() + atoms.get_masses()[:, None] * [0.01, 0, 0],
+                      apply_constraint=False)
+    atoms.set_constraint(FixCom())
+    if name == "verlet":
+        dyn = RigidVerlet(atoms, units.fs, bodies="mol-id")
+    else:
+        cls, kwargs = THERMOSTATS[name]
+        kwargs = kwargs | ({"rng": np.random.default_rng(1)} if name != "nose-hoover" else {})
+        dyn = cls(atoms, units.fs, temperature_K=T, bodies="mol-id", fixcm=False, **kwargs)
+    assert any(isinstance(c, FixCom) for c in atoms.constraints)
+    scale = np.abs(atoms.get_momenta()).max()
+    for _ in range(3):
+        dyn.run(10)
+        momentum, _ = total_momenta(atoms)
+        # Roundoff of summing the momenta of the 22 atoms.
+        np.testing.assert_allclose(momentum, 0.0, atol=1e-14 * len(atoms) * scale)
+    ndof = dyn.degrees_of_freedom - 3
+    assert atoms.get_temperature() == pytest.approx(
+        2 * atoms.get_kinetic_energy() / (ndof * units.kB), rel=1e-12)
+
+
+def test_fixcom_with_a_barostat_is_refused():
+    from ase.constraints import FixCom
+    from helpers import dimer_fluid
+
+    from rigidmd import RigidNPT
+
+    atoms = dimer_fluid(n_side=4, rc=7.0)
+    atoms.set_constraint(FixCom())
+    with pytest.raises(ValueError, match="FixCom with a barostat"):
+        RigidNPT(atoms, 5 * units.fs, 80, units.bar, 100 * units.fs, 1000 * units.fs,
+                 bodies="tags")

@@ -5,12 +5,12 @@ LAMMPS ``fix rigid/nve``) with forces from any ASE calculator; atoms in no
 body move as point particles in the same step.
 """
 
-from rigidmd.atomslink import RigidBodyDOF, kinetic_energy, temperature
+from rigidmd.barostats import RigidCRescale, RigidNPT
 from rigidmd.bodies import RigidBodies
-from rigidmd.checkpoint import load_checkpoint
+from rigidmd.dof import RigidBodyDOF, kinetic_energy, temperature
 from rigidmd.dynamics import NonFiniteForceError, RigidDynamics, RigidVerlet
 from rigidmd.model import BodyGeometry, BodyModel
-from rigidmd.npt import RigidCRescale, RigidNPT
+from rigidmd.restart import load_checkpoint
 from rigidmd.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover
 from rigidmd.velocities import (
     rigid_maxwell_boltzmann,

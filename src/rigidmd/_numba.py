@@ -17,7 +17,22 @@ except ImportError:  # pragma: no cover - exercised only without numba
 
 AVAILABLE = numba is not None
 
-__all__ = ["AVAILABLE", "first_half", "second_half", "place", "momenta"]
+__all__ = ["AVAILABLE", "resolve_backend", "first_half", "second_half", "place", "momenta"]
+
+
+def resolve_backend(backend=None):
+    """The backend a dynamics runs on, decided once: ``"numba"`` or ``"numpy"``.
+
+    ``None`` picks numba when it is installed; an unknown name, or numba
+    asked for but missing, is a ValueError.
+    """
+    if backend is None:
+        return "numba" if AVAILABLE else "numpy"
+    if backend not in ("numba", "numpy"):
+        raise ValueError(f"backend must be 'numba' or 'numpy', got {backend!r}")
+    if backend == "numba" and not AVAILABLE:
+        raise ValueError("backend='numba' but numba is not installed")
+    return backend
 
 
 #: Whether compiled functions are cached on disk (False when numba finds no writable place).

@@ -160,7 +160,7 @@ class RigidBodies:
         _, labels = connected_components(nl.get_connectivity_matrix(sparse=True))
         return cls(labels, rule="connectivity")
 
-    def _warn_merged(self, atoms, unique_formulas=False):
+    def warn_merged(self, atoms, unique_formulas=False):
         """Warn when connectivity probably joined or split molecules.
 
         A body whose composition is a multiple of another body's (two waters
@@ -204,7 +204,7 @@ class RigidBodies:
                 stacklevel=4,
             )
 
-    def _warn_unbonded(self, atoms):
+    def warn_unbonded(self, atoms):
         """Warn when a body holds atoms that no chain of covalent bonds joins.
 
         Used for the default rule: ASE fills a missing ``mol-id`` with 0 when
@@ -252,16 +252,16 @@ class RigidBodies:
             tags = atoms.get_tags()
             if "mol-id" in atoms.arrays:
                 bodies = cls.from_mol_id(atoms)
-                bodies._warn_unbonded(atoms)
+                bodies.warn_unbonded(atoms)
             elif n and np.any(tags != tags[0]):
                 bodies = cls.from_tags(atoms)
-                bodies._warn_unbonded(atoms)
+                bodies.warn_unbonded(atoms)
             else:
                 bodies = cls.from_connectivity(atoms)
-                bodies._warn_merged(atoms, unique_formulas=True)
+                bodies.warn_merged(atoms, unique_formulas=True)
         elif isinstance(spec, str) and spec == "connectivity":
             bodies = cls.from_connectivity(atoms)
-            bodies._warn_merged(atoms)
+            bodies.warn_merged(atoms)
         elif isinstance(spec, RigidBodies):
             bodies = spec
         elif isinstance(spec, str):
@@ -525,3 +525,73 @@ def unwrap_bodies(atoms, order, starts, atom_body):
         _refuse_long_body(order[atom_body == b], int(b), int(k), extent[b, k], cell,
                           "cannot make it whole by minimum image")
     return x
+
+
+def molecule_ids(body_ids) -> np.ndarray:
+    """The one encoding of bodies as integers outside rigidmd: body ``b`` is ``b + 1``, -1 none.
+
+    Used for the tags of every trajectory frame and by :class:`rigidmd.dof.RigidBodyDOF`
+    (the molecule IDs of LAMMPS data files and of
+    :class:`rigidmd.lammps.LAMMPSCalculator`, which read IDs <= 0 as "no molecule").
+    """
+    body_ids = np.asarray(body_ids)
+    return np.where(body_ids >= 0, body_ids + 1, -1)
+
+
+def same_partition(a, b) -> bool:
+    """Whether two labellings of the atoms group them the same way (labels may differ)."""
+    pairs = np.unique(np.stack([a, b], axis=1), axis=0)
+    return len(pairs) == len(np.unique(a)) == len(np.unique(b))
+
+
+def store_bodies_in_tags(atoms, body_ids) -> None:
+    """Tags = :func:`molecule_ids`: every ``.traj`` frame carries the bodies.
+
+    ASE's trajectory files keep tags but drop custom arrays such as
+    ``mol-id``; ``bodies=None`` (or ``"tags"``) on a frame read back then finds
+    the same bodies.  Tags that already group the atoms as the bodies do are
+    kept; other non-zero tags are kept too, with a warning.
+    """
+    def distinct(ids):  # free atoms (negative) each in a group of their own
+        return np.where(ids < 0, -1 - np.arange(len(ids)), ids)
+
+    tags = atoms.get_tags()
+    if same_partition(distinct(RigidBodies.from_tags(atoms).body_ids), distinct(body_ids)):
+        return
+    if np.any(tags != 0):
+        warnings.warn("the atoms' tags group them differently from the rigid bodies; "
+                      "rigidmd keeps the tags, so trajectory frames do not carry the bodies "
+                      "(give bodies=... when reading them back)", stacklevel=4)
+        return
+    atoms.set_tags(molecule_ids(body_ids))
+
+
+def check_bodies_fit(r, model, cell, pbc, when=""):
+    """Refuse a cell in which a body reaches half the cell's width in a periodic direction.
+
+    Parameters
+    ----------
+    r : numpy.ndarray, shape (n_body_atoms, 3)
+        Lab displacements of the body atoms from their centres of mass (Å),
+        in ``model.order``.
+    model : rigidmd.model.BodyModel
+    cell : numpy.ndarray, shape (3, 3)
+    pbc : array_like of bool, shape (3,)
+    when : str
+        Appended to the message (what changed the cell).
+
+    Raises
+    ------
+    ValueError
+        Naming the body, its atoms, the cell vector and the widths.
+    """
+    pbc = np.asarray(pbc, dtype=bool)
+    if not pbc.any() or model.n_bodies == 0:
+        return
+    frac = np.linalg.solve(cell.T, r.T).T
+    extent = np.maximum.reduceat(frac, model.starts) - np.minimum.reduceat(frac, model.starts)
+    extent[:, ~pbc] = 0.0
+    b, k = np.unravel_index(np.argmax(extent), extent.shape)
+    if extent[b, k] >= 0.5:
+        _refuse_long_body(model.atoms_of(int(b)), int(b), int(k), extent[b, k], cell,
+                          f"the minimum image is ambiguous{'; ' + when if when else ''}")

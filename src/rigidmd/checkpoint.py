@@ -18,11 +18,13 @@ over the target), a NumPy ``.npz`` archive holding
   random-number generator states, which parts share a generator);
 * anything the caller adds (the command line records the length of each output).
 
-:func:`load_checkpoint` rebuilds the dynamics with a calculator you give and
-continues exactly: with a deterministic calculator the positions after ``n``
-more steps are bit-identical to those of the run that was never stopped.
-(Calculators whose summation order depends on history, such as a LAMMPS
-neighbour list built at another step, agree to roundoff instead.)
+It only serialises what the dynamics exports (``dyn.get_state()``);
+:func:`rigidmd.load_checkpoint` rebuilds the dynamics with a calculator you
+give (``dyn.set_state(...)``) and continues exactly: with a deterministic
+calculator the positions after ``n`` more steps are bit-identical to those
+of the run that was never stopped.  (Calculators whose summation order
+depends on history, such as a LAMMPS neighbour list built at another step,
+agree to roundoff instead.)
 """
 
 import glob
@@ -34,15 +36,16 @@ from pathlib import Path
 import numpy as np
 from ase import Atoms
 
-__all__ = ["save_checkpoint", "load_checkpoint", "read_checkpoint", "atomic_write",
-           "remove_stale_temporaries", "CheckpointError", "FORMAT"]
+from rigidmd.coupling import COUPLINGS, Coupling, new_rng
+from rigidmd.model import BodyModel
+from rigidmd.state import STATE_FIELDS
+
+__all__ = ["save_checkpoint", "read_checkpoint", "atomic_write", "remove_stale_temporaries",
+           "Checkpoint", "CheckpointError", "FORMAT"]
 
 #: Identifies the file format (with a version number).
 FORMAT = "rigidmd-checkpoint-1"
 
-_MODEL_FIELDS = ("order", "starts", "atom_body", "atom_masses", "mass", "moments",
-                 "body_coordinates", "free", "free_masses")
-_STATE_FIELDS = ("X", "V", "q", "p", "x", "v", "cell")
 _ATOMS_ARRAYS = ("numbers", "positions", "momenta", "masses", "tags", "initial_charges")
 
 
@@ -147,12 +150,6 @@ def _is_json(value):
     return True
 
 
-def _rng_kind(rng):
-    if isinstance(rng, np.random.Generator):
-        return {"type": "generator", "bit_generator": type(rng.bit_generator).__name__}
-    return {"type": "legacy"}
-
-
 def save_checkpoint(dyn, path, extra=None):
     """Write a checkpoint of ``dyn`` to ``path`` (atomically).
 
@@ -163,40 +160,34 @@ def save_checkpoint(dyn, path, extra=None):
     extra : dict, optional
         JSON-serialisable data stored alongside (e.g. output file lengths).
     """
-    atoms, model, state, ctx = dyn.atoms, dyn.model, dyn.state, dyn._ctx
+    atoms, saved = dyn.atoms, dyn.get_state()
+    record = saved["record"]
     arrays = {
         "numbers": atoms.numbers, "masses": atoms.get_masses(), "tags": atoms.get_tags(),
         "charges": atoms.get_initial_charges(), "cell": atoms.cell.array,
         "pbc": atoms.pbc, "positions": atoms.positions, "momenta": atoms.get_momenta(),
-        "body_ids": dyn.bodies.body_ids, "F": ctx.F, "tau": ctx.tau, "f": ctx.f,
+        "body_ids": saved["body_ids"], "F": record["F"], "tau": record["tau"], "f": record["f"],
     }
-    arrays.update({f"model_{name}": getattr(model, name) for name in _MODEL_FIELDS})
-    arrays.update({f"state_{name}": getattr(state, name) for name in _STATE_FIELDS})
-    if dyn._virial is not None:
-        arrays["virial"] = dyn._virial
+    arrays.update({f"model_{name}": value for name, value in saved["model"].items()})
+    arrays.update({f"state_{name}": value for name, value in saved["state"].items()})
+    if record["virial"] is not None:
+        arrays["virial"] = record["virial"]
     # Other per-atom arrays (a LAMMPS data file's mol-id and type, ...), for calculators.
     for name, values in atoms.arrays.items():
         if name not in _ATOMS_ARRAYS and values.dtype.kind in "biuf":
             arrays[f"atoms_{name}"] = values
-    rngs = []
-    parts = []
-    for part in dyn.couplings:
-        rng = getattr(part, "rng", None)
-        owner = next((i for i, other in enumerate(dyn.couplings)
-                      if getattr(other, "rng", None) is rng), None) if rng is not None else None
-        parts.append({"class": type(part).__name__, "parameters": part.todict(),
-                      "state": part.get_state(), "rng_owner": owner,
-                      "rng": None if rng is None else _rng_kind(rng)})
-        rngs.append(rng)
     meta = {
         "format": FORMAT,
         "class": type(dyn).__name__,
-        "nsteps": int(dyn.nsteps), "time": float(dyn.get_time()), "dt": float(dyn.dt),
-        "scheme": dyn.scheme.todict(), "scheme_name": dyn.scheme.name,
-        "backend": dyn.backend, "bodies_rule": dyn.bodies.rule,
-        "model_n_atoms": int(model.n_atoms),
-        "couplings": parts,
-        "scratch": {k: v for k, v in ctx.scratch.items() if isinstance(v, np.ndarray)},
+        "nsteps": saved["nsteps"], "time": saved["time"], "dt": saved["dt"],
+        "scheme": saved["scheme"], "scheme_name": saved["scheme_name"],
+        "backend": saved["backend"], "bodies_rule": saved["bodies_rule"],
+        "model_n_atoms": saved["n_atoms"],
+        "couplings": saved["couplings"],
+        "scratch": {k: v for k, v in record["scratch"].items() if isinstance(v, np.ndarray)},
+        # What the per-step record had computed (the kinetic tensor as the coupling parts
+        # updated it): a continuation reads these, not fresh sums that differ in roundoff.
+        "record": {key: record[key] for key in ("volume", "kinetic", "rotational")},
         "info": {k: v for k, v in atoms.info.items() if _is_json(v)},
         "extra": extra or {},
         "atoms_arrays": sorted(atoms.arrays),  # which arrays the Atoms had set
@@ -242,6 +233,40 @@ class Checkpoint:
         atoms.info.update(self.meta.get("info", {}))
         return atoms
 
+    def dynamics_state(self) -> dict:
+        """What ``RigidDynamics.set_state`` takes, as ``RigidDynamics.get_state`` gave it."""
+        meta, a = self.meta, self.arrays
+        record = {"F": a["F"], "tau": a["tau"], "f": a["f"], "virial": a.get("virial"),
+                  "scratch": dict(meta["scratch"]), **meta.get("record", {})}
+        return {
+            "nsteps": meta["nsteps"], "time": meta["time"], "dt": meta["dt"],
+            "scheme": meta["scheme"], "scheme_name": meta["scheme_name"],
+            "backend": meta["backend"], "bodies_rule": meta["bodies_rule"],
+            "body_ids": a["body_ids"], "n_atoms": meta["model_n_atoms"],
+            "model": {name: a[f"model_{name}"] for name in BodyModel.STORED},
+            "state": {name: a[f"state_{name}"] for name in STATE_FIELDS},
+            "record": record, "couplings": meta["couplings"],
+        }
+
+    def couplings(self) -> list[Coupling]:
+        """New coupling parts with the stored parameters (a shared generator stays shared)."""
+        parts, rngs = [], []
+        for entry in self.meta["couplings"]:
+            parameters = dict(entry["parameters"])
+            kind = parameters.pop("kind")
+            if kind not in COUPLINGS:
+                raise CheckpointError(f"checkpoint: unknown coupling kind {kind!r}")
+            if entry["rng"] is not None:
+                owner = entry["rng_owner"]
+                rng = rngs[owner] if owner is not None and owner < len(rngs) and \
+                    rngs[owner] is not None else new_rng(entry["rng"])
+                parameters["rng"] = rng
+            else:
+                rng = None
+            parts.append(COUPLINGS[kind](**parameters))
+            rngs.append(rng)
+        return parts
+
 
 #: What every checkpoint holds (a file without one of them is damaged or not ours).
 _REQUIRED_ARRAYS = ("numbers", "positions", "momenta", "masses", "tags", "charges", "cell",
@@ -283,91 +308,9 @@ def read_checkpoint(path):
         raise CheckpointError(f"checkpoint: {str(path)!r} has format {meta.get('format')!r}, "
                               f"this rigidmd reads {FORMAT!r}")
     missing = [name for name in _REQUIRED_ARRAYS if name not in arrays]
-    missing += [f"model_{name}" for name in _MODEL_FIELDS if f"model_{name}" not in arrays]
-    missing += [f"state_{name}" for name in _STATE_FIELDS if f"state_{name}" not in arrays]
+    missing += [f"model_{name}" for name in BodyModel.STORED if f"model_{name}" not in arrays]
+    missing += [f"state_{name}" for name in STATE_FIELDS if f"state_{name}" not in arrays]
     missing += [name for name in _REQUIRED_META if name not in meta]
     if missing:
         raise CheckpointError(f"checkpoint: {str(path)!r} is incomplete (no {missing[0]!r})")
     return Checkpoint(meta, arrays)
-
-
-def _new_rng(kind):
-    if kind["type"] == "generator":
-        return np.random.Generator(getattr(np.random, kind["bit_generator"])())
-    return np.random.RandomState()
-
-
-def _parts(meta):
-    """New coupling parts with the stored parameters; parts that shared a generator share one."""
-    from rigidmd.coupling import COUPLINGS
-
-    parts, rngs = [], []
-    for entry in meta["couplings"]:
-        parameters = dict(entry["parameters"])
-        kind = parameters.pop("kind")
-        if kind not in COUPLINGS:
-            raise CheckpointError(f"checkpoint: unknown coupling kind {kind!r}")
-        if entry["rng"] is not None:
-            owner = entry["rng_owner"]
-            rng = rngs[owner] if owner is not None and owner < len(rngs) and \
-                rngs[owner] is not None else _new_rng(entry["rng"])
-            parameters["rng"] = rng
-        else:
-            rng = None
-        parts.append(COUPLINGS[kind](**parameters))
-        rngs.append(rng)
-    return parts
-
-
-def load_checkpoint(path, calculator, **kwargs):
-    """Rebuild a rigid dynamics from a checkpoint, ready to continue exactly.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-    calculator : ase.calculators.calculator.Calculator
-        Attached to the rebuilt atoms (the checkpoint holds no calculator; one with
-        ``set_checkpoint_state`` gets what its ``get_checkpoint_state`` gave).
-    **kwargs
-        ``trajectory``, ``logfile``, ``loginterval``, ``append_trajectory``, ...
-        as for :class:`~rigidmd.dynamics.RigidDynamics`.
-
-    Returns
-    -------
-    rigidmd.dynamics.RigidDynamics
-        At the checkpoint's step and time; ``dyn.atoms`` are new Atoms.  The
-        class is :class:`~rigidmd.dynamics.RigidDynamics` with the stored
-        coupling parts (``dyn.couplings``).
-    """
-    from rigidmd.dynamics import RigidDynamics
-    from rigidmd.model import BodyModel
-    from rigidmd.schemes import Scheme
-
-    checkpoint = path if isinstance(path, Checkpoint) else read_checkpoint(path)
-    meta, arrays = checkpoint.meta, checkpoint.arrays
-    atoms = checkpoint.atoms()
-    atoms.calc = calculator
-    if meta.get("calculator_state") is not None and hasattr(calculator, "set_checkpoint_state"):
-        calculator.set_checkpoint_state(meta["calculator_state"])
-    scheme = Scheme(meta["scheme"], name=meta["scheme_name"])
-    dyn = RigidDynamics(atoms, meta["dt"], bodies=arrays["body_ids"], integrator=scheme,
-                        backend=meta["backend"], couplings=_parts(meta), **kwargs)
-    # The stored model and state replace what the constructor measured.
-    dyn.model = BodyModel(n_atoms=meta["model_n_atoms"],
-                          **{name: arrays[f"model_{name}"] for name in _MODEL_FIELDS})
-    dyn._ctx.model = dyn.model
-    for name in _STATE_FIELDS:
-        np.copyto(getattr(dyn.state, name), arrays[f"state_{name}"])
-    dyn._ctx.F, dyn._ctx.tau, dyn._ctx.f = arrays["F"], arrays["tau"], arrays["f"]
-    dyn._ctx.scratch = dict(meta["scratch"])
-    for part, entry in zip(dyn.couplings, meta["couplings"], strict=True):
-        part.set_state(entry["state"])
-    if "virial" in arrays:
-        dyn._virial = arrays["virial"]
-    dyn.nsteps = meta["nsteps"]
-    dyn._time = meta["time"]
-    dyn.bodies.rule = meta["bodies_rule"]
-    atoms.set_cell(dyn.state.cell)
-    dyn._write_atoms()
-    dyn._forces_current = True
-    return dyn

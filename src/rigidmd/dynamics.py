@@ -2,50 +2,60 @@ r"""Rigid-body molecular dynamics as an ASE integrator.
 
 :class:`RigidDynamics` advances rigid bodies (centre of mass and orientation
 quaternion) and atoms that belong to no body (point particles) in the same
-step, with forces from any ASE calculator.  A step is one pipeline:
+step, with forces from any ASE calculator.  It keeps ASE's interface
+(``run``, ``irun``, ``attach``, logs) and composes three parts:
 
-1. changes the user made to the Atoms since the last step are read (only
-   when an observer or the caller of :meth:`irun` could have made them);
-2. the coupling parts (thermostats, barostats; :mod:`rigidmd.coupling`) act
-   for half a step;
-3. the integrator's scheme (:mod:`rigidmd.schemes`) makes the deterministic
-   step, through its compiled kernel when it has one;
-4. the coupling parts act for the second half step, in reverse order;
-5. the atom momenta are written, once.
+1. the body link (:mod:`rigidmd.link`): atoms ↔ body state, and the changes
+   the user made to the Atoms since the last step (read only when an
+   observer or the caller of :meth:`irun` could have made them);
+2. the force evaluator (:mod:`rigidmd.forces`): one calculator call per
+   step, checked, reduced to the bodies, into the per-step record
+   (:mod:`rigidmd.record`);
+3. the stepper (:mod:`rigidmd.stepper`): the coupling parts
+   (:mod:`rigidmd.thermostats`, :mod:`rigidmd.barostats`) for half a step,
+   the integrator's scheme (:mod:`rigidmd.schemes`), the parts' second
+   halves in reverse order, the atom momenta written once; a failed step is
+   undone.
 
 The time step is read from :attr:`RigidDynamics.dt` at every step.
-:class:`RigidVerlet` is the plain NVE case.
+:class:`RigidVerlet` is the plain NVE case.  :func:`rigidmd.restart.load_checkpoint`
+rebuilds a dynamics from a file :mod:`rigidmd.checkpoint` wrote.
 """
 
 import warnings
 
 import numpy as np
 from ase import Atoms, units
+from ase.constraints import FixCom
 from ase.io.trajectory import TrajectoryWriter
 from ase.md.logger import MDLogger
 from ase.md.md import MolecularDynamics
 
 from rigidmd import _numba
-from rigidmd import operators as ops
-from rigidmd.atomslink import (
-    RigidBodyDOF,
-    calculate_together,
+from rigidmd import observables as obs
+from rigidmd.bodies import RigidBodies, molecule_ids, store_bodies_in_tags
+from rigidmd.checkpoint import save_checkpoint
+from rigidmd.checks import (
+    check_constraints,
     check_finite,
     check_massless_momenta,
-    kinetic_energy,
-    store_bodies_in_tags,
+    check_timestep,
 )
-from rigidmd.bodies import RigidBodies, unwrap_bodies
-from rigidmd.coupling import Coupling
+from rigidmd.coupling import CouplingView, check_composition, rng_kind
+from rigidmd.dof import RigidBodyDOF, kinetic_energy
+from rigidmd.forces import ForceEvaluator, NonFiniteForceError
+from rigidmd.link import BodyLink
 from rigidmd.logger import RigidLogger
-from rigidmd.observables import NonFiniteForceError, RigidObservables
-from rigidmd.schemes import BUILTIN_SCHEMES, StepContext, resolve_scheme
-from rigidmd.state import RigidState
+from rigidmd.model import BodyModel
+from rigidmd.record import StepRecord
+from rigidmd.schemes import BUILTIN_SCHEMES, resolve_scheme
+from rigidmd.state import STATE_FIELDS
+from rigidmd.stepcontext import StepContext
+from rigidmd.stepper import Stepper, remove_centre_velocity
 
-__all__ = ["RigidDynamics", "RigidVerlet", "RigidBodyDOF", "NonFiniteForceError"]
+__all__ = ["RigidDynamics", "RigidVerlet", "RigidBodyDOF", "NonFiniteForceError",
+           "check_timestep"]
 
-#: Largest rigid-fit residual (Å) accepted silently when re-reading positions.
-FIT_TOLERANCE = 1e-6
 #: A body turning more than this per step (rad) means the step is too large.  Measured on
 #: 27 TIP3P waters at 300 K over 1 ps: the largest |omega| dt is 0.07, 0.14, 0.25 and
 #: 0.33 rad at 1, 2, 4 and 6 fs.
@@ -55,17 +65,6 @@ MAX_ROTATION_PER_STEP = 0.5
 MAX_ENERGY_CHANGE = 0.1
 
 
-def check_timestep(timestep):
-    """``timestep`` as a positive finite float (ASE time units), or a clear error."""
-    try:
-        dt = float(timestep)
-    except (TypeError, ValueError):
-        raise TypeError(f"timestep must be a number, got {timestep!r}") from None
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"timestep must be positive and finite, got {timestep!r}")
-    return dt
-
-
 def _observer_reads_only(function):
     """True for observers known not to change the Atoms (ASE's logger and writer)."""
     owner = getattr(function, "__self__", function)
@@ -73,7 +72,7 @@ def _observer_reads_only(function):
             or getattr(owner, "modifies_atoms", True) is False)
 
 
-class RigidDynamics(RigidObservables, MolecularDynamics):
+class RigidDynamics(MolecularDynamics):
     r"""Rigid-body molecular dynamics: an integrator scheme and optional coupling parts.
 
     Molecules are rigid bodies with centre of mass :math:`X`, velocity
@@ -100,8 +99,19 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
     While the dynamics exists, ``atoms.constraints`` holds a
     :class:`RigidBodyDOF`, so ``atoms.get_temperature()`` and the MD logger
     count rigid degrees of freedom (6 per body, 5 per linear body, 3 per
-    point particle; no centre-of-mass correction, as everywhere in ASE,
-    whereas LAMMPS subtracts 3).
+    point particle), less 3 when the total momentum is held: by a
+    thermostat's ``fixcm=True`` or by ASE's :class:`ase.constraints.FixCom`
+    on the atoms (which this dynamics honours: the total momentum is made
+    zero at the start and kept zero at every step).  Without either there is
+    no centre-of-mass correction, as everywhere in ASE (LAMMPS subtracts 3).
+
+    The dynamics is composed of three parts, each usable alone:
+    :attr:`link` (a :class:`~rigidmd.link.BodyLink`, atoms ↔ state),
+    :attr:`evaluator` (a :class:`~rigidmd.forces.ForceEvaluator`, filling the
+    per-step :attr:`record`) and :attr:`stepper` (a
+    :class:`~rigidmd.stepper.Stepper`, the step and its rollback).
+    :meth:`get_state` and :meth:`set_state` export and restore everything an
+    exact continuation needs (:mod:`rigidmd.checkpoint` writes it to a file).
 
     Parameters
     ----------
@@ -151,8 +161,9 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         ``atoms`` is not an :class:`ase.Atoms`, or a coupling is not a part.
     ValueError
         A bad body definition, mass, geometry or time step, a coupling whose
-        parameters do not fit the system, or other ASE constraints on the
-        atoms; raised before anything is changed.
+        parameters do not fit the system, parts with different target
+        temperatures, or ASE constraints other than ``FixCom`` on the atoms;
+        raised before anything is changed.
 
     References
     ----------
@@ -160,20 +171,16 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
     G. J. Martyna, J. Chem. Phys. 116, 8649 (2002).
     """
 
-    def __init__(self, atoms, timestep, bodies=None, trajectory=None, logfile=None,
-                 loginterval=1, integrator="no_squish", integrator_options=None, backend=None,
-                 couplings=(), log_pressure=None, **kwargs):
+    def __init__(self, atoms: Atoms, timestep: float, bodies=None, trajectory=None,
+                 logfile=None, loginterval: int = 1, integrator="no_squish",
+                 integrator_options: dict | None = None, backend: str | None = None,
+                 couplings=(), log_pressure: bool | None = None, **kwargs):
         # -- validate everything before touching the atoms or any file --
         if not isinstance(atoms, Atoms):
             raise TypeError(f"atoms must be an ase.Atoms, got {type(atoms).__name__}")
         self._dt = check_timestep(timestep)
-        self._check_constraints(atoms)
-        if backend is None:
-            backend = "numba" if _numba.AVAILABLE else "numpy"
-        if backend not in ("numba", "numpy"):
-            raise ValueError(f"backend must be 'numba' or 'numpy', got {backend!r}")
-        if backend == "numba" and not _numba.AVAILABLE:
-            raise ValueError("backend='numba' but numba is not installed")
+        fixcom = check_constraints(atoms)
+        backend = _numba.resolve_backend(backend)
         check_finite(atoms.positions, "position", "Å")
         check_finite(atoms.get_momenta(), "momentum", "amu Å / ASE time")
         scheme = resolve_scheme(integrator, **(integrator_options or {}))
@@ -181,21 +188,10 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         geometry = rigid.geometry(atoms)
         check_massless_momenta(atoms)
         couplings = tuple(couplings)
+        mover = check_composition(couplings, fixcom)
+        model = geometry.model
         for part in couplings:
-            if not isinstance(part, Coupling):
-                raise TypeError(f"couplings must be coupling parts (rigidmd.coupling), "
-                                f"got {type(part).__name__}")
-        movers = [part for part in couplings if getattr(part, "moves_cell", False)]
-        if len(movers) > 1:
-            raise ValueError(f"two parts move the cell ({movers[0].kind}, {movers[1].kind}); "
-                             "use one barostat")
-        if movers and any(getattr(part, "fixcm", False) for part in couplings):
-            raise ValueError("thermostat fixcm=True with a barostat: the barostat's equations "
-                             "count the centre of mass's degrees of freedom; use fixcm=False")
-        self.model = geometry.model
-        self.atoms = atoms
-        for part in couplings:
-            part.check(self)
+            part.check(atoms, model, self._dt)
 
         # -- from here on the atoms and files change --
         with warnings.catch_warnings():
@@ -208,62 +204,60 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self.scheme = scheme
         self.fused = backend == "numba" and scheme.kernel is not None
         self.bodies = rigid
+        self.model = model
         self.couplings = couplings
-        for part in couplings:
-            part.bind(self)
-        self._cell_moves = bool(movers)
-        self._needs_stress = any(getattr(part, "needs_stress", False) for part in couplings)
-        self._virial = None  # molecular virial at the last force call (when a part needs it)
+        self.fixcom = fixcom
+        #: Whether the total momentum is held (FixCom, or a thermostat's fixcm).
+        self.holds_momentum = fixcom or any(part.fixcm for part in couplings)
+        self.needs_energy = any(part.needs_energy for part in couplings)
+        self._mark_atoms()
+        store_bodies_in_tags(atoms, rigid.body_ids)
+        self.link = BodyLink(atoms, model, backend)
+        self.state = self.link.initial_state(geometry)
+        self.record = StepRecord(self.state, model)
+        self.evaluator = ForceEvaluator(self.link, self.record,
+                                        stress=any(part.needs_stress for part in couplings),
+                                        cell_moves=mover is not None)
+        self.view = CouplingView(self.state, model, self.record, self.evaluator, 0, fixcom)
         #: Ask the calculator for the stress with the forces on every step an observer is
         #: due (set by :class:`rigidmd.mdanalysis.StressRecorder`): one call, not two.
         self.stress_on_observed_steps = False
-        model = self.model
-        atoms.constraints = [RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom,
-                                                self.bodies.body_ids)]
-        store_bodies_in_tags(atoms, self.bodies.body_ids)
-        nb, nf = model.n_bodies, model.n_free
-        self.state = RigidState(
-            X=geometry.com.copy(), V=np.zeros((nb, 3)), q=geometry.quaternions.copy(),
-            p=np.zeros((nb, 4)), x=atoms.positions[model.free].copy(), v=np.zeros((nf, 3)),
-            cell=atoms.cell.array.copy(),
-        )
-        self._backup = self.state.copy()
-        self._ctx = StepContext(
-            state=self.state, model=model, F=np.zeros((nb, 3)), tau=np.zeros((nb, 3)),
-            f=np.zeros((nf, 3)), r=np.zeros((len(model.order), 3)),
-            evaluate=self._evaluate_forces, calculator_forces=self._get_forces,
+        for part in couplings:
+            part.bind(self.view)
+        context = StepContext(
+            self.state, model, self.record, self.evaluator,
             positions=atoms.arrays["positions"], momenta=atoms.arrays["momenta"],
-            write_momenta=not couplings, cell_motion=movers[0] if movers else None)
-        self.removed_kinetic_energy = 0.0
-        self._time = 0.0             # simulated time (ASE units), summed step by step
+            write_momenta=not couplings and not fixcom, cell_motion=mover, view=self.view)
+        self.stepper = Stepper(scheme, context, couplings, self.view, self.link,
+                               fused=self.fused, fixcom=fixcom)
         self._forces_current = False  # forces restored from a checkpoint: no call at irun
         self._stepping = False        # inside step(): observers run after it, at nsteps + 1
-        self._synced = None          # (positions, momenta) at the end of the last run
-        self._changed = None         # (positions, momenta) written before a change was made
+        self._synced = None          # (positions, momenta, cell) at the end of the last run
+        self._changed = None         # (positions, momenta, cell) written before a change
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps
-        self._energy_known = False   # the calculator computed the energy at the last call
         self._energy_ref = None      # (step, conserved energy) the step-size check compares to
         self._warned_step = False    # the step-size warning is given once
-        self._read_momenta()
+        self.link.read_momenta(self.state, owner=type(self).__name__)
+        if fixcom:
+            remove_centre_velocity(self.state, model)
         self._write_atoms()
         if logfile:
-            pressure = self._needs_stress if log_pressure is None else log_pressure
+            pressure = self.evaluator.stress if log_pressure is None else log_pressure
             self.attach(self.closelater(RigidLogger(self, logfile, pressure=pressure)),
                         loginterval)
 
-    @staticmethod
-    def _check_constraints(atoms):
-        others = [c for c in atoms.constraints if not isinstance(c, RigidBodyDOF)]
-        if others:
-            raise ValueError(
-                f"rigid-body dynamics cannot honour other ASE constraints ({others[0]!r}); "
-                "remove them (rigid bodies replace bond constraints; atoms in no body are "
-                "free point particles)"
-            )
+    def _mark_atoms(self):
+        """Put the rigid degree-of-freedom marker in ``atoms.constraints`` (FixCom kept)."""
+        removed = 3 * len(self.atoms) - self.model.degrees_of_freedom
+        if self.holds_momentum and not self.fixcom:
+            removed += 3  # fixcm keeps the total momentum; FixCom counts its own 3
+        marker = RigidBodyDOF(removed, molecule_ids(self.bodies.body_ids))
+        kept = [c for c in self.atoms.constraints if isinstance(c, FixCom)]
+        self.atoms.constraints = kept + [marker]
 
     # ------------------------------------------------------------ time step
     @property
-    def dt(self):
+    def dt(self) -> float:
         """The time step (ASE time units), read at every step by every path."""
         return self._dt
 
@@ -271,25 +265,40 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
     def dt(self, timestep):
         dt = check_timestep(timestep)
         for part in getattr(self, "couplings", ()):
-            check = getattr(part, "check_timestep", None)
-            if check is not None:
-                check(dt)
+            part.check_timestep(dt)
         self._dt = dt
         self._energy_ref = None
 
-    def set_timestep(self, timestep):
+    def set_timestep(self, timestep: float) -> None:
         """Change the time step (ASE time units), as ASE's ``Langevin.set_timestep``."""
         self.dt = timestep
 
-    def get_time(self):
-        """Simulated time (ASE time units): the sum of the steps taken, whatever their size.
+    def get_time(self) -> float:
+        """Simulated time (ASE units): the sum of the steps taken (not ``nsteps * dt``)."""
+        return self.stepper.time
 
-        ASE's ``nsteps * dt`` would misreport it after :attr:`dt` changed.
+    def set_temperature(self, temperature=None, *, temperature_K=None) -> None:
+        """Change the target temperature of every part that has one (``temperature_K`` in K).
+
+        As ASE's thermostats; a thermostat and a barostat keep one target.
+        Every part checks the value before any changes.
         """
-        return self._time
+        value = self._process_temperature(temperature, temperature_K, "K")
+        parts = [part for part in self.couplings if hasattr(part, "set_temperature")]
+        if not parts:
+            raise ValueError(f"{type(self).__name__} has no part with a target temperature")
+        saved = [part.temperature_K for part in parts]
+        try:
+            for part in parts:
+                part.set_temperature(value)
+        except (TypeError, ValueError):
+            for part, old in zip(parts, saved, strict=True):
+                part.temperature_K = old
+            raise
+        self._energy_ref = None  # the chains' energy jumps with the target: a new reference
 
     # ------------------------------------------------------------ ASE API
-    def todict(self):
+    def todict(self) -> dict:
         d = super().todict()
         name = self.scheme.name if self.scheme.name in BUILTIN_SCHEMES else "custom"
         d.update(integrator=name, scheme=self.scheme.todict(), bodies_rule=self.bodies.rule,
@@ -297,7 +306,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
                  couplings=[part.todict() for part in self.couplings])
         return d
 
-    def run(self, steps=50):
+    def run(self, steps: int = 50) -> bool:
         """Run ``steps`` steps; see :meth:`ase.md.md.MolecularDynamics.run`."""
         self._driven_by_run = True
         try:
@@ -305,14 +314,14 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         finally:
             self._driven_by_run = False
 
-    def irun(self, steps=50):
+    def irun(self, steps: int = 50):
         """Run as a generator; see :meth:`ase.md.md.MolecularDynamics.irun`.
 
         Changes made to the Atoms since the last step, by observers or by the
         code that drives this generator, are read before the next step.
         """
         if not self._sync_from_atoms(self._synced) and self._forces_current:
-            self._place_atoms()  # the restored forces belong to these positions
+            self.record.r = self.link.place(self.state, self.record.r)  # the restored forces'
         else:
             self._evaluate_forces()
         self._forces_current = False
@@ -321,42 +330,30 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
                 if self._driven_by_run:
                     yield converged
                     continue
-                written = self._snapshot()
+                written = self.link.snapshot()
                 yield converged
-                if self._changed is None and self._differs(written):
+                if self._changed is None and self.link.differs(written):
                     self._changed = written
         finally:
-            self._synced = self._snapshot()
+            self._synced = self.link.snapshot()
 
     def call_observers(self):
         """Call the observers due at this step, noting whether they changed the Atoms."""
+        if not self.observers:
+            return
         due = [function for function, interval, _, _ in self.observers
                if (interval > 0 and self.nsteps % interval == 0)
                or (interval <= 0 and self.nsteps == abs(interval))]
         if all(_observer_reads_only(function) for function in due):
             super().call_observers()
             return
-        written = self._snapshot()
+        written = self.link.snapshot()
         super().call_observers()
-        if self._changed is None and self._differs(written):
+        if self._changed is None and self.link.differs(written):
             self._changed = written
 
-    def _snapshot(self):
-        atoms = self.atoms
-        return (atoms.arrays["positions"].copy(), atoms.arrays["momenta"].copy(),
-                atoms.cell.array.copy())
-
-    def _differs(self, snapshot):
-        positions, momenta, cell = snapshot
-        atoms = self.atoms
-        return not (np.array_equal(atoms.arrays["positions"], positions)
-                    and np.array_equal(atoms.arrays["momenta"], momenta)
-                    and np.array_equal(atoms.cell.array, cell))
-
     def _refresh_properties(self):
-        # Forces at the current positions were evaluated inside step() (or
-        # at the start of irun); nothing to refresh.
-        pass
+        pass  # the forces of the current positions were evaluated in step() or at irun's start
 
     # ------------------------------------------------------------ the step
     def step(self):
@@ -369,37 +366,16 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         if self._changed is not None:
             written, self._changed = self._changed, None
             self._sync_from_atoms(written)
-        ctx, dt = self._ctx, self.dt
         self._stepping = True
-        self.state.copy_into(self._backup)
-        if self.fused:
-            # The kernel overwrites the forces only after the force call succeeded.
-            saved = (ctx.F, ctx.tau, ctx.f, ctx.scratch)
-        else:
-            saved = (ctx.F.copy(), ctx.tau.copy(), ctx.f.copy(), dict(ctx.scratch))
-        coupled = [part.get_state() for part in self.couplings]
+        evaluator = self.evaluator
+        evaluator.step = self.nsteps
+        observed = self._observed_next() if self.observers else False
+        evaluator.want_energy = self.needs_energy or observed
+        evaluator.want_stress = self.stress_on_observed_steps and observed
         try:
-            half = 0.5 * dt
-            for part in self.couplings:
-                part.first_half(half)
-            self.scheme.run(ctx, dt, fused=self.fused)
-            for part in reversed(self.couplings):
-                part.second_half(half)
-            if not ctx.write_momenta or not self.fused:
-                self._write_momenta()
-            self._time += dt
-        except BaseException:
+            self.stepper.step(self._dt, self.nsteps)
+        finally:
             self._stepping = False
-            self._backup.copy_into(self.state)
-            ctx.F, ctx.tau, ctx.f, ctx.scratch = saved
-            for part, variables in zip(self.couplings, coupled, strict=True):
-                part.set_state(variables)
-            if self._cell_moves:
-                self.atoms.set_cell(self.state.cell)
-            self._place_atoms()
-            self._write_momenta()
-            raise
-        self._stepping = False
         if not self._warned_step:
             self._check_step_size()
 
@@ -415,13 +391,12 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         """
         step = self.nsteps + 1
         message = None
-        if self.model.n_bodies and step % 10 == 0:
-            omega = np.linalg.norm(self.angular_velocities, axis=1)
-            b = int(np.argmax(omega))
-            if omega[b] * self.dt > MAX_ROTATION_PER_STEP:
-                message = (f"body {b} turns by {omega[b] * self.dt:.2f} rad per step at step "
+        if step % 10 == 0 and self.model.n_bodies:
+            b, speed = obs.largest_angular_speed(self.state, self.model)
+            if speed * self._dt > MAX_ROTATION_PER_STEP:
+                message = (f"body {b} turns by {speed * self._dt:.2f} rad per step at step "
                            f"{step} (above {MAX_ROTATION_PER_STEP} rad)")
-        if message is None and self._energy_known:
+        if message is None and self.evaluator.energy_known:
             energy = self.get_conserved_energy()
             if self._energy_ref is None:
                 self._energy_ref = (step, energy)
@@ -436,51 +411,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         if message is not None:
             self._warned_step = True
             warnings.warn(f"{type(self).__name__}: {message}: the time step "
-                          f"{self.dt / units.fs:g} fs is probably too large", stacklevel=3)
-
-    # ------------------------------------------------------------ forces
-    def _get_forces(self):
-        """Call the calculator on the current positions and check the result.
-
-        With a barostat the cell is set first, the stress is asked for in
-        the same call, and the molecular virial is kept.
-        """
-        atoms = self.atoms
-        if self._cell_moves:
-            atoms.set_cell(self.state.cell)
-        wanted = ["forces"]
-        if self._needs_stress:
-            wanted.append("stress")
-        if self._observed_next():
-            wanted.append("energy")  # a logger will ask: one calculator call, not two
-            if self.stress_on_observed_steps and not self._needs_stress and atoms.pbc.all():
-                wanted.append("stress")
-        if len(wanted) > 1:
-            calculate_together(atoms.calc, atoms, wanted)
-        forces = np.asarray(atoms.get_forces(md=True), dtype=float)
-        if forces.shape != (len(self.atoms), 3):
-            raise ValueError(
-                f"calculator returned forces of shape {forces.shape}, "
-                f"expected {(len(self.atoms), 3)}"
-            )
-        # One reduction: a NaN or an infinity anywhere makes the sum non-finite.
-        if not np.isfinite(forces.sum()):
-            bad = np.flatnonzero(~np.isfinite(forces).all(axis=1))
-            raise NonFiniteForceError(
-                f"calculator returned non-finite forces on atom(s) {bad[:10].tolist()} "
-                f"after step {self.nsteps}; the atoms are left at step {self.nsteps}"
-            )
-        self._energy_known = ("energy" in wanted
-                              and "energy" in getattr(atoms.calc, "results", {}))
-        if self._energy_known:
-            energy = atoms.calc.results["energy"]
-            if not np.isfinite(energy):
-                raise NonFiniteForceError(
-                    f"calculator returned a non-finite energy ({energy}) with finite forces "
-                    f"after step {self.nsteps}; the atoms are left at step {self.nsteps}")
-        if self._needs_stress:
-            self._virial = self._molecular_virial(forces)
-        return forces
+                          f"{self._dt / units.fs:g} fs is probably too large", stacklevel=3)
 
     def _observed_next(self):
         """Whether an observer is due after the step being taken (or at a run's start)."""
@@ -491,93 +422,17 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
 
     def _evaluate_forces(self):
         """Place the atoms from the state, call the calculator, reduce to bodies."""
-        self._place_atoms()
-        forces = self._get_forces()
-        ctx = self._ctx
-        ctx.F, ctx.tau = ops.reduce_forces(forces, ctx.r, self.model)
-        ctx.f = forces[self.model.free]
-
-    # ------------------------------------------------------------ atoms <-> state
-    def _place_atoms(self):
-        """Write rigid positions of the current state to the atoms (and ``ctx.r``)."""
-        s, m, ctx = self.state, self.model, self._ctx
-        positions = self.atoms.arrays["positions"]
-        if self.backend == "numba":
-            # The same arithmetic as the kernel's, so a restored state gives
-            # bit-identical positions.
-            _numba.place(s.X, s.q, m.body_coordinates, m.bounds, m.order, ctx.r, positions)
-        else:
-            ctx.r, positions[m.order] = ops.place_atoms(s, m)
-        positions[m.free] = s.x
-
-    def _write_momenta(self):
-        """Write rigid momenta of the current state to the atoms (positions placed already)."""
-        s, m, r = self.state, self.model, self._ctx.r
-        momenta = self.atoms.arrays["momenta"]
-        if self.backend == "numba":
-            _numba.momenta(s.V, s.q, s.p, m.inv_moments, m.bounds, m.order, m.atom_masses, r,
-                           momenta)
-        else:
-            momenta[m.order] = m.atom_masses[:, None] * ops.atom_velocities(s, r, m)
-        momenta[m.free] = m.free_masses[:, None] * s.v
+        self.evaluator.step = self.nsteps
+        observed = self._observed_next()
+        self.evaluator.want_energy = self.needs_energy or observed
+        self.evaluator.want_stress = self.stress_on_observed_steps and observed
+        self.evaluator.evaluate(self.state)
 
     def _write_atoms(self):
         """Write positions and rigid momenta of the current state to the atoms."""
-        self._place_atoms()
-        self._write_momenta()
-        self._synced = self._snapshot()
-
-    def _read_momenta(self, previous=None):
-        """Project the atoms' velocities onto rigid motion of the bodies.
-
-        With ``previous`` (the momenta last written to the atoms, positions
-        unchanged since), a body whose atom momenta were all scaled by one
-        factor (a velocity flip, a rescaling) has its whole momentum scaled
-        instead of projected afresh.  This keeps, bit for bit, the axial
-        NO_SQUISH momentum of a linear body, which its atoms' velocities
-        cannot express, so that flipping velocities reverses a run exactly.
-        """
-        s, m, atoms = self.state, self.model, self.atoms
-        momenta = atoms.get_momenta()
-        # Massless atoms (virtual sites) carry no momentum (check_massless_momenta).
-        massive = self.masses[:, 0] > 0
-        ke_atoms = 0.5 * np.sum(momenta[massive] ** 2 / self.masses[massive])
-        r, _ = ops.place_atoms(s, m)
-        V, L_body = ops.rigid_projection(momenta[m.order], r, s.q, m)
-        p = ops.conjugate_momentum(s.q, L_body)
-        if previous is not None:
-            scale, uniform = ops.uniform_rescale(momenta[m.order], previous[m.order], m)
-            V = np.where(uniform[:, None], scale[:, None] * s.V, V)
-            p = np.where(uniform[:, None], scale[:, None] * s.p, p)
-        s.V, s.p = V, p
-        s.v = momenta[m.free] / m.free_masses[:, None]
-        ke_rigid = self.get_translational_kinetic_energy() + self.get_rotational_kinetic_energy()
-        self.removed_kinetic_energy = float(ke_atoms - ke_rigid)
-        # Rigid input loses only roundoff (~1e-16 of the kinetic energy).
-        if self.removed_kinetic_energy > 1e-10 * ke_atoms + 1e-12:
-            warnings.warn(
-                f"{type(self).__name__}: projecting the atoms' velocities onto rigid-body "
-                f"motion removed {self.removed_kinetic_energy:.6g} eV of kinetic energy "
-                f"({100 * self.removed_kinetic_energy / ke_atoms:.3g}% of {ke_atoms:.6g} eV)",
-                stacklevel=4,
-            )
-
-    def _read_positions(self):
-        """Refit centres of mass and orientations to the atoms' positions."""
-        s, m, atoms = self.state, self.model, self.atoms
-        x = unwrap_bodies(atoms, m.order, m.starts, m.atom_body)
-        if m.n_bodies:
-            X, q, residual = ops.fit_bodies(x, m)
-            worst = int(np.argmax(residual))
-            if residual[worst] > FIT_TOLERANCE:
-                warnings.warn(
-                    f"{type(self).__name__}: the atoms of body {worst} are "
-                    f"{residual[worst]:.3g} Å from a rigid image of the body; they were "
-                    "moved onto it",
-                    stacklevel=4,
-                )
-            s.X, s.q = X, q
-        s.x = atoms.positions[m.free].copy()
+        self.record.r = self.link.place(self.state, self.record.r)
+        self.link.write_momenta(self.state, self.record.r)
+        self._synced = self.link.snapshot()
 
     def _sync_from_atoms(self, written):
         """Pick up changes made to the Atoms since ``written`` (positions, momenta, cell) was true.
@@ -585,52 +440,236 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         Returns whether anything changed.  Moved atoms are refitted and their
         forces evaluated again.
         """
-        atoms = self.atoms
-        if len(atoms) != self.model.n_atoms:
-            raise ValueError(
-                f"the atoms changed from {self.model.n_atoms} to {len(atoms)}; "
-                "create a new dynamics"
-            )
-        if not np.array_equal(atoms.get_masses(), self.masses[:, 0]):
-            raise ValueError("the atoms' masses changed; create a new dynamics")
-        self._check_constraints(atoms)
+        atoms, link = self.atoms, self.link
+        link.check_unchanged_system()
+        fixcom = check_constraints(atoms)
+        if fixcom != self.fixcom:
+            raise ValueError("FixCom was added to or removed from the atoms; create a new "
+                             "dynamics")
         if not any(isinstance(c, RigidBodyDOF) for c in atoms.constraints):
-            atoms.constraints = [RigidBodyDOF(3 * len(atoms) - self.degrees_of_freedom,
-                                                self.bodies.body_ids)]
-        positions, momenta, cell = written
-        moved = not (np.array_equal(atoms.positions, positions)
-                     and np.array_equal(atoms.cell.array, cell))
-        kicked = not np.array_equal(atoms.get_momenta(), momenta)
-        when = f"(set after step {self.nsteps}; nothing was changed)"
+            self._mark_atoms()
+        moved, kicked = link.changes_since(written, f"(set after step {self.nsteps}; "
+                                                    "nothing was changed)")
+        owner = type(self).__name__
         if moved:
-            check_finite(atoms.positions, "position", "Å", when)
-            check_finite(atoms.cell.array, "cell", "Å", when)
-        if kicked:
-            check_finite(atoms.get_momenta(), "momentum", "amu Å / ASE time", when)
-            check_massless_momenta(atoms, when)
-        if moved:
-            self.state.cell[...] = atoms.cell.array
-            self._read_positions()
+            link.read_positions(self.state, owner=owner)
+            self.record.cell_changed()
         if moved or kicked:
-            self._read_momenta(previous=None if moved else momenta)
+            link.read_momenta(self.state, previous=None if moved else written[1], owner=owner)
+            if self.fixcom:
+                remove_centre_velocity(self.state, self.model)
+            self.record.velocities_changed()
             self._write_atoms()
-            self._ctx.scratch.clear()
+            self.record.scratch.clear()
         if moved:
             self._evaluate_forces()
         if moved or kicked:
             self._energy_ref = None
         return moved or kicked
 
-    # ------------------------------------------------------------ checkpoints
-    def save_checkpoint(self, path, extra=None):
+    @property
+    def removed_kinetic_energy(self) -> float:
+        """Kinetic energy (eV) the last projection onto rigid motion removed."""
+        return self.link.removed_kinetic_energy
+
+    # ------------------------------------------------------------ observables (thin)
+    @property
+    def degrees_of_freedom(self) -> int:
+        """Rigid degrees of freedom: 6 per body, 5 per linear body, 3 per point particle."""
+        return self.model.degrees_of_freedom
+
+    @property
+    def translational_dof(self) -> int:
+        """Centre-of-mass and point-particle degrees of freedom: 3 each."""
+        return self.model.translational_dof
+
+    @property
+    def rotational_dof(self) -> int:
+        """Rotational degrees of freedom: 3 per body, 2 per linear body."""
+        return self.model.rotational_dof
+
+    @property
+    def com_positions(self) -> np.ndarray:
+        """Centres of mass of the bodies (Å), unwrapped, shape (n_bodies, 3)."""
+        return self.state.X.copy()
+
+    @property
+    def com_velocities(self) -> np.ndarray:
+        """Centre-of-mass velocities (Å per ASE time unit), shape (n_bodies, 3)."""
+        return self.state.V.copy()
+
+    @property
+    def quaternions(self) -> np.ndarray:
+        """Orientations ``(w, x, y, z)``, body to lab frame, shape (n_bodies, 4)."""
+        return self.state.q.copy()
+
+    @property
+    def moments_of_inertia(self) -> np.ndarray:
+        """Principal moments (amu Å²), ascending, shape (n_bodies, 3)."""
+        return self.model.moments.copy()
+
+    @property
+    def angular_momenta(self) -> np.ndarray:
+        """Lab angular momenta about the centres of mass (amu Å² / ASE time), (n_bodies, 3)."""
+        return obs.angular_momenta(self.state, self.model)
+
+    @property
+    def angular_velocities(self) -> np.ndarray:
+        """Lab-frame angular velocities (rad / ASE time), shape (n_bodies, 3)."""
+        return obs.angular_velocities(self.state, self.model)
+
+    @property
+    def translational_kinetic_energies(self) -> np.ndarray:
+        r"""Per-body :math:`\tfrac12 M |V|^2` (eV), shape (n_bodies,)."""
+        return obs.translational_kinetic_energies(self.state, self.model)
+
+    @property
+    def rotational_kinetic_energies(self) -> np.ndarray:
+        r"""Per-body rotational energy :math:`\tfrac12 \sum_k L_{b,k}^2 / I_k` (eV), (n_bodies,)."""
+        return obs.rotational_kinetic_energies(self.state, self.model)
+
+    def get_angular_momentum(self) -> np.ndarray:
+        r"""Total angular momentum about the origin (amu Å² / ASE time), shape (3,).
+
+        For a linear body this includes the axial component that NO_SQUISH's
+        splitting builds up (as in LAMMPS), which atom velocities cannot show;
+        this total, not the atoms' :math:`\sum_i x_i \times p_i`, is what the
+        integrator conserves (:func:`rigidmd.observables.total_angular_momentum`).
+        """
+        return obs.total_angular_momentum(self.state, self.model)
+
+    def get_translational_kinetic_energy(self) -> float:
+        """Kinetic energy of the centres of mass plus that of the point particles (eV)."""
+        return float(self.translational_kinetic_energies.sum()
+                     + obs.free_kinetic_energy(self.state, self.model))
+
+    def get_rotational_kinetic_energy(self) -> float:
+        """Rotational kinetic energy of all bodies (eV)."""
+        return obs.rotational_kinetic_energy(self.state, self.model)
+
+    def get_volume(self) -> float:
+        """Volume of the cell (Å³); a clear error for a cell that is not periodic."""
+        if not self.atoms.pbc.all():
+            raise ValueError("the volume and pressure need a cell periodic in all three "
+                             f"directions; atoms.pbc is {self.atoms.pbc.tolist()}")
+        return self.record.volume
+
+    def get_density(self) -> float:
+        """Mass density (g/cm³)."""
+        grams = self.atoms.get_masses().sum() / units.kg * 1e3
+        return float(grams / (self.get_volume() * 1e-24))
+
+    def molecular_virial(self) -> np.ndarray:
+        r"""Molecular virial :math:`\sum_b X_b \otimes F_b + \sum_{free} x\otimes f` (eV, 3x3).
+
+        The calculator's atomic virial :math:`-V\sigma` less the
+        intramolecular part :math:`\sum_b\sum_{i\in b} d_i \otimes f_i`
+        (symmetrised), at the current positions: the per-step record's under
+        a barostat, else asked of the calculator now.
+        """
+        if self.evaluator.stress and self.record.virial is not None:
+            return self.record.virial
+        self.get_volume()  # a clear error for a cell that is not periodic
+        forces = np.asarray(self.atoms.get_forces(md=True), dtype=float)
+        return self.evaluator.molecular_virial(forces)
+
+    def get_stress(self, include_ideal_gas: bool = True, voigt: bool = True) -> np.ndarray:
+        r"""Molecular stress (eV/Å³) in ASE's sign convention and Voigt order.
+
+        :math:`\sigma = -(\mathsf W + \mathsf K)/V` with the positional part
+        :math:`\mathsf W` from :meth:`molecular_virial` and the kinetic tensor
+        :math:`\mathsf K` of the centres of mass and point particles (only with
+        ``include_ideal_gas``); see :func:`rigidmd.observables.stress_tensor`.
+        Centres of mass, not atoms, carry the pressure of rigid molecules; the
+        atomic pressure including the constraint forces has the same trace.
+
+        Raises
+        ------
+        ase.calculators.calculator.PropertyNotImplementedError
+            The calculator provides no stress (the message names it).
+        ValueError
+            The cell is not periodic in all three directions.
+        """
+        volume = self.get_volume()
+        kinetic = self.record.kinetic_tensor if include_ideal_gas else None
+        sigma = obs.stress_tensor(self.molecular_virial(), kinetic, volume)
+        return obs.voigt(sigma) if voigt else sigma
+
+    def get_pressure(self) -> float:
+        """Instantaneous molecular pressure, minus a third of the stress trace (eV/Å³)."""
+        return float(-np.trace(self.get_stress(voigt=False)) / 3.0)
+
+    def get_conserved_energy(self) -> float:
+        """Total energy plus every coupling part's term (eV): what the dynamics conserves.
+
+        For NVE this is the total energy; a stochastic thermostat subtracts the
+        energy it put in, Nosé–Hoover chains add their own energy.
+        """
+        energy = self.atoms.get_potential_energy() + kinetic_energy(self.atoms)
+        return float(energy + sum(part.energy(self.view) for part in self.couplings))
+
+    # ------------------------------------------------------------ state export
+    def get_state(self) -> dict:
+        """Everything an exact continuation needs, as plain data (copies).
+
+        Keys: ``nsteps``, ``time``, ``dt``, ``scheme``, ``scheme_name``,
+        ``backend``, ``bodies_rule``, ``body_ids``, ``model`` (the body
+        model's arrays: the reference frames), ``state`` (the rigid state's
+        arrays), ``record`` (forces, torques, virial, scratch values and the
+        quantities the per-step record holds) and ``couplings`` (each part's
+        kind, parameters, variables and random-number generator).  The atoms
+        themselves are ``dyn.atoms``.
+        """
+        model = self.model
+        parts = []
+        for part in self.couplings:
+            rng = getattr(part, "rng", None)
+            owner = None if rng is None else next(
+                i for i, other in enumerate(self.couplings) if getattr(other, "rng", None) is rng)
+            parts.append({"class": type(part).__name__, "parameters": part.todict(),
+                          "state": part.get_state(), "rng_owner": owner,
+                          "rng": None if rng is None else rng_kind(rng)})
+        return {
+            "nsteps": int(self.nsteps), "time": float(self.stepper.time), "dt": float(self._dt),
+            "scheme": self.scheme.todict(), "scheme_name": self.scheme.name,
+            "backend": self.backend, "bodies_rule": self.bodies.rule,
+            "body_ids": self.bodies.body_ids.copy(),
+            "model": {name: getattr(model, name).copy() for name in BodyModel.STORED},
+            "n_atoms": int(model.n_atoms),
+            "state": {name: getattr(self.state, name).copy() for name in STATE_FIELDS},
+            "record": self.record.get_state(),
+            "couplings": parts,
+        }
+
+    def set_state(self, saved: dict) -> None:
+        """Continue from what :meth:`get_state` returned (of a dynamics of these atoms).
+
+        The stored body model and state replace what the constructor
+        measured; the atoms are placed from them and the stored forces are
+        used at the next step without a calculator call.
+        """
+        model = BodyModel(n_atoms=saved["n_atoms"], **saved["model"])
+        self.model = model
+        for holder in (self.link, self.record, self.view, self.evaluator):
+            holder.model = model
+        self.stepper.context.use_model(model)
+        for name in STATE_FIELDS:
+            np.copyto(getattr(self.state, name), saved["state"][name])
+        self.record.set_state(saved["record"])
+        self.stepper.set_state({"time": saved["time"],
+                                "couplings": [part["state"] for part in saved["couplings"]]})
+        self.nsteps = saved["nsteps"]
+        self.bodies.rule = saved["bodies_rule"]
+        self.atoms.set_cell(self.state.cell)
+        self._write_atoms()
+        self._forces_current = True
+
+    def save_checkpoint(self, path, extra: dict | None = None) -> None:
         """Write everything an exact continuation needs to ``path`` (atomically).
 
         See :mod:`rigidmd.checkpoint`; :func:`rigidmd.load_checkpoint` continues.
         """
-        from rigidmd.checkpoint import save_checkpoint
-
         save_checkpoint(self, path, extra)
-
 
 
 class RigidVerlet(RigidDynamics):

@@ -12,7 +12,7 @@ when a barostat runs or ``log_pressure`` asks for it), the volume
 from ase import units
 from ase.md.logger import MDLogger
 
-from rigidmd.atomslink import kinetic_energy, temperature
+from rigidmd.dof import kinetic_energy, temperature
 
 __all__ = ["RigidLogger", "LOG_COLUMNS"]
 

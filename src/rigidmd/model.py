@@ -23,6 +23,7 @@ they add nothing to its mass, inertia, momenta or degrees of freedom.
 """
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
@@ -99,6 +100,10 @@ class BodyModel:
     linear : numpy.ndarray of bool, shape (n_bodies,)
         Bodies with one zero moment.
     """
+
+    #: The fields a checkpoint stores (the others are derived from them).
+    STORED: ClassVar[tuple] = ("order", "starts", "atom_body", "atom_masses", "mass", "moments",
+                               "body_coordinates", "free", "free_masses")
 
     n_atoms: int
     order: np.ndarray

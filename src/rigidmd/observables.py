@@ -1,201 +1,135 @@
-r"""What a rigid dynamics object reports: per-body state, energies and pressure.
+r"""What a rigid system reports, as functions of its state, model and per-step record.
 
-:class:`RigidObservables` is the part of :class:`rigidmd.RigidDynamics` that
-reads the rigid state without changing it: degrees of freedom, centre-of-mass
-and angular quantities, kinetic energies, and the molecular virial, stress
-and pressure (for barostats and logs).  Units are ASE's: Å, eV, amu and ASE
-time.
+Each function reads :class:`~rigidmd.state.RigidState`,
+:class:`~rigidmd.model.BodyModel` and, for the pressure, a
+:class:`~rigidmd.record.StepRecord`; none changes them.
+:class:`~rigidmd.dynamics.RigidDynamics` exposes them as thin properties
+(``dyn.angular_velocities``, ``dyn.get_stress()``, ...).  Units are ASE's: Å,
+eV, amu and ASE time.
 """
 
 import numpy as np
-from ase import units
-from ase.calculators.calculator import PropertyNotImplementedError
 
 from rigidmd import operators as ops
-from rigidmd.atomslink import kinetic_energy
+from rigidmd.model import BodyModel
+from rigidmd.state import RigidState
 
-__all__ = ["RigidObservables", "NonFiniteForceError"]
+__all__ = ["volume", "kinetic_tensor", "kinetic_tensor_of", "translational_kinetic_energies",
+           "rotational_kinetic_energies", "rotational_kinetic_energy", "angular_momenta",
+           "angular_velocities", "largest_angular_speed", "total_angular_momentum",
+           "free_kinetic_energy", "molecular_virial", "stress_tensor", "voigt"]
 
 
-class NonFiniteForceError(ValueError):
-    """The calculator returned a force, energy or stress that is NaN or infinite."""
+def volume(cell: np.ndarray) -> float:
+    """Volume of a cell (Å³), :math:`|\\det h|`."""
+    return float(abs(np.linalg.det(cell)))
 
 
-class RigidObservables:
-    """Read-only views of a rigid dynamics object's state (mixin of RigidDynamics)."""
+def kinetic_tensor(state: RigidState, model: BodyModel) -> np.ndarray:
+    r"""Translational kinetic tensor :math:`\sum_b M_b V_b\otimes V_b + \sum_{free} m\,v\otimes v`.
 
-    # ------------------------------------------------------------ per-body state
-    @property
-    def degrees_of_freedom(self):
-        """Rigid degrees of freedom: 6 per body, 5 per linear body, 3 per point particle."""
-        return self.model.degrees_of_freedom
+    Twice the translational kinetic energy on the trace (eV), shape (3, 3).
+    """
+    return kinetic_tensor_of(state.V, state.v, model)
 
-    @property
-    def translational_dof(self):
-        """Centre-of-mass and point-particle degrees of freedom: 3 each."""
-        return self.model.translational_dof
 
-    @property
-    def rotational_dof(self):
-        """Rotational degrees of freedom: 3 per body, 2 per linear body."""
-        return self.model.rotational_dof
+def kinetic_tensor_of(V: np.ndarray, v: np.ndarray, model: BodyModel) -> np.ndarray:
+    """:func:`kinetic_tensor` of given centre-of-mass and point-particle velocities."""
+    return (np.einsum("b,bi,bj->ij", model.mass, V, V)
+            + np.einsum("f,fi,fj->ij", model.free_masses, v, v))
 
-    @property
-    def com_positions(self):
-        """Centres of mass of the bodies (Å), unwrapped, shape (n_bodies, 3)."""
-        return self.state.X.copy()
 
-    @property
-    def com_velocities(self):
-        """Centre-of-mass velocities (Å per ASE time unit), shape (n_bodies, 3)."""
-        return self.state.V.copy()
+def translational_kinetic_energies(state: RigidState, model: BodyModel) -> np.ndarray:
+    r"""Per-body :math:`\tfrac12 M |V|^2` (eV), shape (n_bodies,)."""
+    return 0.5 * model.mass * np.sum(state.V**2, axis=1)
 
-    @property
-    def quaternions(self):
-        """Orientations ``(w, x, y, z)``, body to lab frame, shape (n_bodies, 4)."""
-        return self.state.q.copy()
 
-    @property
-    def moments_of_inertia(self):
-        """Principal moments (amu Å²), ascending, shape (n_bodies, 3)."""
-        return self.model.moments.copy()
+def free_kinetic_energy(state: RigidState, model: BodyModel) -> float:
+    """Kinetic energy of the point particles (eV)."""
+    return float(0.5 * np.sum(model.free_masses[:, None] * state.v**2))
 
-    @property
-    def angular_momenta(self):
-        """Lab-frame angular momenta about the centres of mass, shape (n_bodies, 3).
 
-        Units amu Å² per ASE time unit.
-        """
-        return ops.lab_angular_momentum(self.state.q, self.state.p)
+def rotational_kinetic_energies(state: RigidState, model: BodyModel) -> np.ndarray:
+    r"""Per-body :math:`\tfrac12 \sum_k L_{b,k}^2 / I_k` over axes with :math:`I_k > 0` (eV)."""
+    L_body = ops.body_angular_momentum(state.q, state.p)
+    return 0.5 * np.sum(L_body**2 * model.inv_moments, axis=1)
 
-    @property
-    def angular_velocities(self):
-        """Lab-frame angular velocities (rad / ASE time), shape (n_bodies, 3)."""
-        s = self.state
-        return ops.angular_velocity(s.q, ops.body_angular_momentum(s.q, s.p),
-                                    self.model.inv_moments)
 
-    @property
-    def translational_kinetic_energies(self):
-        r"""Per-body :math:`\tfrac12 M |V|^2` (eV), shape (n_bodies,)."""
-        return 0.5 * self.model.mass * np.sum(self.state.V**2, axis=1)
+def rotational_kinetic_energy(state: RigidState, model: BodyModel) -> float:
+    """Rotational kinetic energy of all bodies (eV)."""
+    return float(rotational_kinetic_energies(state, model).sum())
 
-    @property
-    def rotational_kinetic_energies(self):
-        r"""Per-body rotational energy (eV), shape (n_bodies,).
 
-        :math:`\tfrac12 \sum_k L_{b,k}^2 / I_k` over the axes with :math:`I_k > 0`.
-        """
-        L_body = ops.body_angular_momentum(self.state.q, self.state.p)
-        return 0.5 * np.sum(L_body**2 * self.model.inv_moments, axis=1)
+def angular_momenta(state: RigidState, model: BodyModel) -> np.ndarray:
+    """Lab-frame angular momenta about the centres of mass (amu Å² / ASE time), (n_bodies, 3)."""
+    return ops.lab_angular_momentum(state.q, state.p)
 
-    def get_angular_momentum(self):
-        r"""Total angular momentum about the origin (amu Å² / ASE time), shape (3,).
 
-        :math:`\sum_b (X_b \times M_b V_b + R(q_b) L_{b}) + \sum_{free} x \times m v`,
-        with :math:`L_b` from the NO_SQUISH momentum.  For a linear body this
-        includes the axial component that NO_SQUISH's splitting builds up (as in
-        LAMMPS), which atom velocities cannot show; this total, not the atoms'
-        :math:`\sum_i x_i \times p_i`, is what the integrator conserves.
-        """
-        s, m = self.state, self.model
-        L = np.cross(s.X, m.mass[:, None] * s.V).sum(axis=0) + self.angular_momenta.sum(axis=0)
-        return L + np.cross(s.x, m.free_masses[:, None] * s.v).sum(axis=0)
+def angular_velocities(state: RigidState, model: BodyModel) -> np.ndarray:
+    """Lab-frame angular velocities (rad / ASE time), shape (n_bodies, 3)."""
+    return ops.angular_velocity(state.q, ops.body_angular_momentum(state.q, state.p),
+                                model.inv_moments)
 
-    def get_translational_kinetic_energy(self):
-        """Kinetic energy of the centres of mass plus that of the point particles (eV)."""
-        free = 0.5 * np.sum(self.model.free_masses[:, None] * self.state.v**2)
-        return float(self.translational_kinetic_energies.sum() + free)
 
-    def get_rotational_kinetic_energy(self):
-        """Rotational kinetic energy of all bodies (eV)."""
-        return float(self.rotational_kinetic_energies.sum())
+def largest_angular_speed(state: RigidState, model: BodyModel) -> tuple[int, float]:
+    r"""The body turning fastest and its :math:`|\omega|` (rad / ASE time).
 
-    # ------------------------------------------------------------ pressure
-    def _molecular_virial(self, forces):
-        r"""The molecular virial (eV, 3x3): the atomic virial less its intramolecular part."""
-        try:
-            stress = self.atoms.get_stress(voigt=False, include_ideal_gas=False)
-        except PropertyNotImplementedError:
-            raise PropertyNotImplementedError(
-                f"the calculator {type(self.atoms.calc).__name__} provides no stress, so the "
-                "pressure is unknown; use a calculator with stress (e.g. "
-                "rigidmd.lammps.LAMMPSCalculator)") from None
-        stress = np.asarray(stress, dtype=float)
-        if not np.isfinite(stress.sum()):
-            raise NonFiniteForceError(f"calculator returned a non-finite stress {stress.tolist()} "
-                                      f"after step {self.nsteps}")
-        virial = -self.get_volume() * stress
-        return virial - ops.intramolecular_virial(self._ctx.r, forces, self.model)
+    :math:`|\omega| = |L_b / I|` (a rotation keeps the norm), with
+    :math:`L_b = \tfrac12\,\mathrm{vec}(q^*\otimes p)` written out: no
+    quaternion products, for the step-size check.
+    """
+    q, p = state.q, state.p
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    p0, p1, p2, p3 = p[:, 0], p[:, 1], p[:, 2], p[:, 3]
+    inv = model.inv_moments
+    o1 = 0.5 * (w * p1 - x * p0 - y * p3 + z * p2) * inv[:, 0]
+    o2 = 0.5 * (w * p2 - y * p0 - z * p1 + x * p3) * inv[:, 1]
+    o3 = 0.5 * (w * p3 - z * p0 - x * p2 + y * p1) * inv[:, 2]
+    speed2 = o1 * o1 + o2 * o2 + o3 * o3
+    b = int(np.argmax(speed2))
+    return b, float(np.sqrt(speed2[b]))
 
-    def get_volume(self):
-        """Volume of the cell (Å³); a clear error for a cell that is not periodic."""
-        if not self.atoms.pbc.all():
-            raise ValueError("the volume and pressure need a cell periodic in all three "
-                             f"directions; atoms.pbc is {self.atoms.pbc.tolist()}")
-        return float(abs(np.linalg.det(self.state.cell)))
 
-    def get_density(self):
-        """Mass density (g/cm³)."""
-        grams = self.atoms.get_masses().sum() * units._amu * 1e3
-        return float(grams / (self.get_volume() * 1e-24))
+def total_angular_momentum(state: RigidState, model: BodyModel) -> np.ndarray:
+    r"""Total angular momentum about the origin (amu Å² / ASE time), shape (3,).
 
-    def molecular_virial(self):
-        r"""Molecular virial :math:`\sum_b X_b \otimes F_b + \sum_{free} x\otimes f` (eV, 3x3).
+    :math:`\sum_b (X_b \times M_b V_b + R(q_b) L_{b}) + \sum_{free} x \times m v`.
+    """
+    s, m = state, model
+    L = np.cross(s.X, m.mass[:, None] * s.V).sum(axis=0)
+    L = L + angular_momenta(state, model).sum(axis=0)
+    return L + np.cross(s.x, m.free_masses[:, None] * s.v).sum(axis=0)
 
-        The calculator's atomic virial :math:`-V\sigma` less the
-        intramolecular part :math:`\sum_b\sum_{i\in b} d_i \otimes f_i`
-        (symmetrised), at the current positions.
-        """
-        if self._needs_stress and self._virial is not None:
-            return self._virial
-        return self._molecular_virial(np.asarray(self.atoms.get_forces(md=True), dtype=float))
 
-    def get_stress(self, include_ideal_gas=True, voigt=True):
-        r"""Molecular stress (eV/Å³) in ASE's sign convention and Voigt order.
+def molecular_virial(atomic_stress: np.ndarray, cell_volume: float, r: np.ndarray,
+                     forces: np.ndarray, model: BodyModel) -> np.ndarray:
+    r"""Molecular virial (eV, 3x3): the atomic virial :math:`-V\sigma` less its intramolecular part.
 
-        .. math::
-            \sigma = -\frac{1}{V}\Big(\sum_b X_b \otimes F_b
-                + \sum_b M_b V_b \otimes V_b + \sum_{free} m\, v \otimes v\Big)
+    Parameters
+    ----------
+    atomic_stress : numpy.ndarray, shape (3, 3)
+        The calculator's stress without the ideal-gas part (eV/Å³).
+    cell_volume : float
+        Å³.
+    r : numpy.ndarray, shape (n_body_atoms, 3)
+        Lab displacements of the body atoms (Å), in ``model.order``.
+    forces : numpy.ndarray, shape (n_atoms, 3)
+        Atom forces (eV/Å).
+    model : BodyModel
+    """
+    return -cell_volume * atomic_stress - ops.intramolecular_virial(r, forces, model)
 
-        with the positional part from :meth:`molecular_virial` (the kinetic
-        part only with ``include_ideal_gas``).  Centres of mass, not atoms,
-        carry the pressure of rigid molecules; the instantaneous atomic
-        pressure including the constraint forces that keep the molecules rigid
-        has the same trace.  The antisymmetric part of the intramolecular
-        virial (the bodies' torques, zero on average) is left out.
 
-        Parameters
-        ----------
-        include_ideal_gas : bool, default True
-        voigt : bool, default True
-            ``(xx, yy, zz, yz, xz, xy)``, else a 3x3 matrix.
+def stress_tensor(virial: np.ndarray, kinetic: np.ndarray | None, cell_volume: float
+                  ) -> np.ndarray:
+    r"""Molecular stress :math:`\sigma = -(\mathsf W + \mathsf K)/V` (eV/Å³), shape (3, 3).
 
-        Raises
-        ------
-        ase.calculators.calculator.PropertyNotImplementedError
-            The calculator provides no stress (the message names it).
-        ValueError
-            The cell is not periodic in all three directions.
-        """
-        volume = self.get_volume()
-        W = self.molecular_virial()
-        if include_ideal_gas:
-            W = W + ops.kinetic_tensor(self.state, self.model)
-        sigma = -W / volume
-        if voigt:
-            return sigma[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
-        return sigma
+    ``kinetic`` None leaves out the ideal-gas part.
+    """
+    W = virial if kinetic is None else virial + kinetic
+    return -W / cell_volume
 
-    def get_pressure(self):
-        """Instantaneous molecular pressure, minus a third of the stress trace (eV/Å³)."""
-        return float(-np.trace(self.get_stress(voigt=False)) / 3.0)
 
-    def get_conserved_energy(self):
-        """Total energy plus every coupling part's term (eV): what the dynamics conserves.
-
-        For NVE this is the total energy; a stochastic thermostat subtracts the
-        energy it put in, Nosé–Hoover chains add their own energy.
-        """
-        energy = self.atoms.get_potential_energy() + kinetic_energy(self.atoms)
-        return float(energy + sum(part.energy() for part in self.couplings))
+def voigt(sigma: np.ndarray) -> np.ndarray:
+    """A symmetric 3x3 tensor in ASE's Voigt order ``(xx, yy, zz, yz, xz, xy)``."""
+    return sigma[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]

@@ -45,7 +45,6 @@ __all__ = [
     "pcdm_correct",
     "exadem_push_to_quaternion",
     "exadem_angular_acceleration",
-    "kinetic_tensor",
     "intramolecular_virial",
     "affine_drift",
 ]
@@ -566,24 +565,6 @@ def exadem_angular_acceleration(q, omega, torque, moments, inv_moments):
 
 
 # ---------------------------------------------------------------- pressure
-def kinetic_tensor(state, model):
-    r"""Kinetic tensor of the centres of mass and point particles.
-
-    .. math:: K_{\alpha\beta} = \sum_b M_b V_{b\alpha} V_{b\beta}
-              + \sum_{free} m\, v_\alpha v_\beta
-
-    (twice the translational kinetic energy on the trace).
-
-    Returns
-    -------
-    numpy.ndarray, shape (3, 3)
-        eV.
-    """
-    V, v = state.V, state.v
-    return (np.einsum("b,bi,bj->ij", model.mass, V, V)
-            + np.einsum("f,fi,fj->ij", model.free_masses, v, v))
-
-
 def intramolecular_virial(r, forces, model):
     r"""The intramolecular part of the atomic virial, :math:`\sum_b \sum_{i\in b} d_i \otimes f_i`.
 

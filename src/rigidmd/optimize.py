@@ -45,8 +45,10 @@ from ase.calculators.calculator import PropertyNotImplementedError
 from rigidmd import operators as ops
 from rigidmd import quaternion as quat
 from rigidmd import relaxcell
-from rigidmd.atomslink import RigidBodyDOF, calculate_together, check_finite
 from rigidmd.bodies import RigidBodies
+from rigidmd.checks import check_finite
+from rigidmd.dof import RigidBodyDOF
+from rigidmd.forces import calculate_together
 from rigidmd.model import describe_atoms
 
 try:  # ASE >= 3.24

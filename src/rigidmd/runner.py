@@ -39,8 +39,8 @@ from pathlib import Path
 import numpy as np
 from ase import units
 
-from rigidmd.atomslink import temperature
 from rigidmd.config import TIME_UNITS, ConfigError
+from rigidmd.dof import temperature
 from rigidmd.outputs import (
     OutputError,
     OutputLock,
@@ -189,7 +189,7 @@ def _differing_fields(recorded, current):
 def _observables(dyn):
     """Time, conserved energy and, under a barostat, pressure (bar), volume, density."""
     row = (dyn.get_time(), dyn.get_conserved_energy())
-    if dyn._cell_moves:
+    if dyn.evaluator.cell_moves:
         row += (dyn.get_pressure() / units.bar, dyn.get_volume(), dyn.get_density())
     return row
 
@@ -389,8 +389,8 @@ class Run:
         return checkpoint
 
     def _resumed_dynamics(self):
-        from rigidmd.checkpoint import load_checkpoint
         from rigidmd.logger import RigidLogger
+        from rigidmd.restart import load_checkpoint
 
         out = self.outputs
         checkpoint = self._read_checkpoint()
@@ -408,7 +408,7 @@ class Run:
                               trajectory=str(out.trajectory) if out.trajectory else None,
                               append_trajectory=True, loginterval=out.interval)
         if out.log:
-            dyn.attach(dyn.closelater(RigidLogger(dyn, str(out.log), pressure=dyn._needs_stress,
+            dyn.attach(dyn.closelater(RigidLogger(dyn, str(out.log), pressure=dyn.evaluator.stress,
                                                   header=False)), out.interval)
         cut = f" (cut back: {', '.join(trimmed)})" if trimmed else ""
         print(f"resuming from step {dyn.nsteps} of {out.checkpoint}{cut}", file=self.stream)

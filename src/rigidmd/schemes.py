@@ -41,249 +41,13 @@ torques), ``reset_force_moment``.  Groups: ``combined_compute_prolog`` and
 :math:`h = \mathrm{dt\_scale}\cdot\Delta t`.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from rigidmd import _numba
-from rigidmd import operators as ops
+from rigidmd import stepcontext as sc
 
-__all__ = ["Scheme", "StepContext", "OPERATORS", "BUILTIN_SCHEMES", "resolve_scheme"]
-
-
-@dataclass
-class StepContext:
-    """What operators read and write during a step.
-
-    The time step is not stored here: :meth:`Scheme.run` receives it from
-    the dynamics at every step, so a changed ``dyn.dt`` takes effect at once
-    on every path.
-
-    Attributes
-    ----------
-    state : rigidmd.state.RigidState
-    model : rigidmd.model.BodyModel
-    F, tau : numpy.ndarray, shape (n_bodies, 3)
-        Body forces (eV/Å) and lab torques (eV) from the last force call.
-    f : numpy.ndarray, shape (n_free, 3)
-        Forces on the free atoms (eV/Å).
-    r : numpy.ndarray, shape (n_body_atoms, 3)
-        Lab displacements :math:`R(q) d_i` of the body atoms at the last
-        placement (Å), in ``model.order``.
-    evaluate : callable
-        ``evaluate()`` places the atoms from ``state``, calls the calculator
-        and sets ``F``, ``tau``, ``f`` and ``r``.
-    calculator_forces : callable
-        ``calculator_forces()`` calls the calculator on the atoms as they
-        are and returns checked atom forces, shape (n_atoms, 3) (the fused
-        kernel places the atoms and reduces the forces itself).
-    positions, momenta : numpy.ndarray, shape (n_atoms, 3)
-        The Atoms' own position and momentum arrays, written in place.
-    write_momenta : bool
-        Whether the scheme writes the atom momenta at the end of its step
-        (False when coupling parts act after it; the dynamics then writes them).
-    cell_motion : object or None
-        A barostat: its ``drift_matrices(h)`` gives the matrices ``A, B, S``
-        of a drift over ``h`` in which the centres of mass, the point
-        particles and the cell move with the cell (:func:`~rigidmd.operators.affine_drift`).
-    scratch : dict
-        Quantities an operator hands to a later one (exaDEM's accelerations,
-        PCDM's start-of-step values).  Kept across steps.
-    """
-
-    state: object
-    model: object
-    F: np.ndarray
-    tau: np.ndarray
-    f: np.ndarray
-    r: np.ndarray
-    evaluate: object
-    calculator_forces: object
-    positions: np.ndarray
-    momenta: np.ndarray
-    write_momenta: bool = True
-    cell_motion: object = None
-    scratch: dict = field(default_factory=dict)
-
-    def omega(self):
-        """Lab angular velocities of the bodies (rad / ASE time), shape (n_bodies, 3)."""
-        s = self.state
-        return ops.angular_velocity(s.q, ops.body_angular_momentum(s.q, s.p),
-                                    self.model.inv_moments)
-
-    def set_omega(self, omega):
-        """Set the bodies' lab angular velocities (at the current orientations)."""
-        L = ops.lab_from_omega(self.state.q, omega, self.model.moments)
-        self.state.p = ops.momentum_from_lab(self.state.q, L)
-
-    def accelerations(self):
-        """exaDEM's stored accelerations ``(a_bodies, a_free)``, from the forces if absent."""
-        if "a" not in self.scratch:
-            force_to_accel(self)
-        return self.scratch["a"], self.scratch["a_free"]
-
-    def angular_acceleration(self):
-        """exaDEM's stored lab angular accelerations, from ω and τ if absent."""
-        if "alpha" not in self.scratch:
-            push_to_angular_acceleration(self)
-        return self.scratch["alpha"]
-
-
-# ---------------------------------------------------------------- operators
-# Each takes the context, h = dt_scale * dt, and its own keyword parameters.
-
-def translational_kick(ctx, h):
-    ops.translational_kick(ctx.state, ctx.F, ctx.f, ctx.model, h)
-
-
-def drift(ctx, h):
-    if ctx.cell_motion is None:
-        ops.drift(ctx.state, h)
-    else:
-        ops.affine_drift(ctx.state, *ctx.cell_motion.drift_matrices(h))
-
-
-def rotational_kick(ctx, h):
-    ops.rotational_kick(ctx.state, ctx.tau, h)
-
-
-def no_squish_rotate(ctx, h):
-    ops.free_rotor(ctx.state, ctx.model.inv_moments, h)
-
-
-def richardson_rotate(ctx, h):
-    ops.richardson_rotate(ctx.state, ctx.model.inv_moments, h)
-
-
-def rozmanov_kusalik_rotate(ctx, h, tol=1e-13, max_iter=100):
-    ops.rozmanov_kusalik_rotate(ctx.state, ctx.tau, ctx.model.inv_moments, h, tol=tol,
-                                max_iter=max_iter)
-
-
-def pcdm_predict(ctx, h):
-    s, m = ctx.state, ctx.model
-    q0 = s.q.copy()
-    q_half, omega_body0, domega_body0 = ops.pcdm_predict(q0, ctx.omega(), ctx.tau, m.moments,
-                                                         m.inv_moments, h)
-    ctx.scratch["pcdm"] = (q0, q_half, omega_body0, domega_body0)
-    L = ops.lab_angular_momentum(s.q, s.p)
-    s.q = q_half  # the midpoint force call places the atoms here
-    s.p = ops.momentum_from_lab(s.q, L)
-
-
-def pcdm_correct(ctx, h):
-    if "pcdm" not in ctx.scratch:
-        raise RuntimeError("pcdm_correct needs a pcdm_predict earlier in the step")
-    q0, q_half, omega_body0, domega_body0 = ctx.scratch.pop("pcdm")
-    m = ctx.model
-    q1, omega1 = ops.pcdm_correct(q0, q_half, omega_body0, domega_body0, ctx.tau, m.moments,
-                                  m.inv_moments, h)
-    ctx.state.q = q1
-    ctx.set_omega(omega1)
-
-
-def compute_force(ctx):
-    ctx.evaluate()
-
-
-def reset_force_moment(ctx):
-    ctx.F[...] = 0.0
-    ctx.tau[...] = 0.0
-    ctx.f[...] = 0.0
-
-
-def force_to_accel(ctx):
-    ctx.scratch["a"] = ctx.F / ctx.model.mass[:, None]
-    ctx.scratch["a_free"] = ctx.f / ctx.model.free_masses[:, None]
-
-
-def push_f_v_r(ctx, h):
-    a, a_free = ctx.accelerations()
-    s = ctx.state
-    if ctx.cell_motion is None:
-        s.X += h * s.V + 0.5 * h * h * a
-        s.x += h * s.v + 0.5 * h * h * a_free
-        return
-    # With a barostat: the cell's drift, at the mean velocity V + (h/2) a.
-    A, B, S = ctx.cell_motion.drift_matrices(h)
-    s.X = s.X @ A.T + (s.V + 0.5 * h * a) @ B.T
-    s.x = s.x @ A.T + (s.v + 0.5 * h * a_free) @ B.T
-    s.V = s.V @ S.T
-    s.v = s.v @ S.T
-    s.cell = s.cell @ A.T
-
-
-def push_f_v(ctx, h):
-    a, a_free = ctx.accelerations()
-    ctx.state.V += 0.5 * h * a
-    ctx.state.v += 0.5 * h * a_free
-
-
-def push_to_quaternion(ctx, h):
-    q, omega = ops.exadem_push_to_quaternion(ctx.state.q, ctx.omega(),
-                                             ctx.angular_acceleration(), h)
-    ctx.state.q = q
-    ctx.set_omega(omega)
-
-
-def push_to_angular_acceleration(ctx):
-    m = ctx.model
-    ctx.scratch["alpha"] = ops.exadem_angular_acceleration(ctx.state.q, ctx.omega(), ctx.tau,
-                                                           m.moments, m.inv_moments)
-
-
-def push_to_angular_velocity(ctx, h):
-    ctx.set_omega(ctx.omega() + 0.5 * h * ctx.angular_acceleration())
-
-
-# ---------------------------------------------------------------- fused kernel
-_IDENTITY = np.eye(3)
-
-
-def fused_no_squish(ctx, dt):
-    """NO_SQUISH as two compiled loops over bodies: the ``no_squish`` scheme, fused.
-
-    The same arithmetic as the operator list ``translational_kick(1/2), drift,
-    rotational_kick(1/2), no_squish_rotate, compute_force,
-    translational_kick(1/2), rotational_kick(1/2)`` (checked operator by
-    operator in the tests), with each body touched twice: before the force
-    call (kick, drift, free rotor, placement) and after it (reduction, kick,
-    momenta).  Free atoms take plain velocity Verlet in NumPy.
-    """
-    s, m = ctx.state, ctx.model
-    half = 0.5 * dt
-    affine = ctx.cell_motion is not None
-    if affine:
-        # A barostat reads the pressure after the half kick: kick first, then
-        # move the cell, and let the loop's own kick add nothing.
-        s.V += (half * m.inv_mass)[:, None] * ctx.F
-        s.v += half * ctx.f / m.free_masses[:, None]
-        A, B, S = ctx.cell_motion.drift_matrices(dt)
-        s.cell[...] = s.cell @ A.T
-        F = np.zeros_like(ctx.F)
-    else:
-        A = B = S = _IDENTITY
-        F = ctx.F
-    _numba.first_half(s.X, s.V, s.q, s.p, F, ctx.tau, m.inv_mass, 0.25 * m.inv_moments, dt,
-                      m.body_coordinates, m.bounds, m.order, ctx.r, ctx.positions, A, B, S,
-                      affine)
-    if m.n_free:
-        if affine:
-            s.x[...] = s.x @ A.T + s.v @ B.T
-            s.v[...] = s.v @ S.T
-        else:
-            s.v += half * ctx.f / m.free_masses[:, None]
-            s.x += dt * s.v
-        ctx.positions[m.free] = s.x
-    forces = ctx.calculator_forces()
-    # The body forces and torques are overwritten only after the force call succeeded.
-    _numba.second_half(s.V, s.q, s.p, ctx.F, ctx.tau, m.inv_mass, m.inv_moments, dt, forces,
-                       m.bounds, m.order, m.atom_masses, ctx.r, ctx.momenta, ctx.write_momenta)
-    if m.n_free:
-        ctx.f = forces[m.free]
-        s.v += half * ctx.f / m.free_masses[:, None]
-        if ctx.write_momenta:
-            ctx.momenta[m.free] = m.free_masses[:, None] * s.v
+__all__ = ["Scheme", "OPERATORS", "BUILTIN_SCHEMES", "resolve_scheme", "load_yaml"]
 
 
 @dataclass(frozen=True)
@@ -303,23 +67,24 @@ def _op(function, moves=False, timed=True, **params):
 
 
 OPERATORS = {
-    "translational_kick": _op(translational_kick, dt_scale=0.5),
-    "drift": _op(drift, moves=True, dt_scale=1.0),
-    "rotational_kick": _op(rotational_kick, dt_scale=0.5),
-    "no_squish_rotate": _op(no_squish_rotate, moves=True, dt_scale=1.0),
-    "richardson_rotate": _op(richardson_rotate, moves=True, dt_scale=1.0),
-    "rozmanov_kusalik_rotate": _op(rozmanov_kusalik_rotate, moves=True, dt_scale=1.0,
+    "translational_kick": _op(sc.apply_translational_kick, dt_scale=0.5),
+    "drift": _op(sc.apply_drift, moves=True, dt_scale=1.0),
+    "rotational_kick": _op(sc.apply_rotational_kick, dt_scale=0.5),
+    "no_squish_rotate": _op(sc.apply_no_squish_rotate, moves=True, dt_scale=1.0),
+    "richardson_rotate": _op(sc.apply_richardson_rotate, moves=True, dt_scale=1.0),
+    "rozmanov_kusalik_rotate": _op(sc.apply_rozmanov_kusalik_rotate, moves=True, dt_scale=1.0,
                                    tol=1e-13, max_iter=100),
-    "pcdm_predict": _op(pcdm_predict, moves=True, dt_scale=1.0),
-    "pcdm_correct": _op(pcdm_correct, moves=True, dt_scale=1.0),
-    "compute_force": Operator(compute_force, {}, timed=False, forces=True),
-    "reset_force_moment": Operator(reset_force_moment, {}, timed=False),
-    "force_to_accel": Operator(force_to_accel, {}, timed=False),
-    "push_f_v_r": _op(push_f_v_r, moves=True, dt_scale=1.0),
-    "push_f_v": _op(push_f_v, dt_scale=1.0),
-    "push_to_quaternion": _op(push_to_quaternion, moves=True, dt_scale=1.0),
-    "push_to_angular_acceleration": Operator(push_to_angular_acceleration, {}, timed=False),
-    "push_to_angular_velocity": _op(push_to_angular_velocity, dt_scale=1.0),
+    "pcdm_predict": _op(sc.apply_pcdm_predict, moves=True, dt_scale=1.0),
+    "pcdm_correct": _op(sc.apply_pcdm_correct, moves=True, dt_scale=1.0),
+    "compute_force": Operator(sc.apply_compute_force, {}, timed=False, forces=True),
+    "reset_force_moment": Operator(sc.apply_reset_force_moment, {}, timed=False),
+    "force_to_accel": Operator(sc.apply_force_to_accel, {}, timed=False),
+    "push_f_v_r": _op(sc.apply_push_f_v_r, moves=True, dt_scale=1.0),
+    "push_f_v": _op(sc.apply_push_f_v, dt_scale=1.0),
+    "push_to_quaternion": _op(sc.apply_push_to_quaternion, moves=True, dt_scale=1.0),
+    "push_to_angular_acceleration": Operator(sc.apply_push_to_angular_acceleration, {},
+                                             timed=False),
+    "push_to_angular_velocity": _op(sc.apply_push_to_angular_velocity, dt_scale=1.0),
     "combined_compute_prolog": Operator(None, {"dt_scale": 1.0}, moves=True, group=(
         "push_f_v_r", "push_f_v", "push_to_quaternion")),
     "combined_compute_epilog": Operator(None, {"dt_scale": 1.0}, group=(
@@ -430,11 +195,15 @@ class Scheme:
         """The compiled, fused implementation of this scheme, or None.
 
         The built-in ``no_squish`` (and any scheme equal to it, e.g. from
-        YAML) has one: :func:`fused_no_squish`, when numba is installed.
+        YAML) has one: :func:`rigidmd.stepcontext.fused_no_squish`, which a
+        dynamics on the numba backend runs.
         """
-        if not _numba.AVAILABLE:
-            return None
-        return fused_no_squish if self.steps == _BUILTIN_NO_SQUISH.steps else None
+        try:
+            return self._kernel
+        except AttributeError:
+            no_squish = [_parse_entry(i, e) for i, e in enumerate(BUILTIN_SCHEMES["no_squish"])]
+            self._kernel = sc.fused_no_squish if self.steps == no_squish else None
+            return self._kernel
 
     def run(self, ctx, dt, fused=False):
         """Advance ``ctx`` by one step of ``dt`` (ASE time units).
@@ -451,20 +220,23 @@ class Scheme:
         if fused and self.kernel is not None:
             self.kernel(ctx, dt)
             return
-        for op, params in self._compiled:
-            if op.timed:
-                extra = {k: v for k, v in params.items() if k != "dt_scale"}
-                op.function(ctx, params["dt_scale"] * dt, **extra)
+        for function, dt_scale, extra in self._compiled:
+            if dt_scale is None:
+                function(ctx)
             else:
-                op.function(ctx)
+                function(ctx, dt_scale * dt, **extra)
 
     @property
     def _compiled(self):
+        """``[(function, dt_scale or None, other parameters)]``, built once."""
         try:
-            return self.__compiled
+            return self._calls
         except AttributeError:
-            self.__compiled = self.expanded()
-            return self.__compiled
+            self._calls = [
+                (op.function, params["dt_scale"] if op.timed else None,
+                 {k: v for k, v in params.items() if k != "dt_scale"})
+                for op, params in self.expanded()]
+            return self._calls
 
     def todict(self):
         """A JSON- and YAML-friendly description: ``[{name: params}, ...]``."""
@@ -575,5 +347,3 @@ def resolve_scheme(spec, **params):
                          "put them in the scheme's entries instead")
     return scheme
 
-
-_BUILTIN_NO_SQUISH = Scheme(BUILTIN_SCHEMES["no_squish"], name="no_squish")

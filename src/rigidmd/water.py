@@ -51,7 +51,8 @@ from ase.calculators import tip4p as ase_tip4p
 from ase.data import atomic_masses
 from ase.geometry import find_mic
 
-__all__ = ["WaterModel", "WATER_MODELS", "water_model", "M_SYMBOL"]
+__all__ = ["WaterModel", "WATER_MODELS", "water_model", "M_SYMBOL", "tip3p_pair_commands",
+           "tip3p_charges"]
 
 #: Chemical symbol of the massless charge site M (ASE's dummy element, Z = 0).
 M_SYMBOL = "X"
@@ -280,3 +281,67 @@ def water_model(name):
     if key not in WATER_MODELS:
         raise ValueError(f"unknown water model {name!r}; use one of {', '.join(WATER_MODELS)}")
     return WATER_MODELS[key]
+
+
+# ---------------------------------------------------------------- ASE's TIP3P in LAMMPS
+def tip3p_pair_commands(cutoff: float = 40.0, oxygen_types=("O",)) -> list[str]:
+    """LAMMPS pair commands for TIP3P as ``ase.calculators.tip3p.TIP3P``.
+
+    Lennard-Jones between oxygens only (the ``tip3p`` model's σ and ε, ASE's
+    ``sigma0`` and ``epsilon0``), plain cut-off Coulomb between all atoms, no
+    interactions inside a molecule.  The charges come from the data file, see
+    :func:`tip3p_charges` and :func:`rigidmd.lammps.write_data`.
+
+    ASE's ``TIP3P(rc, width)`` switches whole molecule pairs off smoothly for
+    O–O distances between ``rc - width`` and ``rc``; LAMMPS cuts atom pairs
+    at ``cutoff``.  The two agree when every O–O distance is below
+    ``rc - width`` and every atom pair is within ``cutoff`` (e.g. a cluster
+    smaller than 39 Å with ``rc = cutoff = 40``).
+
+    Parameters
+    ----------
+    cutoff : float, default 40.0
+        LJ and Coulomb cut-off, Å.
+    oxygen_types : sequence of str or int, default ("O",)
+        LAMMPS atom type labels or numbers of the oxygens, as returned in
+        :attr:`LammpsData.types` by :func:`rigidmd.lammps.write_data` (the
+        label is the element symbol when an element has a single mass).
+
+    Returns
+    -------
+    list of str
+        ``pair_style``, ``pair_coeff`` and ``neigh_modify`` commands.
+    """
+    model = WATER_MODELS["tip3p"]
+    cmds = [f"pair_style lj/cut/coul/cut {float(cutoff)!r}", "pair_coeff * * 0.0 1.0"]
+    types = [str(t) for t in oxygen_types]
+    for i, ti in enumerate(types):
+        for tj in types[i:]:
+            cmds.append(f"pair_coeff {ti} {tj} {model.epsilon!r} {model.sigma!r}")
+    cmds.append("neigh_modify exclude molecule/intra all")
+    return cmds
+
+
+def tip3p_charges(atoms: Atoms) -> np.ndarray:
+    """TIP3P charges of ASE's ``TIP3P`` calculator: ``-2 qH`` on O, ``qH`` on H (e).
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+        Water molecules (only O and H atoms), in any order.
+
+    Returns
+    -------
+    numpy.ndarray, shape (n,)
+
+    Raises
+    ------
+    ValueError
+        If ``atoms`` contains elements other than O and H.
+    """
+    numbers = atoms.numbers
+    other = sorted(set(atoms.symbols[(numbers != 1) & (numbers != 8)]))
+    if other:
+        raise ValueError(f"TIP3P has charges for O and H only, not {other}")
+    q_h = WATER_MODELS["tip3p"].q_h
+    return np.where(numbers == 8, -2.0 * q_h, q_h)

@@ -614,6 +614,14 @@ class CouplingSection:
             defaults = {} if thermostat is None else {
                 "temperature_K": thermostat.kwargs["temperature_K"]}
             barostat = parse_coupling("barostat", barostat, defaults)
+            if thermostat is not None:
+                own = barostat.kwargs["temperature_K"]
+                target = thermostat.kwargs["temperature_K"]
+                if own != target:
+                    raise ConfigError(
+                        f"barostat.temperature: {own:g} K differs from thermostat.temperature "
+                        f"{target:g} K; one run has one target temperature (leave "
+                        "barostat.temperature out)")
         return cls(thermostat, barostat)
 
     @property

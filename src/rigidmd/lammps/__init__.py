@@ -15,7 +15,6 @@ Everything here speaks ASE units (eV, Å, amu, ASE time); see
 :mod:`rigidmd.lammps.library` for the unit constants.
 """
 
-from rigidmd.forcefields import tip3p_charges, tip3p_pair_commands
 from rigidmd.lammps.calculator import LAMMPSCalculator
 from rigidmd.lammps.data import LammpsData, write_data
 from rigidmd.lammps.deck import export_lammps
@@ -36,6 +35,7 @@ from rigidmd.lammps.reference import (
     read_dump,
     run_rigid_reference,
 )
+from rigidmd.water import tip3p_charges, tip3p_pair_commands
 
 __all__ = [
     "DEFAULT_CMDARGS",

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
-from rigidmd.atomslink import check_finite
+from rigidmd.checks import check_finite
 from rigidmd.lammps.data import MASSLESS_SITE_MASS
 from rigidmd.lammps.library import (
     DEFAULT_CMDARGS,

@@ -188,7 +188,7 @@ def export_lammps(
     rigidmd.coupling.NotExportable
         A coupling LAMMPS has no equivalent for (Bussi, C-rescale, ``tri``).
     """
-    from rigidmd.coupling.thermostats import LangevinThermostat, NoseHooverThermostat
+    from rigidmd.thermostats import LangevinThermostat, NoseHooverThermostat
 
     if tdamp is not None and friction is not None:
         raise ValueError("give tdamp (Nose-Hoover) or friction (Langevin), not both")

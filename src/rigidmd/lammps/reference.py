@@ -306,7 +306,7 @@ def run_rigid_reference(
     RuntimeError
         If a LAMMPS command fails (the message names the command).
     """
-    from rigidmd.coupling.thermostats import NoseHooverThermostat
+    from rigidmd.thermostats import NoseHooverThermostat
 
     if fix not in RIGID_FIX_STYLES:
         raise ValueError(f"fix must be one of {RIGID_FIX_STYLES}, got {fix!r}")

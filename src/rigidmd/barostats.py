@@ -24,26 +24,28 @@ lower-triangular form, which rigidmd's own LAMMPS calculator handles).
 import numpy as np
 from ase import units
 
+from rigidmd import observables as obs
 from rigidmd.coupling import (
+    TEMPERATURE,
     Coupling,
+    CouplingView,
     LammpsFix,
+    NoseHooverChain,
     NotExportable,
     Parameter,
+    check_positive_integer,
     check_rng,
+    check_temperature,
+    check_time,
     register,
     rng_state,
     set_rng_state,
 )
-from rigidmd.coupling.thermostats import (
-    TEMPERATURE,
-    NoseHooverChain,
-    check_positive_integer,
-    check_temperature,
-    check_time,
-)
+from rigidmd.dynamics import RigidDynamics
+from rigidmd.thermostats import BussiThermostat, NoseHooverThermostat
 
-__all__ = ["Barostat", "MTKBarostat", "CRescaleBarostat", "BarostatError", "COUPLE",
-           "symmetric_exp", "exprel"]
+__all__ = ["RigidNPT", "RigidCRescale", "Barostat", "MTKBarostat", "CRescaleBarostat",
+           "BarostatError", "COUPLE", "symmetric_exp", "exprel"]
 
 #: Allowed values of ``couple`` and the number of cell degrees of freedom each moves.
 COUPLE = {"iso": 1, "aniso": 3, "tri": 6}
@@ -121,17 +123,25 @@ class Barostat(Coupling):
     moves_cell = True
 
     def __init__(self, temperature_K, pressure_au, couple):
-        self.temperature_K = check_temperature(temperature_K)
+        self.temperature_K = self._check_positive(check_temperature(temperature_K))
         self.pressure_au = check_pressure(pressure_au)
         self.couple = check_couple(couple)
+
+    def _check_positive(self, temperature_K):
+        if temperature_K == 0:
+            raise ValueError(f"temperature_K = 0: {self.zero_kelvin}")
+        return temperature_K
+
+    def set_temperature(self, temperature_K: float) -> None:
+        """Change the target temperature (K)."""
+        self.temperature_K = self._check_positive(check_temperature(temperature_K))
 
     @property
     def kT(self):
         return units.kB * self.temperature_K
 
-    def check(self, dyn):
-        super().check(dyn)
-        atoms = dyn.atoms
+    def check(self, atoms, model, dt):
+        super().check(atoms, model, dt)
         if not atoms.pbc.all():
             raise ValueError(f"a barostat needs a periodic cell in all three directions; "
                              f"atoms.pbc is {atoms.pbc.tolist()}")
@@ -151,9 +161,11 @@ class Barostat(Coupling):
                 f"couple='tri' shears the cell, but the calculator {type(calc).__name__} needs "
                 "an orthorhombic cell; use couple='aniso' or 'iso'")
 
-    def pressure_tensor(self):
+    @staticmethod
+    def pressure_tensor(view: CouplingView) -> np.ndarray:
         """Molecular pressure tensor (eV/Å³) at the current state, symmetric, shape (3, 3)."""
-        return -self.dyn.get_stress(voigt=False)
+        record = view.record
+        return -obs.stress_tensor(record.virial, record.kinetic_tensor, record.volume)
 
     def check_volume_change(self, A):
         """Refuse a step that changes the volume by more than 10 %."""
@@ -215,6 +227,7 @@ class MTKBarostat(Barostat):
     """
 
     kind = "mtk"
+    zero_kelvin = "the MTK barostat's mass is (N+1) k_B T pdamp^2"
     parameters = (TEMPERATURE, PRESSURE, Parameter("pdamp", "pdamp", "time", example="1 ps"),
                   COUPLING,
                   Parameter("pchain", "pchain", "integer", required=False, default=3),
@@ -222,8 +235,6 @@ class MTKBarostat(Barostat):
 
     def __init__(self, temperature_K, pressure_au, pdamp, couple="iso", pchain=3, ploop=1):
         super().__init__(temperature_K, pressure_au, couple)
-        if self.temperature_K == 0:
-            raise ValueError("temperature_K = 0: the MTK barostat's mass is (N+1) k_B T pdamp^2")
         self.pdamp = check_time("pdamp", pdamp)
         self.pchain = check_positive_integer("pchain", pchain)
         self.ploop = check_positive_integer("ploop", ploop)
@@ -236,53 +247,57 @@ class MTKBarostat(Barostat):
             raise ValueError(f"pdamp = {self.pdamp:g} is under 10 time steps ({10 * dt:g}): "
                              "the barostat cannot be integrated (1000 steps is typical)")
 
+    def bind(self, view: CouplingView) -> None:
+        super().bind(view)
+        #: :math:`N_f`, the centres of mass' and point particles' degrees of freedom.
+        self.n_f = view.model.translational_dof
+
     @property
     def W(self):
         """Barostat mass per cell component (eV · ASE time²)."""
-        return (self.dyn.model.translational_dof / 3 + 1) * self.kT * self.pdamp**2
+        return (self.n_f / 3 + 1) * self.kT * self.pdamp**2
 
     def cell_kinetic_energy(self):
         return float(np.sum(self.p_g**2) / (2 * self.W))
 
     def _kappa(self):
         """Friction tensor of the translational momenta, (p_g + Tr(p_g)/N_f) / W."""
-        n_f = self.dyn.model.translational_dof
-        return (self.p_g + np.trace(self.p_g) / n_f * np.eye(3)) / self.W
+        return (self.p_g + np.trace(self.p_g) / self.n_f * np.eye(3)) / self.W
 
-    def _kick(self, h):
+    def _kick(self, view, h):
         """:math:`p_g \\mathrel{+}= h\\,G` with the pressure at the current state."""
-        dyn = self.dyn
-        n_f = dyn.model.translational_dof
-        kinetic = 2.0 * dyn.get_translational_kinetic_energy() / n_f
-        G = dyn.get_volume() * (self.pressure_tensor() - self.pressure_au * np.eye(3))
+        record = view.record
+        kinetic = 2.0 * record.translational_energy / self.n_f
+        G = record.volume * (self.pressure_tensor(view) - self.pressure_au * np.eye(3))
         self.p_g += h * project(G + kinetic * np.eye(3), self.couple)
 
     def _thermostat(self, h):
         self.p_g *= self.chain.propagate(self.cell_kinetic_energy(), self.kT, h)
 
-    def _scale_momenta(self, h):
-        s = self.dyn.state
+    def _scale_momenta(self, view, h):
+        s = view.state
         factor, _ = symmetric_exp(-self._kappa(), h)
         s.V[...] = s.V @ factor.T
         s.v[...] = s.v @ factor.T
+        view.record.scale_translation(factor)
 
-    def first_half(self, h):
+    def first_half(self, view: CouplingView, h: float) -> None:
         self._thermostat(h)
-        self._kick(h)
-        self._scale_momenta(h)
+        self._kick(view, h)
+        self._scale_momenta(view, h)
 
-    def second_half(self, h):
-        self._scale_momenta(h)
-        self._kick(h)
+    def second_half(self, view: CouplingView, h: float) -> None:
+        self._scale_momenta(view, h)
+        self._kick(view, h)
         self._thermostat(h)
 
-    def drift_matrices(self, h):
+    def drift_matrices(self, view: CouplingView, h: float) -> tuple:
         A, B = symmetric_exp(self.p_g / self.W, h)
         self.check_volume_change(A)
-        return A, B, np.eye(3)
+        return A, B, np.eye(3), None
 
-    def energy(self):
-        return (self.cell_kinetic_energy() + self.pressure_au * self.dyn.get_volume()
+    def energy(self, view: CouplingView) -> float:
+        return (self.cell_kinetic_energy() + self.pressure_au * view.record.volume
                 + self.chain.energy(self.kT))
 
     def get_state(self):
@@ -379,6 +394,8 @@ class CRescaleBarostat(Barostat):
     """
 
     kind = "crescale"
+    zero_kelvin = ("stochastic cell rescaling's drift is D f / k_B T with D proportional to "
+                   "k_B T: it has no 0 K limit; use the MTK barostat or a positive temperature")
     parameters = (TEMPERATURE, PRESSURE, Parameter("taup", "taup", "time", example="1 ps"),
                   Parameter("compressibility_au", "compressibility", "compressibility",
                             example="4.5e-5 1/bar"),
@@ -403,8 +420,8 @@ class CRescaleBarostat(Barostat):
         self.basis = _deviatoric_basis(self.couple)
         #: The scheme's bookkeeping (eV): P0 V + this is the barostat's energy term.
         self.work = 0.0
-        self._move = None  # this step's move, between the drift and the second half
-        self._due = False
+        self._noise = None  # this step's random numbers, drawn in the first half
+        self._span = 0.0    # the time this step's move stands for (every * dt)
 
     def check_timestep(self, dt):
         if self.taup < 10 * self.every * dt:
@@ -419,24 +436,28 @@ class CRescaleBarostat(Barostat):
         f_eta = volume * np.einsum("kij,ij->k", self.basis, pressure)
         return f_lambda, f_eta
 
-    def first_half(self, h):
-        self._move = None
-        self._due = self.dyn.nsteps % self.every == 0
+    def first_half(self, view: CouplingView, h: float) -> None:
+        """Draw this step's noise when the cell moves this step (the drift only asks)."""
+        self._noise = None
+        if view.step % self.every == 0:
+            self._span = self.every * (2.0 * h)  # the time the move stands for
+            self._noise = (self.rng.standard_normal(),
+                           self.rng.standard_normal(len(self.basis)))
 
-    def drift_matrices(self, h):
-        if self._move is not None or not self._due:  # moved already, or not this step
-            return np.eye(3), h * np.eye(3), np.eye(3)
-        dyn, kT, dt = self.dyn, self.kT, self.every * self.dyn.dt
-        volume = dyn.get_volume()
-        pressure = self.pressure_tensor()
-        f_lambda, f_eta = self._forces(pressure, volume)
+    def drift_matrices(self, view: CouplingView, h: float) -> tuple:
+        """The cell's move in the step's first drift, from this step's noise; changes nothing."""
+        record = view.record
+        if record.cell_move is not None or self._noise is None:  # moved already, or not now
+            return np.eye(3), h * np.eye(3), np.eye(3), None
+        kT, dt = self.kT, self._span
+        volume = record.volume
+        f_lambda, f_eta = self._forces(self.pressure_tensor(view), volume)
         d_lambda = 0.25 * kT * self.compressibility_au / self.taup
         d_eta = kT * self.compressibility_au / (3.0 * self.taup * volume)
         lam = np.sqrt(volume)
-        step_lambda = (d_lambda / kT * f_lambda * dt
-                       + np.sqrt(2.0 * d_lambda * dt) * self.rng.standard_normal())
-        step_eta = (d_eta / kT * f_eta * dt
-                    + np.sqrt(2.0 * d_eta * dt) * self.rng.standard_normal(len(f_eta)))
+        xi_lambda, xi_eta = self._noise
+        step_lambda = d_lambda / kT * f_lambda * dt + np.sqrt(2.0 * d_lambda * dt) * xi_lambda
+        step_eta = d_eta / kT * f_eta * dt + np.sqrt(2.0 * d_eta * dt) * xi_eta
         if not step_lambda / lam > -1.0:
             raise BarostatError(f"{self.kind} barostat: the volume would collapse in one step; "
                                 "the step was undone (use a longer taup)")
@@ -445,33 +466,33 @@ class CRescaleBarostat(Barostat):
         mu, _ = symmetric_exp(strain, 1.0)
         self.check_volume_change(mu)
         inverse = np.linalg.inv(mu)
-        # Bookkeeping before the move (the reversible scheme's first half).
-        self.work += (0.5 * step_lambda * f_lambda
-                      - 0.25 * d_lambda / kT * dt * f_lambda**2 + 0.5 * kT * np.log(volume)
-                      + 0.5 * step_eta @ f_eta - 0.25 * d_eta / kT * dt * f_eta @ f_eta)
-        kinetic = dyn.state.V @ inverse.T, dyn.state.v @ inverse.T
-        self._move = (step_lambda, step_eta, d_lambda, d_eta, kinetic)
-        return mu, 0.5 * h * (mu + inverse), inverse
+        # Bookkeeping of the reversible scheme's first half, added in the second half.
+        first = (0.5 * step_lambda * f_lambda
+                 - 0.25 * d_lambda / kT * dt * f_lambda**2 + 0.5 * kT * np.log(volume)
+                 + 0.5 * step_eta @ f_eta - 0.25 * d_eta / kT * dt * f_eta @ f_eta)
+        state = view.state
+        kinetic = state.V @ inverse.T, state.v @ inverse.T
+        note = (step_lambda, step_eta, d_lambda, d_eta, kinetic, first)
+        return mu, 0.5 * h * (mu + inverse), inverse, note
 
-    def second_half(self, h):
-        if self._move is None:
+    def second_half(self, view: CouplingView, h: float) -> None:
+        record = view.record
+        if record.cell_move is None:
             return
-        step_lambda, step_eta, d_lambda, d_eta, (V, v) = self._move
-        dyn, kT, dt = self.dyn, self.kT, self.every * self.dyn.dt
-        volume = dyn.get_volume()
+        step_lambda, step_eta, d_lambda, d_eta, (V, v), first = record.cell_move
+        kT, dt = self.kT, self._span
+        volume = record.volume
         # The pressure right after the force call: the velocities as the drift left them.
-        m = dyn.model
-        kinetic = (np.einsum("b,bi,bj->ij", m.mass, V, V)
-                   + np.einsum("f,fi,fj->ij", m.free_masses, v, v))
-        pressure = dyn.molecular_virial() / volume + kinetic / volume
+        kinetic = obs.kinetic_tensor_of(V, v, view.model)
+        pressure = record.virial / volume + kinetic / volume
         f_lambda, f_eta = self._forces(pressure, volume)
+        self.work += first
         self.work += (0.5 * step_lambda * f_lambda
                       + 0.25 * d_lambda / kT * dt * f_lambda**2 - 0.5 * kT * np.log(volume)
                       + 0.5 * step_eta @ f_eta + 0.25 * d_eta / kT * dt * f_eta @ f_eta)
-        self._move = None
 
-    def energy(self):
-        return self.pressure_au * self.dyn.get_volume() + self.work
+    def energy(self, view: CouplingView) -> float:
+        return self.pressure_au * view.record.volume + self.work
 
     def get_state(self):
         return {"work": self.work, "rng": rng_state(self.rng)}
@@ -479,8 +500,7 @@ class CRescaleBarostat(Barostat):
     def set_state(self, state):
         self.work = float(state["work"])
         set_rng_state(self.rng, state["rng"])
-        self._move = None
-        self._due = False
+        self._noise = None
 
     def lammps_fix(self, time_unit, seed=None):
         raise NotExportable("barostat.kind: LAMMPS has no stochastic cell rescaling for rigid "
@@ -490,3 +510,110 @@ class CRescaleBarostat(Barostat):
         return super().todict() | {"taup": self.taup,
                                    "compressibility_au": self.compressibility_au,
                                    "every": self.every}
+
+
+# ---------------------------------------------------------------- user constructors
+class _Barostatted(RigidDynamics):
+    """A rigid dynamics with a thermostat part and a barostat part."""
+
+    def __init__(self, atoms, timestep, thermostat, barostat, **kwargs):
+        if "couplings" in kwargs:
+            raise TypeError(f"{type(self).__name__} builds its own thermostat and barostat; "
+                            "use RigidDynamics(couplings=...) to compose parts")
+        self.thermostat, self.barostat = thermostat, barostat
+        super().__init__(atoms, timestep, couplings=[thermostat, barostat], **kwargs)
+
+    @property
+    def temperature_K(self):
+        """Target temperature (K)."""
+        return self.thermostat.temperature_K
+
+    @property
+    def pressure_au(self):
+        """Target pressure (eV/Å³)."""
+        return self.barostat.pressure_au
+
+    def todict(self):
+        return super().todict() | {"thermostat": self.thermostat.todict(),
+                                   "barostat": self.barostat.todict()}
+
+
+class RigidNPT(_Barostatted):
+    r"""Isothermal–isobaric rigid-body dynamics: Nosé–Hoover chains and the MTK barostat.
+
+    See :class:`~rigidmd.thermostats.NoseHooverThermostat` and
+    :class:`MTKBarostat`.  ``get_conserved_energy()``
+    includes the barostat's kinetic energy, :math:`P_0 V` and every chain.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+        A periodic system whose calculator provides stress.
+    timestep : float
+        ASE time units.
+    temperature_K : float
+        K.
+    pressure_au : float
+        eV/Å³ (``1.01325 * ase.units.bar`` for 1 atm).
+    tdamp : float
+        Thermostat time constant (ASE time units; 100 steps is typical).
+    pdamp : float
+        Barostat time constant (ASE time units; at least 10 steps, 1000 typical).
+    couple : {"iso", "aniso", "tri"}, default "iso"
+        Volume only, the three lengths, or every strain (a triclinic cell;
+        LAMMPS's rigid barostats cannot do this).
+    tchain, pchain, tloop, ploop : int
+        Chain lengths and sub-steps of the thermostat and of the barostat.
+    **kwargs
+        As for :class:`~rigidmd.dynamics.RigidDynamics` (``bodies``,
+        ``integrator``, ``trajectory``, ``logfile``, ...).
+    """
+
+    def __init__(self, atoms, timestep, temperature_K, pressure_au, tdamp, pdamp, *,
+                 couple="iso", tchain=3, pchain=3, tloop=1, ploop=1, **kwargs):
+        super().__init__(
+            atoms, timestep, NoseHooverThermostat(temperature_K, tdamp, tchain, tloop),
+            MTKBarostat(temperature_K, pressure_au, pdamp, couple, pchain, ploop), **kwargs)
+
+
+class RigidCRescale(_Barostatted):
+    r"""Rigid-body NPT by stochastic cell rescaling and stochastic velocity rescaling.
+
+    See :class:`~rigidmd.thermostats.BussiThermostat` and
+    :class:`CRescaleBarostat`.
+    ``get_conserved_energy()`` is the effective energy: its drift measures
+    the integration error.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+        A periodic system whose calculator provides stress.
+    timestep : float
+        ASE time units.
+    temperature_K : float
+        K.
+    pressure_au : float
+        eV/Å³.
+    taut : float
+        Thermostat relaxation time (ASE time units).
+    taup : float
+        Barostat relaxation time (ASE time units; at least 10 steps).
+    compressibility_au : float
+        Isothermal compressibility (Å³/eV; water: ``4.5e-5 / ase.units.bar``).
+    couple : {"iso", "aniso", "tri"}, default "iso"
+    rng : numpy.random.Generator, optional
+        Shared by the thermostat and the barostat.
+    every : int, default 1
+        Move the cell every ``every`` steps (see
+        :class:`CRescaleBarostat`).
+    **kwargs
+        As for :class:`~rigidmd.dynamics.RigidDynamics`.
+    """
+
+    def __init__(self, atoms, timestep, temperature_K, pressure_au, taut, taup,
+                 compressibility_au, *, couple="iso", rng=None, every=1, **kwargs):
+        rng = check_rng(rng)
+        super().__init__(
+            atoms, timestep, BussiThermostat(temperature_K, taut, rng),
+            CRescaleBarostat(temperature_K, pressure_au, taup, compressibility_au, couple, rng,
+                             every), **kwargs)
