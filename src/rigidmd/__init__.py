@@ -10,6 +10,7 @@ from rigidmd.bodies import RigidBodies
 from rigidmd.dof import RigidBodyDOF, kinetic_energy, temperature
 from rigidmd.dynamics import NonFiniteForceError, RigidDynamics, RigidVerlet
 from rigidmd.model import BodyGeometry, BodyModel
+from rigidmd.montecarlo import RigidMCBarostat
 from rigidmd.restart import load_checkpoint
 from rigidmd.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover
 from rigidmd.velocities import (
@@ -27,6 +28,7 @@ __all__ = [
     "RigidNoseHoover",
     "RigidNPT",
     "RigidCRescale",
+    "RigidMCBarostat",
     "RigidBodies",
     "BodyModel",
     "BodyGeometry",

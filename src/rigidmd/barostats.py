@@ -513,7 +513,7 @@ class CRescaleBarostat(Barostat):
 
 
 # ---------------------------------------------------------------- user constructors
-class _Barostatted(RigidDynamics):
+class BarostattedDynamics(RigidDynamics):
     """A rigid dynamics with a thermostat part and a barostat part."""
 
     def __init__(self, atoms, timestep, thermostat, barostat, **kwargs):
@@ -538,7 +538,7 @@ class _Barostatted(RigidDynamics):
                                    "barostat": self.barostat.todict()}
 
 
-class RigidNPT(_Barostatted):
+class RigidNPT(BarostattedDynamics):
     r"""Isothermal–isobaric rigid-body dynamics: Nosé–Hoover chains and the MTK barostat.
 
     See :class:`~rigidmd.thermostats.NoseHooverThermostat` and
@@ -576,7 +576,7 @@ class RigidNPT(_Barostatted):
             MTKBarostat(temperature_K, pressure_au, pdamp, couple, pchain, ploop), **kwargs)
 
 
-class RigidCRescale(_Barostatted):
+class RigidCRescale(BarostattedDynamics):
     r"""Rigid-body NPT by stochastic cell rescaling and stochastic velocity rescaling.
 
     See :class:`~rigidmd.thermostats.BussiThermostat` and

@@ -17,11 +17,12 @@ of a failed step and for checkpoints), and says what it is in a LAMMPS deck.
 It never holds the dynamics: each call gets a :class:`CouplingView` (the
 state, the body model, the per-step record of :mod:`rigidmd.record`, the force
 evaluator and the step number).  The parts themselves live beside the
-classes users construct: :mod:`rigidmd.thermostats` and :mod:`rigidmd.barostats`.
+classes users construct: :mod:`rigidmd.thermostats`, :mod:`rigidmd.barostats` and
+:mod:`rigidmd.montecarlo`.
 
 :data:`COUPLINGS` maps each kind's name (``"langevin"``, ``"bussi"``,
-``"nose_hoover"``, ...) to its class; the class's :attr:`Coupling.parameters`
-say which parameters it takes, with which units, so that the configuration
+``"nose_hoover"``, ``"monte_carlo"``, ...) to its class; the class's
+:attr:`Coupling.parameters` say which parameters it takes, with which units, so that the configuration
 checker, the command line and the LAMMPS export all read one registry.
 """
 
@@ -184,6 +185,8 @@ class Coupling:
     needs_energy: ClassVar[bool] = False
     #: Whether the part keeps the total momentum (a thermostat's ``fixcm``).
     fixcm: bool = False
+    #: Names of the columns the part adds to the MD log (values from :meth:`log_values`).
+    log_columns: ClassVar[tuple] = ()
 
     def check(self, atoms: Atoms, model: BodyModel, dt: float) -> None:
         """Check the parameters against a system and time step; change nothing.
@@ -223,6 +226,10 @@ class Coupling:
     def energy(self, view: CouplingView) -> float:
         """This part's term in the conserved energy (eV)."""
         return 0.0
+
+    def log_values(self) -> tuple:
+        """Values of :attr:`log_columns` now (numbers, one per column)."""
+        return ()
 
     def get_state(self) -> dict:
         """The part's own variables, as a dict of floats, arrays and RNG states (copies)."""

@@ -5,8 +5,10 @@ The first five columns are those of ASE's :class:`~ase.md.MDLogger`
 read these; then the quantity the dynamics conserves (``Econs[eV]``, the total
 energy for NVE) and, for a periodic cell, the molecular pressure (``P[bar]``,
 when a barostat runs or ``log_pressure`` asks for it), the volume
-(``V[A^3]``) and the density (``rho[g/cm3]``).  Energies carry 6 decimals
-(µeV), so a slow drift shows as a line, not as steps.
+(``V[A^3]``) and the density (``rho[g/cm3]``), then the columns of the coupling
+parts that have any (:attr:`rigidmd.coupling.Coupling.log_columns`, e.g.
+``MCacc[%]``, a Monte Carlo barostat's acceptance since the start).  Energies
+carry 6 decimals (µeV), so a slow drift shows as a line, not as steps.
 """
 
 from ase import units
@@ -48,10 +50,18 @@ class RigidLogger(MDLogger):
         if self.periodic:
             columns += ["V[A^3]", "rho[g/cm3]"]
             self.fmt += " %12.3f %10.5f"
+        widths = [-10, 14, 14, 14, 8, 14] + ([11] if self.log_pressure else [])
+        widths += [12, 10] if self.periodic else []
+        #: The coupling parts that add columns (their ``log_values()`` at each line).
+        self.parts = [part for part in getattr(dyn, "couplings", ()) if part.log_columns]
+        for part in self.parts:
+            for name in part.log_columns:
+                columns.append(name)
+                widths.append(max(9, len(name)))
+                self.fmt += f" %{widths[-1]}.2f"
         self.fmt += "\n"
-        widths = [-10, 14, 14, 14, 8, 14, 11, 12, 10]
         self.hdr = " ".join(f"{name:{'<' if w < 0 else '>'}{abs(w)}}"
-                            for name, w in zip(columns, widths, strict=False))
+                            for name, w in zip(columns, widths, strict=True))
         if header:
             self.logfile.write(self.hdr + "\n")
 
@@ -65,5 +75,7 @@ class RigidLogger(MDLogger):
             row.append(dyn.get_pressure() / units.bar)
         if self.periodic:
             row += [dyn.get_volume(), dyn.get_density()]
+        for part in self.parts:
+            row += part.log_values()
         self.logfile.write(self.fmt % tuple(row))
         self.logfile.flush()

@@ -190,7 +190,10 @@ def _observables(dyn):
     """Time, conserved energy and, under a barostat, pressure (bar), volume, density."""
     row = (dyn.get_time(), dyn.get_conserved_energy())
     if dyn.evaluator.cell_moves:
-        row += (dyn.get_pressure() / units.bar, dyn.get_volume(), dyn.get_density())
+        # A Monte Carlo barostat runs with calculators that have no stress: no pressure then.
+        stress = "stress" in getattr(dyn.atoms.calc, "implemented_properties", ("stress",))
+        pressure = dyn.get_pressure() / units.bar if stress else np.nan
+        row += (pressure, dyn.get_volume(), dyn.get_density())
     return row
 
 
@@ -600,7 +603,8 @@ def summary(dyn, rows, elapsed, stream):
               file=stream)
         if data.shape[1] > 2:
             pressure, volume, density = data[:, 2:].T
-            print(f"mean P = {pressure.mean():.1f} bar, V = {volume.mean():.1f} Å³, "
+            mean_p = "" if np.isnan(pressure).all() else f"mean P = {pressure.mean():.1f} bar, "
+            print(f"{mean_p}V = {volume.mean():.1f} Å³, "
                   f"density = {density.mean():.4f} g/cm³ (final {density[-1]:.4f})",
                   file=stream)
 

@@ -20,10 +20,12 @@ A configuration is a YAML mapping (every key optional except ``structure``
       temperature: 300 K
       friction: 0.01 1/fs         # langevin;  taut: 100 fs (bussi);  tdamp: 100 fs
     barostat:                     # omit for constant volume (a periodic cell and a
-      kind: mtk                   # calculator with stress); mtk | crescale
+      kind: mtk                   # calculator with stress); mtk | crescale | monte_carlo
       pressure: 1 bar             # bar, atm, GPa, Pa or eV/A^3
       pdamp: 1 ps                 # mtk;  crescale: taup: 1 ps, compressibility: 4.5e-5 1/bar
       couple: iso                 # iso | aniso | tri
+                                  # monte_carlo (no stress needed): every: 25, seed: 0,
+                                  # adapt_moves: 500
     velocities: {temperature: 250 K, seed: 0}   # draw rigid velocities first
     timestep: 1 fs                # with a unit: fs, ps, or ase (ASE time units)
     steps: 2000
