@@ -22,8 +22,9 @@ classes users construct: :mod:`rigidmd.thermostats`, :mod:`rigidmd.barostats` an
 
 :data:`COUPLINGS` maps each kind's name (``"langevin"``, ``"bussi"``,
 ``"nose_hoover"``, ``"monte_carlo"``, ...) to its class; the class's
-:attr:`Coupling.parameters` say which parameters it takes, with which units, so that the configuration
-checker, the command line and the LAMMPS export all read one registry.
+:attr:`Coupling.parameters` say which parameters it takes, with which units, so
+that the configuration checker, the command line and the LAMMPS export all read
+one registry.
 """
 
 from dataclasses import dataclass
