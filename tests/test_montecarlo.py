@@ -196,6 +196,30 @@ def test_one_calculator_call_per_move_and_rigid_molecules(couple):
     assert dyn.get_volume() != pytest.approx(dimer_fluid(n_side=4).get_volume(), rel=1e-6)
 
 
+def test_a_calculator_that_computes_only_what_is_asked_pays_one_call_per_accepted_move():
+    """The trial asks for the energy only; a calculator that then leaves the forces out is
+    called once more for the forces of an accepted cell (most compute both in one call,
+    and the acceptance adopts those: the test above)."""
+
+    class EnergyOnlyWhenAsked(NoStressLJ):
+        def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+            super().calculate(atoms, properties, system_changes)
+            if list(properties) == ["energy"]:
+                del self.results["forces"]
+
+    atoms = liquid()
+    atoms.calc = calc = EnergyOnlyWhenAsked(rc=7.0)
+    dyn = mc(atoms, every=5)
+    dyn.run(100)
+    accepted = int(dyn.barostat.accepted.sum())
+    assert 0 < accepted < 20
+    assert calc.calls == 1 + 100 + 20 + accepted
+    # The forces the dynamics holds are those of the final configuration.
+    fresh = atoms.copy()
+    fresh.calc = PeriodicLJ(rc=7.0)
+    np.testing.assert_allclose(atoms.get_forces(), fresh.get_forces(), rtol=1e-12, atol=1e-12)
+
+
 def test_a_rejected_move_leaves_everything_as_it_was():
     atoms = liquid()
     calc = atoms.calc
@@ -319,6 +343,44 @@ def test_failed_trial_is_rolled_back_with_the_cell():
     dyn.run(60 - dyn.nsteps)
     np.testing.assert_array_equal(atoms.positions, reference.positions)
     np.testing.assert_array_equal(atoms.cell.array, reference.cell.array)
+
+
+def test_failure_in_the_step_after_an_accepted_move_is_rolled_back():
+    """The step's own force call failing right after an accepted move: the move is undone
+    with the step (cell, counters, random state); going on gives the same run."""
+    reference = liquid()
+    ref = mc(reference, every=3)
+    cells = []  # the cell after 0, 1, 2, ... steps (observers run at the start too)
+    ref.attach(lambda: cells.append(reference.cell.array.copy()), interval=1)
+    ref.run(60)
+    # Move j is made at the start of step 3j: accepted when that step changed the cell.
+    moved = [j for j in range(20) if not np.array_equal(cells[3 * j + 1], cells[3 * j])]
+    j = next(j for j in moved if j >= 3)
+
+    class Flaky(NoStressLJ):
+        trials = 0
+        failed = False
+
+        def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+            if "cell" in system_changes:  # irun's first call (all changes), then the trials
+                self.trials += 1
+            elif self.trials == j + 2 and not self.failed:  # the step's call after move j
+                self.failed = True
+                raise RuntimeError("calculator failed")
+            super().calculate(atoms, properties, system_changes)
+
+    atoms = liquid()
+    atoms.calc = Flaky(rc=7.0)
+    dyn = mc(atoms, every=3)
+    with pytest.raises(RuntimeError, match="calculator failed"):
+        dyn.run(60)
+    assert dyn.nsteps == 3 * j and dyn.barostat.attempted.sum() == j
+    np.testing.assert_array_equal(dyn.state.cell, cells[3 * j])
+    np.testing.assert_array_equal(atoms.cell.array, cells[3 * j])
+    dyn.run(60 - dyn.nsteps)
+    np.testing.assert_array_equal(atoms.positions, reference.positions)
+    np.testing.assert_array_equal(atoms.cell.array, reference.cell.array)
+    np.testing.assert_array_equal(dyn.barostat.accepted, ref.barostat.accepted)
 
 
 def test_sizes_adapt_in_the_window_then_freeze():
