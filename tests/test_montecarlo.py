@@ -220,6 +220,39 @@ def test_a_calculator_that_computes_only_what_is_asked_pays_one_call_per_accepte
     np.testing.assert_allclose(atoms.get_forces(), fresh.get_forces(), rtol=1e-12, atol=1e-12)
 
 
+def test_a_calculator_outside_ase_s_protocol_gives_the_same_run():
+    """A calculator with only get_forces and get_potential_energy (no calculate, no cached
+    results): the force calls carry no energy, so a move asks for the old energy too."""
+
+    class Bare:
+        implemented_properties = ["energy", "forces"]
+
+        def __init__(self):
+            self.energy_calls = 0
+
+        def evaluate(self, atoms):
+            copy = atoms.copy()
+            copy.calc = PeriodicLJ(rc=7.0)
+            return copy
+
+        def get_forces(self, atoms):
+            return self.evaluate(atoms).get_forces()
+
+        def get_potential_energy(self, atoms, force_consistent=False):
+            self.energy_calls += 1
+            return self.evaluate(atoms).get_potential_energy()
+
+    reference = liquid()
+    mc(reference, every=5).run(50)
+    atoms = liquid()
+    atoms.calc = calc = Bare()
+    dyn = mc(atoms, every=5)
+    dyn.run(50)
+    assert calc.energy_calls == 2 * 10  # the old and the trial energy of each move
+    np.testing.assert_array_equal(atoms.positions, reference.positions)
+    np.testing.assert_array_equal(atoms.cell.array, reference.cell.array)
+
+
 def test_a_rejected_move_leaves_everything_as_it_was():
     atoms = liquid()
     calc = atoms.calc
