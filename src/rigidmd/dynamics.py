@@ -192,7 +192,6 @@ class RigidDynamics(MolecularDynamics):
         model = geometry.model
         for part in couplings:
             part.check(atoms, model, self._dt)
-
         # -- from here on the atoms and files change --
         with warnings.catch_warnings():  # ASE warns of massless atoms: ours are carried sites
             warnings.filterwarnings("ignore", message="Zero mass encountered in atoms")
