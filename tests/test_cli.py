@@ -158,7 +158,7 @@ def test_run_from_flags_only(tmp_path):
      "calculator.options.rc: 40 Å is more than half the periodic cell's width (9.30 Å)"),
     ("bodies: [[0, 1, 2]]", "bodies: use connectivity, mol-id or tags"),
     ("structure: {builtin: water_box, n_side: 3, model: spc}",
-     "structure.model: unknown water model 'spc'; use one of tip3p, tip4p, tip4p2005"),
+     "structure.model: unknown water model 'spc'; use one of tip3p, spce, tip4p, tip4p2005"),
     ("calculator: {name: lammps, water_model: {name: tip4p2005}}",
      "calculator.water_model.cutoff: missing"),
     ("calculator: {name: tip3p, water_model: {name: opc, cutoff: 9}}",

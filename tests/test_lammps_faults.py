@@ -18,8 +18,9 @@ from helpers import DATA, lammps_instances
 
 import rigidmd.lammps.calculator as lammps_calculator
 from rigidmd import RigidBodies, RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
-from rigidmd.checkpoint import load_checkpoint, save_checkpoint
+from rigidmd.checkpoint import save_checkpoint
 from rigidmd.lammps import LAMMPSCalculator, tip3p_charges
+from rigidmd.restart import load_checkpoint
 from rigidmd.systems import water_box
 from rigidmd.water import water_model
 

@@ -37,6 +37,8 @@ def private_accesses(tree):
             continue
         if isinstance(owner, ast.Call) and ast.unparse(owner.func) == "super":
             continue  # a base class's own template method (MDAnalysis's _single_frame)
+        if ast.unparse(node) == "os._exit":
+            continue  # the standard library's documented exit without clean-up
         found.append((node.lineno, ast.unparse(node)))
     return found
 

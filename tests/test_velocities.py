@@ -89,3 +89,20 @@ def test_rigid_zero_rotation_on_four_site_water():
     atoms = _four_site_cluster()
     rigid_zero_rotation(atoms, preserve_temperature=False)
     assert kinetic_energy(atoms) < kinetic0
+
+
+def test_ase_stationary_between_steps_on_four_site_water_is_reported():
+    """ASE's Stationary zeroes a four-site system's momenta: the dynamics says so."""
+    from ase.md.velocitydistribution import Stationary
+    from helpers import CoulombLJ, water_parameters
+
+    from rigidmd.water import WATER_MODELS
+
+    atoms = _four_site_cluster()
+    atoms.calc = CoulombLJ(parameters=water_parameters(WATER_MODELS["tip4p2005"]))
+    dyn = RigidVerlet(atoms, units.fs)
+    dyn.run(2)
+    with np.errstate(invalid="ignore"):
+        Stationary(atoms)
+    with pytest.warns(UserWarning, match="rigidmd.rigid_stationary"):
+        dyn.run(1)

@@ -192,11 +192,8 @@ class RigidDynamics(MolecularDynamics):
         model = geometry.model
         for part in couplings:
             part.check(atoms, model, self._dt)
-
         # -- from here on the atoms and files change --
-        with warnings.catch_warnings():
-            # ASE warns of every massless atom; ours are virtual sites that their bodies
-            # carry (check_masses refused any other).
+        with warnings.catch_warnings():  # ASE warns of massless atoms: ours are carried sites
             warnings.filterwarnings("ignore", message="Zero mass encountered in atoms")
             super().__init__(atoms, self._dt, trajectory=trajectory, logfile=None,
                              loginterval=loginterval, **kwargs)
@@ -219,8 +216,7 @@ class RigidDynamics(MolecularDynamics):
                                         stress=any(part.needs_stress for part in couplings),
                                         cell_moves=mover is not None)
         self.view = CouplingView(self.state, model, self.record, self.evaluator, 0, fixcom)
-        #: Ask the calculator for the stress with the forces on every step an observer is
-        #: due (set by :class:`rigidmd.mdanalysis.StressRecorder`): one call, not two.
+        #: The stress with the forces when an observer is due (``StressRecorder`` sets it).
         self.stress_on_observed_steps = False
         for part in couplings:
             part.bind(self.view)
@@ -424,8 +420,8 @@ class RigidDynamics(MolecularDynamics):
         """Place the atoms from the state, call the calculator, reduce to bodies."""
         self.evaluator.step = self.nsteps
         observed = self._observed_next()
-        self.evaluator.want_energy = self.needs_energy or observed
-        self.evaluator.want_stress = self.stress_on_observed_steps and observed
+        self.evaluator.want_energy, self.evaluator.want_stress = (
+            self.needs_energy or observed, self.stress_on_observed_steps and observed)
         self.evaluator.evaluate(self.state)
 
     def _write_atoms(self):

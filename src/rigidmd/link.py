@@ -186,6 +186,14 @@ class BodyLink:
             check_finite(atoms.positions, "position", "Å", when)
             check_finite(atoms.cell.array, "cell", "Å", when)
         if kicked:
-            check_finite(atoms.get_momenta(), "momentum", "amu Å / ASE time", when)
+            new = atoms.get_momenta()
+            check_finite(new, "momentum", "amu Å / ASE time", when)
             check_massless_momenta(atoms, when)
+            if not new.any() and momenta.any() and not self.masses.all():
+                warnings.warn(
+                    "every momentum was set to zero between steps, and the atoms have massless "
+                    "sites: ASE's Stationary, ZeroRotation and force_temperature read a NaN "
+                    "temperature there and zero the momenta; rigidmd.rigid_stationary and "
+                    "rigidmd.rigid_zero_rotation do what they mean (going on from rest)",
+                    stacklevel=4)
         return moved, kicked

@@ -47,7 +47,7 @@ KJ_PER_MOL = units.kJ / units.mol
 #: Coulomb's constant 1/(4π ε0) in eV Å / e².
 COULOMB = units.Hartree * units.Bohr
 #: One debye in e Å.
-DEBYE = 1e-21 / units._c / units._e * 1e10
+DEBYE = units.Debye
 #: Gas-phase dipole of water (D) and its polarisability (Å³) used by Berendsen et al. (1987).
 GAS_DIPOLE_DEBYE = 1.85
 POLARIZABILITY_A3 = 1.44

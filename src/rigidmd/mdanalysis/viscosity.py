@@ -37,7 +37,7 @@ from rigidmd.mdanalysis.thermo import Results
 __all__ = ["StressRecorder", "ShearViscosity", "shear_components", "EV_PS_PER_A3_IN_MPA_S"]
 
 #: eV ps / Å³ in mPa s.
-EV_PS_PER_A3_IN_MPA_S = units._e * 1e30 * 1e-12 * 1e3
+EV_PS_PER_A3_IN_MPA_S = 1e30 * 1e-12 * 1e3 / units.J  # 1 / units.J is e in C
 
 
 class StressRecorder:
