@@ -13,7 +13,9 @@ corrections, PPPM 1e-5; as ``examples/tip4p2005.py``), 298 K and 1 bar,
    with the plain calculator, the same lengths: the same density?
 3. cost: calculator calls per step, and ms per step of RigidMCBarostat
    (every 25, move sizes frozen) against ``RigidBussi`` (NVT) on the same
-   wrapped calculator, interleaved, best of ``--rounds``.
+   wrapped calculator, interleaved, best of ``--rounds``; with ``--engine``,
+   the same with :class:`rigidmd.lammps.LAMMPSEngine` (LAMMPS in its own
+   process, one rank), CPU time then of this process and its children.
 
 Run ``python benchmarks/mc_barostat.py`` (``--equilibration-ps``,
 ``--production-ps``; about 20 minutes with the defaults on a shared
@@ -21,6 +23,8 @@ machine); the results are written to ``benchmarks/mc_barostat.txt``.
 """
 
 import argparse
+import contextlib
+import os
 import sys
 import time
 from pathlib import Path
@@ -30,7 +34,7 @@ from ase import units
 from ase.calculators.calculator import Calculator, all_changes
 
 from rigidmd import RigidBussi, RigidCRescale, RigidLangevin, RigidMCBarostat
-from rigidmd.lammps import LAMMPSCalculator
+from rigidmd.lammps import LAMMPSCalculator, LAMMPSEngine
 from rigidmd.systems import water_box
 from rigidmd.water import water_model
 
@@ -40,9 +44,27 @@ PS = 1000 * units.fs
 DT = 2 * units.fs
 
 
-def lammps():
-    return LAMMPSCalculator(MODEL.lammps_commands(8.5, "pppm", 1e-5, tail=True),
-                            atom_types={"O": 1, "H": 2, "X": 3})
+def lammps(engine=False):
+    kind = LAMMPSEngine if engine else LAMMPSCalculator
+    return kind(MODEL.lammps_commands(8.5, "pppm", 1e-5, tail=True),
+                atom_types={"O": 1, "H": 2, "X": 3})
+
+
+def cpu_seconds():
+    """CPU time (s) of this process and all its descendants (an engine's ``lmp``), from /proc."""
+    stats = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError):
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            stats[int(stat.parent.name)] = (int(fields[1]), int(fields[11]) + int(fields[12]))
+    family = {os.getpid()}
+    for _ in range(len(stats)):  # until no new descendant is found
+        new = {pid for pid, (ppid, _) in stats.items() if ppid in family} - family
+        if not new:
+            break
+        family |= new
+    total = sum(stats[pid][1] for pid in family - {os.getpid()})
+    return time.process_time() + total / os.sysconf("SC_CLK_TCK")
 
 
 class HiddenStress(Calculator):
@@ -110,11 +132,11 @@ def density_run(atoms, kind, eq_ps, prod_ps, out):
     return mean, err
 
 
-def cost(atoms, rounds, steps, out):
+def cost(atoms, rounds, steps, out, engine=False):
     """ms per step (wall and CPU) and calculator calls per step: NVT Bussi against the MC barostat.
 
-    CPU time of this process (LAMMPS runs in it) is less disturbed by other
-    jobs on a shared machine than wall time.
+    CPU time of this process (LAMMPS runs in it, or in a child with ``engine``)
+    is less disturbed by other jobs on a shared machine than wall time.
     """
     wall = {"bussi": [], "mc": []}
     cpu = {"bussi": [], "mc": []}
@@ -122,24 +144,29 @@ def cost(atoms, rounds, steps, out):
     for _ in range(rounds):
         for kind in ("bussi", "mc"):
             copy = atoms.copy()
-            calc = HiddenStress(lammps())
+            inner = lammps(engine)
+            calc = HiddenStress(inner)
             copy.calc = calc
-            if kind == "bussi":
-                dyn = RigidBussi(copy, DT, T, 0.5 * PS, rng=np.random.default_rng(3))
-            else:
-                # The move size the density run froze at (about 45 % accepted).
-                dyn = RigidMCBarostat(copy, DT, T, P_BAR * units.bar, 0.5 * PS, every=25,
-                                      rng=np.random.default_rng(3), adapt_moves=0, step=0.0236)
-            dyn.run(25)  # LAMMPS set-up, compilation
-            calls0, t0, c0 = calc.calls, time.perf_counter(), time.process_time()
-            dyn.run(steps)
-            wall[kind].append(1e3 * (time.perf_counter() - t0) / steps)
-            cpu[kind].append(1e3 * (time.process_time() - c0) / steps)
+            # With the engine, the with block stops it: no lmp outlives the round.
+            with inner if engine else contextlib.nullcontext():
+                if kind == "bussi":
+                    dyn = RigidBussi(copy, DT, T, 0.5 * PS, rng=np.random.default_rng(3))
+                else:
+                    # The move size the density run froze at (about 45 % accepted).
+                    dyn = RigidMCBarostat(copy, DT, T, P_BAR * units.bar, 0.5 * PS, every=25,
+                                          rng=np.random.default_rng(3), adapt_moves=0,
+                                          step=0.0236)
+                dyn.run(25)  # LAMMPS set-up (the engine's start), compilation
+                calls0, t0, c0 = calc.calls, time.perf_counter(), cpu_seconds()
+                dyn.run(steps)
+                wall[kind].append(1e3 * (time.perf_counter() - t0) / steps)
+                cpu[kind].append(1e3 * (cpu_seconds() - c0) / steps)
             calls[kind] = (calc.calls - calls0) / steps
             if kind == "mc":
                 acceptance.append(dyn.barostat.acceptance)
-    out(f"cost, {steps} steps, {rounds} interleaved rounds, best of each (ms per step; "
-        "calculator calls per step):")
+    where = "LAMMPSEngine (own process, 1 rank)" if engine else "LAMMPSCalculator (in-process)"
+    out(f"cost with {where}, {steps} steps, {rounds} interleaved rounds, best of each "
+        "(ms per step; calculator calls per step):")
     for kind, label in (("bussi", "RigidBussi (NVT)        "), ("mc", "RigidMCBarostat every 25")):
         line = (f"  {label} wall {min(wall[kind]):7.2f} ms  CPU {min(cpu[kind]):7.2f} ms  "
                 f"{calls[kind]:.3f} calls")
@@ -158,6 +185,8 @@ def main(argv=None):
     p.add_argument("--production-ps", type=float, default=60.0)
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--cost-steps", type=int, default=500)
+    p.add_argument("--engine", action="store_true",
+                   help="cost with LAMMPSEngine (LAMMPS in its own process)")
     p.add_argument("--only", choices=("mc", "crescale", "cost"), action="append")
     p.add_argument("--output", type=Path,
                    default=Path(__file__).with_name("mc_barostat.txt"))
@@ -175,7 +204,7 @@ def main(argv=None):
     atoms = start()
     only = args.only or ["cost", "mc", "crescale"]
     if "cost" in only:
-        cost(atoms, args.rounds, args.cost_steps, out)
+        cost(atoms, args.rounds, args.cost_steps, out, args.engine)
     for kind in ("mc", "crescale"):
         if kind in only:
             density_run(atoms.copy(), kind, args.equilibration_ps, args.production_ps, out)
