@@ -18,6 +18,29 @@ from rigidmd.systems import co2_water_mixture, water_cluster
 
 #: The tests' data files.
 DATA = Path(__file__).with_name("data")
+#: TIP3P with PPPM for the stored 27-water box (:func:`water_box_27`), as LAMMPS commands.
+PPPM_27 = ["pair_style lj/cut/coul/long 4.5", "pair_coeff * * 0.0 1.0",
+           "pair_coeff O O 0.0065956819 3.15061", "kspace_style pppm 1e-5"]
+
+
+def water_box_27(temperature_K=None):
+    """The stored periodic box of 27 waters (``data/water_box_27.traj``), TIP3P charges.
+
+    With ``temperature_K`` the molecules are made whole and given rigid
+    velocities drawn at that temperature (a fixed seed).
+    """
+    from ase.io import read
+
+    from rigidmd import RigidBodies
+    from rigidmd.water import tip3p_charges
+
+    atoms = read(DATA / "water_box_27.traj")
+    atoms.set_initial_charges(tip3p_charges(atoms))
+    if temperature_K is not None:
+        atoms.positions = RigidBodies.resolve(atoms, "tags").whole_positions(atoms)
+        rigid_maxwell_boltzmann(atoms, temperature_K, bodies="tags",
+                                rng=np.random.default_rng(3))
+    return atoms
 
 # Coulomb constant in eV Å / e².
 KE = units.Hartree * units.Bohr

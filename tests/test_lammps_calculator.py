@@ -1,18 +1,16 @@
 """rigidmd's LAMMPS calculator against native LAMMPS, and what it refuses.
 
 The periodic liquid is ``tests/data/water_box_27.traj`` (27 TIP3P waters in a
-9.3 Å box) with ``lj/cut/coul/long 4.5`` and PPPM at 1e-5; native LAMMPS runs
+9.3 Å box) with ``lj/cut/coul/long 4.5`` and PPPM_27 at 1e-5; native LAMMPS runs
 ``run 0`` of the same data file with ``neigh_modify exclude molecule/intra all``.
 """
 
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 from ase import units
-from ase.io import read
-from helpers import waters
+from helpers import PPPM_27, water_box_27, waters
 
 from rigidmd import RigidBodies, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.lammps import (
@@ -26,18 +24,8 @@ from rigidmd.lammps import (
 
 pytestmark = pytest.mark.lammps
 
-DATA = Path(__file__).with_name("data")
-PPPM = ["pair_style lj/cut/coul/long 4.5", "pair_coeff * * 0.0 1.0",
-        "pair_coeff O O 0.0065956819 3.15061", "kspace_style pppm 1e-5"]
 
-
-def liquid():
-    atoms = read(DATA / "water_box_27.traj")
-    atoms.set_initial_charges(tip3p_charges(atoms))
-    return atoms
-
-
-def native(atoms, commands=PPPM, **kwargs):
+def native(atoms, commands=PPPM_27, **kwargs):
     body_ids = RigidBodies.resolve(atoms, "tags").body_ids
     return lammps_energy_forces(atoms, body_ids,
                                 list(commands) + ["neigh_modify exclude molecule/intra all"],
@@ -53,7 +41,7 @@ def pinned(calc):
     on these 27 waters).
     """
     assert calc.kspace_parameters.startswith("kspace_modify gewald ")
-    return PPPM + [calc.kspace_parameters]
+    return PPPM_27 + [calc.kspace_parameters]
 
 
 def assert_native(atoms):
@@ -68,8 +56,8 @@ def assert_native(atoms):
 def test_energy_forces_and_stress_equal_native_lammps():
     """Measured: energy equal to the last bit, forces 1e-15 eV/Å, stress 1e-15 relative;
     after moves, a 1 % scaling of the cell and a triclinic tilt, the same."""
-    atoms = liquid()
-    atoms.calc = LAMMPSCalculator(PPPM)
+    atoms = water_box_27()
+    atoms.calc = LAMMPSCalculator(PPPM_27)
     assert_native(atoms)
     rng = np.random.default_rng(0)
     for _ in range(3):  # moved atoms, some across the faces: no new set-up
@@ -88,14 +76,14 @@ def test_energy_forces_and_stress_equal_native_lammps():
 
 def test_a_cell_not_in_lammps_form_is_rotated():
     """A cell whose first vector is not along x: rotated into LAMMPS's frame and back."""
-    atoms = liquid()
+    atoms = water_box_27()
     reference = atoms.copy()
-    reference.calc = LAMMPSCalculator(PPPM)
+    reference.calc = LAMMPSCalculator(PPPM_27)
     rotation = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))[0]
     rotation *= np.sign(np.linalg.det(rotation))
     atoms.set_cell(atoms.cell.array @ rotation.T)
     atoms.positions = atoms.positions @ rotation.T
-    atoms.calc = LAMMPSCalculator(PPPM)
+    atoms.calc = LAMMPSCalculator(PPPM_27)
     assert atoms.get_potential_energy() == pytest.approx(reference.get_potential_energy(),
                                                          rel=1e-10)
     np.testing.assert_allclose(atoms.get_forces(), reference.get_forces() @ rotation.T,
@@ -120,10 +108,10 @@ def test_a_cluster_equals_native_lammps():
 
 
 def test_molecules_come_from_mol_id_tags_argument_or_bodies():
-    atoms = liquid()
+    atoms = water_box_27()
     tags = atoms.get_tags()
     probe = atoms.copy()
-    probe.calc = LAMMPSCalculator(PPPM)
+    probe.calc = LAMMPSCalculator(PPPM_27)
     probe.get_potential_energy()
     energy = native(atoms, pinned(probe.calc))[0]
     for source in ("tags", "mol-id", "argument", "bodies"):
@@ -136,45 +124,45 @@ def test_molecules_come_from_mol_id_tags_argument_or_bodies():
             a.arrays["mol-id"] = tags
         elif source == "argument":
             kwargs["molecule_ids"] = tags
-        a.calc = LAMMPSCalculator(PPPM, **kwargs)
+        a.calc = LAMMPSCalculator(PPPM_27, **kwargs)
         if source == "bodies":
             RigidVerlet(a, units.fs, bodies=RigidBodies.from_body_ids(tags - 1))
         assert a.get_potential_energy() == pytest.approx(energy, rel=1e-9), source
     # Without molecules nothing is excluded, and the calculator says so.
     a = atoms.copy()
     a.set_tags(0)
-    a.calc = LAMMPSCalculator(PPPM)
+    a.calc = LAMMPSCalculator(PPPM_27)
     with pytest.warns(UserWarning, match="no pair is excluded"):
         assert a.get_potential_energy() != pytest.approx(energy, rel=1e-3)
 
 
 def test_bad_input_is_refused_before_lammps_starts():
-    atoms = liquid()
+    atoms = water_box_27()
     with pytest.raises(ValueError, match="need a pair_style"):
         LAMMPSCalculator(["pair_coeff * * 0 1"])
     a = atoms.copy()
     a.set_initial_charges(np.zeros(len(a)))
-    a.calc = LAMMPSCalculator(PPPM)
+    a.calc = LAMMPSCalculator(PPPM_27)
     with pytest.raises(ValueError, match="Coulomb interactions but the atoms have no charges"):
         a.get_forces()
     a = atoms.copy()
-    a.calc = LAMMPSCalculator(PPPM, atom_types={"O": 1})
+    a.calc = LAMMPSCalculator(PPPM_27, atom_types={"O": 1})
     with pytest.raises(ValueError, match="element H has no LAMMPS type"):
         a.get_forces()
 
 
 def test_lammps_errors_carry_lammps_message_and_the_calculator_recovers():
-    atoms = liquid()
-    atoms.calc = LAMMPSCalculator(PPPM[:-1] + ["kspace_style pppm 1e-5", "pair_coeff 7 7 1 1"])
+    atoms = water_box_27()
+    atoms.calc = LAMMPSCalculator(PPPM_27[:-1] + ["kspace_style pppm 1e-5", "pair_coeff 7 7 1 1"])
     with pytest.raises(LammpsError, match="pair_coeff 7 7 1 1.* failed: ERROR"):
         atoms.get_forces()
-    atoms.calc = calc = LAMMPSCalculator(PPPM)
+    atoms.calc = calc = LAMMPSCalculator(PPPM_27)
     good = atoms.get_forces().copy()
     # Lost atoms (one far outside the box) stop a call; the next call starts afresh.
     atoms.positions[0] += 10 * atoms.cell.lengths()
     with pytest.raises(LammpsError, match="ERROR"):
         atoms.get_forces()
-    atoms.positions = liquid().positions
+    atoms.positions = water_box_27().positions
     np.testing.assert_array_equal(atoms.get_forces(), good)  # a fresh instance, same forces
     # A changed number of atoms: a new instance, no error.
     atoms.calc = calc
@@ -185,12 +173,12 @@ def test_lammps_errors_carry_lammps_message_and_the_calculator_recovers():
 
 def test_rigid_verlet_follows_native_fix_rigid_nve_small_with_pppm():
     """The same standard as the cluster validation: a roundoff-level gap grown by chaos."""
-    atoms = liquid()
+    atoms = water_box_27()
     atoms.positions = RigidBodies.resolve(atoms, "tags").whole_positions(atoms)
     rigid_maxwell_boltzmann(atoms, 300, bodies="tags", rng=np.random.default_rng(3))
     body_ids = RigidBodies.resolve(atoms, "tags").body_ids
     probe = atoms.copy()
-    probe.calc = LAMMPSCalculator(PPPM, ase_constants=True)
+    probe.calc = LAMMPSCalculator(PPPM_27, ase_constants=True)
     probe.get_potential_energy()
     reference = run_rigid_reference(
         atoms, body_ids, pinned(probe.calc) + ["neigh_modify exclude molecule/intra all"],
@@ -198,7 +186,7 @@ def test_rigid_verlet_follows_native_fix_rigid_nve_small_with_pppm():
         every=100, fix="rigid/nve/small", charges=atoms.get_initial_charges())
     a = atoms.copy()
     # ASE's constants on both sides (rigidmd integrates in ASE units).
-    a.calc = LAMMPSCalculator(PPPM, ase_constants=True)
+    a.calc = LAMMPSCalculator(PPPM_27, ase_constants=True)
     dyn = RigidVerlet(a, units.fs, bodies="tags")
     positions = []
     dyn.attach(lambda: positions.append(a.positions.copy()), interval=100)
@@ -216,7 +204,7 @@ def test_rigid_verlet_follows_native_fix_rigid_nve_small_with_pppm():
 def test_npt_conserved_energy_with_pppm_and_a_moving_cell():
     """The k-space parameters stay those of the first cell, so the energy is continuous.
 
-    64 TIP4P/2005 waters (explicit M), PPPM 1e-5, tail corrections, C-rescale moving the
+    64 TIP4P/2005 waters (explicit M), PPPM_27 1e-5, tail corrections, C-rescale moving the
     cell every 1 fs step for 400 steps just after a quench.  Measured: the conserved
     energy spans 0.054 eV, as NVE from the same start (0.052 eV); with the parameters
     chosen anew at each cell (a full LAMMPS set-up) it spanned 18 eV.  Bound 0.1 eV.

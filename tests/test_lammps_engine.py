@@ -1,7 +1,7 @@
 """LAMMPS in its own process (``fix ipi``) against the in-process calculator; its life cycle.
 
 The periodic liquid is ``tests/data/water_box_27.traj`` (27 TIP3P waters in a
-9.3 Å box) with ``lj/cut/coul/long 4.5`` and PPPM at 1e-5, as in
+9.3 Å box) with ``lj/cut/coul/long 4.5`` and PPPM_27 at 1e-5, as in
 ``test_lammps_calculator.py``.
 """
 
@@ -19,23 +19,14 @@ import numpy as np
 import pytest
 from ase import units
 from ase.io import read
+from helpers import DATA, PPPM_27, water_box_27
 
 from rigidmd import RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.ipi import EngineError, IPICalculator
-from rigidmd.lammps import LAMMPSCalculator, tip3p_charges
+from rigidmd.lammps import LAMMPSCalculator
 from rigidmd.lammps.engine import LAMMPSEngine
 
 pytestmark = pytest.mark.lammps
-
-DATA = Path(__file__).with_name("data")
-PPPM = ["pair_style lj/cut/coul/long 4.5", "pair_coeff * * 0.0 1.0",
-        "pair_coeff O O 0.0065956819 3.15061", "kspace_style pppm 1e-5"]
-
-
-def liquid():
-    atoms = read(DATA / "water_box_27.traj")
-    atoms.set_initial_charges(tip3p_charges(atoms))
-    return atoms
 
 
 def processes_named(name):
@@ -94,12 +85,12 @@ def assert_same(atoms, reference):
 def test_engine_equals_the_in_process_calculator_through_cell_changes():
     """Orthorhombic, scaled, tilted (the engine restarts with a triclinic box) and a
     triclinic cell scaled again; shear stresses included (fix ipi's upper triangle)."""
-    atoms = liquid()
-    with LAMMPSEngine(PPPM) as engine:
+    atoms = water_box_27()
+    with LAMMPSEngine(PPPM_27) as engine:
         atoms.calc = engine
         atoms.get_potential_energy()
         reference = atoms.copy()
-        reference.calc = LAMMPSCalculator(PPPM + [engine.kspace_parameters])
+        reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
         assert_same(atoms, reference)
         rng = np.random.default_rng(0)
         atoms.positions += rng.normal(scale=0.05, size=atoms.positions.shape)
@@ -121,7 +112,7 @@ def test_engine_equals_the_in_process_calculator_through_cell_changes():
 
 def test_a_rotated_triclinic_cell_and_two_ranks():
     """A general (rotated, tilted) cell on 2 MPI ranks: rotated into LAMMPS's frame."""
-    atoms = liquid()
+    atoms = water_box_27()
     cell = atoms.cell.array.copy()
     cell[1, 0], cell[2, 0] = 0.5, -0.3
     atoms.set_cell(cell, scale_atoms=True)
@@ -129,11 +120,11 @@ def test_a_rotated_triclinic_cell_and_two_ranks():
     rotation *= np.sign(np.linalg.det(rotation))
     atoms.set_cell(atoms.cell.array @ rotation.T)
     atoms.positions = atoms.positions @ rotation.T
-    with LAMMPSEngine(PPPM, processes=2) as engine:
+    with LAMMPSEngine(PPPM_27, processes=2) as engine:
         atoms.calc = engine
         atoms.get_potential_energy()
         reference = atoms.copy()
-        reference.calc = LAMMPSCalculator(PPPM + [engine.kspace_parameters])
+        reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
         assert_same(atoms, reference)
         atoms.set_cell(atoms.cell * 1.003, scale_atoms=True)
         assert_same(atoms, reference)
@@ -145,10 +136,10 @@ def test_a_tilt_past_half_a_box_is_reduced_and_a_flip_restarts_the_engine():
     roundoff, to LAMMPSCalculator given that basis); when the basis flips, as native
     LAMMPS re-neighbours, a new engine starts.  (Without it a 64-water triclinic
     RigidNPT run, its cell sheared far, stopped with LAMMPS's "Out of range atoms -
-    cannot compute PPPM".)"""
-    atoms = liquid()
+    cannot compute PPPM_27".)"""
+    atoms = water_box_27()
     length = atoms.cell[0, 0]
-    with LAMMPSEngine(PPPM) as engine:
+    with LAMMPSEngine(PPPM_27) as engine:
         atoms.calc = engine
         for xy, flips in ((0.45, 0), (0.55, 1), (1.3, 1)):
             cell = atoms.cell.array.copy()
@@ -158,7 +149,7 @@ def test_a_tilt_past_half_a_box_is_reduced_and_a_flip_restarts_the_engine():
             if xy == 0.45:
                 first = engine.pid
                 reference = atoms.copy()
-                reference.calc = LAMMPSCalculator(PPPM + [engine.kspace_parameters])
+                reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
             else:
                 assert engine.pid != first  # the basis flipped: a new engine
             reduced = atoms.copy()
@@ -179,7 +170,7 @@ def test_an_engine_started_elsewhere_over_tcp(tmp_path):
     with socket.socket() as probe:
         probe.bind(("localhost", 0))
         port = probe.getsockname()[1]
-    engine = LAMMPSEngine(PPPM, launch=False, port=port, workdir=tmp_path, timeout=60)
+    engine = LAMMPSEngine(PPPM_27, launch=False, port=port, workdir=tmp_path, timeout=60)
     started = []
 
     def start_elsewhere():
@@ -191,12 +182,12 @@ def test_an_engine_started_elsewhere_over_tcp(tmp_path):
 
     thread = threading.Thread(target=start_elsewhere)
     thread.start()
-    atoms = liquid()
+    atoms = water_box_27()
     try:
         atoms.calc = engine
         atoms.get_potential_energy()
         reference = atoms.copy()
-        reference.calc = LAMMPSCalculator(PPPM + [engine.kspace_parameters])
+        reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
         assert_same(atoms, reference)
     finally:
         engine.close()
@@ -218,9 +209,9 @@ def test_virial_lower_triangle_is_mirrored():
 
 
 def test_a_dead_engine_raises_naming_its_log_and_the_step_is_undone():
-    atoms = liquid()
+    atoms = water_box_27()
     rigid_maxwell_boltzmann(atoms, 300, bodies="tags", rng=np.random.default_rng(2))
-    engine = LAMMPSEngine(PPPM, timeout=30)
+    engine = LAMMPSEngine(PPPM_27, timeout=30)
     atoms.calc = engine
     dyn = RigidVerlet(atoms, units.fs, bodies="tags")
     dyn.run(2)
@@ -242,8 +233,8 @@ def test_a_dead_engine_raises_naming_its_log_and_the_step_is_undone():
 
 
 def test_a_hung_engine_raises_within_the_timeout():
-    atoms = liquid()
-    with LAMMPSEngine(PPPM, timeout=2, connect_timeout=60) as engine:
+    atoms = water_box_27()
+    with LAMMPSEngine(PPPM_27, timeout=2, connect_timeout=60) as engine:
         atoms.calc = engine
         atoms.get_potential_energy()
         lmp = [p for p in children_of(os.getpid()) if p in processes_named("lmp")]
@@ -267,7 +258,7 @@ def test_sigkill_of_its_python_leaves_no_engine(tmp_path, processes):
         from rigidmd.lammps.engine import LAMMPSEngine
         atoms = read({str(DATA / "water_box_27.traj")!r})
         atoms.set_initial_charges(tip3p_charges(atoms))
-        atoms.calc = LAMMPSEngine({PPPM!r}, processes={processes})
+        atoms.calc = LAMMPSEngine({PPPM_27!r}, processes={processes})
         atoms.get_forces()
         print("ready", flush=True)
         sys.stdin.read()
@@ -305,14 +296,14 @@ def test_npt_through_the_engine_follows_the_in_process_calculator(couple):
     through both calculators with the same k-space parameters agree to roundoff growth
     (measured: iso and aniso cells equal, positions 2e-15 Å; tri cells 2e-14 Å,
     positions 3e-14 Å; bound 1e-12 Å)."""
-    atoms = liquid()
+    atoms = water_box_27()
     rigid_maxwell_boltzmann(atoms, 300, bodies="tags", rng=np.random.default_rng(3))
     runs = []
-    with LAMMPSEngine(PPPM) as engine:
+    with LAMMPSEngine(PPPM_27) as engine:
         for calc in (engine, None):
             a = atoms.copy()
             a.calc = calc if calc is not None else LAMMPSCalculator(
-                PPPM + [engine.kspace_parameters])
+                PPPM_27 + [engine.kspace_parameters])
             dyn = RigidNPT(a, units.fs, 300, 1.01325 * units.bar, 50 * units.fs,
                            200 * units.fs, bodies="tags", couple=couple)
             dyn.run(20)
@@ -343,7 +334,7 @@ def test_an_ase_calculator_in_ases_socket_client_gives_the_same_trajectory(tmp_p
     20 steps of 27 periodic waters; positions and forces cross the socket in Bohr
     and Hartree and back: measured 1.8e-15 Å and 4e-16 Å/ASE-time from the
     in-process run (bound 1e-13)."""
-    atoms = liquid()
+    atoms = water_box_27()
     rigid_maxwell_boltzmann(atoms, 300, bodies="tags", rng=np.random.default_rng(4))
     atoms.write(tmp_path / "start.traj")
     (tmp_path / "client.py").write_text(ASE_CLIENT)
@@ -434,9 +425,9 @@ def test_rigidmd_run_with_an_engine_stops_on_sigterm_and_resumes(tmp_path):
 def test_threads_in_one_process_and_in_the_engine(tmp_path):
     """``threads=2``: LAMMPS's OpenMP styles, the same numbers (other summation order:
     measured 1.7e-13 eV, forces 3e-16 eV/Å, stress 2e-15 relative)."""
-    atoms = liquid()
-    plain = LAMMPSCalculator(PPPM)
-    threaded = LAMMPSCalculator(PPPM, threads=2)
+    atoms = water_box_27()
+    plain = LAMMPSCalculator(PPPM_27)
+    threaded = LAMMPSCalculator(PPPM_27, threads=2)
     assert threaded.cmdargs[-5:] == ["-sf", "omp", "-pk", "omp", "2"]
     energy = plain.get_potential_energy(atoms)
     assert threaded.get_potential_energy(atoms) == pytest.approx(energy, rel=1e-13)
@@ -444,16 +435,16 @@ def test_threads_in_one_process_and_in_the_engine(tmp_path):
     stress = plain.get_stress(atoms)
     np.testing.assert_allclose(threaded.get_stress(atoms), stress,
                                atol=1e-13 * np.abs(stress).max())
-    with LAMMPSEngine(PPPM, threads=2, workdir=tmp_path) as engine:
+    with LAMMPSEngine(PPPM_27, threads=2, workdir=tmp_path) as engine:
         assert engine.get_potential_energy(atoms) == pytest.approx(energy, rel=1e-13)
         log = (tmp_path / "log.lammps").read_text()
         assert "using 2 OpenMP thread(s) per MPI task" in log
         assert "pair lj/cut/coul/long/omp" in log
     for bad in (0, 1.5, True):
         with pytest.raises(ValueError, match="threads must be a positive whole number"):
-            LAMMPSCalculator(PPPM, threads=bad)
+            LAMMPSCalculator(PPPM_27, threads=bad)
         with pytest.raises(ValueError, match="threads must be a positive whole number"):
-            LAMMPSEngine(PPPM, threads=bad)
+            LAMMPSEngine(PPPM_27, threads=bad)
 
 
 @pytest.mark.slow

@@ -1,7 +1,7 @@
 """Faults of the LAMMPS calculator found from outside (issue 22), each held by a test.
 
 The periodic liquid is ``tests/data/water_box_27.traj`` (27 TIP3P waters in a
-9.3 Å box) with ``lj/cut/coul/long 4.5`` and PPPM at 1e-5, as in
+9.3 Å box) with ``lj/cut/coul/long 4.5`` and PPPM_27 at 1e-5, as in
 ``test_lammps_calculator.py``.
 """
 
@@ -13,31 +13,18 @@ import numpy as np
 import pytest
 from ase import units
 from ase.calculators.calculator import Calculator, all_changes
-from ase.io import read, write
-from helpers import DATA, lammps_instances
+from ase.io import write
+from helpers import PPPM_27, lammps_instances, water_box_27
 
 import rigidmd.lammps.calculator as lammps_calculator
 from rigidmd import RigidBodies, RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.checkpoint import save_checkpoint
-from rigidmd.lammps import LAMMPSCalculator, tip3p_charges
+from rigidmd.lammps import LAMMPSCalculator
 from rigidmd.restart import load_checkpoint
 from rigidmd.systems import water_box
 from rigidmd.water import water_model
 
 pytestmark = pytest.mark.lammps
-
-PPPM = ["pair_style lj/cut/coul/long 4.5", "pair_coeff * * 0.0 1.0",
-        "pair_coeff O O 0.0065956819 3.15061", "kspace_style pppm 1e-5"]
-
-
-def liquid(temperature_K=None):
-    atoms = read(DATA / "water_box_27.traj")
-    atoms.set_initial_charges(tip3p_charges(atoms))
-    if temperature_K is not None:
-        atoms.positions = RigidBodies.resolve(atoms, "tags").whole_positions(atoms)
-        rigid_maxwell_boltzmann(atoms, temperature_K, bodies="tags",
-                                rng=np.random.default_rng(3))
-    return atoms
 
 
 class FreshLAMMPS(Calculator):
@@ -53,7 +40,7 @@ class FreshLAMMPS(Calculator):
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         super().calculate(atoms, properties, system_changes)
         atoms = self.atoms.copy()
-        atoms.calc = LAMMPSCalculator(PPPM, kspace_parameters=self.kspace_parameters)
+        atoms.calc = LAMMPSCalculator(PPPM_27, kspace_parameters=self.kspace_parameters)
         self.results = {name: atoms.calc.get_property(name, atoms)
                         for name in self.implemented_properties}
 
@@ -80,7 +67,7 @@ def test_a_moving_cell_keeps_one_instance_and_its_kspace_parameters(monkeypatch,
     case); bound 1e-9 eV, room for roundoff grown by chaos on other CPUs.  The
     conserved energy spans 0.024-0.032 eV over 40 steps, as in couple="iso" runs (0.03 eV
     over 100 steps; the 4.5 Å cut-off is abrupt); bound 0.1 eV."""
-    atoms = liquid(300)
+    atoms = water_box_27(300)
     if rotated:
         rotation = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))[0]
         rotation *= np.sign(np.linalg.det(rotation))
@@ -88,7 +75,7 @@ def test_a_moving_cell_keeps_one_instance_and_its_kspace_parameters(monkeypatch,
         atoms.positions = atoms.positions @ rotation.T
         atoms.set_momenta(atoms.get_momenta() @ rotation.T)
     reference = atoms.copy()
-    atoms.calc = LAMMPSCalculator(PPPM)
+    atoms.calc = LAMMPSCalculator(PPPM_27)
     count = lammps_instances(monkeypatch, lammps_calculator)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the step-size advice of a hot, small box
@@ -113,8 +100,8 @@ def test_any_cell_change_equals_a_fresh_lammps_with_the_same_kspace_parameters(m
     Before the fix, a tilt or a turn started a new LAMMPS, which chose other parameters
     (energies 1e-3-1 eV apart); a change of the tilt by 2 box lengths lost atoms (the
     previous image flags kept)."""
-    atoms = liquid()
-    atoms.calc = LAMMPSCalculator(PPPM)
+    atoms = water_box_27()
+    atoms.calc = LAMMPSCalculator(PPPM_27)
     count = lammps_instances(monkeypatch, lammps_calculator)
     atoms.get_potential_energy()
     parameters = atoms.calc.kspace_parameters
@@ -129,7 +116,7 @@ def test_any_cell_change_equals_a_fresh_lammps_with_the_same_kspace_parameters(m
             cell = cell @ rotation.T
         atoms.set_cell(cell, scale_atoms=True)
         fresh = atoms.copy()
-        fresh.calc = LAMMPSCalculator(PPPM, kspace_parameters=parameters)
+        fresh.calc = LAMMPSCalculator(PPPM_27, kspace_parameters=parameters)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # LAMMPS: "Triclinic box skew is large"
             energy, forces, stress = (fresh.get_potential_energy(), fresh.get_forces(),
@@ -147,8 +134,8 @@ def test_an_npt_run_continues_with_the_kspace_parameters_it_had(tmp_path):
     and its potential and conserved energies jumped (7.7e-4 eV here after 30 steps at
     5 kbar; 0.7-1.2 eV in longer runs).  Now the checkpoint holds them and the
     continuation equals the uninterrupted run: measured identical; bound 1e-9 eV."""
-    atoms = liquid(300)
-    atoms.calc = LAMMPSCalculator(PPPM)
+    atoms = water_box_27(300)
+    atoms.calc = LAMMPSCalculator(PPPM_27)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         dyn = RigidNPT(atoms, units.fs, 300, 5000 * units.bar, 50 * units.fs,
@@ -159,15 +146,15 @@ def test_an_npt_run_continues_with_the_kspace_parameters_it_had(tmp_path):
         energies = []
         dyn.attach(lambda: energies.append(atoms.get_potential_energy()), interval=5)
         dyn.run(20)
-        again = load_checkpoint(tmp_path / "c.npz", LAMMPSCalculator(PPPM))
+        again = load_checkpoint(tmp_path / "c.npz", LAMMPSCalculator(PPPM_27))
         assert again.atoms.calc.kspace_parameters == first
         resumed = []
         again.attach(lambda: resumed.append(again.atoms.get_potential_energy()), interval=5)
         again.run(20)
-    fresh = liquid()
+    fresh = water_box_27()
     fresh.set_cell(again.atoms.cell)
     fresh.positions = again.atoms.positions
-    fresh.calc = LAMMPSCalculator(PPPM)
+    fresh.calc = LAMMPSCalculator(PPPM_27)
     assert fresh.calc.kspace_parameters is None
     fresh.get_potential_energy()
     assert fresh.calc.kspace_parameters != first  # a new choice at the moved cell
@@ -175,13 +162,13 @@ def test_an_npt_run_continues_with_the_kspace_parameters_it_had(tmp_path):
 
 
 def test_kspace_parameters_are_a_checked_public_setting():
-    atoms = liquid()
-    atoms.calc = LAMMPSCalculator(PPPM)
+    atoms = water_box_27()
+    atoms.calc = LAMMPSCalculator(PPPM_27)
     energy = atoms.get_potential_energy()
     state = atoms.calc.get_checkpoint_state()
     assert state["kspace_parameters"].startswith("kspace_modify gewald ")
     other = atoms.copy()
-    other.calc = LAMMPSCalculator(PPPM)
+    other.calc = LAMMPSCalculator(PPPM_27)
     other.calc.set_checkpoint_state(state)
     assert other.get_potential_energy() == energy
     # Other atoms get parameters of their own, unless they were given.
@@ -194,7 +181,7 @@ def test_kspace_parameters_are_a_checked_public_setting():
     smaller.get_potential_energy()
     assert other.calc.kspace_parameters == state["kspace_parameters"]
     with pytest.raises(ValueError, match="kspace_parameters must be one 'kspace_modify gewald"):
-        LAMMPSCalculator(PPPM, kspace_parameters="kspace_style ewald 1e-4")
+        LAMMPSCalculator(PPPM_27, kspace_parameters="kspace_style ewald 1e-4")
     with pytest.raises(ValueError, match="unknown checkpoint state 'gewald'"):
         other.calc.set_checkpoint_state({"gewald": 0.3})
 
@@ -204,7 +191,7 @@ def test_tags_that_group_atoms_unlike_the_bodies_are_refused(tags):
     """Before: all tags 1 excluded every intermolecular pair, and layer tags (as ASE's
     slab builders set) the pairs within a layer, silently: on these 27 waters -154.0 and
     -167.5 eV against -156.2 eV."""
-    atoms = liquid(300)
+    atoms = water_box_27(300)
     bodies = RigidBodies.resolve(atoms, "tags")
     if tags == "all-one":
         atoms.set_tags(1)
@@ -215,7 +202,7 @@ def test_tags_that_group_atoms_unlike_the_bodies_are_refused(tags):
     else:
         atoms.set_tags(np.arange(1, len(atoms) + 1))
         message = "the atoms' tags split a rigid body: atoms 0 and 1 are in one body"
-    atoms.calc = LAMMPSCalculator(PPPM)
+    atoms.calc = LAMMPSCalculator(PPPM_27)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # the dynamics says it keeps the tags
         with pytest.raises(ValueError, match=message):
@@ -224,23 +211,23 @@ def test_tags_that_group_atoms_unlike_the_bodies_are_refused(tags):
 
 def test_the_bodies_are_the_molecules_of_a_rigid_dynamics():
     """Tags of the bodies' grouping (other numbers), or none: the energy of the bodies."""
-    atoms = liquid(300)
+    atoms = water_box_27(300)
     bodies = RigidBodies.resolve(atoms, "tags")
-    atoms.calc = LAMMPSCalculator(PPPM)
+    atoms.calc = LAMMPSCalculator(PPPM_27)
     energy = atoms.get_potential_energy()
     for tags in (100 + 7 * atoms.get_tags(), np.zeros(len(atoms), int)):
         a = atoms.copy()
         a.set_tags(tags)
-        a.calc = LAMMPSCalculator(PPPM, kspace_parameters=atoms.calc.kspace_parameters)
+        a.calc = LAMMPSCalculator(PPPM_27, kspace_parameters=atoms.calc.kspace_parameters)
         RigidVerlet(a, units.fs, bodies=bodies)
         assert a.get_potential_energy() == pytest.approx(energy, rel=1e-12, abs=0)
 
 
 def test_a_non_finite_position_or_cell_is_refused_before_lammps_sees_it(monkeypatch):
     """Before: a new instance given a NaN position hung at 100 % CPU, deaf to Ctrl-C."""
-    atoms = liquid()
+    atoms = water_box_27()
     atoms.positions[5, 1] = np.nan
-    atoms.calc = LAMMPSCalculator(PPPM)
+    atoms.calc = LAMMPSCalculator(PPPM_27)
 
     def refuse(*args, **kwargs):  # before the fix LAMMPS started here, and hung
         raise AssertionError("LAMMPS was started with a non-finite position or cell")
@@ -249,31 +236,31 @@ def test_a_non_finite_position_or_cell_is_refused_before_lammps_sees_it(monkeypa
     with pytest.raises(ValueError, match=r"atom 5 has a non-finite position \[.*nan.*\] \(Å\) "
                                          "given to LAMMPSCalculator"):
         atoms.get_forces()
-    atoms = liquid()
+    atoms = water_box_27()
     atoms.cell[2, 2] = np.inf
-    atoms.calc = LAMMPSCalculator(PPPM)
+    atoms.calc = LAMMPSCalculator(PPPM_27)
     with pytest.raises(ValueError, match="cell vector 2 has a non-finite cell"):
         atoms.get_forces()
 
 
 def test_net_charge_with_kspace_and_lammps_warnings_are_said():
-    """Before: -11 e with PPPM ran without a word, and every LAMMPS warning was hidden."""
-    atoms = liquid()
+    """Before: -11 e with PPPM_27 ran without a word, and every LAMMPS warning was hidden."""
+    atoms = water_box_27()
     charges = atoms.get_initial_charges()
     charges[0] -= 11
     atoms.set_initial_charges(charges)
-    atoms.calc = LAMMPSCalculator(PPPM)
+    atoms.calc = LAMMPSCalculator(PPPM_27)
     with pytest.warns(UserWarning, match="net charge of -11 e and the commands have a "
                                          "kspace_style"):
         atoms.get_potential_energy()
-    atoms = liquid()
-    atoms.calc = LAMMPSCalculator(PPPM + ["comm_modify cutoff 1.0"])
+    atoms = water_box_27()
+    atoms.calc = LAMMPSCalculator(PPPM_27 + ["comm_modify cutoff 1.0"])
     with pytest.warns(UserWarning, match="LAMMPS warns: Communication cutoff adjusted to 6.5$"):
         atoms.get_potential_energy()
     # The warnings a rigid-water set-up always gets (no integrator fix, exclusions with
     # k-space) are not passed on: a neutral liquid says nothing.
-    atoms = liquid()
-    atoms.calc = LAMMPSCalculator(PPPM)
+    atoms = water_box_27()
+    atoms.calc = LAMMPSCalculator(PPPM_27)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         atoms.get_potential_energy()
@@ -283,15 +270,15 @@ def test_isotopes_share_a_type_and_give_the_forces_of_the_light_system():
     """Before: "give atoms of different masses different types", which atom_types keyed
     by element cannot do.  Masses never enter LAMMPS's forces: a D2O/H2O/H2(18)O mixture
     gets the forces of the all-H2O box, bit for bit, and runs."""
-    light = liquid()
-    light.calc = LAMMPSCalculator(PPPM)
+    light = water_box_27()
+    light.calc = LAMMPSCalculator(PPPM_27)
     mixed = light.copy()
     masses = mixed.get_masses()
     masses[1:30:3] = masses[2:30:3] = 2.014  # D2O: the first ten waters
     masses[60::3] = 17.999  # 18O: the last seven
     mixed.set_masses(masses)
     rigid_maxwell_boltzmann(mixed, 300, bodies="tags", rng=np.random.default_rng(3))
-    mixed.calc = LAMMPSCalculator(PPPM)
+    mixed.calc = LAMMPSCalculator(PPPM_27)
     np.testing.assert_array_equal(mixed.get_forces(), light.get_forces())
     assert mixed.get_potential_energy() == light.get_potential_energy()
     dyn = RigidVerlet(mixed, units.fs, bodies="tags")
