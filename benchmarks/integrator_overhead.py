@@ -17,6 +17,12 @@ the ratio rigidmd / LAMMPS (goal: at most 4 at 64 waters, at most 0.5 from
 measured side by side in this one run, on one core.
 
 Run:  python benchmarks/integrator_overhead.py [--quick]
+
+``--ratio`` measures only the ratio the README's table reports: rigidmd and
+LAMMPS's fix at 64 and 4096 waters, three rounds interleaved (rigidmd, then
+LAMMPS, at each size, three times), best of each side::
+
+    python benchmarks/integrator_overhead.py --ratio
 """
 
 import argparse
@@ -92,10 +98,32 @@ def rattle_time(atoms, steps):
     return per_step(dyn.run, steps, repeats=3 if len(atoms) < 3 * 4096 else 1)
 
 
+def ratio(sides=(4, 16), rounds=3):
+    """Best-of-``rounds`` interleaved times (µs per step) of rigidmd and LAMMPS's fix."""
+    print(f"{'waters':>7} {'rigidmd':>10} {'LAMMPS':>10} {'ratio':>7} {'rounds':>18}   "
+          "(µs per step, best of interleaved rounds)")
+    for side in sides:
+        n = side**3
+        atoms = system(side)
+        steps = max(200, min(20_000, 1_280_000 // n))
+        ours, ref = [], []
+        for _ in range(rounds):
+            ours.append(rigidmd_time(atoms, "numba", steps))
+            ref.append(lammps_time(atoms, steps))
+        each = " ".join(f"{a / b:.2f}" for a, b in zip(ours, ref, strict=True))
+        print(f"{n:7d} {min(ours) * 1e6:10.1f} {min(ref) * 1e6:10.1f} "
+              f"{min(ours) / min(ref):7.2f} {each:>18}", flush=True)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer steps, up to 4096 waters")
+    parser.add_argument("--ratio", action="store_true",
+                        help="only rigidmd / LAMMPS at 64 and 4096 waters, interleaved rounds")
     args = parser.parse_args()
+    if args.ratio:
+        ratio()
+        return
     sides = [4, 8, 16] if args.quick else [4, 8, 16, 32]
     print(f"{'waters':>7} {'rigidmd':>10} {'(numpy)':>10} {'LAMMPS':>10} {'ASE RATTLE':>11}"
           f" {'rigidmd/LAMMPS':>15} {'RATTLE/rigidmd':>15}   (µs per step)")

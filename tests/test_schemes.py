@@ -127,9 +127,11 @@ def test_compiled_kernel_matches_its_operators():
     ops.free_rotor(ref, m.inv_moments, dt)
     r_ref, x_ref = ops.place_atoms(ref, m)
     r, positions = np.zeros_like(r_ref), np.zeros((len(atoms), 3))
-    _numba.first_half(fused.X, fused.V, fused.q, fused.p, F, tau, m.inv_mass,
-                      0.25 * m.inv_moments, dt, m.body_coordinates, m.bounds, m.order, r,
-                      positions, np.eye(3), np.eye(3), np.eye(3), False)
+    body, atom, index = _numba.pack_model(m.inv_mass, m.inv_moments, m.body_coordinates,
+                                          m.atom_masses, m.bounds, m.order)
+    n = m.n_bodies
+    _numba.first_half(fused.data, n, F, tau, body, atom, index, dt, r, positions,
+                      np.array([np.eye(3)] * 3), False)
     # Measured: X and V identical, q and p within 5e-16 relative, lab
     # displacements and positions within 9e-16 Å (the kernel's Taylor sin/cos
     # below 0.25 rad and its fused sums round differently).
@@ -142,8 +144,8 @@ def test_compiled_kernel_matches_its_operators():
     # Second loop: reduction, translational_kick(dt/2), rotational_kick(dt/2), momenta.
     F2, tau2 = np.zeros_like(F), np.zeros_like(tau)
     momenta = np.zeros((len(atoms), 3))
-    _numba.second_half(fused.V, fused.q, fused.p, F2, tau2, m.inv_mass, m.inv_moments, dt,
-                       forces, m.bounds, m.order, m.atom_masses, r, momenta, True)
+    assert _numba.second_half(fused.data, n, F2, tau2, body, atom, index, dt, forces, r,
+                              momenta, True)
     F_ref, tau_ref = ops.reduce_forces(forces, r_ref, m)
     ops.translational_kick(ref, F_ref, forces[m.free], m, 0.5 * dt)
     ops.rotational_kick(ref, tau_ref, 0.5 * dt)
@@ -163,7 +165,17 @@ def test_compiled_kernel_matches_its_operators():
     np.testing.assert_array_equal(momenta3[m.order], momenta[m.order])
     # Without write_momenta the second loop leaves the momenta alone.
     untouched = np.full((len(atoms), 3), 7.0)
-    _numba.second_half(fused.V.copy(), fused.q, fused.p.copy(), F2, tau2, m.inv_mass,
-                       m.inv_moments, dt, forces, m.bounds, m.order, m.atom_masses, r,
-                       untouched, False)
+    assert _numba.second_half(fused.copy().data, n, F2, tau2, body, atom, index, dt, forces,
+                              r, untouched, False)
     assert np.all(untouched == 7.0)
+    # A NaN force on any body atom: the second loop refuses and writes nothing at all.
+    bad = forces.copy()
+    bad[m.order[-1], 1] = np.nan
+    before = fused.copy()
+    F3, tau3, momenta4 = F2.copy(), tau2.copy(), np.full((len(atoms), 3), 7.0)
+    assert not _numba.second_half(fused.data, n, F3, tau3, body, atom, index, dt, bad, r,
+                                  momenta4, True)
+    np.testing.assert_array_equal(fused.data, before.data)
+    np.testing.assert_array_equal(F3, F2)
+    np.testing.assert_array_equal(tau3, tau2)
+    assert np.all(momenta4 == 7.0)

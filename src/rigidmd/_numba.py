@@ -17,7 +17,8 @@ except ImportError:  # pragma: no cover - exercised only without numba
 
 AVAILABLE = numba is not None
 
-__all__ = ["AVAILABLE", "resolve_backend", "first_half", "second_half", "place", "momenta"]
+__all__ = ["AVAILABLE", "resolve_backend", "pack_model", "first_half", "second_half", "place",
+           "momenta"]
 
 
 def resolve_backend(backend=None):
@@ -60,7 +61,19 @@ def _jit(func):
     return numba.njit(cache=False, fastmath=False, nogil=True)(func)
 
 
-@_jit
+def _inline(func):
+    """A helper of the kernels, compiled into each caller (``inline="always"``).
+
+    Inlined in numba's own IR the five free-rotor sub-steps and the kick
+    stay in registers: measured 10-12 % off the first loop on 64 and 4096
+    waters against LLVM's own (partial) inlining of separately compiled helpers.
+    """
+    if numba is None:  # pragma: no cover
+        return func
+    return numba.njit(inline="always", nogil=True)(func)
+
+
+@_inline
 def _matrix(q0, q1, q2, q3):
     """R(q) as nine scalars, row by row."""
     return (1.0 - 2.0 * (q2 * q2 + q3 * q3), 2.0 * (q1 * q2 - q0 * q3), 2.0 * (q1 * q3 + q0 * q2),
@@ -68,7 +81,7 @@ def _matrix(q0, q1, q2, q3):
             2.0 * (q1 * q3 - q0 * q2), 2.0 * (q2 * q3 + q0 * q1), 1.0 - 2.0 * (q1 * q1 + q2 * q2))
 
 
-@_jit
+@_inline
 def _kick(q0, q1, q2, q3, p0, p1, p2, p3, t0, t1, t2, h2):
     """p + h2 * q ⊗ (0, R(q)ᵀ t), for a lab torque t."""
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = _matrix(q0, q1, q2, q3)
@@ -81,7 +94,7 @@ def _kick(q0, q1, q2, q3, p0, p1, p2, p3, t0, t1, t2, h2):
             p3 + h2 * (q0 * b2 + q1 * b1 - q2 * b0))
 
 
-@_jit
+@_inline
 def _place_body(b, X, q0, q1, q2, q3, d, bounds, order, r, positions):
     """Lab displacements r_j = R(q) d_j and positions X + r_j of body b's atoms."""
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = _matrix(q0, q1, q2, q3)
@@ -106,7 +119,7 @@ _SIN = (1.0, -1.0 / 6, 1.0 / 120, -1.0 / 5040, 1.0 / 362880, -1.0 / 39916800)
 _COS = (1.0, -1.0 / 2, 1.0 / 24, -1.0 / 720, 1.0 / 40320, -1.0 / 3628800, 1.0 / 479001600)
 
 
-@_jit
+@_inline
 def _sincos(x):
     """(sin x, cos x); polynomials in Estrin form (short dependency chains)."""
     if abs(x) > 0.25:
@@ -121,7 +134,7 @@ def _sincos(x):
     return s * x, c
 
 
-@_jit
+@_inline
 def _rotate(q0, q1, q2, q3, p0, p1, p2, p3, inv4i, k, h):
     """NO_SQUISH free rotation about body axis k (0, 1, 2) for time h.
 
@@ -143,21 +156,56 @@ def _rotate(q0, q1, q2, q3, p0, p1, p2, p3, inv4i, k, h):
             c * p0 + s * kp0, c * p1 + s * kp1, c * p2 + s * kp2, c * p3 + s * kp3)
 
 
+def pack_model(inv_mass, inv_moments, body_coordinates, atom_masses, bounds, order):
+    """The body model as the three arrays :func:`first_half` and :func:`second_half` take.
+
+    Returns
+    -------
+    body : numpy.ndarray, shape (n_bodies, 7)
+        Per body: :math:`1/M`, :math:`1/(4 I_k)` (three), :math:`1/I_k` (three),
+        0 where :math:`I_k = 0`.
+    atom : numpy.ndarray, shape (n_body_atoms, 4)
+        Per body atom, in body order: body-frame coordinates (Å) and mass (amu).
+    index : numpy.ndarray of int64, shape (n_bodies + 1 + n_body_atoms,)
+        ``bounds`` (body ``b``'s atoms are ``bounds[b]:bounds[b + 1]`` in body
+        order) followed by ``order`` (their atom indices).
+    """
+    body = np.column_stack([inv_mass, 0.25 * inv_moments, inv_moments])
+    atom = np.column_stack([body_coordinates, atom_masses])
+    index = np.concatenate([bounds, order]).astype(np.int64)
+    return (np.ascontiguousarray(body, dtype=float), np.ascontiguousarray(atom, dtype=float),
+            index)
+
+
+@_inline
+def _unpack(data, n):
+    """Views X, V, q, p of the first n bodies' part of a state buffer."""
+    X = data[0:3 * n].reshape((n, 3))
+    V = data[3 * n:6 * n].reshape((n, 3))
+    q = data[6 * n:10 * n].reshape((n, 4))
+    p = data[10 * n:14 * n].reshape((n, 4))
+    return X, V, q, p
+
+
 @_jit
-def first_half(X, V, q, p, F, tau, inv_mass, inv4i, dt, d, bounds, order, r, positions,
-               A, B, S, affine):
+def first_half(data, n, F, tau, body, atom, index, dt, r, positions, ABS, affine):
     r"""Kick (dt/2), drift (dt), free rotor (dt), and place the body atoms.
 
-    Updates ``X, V, q, p`` in place, writes the lab displacements ``r``
-    (in body-atom order) and the atom ``positions`` (atom order).
-    ``inv_mass`` is 1/M; ``inv4i`` is :math:`1/(4 I_k)` per body and axis, 0
-    where :math:`I_k = 0`.  With ``affine`` the drift moves the centres of
-    mass with the cell, :math:`X \leftarrow A X + B V`, :math:`V \leftarrow S V`
-    (3x3 matrices from a barostat); otherwise :math:`X \mathrel{+}= dt\, V`.
+    ``data`` is a :attr:`rigidmd.state.RigidState.data` buffer with ``n``
+    bodies (its ``X, V, q, p`` updated in place); ``body, atom, index`` are
+    :func:`pack_model`'s.  Writes the lab displacements ``r`` (in body-atom
+    order) and the atom ``positions`` (atom order).  With ``affine`` the
+    drift moves the centres of mass with the cell, :math:`X \leftarrow A X + B V`,
+    :math:`V \leftarrow S V` (``ABS`` = the three 3x3 matrices from a
+    barostat, stacked); otherwise :math:`X \mathrel{+}= dt\, V`.
     """
+    X, V, q, p = _unpack(data, n)
+    bounds, order = index[:n + 1], index[n + 1:]
+    d = atom[:, :3]
+    A, B, S = ABS[0], ABS[1], ABS[2]
     half = 0.5 * dt
-    for b in range(X.shape[0]):
-        hm = half * inv_mass[b]
+    for b in range(n):
+        hm = half * body[b, 0]
         for a in range(3):
             V[b, a] += hm * F[b, a]
         if affine:
@@ -173,7 +221,7 @@ def first_half(X, V, q, p, F, tau, inv_mass, inv4i, dt, d, bounds, order, r, pos
         q0, q1, q2, q3 = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
         p0, p1, p2, p3 = _kick(q0, q1, q2, q3, p[b, 0], p[b, 1], p[b, 2], p[b, 3],
                                tau[b, 0], tau[b, 1], tau[b, 2], dt)
-        i0, i1, i2 = inv4i[b, 0], inv4i[b, 1], inv4i[b, 2]
+        i0, i1, i2 = body[b, 1], body[b, 2], body[b, 3]
         q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i2, 2, half)
         q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i1, 1, half)
         q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i0, 0, dt)
@@ -185,18 +233,30 @@ def first_half(X, V, q, p, F, tau, inv_mass, inv4i, dt, d, bounds, order, r, pos
 
 
 @_jit
-def second_half(V, q, p, F, tau, inv_mass, inv_moments, dt, forces, bounds, order, m, r,
-                momenta, write_momenta):
+def second_half(data, n, F, tau, body, atom, index, dt, forces, r, momenta, write_momenta):
     """Reduce forces to bodies, kick (dt/2), and (optionally) write rigid atom momenta.
 
-    Overwrites ``F, tau`` with the new body forces and lab torques, updates
-    ``V, p`` in place and, if ``write_momenta``, writes ``momenta`` (atom
-    order) of the body atoms.  (A coupled dynamics changes ``V, p`` after this
-    and writes the momenta once, with :func:`momenta`.)
-    ``inv_mass`` is 1/M; ``inv_moments`` is 1/I_k, 0 where I_k = 0.
+    Arguments as in :func:`first_half`.  First checks that the body atoms'
+    ``forces`` are finite: if any is not, returns False having written
+    nothing.  Otherwise overwrites ``F, tau`` with the new body forces and
+    lab torques, updates ``V, p`` in place and, if ``write_momenta``, writes
+    ``momenta`` (atom order) of the body atoms, and returns True.  (A coupled
+    dynamics changes ``V, p`` after this and writes the momenta once, with
+    :func:`momenta`.)
     """
+    X, V, q, p = _unpack(data, n)
+    bounds, order = index[:n + 1], index[n + 1:]
+    inv_moments = body[:, 4:7]
+    m = atom[:, 3]
+    # One reduction: a NaN or an infinity anywhere makes the sum non-finite.
+    total = 0.0
+    for j in range(order.shape[0]):
+        i = order[j]
+        total += forces[i, 0] + forces[i, 1] + forces[i, 2]
+    if not np.isfinite(total):
+        return False
     half = 0.5 * dt
-    for b in range(V.shape[0]):
+    for b in range(n):
         fx = fy = fz = 0.0
         tx = ty = tz = 0.0
         for j in range(bounds[b], bounds[b + 1]):
@@ -211,7 +271,7 @@ def second_half(V, q, p, F, tau, inv_mass, inv_moments, dt, forces, bounds, orde
             tz += r0 * f1 - r1 * f0
         F[b, 0], F[b, 1], F[b, 2] = fx, fy, fz
         tau[b, 0], tau[b, 1], tau[b, 2] = tx, ty, tz
-        hm = half * inv_mass[b]
+        hm = half * body[b, 0]
         vx = V[b, 0] + hm * fx
         vy = V[b, 1] + hm * fy
         vz = V[b, 2] + hm * fz
@@ -222,9 +282,10 @@ def second_half(V, q, p, F, tau, inv_mass, inv_moments, dt, forces, bounds, orde
         if write_momenta:
             _body_momenta(b, vx, vy, vz, w, x, y, z, p0, p1, p2, p3, inv_moments, bounds, order,
                           m, r, momenta)
+    return True
 
 
-@_jit
+@_inline
 def _body_momenta(b, vx, vy, vz, w, x, y, z, p0, p1, p2, p3, inv_moments, bounds, order, m, r,
                   momenta):
     """Rigid momenta m_j (V + ω × r_j) of body b's atoms."""

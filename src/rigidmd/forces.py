@@ -111,13 +111,15 @@ class ForceEvaluator:
         record.F, record.tau = ops.reduce_forces(forces, record.r, self.model)
         record.f = forces[self.model.free]
 
-    def calculator_forces(self, state: RigidState) -> np.ndarray:
+    def calculator_forces(self, state: RigidState, check: bool = True) -> np.ndarray:
         """Call the calculator on the atoms as placed and return checked atom forces.
 
         With a moving cell the cell is set from ``state`` first (and checked
         against the bodies' extents, with ``record.r`` placed); with
         ``stress`` the stress is asked in the same call and the molecular
-        virial kept in the record.
+        virial kept in the record.  ``check=False`` leaves the forces'
+        finiteness to the caller (the fused kernel checks it in its own loop
+        and calls :meth:`check_forces` for the message).
 
         Returns
         -------
@@ -131,25 +133,21 @@ class ForceEvaluator:
                              "it; the step was undone")
             atoms.set_cell(state.cell)
             record.cell_changed()
-        wanted = ["forces"]
-        if self.stress:
-            wanted.append("stress")
-        elif self.want_stress and atoms.pbc.all():
-            wanted.append("stress")  # an observer will ask (a stress recorder)
-        if self.want_energy:
-            wanted.append("energy")  # a logger will ask: one calculator call, not two
-        if len(wanted) > 1:
-            calculate_together(atoms.calc, atoms, wanted)
+        together = self.stress or self.want_energy or self.want_stress
+        if together:
+            wanted = ["forces"]
+            if self.stress or (self.want_stress and atoms.pbc.all()):
+                wanted.append("stress")  # a barostat, or an observer (a stress recorder)
+            if self.want_energy:
+                wanted.append("energy")  # a logger will ask: one calculator call, not two
+            if len(wanted) > 1:
+                calculate_together(atoms.calc, atoms, wanted)
         forces = np.asarray(atoms.get_forces(md=True), dtype=float)
         if forces.shape != (len(atoms), 3):
             raise ValueError(f"calculator returned forces of shape {forces.shape}, "
                              f"expected {(len(atoms), 3)}")
-        # One reduction: a NaN or an infinity anywhere makes the sum non-finite.
-        if not np.isfinite(forces.sum()):
-            bad = np.flatnonzero(~np.isfinite(forces).all(axis=1))
-            raise NonFiniteForceError(
-                f"calculator returned non-finite forces on atom(s) {bad[:10].tolist()} "
-                f"after step {self.step}; the atoms are left at step {self.step}")
+        if check or together:  # the energy's and stress's messages assume finite forces
+            self.check_forces(forces)
         record.energy = None
         self.energy_known = self.want_energy and "energy" in getattr(atoms.calc, "results", {})
         if self.energy_known:
@@ -163,6 +161,15 @@ class ForceEvaluator:
         if self.stress:
             record.virial = self.molecular_virial(forces)
         return forces
+
+    def check_forces(self, forces: np.ndarray) -> None:
+        """Refuse forces with a NaN or an infinity, naming the atoms (NonFiniteForceError)."""
+        # One reduction: a NaN or an infinity anywhere makes the sum non-finite.
+        if not np.isfinite(forces.sum()):
+            bad = np.flatnonzero(~np.isfinite(forces).all(axis=1))
+            raise NonFiniteForceError(
+                f"calculator returned non-finite forces on atom(s) {bad[:10].tolist()} "
+                f"after step {self.step}; the atoms are left at step {self.step}")
 
     def molecular_virial(self, forces: np.ndarray) -> np.ndarray:
         r"""The molecular virial (eV, 3x3) at the atoms as placed: atomic less intramolecular."""

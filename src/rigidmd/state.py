@@ -1,18 +1,27 @@
-"""The arrays a time step changes, and nothing else."""
-
-from dataclasses import dataclass
+"""The arrays a time step changes, and nothing else, packed in one buffer."""
 
 import numpy as np
 
 __all__ = ["RigidState", "STATE_FIELDS"]
 
-#: The state's arrays, in order.
+#: The state's arrays, in order (their order in :attr:`RigidState.data`).
 STATE_FIELDS = ("X", "V", "q", "p", "x", "v", "cell")
+#: Columns of each field: per body (X, V, q, p), per free atom (x, v), the cell.
+_WIDTHS = {"X": 3, "V": 3, "q": 4, "p": 4, "x": 3, "v": 3}
 
 
-@dataclass
 class RigidState:
     r"""Dynamical state of the rigid bodies, the free atoms and the cell.
+
+    All seven arrays are C-contiguous views into one buffer, :attr:`data`,
+    so that a copy of the whole state (the rollback's backup, at every step)
+    is one ``numpy.copyto``.  Assigning to a field copies into its view: the
+    arrays never change identity, and an array of another shape is refused.
+
+    Parameters
+    ----------
+    X, V, q, p, x, v, cell : array_like
+        Copied into the buffer; shapes as below.
 
     Attributes
     ----------
@@ -33,31 +42,54 @@ class RigidState:
     cell : numpy.ndarray, shape (3, 3)
         Cell vectors as rows (Å), as :attr:`ase.Atoms.cell`; only a barostat
         changes it.
+    data : numpy.ndarray, shape (14 n_bodies + 6 n_free + 9,)
+        The buffer: ``X, V, q, p, x, v, cell`` one after the other, each
+        flattened in C order.
     """
 
-    X: np.ndarray
-    V: np.ndarray
-    q: np.ndarray
-    p: np.ndarray
-    x: np.ndarray
-    v: np.ndarray
-    cell: np.ndarray
+    # Plain slots: reading a field is as cheap as an attribute (the step reads them often).
+    __slots__ = ("data", *STATE_FIELDS)
+
+    def __init__(self, X, V, q, p, x, v, cell):
+        arrays = {name: np.asarray(value, dtype=float) for name, value in
+                  zip(STATE_FIELDS, (X, V, q, p, x, v, cell), strict=True)}
+        n_bodies, n_free = len(arrays["X"]), len(arrays["x"])
+        shapes = {name: ((n_bodies if name in "XVqp" else n_free), width)
+                  for name, width in _WIDTHS.items()}
+        shapes["cell"] = (3, 3)
+        for name, shape in shapes.items():
+            if arrays[name].shape != shape:
+                raise ValueError(f"RigidState.{name} must have shape {shape}, got "
+                                 f"{arrays[name].shape}")
+        data = np.empty(sum(int(np.prod(s)) for s in shapes.values()))
+        object.__setattr__(self, "data", data)
+        start = 0
+        for name in STATE_FIELDS:
+            size = int(np.prod(shapes[name]))
+            view = data[start:start + size].reshape(shapes[name])
+            view[...] = arrays[name]
+            object.__setattr__(self, name, view)
+            start += size
+
+    def __setattr__(self, name, value):
+        """``state.X = array`` copies into the view (same shape only); ``data`` is fixed."""
+        if name not in STATE_FIELDS:
+            raise AttributeError(f"RigidState.{name} cannot be assigned")
+        view = getattr(self, name)
+        value = np.asarray(value, dtype=float)
+        if value.shape != view.shape:
+            raise ValueError(f"RigidState.{name} has shape {view.shape}; cannot assign an array "
+                             f"of shape {value.shape}")
+        view[...] = value
+
+    def __repr__(self) -> str:
+        return (f"RigidState(n_bodies={len(self.X)}, n_free={len(self.x)}, "
+                f"cell={self.cell.tolist()})")
 
     def copy(self) -> "RigidState":
-        """A deep copy."""
-        return RigidState(self.X.copy(), self.V.copy(), self.q.copy(), self.p.copy(),
-                          self.x.copy(), self.v.copy(), self.cell.copy())
+        """A deep copy (its own buffer)."""
+        return RigidState(self.X, self.V, self.q, self.p, self.x, self.v, self.cell)
 
     def copy_into(self, other: "RigidState") -> None:
-        """Overwrite ``other``'s arrays in place with this state's values.
-
-        Spelled out field by field: this runs at every step (the rollback's
-        backup), where walking ``dataclasses.fields`` cost 11 µs.
-        """
-        np.copyto(other.X, self.X)
-        np.copyto(other.V, self.V)
-        np.copyto(other.q, self.q)
-        np.copyto(other.p, self.p)
-        np.copyto(other.x, self.x)
-        np.copyto(other.v, self.v)
-        np.copyto(other.cell, self.cell)
+        """Overwrite ``other``'s arrays in place with this state's values (one copy)."""
+        np.copyto(other.data, self.data)

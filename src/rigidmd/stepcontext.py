@@ -17,7 +17,7 @@ import numpy as np
 from rigidmd import _numba
 from rigidmd import observables as obs
 from rigidmd import operators as ops
-from rigidmd.forces import ForceEvaluator
+from rigidmd.forces import ForceEvaluator, NonFiniteForceError
 from rigidmd.model import BodyModel
 from rigidmd.record import StepRecord
 from rigidmd.state import RigidState
@@ -77,9 +77,11 @@ class StepContext:
     def use_model(self, model: BodyModel) -> None:
         """Work with ``model`` (a checkpoint's, equal to the measured one but for roundoff)."""
         self.model = model
-        # The free rotor's 1/(4 I), once: the fused kernel's only derived array.
-        self.quarter_inv_moments = 0.25 * model.inv_moments
-        self.n_free = model.n_free
+        # The model as the fused kernel takes it (three arrays: few arguments to pass).
+        self.packed_model = _numba.pack_model(model.inv_mass, model.inv_moments,
+                                              model.body_coordinates, model.atom_masses,
+                                              model.bounds, model.order)
+        self.n_bodies, self.n_free = model.n_bodies, model.n_free
 
     def cell_move(self, h):
         """The barostat's drift matrices ``A, B, S`` over ``h``; its note goes to the record."""
@@ -219,7 +221,7 @@ def apply_push_to_angular_velocity(ctx, h):
 
 
 # ---------------------------------------------------------------- fused kernel
-_IDENTITY = np.eye(3)
+_IDENTITY = np.array([np.eye(3)] * 3)
 
 
 def fused_no_squish(ctx, dt):
@@ -229,43 +231,48 @@ def fused_no_squish(ctx, dt):
     rotational_kick(1/2), no_squish_rotate, compute_force,
     translational_kick(1/2), rotational_kick(1/2)`` (checked operator by
     operator in the tests), with each body touched twice: before the force
-    call (kick, drift, free rotor, placement) and after it (reduction, kick,
-    momenta).  Free atoms take plain velocity Verlet in NumPy.
+    call (kick, drift, free rotor, placement) and after it (finiteness of
+    the forces, reduction, kick, momenta).  Free atoms take plain velocity
+    Verlet in NumPy.
     """
-    s, m, record = ctx.state, ctx.model, ctx.record
-    positions, momenta = ctx.positions, ctx.momenta
-    half = 0.5 * dt
-    affine = ctx.cell_motion is not None
-    if affine:
+    s, record = ctx.state, ctx.record
+    body, atom, index = ctx.packed_model
+    n = ctx.n_bodies
+    if ctx.cell_motion is not None:
         # A barostat reads the pressure after the half kick: kick first, then
         # move the cell, and let the loop's own kick add nothing.
+        m, half = ctx.model, 0.5 * dt
         s.V += (half * m.inv_mass)[:, None] * record.F
         s.v += half * record.f / m.free_masses[:, None]
         A, B, S = ctx.cell_move(dt)
         s.cell[...] = s.cell @ A.T
-        F = np.zeros_like(record.F)
-    else:
-        A = B = S = _IDENTITY
-        F = record.F
-    _numba.first_half(s.X, s.V, s.q, s.p, F, record.tau, m.inv_mass, ctx.quarter_inv_moments, dt,
-                      m.body_coordinates, m.bounds, m.order, record.r, positions, A, B, S,
-                      affine)
-    if ctx.n_free:
-        if affine:
+        _numba.first_half(s.data, n, np.zeros_like(record.F), record.tau, body, atom, index, dt,
+                          record.r, ctx.positions, np.array([A, B, S]), True)
+        if ctx.n_free:
             s.x[...] = s.x @ A.T + s.v @ B.T
             s.v[...] = s.v @ S.T
-        else:
-            s.v += half * record.f / m.free_masses[:, None]
+            ctx.positions[m.free] = s.x
+    else:
+        _numba.first_half(s.data, n, record.F, record.tau, body, atom, index, dt, record.r,
+                          ctx.positions, _IDENTITY, False)
+        if ctx.n_free:
+            m = ctx.model
+            s.v += 0.5 * dt * record.f / m.free_masses[:, None]
             s.x += dt * s.v
-        positions[m.free] = s.x
-    forces = ctx.evaluator.calculator_forces(s)
-    # The body forces and torques are overwritten only after the force call succeeded.
-    _numba.second_half(s.V, s.q, s.p, record.F, record.tau, m.inv_mass, m.inv_moments, dt, forces,
-                       m.bounds, m.order, m.atom_masses, record.r, momenta, ctx.write_momenta)
+            ctx.positions[m.free] = s.x
+    evaluator = ctx.evaluator
+    forces = evaluator.calculator_forces(s, check=False)
     if ctx.n_free:
+        evaluator.check_forces(forces)  # before anything is written
+    # The body forces and torques are overwritten only after the forces were found finite.
+    if not _numba.second_half(s.data, n, record.F, record.tau, body, atom, index, dt, forces,
+                              record.r, ctx.momenta, ctx.write_momenta):
+        evaluator.check_forces(forces)
+        raise NonFiniteForceError(f"calculator returned forces whose sum is not finite after "
+                                  f"step {evaluator.step}")
+    if ctx.n_free:
+        m = ctx.model
         record.f = forces[m.free]
-        s.v += half * record.f / m.free_masses[:, None]
+        s.v += 0.5 * dt * record.f / m.free_masses[:, None]
         if ctx.write_momenta:
-            momenta[m.free] = m.free_masses[:, None] * s.v
-
-
+            ctx.momenta[m.free] = m.free_masses[:, None] * s.v
