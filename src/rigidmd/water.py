@@ -13,7 +13,7 @@ model           r_OH (Å)  HOH (deg)  d_OM (Å)  q_H (e)   σ_OO (Å)  ε_OO (kJ
 ==============  ========  =========  ========  ========  ========  =============
 ``tip3p``       0.9572    104.52     0         0.417     3.15061   0.6364
 ``spce``        1.0       109.47     0         0.4238    3.166     0.650
-``tip4p``       0.9572    104.52     0.15      0.52      3.15365   0.6480
+``tip4p``       0.9572    104.52     0.15      0.52      3.15365   0.6487
 ``tip4p2005``   0.9572    104.52     0.1546    0.5564    3.1589    0.7749
 ``tip4pew``     0.9572    104.52     0.125     0.52422   3.16435   0.680946
 ``opc``         0.8724    103.6      0.1594    0.6791    3.16655   0.89036
@@ -25,6 +25,12 @@ model           r_OH (Å)  HOH (deg)  d_OM (Å)  q_H (e)   σ_OO (Å)  ε_OO (kJ
 ``spce`` is SPC/E [5]_: SPC's tetrahedral geometry and Lennard-Jones with the
 charges raised to a dipole of 2.35 D, its paper's liquid energy counting the
 self-polarisation cost (see :mod:`rigidmd.mdanalysis.thermo`).
+ASE's TIP3P σ (3.15061 Å, CHARMM's R_min 3.5365 Å / 2^(1/6)) differs from
+the 1983 A, C coefficients' 3.15066 Å by 2e-5 relative.  Checked against
+other sources: SPC/E (SklogWiki; Mark & Nilsson, J. Phys. Chem. A 105, 9954
+(2001), Table 1), TIP4P-Ew and TIP4P/2005 (LAMMPS "TIP4P water model" howto),
+OPC (ε 0.2128 kcal/mol and R_min/2 1.77717 Å in the OpenFF port
+``opc-1.0.2.offxml``; q_H and geometry in the OPC GROMACS topology).
 
 References
 ----------
