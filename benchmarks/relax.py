@@ -21,8 +21,10 @@ the energy left above the minimum per molecule.
 
 Run::
 
-    python benchmarks/relax.py              # everything, in turn
-    python benchmarks/relax.py cluster 0.01  # one system and fmax (rows to stdout)
+    python benchmarks/relax.py                     # everything, in turn
+    python benchmarks/relax.py box FixBondLengths  # one system (and route): rows to
+                                                   # stdout, every step to stderr
+    python benchmarks/relax.py alpha cluster       # BFGS's alpha swept (RigidFilter)
 
 Results are written to ``benchmarks/relax.txt``.
 """
@@ -33,6 +35,7 @@ from pathlib import Path
 import numpy as np
 from ase.calculators.tip3p import TIP3P
 from ase.constraints import FixBondLengths
+from ase.io import read, write
 from ase.optimize import BFGS
 
 from rigidmd import quaternion as quat
@@ -70,38 +73,74 @@ def perturbed(atoms, seed, shift=0.1, angle=0.1):
     return out
 
 
-def run(system, rc, fmax):
-    """Force calls, steps and final energy of both routes from one start."""
-    rows = []
-    start = system
-    rigid = start.copy()
-    rigid.calc = CountingTIP3P(rc=rc)
-    CountingTIP3P.calls = 0
-    t = time.perf_counter()
-    result = relax(rigid, fmax=fmax, steps=5000)
-    rows.append(("RigidFilter", CountingTIP3P.calls, result.steps, result.converged,
-                 rigid.get_potential_energy(), time.perf_counter() - t))
-    atomic = start.copy()
-    atomic.calc = CountingTIP3P(rc=rc)
-    n = len(atomic) // 3
-    atomic.set_constraint(FixBondLengths(
-        [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]))
-    CountingTIP3P.calls = 0
-    t = time.perf_counter()
-    with BFGS(atomic, logfile=None) as opt:
-        converged = opt.run(fmax=fmax, steps=5000)
-        steps = opt.nsteps
-    rows.append(("FixBondLengths", CountingTIP3P.calls, steps, converged,
-                 atomic.get_potential_energy(), time.perf_counter() - t))
-    return rows
+class Recorder:
+    """Force calls, steps and energy the first time the largest row falls below each ``fmax``.
 
+    One relaxation to the smallest ``fmax`` gives the rows of every larger one:
+    BFGS's steps do not depend on ``fmax`` (it is only the stopping test), so
+    the state at the first test passed for ``fmax`` is where a run with that
+    ``fmax`` stops.  The norms are read off the optimizer's own convergence
+    test (no extra calculator or projection call).
+    """
+
+    def __init__(self, opt, atoms, fmaxes, log=None):
+        self.opt, self.atoms, self.log = opt, atoms, log
+        self.todo = sorted(fmaxes, reverse=True)
+        self.found = {}
+        self.t0 = time.perf_counter()
+        optimizable = opt.optimizable
+        original = optimizable.converged
+
+        def converged(gradient, fmax):
+            norm = float(optimizable.gradient_norm(gradient))
+            self.record(norm)
+            return original(gradient, fmax)
+
+        optimizable.converged = converged
+
+    def record(self, norm):
+        energy = self.atoms.get_potential_energy()
+        wall = time.perf_counter() - self.t0
+        if self.log is not None:
+            print(f"{self.opt.nsteps:5d} {CountingTIP3P.calls:5d} {energy:.8f} {norm:.5f} "
+                  f"{wall:.1f}", file=self.log, flush=True)
+        while self.todo and norm < self.todo[0]:
+            self.found[self.todo.pop(0)] = (CountingTIP3P.calls, self.opt.nsteps, True,
+                                            energy, wall)
+
+
+def run_route(route, start, rc, fmaxes, log=None, steps=5000, **bfgs):
+    """``{fmax: (calls, steps, converged, energy, wall)}`` of one route from ``start``.
+
+    ``bfgs``: further arguments of ASE's BFGS (``alpha``, the initial Hessian in eV/Å²).
+    """
+    atoms = start.copy()
+    atoms.calc = CountingTIP3P(rc=rc)
+    if route == "RigidFilter":
+        target = RigidFilter(atoms)
+    else:
+        n = len(atoms) // 3
+        atoms.set_constraint(FixBondLengths(
+            [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]))
+        target = atoms
+    CountingTIP3P.calls = 0
+    with BFGS(target, logfile=None, **bfgs) as opt:
+        recorder = Recorder(opt, atoms, fmaxes, log)
+        opt.run(fmax=min(fmaxes), steps=steps)
+    for fmax in recorder.todo:  # not reached within steps
+        recorder.found[fmax] = (CountingTIP3P.calls, opt.nsteps, False,
+                                atoms.get_potential_energy(), time.perf_counter() - recorder.t0)
+    return recorder.found
+
+
+ROUTES = ("RigidFilter", "FixBondLengths")
 
 HEADER = ["# Force calls to relax rigid TIP3P water (BFGS): RigidFilter vs FixBondLengths",
           "",
           "Start: the minimum (rigid BFGS to fmax 1e-4 eV/Å), every molecule moved rigidly "
           "(0.1 Å, 0.1 rad).",
           "ΔE: energy above the minimum per molecule (eV). Wall times with other jobs on the "
-          "machine (2 cores shared, load 10-16).",
+          "machine (2 cores shared).",
           "",
           "| system | fmax (eV/Å) | route | force calls | steps | converged | ΔE (eV/molecule) "
           "| wall (s) |",
@@ -111,21 +150,59 @@ SYSTEMS = {"cluster": ("32-water cluster", lambda: water_cluster(32, seed=0), 20
            "box": ("64-water box", lambda: water_box(4, seed=0), 6.0)}
 
 
-def rows(key, fmaxes):
-    """Table rows of one system for each ``fmax``."""
+def start_of(key):
+    """The start and the minimum's energy of one system, computed once and kept in a file.
+
+    The file (``relax_start_<key>.extxyz`` beside this script) keeps every route
+    on one start even when the rigid relaxation to the minimum changes.
+    """
+    path = Path(__file__).with_name(f"relax_start_{key}.extxyz")
+    if path.exists():
+        start = read(path)
+        return start, start.info["minimum_energy"]
     name, build, rc = SYSTEMS[key]
     atoms = build()
     atoms.calc = TIP3P(rc=rc)
     relax(atoms, fmax=1e-4, steps=5000)
     minimum = atoms.get_potential_energy()
-    n = len(atoms) // 3
     start = perturbed(atoms, seed=1)
     start.calc = None
+    start.info["minimum_energy"] = minimum
+    write(path, start)
+    return start, minimum
+
+
+def rows(key, fmaxes=(0.05, 0.01), routes=ROUTES, log=None):
+    """Table rows of one system for each ``fmax`` and route."""
+    name, _, rc = SYSTEMS[key]
+    start, minimum = start_of(key)
+    n = len(start) // 3
     out = []
-    for fmax in fmaxes:
-        for route, calls, steps, converged, energy, wall in run(start, rc, fmax):
+    for route in routes:
+        found = run_route(route, start, rc, fmaxes, log)
+        for fmax in sorted(fmaxes, reverse=True):
+            calls, steps, converged, energy, wall = found[fmax]
             out.append(f"| {name} | {fmax} | {route} | {calls} | {steps} | {converged} "
                        f"| {(energy - minimum) / n:.2e} | {wall:.1f} |")
+            print(out[-1], flush=True)
+    return out
+
+
+ALPHAS = (70.0, 35.0, 20.0, 10.0, 7.0, 5.0, 3.0)
+
+
+def alpha_rows(key, route="RigidFilter", fmaxes=(0.05, 0.01)):
+    """Rows of one route for BFGS's initial Hessian ``alpha`` (eV/Å²) in :data:`ALPHAS`."""
+    name, _, rc = SYSTEMS[key]
+    start, minimum = start_of(key)
+    n = len(start) // 3
+    out = []
+    for alpha in ALPHAS:
+        found = run_route(route, start, rc, fmaxes, alpha=alpha)
+        for fmax in sorted(fmaxes, reverse=True):
+            calls, steps, converged, energy, wall = found[fmax]
+            out.append(f"| {name} | {alpha:g} | {fmax} | {route} | {calls} | {steps} "
+                       f"| {converged} | {(energy - minimum) / n:.2e} |")
             print(out[-1], flush=True)
     return out
 
@@ -133,10 +210,14 @@ def rows(key, fmaxes):
 def main():
     import sys
 
-    if len(sys.argv) == 3:
-        rows(sys.argv[1], [float(sys.argv[2])])
+    args = sys.argv[1:]
+    if args[:1] == ["alpha"]:  # alpha SYSTEM [ROUTE]: BFGS's alpha swept, rows to stdout
+        alpha_rows(args[1], *args[2:])
         return
-    lines = HEADER + rows("cluster", (0.05, 0.01)) + rows("box", (0.05, 0.01))
+    if args:  # SYSTEM [ROUTE]: rows to stdout, per-step log to stderr
+        rows(args[0], routes=args[1:] or ROUTES, log=sys.stderr)
+        return
+    lines = HEADER + rows("cluster") + rows("box")
     text = "\n".join(lines) + "\n"
     Path(__file__).with_suffix(".txt").write_text(text)
     print(text)
