@@ -62,13 +62,13 @@ def test_cell_gradient_matches_finite_differences_of_the_enthalpy(mode):
     assert np.all(forces[27:54, 0] == 0.0)  # no coordinate about a linear body's axis
 
 
-# The linear water dimer (the donor's O-H on the O...O axis, the donor in the acceptor's
-# mirror plane): dimerization energy (kcal/mol), R(OO) (Å) and the angle (deg) between the
-# O...O axis and the acceptor's plane.  Read in T. A. Halgren, J. Comput. Chem. 17, 490
-# (1996), section "Additional comparisons", which gives them for TIP3P and TIP4P "for the
-# linear water dimer (optimized with the O-H...O angle restricted to 180 deg)" beside
-# MMFF94's; the models are Jorgensen et al., J. Chem. Phys. 79, 926 (1983), whose table I
-# could not be read here.
+# The linear water dimer (the donor's O-H on the O...O axis, the donor in the dimer's
+# mirror plane, which bisects the acceptor): dimerization energy (kcal/mol), R(OO) (Å) and
+# the angle (deg) between the O...O axis and the acceptor's plane.  Read in T. A. Halgren,
+# J. Comput. Chem. 17, 490 (1996), section "Additional comparisons", which gives them for
+# TIP3P and TIP4P, optimized with the O-H...O angle held at 180 deg, beside MMFF94's; the
+# models are Jorgensen et al., J. Chem. Phys. 79, 926 (1983), whose own table was not
+# available here.
 PUBLISHED_LINEAR_DIMERS = {"tip3p": (-6.50, 2.74, 27.0), "tip4p": (-6.24, 2.74, 46.0)}
 CALCULATORS = {"tip3p": TIP3P, "tip4p": TIP4P}
 
