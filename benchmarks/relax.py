@@ -14,15 +14,20 @@ waters: wall times are ASE's, the force calls are the comparison).
 
 Systems: a 32-water cluster (``water_cluster(32)``, ``TIP3P(rc=20)``, no
 cutoff reached) and a periodic box of 64 waters (``water_box(4)``, 12.4 Å,
-``TIP3P(rc=6)``).  The minimum is the rigid relaxation to ``fmax`` 1e-4 eV/Å
-of the built structure.  Reported per ``fmax`` (0.05 and 0.01 eV/Å): force
-calls (calculator evaluations, counted in the calculator), optimizer steps and
-the energy left above the minimum per molecule.
+``TIP3P(rc=6)``).  The start and the minimum are made once and kept beside
+this script (:func:`start_of`).  Reported per ``fmax`` (0.05 and 0.01 eV/Å),
+both from one run to the smaller (BFGS's steps do not depend on ``fmax``):
+force calls (calculator evaluations, counted in the calculator), optimizer
+steps and the energy left above the minimum per molecule.  ``alpha`` sweeps
+BFGS's initial Hessian (``alpha`` eV/Å² times the identity, in the
+coordinates each route shows the optimizer).
 
 Run::
 
-    python benchmarks/relax.py              # everything, in turn
-    python benchmarks/relax.py cluster 0.01  # one system and fmax (rows to stdout)
+    python benchmarks/relax.py                     # everything, in turn
+    python benchmarks/relax.py box FixBondLengths  # one system (and route): rows to
+                                                   # stdout, every step to stderr
+    python benchmarks/relax.py alpha cluster       # BFGS's alpha swept (RigidFilter)
 
 Results are written to ``benchmarks/relax.txt``.
 """
@@ -33,6 +38,7 @@ from pathlib import Path
 import numpy as np
 from ase.calculators.tip3p import TIP3P
 from ase.constraints import FixBondLengths
+from ase.io import read, write
 from ase.optimize import BFGS
 
 from rigidmd import quaternion as quat
@@ -70,38 +76,74 @@ def perturbed(atoms, seed, shift=0.1, angle=0.1):
     return out
 
 
-def run(system, rc, fmax):
-    """Force calls, steps and final energy of both routes from one start."""
-    rows = []
-    start = system
-    rigid = start.copy()
-    rigid.calc = CountingTIP3P(rc=rc)
-    CountingTIP3P.calls = 0
-    t = time.perf_counter()
-    result = relax(rigid, fmax=fmax, steps=5000)
-    rows.append(("RigidFilter", CountingTIP3P.calls, result.steps, result.converged,
-                 rigid.get_potential_energy(), time.perf_counter() - t))
-    atomic = start.copy()
-    atomic.calc = CountingTIP3P(rc=rc)
-    n = len(atomic) // 3
-    atomic.set_constraint(FixBondLengths(
-        [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]))
-    CountingTIP3P.calls = 0
-    t = time.perf_counter()
-    with BFGS(atomic, logfile=None) as opt:
-        converged = opt.run(fmax=fmax, steps=5000)
-        steps = opt.nsteps
-    rows.append(("FixBondLengths", CountingTIP3P.calls, steps, converged,
-                 atomic.get_potential_energy(), time.perf_counter() - t))
-    return rows
+class Recorder:
+    """Force calls, steps and energy the first time the largest row falls below each ``fmax``.
 
+    One relaxation to the smallest ``fmax`` gives the rows of every larger one:
+    BFGS's steps do not depend on ``fmax`` (it is only the stopping test), so
+    the state at the first test passed for ``fmax`` is where a run with that
+    ``fmax`` stops.  The norms are read off the optimizer's own convergence
+    test (no extra calculator or projection call).
+    """
+
+    def __init__(self, opt, atoms, fmaxes, log=None):
+        self.opt, self.atoms, self.log = opt, atoms, log
+        self.todo = sorted(fmaxes, reverse=True)
+        self.found = {}
+        self.t0 = time.perf_counter()
+        optimizable = opt.optimizable
+        original = optimizable.converged
+
+        def converged(gradient, fmax):
+            norm = float(optimizable.gradient_norm(gradient))
+            self.record(norm)
+            return original(gradient, fmax)
+
+        optimizable.converged = converged
+
+    def record(self, norm):
+        energy = self.atoms.get_potential_energy()
+        wall = time.perf_counter() - self.t0
+        if self.log is not None:
+            print(f"{self.opt.nsteps:5d} {CountingTIP3P.calls:5d} {energy:.8f} {norm:.5f} "
+                  f"{wall:.1f}", file=self.log, flush=True)
+        while self.todo and norm < self.todo[0]:
+            self.found[self.todo.pop(0)] = (CountingTIP3P.calls, self.opt.nsteps, True,
+                                            energy, wall)
+
+
+def run_route(route, start, rc, fmaxes, log=None, steps=5000, **bfgs):
+    """``{fmax: (calls, steps, converged, energy, wall)}`` of one route from ``start``.
+
+    ``bfgs``: further arguments of ASE's BFGS (``alpha``, the initial Hessian in eV/Å²).
+    """
+    atoms = start.copy()
+    atoms.calc = CountingTIP3P(rc=rc)
+    if route == "RigidFilter":
+        target = RigidFilter(atoms)
+    else:
+        n = len(atoms) // 3
+        atoms.set_constraint(FixBondLengths(
+            [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]))
+        target = atoms
+    CountingTIP3P.calls = 0
+    with BFGS(target, logfile=None, **bfgs) as opt:
+        recorder = Recorder(opt, atoms, fmaxes, log)
+        opt.run(fmax=min(fmaxes), steps=steps)
+    for fmax in recorder.todo:  # not reached within steps
+        recorder.found[fmax] = (CountingTIP3P.calls, opt.nsteps, False,
+                                atoms.get_potential_energy(), time.perf_counter() - recorder.t0)
+    return recorder.found
+
+
+ROUTES = ("RigidFilter", "FixBondLengths")
 
 HEADER = ["# Force calls to relax rigid TIP3P water (BFGS): RigidFilter vs FixBondLengths",
           "",
-          "Start: the minimum (rigid BFGS to fmax 1e-4 eV/Å), every molecule moved rigidly "
-          "(0.1 Å, 0.1 rad).",
-          "ΔE: energy above the minimum per molecule (eV). Wall times with other jobs on the "
-          "machine (2 cores shared, load 10-16).",
+          "Start: a minimum with every molecule moved rigidly (0.1 Å, 0.1 rad), kept in "
+          "relax_start_<system>.extxyz.",
+          "ΔE: energy above the minimum of the start's basin per molecule (eV). Wall times "
+          "with other jobs on the machine (2 cores shared).",
           "",
           "| system | fmax (eV/Å) | route | force calls | steps | converged | ΔE (eV/molecule) "
           "| wall (s) |",
@@ -111,21 +153,72 @@ SYSTEMS = {"cluster": ("32-water cluster", lambda: water_cluster(32, seed=0), 20
            "box": ("64-water box", lambda: water_box(4, seed=0), 6.0)}
 
 
-def rows(key, fmaxes):
-    """Table rows of one system for each ``fmax``."""
+def start_of(key, write_start=None):
+    """The start and the minimum's energy of one system, computed once and kept in a file.
+
+    The file (``relax_start_<key>.extxyz`` beside this script) keeps every route
+    on one start even when the rigid relaxation changes.  A new start: the
+    built structure relaxed rigidly to fmax 1e-3 eV/Å (BFGS, ``alpha`` 5),
+    every molecule moved (:func:`perturbed`), and the minimum of the start's
+    basin by relaxing a copy of it rigidly to fmax 1e-4 eV/Å.  ``write_start``
+    is called with the start's path before that last relaxation (so that a
+    long route can begin meanwhile); the minimum is then added to the file.
+    (The stored cluster start predates this: the built cluster relaxed to
+    1e-4 with BFGS's default ``alpha`` 70, then moved; its minimum that one.)
+    """
+    path = Path(__file__).with_name(f"relax_start_{key}.extxyz")
+    if path.exists():
+        start = read(path)
+        return start, start.info.get("minimum_energy")
     name, build, rc = SYSTEMS[key]
     atoms = build()
     atoms.calc = TIP3P(rc=rc)
-    relax(atoms, fmax=1e-4, steps=5000)
-    minimum = atoms.get_potential_energy()
-    n = len(atoms) // 3
+    relax(atoms, fmax=1e-3, steps=5000, alpha=5.0)
     start = perturbed(atoms, seed=1)
     start.calc = None
+    write(path, start)
+    if write_start is not None:
+        write_start(path)
+    basin = start.copy()
+    basin.calc = TIP3P(rc=rc)
+    result = relax(basin, fmax=1e-4, steps=5000, alpha=5.0)
+    start.info["minimum_energy"] = result.energy
+    write(path, start)
+    return start, result.energy
+
+
+def rows(key, fmaxes=(0.05, 0.01), routes=ROUTES, log=None):
+    """Table rows of one system for each ``fmax`` and route."""
+    name, _, rc = SYSTEMS[key]
+    start, _ = start_of(key)
+    n = len(start) // 3
     out = []
-    for fmax in fmaxes:
-        for route, calls, steps, converged, energy, wall in run(start, rc, fmax):
+    for route in routes:
+        found = run_route(route, start, rc, fmaxes, log)
+        minimum = start_of(key)[1]  # written by another process meanwhile, maybe
+        for fmax in sorted(fmaxes, reverse=True):
+            calls, steps, converged, energy, wall = found[fmax]
             out.append(f"| {name} | {fmax} | {route} | {calls} | {steps} | {converged} "
                        f"| {(energy - minimum) / n:.2e} | {wall:.1f} |")
+            print(out[-1], flush=True)
+    return out
+
+
+ALPHAS = (70.0, 35.0, 20.0, 10.0, 7.0, 5.0, 3.0)
+
+
+def alpha_rows(key, route="RigidFilter", fmaxes=(0.05, 0.01)):
+    """Rows of one route for BFGS's initial Hessian ``alpha`` (eV/Å²) in :data:`ALPHAS`."""
+    name, _, rc = SYSTEMS[key]
+    start, minimum = start_of(key)
+    n = len(start) // 3
+    out = []
+    for alpha in ALPHAS:
+        found = run_route(route, start, rc, fmaxes, alpha=alpha)
+        for fmax in sorted(fmaxes, reverse=True):
+            calls, steps, converged, energy, wall = found[fmax]
+            out.append(f"| {name} | {alpha:g} | {fmax} | {route} | {calls} | {steps} "
+                       f"| {converged} | {(energy - minimum) / n:.2e} |")
             print(out[-1], flush=True)
     return out
 
@@ -133,10 +226,14 @@ def rows(key, fmaxes):
 def main():
     import sys
 
-    if len(sys.argv) == 3:
-        rows(sys.argv[1], [float(sys.argv[2])])
+    args = sys.argv[1:]
+    if args[:1] == ["alpha"]:  # alpha SYSTEM [ROUTE]: BFGS's alpha swept, rows to stdout
+        alpha_rows(args[1], *args[2:])
         return
-    lines = HEADER + rows("cluster", (0.05, 0.01)) + rows("box", (0.05, 0.01))
+    if args:  # SYSTEM [ROUTE]: rows to stdout, per-step log to stderr
+        rows(args[0], routes=args[1:] or ROUTES, log=sys.stderr)
+        return
+    lines = HEADER + rows("cluster") + rows("box")
     text = "\n".join(lines) + "\n"
     Path(__file__).with_suffix(".txt").write_text(text)
     print(text)
