@@ -42,6 +42,7 @@ import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
 from rigidmd.checks import check_finite
+from rigidmd.lammps.boxplugin import BoxPluginUnavailable, box_plugin, warn_fallback
 from rigidmd.lammps.data import MASSLESS_SITE_MASS
 from rigidmd.lammps.library import (
     DEFAULT_CMDARGS,
@@ -201,6 +202,8 @@ class LAMMPSCalculator(Calculator):
     implemented_properties = ["energy", "free_energy", "forces", "stress"]
     _lmp = None
     _grouping_checked = None  # the bodies and molecules last found to agree
+    _box_plugin = None        # True, or why the box plugin is not there (see _start)
+    _box_moved = False        # the box changed through the plugin since the last step
 
     def __init__(self, commands, *, atom_types=None, molecule_ids=None,
                  exclude_intramolecular=True, ase_constants=False, skin=2.0, cmdargs=None,
@@ -427,6 +430,14 @@ class LAMMPSCalculator(Calculator):
                 raise LammpsError("LAMMPSCalculator: unexpected LAMMPS Coulomb constant")
             if kspace and self.kspace_parameters is not None:
                 self._execute([self.kspace_parameters])
+            self._box_plugin = None
+            if periodic:  # declared before the set-up run, as a barostat fix is
+                try:
+                    box_plugin(lmp)
+                    self._execute(["fix rmd_box all rigidmd/box"])
+                    self._box_plugin = True
+                except BoxPluginUnavailable as err:
+                    self._box_plugin = str(err)
             # One set-up with a log: LAMMPS's warnings, and the k-space parameters it chose.
             self._execute(["run 0 pre yes post no", "log none"])
             text = log.read_text()
@@ -554,6 +565,18 @@ class LAMMPSCalculator(Calculator):
         """
         rotation, lammps_cell = _lower_triangular(cell)
         tilted = bool(lammps_cell[1, 0] or lammps_cell[2, 0] or lammps_cell[2, 1])
+        if self._box_plugin is True and (self._triclinic or not tilted):
+            # LAMMPS's barostat path (see rigidmd.lammps.boxplugin): the new box and
+            # KSpace::setup() now; the next step re-neighbours if the box moved enough.
+            edges = [lammps_cell[0, 0], lammps_cell[1, 1], lammps_cell[2, 2],
+                     lammps_cell[1, 0], lammps_cell[2, 0], lammps_cell[2, 1]]
+            self._execute(["rigidmd_box " + " ".join(f"{v:.17g}" for v in edges)])
+            self._rotation = rotation
+            self._cell = cell.copy()
+            self._box_moved = True
+            return
+        if self._box_plugin is not True and self._box_plugin is not None:
+            warn_fallback(self._box_plugin)
         commands = []
         if tilted and not self._triclinic:
             commands.append("change_box all triclinic")
@@ -605,7 +628,15 @@ class LAMMPSCalculator(Calculator):
             lmp.numpy.extract_atom("image")[:nlocal] = self._encode_all(image.astype(np.int64))
         elif atoms.pbc.all():
             # LAMMPS's own image of each atom: only real motion counts against the skin.
-            positions -= self._images(nlocal) @ self._lammps_cell()
+            cell, image = self._lammps_cell(), self._images(nlocal)
+            positions -= image @ cell
+            if self._box_moved:  # a new box without a set-up: an atom far out would be lost
+                frac = np.linalg.solve(cell.T, positions.T).T
+                if np.any(frac < -0.5) or np.any(frac >= 1.5):  # LAMMPS wraps by one box
+                    shift = np.floor(frac)
+                    positions -= shift @ cell
+                    lmp.numpy.extract_atom("image")[:nlocal] = self._encode_all(
+                        image + shift.astype(np.int64))
         lmp.numpy.extract_atom("x")[:nlocal] = positions
         # LAMMPS tallies energy and virial only on the steps computes ask for them
         # (as a native run does on its thermo steps): ask only for what was asked for.
@@ -620,7 +651,7 @@ class LAMMPSCalculator(Calculator):
         if want_energy or want_stress:
             lmp.addstep_compute(step)
         self._execute([command])
-        self._setup_needed = False
+        self._setup_needed = self._box_moved = False
         # LAMMPS sorts its atoms now and then (for locality): map by ID after the run.
         nlocal = lmp.extract_global("nlocal")
         ids = np.asarray(lmp.numpy.extract_atom("id")[:nlocal], dtype=np.int64) - 1
