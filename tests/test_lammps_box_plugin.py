@@ -88,8 +88,7 @@ def test_cell_changes_equal_a_fresh_lammps_with_the_same_kspace_parameters(comma
     component); bounds 1e-9 as in the calculator's other tests.  Only the tilt of an
     orthogonal box runs a set-up (``change_box all triclinic``); every other change is
     one ``rigidmd_box`` command.  Without ``KSpace::setup()`` in the plugin the same
-    comparison is off by 3e-5 to 3e-3
-    relative in energy and 4-12 % in forces."""
+    comparison is off by 3e-5 to 3e-3 relative in energy and 4-12 % in forces."""
     atoms = water_box_27()
     atoms.calc = LAMMPSCalculator(PPPM_27)
     atoms.get_potential_energy()
