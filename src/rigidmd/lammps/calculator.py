@@ -9,14 +9,18 @@ runs one step without set-up and without an integrator
 (``run 1 pre no post no``), and reads energy, forces and the virial back: one
 force evaluation per call, about one native LAMMPS step.
 
-When the cell changes (a barostat), the box is changed with ``change_box``
-and that call runs with LAMMPS's set-up (``run 0 pre yes``), which rebuilds
-the neighbour lists and the k-space set-up (PPPM's Green's function) for the
-new box, as LAMMPS's own barostats do, with the k-space parameters of the
-first cell (:attr:`LAMMPSCalculator.kspace_parameters`): energies, forces and
-stress then equal those of a fresh LAMMPS at that cell given those
-parameters.  The instance stays whatever the cell does: cells that are not in
-LAMMPS's lower-triangular form are rotated into it anew at each cell
+When the cell changes (a barostat), the new box costs what it costs LAMMPS's
+own barostats: a small LAMMPS plugin (:mod:`rigidmd.lammps.boxplugin`, built on
+first use) sets the box and re-sets only the k-space solver (PPPM's Green's
+function for the new box), and the next step re-neighbours when the atoms or
+the box corners have moved by half the skin.  Where the plugin cannot be built
+or loaded (said once, with the reason), the box is changed with
+``change_box`` and that call runs LAMMPS's whole set-up (``run 0 pre yes``).
+Either way the k-space parameters of the first cell are kept
+(:attr:`LAMMPSCalculator.kspace_parameters`): energies, forces and stress
+equal those of a fresh LAMMPS at that cell given those parameters.  The
+instance stays whatever the cell does: cells that are not in LAMMPS's
+lower-triangular form are rotated into it anew at each cell
 (positions, forces and stress rotated back), and an orthogonal box that gets
 tilted becomes triclinic once.  A change in the number or kind of atoms,
 their charges or their molecules builds a new instance.
@@ -41,7 +45,7 @@ from pathlib import Path
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
-from rigidmd.checks import check_finite
+from rigidmd.checks import changed_properties, check_finite
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, box_plugin, warn_fallback
 from rigidmd.lammps.data import MASSLESS_SITE_MASS
 from rigidmd.lammps.library import (
@@ -50,6 +54,7 @@ from rigidmd.lammps.library import (
     LammpsError,
     charge_factor,
     flatten,
+    lammps_warnings,
     load_lammps,
 )
 
@@ -89,28 +94,6 @@ def _threads(threads):
         raise ValueError(f"LAMMPSCalculator: threads must be a positive whole number, got "
                          f"{threads!r}")
     return int(threads)
-
-
-#: LAMMPS warnings that say nothing here: no integrator is the design; the net charge
-#: is said by the calculator itself; and the reciprocal-space part of the excluded
-#: intramolecular pairs is a constant of rigid molecules (the k-space parameters are
-#: pinned) whose forces cancel in each body's force and torque.
-_QUIET = ("No fixes with time integration", "System is not charge neutral",
-          "Neighbor exclusions used with KSpace solver")
-
-
-def _lammps_warnings(text):
-    """The ``WARNING:`` lines of a LAMMPS log, each with the manual page it points to."""
-    lines = text.splitlines()
-    found = []
-    for k, line in enumerate(lines):
-        if not line.startswith("WARNING: ") or any(q in line for q in _QUIET):
-            continue
-        message = re.sub(r"\s*\(src/\S+:\d+\)$", "", line[len("WARNING: "):].strip())
-        more = lines[k + 1] if k + 1 < len(lines) else ""
-        page = re.search(r"https://docs\.lammps\.org/\S+", more)
-        found.append(message + (f" (see {page.group(0)})" if page else ""))
-    return list(dict.fromkeys(found))
 
 
 def _distinct(ids):
@@ -463,7 +446,7 @@ class LAMMPSCalculator(Calculator):
                           "the commands have a kspace_style: k-space adds a uniform neutralising "
                           "background; check the charges if the system should be neutral",
                           stacklevel=4)
-        for line in _lammps_warnings(text):
+        for line in lammps_warnings(text):
             warnings.warn(f"LAMMPSCalculator: LAMMPS warns: {line}", stacklevel=4)
         if kspace and self.kspace_parameters is None:
             self._pin_kspace(text)
@@ -553,6 +536,12 @@ class LAMMPSCalculator(Calculator):
     def _change_box(self, cell):
         """Give LAMMPS a new cell, in the same instance with the same k-space parameters.
 
+        With the box plugin (see :mod:`rigidmd.lammps.boxplugin`): one
+        ``rigidmd_box`` command (the new box and ``KSpace::setup()``; positions
+        are written at the call, in LAMMPS's own images, and the step decides
+        whether to re-neighbour).  Without it, or when an orthogonal box gets
+        tilted: ``change_box`` and a set-up run at the call.
+
         The cell is rotated into LAMMPS's lower-triangular frame anew (a
         barostat that shears a general cell turns that frame a little at every
         step): positions are written in the new frame at the next call, and
@@ -609,21 +598,10 @@ class LAMMPSCalculator(Calculator):
         dynamics asks for (twice or three times a step), where ASE's costs about
         0.5 ms on 648 atoms.
         """
-        old = self.atoms
-        if (old is None or not self.use_cache or len(old) != len(atoms)
-                or set(old.arrays) != set(atoms.arrays)):
+        if self.atoms is None or not self.use_cache:
             return super().check_state(atoms, tol)
-        changes = []
-        pairs = [("cell", old.cell.array, atoms.cell.array), ("pbc", old.pbc, atoms.pbc)]
-        pairs += [(name, old.arrays[name], atoms.arrays[name]) for name in all_changes
-                  if name in old.arrays]
-        for name, a, b in pairs:
-            if a.shape != b.shape:
-                changes.append(name)
-            elif not np.array_equal(a, b) and not (
-                    a.dtype != bool and np.all(np.abs(a - b) <= tol * (1 + np.abs(b)))):
-                changes.append(name)
-        return changes
+        changes = changed_properties(self.atoms, atoms, tol)
+        return super().check_state(atoms, tol) if changes is None else changes
 
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         super().calculate(atoms, properties, system_changes)
