@@ -232,11 +232,14 @@ def test_npt_conserved_energy_with_pppm_and_a_moving_cell():
     assert np.ptp(energies) < 0.1, np.ptp(energies)
 
 
-def test_check_state_finds_what_ases_comparison_finds():
+def test_check_state_finds_what_ases_comparison_finds(monkeypatch):
     """The calculator's own check_state (a faster comparison) against ASE's compare_atoms:
     the same changes for moved atoms (by 1e-3 Å and by roundoff below the 1e-15
     tolerance), a new cell, pbc, charges, elements, a new array and fewer atoms."""
+    import ase.calculators.calculator as ase_calculator
     from ase.calculators.calculator import compare_atoms
+
+    from rigidmd.checks import changed_properties
 
     atoms = water_box_27()
     calc = LAMMPSCalculator(PPPM_27)
@@ -245,6 +248,8 @@ def test_check_state_finds_what_ases_comparison_finds():
     def changed(edit):
         a = atoms.copy()
         edit(a)
+        fast = changed_properties(calc.atoms, a, 1e-15)
+        assert fast is None or sorted(fast) == sorted(calc.check_state(a))
         return sorted(calc.check_state(a)), sorted(compare_atoms(calc.atoms, a))
 
     edits = [lambda a: None,
@@ -259,4 +264,11 @@ def test_check_state_finds_what_ases_comparison_finds():
     found = [changed(edit) for edit in edits]
     for mine, ases in found:
         assert mine == ases
+    a = atoms.copy()  # for atoms alike the calculator does not ask ASE
+    a.positions[0, 0] += 0.1
+    monkeypatch.setattr(ase_calculator, "compare_atoms", None)
+    assert calc.check_state(a) == ["positions"]
+    monkeypatch.undo()
+    a.pop()
+    assert changed_properties(calc.atoms, a, 1e-15) is None
     assert [mine for mine, _ in found[:4]] == [[], ["positions"], [], ["cell"]]

