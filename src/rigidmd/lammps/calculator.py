@@ -10,10 +10,12 @@ runs one step without set-up and without an integrator
 force evaluation per call, about one native LAMMPS step.
 
 When the cell changes (a barostat), the new box costs what it costs LAMMPS's
-own barostats: a small LAMMPS plugin (:mod:`rigidmd.lammps.boxplugin`, built on
-first use) sets the box and re-sets only the k-space solver (PPPM's Green's
-function for the new box), and the next step re-neighbours when the atoms or
-the box corners have moved by half the skin.  Where the plugin cannot be built
+own barostats: a small LAMMPS plugin (:mod:`rigidmd.lammps.boxplugin`, built
+once per user at the first cell change) sets the box and re-sets only the
+k-space solver (PPPM's Green's function for the new box), and the next step
+re-neighbours when the atoms or the box corners have moved by half the skin
+(the first new cell of an instance runs one set-up, which takes the plugin in;
+a fixed cell never loads it).  Where the plugin cannot be built
 or loaded (said once, with the reason), the box is changed with
 ``change_box`` and that call runs LAMMPS's whole set-up (``run 0 pre yes``).
 Either way the k-space parameters of the first cell are kept
@@ -413,14 +415,7 @@ class LAMMPSCalculator(Calculator):
                 raise LammpsError("LAMMPSCalculator: unexpected LAMMPS Coulomb constant")
             if kspace and self.kspace_parameters is not None:
                 self._execute([self.kspace_parameters])
-            self._box_plugin = None
-            if periodic:  # declared before the set-up run, as a barostat fix is
-                try:
-                    box_plugin(lmp)
-                    self._execute(["fix rmd_box all rigidmd/box"])
-                    self._box_plugin = True
-                except BoxPluginUnavailable as err:
-                    self._box_plugin = str(err)
+            self._box_plugin = None  # not needed until the cell changes
             # One set-up with a log: LAMMPS's warnings, and the k-space parameters it chose.
             self._execute(["run 0 pre yes post no", "log none"])
             text = log.read_text()
@@ -539,8 +534,10 @@ class LAMMPSCalculator(Calculator):
         With the box plugin (see :mod:`rigidmd.lammps.boxplugin`): one
         ``rigidmd_box`` command (the new box and ``KSpace::setup()``; positions
         are written at the call, in LAMMPS's own images, and the step decides
-        whether to re-neighbour).  Without it, or when an orthogonal box gets
-        tilted: ``change_box`` and a set-up run at the call.
+        whether to re-neighbour).  At the first new cell of an instance (the
+        plugin's ``fix rigidmd/box`` is taken in by a set-up), without the
+        plugin, or when an orthogonal box gets tilted: ``change_box`` and a
+        set-up run at the call.
 
         The cell is rotated into LAMMPS's lower-triangular frame anew (a
         barostat that shears a general cell turns that frame a little at every
@@ -564,9 +561,18 @@ class LAMMPSCalculator(Calculator):
             self._cell = cell.copy()
             self._box_moved = True
             return
-        if self._box_plugin is not True and self._box_plugin is not None:
-            warn_fallback(self._box_plugin)
         commands = []
+        if self._box_plugin is None:
+            # The first new cell: the set-up below takes in fix rigidmd/box (as it
+            # would a barostat fix); later cells then need no set-up.
+            try:
+                box_plugin(self._lmp)
+                commands.append("fix rmd_box all rigidmd/box")
+                self._box_plugin = True
+            except BoxPluginUnavailable as err:
+                self._box_plugin = str(err)
+        if self._box_plugin is not True:
+            warn_fallback(self._box_plugin)
         if tilted and not self._triclinic:
             commands.append("change_box all triclinic")
             commands += [c for c in self.commands
