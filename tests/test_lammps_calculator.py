@@ -230,3 +230,45 @@ def test_npt_conserved_energy_with_pppm_and_a_moving_cell():
     assert abs(atoms.get_volume() / volume - 1) > 1e-3  # the cell did move
     assert atoms.calc.kspace_parameters.startswith("kspace_modify gewald ")
     assert np.ptp(energies) < 0.1, np.ptp(energies)
+
+
+def test_check_state_finds_what_ases_comparison_finds(monkeypatch):
+    """The calculator's own check_state (a faster comparison) against ASE's compare_atoms:
+    the same changes for moved atoms (by 1e-3 Å and by roundoff below the 1e-15
+    tolerance), a new cell, pbc, charges, elements, a new array and fewer atoms."""
+    import ase.calculators.calculator as ase_calculator
+    from ase.calculators.calculator import compare_atoms
+
+    from rigidmd.checks import changed_properties
+
+    atoms = water_box_27()
+    calc = LAMMPSCalculator(PPPM_27)
+    calc.atoms = atoms.copy()
+
+    def changed(edit):
+        a = atoms.copy()
+        edit(a)
+        fast = changed_properties(calc.atoms, a, 1e-15)
+        assert fast is None or sorted(fast) == sorted(calc.check_state(a))
+        return sorted(calc.check_state(a)), sorted(compare_atoms(calc.atoms, a))
+
+    edits = [lambda a: None,
+             lambda a: a.positions.__setitem__((3, 1), a.positions[3, 1] + 1e-3),
+             lambda a: a.positions.__setitem__((3, 1), a.positions[3, 1] * (1 + 2e-16)),
+             lambda a: a.set_cell(a.cell * 1.01),
+             lambda a: a.set_pbc([True, False, True]),
+             lambda a: a.set_initial_charges(-a.get_initial_charges()),
+             lambda a: a.numbers.__setitem__(0, 8 if a.numbers[0] != 8 else 1),
+             lambda a: a.set_initial_magnetic_moments(np.ones(len(a))),
+             lambda a: a.pop()]
+    found = [changed(edit) for edit in edits]
+    for mine, ases in found:
+        assert mine == ases
+    a = atoms.copy()  # for atoms alike the calculator does not ask ASE
+    a.positions[0, 0] += 0.1
+    monkeypatch.setattr(ase_calculator, "compare_atoms", None)
+    assert calc.check_state(a) == ["positions"]
+    monkeypatch.undo()
+    a.pop()
+    assert changed_properties(calc.atoms, a, 1e-15) is None
+    assert [mine for mine, _ in found[:4]] == [[], ["positions"], [], ["cell"]]

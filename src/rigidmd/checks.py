@@ -10,7 +10,8 @@ from ase.constraints import FixCom
 
 from rigidmd.dof import RigidBodyDOF
 
-__all__ = ["check_finite", "check_massless_momenta", "check_timestep", "check_constraints"]
+__all__ = ["check_finite", "check_massless_momenta", "check_timestep", "check_constraints",
+           "changed_properties"]
 
 
 def check_timestep(timestep: float) -> float:
@@ -70,3 +71,37 @@ def check_constraints(atoms: Atoms) -> bool:
             "free point particles; FixCom is honoured)"
         )
     return any(isinstance(c, FixCom) for c in atoms.constraints)
+
+
+def changed_properties(old: Atoms, atoms: Atoms, tol: float = 1e-15):
+    """ASE's ``compare_atoms`` for atoms of the same size and arrays, in a few array operations.
+
+    Parameters
+    ----------
+    old, atoms : ase.Atoms
+        The atoms of the last calculation and the atoms asked about.
+    tol : float
+        Each of ASE's ``all_changes`` counts as changed unless every element is
+        within ``tol`` absolute plus ``tol`` relative (as ``numpy.allclose``).
+
+    Returns
+    -------
+    list of str or None
+        The changed properties, as ASE's ``compare_atoms`` finds them; None when
+        the atoms differ in size or in the arrays they carry (ask ASE then).
+    """
+    from ase.calculators.calculator import all_changes
+
+    if len(old) != len(atoms) or set(old.arrays) != set(atoms.arrays):
+        return None
+    pairs = [("cell", old.cell.array, atoms.cell.array), ("pbc", old.pbc, atoms.pbc)]
+    pairs += [(name, old.arrays[name], atoms.arrays[name]) for name in all_changes
+              if name in old.arrays]
+    changes = []
+    for name, a, b in pairs:
+        if a.shape != b.shape:
+            changes.append(name)
+        elif not np.array_equal(a, b) and not (
+                a.dtype != bool and np.all(np.abs(a - b) <= tol * (1 + np.abs(b)))):
+            changes.append(name)
+    return changes

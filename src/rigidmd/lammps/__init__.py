@@ -8,6 +8,7 @@ module                 owns
 ``deck``               set-up and integration commands, :func:`export_lammps`
 ``reference``          rigid-body reference runs and single-point energies
 ``calculator``         :class:`LAMMPSCalculator`, LAMMPS forces at LAMMPS speed
+``boxplugin``          the LAMMPS plugin for a cell change without a set-up
 ``engine``             :class:`LAMMPSEngine`, LAMMPS in its own process(es) (i-PI)
 =====================  ======================================================
 

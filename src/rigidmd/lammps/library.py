@@ -33,6 +33,7 @@ from __future__ import annotations
 import ctypes
 import math
 import os
+import re
 import sys
 from collections.abc import Iterable, Sequence
 
@@ -40,7 +41,7 @@ from ase import units
 
 __all__ = ["DEFAULT_CMDARGS", "LAMMPS_METAL_FTM2V", "LAMMPS_METAL_QQR2E", "load_lammps",
            "velocity_factor", "charge_factor", "LammpsError", "flatten", "execute",
-           "execute_checked"]
+           "execute_checked", "lammps_warnings"]
 
 #: Command-line arguments given to LAMMPS by :func:`load_lammps` by default.
 DEFAULT_CMDARGS = ("-log", "none", "-screen", "none", "-nocite")
@@ -198,3 +199,36 @@ def execute_checked(lmp, commands: Sequence[str]) -> None:
     execute(lmp, commands[1:])
 
 
+#: LAMMPS warnings that say nothing to :class:`~rigidmd.lammps.LAMMPSCalculator`: no
+#: integrator is the design; the net charge is said by the calculator itself; and the
+#: reciprocal-space part of the excluded intramolecular pairs is a constant of rigid
+#: molecules (the k-space parameters are pinned) whose forces cancel in each body's
+#: force and torque.
+QUIET_WARNINGS = ("No fixes with time integration", "System is not charge neutral",
+                  "Neighbor exclusions used with KSpace solver")
+
+
+def lammps_warnings(text: str) -> list[str]:
+    """The ``WARNING:`` lines of a LAMMPS log, each with the manual page it points to.
+
+    Parameters
+    ----------
+    text : str
+        A LAMMPS log.
+
+    Returns
+    -------
+    list of str
+        Each distinct warning once (without LAMMPS's source location), in order,
+        except those in :data:`QUIET_WARNINGS`.
+    """
+    lines = text.splitlines()
+    found = []
+    for k, line in enumerate(lines):
+        if not line.startswith("WARNING: ") or any(q in line for q in QUIET_WARNINGS):
+            continue
+        message = re.sub(r"\s*\(src/\S+:\d+\)$", "", line[len("WARNING: "):].strip())
+        more = lines[k + 1] if k + 1 < len(lines) else ""
+        page = re.search(r"https://docs\.lammps\.org/\S+", more)
+        found.append(message + (f" (see {page.group(0)})" if page else ""))
+    return list(dict.fromkeys(found))
