@@ -134,6 +134,33 @@ def test_body_larger_than_half_the_cell_is_refused():
         RigidBodies.resolve(chain, [[0, 1, 2]]).geometry(chain)
 
 
+def test_the_quick_bound_of_check_bodies_fit_never_passes_a_body_that_does_not_fit():
+    """check_bodies_fit returns early when 2 R |g_k| < 1/2 (R: the model's radius); over
+    random sheared and shrunk cells around the threshold it refuses exactly the cells in
+    which a body's extent along a cell vector, computed atom by atom, reaches one half."""
+    from rigidmd.bodies import check_bodies_fit
+    from rigidmd.dynamics import RigidVerlet
+
+    atoms = co2_water_mixture(n_co2=2, n_water=2, box=True)
+    dyn = RigidVerlet(atoms, 1.0, bodies="mol-id")
+    model, r = dyn.model, dyn.record.r
+    rng = np.random.default_rng(0)
+    refused = passed = 0
+    for _ in range(400):
+        cell = np.diag(rng.uniform(2.0, 6.0, 3)) + np.tril(rng.uniform(-1.5, 1.5, (3, 3)), -1)
+        frac = np.linalg.solve(cell.T, r.T).T
+        extent = (np.maximum.reduceat(frac, model.starts)
+                  - np.minimum.reduceat(frac, model.starts)).max()
+        if extent >= 0.5:
+            with pytest.raises(ValueError, match="minimum image is ambiguous"):
+                check_bodies_fit(r, model, cell, [True] * 3)
+            refused += 1
+        else:
+            check_bodies_fit(r, model, cell, [True] * 3)
+            passed += 1
+    assert refused > 50 and passed > 50  # both sides of the threshold were tried
+
+
 def test_connectivity_warns_about_joined_molecules():
     atoms = water_cluster(3, seed=0)
     # Push the second water's oxygen within bonding reach of the first's hydrogen.

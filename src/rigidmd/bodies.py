@@ -588,6 +588,13 @@ def check_bodies_fit(r, model, cell, pbc, when=""):
     pbc = np.asarray(pbc, dtype=bool)
     if not pbc.any() or model.n_bodies == 0:
         return
+    # A body's extent along fractional axis k is at most 2 R |g_k|, with R the largest
+    # atom distance from a centre of mass and g_k the k-th reciprocal vector (column k
+    # of the inverse cell): when that bound is below one half, every body fits, and the
+    # per-atom check (a solve over all body atoms, at every barostat step) is not needed.
+    reciprocal = np.linalg.inv(cell)
+    if 2.0 * model.radius * np.sqrt((reciprocal * reciprocal).sum(axis=0)[pbc].max()) < 0.5:
+        return
     frac = np.linalg.solve(cell.T, r.T).T
     extent = np.maximum.reduceat(frac, model.starts) - np.minimum.reduceat(frac, model.starts)
     extent[:, ~pbc] = 0.0

@@ -99,6 +99,9 @@ class BodyModel:
         :math:`1/I_k`, 0 about a zero-moment axis (:func:`safe_inverse`).
     linear : numpy.ndarray of bool, shape (n_bodies,)
         Bodies with one zero moment.
+    radius : float
+        The largest distance of a body atom from its centre of mass (Å), 0
+        without bodies: no body is wider than twice this in any direction.
     """
 
     #: The fields a checkpoint stores (the others are derived from them).
@@ -119,6 +122,7 @@ class BodyModel:
     inv_mass: np.ndarray = field(init=False, repr=False)
     inv_moments: np.ndarray = field(init=False, repr=False)
     linear: np.ndarray = field(init=False, repr=False)
+    radius: float = field(init=False, repr=False)
 
     def __post_init__(self):
         derived = {
@@ -132,6 +136,9 @@ class BodyModel:
         for name in ("order", "starts", "atom_body", "atom_masses", "mass", "moments",
                      "body_coordinates", "free", "free_masses", *derived):
             getattr(self, name).flags.writeable = False
+        coordinates = self.body_coordinates
+        object.__setattr__(self, "radius", float(np.sqrt(np.max(np.sum(
+            coordinates * coordinates, axis=1)))) if len(coordinates) else 0.0)
 
     @property
     def n_bodies(self):
