@@ -12,7 +12,7 @@ forces that cost nothing, this prints per step:
 * ASE today: ``VelocityVerlet`` with ``FixBondLengths`` (RATTLE, 3 bonds per
   water) on the same waters;
 
-the ratio rigidmd / LAMMPS (goal: at most 4 at 64 waters, at most 0.5 from
+the ratio rigidmd / LAMMPS (goal: at most 1.0 at 64 waters, at most 0.5 from
 4096 up) and how many times faster rigidmd is than ASE's RATTLE.  All are
 measured side by side in this one run, on one core.
 

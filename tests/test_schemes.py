@@ -109,6 +109,7 @@ def test_every_operator_is_documented():
 def test_compiled_kernel_matches_its_operators():
     """Each fused loop of the no_squish kernel against the operators it fuses, one by one."""
     from rigidmd import _numba
+    from rigidmd import observables as obs
     from rigidmd import operators as ops
 
     atoms = mixture()
@@ -168,6 +169,10 @@ def test_compiled_kernel_matches_its_operators():
     assert _numba.second_half(fused.copy().data, n, F2, tau2, body, atom, index, dt, forces,
                               r, untouched, False)
     assert np.all(untouched == 7.0)
+    # The step-size check's compiled fastest body: the observables' numbers.
+    b, speed = _numba.largest_angular_speed(fused.q, fused.p, m.inv_moments)
+    b_ref, speed_ref = obs.largest_angular_speed(fused, m)
+    assert b == b_ref and speed == pytest.approx(speed_ref, rel=1e-14)
     # A NaN force on any body atom: the second loop refuses and writes nothing at all.
     bad = forces.copy()
     bad[m.order[-1], 1] = np.nan

@@ -18,7 +18,7 @@ except ImportError:  # pragma: no cover - exercised only without numba
 AVAILABLE = numba is not None
 
 __all__ = ["AVAILABLE", "resolve_backend", "pack_model", "first_half", "second_half", "place",
-           "momenta"]
+           "momenta", "largest_angular_speed"]
 
 
 def resolve_backend(backend=None):
@@ -322,3 +322,20 @@ def place(X, q, d, bounds, order, r, positions):
     """Lab displacements ``r`` and ``positions`` of the body atoms, as in :func:`first_half`."""
     for b in range(X.shape[0]):
         _place_body(b, X, q[b, 0], q[b, 1], q[b, 2], q[b, 3], d, bounds, order, r, positions)
+
+
+@_jit
+def largest_angular_speed(q, p, inv_moments):
+    """The body turning fastest and its |ω| (rad / ASE time), as
+    :func:`rigidmd.observables.largest_angular_speed` computes them; (-1, 0.0) without bodies."""
+    best, best2 = -1, -1.0
+    for b in range(q.shape[0]):
+        w, x, y, z = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+        p0, p1, p2, p3 = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
+        o1 = 0.5 * (w * p1 - x * p0 - y * p3 + z * p2) * inv_moments[b, 0]
+        o2 = 0.5 * (w * p2 - y * p0 - z * p1 + x * p3) * inv_moments[b, 1]
+        o3 = 0.5 * (w * p3 - z * p0 - x * p2 + y * p1) * inv_moments[b, 2]
+        speed2 = o1 * o1 + o2 * o2 + o3 * o3
+        if speed2 > best2:
+            best, best2 = b, speed2
+    return best, np.sqrt(best2) if best >= 0 else 0.0

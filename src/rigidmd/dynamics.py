@@ -388,7 +388,7 @@ class RigidDynamics(MolecularDynamics):
         step = self.nsteps + 1
         message = None
         if step % 10 == 0 and self.model.n_bodies:
-            b, speed = obs.largest_angular_speed(self.state, self.model)
+            b, speed = self.link.largest_angular_speed(self.state)
             if speed * self._dt > MAX_ROTATION_PER_STEP:
                 message = (f"body {b} turns by {speed * self._dt:.2f} rad per step at step "
                            f"{step} (above {MAX_ROTATION_PER_STEP} rad)")

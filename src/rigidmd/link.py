@@ -96,6 +96,17 @@ class BodyLink:
             momenta[m.order] = m.atom_masses[:, None] * ops.atom_velocities(state, r, m)
         momenta[m.free] = m.free_masses[:, None] * state.v
 
+    def largest_angular_speed(self, state: RigidState) -> tuple[int, float]:
+        """The body turning fastest and its :math:`|\\omega|` (rad / ASE time), on the backend.
+
+        See :func:`rigidmd.observables.largest_angular_speed`; the compiled
+        loop gives the same numbers without two dozen array operations.
+        """
+        if self.compiled:
+            b, speed = _numba.largest_angular_speed(state.q, state.p, self.model.inv_moments)
+            return int(b), float(speed)
+        return obs.largest_angular_speed(state, self.model)
+
     # ------------------------------------------------------------ atoms -> state
     def read_momenta(self, state: RigidState, previous: np.ndarray | None = None,
                      owner: str = "RigidDynamics") -> float:
