@@ -87,7 +87,8 @@ def test_cell_changes_equal_a_fresh_lammps_with_the_same_kspace_parameters(comma
     in energy, 7.5e-15 in forces and 2.2e-15 in stress (relative to the largest
     component); bounds 1e-9 as in the calculator's other tests.  Only the tilt of an
     orthogonal box and the first change (which takes the plugin's fix in) run a set-up;
-    every other change is one ``rigidmd_box`` command.  Without ``KSpace::setup()`` in
+    every other change is one ``rigidmd_box`` command, and its stress (asked alone) one
+    ``rigidmd_tally`` of the virial compute, without the energy.  Without ``KSpace::setup()`` in
     the plugin the same comparison is off by 3e-5 to 3e-3 relative in energy and 4-12 %
     in forces."""
     atoms = water_box_27()
@@ -111,8 +112,9 @@ def test_cell_changes_equal_a_fresh_lammps_with_the_same_kspace_parameters(comma
             assert "run 0 pre yes post no" in setups
         elif label.startswith("tilted"):
             assert not boxes and "change_box all triclinic" in setups, label
-        else:
+        else:  # and the stress alone (asked after the energy) tallies only the virial
             assert len(boxes) == 1 and not setups, (label, commands)
+            assert "rigidmd_tally rmd_pressure" in " ".join(commands), (label, commands)
 
 
 def test_without_the_plugin_a_cell_change_runs_a_set_up_with_the_same_numbers(

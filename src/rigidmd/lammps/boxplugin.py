@@ -15,7 +15,9 @@ set-up run, that the box will change (so LAMMPS's neighbour check watches the
 box corners and a re-neighbouring step resets the box, the communication
 cut-offs and the bins, as under a barostat), and ``rigidmd_box LX LY LZ XY XZ
 YZ`` sets a new box and re-sets the k-space solver.  The next ``run 1 pre no
-post no`` is then a native barostat step's force evaluation.
+post no`` is then a native barostat step's force evaluation.  A third command,
+``rigidmd_tally COMPUTE_ID STEP``, asks one compute to be tallied on a step:
+a barostat's virial without the pair energy, as native barostats run.
 
 It is compiled at the first cell change (once per user) with the system's C++
 compiler (``$CXX``, else ``c++`` or ``g++``) against the headers the LAMMPS
@@ -185,7 +187,8 @@ def box_plugin(lmp):
         lmp.command(f'plugin load "{found}"')
     except Exception as err:  # LAMMPS raises a bare Exception with its message
         raise BoxPluginUnavailable(f"LAMMPS could not load {found}: {err}") from None
-    if not (lmp.has_style("fix", "rigidmd/box") and lmp.has_style("command", "rigidmd_box")):
+    if not (lmp.has_style("fix", "rigidmd/box") and lmp.has_style("command", "rigidmd_box")
+            and lmp.has_style("command", "rigidmd_tally")):
         failure = BoxPluginUnavailable(f"LAMMPS did not register the styles of {found} "
                                        "(see LAMMPS's log)")
         _FOUND[key] = failure

@@ -47,7 +47,8 @@ from pathlib import Path
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
-from rigidmd.checks import changed_properties, check_finite
+from rigidmd.checks import changed_properties, check_finite, refreshed_copy
+from rigidmd.lammps.atomarrays import AtomArrays
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, box_plugin, warn_fallback
 from rigidmd.lammps.data import MASSLESS_SITE_MASS
 from rigidmd.lammps.library import (
@@ -65,7 +66,7 @@ __all__ = ["LAMMPSCalculator", "lower_triangular"]
 _COULOMB = ("coul", "kspace_style", "tip4p")
 
 
-def _lower_triangular(cell):
+def lower_triangular(cell):
     """Rotation ``Q`` with ``cell @ Q`` lower triangular with a positive diagonal.
 
     Returns
@@ -85,10 +86,6 @@ def _lower_triangular(cell):
     lammps_cell = R.T
     lammps_cell[np.abs(lammps_cell) < 1e-14 * np.abs(lammps_cell).max()] = 0.0
     return Q, lammps_cell
-
-
-#: Public name of the rotation into LAMMPS's frame (used by :mod:`rigidmd.lammps.engine`).
-lower_triangular = _lower_triangular
 
 
 def _threads(threads):
@@ -189,6 +186,7 @@ class LAMMPSCalculator(Calculator):
     _grouping_checked = None  # the bodies and molecules last found to agree
     _box_plugin = None        # True, or why the box plugin is not there (see _start)
     _box_moved = False        # the box changed through the plugin since the last step
+    _arrays = None            # AtomArrays of the instance
 
     def __init__(self, commands, *, atom_types=None, molecule_ids=None,
                  exclude_intramolecular=True, ase_constants=False, skin=2.0, cmdargs=None,
@@ -370,7 +368,7 @@ class LAMMPSCalculator(Calculator):
                     f"boundary {'p p p' if periodic else 's s s'}"]
             self._execute(cmds)
             if periodic:
-                self._rotation, cell = _lower_triangular(atoms.cell.array)
+                self._rotation, cell = lower_triangular(atoms.cell.array)
                 self._triclinic = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
                 region = self._region(cell)
             else:
@@ -395,22 +393,23 @@ class LAMMPSCalculator(Calculator):
                                        image=[self._encode(i) for i in image.tolist()])
             if created != n:
                 raise LammpsError(f"LAMMPSCalculator: LAMMPS created {created} of {n} atoms")
-            nlocal = lmp.extract_global("nlocal")
-            ids = np.array(lmp.numpy.extract_atom("id")[:nlocal], dtype=np.int64) - 1
+            self._arrays = AtomArrays(lmp, lmp.extract_global("nlocal"))
+            ids = self._arrays.order()
             charge = atoms.get_initial_charges() * charge_factor(self.ase_constants)
-            lmp.numpy.extract_atom("q")[:nlocal] = charge[ids]
-            lmp.numpy.extract_atom("molecule")[:nlocal] = molecules[ids]
+            lmp.numpy.extract_atom("q")[:n] = charge[ids]
+            lmp.numpy.extract_atom("molecule")[:n] = molecules[ids]
             setup = [f"neighbor {self.skin:.17g} bin", "neigh_modify every 1 delay 0 check yes"]
             if self.exclude_intramolecular:
                 setup.append("neigh_modify exclude molecule/intra all")
             self._execute(setup)
             self._execute(self.commands)
-            # Thermo's own thermo_pe is tallied on the last step of every run, so a lone
-            # `run 1` computed the pair energy at every call (+1.7 ms on 4.9, 216 waters);
-            # our rmd_pe is tallied only on the steps a call asks for (addstep_compute).
+            # LAMMPS tallies energy and virial on every thermo step, with `thermo 0` the last
+            # of every run (a lone `run 1`: 4.6-5.5 ms against 3.5-4.1 in a long run, 216
+            # waters); a variable's thermo step never comes: only calls that ask tally them.
             self._execute(["compute rmd_pressure all pressure NULL virial",
                            "thermo_style custom step", "thermo_modify norm no lost error",
-                           "thermo 0", "compute rmd_pe all pe", "uncompute thermo_pe"])
+                           "variable rmd_thermo equal 1e18", "thermo v_rmd_thermo",
+                           "compute rmd_pe all pe", "uncompute thermo_pe"])
             if self.ase_constants and lmp.extract_global("qqr2e") != LAMMPS_METAL_QQR2E:
                 raise LammpsError("LAMMPSCalculator: unexpected LAMMPS Coulomb constant")
             if kspace and self.kspace_parameters is not None:
@@ -428,12 +427,7 @@ class LAMMPSCalculator(Calculator):
             tmp.cleanup()
         self._signature = signature
         self._cell = atoms.cell.array.copy()
-        self._ids = ids
         self._nktv2p = lmp.extract_global("nktv2p")
-        self._imgbits = lmp.extract_setting("IMGBITS")
-        self._img2bits = lmp.extract_setting("IMG2BITS")
-        self._imgmask = lmp.extract_setting("IMGMASK")
-        self._imgmax = lmp.extract_setting("IMGMAX")
         self._setup_needed = True
         net = float(atoms.get_initial_charges().sum())
         if kspace and abs(net) > 1e-6:
@@ -493,17 +487,6 @@ class LAMMPSCalculator(Calculator):
         ix, iy, iz = (int(v) + 512 for v in image)
         return ix | (iy << 10) | (iz << 20)
 
-    def _encode_all(self, image):
-        """Image flags, shape (n, 3), packed as LAMMPS packs them (its own bit widths)."""
-        packed = (image + self._imgmax) & self._imgmask
-        return packed[:, 0] | (packed[:, 1] << self._imgbits) | (packed[:, 2] << self._img2bits)
-
-    def _images(self, nlocal):
-        img = np.asarray(self._lmp.numpy.extract_atom("image")[:nlocal], dtype=np.int64)
-        mask, bits, bits2, offset = self._imgmask, self._imgbits, self._img2bits, self._imgmax
-        return np.stack([(img & mask) - offset, ((img >> bits) & mask) - offset,
-                         (img >> bits2) - offset], axis=1)
-
     def _to_lammps(self, vectors):
         return vectors if self._rotation is None else vectors @ self._rotation
 
@@ -521,7 +504,7 @@ class LAMMPSCalculator(Calculator):
                 self._lmp.close()
             except Exception:  # noqa: BLE001 - closing a broken instance must not mask an error
                 pass
-        self._lmp = None
+        self._lmp = self._arrays = None  # (the views point into the instance's memory)
         self._signature = None
 
     def __del__(self):
@@ -544,12 +527,11 @@ class LAMMPSCalculator(Calculator):
         step): positions are written in the new frame at the next call, and
         forces and stress rotated back, so a turned frame costs nothing more
         than a changed box.  An orthogonal box that gets tilted becomes
-        triclinic once; LAMMPS then needs its ``kspace_style`` again, given
-        with the same commands and the pinned :attr:`kspace_parameters`.
-        LAMMPS takes any tilt (a large one only runs less efficiently), so
-        the cell is never flipped or re-mapped.
+        triclinic once; LAMMPS then needs its ``kspace_style`` again, given with the
+        same commands and the pinned :attr:`kspace_parameters`.  LAMMPS takes any tilt
+        (a large one only runs less efficiently): the cell is never flipped or re-mapped.
         """
-        rotation, lammps_cell = _lower_triangular(cell)
+        rotation, lammps_cell = lower_triangular(cell)
         tilted = bool(lammps_cell[1, 0] or lammps_cell[2, 0] or lammps_cell[2, 1])
         if self._box_plugin is True and (self._triclinic or not tilted):
             # LAMMPS's barostat path (see rigidmd.lammps.boxplugin): the new box and
@@ -611,8 +593,8 @@ class LAMMPSCalculator(Calculator):
         return super().check_state(atoms, tol) if changes is None else changes
 
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
-        super().calculate(atoms, properties, system_changes)
-        atoms = self.atoms
+        # ASE's Calculator.calculate keeps a copy: refreshed in place when it can be.
+        atoms = self.atoms = self.atoms if atoms is None else refreshed_copy(self.atoms, atoms)
         # NaN or infinite coordinates hang LAMMPS (deaf to Ctrl-C): refused first.
         check_finite(atoms.positions, "position", "Å", "given to LAMMPSCalculator")
         if atoms.pbc.any():
@@ -624,10 +606,9 @@ class LAMMPSCalculator(Calculator):
             self._start(atoms, molecules, source)
         elif atoms.pbc.all() and not np.array_equal(atoms.cell.array, self._cell):
             self._change_box(atoms.cell.array)
-        lmp = self._lmp
-        nlocal = lmp.extract_global("nlocal")
-        ids = np.asarray(lmp.numpy.extract_atom("id")[:nlocal], dtype=np.int64) - 1
-        positions = self._to_lammps(atoms.positions)[ids]
+        lmp, arrays = self._lmp, self._arrays
+        # LAMMPS's order as the last step left it (anew after a set-up run, which sorts)
+        positions = self._to_lammps(atoms.positions)[arrays.order(self._setup_needed)]
         if atoms.pbc.all() and self._setup_needed:
             # A new cell (a set-up follows anyway): every atom into the box, with image
             # flags to match.  LAMMPS's change_box re-mapped the previous positions into
@@ -635,21 +616,19 @@ class LAMMPSCalculator(Calculator):
             cell = self._lammps_cell()
             image = np.floor(np.linalg.solve(cell.T, positions.T).T)
             positions -= image @ cell
-            lmp.numpy.extract_atom("image")[:nlocal] = self._encode_all(image.astype(np.int64))
+            arrays.view("image")[:] = arrays.pack_images(image)
         elif atoms.pbc.all():
             # LAMMPS's own image of each atom: only real motion counts against the skin.
-            cell, image = self._lammps_cell(), self._images(nlocal)
+            cell, image = self._lammps_cell(), arrays.images()
             positions -= image @ cell
             if self._box_moved:  # a new box without a set-up: an atom far out would be lost
                 frac = np.linalg.solve(cell.T, positions.T).T
                 if np.any(frac < -0.5) or np.any(frac >= 1.5):  # LAMMPS wraps by one box
                     shift = np.floor(frac)
                     positions -= shift @ cell
-                    lmp.numpy.extract_atom("image")[:nlocal] = self._encode_all(
-                        image + shift.astype(np.int64))
-        lmp.numpy.extract_atom("x")[:nlocal] = positions
-        # LAMMPS tallies energy and virial only on the steps computes ask for them
-        # (as a native run does on its thermo steps): ask only for what was asked for.
+                    arrays.view("image")[:] = arrays.pack_images(image + shift)
+        arrays.view("x")[:] = positions
+        # Energy and virial are tallied only on steps asked for (as native thermo steps).
         want_energy = bool({"energy", "free_energy"} & set(properties))
         want_stress = "stress" in properties and atoms.pbc.all()
         moved = "positions" in system_changes or "cell" in system_changes
@@ -658,15 +637,19 @@ class LAMMPSCalculator(Calculator):
             command = "run 0 pre yes post no"
         else:  # a step without set-up (also for the same positions asked for more)
             command, step = "run 1 pre no post no", step + 1
-        if want_energy or want_stress:
-            lmp.addstep_compute(step)
-        self._execute([command])
+        if want_stress and not want_energy and not self._setup_needed and self._box_plugin is True:
+            command = f"rigidmd_tally rmd_pressure {step}\n{command}"  # not the costly energy
+        elif want_energy or want_stress:
+            lmp.addstep_compute(step)  # every energy and pressure compute
+        self._execute(command.splitlines())
         self._setup_needed = self._box_moved = False
-        # LAMMPS sorts its atoms now and then (for locality): map by ID after the run.
-        nlocal = lmp.extract_global("nlocal")
-        ids = np.asarray(lmp.numpy.extract_atom("id")[:nlocal], dtype=np.int64) - 1
-        forces = np.empty((len(atoms), 3))
-        forces[ids] = lmp.numpy.extract_atom("f")[:nlocal]
+        # (thermo's lost-atom check would come only at the next call)
+        if (nlocal := lmp.extract_global("nlocal")) != len(atoms):
+            self._close()
+            raise LammpsError(f"LAMMPSCalculator: LAMMPS lost {len(atoms) - nlocal} of "
+                              f"{len(atoms)} atoms (an atom moved far out of the box)")
+        forces = np.empty((len(atoms), 3))  # LAMMPS may have sorted its atoms: IDs anew
+        forces[arrays.order(refresh=True)] = arrays.view("f")
         if self._rotation is not None:
             forces = forces @ self._rotation.T
         results = {"forces": forces}

@@ -1,0 +1,97 @@
+r"""The per-atom arrays of one LAMMPS instance as NumPy views, kept between calls.
+
+Every call of :class:`~rigidmd.lammps.LAMMPSCalculator` reads LAMMPS's atom
+IDs, image flags and forces and writes its positions.  LAMMPS's NumPy wrapper
+(``lmp.numpy.extract_atom``) asks the library for the array's type and size and
+builds a new view at every request (~8 µs each on a quiet core, several times
+that right after a LAMMPS step has cooled the caches).  LAMMPS moves an array
+only when it reallocates it (more atoms than it has room for), so
+:class:`AtomArrays` keeps each view and builds it anew only when the library's
+pointer to the data has changed (one raw query, ~2 µs).
+
+LAMMPS keeps its atoms in its own order, which it changes when it sorts them
+(for locality) or exchanges them at a re-neighbouring step; :meth:`order` is
+the index of each LAMMPS atom in the ASE atoms, read after every step.
+
+Image flags are packed three to an integer with the bit widths of the LAMMPS
+build (``IMGBITS``, ``IMG2BITS``, ``IMGMASK``, ``IMGMAX``): :meth:`images`
+unpacks them, :meth:`pack_images` packs them.
+"""
+
+import ctypes
+
+import numpy as np
+
+__all__ = ["AtomArrays"]
+
+_TWO_D = ("x", "f", "v")
+
+
+class AtomArrays:
+    """NumPy views of ``id``, ``image``, ``x`` and ``f`` of a LAMMPS instance's local atoms.
+
+    Parameters
+    ----------
+    lmp : lammps.lammps
+        The instance, with its atoms created (one MPI rank: all atoms local).
+    nlocal : int
+        Number of atoms; the views have this length.
+    """
+
+    def __init__(self, lmp, nlocal: int):
+        self._lmp = lmp
+        self.nlocal = int(nlocal)
+        self._dtypes = {name: lmp.extract_atom_datatype(name)
+                        for name in ("id", "image", "x", "f")}
+        self._views = {}
+        self._bits = tuple(lmp.extract_setting(s)
+                           for s in ("IMGBITS", "IMG2BITS", "IMGMASK", "IMGMAX"))
+        self._order = None
+
+    def view(self, name: str) -> np.ndarray:
+        """LAMMPS's array ``name`` for the local atoms (a view: writing it writes LAMMPS's).
+
+        Returns
+        -------
+        numpy.ndarray, shape (nlocal,) or (nlocal, 3)
+        """
+        ptr = self._lmp.extract_atom(name, self._dtypes[name])
+        data = ptr[0] if name in _TWO_D else ptr
+        address = ctypes.cast(data, ctypes.c_void_p).value
+        kept = self._views.get(name)
+        if kept is None or kept[0] != address:
+            kept = (address, self._lmp.numpy.extract_atom(name)[:self.nlocal])
+            self._views[name] = kept
+        return kept[1]
+
+    def order(self, refresh: bool = False) -> np.ndarray:
+        """Index (0-based) in the ASE atoms of each LAMMPS atom, shape (nlocal,).
+
+        Parameters
+        ----------
+        refresh : bool
+            Read LAMMPS's IDs anew (after a step: LAMMPS may have sorted its atoms).
+        """
+        if refresh or self._order is None:
+            ids = self.view("id")
+            if self._order is None:
+                self._order = np.empty(self.nlocal, dtype=np.int64)
+            np.subtract(ids, 1, out=self._order)
+        return self._order
+
+    def images(self) -> np.ndarray:
+        """LAMMPS's image flags of its atoms (in its order), unpacked, shape (nlocal, 3)."""
+        img = self.view("image").astype(np.int64)
+        bits, bits2, mask, offset = self._bits
+        out = np.empty((self.nlocal, 3), dtype=np.int64)
+        np.bitwise_and(img, mask, out=out[:, 0])
+        np.bitwise_and(img >> bits, mask, out=out[:, 1])
+        np.right_shift(img, bits2, out=out[:, 2])
+        out -= offset
+        return out
+
+    def pack_images(self, image) -> np.ndarray:
+        """Image flags, shape (n, 3) of int, packed as LAMMPS packs them."""
+        bits, bits2, mask, offset = self._bits
+        packed = (np.asarray(image, dtype=np.int64) + offset) & mask
+        return packed[:, 0] | (packed[:, 1] << bits) | (packed[:, 2] << bits2)
