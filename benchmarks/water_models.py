@@ -153,8 +153,9 @@ PUBLISHED = {
     "spce": {
         "density": (0.994, I14 + " (SPC/E column, from its refs 17, 50): 0.994; WMP14 also "
                     "0.994", True),
-        # Berendsen 1987 fitted U + E_pol to experiment.  I14 and WMP14 quote 10.43 kcal/mol,
-        # close to W09's corrected 10.48: the corrected number, not the raw one.
+        # Berendsen 1987 fitted U + E_pol to experiment (W09 footnote a marks its 10.48 as
+        # corrected; Berendsen's paper not read here).  I14 and WMP14 quote 10.43 kcal/mol
+        # without saying; being near 10.48 and far from 11.66 it is presumably corrected.
         "dhvap": (round(11.66 * KCAL, 1), W09 + ": 11.66 kcal/mol uncorrected (10.48 = "
                   "43.8 kJ/mol with the polarisation correction; I14/WMP14 quote 10.43)", True),
         # D∞ (WMP14's D0, source not named).  I14 Table 3 quotes D = 2.54 (box not stated).
