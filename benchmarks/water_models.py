@@ -96,87 +96,153 @@ G_A = "González & Abascal, J. Chem. Phys. 132, 096101 (2010)"
 V_A = "Vega & Abascal, PCCP 13, 19663 (2011)"
 #: Wang, Abel, Friesner & Berne, J. Chem. Theory Comput. 5, 1462 (2009), Table 3 (read on
 #: PMC2764996): one MD study of five models; ΔH_vap = -(excess enthalpy), without / with the
-#: polarisation correction.  Their temperature, cut-off and Ewald settings were not read.
+#: polarisation correction (footnotes a, b: "Include polarization correction", refs 39, 40 of
+#: that paper).  Their temperature, cut-off and Ewald settings were not read.
 W09 = "Wang, Abel, Friesner & Berne, JCTC 5, 1462 (2009), Table 3"
 #: Braun, Boresch & Steinhauser, "Rationalization of the dielectric properties of common
 #: three-site water models in terms of their force field parameters", J. Chem. Phys. 140,
 #: 064107 (2014): Ewald, 2 ns MD (abstract read; its temperature was not stated there).
 B14 = "Braun, Boresch & Steinhauser, J. Chem. Phys. 140, 064107 (2014)"
+#: Izadi, Anandakrishnan & Onufriev, "Building water models: a different approach", J. Phys.
+#: Chem. Lett. 5, 3863 (2014), Table 3, p. 3866 ("Model versus experimental bulk properties of
+#: water at ambient conditions (298.16 K, 1 bar)"), read in the paper's PDF with its SI.  OPC
+#: column: their own MD (Amber pmemd, NPT 298.16 K, 1 bar, 804 waters in a 30 Å cubic box,
+#: PME, van der Waals cut off at 8 Å, "Amber default for the remaining parameters" (the LJ
+#: long-range treatment is not stated), Langevin γ = 2/ps, Berendsen barostat, 2 fs, SHAKE;
+#: averages over six 65 ns runs, SI p. 5).  The other columns quote the literature: TIP4P-Ew
+#: from Horn et al. 2004 (their ref 12), SPC/E from Wang et al. 2014 and Vega & Abascal 2011
+#: (refs 17, 50), TIP3P from Mahoney & Jorgensen 2000 and Vega & Abascal 2011 (refs 11, 50).
+I14 = "Izadi, Anandakrishnan & Onufriev, J. Phys. Chem. Lett. 5, 3863 (2014), Table 3"
+#: Wang, Martinez & Pande, "Building force fields: an automatic, systematic, and reproducible
+#: approach", J. Phys. Chem. Lett. 5, 1885 (2014), Table 1, p. 1888 ("Comparison of water model
+#: performance at 298.15 K, 1.0 atm"), read in the paper's PDF.  The TIP3P, SPC/E, TIP4P,
+#: TIP4P-Ew and TIP4P/2005 columns are values "in the literature"; the table does not name the
+#: source of each number.  Its self-diffusion row is headed D0: for their own models the SI
+#: (p. 10) extrapolates D to the infinite-size limit (Yeh & Hummer), so D0 is read as D∞.
+WMP14 = "Wang, Martinez & Pande, J. Phys. Chem. Lett. 5, 1885 (2014), Table 1"
 KCAL = 4.184  # kJ per kcal (thermochemical)
 #: Published values at 298 K (300 K where said), 1 bar: (value, citation, checked).
 #: ``checked`` True: the number was read in the source named (or in the page named that cites
 #: it) during this work; False: not found in a readable source, to be checked against the
 #: paper before the numbers are compared in the README.  Units: g/cm³, kJ/mol, 1e-5 cm²/s,
 #: mPa s, -.  ΔH_vap is the uncorrected -<U>/N + RT (what the benchmark's main number is)
-#: unless the citation says otherwise; D is the finite-box D_PBC of the box the citation
-#: names unless it says "D∞" (the benchmark prints D∞ and its own box's D_PBC).
+#: unless the citation says otherwise; D is D∞ (extrapolated or corrected to infinite box)
+#: where the citation says "D∞", else the finite-box D_PBC of the box the citation names.
+#: Each comment says what matters for the comparison: corrections, box size, conditions.
 PUBLISHED = {
     "tip3p": {
-        "density": (0.980, V_A + ", Table (not read here)", False),
-        # Jorgensen et al. 1983 (cut-off MC) report a ΔH_vap too; not read here.
+        # Vega & Abascal 2011 / Mahoney & Jorgensen 2000 as quoted by I14 (conditions of the
+        # original runs not given there); WMP14 Table 1 gives 0.98.
+        "density": (0.980, I14 + " (TIP3P column, from its refs 11, 50): 0.980", True),
+        # Raw -<U>/N + RT (W09 footnotes no correction for TIP3P).  I14 Table 3 quotes 10.26
+        # kcal/mol and WMP14 Table 1 10.05: the literature's TIP3P numbers differ by 2 %.
         "dhvap": (round(10.07 * KCAL, 1), W09 + ": 10.07 kcal/mol", True),
-        # Mark & Nilsson's 5.85 +- 0.08 (hozir.org copy of the paper, p. 7 of 9) is for the
-        # CHARMM-modified TIP3P (LJ on H), not the original TIP3P run here, and is D_PBC.
-        "D": (5.85, "Mark & Nilsson, J. Phys. Chem. A 105, 9954 (2001): 5.85 +- 0.08 for "
-              "CHARMM-modified TIP3P (H LJ), not the original TIP3P run here; D_PBC", False),
-        "eta": (0.321, G_A + " (not read here)", False),
-        "eps": (97.0, B14 + ", abstract: 97 +- 7 (Ewald, 2 ns)", True),
+        # D∞ (WMP14's D0; source not named there).  I14 Table 3 quotes D = 5.5 (box size not
+        # stated).  Mark & Nilsson's 5.85 +- 0.08 is for CHARMM-modified TIP3P, not this one.
+        "D": (6.05, WMP14 + ": D0 = 6.05, read as D∞ (source of the number not named)", True),
+        # WMP14 Table 1 (literature column, source not named); its SPC/E, TIP4P, TIP4P/2005
+        # entries (0.729, 0.494, 0.855) are the González & Abascal values SklogWiki quotes,
+        # so 0.321 is very likely G_A's TIP3P value; G_A itself was not read.
+        "eta": (0.321, WMP14 + ": 0.321 (literature column; attributed to " + G_A
+                + ", not read there)", True),
+        # I14 Table 3 and WMP14 Table 1 both quote 94 (source not named); B14 is an Ewald
+        # (conducting boundary) run like this benchmark's.
+        "eps": (97.0, B14 + ", abstract: 97 +- 7 (Ewald, 2 ns); " + I14 + " and WMP14 quote 94",
+                True),
     },
     "spce": {
-        "density": (0.994, V_A + ", Table (not read here)", False),
-        # Berendsen 1987 fitted U + E_pol to experiment (ΔH_vap ~ 44 kJ/mol corrected).
+        "density": (0.994, I14 + " (SPC/E column, from its refs 17, 50): 0.994; WMP14 also "
+                    "0.994", True),
+        # Berendsen 1987 fitted U + E_pol to experiment (W09 footnote a marks its 10.48 as
+        # corrected; Berendsen's paper not read here).  I14 and WMP14 quote 10.43 kcal/mol
+        # without saying; being near 10.48 and far from 11.66 it is presumably corrected.
         "dhvap": (round(11.66 * KCAL, 1), W09 + ": 11.66 kcal/mol uncorrected (10.48 = "
-                  "43.8 kJ/mol with the polarisation correction)", True),
-        "D": (2.49, "attributed to Berendsen et al. 1987 / Mark & Nilsson 2001; not read "
-              "here, box size unknown", False),
-        "eta": (0.729, G_A + ", via SklogWiki SPC/E page: 298 K, 1 bar", True),
+                  "43.8 kJ/mol with the polarisation correction; I14/WMP14 quote 10.43)", True),
+        # D∞ (WMP14's D0, source not named).  I14 Table 3 quotes D = 2.54 (box not stated).
+        "D": (2.97, WMP14 + ": D0 = 2.97, read as D∞ (source not named); " + I14
+              + " quotes 2.54, box not stated", True),
+        "eta": (0.729, G_A + ", via SklogWiki SPC/E page: 298 K, 1 bar; WMP14 also 0.729",
+                True),
         # Smith & van Gunsteren, J. Chem. Phys. 100, 3169 (1994), abstract: 62.3 at 300 K with a
         # reaction field; the Ewald value matches this benchmark's conducting boundary.
         "eps": (68.0, B14 + ", abstract: 68 +- 6 (Ewald, 2 ns; reaction field at 300 K "
-                "gives 62.3, Smith & van Gunsteren 1994)", True),
+                "gives 62.3, Smith & van Gunsteren 1994); I14 and WMP14 also 68", True),
     },
     "tip4p": {
-        "density": (0.993, V_A + ", Table (not read here)", False),
-        # Jorgensen et al. 1983 (cut-off MC) report a ΔH_vap too; not read here.
+        # WMP14 Table 1, 298.15 K, 1 atm (source not named).  0.993 "as remembered" from
+        # Vega & Abascal 2011 was not found in a readable copy.
+        "density": (0.992, WMP14 + ": 0.992 (literature column, source not named)", True),
+        # Raw (no correction footnote in W09).  WMP14 quotes 9.90 kcal/mol (source not named).
         "dhvap": (round(10.43 * KCAL, 1), W09 + ": 10.43 kcal/mol", True),
-        "D": (3.3, "Jorgensen et al. 1983 / " + V_A + " (not read here)", False),
-        "eta": (0.494, G_A + ", via SklogWiki TIP4P page: 298 K, 1 bar", True),
-        "eps": (50.0, V_A + ", Table (not read here)", False),
+        # D∞ (WMP14's D0, source not named).  Jorgensen et al. 1983's MD value (3.3 as
+        # remembered, a small-box D_PBC with a cut-off) was not read.
+        "D": (4.05, WMP14 + ": D0 = 4.05, read as D∞ (source not named)", True),
+        "eta": (0.494, G_A + ", via SklogWiki TIP4P page: 298 K, 1 bar; WMP14 also 0.494",
+                True),
+        # WMP14 Table 1 (source not named).  50 "as remembered" from Vega & Abascal 2011 was
+        # not found in a readable copy.
+        "eps": (53.0, WMP14 + ": 53 (literature column, source not named)", True),
     },
     "tip4pew": {
-        "density": (0.995, "Horn et al., J. Chem. Phys. 120, 9665 (2004) (not read here; "
-                    "abstract: densities within 1 % of experiment)", False),
-        # Horn et al.'s fitted ΔH_vap (10.58 kcal/mol as remembered) includes a polarisation
-        # correction (W09 footnote b): compare the corrected number, not the raw one.
+        # Horn 2004 as quoted by I14 (their ref 12); WMP14 also 0.995.  Horn's own run
+        # settings (box, cut-off, tail) were not read.
+        "density": (0.995, I14 + " (TIP4P-Ew column, from Horn et al., J. Chem. Phys. 120, "
+                    "9665 (2004)): 0.995; WMP14 also 0.995", True),
+        # Horn et al.'s ΔH_vap includes the polarisation correction and a term C for the
+        # intramolecular vibrations and the non-ideal gas: I14 SI eq. 15, "following the method
+        # described in" Horn 2004, ΔH ≈ -U/N + RT - pV - E_pol + C; W09 footnote b marks its
+        # 10.45 as corrected.  I14 Table 3 quotes Horn's 10.58 kcal/mol (44.3 kJ/mol): compare
+        # a corrected number with that, the raw one with W09's 11.49.
         "dhvap": (round(11.49 * KCAL, 1), W09 + ": 11.49 kcal/mol uncorrected (10.45 = "
-                  "43.7 kJ/mol with the polarisation correction Horn et al. 2004 apply)", True),
-        "D": (2.4, "Horn et al. 2004 (not read here; abstract: 'excellent agreement with "
-              "experiment')", False),
-        "eta": (None, "not found", False),
-        "eps": (63.9, "Horn et al. 2004 (63.90 +- 0.88 as remembered; not read here)", False),
+                  "43.7 kJ/mol corrected; Horn's own 10.58 with E_pol and C, via I14)", True),
+        # D∞ (WMP14's D0, source not named).  Horn's D as quoted by I14 Table 3 is 2.44,
+        # a finite-box value whose box size I14 does not give.
+        "D": (2.83, WMP14 + ": D0 = 2.83, read as D∞ (source not named); Horn's 2.44 "
+              "via I14, box not stated", True),
+        "eta": (0.72, WMP14 + ": 0.72 (literature column, source not named)", True),
+        # Horn 2004 as quoted by I14 Table 3 (63.90, no error given there); WMP14 quotes 62.
+        "eps": (63.9, I14 + " (TIP4P-Ew column, from Horn et al. 2004): 63.90; WMP14 "
+                "quotes 62", True),
     },
     "tip4p2005": {
         # Kept as an earlier session read it (the paper's Table); not re-read in this pass.
+        # WMP14 Table 1 quotes 0.993 (source not named).
         "density": (0.9979, "Abascal & Vega, J. Chem. Phys. 123, 234505 (2005), Table",
                     True),
+        # Not found readable.  WMP14 Table 1 quotes 10.93 kcal/mol (45.7 kJ/mol) without
+        # saying whether it holds the polarisation correction; 50.1 would be the raw number.
         "dhvap": (50.1, "Abascal & Vega 2005 (uncorrected; the paper compares the "
-                  "polarisation-corrected value with experiment; not read here)", False),
-        "D": (2.1, "SklogWiki TIP4P/2005 page: 0.21 Å²/ps, D_PBC of 216 molecules at 298 K "
-              "(compare with this benchmark's D_PBC at 216, not D∞)", True),
-        "eta": (0.855, G_A + ", via SklogWiki TIP4P/2005 page: 298 K, 1 bar", True),
-        "eps": (58.0, "Abascal & Vega 2005 / " + V_A + " (not read here)", False),
+                  "polarisation-corrected value with experiment; not read here: searched PMC, "
+                  "SklogWiki, arXiv copies; WMP14 quotes 10.93 kcal/mol, correction not "
+                  "stated)", False),
+        # D∞ (WMP14's D0, source not named).  SklogWiki's TIP4P/2005 page gives D_PBC = 0.21
+        # Å²/ps = 2.1 for 216 molecules at 298 K (compare with this benchmark's D_PBC at 216).
+        "D": (2.59, WMP14 + ": D0 = 2.59, read as D∞ (source not named); SklogWiki: D_PBC "
+              "2.1 at 216 molecules, 298 K", True),
+        "eta": (0.855, G_A + ", via SklogWiki TIP4P/2005 page: 298 K, 1 bar; WMP14 also "
+                "0.855", True),
+        "eps": (58.0, WMP14 + ": 58 (literature column, source not named)", True),
     },
     "opc": {
-        "density": (0.997, "Izadi, Anandakrishnan & Onufriev, J. Phys. Chem. Lett. 5, "
-                    "3863 (2014) (not read here)", False),
-        "dhvap": (44.2, "Izadi et al. 2014 (10.57 kcal/mol as remembered; not read here, "
-                  "nor whether it is polarisation-corrected)", False),
-        "D": (2.3, "Izadi et al. 2014 (not read here)", False),
+        # I14's own runs: 298.16 K, 1 bar, 804 waters, PME, 8 Å vdW cut-off (see I14 above).
+        "density": (0.997, I14 + " (OPC column): 0.997 +- 0.001", True),
+        # Polarisation-corrected: I14 SI eq. 15, ΔH_vap ≈ -U_liq/N + RT - pV - E_pol + C with
+        # E_pol = (µ - µ_gas)²/(2 α_gas) (eq. 16, µ_gas and α_gas from the IAPWS guideline, their
+        # ref 14, values not printed) and C Horn et al.'s vibrational / non-ideal-gas term.
+        # Compare the benchmark's corrected number (and mind C), not the raw one.
+        "dhvap": (round(10.57 * KCAL, 1), I14 + " (OPC column): 10.57 +- 0.004 kcal/mol, "
+                  "polarisation-corrected and with Horn's C term (SI eq. 15)", True),
+        # D_PBC of 804 molecules (30 Å box): SI p. 6, 80 NVE segments of 20 ps between NPT
+        # segments, Einstein relation; no finite-size correction is mentioned.  Not D∞.
+        "D": (2.3, I14 + " (OPC column): 2.3 +- 0.02, D_PBC of 804 molecules (no finite-size "
+              "correction stated)", True),
         # Ando, J. Chem. Phys. 159, 101102 (2023), abstract: OPC's Green-Kubo viscosity at
         # 298 K is about 10 % below experiment (0.89 mPa s): ~0.80, derived, not read.
         "eta": (0.80, "Ando, J. Chem. Phys. 159, 101102 (2023): abstract says ~10 % below "
-                "experiment at 298 K; 0.80 derived from that, not read", False),
-        "eps": (78.4, "Izadi et al. 2014 (not read here)", False),
+                "experiment at 298 K; 0.80 derived from that, not read (the paper's table was "
+                "not found readable)", False),
+        # SI eq. 13: ε from <M²> - <M>² with PME (conducting boundary), six 65 ns runs.
+        "eps": (78.4, I14 + " (OPC column): 78.4 +- 0.6", True),
     },
 }
 PROPERTIES = [("density", "density (g/cm³)"), ("dhvap", "ΔH_vap (kJ/mol)"),
