@@ -476,7 +476,7 @@ def table(results):
             lines.append(f"  {label:<18} {value:10.4g} ± {err:<9.2g}{extra}  published "
                          f"{published:>7}  {cite}{mark}")
         lines.append(f"  {'D_PBC (this box)':<18} {r['D_pbc'][0]:10.4g} ± {r['D_pbc'][1]:<9.2g}"
-                     "  (published D values are for the box sizes their papers say)")
+                     "  (published D above: D∞ unless its citation says D_PBC and the box)")
         lines.append(f"  ε to 15 %: about {r['nvt_ps_for_eps_15_percent']:.3g} ps of NVT")
         lines.append("")
     return "\n".join(lines)

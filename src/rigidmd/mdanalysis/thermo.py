@@ -55,6 +55,11 @@ POLARIZABILITY_A3 = 1.44
 POLARIZATION_CORRECTED = {
     "spce": "Berendsen, Grigera & Straatsma, J. Phys. Chem. 91, 6269 (1987)",
     "tip4p2005": "Abascal & Vega, J. Chem. Phys. 123, 234505 (2005)",
+    # Horn et al. and Izadi et al. also add a term C (vibrations, non-ideal gas; Horn's
+    # number) that is not applied here, and take the gas dipole and polarisability from
+    # experiment rather than Berendsen's 1.85 D and 1.44 Å³.
+    "tip4pew": "Horn et al., J. Chem. Phys. 120, 9665 (2004)",
+    "opc": "Izadi, Anandakrishnan & Onufriev, J. Phys. Chem. Lett. 5, 3863 (2014), SI eq. 15",
 }
 
 
