@@ -1,6 +1,7 @@
 """Anisotropic and triclinic NPT through LAMMPSEngine: the same cell and density as in-process.
 
-64 TIP3P waters (``rigidmd.systems.water_box(4)``), ``lj/cut/coul/long 6.0``
+64 TIP3P waters (``rigidmd.systems.water_box(4)``; ``--n-side 6``: 216),
+``lj/cut/coul/long 6.0``
 and PPPM at 1e-4, 298 K and 1 atm, ``RigidNPT`` (Nosé–Hoover 100 fs, MTK
 1 ps), 2 fs steps; 5 ps of equilibration, then ``--ps`` of sampling:
 
@@ -9,11 +10,9 @@ and PPPM at 1e-4, 298 K and 1 atm, ``RigidNPT`` (Nosé–Hoover 100 fs, MTK
 * ``LAMMPSEngine``, ``couple="tri"`` (the cell's six degrees of freedom:
   the run that needs the virial's shear components, which ``fix ipi`` sends
   as one triangle);
+* ``LAMMPSCalculator``, ``couple="tri"`` (one LAMMPS instance whose box the
+  plugin changes, the cell rotated into LAMMPS's frame at each step);
 * ``LAMMPSCalculator``, ``couple="iso"``.
-
-(``LAMMPSCalculator`` under ``couple="tri"`` starts a new LAMMPS instance at
-each step, as the cell turns out of LAMMPS's lower-triangular form: 4x the
-engine's time per step here, too slow to sample.)
 
 Means with standard errors from 10 blocks: density, the three cell lengths,
 the angles (triclinic).  A liquid has no shear modulus: under ``aniso`` and
@@ -39,11 +38,12 @@ COMMANDS = ["pair_style lj/cut/coul/long 6.0", "pair_coeff * * 0.0 1.0",
 TYPES = {"O": 1, "H": 2}
 AMU_PER_A3 = 1.66053906660  # g/cm³ per amu/Å³
 RUNS = {"LAMMPSCalculator aniso": ("calc", "aniso"), "LAMMPSEngine aniso": ("engine", "aniso"),
-        "LAMMPSEngine tri": ("engine", "tri"), "LAMMPSCalculator iso": ("calc", "iso")}
+        "LAMMPSEngine tri": ("engine", "tri"), "LAMMPSCalculator tri": ("calc", "tri"),
+        "LAMMPSCalculator iso": ("calc", "iso")}
 
 
-def run(kind, couple, ps, seed, equilibration_ps=5.0):
-    atoms = water_box(4)
+def run(kind, couple, ps, seed, equilibration_ps=5.0, n_side=4):
+    atoms = water_box(n_side)
     atoms.set_initial_charges(tip3p_charges(atoms))
     rigid_maxwell_boltzmann(atoms, 298, rng=np.random.default_rng(seed))
     if kind == "engine":
@@ -79,15 +79,17 @@ def main():
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--runs", nargs="*", default=list(RUNS), choices=list(RUNS))
     parser.add_argument("--append", action="store_true", help="add to the .txt")
+    parser.add_argument("--n-side", type=int, default=4, help="waters per box edge")
     args = parser.parse_args()
-    lines = [f"64 TIP3P waters, 298 K, 1 atm, RigidNPT (MTK 1 ps), 2 fs; "
+    lines = [f"{args.n_side ** 3} TIP3P waters, 298 K, 1 atm, RigidNPT (MTK 1 ps), 2 fs; "
              f"{args.equilibration_ps:g} ps equilibration, "
              f"{args.ps:g} ps sampled, seed {args.seed}; means ± standard error (10 blocks)",
              f"{'run':>34} {'density g/cm3':>17} {'a Å':>14} {'b Å':>14} {'c Å':>14} "
              f"{'alpha':>13} {'beta':>13} {'gamma':>13}"]
     for name in args.runs:
         kind, couple = RUNS[name]
-        mean, error = block_mean(run(kind, couple, args.ps, args.seed, args.equilibration_ps))
+        mean, error = block_mean(run(kind, couple, args.ps, args.seed, args.equilibration_ps,
+                                    args.n_side))
         cells = " ".join(f"{m:7.4f}±{e:6.4f}" for m, e in zip(mean, error, strict=True))
         lines.append(f"{name:>34} {cells}")
         print(lines[-1], flush=True)
