@@ -375,6 +375,30 @@ def block_variance(values, n=10):
     return np.var(values), blocks.std(ddof=1) / np.sqrt(n)
 
 
+def ideal_gas_start(calc, temperature_K, pressure):
+    """64 rigid dimers (``dimer_fluid(n_side=4)``) with ``calc`` (no interactions) at the
+    ideal gas's mean volume, 65 k_B T/P; returns the atoms and k_B T/P (Å³)."""
+    atoms = dimer_fluid(n_side=4)
+    kT_P = units.kB * temperature_K / pressure
+    atoms.set_cell(atoms.cell * (65 * kT_P / atoms.get_volume()) ** (1 / 3), scale_atoms=True)
+    atoms.calc = calc
+    return atoms, kT_P
+
+
+def assert_ideal_gas_volumes(volumes):
+    """Volumes (in k_B T/P) of N = 64 bodies distributed as Gamma(N + 1, 1).
+
+    Mean and variance N + 1 = 65, each within 4 standard errors of 20 blocks,
+    the first 10 % dropped; returns the four numbers (for the caller's comment).
+    """
+    volumes = np.asarray(volumes)[len(volumes) // 10:]
+    mean, mean_error = block_mean(volumes, 20)
+    variance, variance_error = block_variance(volumes, 20)
+    assert abs(mean - 65) < 4 * mean_error, (mean, mean_error)
+    assert abs(variance - 65) < 4 * variance_error, (variance, variance_error)
+    return mean, mean_error, variance, variance_error
+
+
 # 125 dimers at 130 K and 500 bar: a diffusive liquid of 0.75 g/cm³ (the
 # centres of mass move 130 Å² in 30 ps), compressibility about 1.7e-4 per bar.
 # (At 80 K with a deeper well the "liquid" was glassy, below the model's
