@@ -11,7 +11,7 @@ from ase.constraints import FixCom
 from rigidmd.dof import RigidBodyDOF
 
 __all__ = ["check_finite", "check_massless_momenta", "check_timestep", "check_constraints",
-           "changed_properties", "refreshed_copy"]
+           "changed_properties"]
 
 
 def check_timestep(timestep: float) -> float:
@@ -106,39 +106,3 @@ def changed_properties(old: Atoms, atoms: Atoms, tol: float = 1e-15):
             changes.append(name)
     return changes
 
-
-def refreshed_copy(kept: Atoms | None, atoms: Atoms) -> Atoms:
-    """``atoms.copy()`` for a calculator's record of the atoms it last computed.
-
-    ASE's ``Calculator.calculate`` keeps ``self.atoms = atoms.copy()`` (a new
-    :class:`ase.Atoms`, its arrays and a deep copy of its constraints: ~40 µs
-    for 648 atoms, more after a LAMMPS step has cooled the caches).  When
-    ``kept`` has the same number of atoms and the same arrays (names, shapes,
-    types) its arrays, cell, pbc, info and constraint list are refreshed in
-    place instead: the same values as a copy, without the new objects.
-
-    Parameters
-    ----------
-    kept : ase.Atoms or None
-        The record (the calculator's ``atoms``), None before the first call.
-    atoms : ase.Atoms
-        The atoms of this call.
-
-    Returns
-    -------
-    ase.Atoms
-        ``kept`` refreshed, or a new copy of ``atoms``.  The constraint list
-        holds ``atoms``' own constraint objects (not copies).
-    """
-    if (kept is None or kept is atoms or len(kept) != len(atoms)
-            or kept.arrays.keys() != atoms.arrays.keys()
-            or any(a.shape != kept.arrays[k].shape or a.dtype != kept.arrays[k].dtype
-                   for k, a in atoms.arrays.items())):
-        return atoms.copy()
-    for name, a in atoms.arrays.items():
-        np.copyto(kept.arrays[name], a)
-    kept.cell.array[...] = atoms.cell.array
-    kept.pbc[...] = atoms.pbc
-    kept.info = dict(atoms.info)
-    kept.constraints = list(atoms.constraints)
-    return kept

@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
-from rigidmd.checks import changed_properties, check_finite, refreshed_copy
+from rigidmd.checks import changed_properties, check_finite
 from rigidmd.lammps.atomarrays import AtomArrays
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, box_plugin, warn_fallback
 from rigidmd.lammps.data import MASSLESS_SITE_MASS
@@ -593,8 +593,9 @@ class LAMMPSCalculator(Calculator):
         return super().check_state(atoms, tol) if changes is None else changes
 
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
-        # ASE's Calculator.calculate keeps a copy: refreshed in place when it can be.
-        atoms = self.atoms = self.atoms if atoms is None else refreshed_copy(self.atoms, atoms)
+        if atoms is not None:  # ASE's Calculator.calculate, without its directory check
+            self.atoms = atoms.copy()
+        atoms = self.atoms
         # NaN or infinite coordinates hang LAMMPS (deaf to Ctrl-C): refused first.
         check_finite(atoms.positions, "position", "Å", "given to LAMMPSCalculator")
         if atoms.pbc.any():
