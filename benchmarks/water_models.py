@@ -2,8 +2,9 @@ r"""Six rigid water models at 298 K and 1 bar: density, ΔH_vap, D, η and ε ag
 
 For TIP3P, SPC/E, TIP4P, TIP4P-Ew, TIP4P/2005 and OPC (:mod:`rigidmd.water`):
 216 molecules (``--n-side 6``), forces from LAMMPS (``lj/cut/coul/long``, PPPM
-at 1e-5) with the cut-off and long-range Lennard-Jones treatment of each
-model's paper (:data:`SETUP`), 2 fs steps.
+at 1e-5) with each model's cut-off and the long-range Lennard-Jones correction
+(:data:`SETUP`: as in the Ewald studies the published values come from), 2 fs
+steps.
 
 1. Quench the lattice start (Langevin, 0.5 fs, 0.2 ps).
 2. NPT, :class:`rigidmd.RigidCRescale` (Bussi τ_T = 0.5 ps, cell rescaling
