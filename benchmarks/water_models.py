@@ -522,6 +522,8 @@ def parse(argv=None):
                         "pipeline, gives no results")
     p.add_argument("--npt-ps", type=float, help="NPT production (ps; full mode 500)")
     p.add_argument("--nvt-ps", type=float, help="NVT production (ps; full mode 1000)")
+    p.add_argument("--report", action="store_true",
+                   help="run nothing: the table and plot of the models already finished")
     args = p.parse_args(argv)
     if args.quick and args.n_side == 6:
         args.n_side = 4
@@ -533,7 +535,12 @@ def main(argv=None):
     args.outdir.mkdir(parents=True, exist_ok=True)
     jobs = [(m, args.outdir, args.quick, args.n_side, args.seed, args.npt_ps, args.nvt_ps)
             for m in args.models]
-    if args.jobs > 1:
+    if args.report:
+        found = [args.outdir / "runs" / m / "results.json" for m in args.models]
+        results = [json.loads(f.read_text()) for f in found if f.exists()]
+        if not results:
+            raise SystemExit(f"water_models: no finished model in {args.outdir / 'runs'}")
+    elif args.jobs > 1:
         with ProcessPoolExecutor(max_workers=args.jobs) as pool:
             results = list(pool.map(run_model, *zip(*jobs, strict=True)))
     else:

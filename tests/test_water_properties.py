@@ -282,6 +282,14 @@ def test_water_models_benchmark_quick(tmp_path):
     (again,) = bench.main(["--quick", "--models", "spce", "--outdir", str(tmp_path)])
     for key in ("density", "dhvap", "eta", "eps", "D"):
         assert again[key] == pytest.approx(result[key]), key
+    # --report: the table of the finished models only, nothing run.
+    (tmp_path / "water_models.txt").unlink()
+    assert bench.main(["--report", "--models", "tip3p", "spce", "--outdir", str(tmp_path)]) \
+        == [again]
+    assert "spce: 64 molecules" in (tmp_path / "water_models.txt").read_text()
+    with pytest.raises(SystemExit, match="no finished model"):
+        bench.main(["--report", "--models", "tip3p", "--outdir", str(tmp_path)])
+    assert not (tmp_path / "runs" / "tip3p").exists()
 
 
 def test_stress_recorder_costs_no_second_calculator_call():
