@@ -7,7 +7,10 @@ positions straight into LAMMPS's own array, in LAMMPS's current periodic
 image of each atom (so only real motion counts against the neighbour skin),
 runs one step without set-up and without an integrator
 (``run 1 pre no post no``), and reads energy, forces and the virial back: one
-force evaluation per call, about one native LAMMPS step.
+force evaluation per call, about one native LAMMPS step.  As in a native run,
+the energy and the virial are tallied only on the steps that ask for them
+(a call for forces alone costs neither; a barostat's stress, with the box
+plugin, not the energy).
 
 When the cell changes (a barostat), the new box costs what it costs LAMMPS's
 own barostats: a small LAMMPS plugin (:mod:`rigidmd.lammps.boxplugin`, built
