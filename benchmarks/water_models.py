@@ -305,6 +305,26 @@ def rescale_to_volume(atoms, volume, sites):
     atoms.set_cell(atoms.cell * s, scale_atoms=False)
 
 
+def diffusion(com, frame_ps, blocks=5):
+    """D_PBC (Å²/ps) from the slope of the MSD of ``com`` (frames, molecules, 3) and its error.
+
+    The slope is fitted between 10 % and 40 % of the longest lag; the error is
+    the standard error of the same fit in ``blocks`` consecutive parts of the
+    run (the spread of the three axes, used before, says little about the
+    run's length).
+    """
+    from rigidmd.mdanalysis.diffusion import mean_squared_displacement
+
+    def slope(x):
+        msd = mean_squared_displacement(x).mean(axis=1)
+        t = np.arange(len(msd)) * frame_ps
+        window = (t >= 0.1 * t[-1]) & (t <= 0.4 * t[-1])
+        return np.polyfit(t[window], msd[window], 1)[0] / 6
+
+    parts = [slope(part) for part in np.array_split(com, blocks)]
+    return float(slope(com)), float(np.std(parts, ddof=1) / np.sqrt(blocks))
+
+
 class Stage:
     """One resumable stage: runs a dynamics in chunks, saving a checkpoint and series."""
 
@@ -344,7 +364,7 @@ def run_model(name, outdir, quick, n_side, seed, npt_ps=None, nvt_ps=None):
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     from rigidmd import RigidBussi, RigidCRescale, RigidLangevin, load_checkpoint
     from rigidmd.mdanalysis.dielectric import dielectric_from_dipoles, jackknife_error
-    from rigidmd.mdanalysis.diffusion import mean_squared_displacement, yeh_hummer_correction
+    from rigidmd.mdanalysis.diffusion import yeh_hummer_correction
     from rigidmd.mdanalysis.thermo import (
         HeatOfVaporization,
         block_average,
@@ -434,16 +454,11 @@ def run_model(name, outdir, quick, n_side, seed, npt_ps=None, nvt_ps=None):
     eps_err = jackknife_error(dipoles, volume, TEMPERATURE_K, 10)
     com = np.asarray(series["com"])
     com = com - com.mean(axis=1, keepdims=True)  # no drift of the whole box
-    msd = mean_squared_displacement(com).mean(axis=1)
-    t = np.arange(len(msd)) * frame * dt / PS
-    window = (t >= 0.1 * t[-1]) & (t <= 0.4 * t[-1])
-    per_axis = [np.polyfit(t[window], mean_squared_displacement(com[:, :, [i]]).mean(axis=1)
-                           [window], 1)[0] / 2 for i in range(3)]
-    d_pbc = float(np.mean(per_axis))  # Å²/ps
-    d_err = float(np.std(per_axis, ddof=1) / np.sqrt(3))
-    eta = gk.viscosity_mPa_s
-    d_inf = d_pbc + (yeh_hummer_correction(TEMPERATURE_K, eta, volume ** (1 / 3))
-                     if eta > 0 else float("nan"))
+    d_pbc, d_err = diffusion(com, frame * dt / PS)  # Å²/ps
+    eta, eta_err = gk.viscosity_mPa_s, gk.viscosity_stderr_mPa_s
+    yh = yeh_hummer_correction(TEMPERATURE_K, eta, volume ** (1 / 3)) if eta > 0 else np.nan
+    d_inf = d_pbc + yh
+    d_inf_err = float(np.hypot(d_err, yh * eta_err / eta)) if eta > 0 else np.nan
     nvt_ps = L["nvt_prod"]
     rel = eps_err / eps if eps > 0 else float("nan")
     results = {
@@ -453,8 +468,8 @@ def run_model(name, outdir, quick, n_side, seed, npt_ps=None, nvt_ps=None):
         "dhvap": [hv.delta_h_kj_mol, hv.delta_h_stderr_kj_mol],
         "dhvap_corrected": hv.delta_h_corrected_kj_mol,
         "polarization_kj_mol": hv.polarization_energy_kj_mol,
-        "D_pbc": [d_pbc * 10, d_err * 10], "D": [d_inf * 10, d_err * 10],
-        "eta": [eta, gk.viscosity_stderr_mPa_s],
+        "D_pbc": [d_pbc * 10, d_err * 10], "D": [d_inf * 10, d_inf_err * 10],
+        "eta": [eta, eta_err],
         "eps": [eps, eps_err],
         "nvt_ps_for_eps_15_percent": float(nvt_ps * (rel / 0.15) ** 2),
     }
