@@ -217,3 +217,46 @@ def test_the_plugin_is_built_once_into_a_writable_cache(monkeypatch, tmp_path):
     monkeypatch.setenv("RIGIDMD_LAMMPS_PLUGIN", "0")
     with pytest.raises(boxplugin.BoxPluginUnavailable, match="RIGIDMD_LAMMPS_PLUGIN"):
         boxplugin._build()
+
+
+@pytest.mark.parametrize("plugin", [True, False])
+def test_a_stress_without_the_energy_in_a_fixed_cell(plugin, commands, monkeypatch, tmp_path):
+    """A fixed cell asked for the stress alone (as a Green-Kubo recorder asks): with the
+    plugin one ``rigidmd_tally`` of the virial compute and no box fix; without it the
+    library's tally of every compute.  Either way the stress, and then the energy of the
+    same positions, equal a fresh LAMMPS's (measured: equal to the last bit; bound 1e-9
+    relative as above)."""
+    if not plugin:
+        break_the_plugin(monkeypatch, tmp_path)
+    atoms = water_box_27()
+    atoms.calc = LAMMPSCalculator(PPPM_27)
+    atoms.get_forces()
+    parameters = atoms.calc.kspace_parameters
+    atoms.positions += np.random.default_rng(3).normal(scale=0.02, size=atoms.positions.shape)
+    del commands[:]
+    stress = atoms.get_stress()
+    tallies = [c.split()[:2] for c in commands if c.startswith("rigidmd_tally")]
+    assert tallies == ([["rigidmd_tally", "rmd_pressure"]] if plugin else []), commands
+    assert not any("rigidmd/box" in c or "rigidmd_box" in c for c in commands)
+    energy, _, fresh_stress = fresh(atoms, parameters)
+    np.testing.assert_allclose(stress, fresh_stress, rtol=0,
+                               atol=1e-9 * np.abs(fresh_stress).max())
+    assert atoms.get_potential_energy() == pytest.approx(energy, rel=1e-9, abs=0)
+
+
+def test_two_live_instances_both_take_the_plugin(commands):
+    """The styles go into each LAMMPS instance's own maps: a second instance alive beside
+    the first gets them too (LAMMPS's ``plugin load`` refused it: "must unload existing
+    rigidmd/box plugin first", and that calculator fell back to full set-ups)."""
+    pair = [water_box_27(), water_box_27()]
+    for atoms in pair:
+        atoms.calc = LAMMPSCalculator(PPPM_27)
+        atoms.get_potential_energy()
+    for scale in (1.02, 1.03):
+        for atoms in pair:
+            atoms.set_cell(atoms.cell * scale, scale_atoms=True)
+            del commands[:]
+            atoms.get_potential_energy()
+            if scale == 1.03:  # after the first new cell (the set-up that takes the fix in)
+                assert [c.split()[0] for c in commands] == ["rigidmd_box", "run"], commands
+    assert pair[0].get_potential_energy() == pair[1].get_potential_energy()

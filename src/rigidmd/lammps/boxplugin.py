@@ -26,9 +26,13 @@ wheel, into a per-user cache (``$RIGIDMD_CACHE_DIR``, else ``$XDG_CACHE_HOME/rig
 ``~/.cache/rigidmd``; a temporary directory when that cannot be written), in a
 file named by a hash of the source, the compiler, its flags and the LAMMPS
 library, so a new LAMMPS or a new source builds anew and concurrent builders
-never see a half-written file.  When it cannot be had (no compiler, a failed
-build or load, or ``RIGIDMD_LAMMPS_PLUGIN=0``), :func:`box_plugin` says why
-and the calculator keeps ``change_box`` and a set-up run.
+never see a half-written file.  The library is opened once per process
+(ctypes) and its ``rigidmd_register_styles`` adds the three styles to each
+LAMMPS instance's own style maps (LAMMPS's ``plugin load`` keeps one registry
+per process: a second live instance could not load them).  When it cannot be
+had (no compiler, a failed build or load, or ``RIGIDMD_LAMMPS_PLUGIN=0``),
+:func:`box_plugin` says why and the calculator keeps ``change_box`` and a
+set-up run.
 """
 
 import ctypes
@@ -51,7 +55,7 @@ FLAGS = ("-O2", "-fPIC", "-shared", "-std=c++17", "-DLAMMPS_SMALLBIG")
 BUILD_TIMEOUT = 300
 
 _FOUND = {}    # library key -> path of the built plugin, or BoxPluginUnavailable
-_HANDLES = []  # the plugins opened here: kept loaded for the life of the process
+_HANDLES = {}  # path -> the plugin library, opened once and kept for the life of the process
 _WARNED = []   # the fallback has been warned of (once per process)
 
 
@@ -170,8 +174,9 @@ def box_plugin(lmp):
     Raises
     ------
     BoxPluginUnavailable
-        With one line saying why (no compiler, a failed build, LAMMPS could not
-        load it, switched off); the reason is kept, so a process tries once.
+        With one line saying why (no compiler, a failed build, the library or
+        its styles could not be loaded, switched off); the reason is kept, so a
+        process tries once.
     """
     key = "plugin"
     found = _FOUND.get(key)
@@ -184,17 +189,22 @@ def box_plugin(lmp):
     if isinstance(found, BoxPluginUnavailable):
         raise found
     try:
-        lmp.command(f'plugin load "{found}"')
-    except Exception as err:  # LAMMPS raises a bare Exception with its message
-        raise BoxPluginUnavailable(f"LAMMPS could not load {found}: {err}") from None
+        if found not in _HANDLES:  # opened once (RTLD_GLOBAL: it uses LAMMPS's symbols)
+            library = ctypes.CDLL(str(found), mode=getattr(ctypes, "RTLD_GLOBAL", 0))
+            library.rigidmd_register_styles.argtypes = [ctypes.c_void_p]
+            _HANDLES[found] = library
+        # The styles go into this instance's own style maps: LAMMPS's `plugin load` keeps
+        # one registry per process and refuses a second live instance the same styles.
+        _HANDLES[found].rigidmd_register_styles(lmp.lmp)
+    except (OSError, AttributeError) as err:
+        failure = BoxPluginUnavailable(f"could not load {found}: {err}")
+        _FOUND[key] = failure
+        raise failure from None
     if not (lmp.has_style("fix", "rigidmd/box") and lmp.has_style("command", "rigidmd_box")
             and lmp.has_style("command", "rigidmd_tally")):
-        failure = BoxPluginUnavailable(f"LAMMPS did not register the styles of {found} "
-                                       "(see LAMMPS's log)")
+        failure = BoxPluginUnavailable(f"LAMMPS did not register the styles of {found}")
         _FOUND[key] = failure
         raise failure
-    if not _HANDLES:  # LAMMPS closes a plugin with its last instance: keep it mapped
-        _HANDLES.append(ctypes.CDLL(str(found), mode=getattr(ctypes, "RTLD_GLOBAL", 0)))
     return found
 
 

@@ -9,16 +9,17 @@ runs one step without set-up and without an integrator
 (``run 1 pre no post no``), and reads energy, forces and the virial back: one
 force evaluation per call, about one native LAMMPS step.  As in a native run,
 the energy and the virial are tallied only on the steps that ask for them
-(a call for forces alone costs neither; a barostat's stress, with the box
-plugin, not the energy).
+(a call for forces alone costs neither; a call for the stress alone, with the
+box plugin, not the energy).
 
 When the cell changes (a barostat), the new box costs what it costs LAMMPS's
 own barostats: a small LAMMPS plugin (:mod:`rigidmd.lammps.boxplugin`, built
 once per user at the first cell change) sets the box and re-sets only the
 k-space solver (PPPM's Green's function for the new box), and the next step
 re-neighbours when the atoms or the box corners have moved by half the skin
-(the first new cell of an instance runs one set-up, which takes the plugin in;
-a fixed cell never loads it).  Where the plugin cannot be built
+(the first new cell of an instance runs one set-up, which takes the plugin's
+fix in; a fixed cell loads the plugin only to ask for a stress without the
+energy).  Where the plugin cannot be built
 or loaded (said once, with the reason), the box is changed with
 ``change_box`` and that call runs LAMMPS's whole set-up (``run 0 pre yes``).
 Either way the k-space parameters of the first cell are kept
@@ -187,7 +188,8 @@ class LAMMPSCalculator(Calculator):
     implemented_properties = ["energy", "free_energy", "forces", "stress"]
     _lmp = None
     _grouping_checked = None  # the bodies and molecules last found to agree
-    _box_plugin = None        # True, or why the box plugin is not there (see _start)
+    _plugin = None            # True (loaded), or why the box plugin is not there
+    _box_fix = False          # fix rigidmd/box declared (at the first new cell)
     _box_moved = False        # the box changed through the plugin since the last step
     _arrays = None            # AtomArrays of the instance
 
@@ -417,7 +419,7 @@ class LAMMPSCalculator(Calculator):
                 raise LammpsError("LAMMPSCalculator: unexpected LAMMPS Coulomb constant")
             if kspace and self.kspace_parameters is not None:
                 self._execute([self.kspace_parameters])
-            self._box_plugin = None  # not needed until the cell changes
+            self._plugin, self._box_fix = None, False  # loaded when first needed
             # One set-up with a log: LAMMPS's warnings, and the k-space parameters it chose.
             self._execute(["run 0 pre yes post no", "log none"])
             text = log.read_text()
@@ -536,7 +538,7 @@ class LAMMPSCalculator(Calculator):
         """
         rotation, lammps_cell = lower_triangular(cell)
         tilted = bool(lammps_cell[1, 0] or lammps_cell[2, 0] or lammps_cell[2, 1])
-        if self._box_plugin is True and (self._triclinic or not tilted):
+        if self._box_fix and (self._triclinic or not tilted):
             # LAMMPS's barostat path (see rigidmd.lammps.boxplugin): the new box and
             # KSpace::setup() now; the next step re-neighbours if the box moved enough.
             edges = [lammps_cell[0, 0], lammps_cell[1, 1], lammps_cell[2, 2],
@@ -547,17 +549,13 @@ class LAMMPSCalculator(Calculator):
             self._box_moved = True
             return
         commands = []
-        if self._box_plugin is None:
+        if not self._box_fix and self._load_plugin():
             # The first new cell: the set-up below takes in fix rigidmd/box (as it
             # would a barostat fix); later cells then need no set-up.
-            try:
-                box_plugin(self._lmp)
-                commands.append("fix rmd_box all rigidmd/box")
-                self._box_plugin = True
-            except BoxPluginUnavailable as err:
-                self._box_plugin = str(err)
-        if self._box_plugin is not True:
-            warn_fallback(self._box_plugin)
+            commands.append("fix rmd_box all rigidmd/box")
+            self._box_fix = True
+        if not self._box_fix:
+            warn_fallback(self._plugin)
         if tilted and not self._triclinic:
             commands.append("change_box all triclinic")
             commands += [c for c in self.commands
@@ -574,6 +572,16 @@ class LAMMPSCalculator(Calculator):
         self._rotation = rotation
         self._cell = cell.copy()
         self._setup_needed = True
+
+    def _load_plugin(self):
+        """Whether the box plugin is loaded in this instance (tried once per instance)."""
+        if self._plugin is None:
+            try:
+                box_plugin(self._lmp)
+                self._plugin = True
+            except BoxPluginUnavailable as err:
+                self._plugin = str(err)
+        return self._plugin is True
 
     def _lammps_cell(self):
         boxlo, boxhi, xy, yz, xz, _, _ = self._lmp.extract_box()
@@ -641,7 +649,7 @@ class LAMMPSCalculator(Calculator):
             command = "run 0 pre yes post no"
         else:  # a step without set-up (also for the same positions asked for more)
             command, step = "run 1 pre no post no", step + 1
-        if want_stress and not want_energy and not self._setup_needed and self._box_plugin is True:
+        if want_stress and not want_energy and not self._setup_needed and self._load_plugin():
             command = f"rigidmd_tally rmd_pressure {step}\n{command}"  # not the costly energy
         elif want_energy or want_stress:
             lmp.addstep_compute(step)  # every energy and pressure compute

