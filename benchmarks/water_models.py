@@ -34,19 +34,15 @@ process each, LAMMPS single-threaded.
 
 Full mode (default): NPT 50 ps equilibration + 500 ps production; NVT 20 ps
 + 1000 ps; 785 k steps of 2 fs per model (``--npt-ps`` and ``--nvt-ps`` change
-the two productions).  Cost per step, 216 waters, RigidBussi, LAMMPS on one
-thread, measured interleaved (best of 3 × 30 steps) on this 2-core machine
-while other jobs loaded it to a load average of 20, so absolute times are
-several times an idle machine's and only the ratios mean much: TIP3P 55 ms
-plain, 75 with the stress recorded every step (×1.37), 127 (×2.3) before
-``stress_on_observed_steps`` made the stress come with the forces;
-TIP4P/2005 35.5, 54.4 (×1.53), 85.0.  Here the stress is recorded every 2
-steps (4 fs), about ×1.2.  Estimate for an idle machine from the README's
-measured 5.8 ms/step (216 TIP3P, NVE) and 12.3 ms/step (216 TIP4P/2005,
-NPT): per three-site model about 0.45 h of NPT and 1.0 h of NVT, per
-four-site model about 0.95 h and 2.1 h, so the six models (two three-site,
-four four-site) take about 15 h of CPU, about 8 h with ``--jobs 2`` on an
-idle 2-core machine.
+the two productions).  Pace measured with ``--jobs 2`` on this 2-core machine
+(216 waters, one LAMMPS thread per model, the stress recorded every 2 steps
+in NVT, at ``nice 19`` beside light interactive work): about 12 ps of NPT or
+NVT per minute for SPC/E and TIP3P, 9 ps per minute for TIP4P/2005's NVT;
+``--npt-ps 200 --nvt-ps 500`` then takes about 1 h per three-site model and
+1.3 h per four-site one, about 4 h for the six with ``--jobs 2``, the full
+mode about twice that.  (The calculator tallies the energy only on the steps
+that record it and the stress alone on the others; before that change the
+same stages ran 2-3x slower.)
 
 ε converges slowly.  For a Gaussian total dipole with correlation time τ_M
 the relative error of ε − 1 after t ps is about sqrt(4 τ_M / (3 t)); with
