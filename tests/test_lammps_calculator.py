@@ -279,8 +279,9 @@ def test_atoms_sorted_by_lammps_at_every_step_keep_their_forces():
     calculator maps them by ID after every step; ``atom_modify sort 1 1.0`` sorts at every
     re-neighbouring step.  A 40-step NVE run (1 fs, 300 K: several re-neighbourings) with
     that sorting equals the run without it.  Measured: positions 1.8e-15 Å apart (sorted
-    atoms sum their pairs in another order: roundoff); bound 1e-9 Å.  Forces mapped with the order of the step before (no re-reading of
-    the IDs after a step) scramble the run: LAMMPS loses 12 of the 81 atoms."""
+    atoms sum their pairs in another order: roundoff); bound 1e-9 Å.  Forces mapped with
+    the order of the step before (no re-reading of the IDs after a step) scramble the run:
+    LAMMPS loses 12 of the 81 atoms."""
     start = water_box_27()
     start.positions = RigidBodies.resolve(start, "tags").whole_positions(start)
     rigid_maxwell_boltzmann(start, 300, bodies="tags", rng=np.random.default_rng(5))
