@@ -187,6 +187,14 @@ def start_of(key, write_start=None):
     return start, result.energy
 
 
+def by_fmax(found, minimum, n):
+    """Each fmax of a route's run, loosest first: (fmax, calls, steps, converged, energy above
+    the minimum per molecule (eV), wall seconds)."""
+    for fmax in sorted(found, reverse=True):
+        calls, steps, converged, energy, wall = found[fmax]
+        yield fmax, calls, steps, converged, (energy - minimum) / n, wall
+
+
 def rows(key, fmaxes=(0.05, 0.01), routes=ROUTES, log=None):
     """Table rows of one system for each ``fmax`` and route."""
     name, _, rc = SYSTEMS[key]
@@ -196,10 +204,9 @@ def rows(key, fmaxes=(0.05, 0.01), routes=ROUTES, log=None):
     for route in routes:
         found = run_route(route, start, rc, fmaxes, log)
         minimum = start_of(key)[1]  # written by another process meanwhile, maybe
-        for fmax in sorted(fmaxes, reverse=True):
-            calls, steps, converged, energy, wall = found[fmax]
+        for fmax, calls, steps, converged, excess, wall in by_fmax(found, minimum, n):
             out.append(f"| {name} | {fmax} | {route} | {calls} | {steps} | {converged} "
-                       f"| {(energy - minimum) / n:.2e} | {wall:.1f} |")
+                       f"| {excess:.2e} | {wall:.1f} |")
             print(out[-1], flush=True)
     return out
 
@@ -215,10 +222,9 @@ def alpha_rows(key, route="RigidFilter", fmaxes=(0.05, 0.01)):
     out = []
     for alpha in ALPHAS:
         found = run_route(route, start, rc, fmaxes, alpha=alpha)
-        for fmax in sorted(fmaxes, reverse=True):
-            calls, steps, converged, energy, wall = found[fmax]
+        for fmax, calls, steps, converged, excess, _ in by_fmax(found, minimum, n):
             out.append(f"| {name} | {alpha:g} | {fmax} | {route} | {calls} | {steps} "
-                       f"| {converged} | {(energy - minimum) / n:.2e} |")
+                       f"| {converged} | {excess:.2e} |")
             print(out[-1], flush=True)
     return out
 
