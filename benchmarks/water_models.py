@@ -11,19 +11,21 @@ steps.
    τ_P = 2 ps): equilibration, then production recording the density and
    the potential energy → density and ΔH_vap (:class:`HeatOfVaporization`,
    the excluded intramolecular pairs' k-space energy taken off, and the
-   polarisation-corrected number for SPC/E and TIP4P/2005).
+   polarisation-corrected number for SPC/E, TIP4P-Ew, TIP4P/2005 and OPC).
 3. The centres of mass rescaled to the mean NPT volume; NVT,
    :class:`rigidmd.RigidBussi` with τ_T = 5 ps (a weak thermostat leaves the
    dynamics close to Newtonian): equilibration, then production recording the
-   molecular stress every step (Green–Kubo η, :class:`ShearViscosity`), the
-   total dipole every 10 steps (ε, tin-foil boundary conditions) and the
-   centres of mass every 0.1 ps (D from the MSD, and D∞ with the
-   Yeh–Hummer correction using the measured η).
+   molecular stress every 2 steps (Green–Kubo η, :class:`ShearViscosity`), the
+   total dipole and the temperature (6N − 3 degrees of freedom) every 10
+   steps (ε, tin-foil boundary conditions) and the centres of mass every
+   0.1 ps (D from the MSD, and D∞ with the Yeh–Hummer correction using the
+   measured η).
 
-Every result is written with its statistical error (block averages; the
-jackknife for ε) beside the published value and its citation
-(:data:`PUBLISHED`) to ``water_models.txt`` and ``water_models.png`` in
-``--outdir`` (default: beside this script), each model's numbers to
+Every result is written with its statistical error (block averages; η and D
+from ten consecutive parts of the production; the jackknife for ε) beside
+the published value and its citation (:data:`PUBLISHED`) to
+``water_models.txt`` and ``water_models.png`` in ``--outdir`` (default:
+beside this script), each model's numbers to
 ``<outdir>/runs/<model>/results.json``.
 
 Resumable: each stage runs in chunks and writes a checkpoint
@@ -249,6 +251,13 @@ PUBLISHED = {
         "eps": (78.4, I14 + " (OPC column): 78.4 +- 0.6", True),
     },
 }
+#: Published D that are finite-box values, by model: the number of molecules of the box.  The
+#: benchmark's D∞ is brought to that box (cubic, at the published density) with the
+#: Yeh–Hummer term of the measured η before the two are compared (:func:`comparable`).
+PUBLISHED_D_MOLECULES = {"opc": 804}
+#: Models whose published ΔH_vap is the polarisation-corrected one: the benchmark's ΔH_vap
+#: − E_pol is set beside it (the others publish the raw −U/N + RT).
+PUBLISHED_DHVAP_CORRECTED = {"opc"}
 PROPERTIES = [("density", "density (g/cm³)"), ("dhvap", "ΔH_vap (kJ/mol)"),
               ("D", "D∞ (1e-5 cm²/s)"), ("eta", "η (mPa s)"), ("eps", "ε")]
 
@@ -264,11 +273,17 @@ def lengths(quick, npt_ps=None, nvt_ps=None):
 
 
 def _lengths(quick):
+    # "blocks": consecutive parts of a production whose spread gives the errors of η and D
+    # (50 ps each at 500 ps, five times the correlation functions' longest lag; five parts
+    # gave errors half the size from the same data: a spread of five numbers is itself
+    # uncertain by 35 %).
     if quick:
         return {"quench": 0.02, "npt_eq": 0.1, "npt_prod": 0.2, "nvt_eq": 0.04,
-                "nvt_prod": 0.6, "chunk": 0.2, "max_lag": 0.05, "plateau": (0.02, 0.04)}
+                "nvt_prod": 0.6, "chunk": 0.2, "max_lag": 0.05, "plateau": (0.02, 0.04),
+                "blocks": 5}
     return {"quench": 0.2, "npt_eq": 50.0, "npt_prod": 500.0, "nvt_eq": 20.0,
-            "nvt_prod": 1000.0, "chunk": 10.0, "max_lag": 10.0, "plateau": (2.0, 4.0)}
+            "nvt_prod": 1000.0, "chunk": 10.0, "max_lag": 10.0, "plateau": (2.0, 4.0),
+            "blocks": 10}
 
 
 def calculator(name, cutoff):
@@ -291,6 +306,12 @@ def total_dipole(atoms, charges, sites):
     return charges @ d
 
 
+def temperature(dyn):
+    """Rigid-body temperature (K) with 6N - 3 degrees of freedom (LAMMPS's count)."""
+    kinetic = dyn.translational_kinetic_energies.sum() + dyn.rotational_kinetic_energies.sum()
+    return 2 * kinetic / ((dyn.degrees_of_freedom - 3) * units.kB)
+
+
 def rescale_to_volume(atoms, volume, sites):
     """Move every molecule's centre of mass to the cell scaled to ``volume`` (rigid shapes)."""
     s = (volume / atoms.get_volume()) ** (1 / 3)
@@ -301,7 +322,7 @@ def rescale_to_volume(atoms, volume, sites):
     atoms.set_cell(atoms.cell * s, scale_atoms=False)
 
 
-def diffusion(com, frame_ps, blocks=5):
+def diffusion(com, frame_ps, blocks=10):
     """D_PBC (Å²/ps) from the slope of the MSD of ``com`` (frames, molecules, 3) and its error.
 
     The slope is fitted between 10 % and 40 % of the longest lag; the error is
@@ -438,25 +459,30 @@ def run_model(name, outdir, quick, n_side, seed, npt_ps=None, nvt_ps=None):
         dyn4.stress_on_observed_steps = True  # the stress with the forces: one LAMMPS call
         observers = {"stress": (lambda: dyn4.get_stress(include_ideal_gas=True), STRESS_EVERY),
                      "dipole": (lambda: total_dipole(a, charges, k), 10),
-                     "com": (lambda: dyn4.com_positions.copy(), frame)}
+                     "com": (lambda: dyn4.com_positions.copy(), frame),
+                     "temperature": (lambda: temperature(dyn4), 10)}
         series = nvt.run(dyn4, steps["nvt_prod"], chunk, series, observers)
     ms_per_step = 1e3 * (time.perf_counter() - t0) / max(sum(steps.values()), 1)
 
     gk = ShearViscosity(np.asarray(series["stress"]), volume, TEMPERATURE_K,
                         STRESS_EVERY * dt / PS,
-                        max_lag_ps=L["max_lag"], plateau_ps=L["plateau"], blocks=5).run().results
+                        max_lag_ps=L["max_lag"], plateau_ps=L["plateau"],
+                        blocks=L["blocks"]).run().results
     dipoles = np.asarray(series["dipole"])
     eps = dielectric_from_dipoles(dipoles, volume, TEMPERATURE_K)
     eps_err = jackknife_error(dipoles, volume, TEMPERATURE_K, 10)
     com = np.asarray(series["com"])
     com = com - com.mean(axis=1, keepdims=True)  # no drift of the whole box
-    d_pbc, d_err = diffusion(com, frame * dt / PS)  # Å²/ps
+    d_pbc, d_err = diffusion(com, frame * dt / PS, L["blocks"])  # Å²/ps
     eta, eta_err = gk.viscosity_mPa_s, gk.viscosity_stderr_mPa_s
     yh = yeh_hummer_correction(TEMPERATURE_K, eta, volume ** (1 / 3)) if eta > 0 else np.nan
     d_inf = d_pbc + yh
     d_inf_err = float(np.hypot(d_err, yh * eta_err / eta)) if eta > 0 else np.nan
     nvt_ps = L["nvt_prod"]
     rel = eps_err / eps if eps > 0 else float("nan")
+    # Recorded since 2026-11-24; a run resumed across that records it for its later part only.
+    t_nvt = ([float(v) for v in block_average(series["temperature"])]
+             if len(series.get("temperature", ())) >= 20 else None)
     results = {
         "model": name, "molecules": n, "cutoff_A": cutoff, "tail": SETUP[name]["tail"],
         "quick": quick, "ms_per_step": ms_per_step, "npt_ps": L["npt_prod"], "nvt_ps": nvt_ps,
@@ -467,10 +493,34 @@ def run_model(name, outdir, quick, n_side, seed, npt_ps=None, nvt_ps=None):
         "D_pbc": [d_pbc * 10, d_err * 10], "D": [d_inf * 10, d_inf_err * 10],
         "eta": [eta, eta_err],
         "eps": [eps, eps_err],
+        "nvt_temperature_K": t_nvt,
         "nvt_ps_for_eps_15_percent": float(nvt_ps * (rel / 0.15) ** 2),
     }
     result_file.write_text(json.dumps(results, indent=1) + "\n")
     return results
+
+
+def comparable(r, key):
+    """The measured value and error to set beside ``PUBLISHED[model][key]``.
+
+    D∞ for every model but those whose published D is a finite box's
+    (:data:`PUBLISHED_D_MOLECULES`): there D∞ less the Yeh–Hummer term of that
+    box's edge (the measured η), so a D_PBC is compared with a D_PBC.  ΔH_vap
+    − E_pol for a model whose paper publishes the corrected number
+    (:data:`PUBLISHED_DHVAP_CORRECTED`), the raw ΔH_vap for the others.
+    """
+    from rigidmd.mdanalysis.diffusion import yeh_hummer_correction
+    from rigidmd.water import water_model
+
+    value, err = r[key]
+    if key == "dhvap" and r["model"] in PUBLISHED_DHVAP_CORRECTED:
+        return r["dhvap_corrected"], err  # E_pol is a constant: the same error
+    n = PUBLISHED_D_MOLECULES.get(r["model"]) if key == "D" else None
+    if n is None or not r["eta"][0] > 0:
+        return value, err
+    grams = n * sum(water_model(r["model"]).masses()) / units.kg * 1e3
+    edge = (grams / (PUBLISHED[r["model"]]["density"][0] * 1e-24)) ** (1 / 3)  # Å
+    return value - 10 * yeh_hummer_correction(TEMPERATURE_K, r["eta"][0], edge), err
 
 
 def table(results):
@@ -490,12 +540,18 @@ def table(results):
             extra = ""
             if key == "dhvap" and r["dhvap_corrected"] is not None:
                 extra = f" (corrected {r['dhvap_corrected']:.2f})"
+            if key == "D" and name in PUBLISHED_D_MOLECULES:
+                extra = (f" (at {PUBLISHED_D_MOLECULES[name]} molecules "
+                         f"{comparable(r, key)[0]:.3g})")
             published = "-" if pub is None else f"{pub:g}"
             mark = "" if checked else " [to check]"
             lines.append(f"  {label:<18} {value:10.4g} ± {err:<9.2g}{extra}  published "
                          f"{published:>7}  {cite}{mark}")
         lines.append(f"  {'D_PBC (this box)':<18} {r['D_pbc'][0]:10.4g} ± {r['D_pbc'][1]:<9.2g}"
                      "  (published D above: D∞ unless its citation says D_PBC and the box)")
+        if r.get("nvt_temperature_K"):
+            lines.append("  NVT temperature    {:10.2f} ± {:.2f} K (6N - 3 degrees of "
+                         "freedom)".format(*r["nvt_temperature_K"]))
         lines.append(f"  ε to 15 %: about {r['nvt_ps_for_eps_15_percent']:.3g} ps of NVT")
         lines.append("")
     return "\n".join(lines)
@@ -509,8 +565,8 @@ def plot(results, path):
     names = [r["model"] for r in results]
     x = np.arange(len(names))
     for ax, (key, label) in zip(axes, PROPERTIES, strict=True):
-        values = np.array([r[key][0] for r in results], dtype=float)
-        errors = np.array([r[key][1] for r in results], dtype=float)
+        values = np.array([comparable(r, key)[0] for r in results], dtype=float)
+        errors = np.array([comparable(r, key)[1] for r in results], dtype=float)
         ax.errorbar(x, values, yerr=errors, fmt="o", color="C0", label="this benchmark")
         pub = np.array([np.nan if PUBLISHED[n][key][0] is None else PUBLISHED[n][key][0]
                         for n in names], dtype=float)

@@ -38,6 +38,8 @@ CHECKED_ELSEWHERE = (
     ("examples/tip4p2005.py --outdir out4", "tests/test_examples.py runs it with --quick"),
     ("benchmarks/water_models.py --jobs 2", "hours; tests/test_water_properties.py runs its "
      "--quick form"),
+    ("benchmarks/water_lammps_check.py --models", "needs a finished water_models.py run; "
+     "tests/test_water_properties.py runs its --quick form"),
     ("examples/mace_water.py --quick", "tests/test_ml_potential.py runs it where mace-torch "
      "is installed (the ml extra, not the test extra)"),
 )

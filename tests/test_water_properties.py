@@ -246,14 +246,9 @@ def test_water_models_benchmark_quick(tmp_path):
     """``benchmarks/water_models.py --quick`` runs every stage for one model and writes the
     table (each property with error, published value and citation) and the plot; a
     second call resumes: the finished model is not run again."""
-    import importlib.util
     import json
-    from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "water_models.py"
-    spec = importlib.util.spec_from_file_location("water_models", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = water_models_benchmark()
     assert set(bench.PUBLISHED) == set(bench.SETUP) == {
         "tip3p", "spce", "tip4p", "tip4pew", "tip4p2005", "opc"}
     for name, values in bench.PUBLISHED.items():
@@ -276,6 +271,23 @@ def test_water_models_benchmark_quick(tmp_path):
     for stage in ("npt_eq", "npt", "nvt_eq", "nvt"):
         assert (tmp_path / "runs" / "spce" / f"{stage}.done").exists()
     assert bench.main(["--quick", "--models", "spce", "--outdir", str(tmp_path)]) == [result]
+    # water_lammps_check.py: the finished NVT's last state continued at constant energy in
+    # rigidmd and in LAMMPS itself, analysed alike.  Over the quick run's 300 steps the two are
+    # one trajectory (measured on this box: step-0 temperatures 1.5e-6 apart, LAMMPS's
+    # Boltzmann constant being 1.1e-6 from ASE's; centres of mass 1.4e-8 Å apart after 20
+    # steps; mean temperatures 5e-5 and D_PBC 1e-4 apart).  η differs more (measured 2 %): the
+    # molecular stress and LAMMPS's atomic one with fix rigid's virial differ by a time
+    # derivative, which the quick plateau (20-40 fs) does not integrate away.
+    lammps = water_models_benchmark("water_lammps_check")
+    (check,) = lammps.main(["--quick", "--models", "spce", "--outdir", str(tmp_path)])
+    assert check["start"]["temperature_step0_relative_gap"] < 1e-5
+    assert check["start"]["com_gap_first_frames_A"] < 1e-6
+    ours, native = check["rigidmd"], check["lammps"]
+    assert ours["temperature_K"][0] == pytest.approx(native["temperature_K"][0], rel=1e-3)
+    assert ours["D_pbc"][0] == pytest.approx(native["D_pbc"][0], rel=1e-2)
+    assert ours["eta"][0] == pytest.approx(native["eta"][0], rel=0.1)
+    with pytest.raises(SystemExit, match="tip4p2005 has a massless site M"):
+        lammps.main(["--quick", "--models", "tip4p2005", "--outdir", str(tmp_path)])
     # Interrupted after the last chunk of NVT: continues from the checkpoints and series.
     (tmp_path / "runs" / "spce" / "results.json").unlink()
     (tmp_path / "runs" / "spce" / "nvt.done").unlink()
@@ -290,6 +302,37 @@ def test_water_models_benchmark_quick(tmp_path):
     with pytest.raises(SystemExit, match="no finished model"):
         bench.main(["--report", "--models", "tip3p", "--outdir", str(tmp_path)])
     assert not (tmp_path / "runs" / "tip3p").exists()
+
+
+def water_models_benchmark(script="water_models"):
+    """``benchmarks/<script>.py`` as a module."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{script}.py"
+    spec = importlib.util.spec_from_file_location(script, path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    return bench
+
+
+def test_a_published_finite_box_diffusion_is_compared_in_its_own_box():
+    """OPC's published D is D_PBC of 804 molecules: the benchmark sets beside it its D∞ less
+    the Yeh–Hummer term of that box, not D∞ itself; and beside OPC's corrected ΔH_vap its
+    own corrected one."""
+    bench = water_models_benchmark()
+    assert bench.PUBLISHED_D_MOLECULES == {"opc": 804}
+    result = {"model": "opc", "D": [2.8, 0.1], "eta": [0.8, 0.05]}
+    # By hand: 804 waters of 18.015 amu at 0.997 g/cm³ fill a cube of 28.894 Å; ξ kT/(6πηL)
+    # with ξ = 2.837297, T = 298 K, η = 0.8 mPa s is 2.6795e-10 m²/s = 0.26795e-5 cm²/s.
+    assert bench.comparable(result, "D") == pytest.approx((2.8 - 0.26795, 0.1), rel=1e-4)
+    assert bench.comparable(result, "eta") == (0.8, 0.05)
+    assert bench.comparable(dict(result, model="tip3p"), "D") == (2.8, 0.1)
+    # OPC's published ΔH_vap is polarisation-corrected: the corrected number is set beside it.
+    assert bench.PUBLISHED_DHVAP_CORRECTED == {"opc"}
+    result.update(dhvap=[53.7, 0.04], dhvap_corrected=45.4)
+    assert bench.comparable(result, "dhvap") == (45.4, 0.04)
+    assert bench.comparable(dict(result, model="spce"), "dhvap") == (53.7, 0.04)
 
 
 def test_stress_recorder_costs_no_second_calculator_call():
