@@ -18,8 +18,8 @@ steps.
    molecular stress every 2 steps (Green–Kubo η, :class:`ShearViscosity`), the
    total dipole and the temperature (6N − 3 degrees of freedom) every 10
    steps (ε, tin-foil boundary conditions) and the centres of mass every
-   0.1 ps (D from the MSD, and D∞ with the Yeh–Hummer correction using the
-   measured η).
+   0.1 ps (D_PBC from the MSD's slope over 10-40 ps lags, and D∞ with the
+   Yeh–Hummer correction using the measured η).
 
 Every result is written with its statistical error (block averages; η and D
 from ten consecutive parts of the production; the jackknife for ε) beside
@@ -274,16 +274,19 @@ def lengths(quick, npt_ps=None, nvt_ps=None):
 
 def _lengths(quick):
     # "blocks": consecutive parts of a production whose spread gives the errors of η and D
-    # (50 ps each at 500 ps, five times the correlation functions' longest lag; five parts
-    # gave errors half the size from the same data: a spread of five numbers is itself
-    # uncertain by 35 %).
+    # (100 ps each at 1 ns, ten times the stress correlation's longest lag; five parts of
+    # TIP4P/2005's 500 ps gave errors half the size of ten from the same data: a spread of
+    # five numbers is itself uncertain by 35 %).  "msd_fit": the lags (ps) of the MSD's
+    # slope: past the first picoseconds' cage and hydrodynamic transients (SPC/E's 1 ns: the
+    # slope over 5-20, 10-40 and 25-100 ps lags 2.43, 2.41, 2.48 in 1e-5 cm²/s), short
+    # enough for many independent origins in each block.
     if quick:
         return {"quench": 0.02, "npt_eq": 0.1, "npt_prod": 0.2, "nvt_eq": 0.04,
                 "nvt_prod": 0.6, "chunk": 0.2, "max_lag": 0.05, "plateau": (0.02, 0.04),
-                "blocks": 5}
+                "msd_fit": (0.02, 0.05), "blocks": 5}
     return {"quench": 0.2, "npt_eq": 50.0, "npt_prod": 500.0, "nvt_eq": 20.0,
             "nvt_prod": 1000.0, "chunk": 10.0, "max_lag": 10.0, "plateau": (2.0, 4.0),
-            "blocks": 10}
+            "msd_fit": (10.0, 40.0), "blocks": 10}
 
 
 def calculator(name, cutoff):
@@ -322,24 +325,35 @@ def rescale_to_volume(atoms, volume, sites):
     atoms.set_cell(atoms.cell * s, scale_atoms=False)
 
 
-def diffusion(com, frame_ps, blocks=10):
+def diffusion(com, frame_ps, window_ps, blocks=10):
     """D_PBC (Å²/ps) from the slope of the MSD of ``com`` (frames, molecules, 3) and its error.
 
-    The slope is fitted between 10 % and 40 % of the longest lag; the error is
-    the standard error of the same fit in ``blocks`` consecutive parts of the
-    run (the spread of the three axes, used before, says little about the
-    run's length).
+    The slope is fitted over the lags ``window_ps`` (first, last), the same
+    window for the whole run (the value) and for each of ``blocks``
+    consecutive parts (the error: their standard error), so that the error
+    describes the estimate it is quoted with.  A window at a fixed fraction of
+    the run's length does not: for SPC/E's 1 ns the MSD at 100-400 ps lags
+    gave D_PBC = 2.22 where 5-20, 10-40 and 25-100 ps gave 2.43, 2.41 and
+    2.48 (its two halves at 50-200 ps: 2.19 and 2.40), while the ten parts'
+    spread said ± 0.065: at lags of hundreds of ps a 216-molecule box has few
+    independent origins.
     """
     from rigidmd.mdanalysis.diffusion import mean_squared_displacement
 
+    lo, hi = window_ps
+    last = int(np.floor(hi / frame_ps)) + 1
+
     def slope(x):
-        msd = mean_squared_displacement(x).mean(axis=1)
+        msd = mean_squared_displacement(x).mean(axis=1)[:last + 1]
         t = np.arange(len(msd)) * frame_ps
-        window = (t >= 0.1 * t[-1]) & (t <= 0.4 * t[-1])
+        window = (t >= lo) & (t <= hi)
         return np.polyfit(t[window], msd[window], 1)[0] / 6
 
-    parts = [slope(part) for part in np.array_split(com, blocks)]
-    return float(slope(com)), float(np.std(parts, ddof=1) / np.sqrt(blocks))
+    parts = np.array_split(com, blocks)
+    if len(parts[-1]) * frame_ps <= 2 * hi:
+        raise ValueError(f"diffusion: parts of {len(parts[-1]) * frame_ps:g} ps are too short "
+                         f"for the MSD fit window {window_ps} ps (need more than twice its end)")
+    return float(slope(com)), float(np.std([slope(p) for p in parts], ddof=1) / np.sqrt(blocks))
 
 
 class Stage:
@@ -473,7 +487,7 @@ def run_model(name, outdir, quick, n_side, seed, npt_ps=None, nvt_ps=None):
     eps_err = jackknife_error(dipoles, volume, TEMPERATURE_K, 10)
     com = np.asarray(series["com"])
     com = com - com.mean(axis=1, keepdims=True)  # no drift of the whole box
-    d_pbc, d_err = diffusion(com, frame * dt / PS, L["blocks"])  # Å²/ps
+    d_pbc, d_err = diffusion(com, frame * dt / PS, L["msd_fit"], L["blocks"])  # Å²/ps
     eta, eta_err = gk.viscosity_mPa_s, gk.viscosity_stderr_mPa_s
     yh = yeh_hummer_correction(TEMPERATURE_K, eta, volume ** (1 / 3)) if eta > 0 else np.nan
     d_inf = d_pbc + yh
@@ -550,8 +564,11 @@ def table(results):
         lines.append(f"  {'D_PBC (this box)':<18} {r['D_pbc'][0]:10.4g} ± {r['D_pbc'][1]:<9.2g}"
                      "  (published D above: D∞ unless its citation says D_PBC and the box)")
         if r.get("nvt_temperature_K"):
+            # The thermostat holds all 6N degrees of freedom (ASE's count) at 298 K; the
+            # record divides the same kinetic energy by 6N - 3 (LAMMPS's count).
+            held = TEMPERATURE_K * 6 * r["molecules"] / (6 * r["molecules"] - 3)
             lines.append("  NVT temperature    {:10.2f} ± {:.2f} K (6N - 3 degrees of "
-                         "freedom)".format(*r["nvt_temperature_K"]))
+                         "freedom; {:.1f} K held)".format(*r["nvt_temperature_K"], held))
         lines.append(f"  ε to 15 %: about {r['nvt_ps_for_eps_15_percent']:.3g} ps of NVT")
         lines.append("")
     return "\n".join(lines)
