@@ -38,13 +38,11 @@ Full mode (default): NPT 50 ps equilibration + 500 ps production; NVT 20 ps
 + 1000 ps; 785 k steps of 2 fs per model (``--npt-ps`` and ``--nvt-ps`` change
 the two productions).  Pace measured with ``--jobs 2`` on this 2-core machine
 (216 waters, one LAMMPS thread per model, the stress recorded every 2 steps
-in NVT, at ``nice 19`` beside light interactive work): about 12 ps of NPT or
-NVT per minute for SPC/E and TIP3P, 9 ps per minute for TIP4P/2005's NVT;
-``--npt-ps 200 --nvt-ps 500`` then takes about 1 h per three-site model and
-1.3 h per four-site one, about 4 h for the six with ``--jobs 2``, the full
-mode about twice that.  (The calculator tallies the energy only on the steps
-that record it and the stress alone on the others; before that change the
-same stages ran 2-3x slower.)
+in NVT, at ``nice 19``, a third process beside them part of the time): about
+50 min per three-site model and 60 min per four-site one, 2.9 h for the six.
+(The calculator tallies the energy only on the steps that record it and the
+stress alone on the others; before that change the same stages ran 2-3x
+slower.)
 
 ε converges slowly.  For a Gaussian total dipole with correlation time τ_M
 the relative error of ε − 1 after t ps is about sqrt(4 τ_M / (3 t)); with
