@@ -39,7 +39,7 @@ Full mode (default): NPT 50 ps equilibration + 500 ps production; NVT 20 ps
 the two productions).  Pace measured with ``--jobs 2`` on this 2-core machine
 (216 waters, one LAMMPS thread per model, the stress recorded every 2 steps
 in NVT, at ``nice 19``, a third process beside them part of the time): about
-50 min per three-site model and 60 min per four-site one, 2.9 h for the six.
+50 min per three-site model and 60 min per four-site one, 3.1 h for the six.
 (The calculator tallies the energy only on the steps that record it and the
 stress alone on the others; before that change the same stages ran 2-3x
 slower.)
