@@ -339,6 +339,27 @@ def water_dimer(seed, model="tip3p"):
     return atoms
 
 
+def benchmark_module(script="water_models"):
+    """``benchmarks/<script>.py`` as a module (the scripts are not a package)."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{script}.py"
+    spec = importlib.util.spec_from_file_location(script, path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    return bench
+
+def whole_water_box(model, n_side=5, seed=1):
+    """:func:`rigidmd.systems.water_box` of ``model``, molecules whole, charges set (no tags)."""
+    from rigidmd.systems import water_box
+    from rigidmd.water import water_model
+
+    model = water_model(model)
+    atoms = water_box(n_side, seed=seed, model=model.name, whole=True)
+    atoms.set_initial_charges(model.charges(len(atoms) // model.sites))
+    return atoms
+
+
 # ---------------------------------------------------------------- barostats and ensembles
 def npt(atoms, kind, dt=5 * units.fs, couple="iso", pressure=units.bar, temperature_K=80.0,
         **kwargs):

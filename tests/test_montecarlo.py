@@ -325,9 +325,12 @@ def test_conserved_energy_subtracts_what_the_moves_put_in():
     dyn.run(500)
     drift = np.abs(np.array(energies) - energies[0]).max()
     moved = abs(dyn.barostat.exchanged)
-    # Measured (2.5 ps, 5 fs): the accepted moves (59 %) changed the potential energy by
-    # -0.20 eV in all; the conserved energy stays within 6.6e-4 eV (integration error).
-    assert moved > 0.2
+    # Measured (2.5 ps, 5 fs): the accepted moves (56-64 %) changed the potential energy by
+    # -0.09 to -0.22 eV in all (rng seeds 1-4; seed 1 gave -0.20 on one machine and -0.17 on
+    # another: 500 chaotic steps amplify the CPU's roundoff); the conserved energy stays
+    # within 6.0e-4 to 8.5e-4 eV (integration error).  The first assertion keeps the test
+    # able to fail: a conserved energy that forgot the moves would drift by > 25x the bound.
+    assert moved > 0.05
     assert drift < 2e-3
 
 

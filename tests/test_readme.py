@@ -40,6 +40,8 @@ CHECKED_ELSEWHERE = (
      "--quick form"),
     ("benchmarks/water_lammps_check.py --models", "needs a finished water_models.py run; "
      "tests/test_water_properties.py runs its --quick form"),
+    ("benchmarks/water_openmm_check.py --models", "minutes a model; tests/test_water_openmm.py "
+     "runs its --quick form"),
     ("examples/mace_water.py --quick", "tests/test_ml_potential.py runs it where mace-torch "
      "is installed (the ml extra, not the test extra)"),
 )

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from ase import units
 from ase.calculators.calculator import all_changes
-from helpers import CoulombLJ, PeriodicLJ, dimer_fluid, water_parameters
+from helpers import CoulombLJ, PeriodicLJ, benchmark_module, dimer_fluid, water_parameters
 
 from rigidmd import RigidBodies
 from rigidmd.mdanalysis.diffusion import yeh_hummer_correction
@@ -248,7 +248,7 @@ def test_water_models_benchmark_quick(tmp_path):
     second call resumes: the finished model is not run again."""
     import json
 
-    bench = water_models_benchmark()
+    bench = benchmark_module()
     assert set(bench.PUBLISHED) == set(bench.SETUP) == {
         "tip3p", "spce", "tip4p", "tip4pew", "tip4p2005", "opc"}
     for name, values in bench.PUBLISHED.items():
@@ -278,7 +278,7 @@ def test_water_models_benchmark_quick(tmp_path):
     # steps; mean temperatures 5e-5 and D_PBC 1e-4 apart).  η differs more (measured 2 %): the
     # molecular stress and LAMMPS's atomic one with fix rigid's virial differ by a time
     # derivative, which the quick plateau (20-40 fs) does not integrate away.
-    lammps = water_models_benchmark("water_lammps_check")
+    lammps = benchmark_module("water_lammps_check")
     (check,) = lammps.main(["--quick", "--models", "spce", "--outdir", str(tmp_path)])
     assert check["start"]["temperature_step0_relative_gap"] < 1e-5
     assert check["start"]["com_gap_first_frames_A"] < 1e-6
@@ -304,23 +304,11 @@ def test_water_models_benchmark_quick(tmp_path):
     assert not (tmp_path / "runs" / "tip3p").exists()
 
 
-def water_models_benchmark(script="water_models"):
-    """``benchmarks/<script>.py`` as a module."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{script}.py"
-    spec = importlib.util.spec_from_file_location(script, path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    return bench
-
-
 def test_a_published_finite_box_diffusion_is_compared_in_its_own_box():
     """OPC's published D is D_PBC of 804 molecules: the benchmark sets beside it its D∞ less
     the Yeh–Hummer term of that box, not D∞ itself; and beside OPC's corrected ΔH_vap its
     own corrected one."""
-    bench = water_models_benchmark()
+    bench = benchmark_module()
     assert bench.PUBLISHED_D_MOLECULES == {"opc": 804}
     result = {"model": "opc", "D": [2.8, 0.1], "eta": [0.8, 0.05]}
     # By hand: 804 waters of 18.015 amu at 0.997 g/cm³ fill a cube of 28.894 Å; ξ kT/(6πηL)
@@ -342,7 +330,7 @@ def test_benchmark_diffusion_of_brownian_walkers(rng):
     error within a factor 3 of the spread over four independent runs (measured over five
     seeds: 0.86-1.94x, a spread of four numbers being itself uncertain by ~40 %; the worst
     estimate 1.9 errors from D), and parts too short for the window refused."""
-    bench = water_models_benchmark()
+    bench = benchmark_module()
     d_exact, frame, window = 0.24, 0.1, (10.0, 40.0)  # Å²/ps, ps, ps
     estimates, errors = [], []
     for _ in range(4):

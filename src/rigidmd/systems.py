@@ -119,13 +119,18 @@ def water_cluster(n_molecules, seed=0, spacing=3.1, jitter=0.1, tries=64, model=
     return atoms
 
 
-def water_box(n_side=3, seed=0, spacing=3.1, jitter=0.1, model="tip3p"):
+def water_box(n_side=3, seed=0, spacing=3.1, jitter=0.1, model="tip3p", whole=False):
     """A periodic cubic box of ``n_side**3`` randomly oriented waters.
 
     About liquid density at the default spacing (1.0 g/cm³ at 3.1 Å).  The
-    lattice is offset by half a spacing and every atom wrapped into the cell,
-    so molecules straddle the boundaries.  ``model`` names the water model
-    (:data:`rigidmd.water.WATER_MODELS`; four-site models carry M explicitly).
+    lattice starts at the cell's origin (each site jittered by up to
+    ``jitter`` Å) and every atom is wrapped into the cell, so molecules
+    straddle the boundaries; with ``whole=True`` nothing is
+    wrapped and every molecule is whole, its atoms up to one molecule's size
+    outside the cell (what codes need that take intramolecular distances
+    without the minimum image, as OpenMM's constraints and virtual sites
+    do).  ``model`` names the water model (:data:`rigidmd.water.WATER_MODELS`;
+    four-site models carry M explicitly).
     """
     rng = np.random.default_rng(seed)
     n = n_side**3
@@ -133,7 +138,8 @@ def water_box(n_side=3, seed=0, spacing=3.1, jitter=0.1, model="tip3p"):
     atoms = _place([water_molecule(model)] * n, sites, rng)
     atoms.cell = np.eye(3) * n_side * spacing
     atoms.pbc = True
-    atoms.wrap()
+    if not whole:
+        atoms.wrap()
     return atoms
 
 
