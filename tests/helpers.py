@@ -349,6 +349,7 @@ def benchmark_module(script="water_models"):
     spec.loader.exec_module(bench)
     return bench
 
+
 def whole_water_box(model, n_side=5, seed=1):
     """:func:`rigidmd.systems.water_box` of ``model``, molecules whole, charges set (no tags)."""
     from rigidmd.systems import water_box

@@ -24,7 +24,6 @@ from rigidmd.water import water_model
 
 mm = pytest.importorskip("openmm",
                          reason="needs OpenMM (pip install openmm; the test extra has it)")
-app = pytest.importorskip("openmm.app")
 pytestmark = [pytest.mark.openmm, pytest.mark.lammps]
 
 KJ = units.kJ / units.mol

@@ -14,7 +14,7 @@ import numpy as np
 
 from rigidmd.model import LINEAR_TOLERANCE, BodyGeometry, describe_atoms, measure
 
-__all__ = ["RigidBodies", "BodyGeometry", "LINEAR_TOLERANCE", "unwrap_bodies"]
+__all__ = ["RigidBodies", "BodyGeometry", "LINEAR_TOLERANCE", "unwrap_bodies", "cell_widths"]
 
 _RULES = ("mol-id", "tags", "connectivity")
 
@@ -428,10 +428,16 @@ def check_masses(masses, symbols, free, order, starts):
             )
 
 
+def cell_widths(cell):
+    """Distances between opposite faces of the cell (Å), shape (3,): the k-th is across vector k."""
+    cell = np.asarray(cell, dtype=float)
+    volume = abs(np.linalg.det(cell))
+    return volume / np.linalg.norm(np.cross(cell[[1, 2, 0]], cell[[2, 0, 1]]), axis=1)
+
+
 def _refuse_long_body(atoms_of_body, b, k, fraction, cell, why):
     """Raise the error for body ``b`` spanning ``fraction`` of the cell's width along vector k."""
-    width = abs(np.linalg.det(cell)) / np.linalg.norm(
-        np.cross(cell[(k + 1) % 3], cell[(k + 2) % 3]))
+    width = cell_widths(cell)[k]
     raise ValueError(
         f"body {b} (atoms {describe_atoms(atoms_of_body)}) spans {fraction * width:.3f} Å "
         f"across cell vector {k}, more than half the periodic cell's width there "

@@ -99,6 +99,7 @@ import numpy as np
 
 from rigidmd import observables as obs
 from rigidmd.barostats import COUPLING, PRESSURE, Barostat, BarostattedDynamics
+from rigidmd.bodies import cell_widths
 from rigidmd.coupling import (
     TEMPERATURE,
     Coupling,
@@ -223,13 +224,6 @@ def adapt_step(step, accepted, attempted, low=TARGET_ACCEPTANCE[0], high=TARGET_
     if rate > high:
         return min(step * factor, largest)
     return step
-
-
-def cell_widths(cell):
-    """Distances between opposite faces of the cell (Å), shape (3,)."""
-    cell = np.asarray(cell, dtype=float)
-    volume = abs(np.linalg.det(cell))
-    return volume / np.linalg.norm(np.cross(cell[[1, 2, 0]], cell[[2, 0, 1]]), axis=1)
 
 
 def body_span(body_coordinates, starts):

@@ -27,6 +27,8 @@ from __future__ import annotations
 import numpy as np
 from ase import units
 
+from rigidmd.bodies import cell_widths
+
 __all__ = ["FORCE_FIELD_FILES", "water_topology", "water_system", "real_atom_forces"]
 
 #: OpenMM's force-field file of each :mod:`rigidmd.water` model it ships.
@@ -127,11 +129,10 @@ def water_system(atoms, model, cutoff, *, tail=True, parameters="file",
                          f"got {parameters!r}")
     if not atoms.pbc.all():
         raise ValueError("rigidmd.openmm: the atoms need a periodic cell (PME)")
-    widths = atoms.cell.volume / np.linalg.norm(np.cross(atoms.cell[[1, 2, 0]],
-                                                         atoms.cell[[2, 0, 1]]), axis=1)
-    if not 0 < cutoff <= widths.min() / 2:
+    half = cell_widths(atoms.cell).min() / 2
+    if not 0 < cutoff <= half:
         raise ValueError(f"rigidmd.openmm: cutoff {cutoff} Å must be positive and at most "
-                         f"half the cell's smallest width ({widths.min() / 2:.3f} Å)")
+                         f"half the cell's smallest width ({half:.3f} Å)")
     _check_whole(atoms, model)
     n = len(atoms) // model.sites
     top = water_topology(model, n, atoms.cell.array)

@@ -2,6 +2,7 @@
 
 import numpy as np
 
+from rigidmd.bodies import cell_widths
 from rigidmd.mdanalysis._base import InterRDF, finish_figure, group_of, new_figure
 
 
@@ -97,9 +98,7 @@ class RadialDistribution(InterRDF):
             from ase.cell import Cell
 
             cell = Cell.fromcellpar(box).array
-            widths = abs(np.linalg.det(cell)) / np.linalg.norm(
-                np.cross(cell[[1, 2, 0]], cell[[2, 0, 1]]), axis=1)
-            r_max = min(10.0, 0.5 * float(widths.min()))
+            r_max = min(10.0, 0.5 * float(cell_widths(cell).min()))
         r_max = float(r_max)
         if not (r_max > 0 and bin_width > 0):
             raise ValueError("r_max and bin_width must be positive (Å)")
