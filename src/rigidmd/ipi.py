@@ -33,9 +33,11 @@ virial is symmetrised.
 
 from __future__ import annotations
 
+import errno
 import os
 import select
 import socket
+import struct
 import time
 import uuid
 
@@ -43,9 +45,31 @@ import numpy as np
 from ase import units
 from ase.calculators.calculator import Calculator, PropertyNotImplementedError, all_changes
 
-__all__ = ["EngineError", "IPICalculator", "symmetric_virial"]
+__all__ = ["EngineError", "IPICalculator", "add_wait_check", "remove_wait_check",
+           "symmetric_virial"]
 
 MSGLEN = 12
+#: Seconds between looks at :func:`add_wait_check`'s checks while an engine is awaited.
+WAIT_SLICE = 0.1
+
+_wait_checks = []
+
+
+def add_wait_check(check):
+    """Call ``check()`` every :data:`WAIT_SLICE` seconds while an engine is awaited.
+
+    Whatever ``check`` raises (a stop request after a signal) ends the wait:
+    the engine is dropped (its exchange cannot be finished) and the exception
+    propagates out of the force call, whose step a rigidmd dynamics undoes.
+    A force call that is answered within one slice is never interrupted.
+    """
+    _wait_checks.append(check)
+
+
+def remove_wait_check(check):
+    """Undo :func:`add_wait_check` (no error when ``check`` is not there)."""
+    if check in _wait_checks:
+        _wait_checks.remove(check)
 
 
 class EngineError(RuntimeError):
@@ -110,6 +134,10 @@ class IPICalculator(Calculator):
         self._server = None
         self._conn = None
         self._handshaken = False
+        self._bound = None      # (device, inode) of the socket file this calculator bound
+        self._peer = None       # the connected engine, in words
+        self._peer_pid = None   # its process (Unix socket), when the system says
+        self._verified = False  # its first answer was checked (check_first_answer)
 
     # ------------------------------------------------------------ hooks
     @property
@@ -140,6 +168,18 @@ class IPICalculator(Calculator):
         """Where the engine puts the cell's origin (Å, in its frame): added to positions."""
         return None
 
+    def engine_positions(self, cell, positions):
+        """The positions sent for ``positions`` (Å, engine frame, before :meth:`origin`)."""
+        return positions
+
+    def check_peer(self, pid):
+        """Why the process ``pid`` that connected is not this calculator's engine, or None."""
+        return None
+
+    def check_first_answer(self, energy, forces):
+        """Why an engine's first answer (eV, eV/Å) shows it is not this system's, or None."""
+        return None
+
     def stop_engine(self, keep_files=False):
         """Stop the engine (here: none; only the connection is closed).
 
@@ -162,34 +202,56 @@ class IPICalculator(Calculator):
         if self.port is None:
             if len(self.socketfile) > 100:
                 raise ValueError(f"IPICalculator: unixsocket name too long: {self.socketfile}")
-            if os.path.exists(self.socketfile):
-                os.unlink(self.socketfile)
             server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-            server.bind(self.socketfile)
+            try:
+                self._bound = _bind_unix(server, self.socketfile)
+            except BaseException:
+                server.close()
+                raise
         else:
             server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
             server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            server.bind((self.host, self.port))
+            try:
+                server.bind((self.host, self.port))
+            except OSError as err:
+                server.close()
+                if err.errno == errno.EADDRINUSE:
+                    raise EngineError(f"IPICalculator: port {self.port} on {self.host!r} is in "
+                                      "use by another process; give another port") from None
+                raise EngineError(f"IPICalculator: cannot listen on {self.host}:{self.port} "
+                                  f"({err.strerror or err})") from None
         server.listen(1)
         self._server = server
 
+    @property
+    def address(self):
+        """Where this calculator listens, in words (the socket file, or host:port)."""
+        return self.socketfile if self.port is None else f"{self.host}:{self.port}"
+
+    def describe_engine(self):
+        """The connected engine, in words (its process for a Unix socket, else its address)."""
+        return self._peer or f"i-PI engine awaited on {self.address}"
+
     def _fail(self, message):
-        """Drop the engine and raise one error naming where to look."""
+        """Drop the engine and raise one error naming it and where to look."""
         why = self.engine_failure()
+        who = self.describe_engine()
         self._shutdown(keep_files=True)
         detail = f": {why}" if why else ""
-        raise EngineError(f"{message}{detail}{self.where_to_look()}")
+        raise EngineError(f"{who}: {message}{detail}{self.where_to_look()}")
 
     def _wait_readable(self, sock, deadline, what):
         while True:
             left = deadline - time.monotonic()
             if left <= 0:
-                self._fail(f"i-PI engine: no {what} within {self._limit:g} s")
-            ready, _, _ = select.select([sock], [], [], min(left, 0.5))
+                self._fail(f"no {what} within {self._limit:g} s")
+            ready, _, _ = select.select([sock], [], [], min(left, WAIT_SLICE))
             if ready:
                 return
+            for check in list(_wait_checks):
+                check()  # a stop request ends the wait (see add_wait_check)
             if self.engine_failure() is not None:
-                self._fail(f"i-PI engine died before its {what}")
+                self._fail(f"died before its {what}")
 
     def _connect(self, atoms):
         self.listen()
@@ -198,22 +260,36 @@ class IPICalculator(Calculator):
             self._limit = self.connect_timeout
             self._wait_readable(self._server, time.monotonic() + self.connect_timeout,
                                 "connection")
-            conn, _ = self._server.accept()
+            conn, peer = self._server.accept()
+        except EngineError:
+            raise  # dropped by _fail, which named what it kept
         except BaseException:
-            self._shutdown(keep_files=True)
+            self._shutdown(keep_files=False)
             raise
         if conn.family != socket.AF_UNIX:
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._peer = f"i-PI engine at {peer[0]}:{peer[1]}"
+            self._peer_pid = None
+        else:
+            self._peer_pid = _peer_pid(conn)
+            self._peer = (f"i-PI engine on {self.socketfile}" if self._peer_pid is None else
+                          f"i-PI engine process {self._peer_pid} ({_command_name(self._peer_pid)})"
+                          f" on {self.socketfile}")
         conn.setblocking(True)
         self._conn = conn
         self._handshaken = False
+        self._verified = False
+        if self._peer_pid is not None:
+            why = self.check_peer(self._peer_pid)
+            if why is not None:
+                self._fail(f"connected, but is not this calculator's engine ({why})")
 
     def _closed(self, detail):
         """The engine closed the connection: wait a little for it to end, then say why."""
         deadline = time.monotonic() + 2.0
         while self.engine_failure() is None and time.monotonic() < deadline:
             time.sleep(0.05)
-        self._fail(f"i-PI engine closed the connection{detail}")
+        self._fail(f"closed the connection{detail}")
 
     def _send(self, *parts):
         try:
@@ -247,7 +323,7 @@ class IPICalculator(Calculator):
             self._send(_word("STATUS"))
             status = self._header(deadline, "status")
         if status != "READY":
-            self._fail(f"i-PI engine answered STATUS with {status!r}, expected READY")
+            self._fail(f"answered STATUS with {status!r}, expected READY")
         self._handshaken = True
 
     def _exchange(self, cell, positions):
@@ -269,12 +345,12 @@ class IPICalculator(Calculator):
             if header != "HAVEDATA":  # an engine may still answer a poll
                 break
         if header != "FORCEREADY":
-            self._fail(f"i-PI engine answered GETFORCE with {header!r}, expected FORCEREADY")
+            self._fail(f"answered GETFORCE with {header!r}, expected FORCEREADY")
         head = self._recv(12, deadline, "forces")
         energy = float(np.frombuffer(head[:8], np.float64)[0])
         natoms = int(np.frombuffer(head[8:], np.int32)[0])
         if natoms != n:
-            self._fail(f"i-PI engine sent forces on {natoms} atoms, expected {n}")
+            self._fail(f"sent forces on {natoms} atoms, expected {n}")
         body = self._recv(8 * (3 * n + 9) + 4, deadline, "forces")
         forces = np.frombuffer(body[:24 * n], np.float64).reshape(n, 3)
         virial = np.frombuffer(body[24 * n:24 * n + 72], np.float64).reshape(3, 3)
@@ -298,15 +374,29 @@ class IPICalculator(Calculator):
             cell, positions = cell @ rotation, positions @ rotation
         if periodic:
             cell = self.engine_cell(cell)
+            positions = self.engine_positions(cell, positions)
         origin = self.origin(cell) if periodic else None
         if origin is not None:
             positions = positions + origin
         if self._conn is None:
             self._connect(atoms)
-        energy, forces, virial = self._exchange(cell, positions)
+        try:
+            energy, forces, virial = self._exchange(cell, positions)
+        except EngineError:
+            raise  # dropped by _fail
+        except BaseException:
+            # A stop request or Ctrl-C while the engine computes: the exchange cannot be
+            # finished, so the engine cannot be asked again.  The next call starts anew.
+            self._shutdown(keep_files=False)
+            raise
         if rotation is not None:
             forces = forces @ rotation.T
             virial = rotation @ virial @ rotation.T
+        if not self._verified:
+            why = self.check_first_answer(energy, forces)
+            if why is not None:
+                self._fail(f"is not this calculator's engine: {why}")
+            self._verified = True
         self.results = {"energy": energy, "free_energy": energy, "forces": forces.copy()}
         if periodic:
             stress = -virial / abs(np.linalg.det(atoms.cell.array))
@@ -331,12 +421,11 @@ class IPICalculator(Calculator):
                     pass
         self._conn = self._server = None
         self._handshaken = False
+        self._peer = self._peer_pid = None
         self.stop_engine(keep_files)
-        if self.socketfile is not None and os.path.exists(self.socketfile):
-            try:
-                os.unlink(self.socketfile)
-            except OSError:
-                pass
+        if self._bound is not None:
+            _unlink_if_ours(self.socketfile, self._bound)
+            self._bound = None
 
     def __enter__(self):
         return self
@@ -349,6 +438,94 @@ class IPICalculator(Calculator):
             self.close()
         except Exception:  # noqa: BLE001 - nothing to report to at interpreter exit
             pass
+
+
+def _listening_unix_paths():
+    """Paths of the listening Unix sockets on this machine (Linux), or None if unknown."""
+    try:
+        with open("/proc/net/unix") as f:
+            lines = f.read().splitlines()[1:]
+    except OSError:
+        return None
+    paths = set()
+    for line in lines:
+        fields = line.split(None, 7)
+        if len(fields) == 8 and int(fields[3], 16) & 0x10000:  # __SO_ACCEPTCON: listening
+            paths.add(fields[7])
+    return paths
+
+
+def _served(path):
+    """Whether a live process listens on the Unix socket ``path``.
+
+    Linux lists listening sockets in ``/proc/net/unix``: looked up there, so
+    that the server is not disturbed.  Elsewhere a connection is tried (and
+    closed at once).
+    """
+    listening = _listening_unix_paths()
+    if listening is not None:
+        return path in listening
+    probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    probe.settimeout(1.0)
+    try:
+        probe.connect(path)
+    except OSError:
+        return False
+    finally:
+        probe.close()
+    return True
+
+
+def _bind_unix(server, path):
+    """Bind ``server`` to ``path``; a stale socket file is replaced, a live one refused.
+
+    Returns the socket file's ``(st_dev, st_ino)``, so that only this file is
+    removed at the end (never another process's).
+    """
+    try:
+        server.bind(path)
+    except OSError as err:
+        if err.errno != errno.EADDRINUSE:
+            raise EngineError(f"IPICalculator: cannot create the socket {path} "
+                              f"({err.strerror or err})") from None
+        if _served(path):
+            raise EngineError(f"IPICalculator: the socket {path} is in use by another live "
+                              "process (another run's engine server?); give another "
+                              "unixsocket name") from None
+        os.unlink(path)  # left by a process that is gone
+        server.bind(path)
+    info = os.stat(path)
+    return info.st_dev, info.st_ino
+
+
+def _unlink_if_ours(path, bound):
+    try:
+        info = os.stat(path)
+        if (info.st_dev, info.st_ino) == bound:
+            os.unlink(path)
+    except OSError:
+        pass
+
+
+def _peer_pid(conn):
+    """The process at the other end of a Unix socket (Linux's SO_PEERCRED), or None."""
+    option = getattr(socket, "SO_PEERCRED", None)
+    if option is None:
+        return None
+    try:
+        pid, _, _ = struct.unpack("3i", conn.getsockopt(socket.SOL_SOCKET, option,
+                                                        struct.calcsize("3i")))
+    except OSError:
+        return None
+    return pid if pid > 0 else None
+
+
+def _command_name(pid):
+    try:
+        with open(f"/proc/{pid}/comm") as f:
+            return f.read().strip()
+    except OSError:
+        return "unknown program"
 
 
 def symmetric_virial(virial):

@@ -41,6 +41,7 @@ from ase import units
 
 from rigidmd.config import TIME_UNITS, ConfigError
 from rigidmd.dof import temperature
+from rigidmd.ipi import EngineError, add_wait_check, remove_wait_check
 from rigidmd.outputs import (
     OutputError,
     OutputLock,
@@ -89,9 +90,11 @@ class StopSignals:
     def __enter__(self):
         for signum in EXIT_STATUS:
             self._previous[signum] = signal.signal(signum, self._handler)
+        add_wait_check(self.check)  # a stop also ends a wait for an i-PI engine (<= 0.1 s)
         return self
 
     def __exit__(self, *exc):
+        remove_wait_check(self.check)
         for signum, handler in self._previous.items():
             signal.signal(signum, handler)
         return False
@@ -426,6 +429,14 @@ class Run:
         dyn.save_checkpoint(self.outputs.checkpoint, extra=extra)
         self.checkpoint_step = dyn.nsteps
 
+    def _checkpoint_undone_step(self, dyn, writer):
+        """Checkpoint after a step an engine failed in: the stepper undid that step, and
+        the steps before it, outputs included, are whole (``--resume`` starts there)."""
+        try:
+            self._checkpoint(dyn, writer)
+        except OSError:
+            pass  # the last checkpoint stays, and the message names it
+
     def _name_outputs(self, dyn):
         """Wrap the trajectory and log observers so that their write errors name the file.
 
@@ -542,6 +553,8 @@ class Run:
                 raise  # a LammpsError of the set-up (the input's fault) is the command's
             reason = describe_os_error(err) if isinstance(err, OSError) else \
                 " ".join(str(err).split()) or type(err).__name__
+            if isinstance(err, EngineError) and dyn.nsteps > self.config.run.steps - remaining:
+                self._checkpoint_undone_step(dyn, writer)
             raise self._stopped(dyn, reason) from None
         finally:
             if writer is not None:

@@ -60,6 +60,7 @@ from rigidmd.lammps.library import (
     LAMMPS_METAL_QQR2E,
     LammpsError,
     charge_factor,
+    check_atom_types,
     flatten,
     lammps_warnings,
     load_lammps,
@@ -202,7 +203,7 @@ class LAMMPSCalculator(Calculator):
         self.commands = flatten(commands)
         if not any(c.split()[0] == "pair_style" for c in self.commands):
             raise ValueError("LAMMPSCalculator: the commands need a pair_style")
-        self.atom_types = None if atom_types is None else dict(atom_types)
+        self.atom_types = check_atom_types(atom_types)
         self.molecule_ids = None if molecule_ids is None else np.asarray(molecule_ids)
         self.exclude_intramolecular = bool(exclude_intramolecular)
         self.ase_constants = bool(ase_constants)
@@ -333,6 +334,8 @@ class LAMMPSCalculator(Calculator):
                 tuple(atoms.pbc), None if molecules is None else molecules.tobytes())
 
     def _check(self, atoms):
+        if len(atoms) == 0:
+            raise ValueError("LAMMPSCalculator: no atoms (LAMMPS needs at least one)")
         charges = atoms.get_initial_charges()
         if any(word in command for command in self.commands for word in _COULOMB) \
                 and not np.any(charges):
@@ -633,12 +636,14 @@ class LAMMPSCalculator(Calculator):
             # LAMMPS's own image of each atom: only real motion counts against the skin.
             cell, image = self._lammps_cell(), arrays.images()
             positions -= image @ cell
-            if self._box_moved:  # a new box without a set-up: an atom far out would be lost
-                frac = np.linalg.solve(cell.T, positions.T).T
-                if np.any(frac < -0.5) or np.any(frac >= 1.5):  # LAMMPS wraps by one box
-                    shift = np.floor(frac)
-                    positions -= shift @ cell
-                    arrays.view("image")[:] = arrays.pack_images(image + shift)
+            # An atom more than a box out (a new box without a set-up, or atoms given in
+            # another image: a restart from unwrapped positions) would be lost: LAMMPS
+            # wraps by one box.  Such atoms are shifted by whole cell vectors first.
+            frac = np.linalg.solve(cell.T, positions.T).T
+            if np.any(frac < -0.5) or np.any(frac >= 1.5):
+                shift = np.floor(frac)
+                positions -= shift @ cell
+                arrays.view("image")[:] = arrays.pack_images(image + shift)
         arrays.view("x")[:] = positions
         # Energy and virial are tallied only on steps asked for (as native thermo steps).
         want_energy = bool({"energy", "free_energy"} & set(properties))

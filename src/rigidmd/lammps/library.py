@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import ctypes
 import math
+import numbers
 import os
 import re
 import sys
@@ -41,7 +42,7 @@ from ase import units
 
 __all__ = ["DEFAULT_CMDARGS", "LAMMPS_METAL_FTM2V", "LAMMPS_METAL_QQR2E", "load_lammps",
            "velocity_factor", "charge_factor", "LammpsError", "flatten", "execute",
-           "execute_checked", "lammps_warnings"]
+           "execute_checked", "lammps_warnings", "check_atom_types"]
 
 #: Command-line arguments given to LAMMPS by :func:`load_lammps` by default.
 DEFAULT_CMDARGS = ("-log", "none", "-screen", "none", "-nocite")
@@ -232,3 +233,23 @@ def lammps_warnings(text: str) -> list[str]:
         page = re.search(r"https://docs\.lammps\.org/\S+", more)
         found.append(message + (f" (see {page.group(0)})" if page else ""))
     return list(dict.fromkeys(found))
+
+
+def check_atom_types(atom_types, owner="LAMMPSCalculator"):
+    """``atom_types`` as a dict of element symbol to LAMMPS type (a positive int), or None.
+
+    Raises one ``ValueError`` naming the entry that is not: a type given as a
+    string (``{"O": "1"}``), a float, a bool, zero or negative.
+    """
+    if atom_types is None:
+        return None
+    try:
+        table = dict(atom_types)
+    except (TypeError, ValueError):
+        raise ValueError(f"{owner}: atom_types must map element symbols to LAMMPS types, "
+                         f"got {atom_types!r}") from None
+    for symbol, kind in table.items():
+        if isinstance(kind, bool) or not isinstance(kind, numbers.Integral) or kind < 1:
+            raise ValueError(f"{owner}: atom_types[{symbol!r}] must be a LAMMPS type, a "
+                             f"positive whole number, got {kind!r}")
+    return {symbol: int(kind) for symbol, kind in table.items()}
