@@ -5,6 +5,7 @@ every system used in two places is built in one place.
 """
 
 import functools
+import os
 from pathlib import Path
 
 import numba
@@ -468,3 +469,31 @@ def sample(kind, pressure_bar=None, scale=1.0, steps=12000):
         2 * dyn.get_rotational_kinetic_energy() / (units.kB * dyn.rotational_dof))), interval=5)
     dyn.run(steps)
     return np.array(rows)
+
+
+def descendants_named(ancestor, name):
+    """PIDs of the running processes called ``name`` that descend from ``ancestor``.
+
+    By Linux's /proc: each process's command name and parent chain.
+    """
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/comm") as f:
+                if f.read().strip() != name:
+                    continue
+        except OSError:
+            continue
+        pid = int(entry)
+        while pid > 1 and pid != ancestor:
+            try:
+                with open(f"/proc/{pid}/stat") as f:
+                    stat = f.read()
+            except OSError:
+                break
+            pid = int(stat[stat.rindex(")") + 2:].split()[1])
+        if pid == ancestor:
+            found.append(int(entry))
+    return found

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ase import Atoms
-from helpers import PPPM_27, water_box_27
+from helpers import PPPM_27, descendants_named, water_box_27
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -31,29 +31,7 @@ pytestmark = pytest.mark.lammps
 
 def our_lmp():
     """``lmp`` processes that descend from this test process, but the shared engine's."""
-    found = []
-    for pid in os.listdir("/proc"):
-        if not pid.isdigit():
-            continue
-        try:
-            with open(f"/proc/{pid}/stat") as f:
-                stat = f.read()
-        except OSError:
-            continue
-        if stat[stat.index("(") + 1:stat.rindex(")")] != "lmp":
-            continue
-        ancestor = int(pid)
-        while ancestor > 1:
-            try:
-                with open(f"/proc/{ancestor}/stat") as f:
-                    text = f.read()
-            except OSError:
-                break
-            ancestor = int(text[text.rindex(")") + 2:].split()[1])
-            if ancestor == os.getpid():
-                found.append(int(pid))
-                break
-    return [pid for pid in found if pid not in SHARED]
+    return [pid for pid in descendants_named(os.getpid(), "lmp") if pid not in SHARED]
 
 
 SHARED = set()  # lmp of the module's shared engine
@@ -330,32 +308,6 @@ def wait_for_steps(proc, log, lines=4):
         time.sleep(0.05)
 
 
-def descendants(pid, name):
-    found = []
-    for p in os.listdir("/proc"):
-        if not p.isdigit():
-            continue
-        q = int(p)
-        try:
-            with open(f"/proc/{q}/comm") as f:
-                if f.read().strip() != name:
-                    continue
-        except OSError:
-            continue
-        ancestor = q
-        while ancestor > 1:
-            try:
-                with open(f"/proc/{ancestor}/stat") as f:
-                    text = f.read()
-            except OSError:
-                break
-            ancestor = int(text[text.rindex(")") + 2:].split()[1])
-            if ancestor == pid:
-                found.append(q)
-                break
-    return found
-
-
 def test_rigidmd_run_names_a_port_in_use(tmp_path):
     """It said "cannot write an output file: Address already in use"."""
     with socket.socket() as busy:
@@ -400,7 +352,7 @@ def test_rigidmd_run_stops_at_once_with_a_hung_engine_and_resumes(tmp_path):
     proc = start_run(tmp_path, "processes: 1")
     try:
         wait_for_steps(proc, tmp_path / "out" / "md.log")
-        lmp = descendants(proc.pid, "lmp")
+        lmp = descendants_named(proc.pid, "lmp")
         assert len(lmp) == 1
         os.kill(lmp[0], signal.SIGSTOP)
         time.sleep(0.5)
@@ -428,7 +380,7 @@ def test_rigidmd_run_checkpoints_the_undone_step_when_its_engine_dies(tmp_path):
     proc = start_run(tmp_path, "processes: 1")
     try:
         wait_for_steps(proc, tmp_path / "out" / "md.log")
-        lmp = descendants(proc.pid, "lmp")
+        lmp = descendants_named(proc.pid, "lmp")
         os.kill(lmp[0], signal.SIGKILL)
         stdout, stderr = proc.communicate(timeout=60)
     finally:

@@ -464,7 +464,10 @@ def _served(path):
     """
     listening = _listening_unix_paths()
     if listening is not None:
-        return path in listening
+        if path in listening:
+            return True
+        time.sleep(0.2)  # a process that has bound the socket but not yet listened on it
+        return path in (_listening_unix_paths() or ())
     probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     probe.settimeout(1.0)
     try:

@@ -25,8 +25,11 @@ Numbers
     ``fix ipi`` centres the box on the origin; positions are shifted by the
     same amount, so that they sit in the box as in one from the origin (PPPM
     is translation invariant only to its discretisation error, 1e-7 relative
-    here); they are sent in any image (LAMMPS wraps them and keeps its own
-    images against its neighbour list).  The cell is sent in the basis with
+    here).  Every atom is sent inside the cell (:func:`wrap_into_cell`: whole
+    cell vectors): ``fix ipi`` folds an atom back by one box length only, so
+    atoms a few boxes out (a restart from unwrapped positions) gave another
+    energy surface; a running LAMMPS keeps its own images against its
+    neighbour list.  The cell is sent in the basis with
     LAMMPS's tilt limits (:func:`reduce_tilt`: the same lattice); when that
     basis flips, where native LAMMPS re-neighbours, a new engine is started.
 
@@ -37,8 +40,19 @@ Life cycle
     Python process ends in any way, SIGKILL included, the watchdog kills the
     whole group (``mpirun``, its proxies, every rank).  An engine that dies or
     does not answer within ``timeout`` raises
-    :class:`~rigidmd.ipi.EngineError` naming its log file (kept); the next
-    call starts a fresh engine.
+    :class:`~rigidmd.ipi.EngineError` naming the engine and its log file
+    (kept); the next call starts a fresh engine.  An engine that fails before
+    it starts (its input refused in this process) leaves no folder.
+
+Identity
+    ``fix ipi`` answers with the atom count it is sent, whatever system it
+    holds, so an engine is checked twice: the process that connects to a
+    Unix socket must be the one this object started (Linux's
+    ``SO_PEERCRED``), and every engine's first answer must equal, to
+    :data:`FIRST_ANSWER_RTOL`, the energy and forces LAMMPS computes in this
+    process for the same atoms (computed anyway, when the data file is
+    written).  An engine of another system is refused with an
+    :class:`~rigidmd.ipi.EngineError` naming the process that answered.
 """
 
 from __future__ import annotations
