@@ -497,3 +497,19 @@ def descendants_named(ancestor, name):
         if pid == ancestor:
             found.append(int(entry))
     return found
+
+
+def start_cli_run(path, config, *args):
+    """``rigidmd run run.yaml ARGS`` in ``path`` (created) with ``config`` as run.yaml.
+
+    Returns the :class:`subprocess.Popen` (text pipes for stdout and stderr).
+    """
+    import subprocess
+    import sys
+
+    path.mkdir(exist_ok=True)
+    (path / "run.yaml").write_text(config)
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "rigidmd.cli", "run", "run.yaml", *args],
+                            cwd=path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from ase import units
 from ase.io import read
-from helpers import DATA, PPPM_27, water_box_27
+from helpers import DATA, PPPM_27, start_cli_run, water_box_27
 
 from rigidmd import RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.ipi import EngineError, IPICalculator
@@ -378,12 +378,7 @@ outputs: {directory: out, trajectory: md.traj, log: md.log, interval: 10,
 
 
 def start_run(path, processes, *args):
-    path.mkdir(exist_ok=True)
-    (path / "run.yaml").write_text(RUN.replace("PROCESSES", str(processes)))
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.Popen([sys.executable, "-m", "rigidmd.cli", "run", "run.yaml", *args],
-                            cwd=path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=env)
+    return start_cli_run(path, RUN.replace("PROCESSES", str(processes)), *args)
 
 
 @pytest.mark.slow
