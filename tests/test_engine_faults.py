@@ -44,9 +44,11 @@ def far_out(atoms, rng, boxes=50):
     return moved
 
 
-def compare(engine_atoms, reference, rtol_energy, atol_forces, rtol_stress):
+def compare(engine_atoms, reference, rtol_energy, atol_forces, rtol_stress, basis=None):
+    """The engine's energy, forces and stress equal ``reference``'s at its positions, in
+    its cell or in ``basis`` (the same lattice in the basis the engine was given)."""
     reference.positions = engine_atoms.positions
-    reference.set_cell(engine_atoms.cell)
+    reference.set_cell(engine_atoms.cell if basis is None else basis)
     energy = reference.get_potential_energy()
     assert engine_atoms.get_potential_energy() == pytest.approx(energy, rel=rtol_energy)
     np.testing.assert_allclose(engine_atoms.get_forces(), reference.get_forces(), rtol=0,
@@ -60,12 +62,14 @@ def compare(engine_atoms, reference, rtol_energy, atol_forces, rtol_stress):
 # the engine and the in-process calculator wrap with different arithmetic.  Measured over 100
 # random cells (tilts up to 0.45 box, 50 boxes out): energy 7.1e-15 relative, forces
 # 8.1e-12 eV/Å (largest forces 1.4-2 eV/Å), stress 3.7e-14 relative.  Bounds 12-27 times that.
-RTOL_ENERGY, ATOL_FORCES, RTOL_STRESS = 1e-13, 1e-10, 1e-12
+BOUNDS = (1e-13, 1e-10, 1e-12)  # energy (relative), forces (eV/Å), stress (relative)
 
 
 def test_atoms_far_outside_the_cell_on_a_new_and_a_running_engine():
     """fix ipi folds an atom back by one box only: a new engine given atoms several boxes
-    out computed another energy surface (27 waters: -159.05 eV against -156.23 eV)."""
+    out computed another energy surface (27 waters: -159.05 eV against -156.23 eV), a
+    running one died ("Atoms have moved too far apart"), and the in-process calculator
+    lost them ("LAMMPS lost 81 of 81 atoms").  Also after a tilt flip (a new engine)."""
     rng = np.random.default_rng(0)
     atoms = far_out(water_box_27(), rng)
     with LAMMPSEngine(PPPM_27) as engine:
@@ -73,14 +77,25 @@ def test_atoms_far_outside_the_cell_on_a_new_and_a_running_engine():
         atoms.get_potential_energy()
         reference = atoms.copy()
         reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
-        compare(atoms, reference, RTOL_ENERGY, ATOL_FORCES, RTOL_STRESS)
+        compare(atoms, reference, *BOUNDS)
         first = engine.pid
         # the running engine (and the running in-process calculator) given other images
         atoms.positions = far_out(water_box_27(), rng).positions
-        compare(atoms, reference, RTOL_ENERGY, ATOL_FORCES, RTOL_STRESS)
+        compare(atoms, reference, *BOUNDS)
         atoms.positions = water_box_27().positions
-        compare(atoms, reference, RTOL_ENERGY, ATOL_FORCES, RTOL_STRESS)
+        compare(atoms, reference, *BOUNDS)
         assert engine.pid == first  # one engine throughout
+        # a tilt past half a box: the basis flips, a new engine starts, atoms far out
+        cell = atoms.cell.array.copy()
+        cell[1, 0] = 0.7 * cell[0, 0]
+        atoms.set_cell(cell, scale_atoms=True)
+        atoms.positions = far_out(atoms, rng).positions
+        atoms.get_potential_energy()
+        assert engine.pid != first
+        # against LAMMPS in this process given the engine's basis (PPPM's mesh follows the
+        # basis: another basis of the lattice differs by PPPM's error, 4e-6 relative here)
+        reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
+        compare(atoms, reference, *BOUNDS, basis=cell - np.outer([0, 1, 0], cell[0]))
     assert not our_lmp()
 
 
@@ -118,7 +133,7 @@ def test_engine_equals_the_in_process_calculator_anywhere(shared_engine, scale, 
     atoms.get_potential_energy()
     reference = atoms.copy()
     reference.calc = LAMMPSCalculator(PPPM_27 + [shared_engine.kspace_parameters])
-    compare(atoms, reference, RTOL_ENERGY, ATOL_FORCES, RTOL_STRESS)
+    compare(atoms, reference, *BOUNDS)
 
 
 # ------------------------------------------------------------ identity and sockets
