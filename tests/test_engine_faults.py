@@ -175,6 +175,26 @@ def test_a_socket_another_process_serves_is_refused_and_kept():
     assert not path.exists()
 
 
+def test_a_live_socket_is_found_by_connecting_where_proc_does_not_list_it(monkeypatch):
+    """Without Linux's /proc/net/unix, liveness is a connection tried (and closed)."""
+    import rigidmd.ipi
+
+    monkeypatch.setattr(rigidmd.ipi, "_listening_unix_paths", lambda: None)
+    name = f"rigidmd-probe-{os.getpid()}"
+    server = listening_unix(name)
+    try:
+        calc = IPICalculator(unixsocket=name, timeout=5)
+        with pytest.raises(EngineError, match="in use by another live process"):
+            calc.listen()
+        calc.close()
+    finally:
+        server.close()
+    calc = IPICalculator(unixsocket=name, timeout=5)
+    calc.listen()  # the file is stale now: replaced
+    calc.close()
+    assert not Path(f"/tmp/ipi_{name}").exists()
+
+
 def test_a_tcp_port_in_use_is_named():
     """LAMMPS's "Address already in use" was reported as "cannot write an output file"."""
     with socket.socket() as busy:
