@@ -258,6 +258,20 @@ def test_an_engine_set_up_for_another_system_is_refused(tmp_path):
             proc.wait(timeout=30)
 
 
+def test_a_first_answer_with_zero_forces_on_missing_atoms_is_named():
+    """What fix ipi of a smaller system sends: forces on the atoms it has, zero on the
+    rest; also when the energy was not asked for (None)."""
+    from rigidmd.lammps.engine import answer_mismatch
+
+    forces = np.random.default_rng(5).normal(size=(81, 3))
+    smaller = forces.copy()
+    smaller[57:] = 0.0
+    assert answer_mismatch(-150.0, forces + 1e-12, -150.0 + 1e-9, forces) is None
+    assert answer_mismatch(None, smaller, -150.0, forces) == (
+        "its forces differ from LAMMPS's in this process on 24 of 81 atoms (first: atom 57); "
+        "it gave zero force on 24 of 81 atoms")
+
+
 def test_atom_types_and_empty_atoms_are_named():
     with pytest.raises(ValueError, match=r"atom_types\['O'\] must be a LAMMPS type, a "
                                          r"positive whole number, got '1'"):

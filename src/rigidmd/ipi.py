@@ -177,7 +177,11 @@ class IPICalculator(Calculator):
         return None
 
     def check_first_answer(self, energy, forces):
-        """Why an engine's first answer (eV, eV/Å) shows it is not this system's, or None."""
+        """Why an engine's first answer shows it is not this system's, or None.
+
+        ``energy`` (eV; None when the engine was not asked for it), ``forces`` (eV/Å,
+        shape (n, 3), in the atoms' frame).
+        """
         return None
 
     def stop_engine(self, keep_files=False):

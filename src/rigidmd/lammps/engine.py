@@ -156,9 +156,10 @@ FIRST_ANSWER_RTOL = 1e-8
 
 
 def answer_mismatch(energy, forces, ref_energy, ref_forces):
-    """Why ``energy`` (eV) and ``forces`` (eV/Å) are not those of the reference, or None."""
+    """Why ``energy`` (eV; None: not computed) and ``forces`` (eV/Å) are not those of the
+    reference, or None."""
     scale = max(abs(ref_energy), 1.0)
-    if not abs(energy - ref_energy) <= FIRST_ANSWER_RTOL * scale:
+    if energy is not None and not abs(energy - ref_energy) <= FIRST_ANSWER_RTOL * scale:
         return (f"its energy {energy:.10g} eV differs from {ref_energy:.10g} eV, LAMMPS's in "
                 "this process for the same atoms")
     gap = np.abs(forces - ref_forces).max(axis=1)
