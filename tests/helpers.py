@@ -471,33 +471,40 @@ def sample(kind, pressure_bar=None, scale=1.0, steps=12000):
     return np.array(rows)
 
 
-def descendants_named(ancestor, name):
-    """PIDs of the running processes called ``name`` that descend from ``ancestor``.
 
-    By Linux's /proc: each process's command name and parent chain.
-    """
+def processes_named(name):
+    """PIDs of running processes whose executable is ``name`` (zombies excluded)."""
     found = []
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
             continue
         try:
-            with open(f"/proc/{entry}/comm") as f:
-                if f.read().strip() != name:
-                    continue
+            with open(f"/proc/{pid}/stat") as f:
+                stat = f.read()
         except OSError:
             continue
-        pid = int(entry)
-        while pid > 1 and pid != ancestor:
-            try:
-                with open(f"/proc/{pid}/stat") as f:
-                    stat = f.read()
-            except OSError:
-                break
-            pid = int(stat[stat.rindex(")") + 2:].split()[1])
-        if pid == ancestor:
-            found.append(int(entry))
+        comm, state = stat[stat.index("(") + 1:stat.rindex(")")], stat[stat.rindex(")") + 2]
+        if comm == name and state != "Z":
+            found.append(int(pid))
     return found
 
+
+def children_of(pid):
+    """All descendants of ``pid`` (by /proc's parent links)."""
+    parents = {}
+    for p in os.listdir("/proc"):
+        if p.isdigit():
+            try:
+                with open(f"/proc/{p}/stat") as f:
+                    stat = f.read()
+            except OSError:
+                continue
+            parents[int(p)] = int(stat[stat.rindex(")") + 2:].split()[1])
+    found, frontier = [], [pid]
+    while frontier:
+        frontier = [p for p, parent in parents.items() if parent in frontier]
+        found += frontier
+    return found
 
 def start_cli_run(path, config, *args):
     """``rigidmd run run.yaml ARGS`` in ``path`` (created) with ``config`` as run.yaml.

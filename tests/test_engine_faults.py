@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ase import Atoms
-from helpers import PPPM_27, descendants_named, start_cli_run, water_box_27
+from helpers import PPPM_27, children_of, processes_named, start_cli_run, water_box_27
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -32,6 +32,10 @@ pytestmark = pytest.mark.lammps
 def our_lmp():
     """``lmp`` processes that descend from this test process, but the shared engine's."""
     return [pid for pid in descendants_named(os.getpid(), "lmp") if pid not in SHARED]
+
+
+def descendants_named(ancestor, name):
+    return [pid for pid in children_of(ancestor) if pid in processes_named(name)]
 
 
 SHARED = set()  # lmp of the module's shared engine
