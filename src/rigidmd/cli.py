@@ -29,6 +29,7 @@ from rigidmd.config import (
     load_config,
     parse_quantity,
 )
+from rigidmd.config.trust import GivenOnCommandLine
 from rigidmd.coupling import NotExportable
 from rigidmd.dynamics import NonFiniteForceError
 from rigidmd.lammps.library import LammpsError
@@ -61,7 +62,9 @@ def _apply_flags(config, args):
             config[key] = str(Path(value).resolve())
     if getattr(args, "outdir", None):
         config.setdefault("outputs", {})
-        config["outputs"] = dict(config["outputs"], directory=str(Path(args.outdir).resolve()))
+        # The user's own choice, not the configuration's: it may be anywhere.
+        outdir = GivenOnCommandLine(Path(args.outdir).resolve())
+        config["outputs"] = dict(config["outputs"], directory=outdir)
     return config
 
 

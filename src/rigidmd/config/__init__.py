@@ -69,6 +69,7 @@ from rigidmd.config.sections import (
     RunSection,
     StructureSection,
 )
+from rigidmd.config.trust import check_output_paths
 
 __all__ = ["ConfigError", "RunConfig", "load_config", "check_config", "parse_quantity",
            "known_keys", "RelaxSection",
@@ -168,9 +169,10 @@ def check_config(config, trust=False):
         As :func:`load_config` returns; ``_base`` is the directory relative
         paths are resolved against (default: the current directory).
     trust : bool, default False
-        Allow what could run code: LAMMPS commands beyond the interactions
-        (``shell``, ``python``, ...), calculator classes that start programs
-        (``rigidmd run --trust``; see :mod:`rigidmd.config.trust`).
+        Allow what is not on the allow-list of :mod:`rigidmd.config.trust`:
+        any calculator class and option, LAMMPS commands beyond the
+        interactions (``shell``, ``python``, ...), output paths outside the
+        run's directory (``rigidmd run --trust``).
 
     Returns
     -------
@@ -182,6 +184,7 @@ def check_config(config, trust=False):
     unknown = sorted(set(config) - known, key=str)
     if unknown:
         raise ConfigError(f"{unknown[0]}: unknown key; allowed: {', '.join(sorted(known))}")
+    check_output_paths(config, trust)
     checked = RunConfig(**{name: section.from_config(config, base)
                            for name, section in _SECTIONS.items()})
     checked.calculator.check_trust(trust)
