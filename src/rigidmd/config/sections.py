@@ -339,6 +339,9 @@ class CalculatorSection:
         calc = mapping("calculator", raw.get("calculator", {"name": "tip3p"}), cls.FIELDS)
         if "name" not in calc:
             raise ConfigError("calculator.name: missing (tip3p, tip4p, lammps or a dotted path)")
+        if not isinstance(calc["name"], str):
+            raise ConfigError(f"calculator.name: expected tip3p, tip4p, lammps, ipi or a dotted "
+                              f"class path, got {calc['name']!r}")
         options = dict(mapping("calculator.options", calc.get("options", {})))
         if "commands" in calc and "pair" in calc:
             raise ConfigError("calculator.pair: give the LAMMPS commands once, as commands")
