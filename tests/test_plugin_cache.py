@@ -94,6 +94,17 @@ def lammps_instance():
     return load_lammps()
 
 
+def loads_and_registers(built):
+    """box_plugin loads ``built`` into a new LAMMPS, whose styles then include the three."""
+    lmp = lammps_instance()
+    try:
+        return boxplugin.box_plugin(lmp) == built and all(
+            lmp.has_style(kind, name) for kind, name in (
+                ("fix", "rigidmd/box"), ("command", "rigidmd_box"), ("command", "rigidmd_tally")))
+    finally:
+        lmp.close()
+
+
 def refused(message_part):
     """box_plugin on a new LAMMPS raises, saying ``message_part``; returns the message."""
     lmp = lammps_instance()
@@ -198,12 +209,7 @@ def test_a_truncated_library_is_rebuilt_not_loaded(built, monkeypatch):
     builds = counting_builds(monkeypatch)
     assert boxplugin._build() == built
     assert len(builds) == 1 and built.read_bytes() == whole
-    lmp = lammps_instance()
-    try:
-        assert boxplugin.box_plugin(lmp) == built
-        assert lmp.has_style("command", "rigidmd_box")
-    finally:
-        lmp.close()
+    assert loads_and_registers(built)
 
 
 @pytest.mark.parametrize("record", ["garbage", "right size, wrong hash", None])
@@ -244,12 +250,7 @@ def test_a_verified_plugin_is_used_without_a_compiler(built, monkeypatch, tmp_pa
     """Built once; then no compiler on the machine ($CXX and PATH lead nowhere): the
     cached library is verified, loaded, and its styles registered."""
     no_compiler(monkeypatch, tmp_path)
-    lmp = lammps_instance()
-    try:
-        assert boxplugin.box_plugin(lmp) == built
-        assert lmp.has_style("fix", "rigidmd/box")
-    finally:
-        lmp.close()
+    assert loads_and_registers(built)
 
 
 def test_a_corrupt_plugin_without_a_compiler_is_not_loaded(built, monkeypatch, tmp_path):
