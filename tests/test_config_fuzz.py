@@ -193,12 +193,18 @@ def test_a_compressibility_in_inverse_pascal(tmp_path):
     ("timestep: 1e308 ps", "timestep: must be finite, got '1e308 ps'"),  # inf once in ASE units
     ("calculator: {name: [tip3p]}", "calculator.name: expected tip3p, tip4p, lammps, ipi or"),
     ("'': 1", "'': unknown key"),
+    ("outputs: {directory: out, checkpoint: null}",  # was the file 'None'
+     "outputs.checkpoint: expected a file or folder name, got None"),
+    ("outputs: {directory: out, trajectory: 5}", "outputs.trajectory: expected a file or"),
+    ("outputs: {directory: [out]}", "outputs.directory: expected a file or folder name"),
     ('outputs: {directory: out, "md\\nlog": 1}', "outputs.'md\\nlog': unknown key"),
 ])
 def test_quirks_the_fuzzing_found(tmp_path, line, message):
-    """Each was read as something else (YAML 1.1's base-60, octal, hex and underscored
-    numbers), overflowed to infinity, crashed (a list as the name: TypeError), or gave a
-    message without its field (an empty or multi-line key)."""
+    """Found by the fuzzing above or while reading the reader.  Each was read as something
+    else (YAML 1.1's base-60, octal, hex and underscored numbers; a null checkpoint as a
+    file 'None', a number or a list as a file name), overflowed to infinity, crashed (a
+    list as the name: TypeError), or gave a message without its field (an empty or
+    multi-line key)."""
     text = yaml.safe_dump({k: v for k, v in BASES[0].items() if k != line.split(":")[0]})
     path = tmp_path / "quirk.yaml"
     path.write_text(text + line + "\n")
