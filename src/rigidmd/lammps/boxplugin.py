@@ -135,8 +135,8 @@ def _euid():
 def _key(library, includes, version):
     """A hash of what the built library depends on: source, flags, LAMMPS, machine."""
     digest = hashlib.sha256(SOURCE.read_bytes())
-    stat = library.stat()
-    for part in (*FLAGS, version, str(library), str(stat.st_size), str(stat.st_mtime_ns),
+    info = library.stat()
+    for part in (*FLAGS, version, str(library), str(info.st_size), str(info.st_mtime_ns),
                  *map(str, includes), platform.machine(), sys.platform):
         digest.update(part.encode() + b"\0")
     return digest.hexdigest()[:16]
@@ -298,7 +298,11 @@ def _build():
             failures.append(f"{directory}: {err.strerror or err}")
             continue
         safe.append(directory)
-        compiler = compiler or _compiler()  # none: BoxPluginUnavailable, said as it is
+        try:
+            compiler = compiler or _compiler()
+        except BoxPluginUnavailable as err:  # none: say so, and why no build could be used
+            cached = f"; the cached one cannot be used: {failures[0]}" if failures else ""
+            raise BoxPluginUnavailable(f"{err}{cached}") from None
         try:
             _compile(compiler, includes, directory / name)
         except OSError as err:  # a cache that cannot be written: the next one
