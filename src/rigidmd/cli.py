@@ -136,8 +136,9 @@ def _parser():
     run.add_argument("--restart", help="start a new run from the last frame of this "
                                        "trajectory (to continue a run exactly, use --resume)")
     run.add_argument("--outdir", help="output directory")
-    trust_help = ("run what the configuration asks even where it could run code: any LAMMPS "
-                  "command (shell, python, ...), calculator classes that start programs")
+    trust_help = ("run what the configuration asks beyond the allow-list (rigidmd.config."
+                  "trust): any calculator class and option, any LAMMPS command (shell, python, "
+                  "...), output paths outside the run's directory")
     run.add_argument("--trust", action="store_true", help=trust_help)
     mode = run.add_mutually_exclusive_group()
     mode.add_argument("--resume", action="store_true",
