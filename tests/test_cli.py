@@ -128,8 +128,8 @@ def test_run_from_flags_only(tmp_path):
     ("timestep: 2", "timestep: give a unit"),
     ("structure: missing.xyz", "structure: no such file"),
     ("calculator: {name: nowhere.Calculator}",
-     "calculator.name: cannot import 'nowhere.Calculator'"),
-    ("calculator: {name: tip3p, options: {rcut: 9}}", "calculator.options:"),
+     "calculator.name: 'nowhere.Calculator' is not a calculator a configuration may name"),
+    ("calculator: {name: tip3p, options: {rcut: 9}}", "calculator.options.rcut: not an option"),
     ("calculator: {name: tip3p, processes: 2}", "calculator.processes: goes with name: lammps"),
     ("calculator: {name: lammps, commands: ['pair_style lj/cut 3.0'], processes: 0}",
      "calculator.processes: expected a whole number >= 1, got 0"),
@@ -181,15 +181,14 @@ def test_run_from_flags_only(tmp_path):
     ("outputs: {directory: out, trajectory: md.traj, checkpoint: nowhere/state.npz}",
      "outputs.checkpoint: the folder"),
     # A configuration runs no code of its own (item 21); numpy.pi is no option's fault (20).
+    # Without --trust only calculators on the allow-list (rigidmd.config.trust, issue 34).
     ("calculator: {name: numpy.pi}",
-     "calculator.name: 'numpy.pi' is a float, not an ASE calculator class"),
-    ("calculator: {name: numpy.zeros}",
-     "calculator.name: 'numpy.zeros' is a builtin_function_or_method, not an ASE calculator"),
+     "calculator.name: 'numpy.pi' is not a calculator a configuration may name without"),
     ("calculator: {name: os.system, options: {command: touch pwned}}",
-     "calculator.name: 'os.system' is in Python's standard library"),
+     "calculator.name: 'os.system' is not a calculator a configuration may name"),
     ("calculator: {name: ase.calculators.socketio.SocketIOCalculator, options: {command: "
-     "touch pwned}}", "calculator.name: 'ase.calculators.socketio.SocketIOCalculator' starts "
-     "programs"),
+     "touch pwned}}", "calculator.name: 'ase.calculators.socketio.SocketIOCalculator' is not "
+     "a calculator a configuration may name"),
     ("calculator: {name: lammps, commands: ['pair_style lj/cut 5.0', 'shell touch pwned']}",
      "calculator.commands: 'shell touch pwned': shell is not an interaction command"),
     ("calculator: {name: lammps, commands: ['pair_style lj/cut 5.0', "

@@ -29,6 +29,7 @@ from rigidmd.config import (
     load_config,
     parse_quantity,
 )
+from rigidmd.config.trust import GivenOnCommandLine
 from rigidmd.coupling import NotExportable
 from rigidmd.dynamics import NonFiniteForceError
 from rigidmd.lammps.library import LammpsError
@@ -61,7 +62,9 @@ def _apply_flags(config, args):
             config[key] = str(Path(value).resolve())
     if getattr(args, "outdir", None):
         config.setdefault("outputs", {})
-        config["outputs"] = dict(config["outputs"], directory=str(Path(args.outdir).resolve()))
+        # The user's own choice, not the configuration's: it may be anywhere.
+        outdir = GivenOnCommandLine(Path(args.outdir).resolve())
+        config["outputs"] = dict(config["outputs"], directory=outdir)
     return config
 
 
@@ -133,8 +136,9 @@ def _parser():
     run.add_argument("--restart", help="start a new run from the last frame of this "
                                        "trajectory (to continue a run exactly, use --resume)")
     run.add_argument("--outdir", help="output directory")
-    trust_help = ("run what the configuration asks even where it could run code: any LAMMPS "
-                  "command (shell, python, ...), calculator classes that start programs")
+    trust_help = ("run what the configuration asks beyond the allow-list (rigidmd.config."
+                  "trust): any calculator class and option, any LAMMPS command (shell, python, "
+                  "...), output paths outside the run's directory")
     run.add_argument("--trust", action="store_true", help=trust_help)
     mode = run.add_mutually_exclusive_group()
     mode.add_argument("--resume", action="store_true",

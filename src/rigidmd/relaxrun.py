@@ -89,6 +89,7 @@ def relax_only(raw, stream=sys.stdout, trust=False):
     from rigidmd.config.quantities import ConfigError
     from rigidmd.config.relaxsection import RelaxSection
     from rigidmd.config.sections import CalculatorSection, OutputsSection, StructureSection
+    from rigidmd.config.trust import check_output_paths
 
     raw = dict(raw)
     base = Path(raw.pop("_base", "."))
@@ -96,6 +97,7 @@ def relax_only(raw, stream=sys.stdout, trust=False):
     if unknown:
         raise ConfigError(f"{unknown[0]}: unknown key; allowed: "
                           f"{', '.join(sorted(known_keys()))}")
+    check_output_paths(raw, trust)
     structure = StructureSection.from_config(raw, base)
     calculator = CalculatorSection.from_config(raw, base)
     calculator.check_trust(trust)

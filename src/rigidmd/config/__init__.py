@@ -59,6 +59,7 @@ from rigidmd.config.quantities import (
     TEMPERATURE_UNITS,
     TIME_UNITS,
     ConfigError,
+    key_name,
     parse_quantity,
 )
 from rigidmd.config.relaxsection import RelaxSection
@@ -69,6 +70,7 @@ from rigidmd.config.sections import (
     RunSection,
     StructureSection,
 )
+from rigidmd.config.trust import check_output_paths
 
 __all__ = ["ConfigError", "RunConfig", "load_config", "check_config", "parse_quantity",
            "known_keys", "RelaxSection",
@@ -107,12 +109,31 @@ def known_keys():
     return {key for section in _SECTIONS.values() for key in section.KEYS}
 
 
+#: Numbers as YAML 1.2 writes them.  YAML 1.1 (PyYAML's) also reads ``1:30`` as 90
+#: (base 60), ``010`` as 8 (octal), ``0x1f``, ``0b11`` and ``1_000``: these stay text, so
+#: the field that wanted a number says so.
+_YAML_INT = r"^[-+]?(?:0|[1-9][0-9]*)$"
+_YAML_FLOAT = (r"^(?:[-+]?(?:[0-9]+\.[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?"
+               r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$")
+
+
 def _strict_loader():
-    """A YAML safe loader that refuses a key given twice in one mapping."""
+    """A YAML safe loader that refuses a key given twice in one mapping (and reads numbers
+    as YAML 1.2 does: see ``_YAML_INT``)."""
+    import re
+
     import yaml
 
     class StrictLoader(yaml.SafeLoader):
         pass
+
+    numbers = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
+    StrictLoader.yaml_implicit_resolvers = {
+        first: [(tag, regexp) for tag, regexp in resolvers if tag not in numbers]
+        for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+    StrictLoader.add_implicit_resolver(numbers[0], re.compile(_YAML_INT), list("-+0123456789"))
+    StrictLoader.add_implicit_resolver(numbers[1], re.compile(_YAML_FLOAT),
+                                       list("-+0123456789."))
 
     def construct_mapping(loader, node, deep=False):
         seen = {}
@@ -168,9 +189,10 @@ def check_config(config, trust=False):
         As :func:`load_config` returns; ``_base`` is the directory relative
         paths are resolved against (default: the current directory).
     trust : bool, default False
-        Allow what could run code: LAMMPS commands beyond the interactions
-        (``shell``, ``python``, ...), calculator classes that start programs
-        (``rigidmd run --trust``; see :mod:`rigidmd.config.trust`).
+        Allow what is not on the allow-list of :mod:`rigidmd.config.trust`:
+        any calculator class and option, LAMMPS commands beyond the
+        interactions (``shell``, ``python``, ...), output paths outside the
+        run's directory (``rigidmd run --trust``).
 
     Returns
     -------
@@ -181,7 +203,9 @@ def check_config(config, trust=False):
     known = known_keys()
     unknown = sorted(set(config) - known, key=str)
     if unknown:
-        raise ConfigError(f"{unknown[0]}: unknown key; allowed: {', '.join(sorted(known))}")
+        raise ConfigError(f"{key_name(unknown[0])}: unknown key; allowed: "
+                          f"{', '.join(sorted(known))}")
+    check_output_paths(config, trust)
     checked = RunConfig(**{name: section.from_config(config, base)
                            for name, section in _SECTIONS.items()})
     checked.calculator.check_trust(trust)

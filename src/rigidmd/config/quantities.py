@@ -6,10 +6,11 @@ K, 1/ASE time, eV/Å³, Å³/eV).
 """
 
 import math
+import re
 
 from ase import units
 
-__all__ = ["ConfigError", "parse_quantity", "mapping", "whole_number", "UNIT_TABLES",
+__all__ = ["ConfigError", "parse_quantity", "mapping", "key_name", "whole_number", "UNIT_TABLES",
            "TIME_UNITS", "RATE_UNITS", "TEMPERATURE_UNITS", "PRESSURE_UNITS",
            "COMPRESSIBILITY_UNITS"]
 
@@ -19,7 +20,10 @@ TEMPERATURE_UNITS = {"K": 1.0}
 PRESSURE_UNITS = {"bar": units.bar, "atm": 1.01325 * units.bar, "GPa": units.GPa,
                   "Pa": units.Pascal, "eV/A^3": 1.0}
 COMPRESSIBILITY_UNITS = {"1/bar": 1 / units.bar, "1/atm": 1 / (1.01325 * units.bar),
-                         "1/GPa": 1 / units.GPa, "A^3/eV": 1.0}
+                         "1/GPa": 1 / units.GPa, "1/Pa": 1 / units.Pascal, "A^3/eV": 1.0}
+#: A number as a configuration writes it: ASCII digits, an optional sign, point and
+#: exponent.  Python's float() also takes "1_0" (10), "infinity" and other scripts' digits.
+NUMBER = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
 
 #: Unit table of each kind of quantity.
 UNIT_TABLES = {"time": TIME_UNITS, "rate": RATE_UNITS, "temperature": TEMPERATURE_UNITS,
@@ -55,15 +59,22 @@ def parse_quantity(field, value, unit_table, default_unit=None):
             raise ConfigError(f"{field}: expected '<number> <unit>' such as {example}, "
                               f"got {value!r}")
         number, unit = parts
-        try:
-            number = float(number)
-        except ValueError:
-            raise ConfigError(f"{field}: {number!r} is not a number") from None
+        if not NUMBER.fullmatch(number):
+            raise ConfigError(f"{field}: {number!r} is not a number (digits, with an optional "
+                              f"sign, point and exponent, e.g. {example})")
+        number = float(number)
     if unit not in unit_table:
         raise ConfigError(f"{field}: unknown unit {unit!r}; use one of {', '.join(unit_table)}")
-    if not math.isfinite(number):
+    if not math.isfinite(number * unit_table[unit]):  # '1e308 ps' overflows to inf
         raise ConfigError(f"{field}: must be finite, got {value!r}")
     return number * unit_table[unit]
+
+
+def key_name(key):
+    """A key as a message shows it: plain words as they are, anything else quoted."""
+    if isinstance(key, str) and re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_./^-]*", key):
+        return key
+    return repr(key)
 
 
 def mapping(field, value, allowed=None):
@@ -74,7 +85,8 @@ def mapping(field, value, allowed=None):
         unknown = sorted(set(value) - set(allowed), key=str)
         if unknown:
             raise ConfigError(
-                f"{field}.{unknown[0]}: unknown key; allowed: {', '.join(sorted(allowed))}")
+                f"{field}.{key_name(unknown[0])}: unknown key; allowed: "
+                f"{', '.join(sorted(allowed))}")
     return value
 
 

@@ -33,7 +33,7 @@ from rigidmd.config.quantities import (
     parse_quantity,
     whole_number,
 )
-from rigidmd.config.trust import calculator_class, check_lammps_calculator
+from rigidmd.config.trust import calculator_class, check_calculator
 
 __all__ = ["StructureSection", "RunSection", "CalculatorSection", "CouplingSection",
            "OutputsSection", "BUILTIN_STRUCTURES", "BODY_RULES"]
@@ -332,17 +332,16 @@ class CalculatorSection:
         ``trust`` (``--trust``) lifts the refusals, not the check that a
         dotted name is an ASE calculator class.
         """
-        if self.name == "lammps":
-            if not trust and self.water is None:
-                check_lammps_calculator(self.options, self.commands)
-        elif self.name not in ("tip3p", "tip4p", "ipi"):
-            self.calculator_class = calculator_class(self.name, self.options, trust)
+        self.calculator_class = check_calculator(self, trust)
 
     @classmethod
     def from_config(cls, raw, base):
         calc = mapping("calculator", raw.get("calculator", {"name": "tip3p"}), cls.FIELDS)
         if "name" not in calc:
             raise ConfigError("calculator.name: missing (tip3p, tip4p, lammps or a dotted path)")
+        if not isinstance(calc["name"], str):
+            raise ConfigError(f"calculator.name: expected tip3p, tip4p, lammps, ipi or a dotted "
+                              f"class path, got {calc['name']!r}")
         options = dict(mapping("calculator.options", calc.get("options", {})))
         if "commands" in calc and "pair" in calc:
             raise ConfigError("calculator.pair: give the LAMMPS commands once, as commands")

@@ -1,38 +1,57 @@
-"""What a configuration file may make rigidmd run: no code of its own unless trusted.
+"""What a configuration may make rigidmd do without ``--trust``: an allow-list.
 
-A configuration is data: reading one must not run a program, load code or
-write files other than the run's outputs.  Two of its fields could do all
-of that, and are checked here before anything is imported or started:
+A configuration is data: reading and running one must not run a program,
+import or load code, or write files other than the run's outputs in its own
+directory.  Everything a configuration names that could do otherwise is
+checked here against what is allowed, before any module it names is
+imported, any engine started or any file written; anything not on the
+lists is refused with one line naming the field and saying that
+``--trust`` allows it.  ``rigidmd run --trust`` (and ``relax --trust``,
+``export-lammps --trust``) lifts these limits for a configuration the user
+wrote or has read.  What is allowed without it:
 
-* ``calculator.name``, a dotted path: it must name an ASE calculator
-  class (a subclass of ``ase.calculators.calculator.BaseCalculator``);
-  functions and other callables (``os.system``) are refused always.
-  Without ``--trust`` these are refused too: a module of Python's standard
-  library (importing one may run code: ``antigravity``), and the calculator
-  classes that start programs or run commands given in their options
-  (ASE's ``FileIOCalculator``, ``GenericFileIOCalculator`` and
-  ``SocketIOCalculator`` and their subclasses, ``LAMMPSlib``, ``lammpsrun``).
-* LAMMPS commands (``calculator.commands`` of ``name: lammps``, or the
-  ``commands`` option of :class:`~rigidmd.lammps.LAMMPSCalculator` named by
-  its dotted path): without ``--trust`` only the commands that define
-  interactions (:data:`SAFE_LAMMPS_COMMANDS`) are accepted, without ``$``
-  substitution (which could spell any command) and without Python pair
-  styles.  LAMMPS's ``shell`` (runs programs), ``python`` and ``plugin``
-  (run code), ``include`` and ``jump`` (read other input files), ``if``
-  and ``run ... every`` (run commands given as strings) and the commands
-  that write files (``dump``, ``write_*``, ``log``, ``print``) are refused;
-  so is the calculator's ``cmdargs`` option (LAMMPS's command line).
+* calculators (:data:`ALLOWED_CALCULATORS`): ``tip3p``, ``tip4p``,
+  ``lammps``, ``ipi`` and the dotted class paths listed there, each with
+  the keyword arguments listed and values of the kinds given (numbers,
+  true/false, whole numbers, a choice of words).  A dotted path not on the
+  list is refused before its module is imported (importing runs the
+  module's code); functions and other callables are never calculators.
+  Calculators that start programs or run commands from their options
+  (ASE's ``FileIOCalculator`` and ``SocketIOCalculator`` families: CP2K,
+  DFTD3, ``command``; ``LAMMPSlib``) are therefore not on it.
+* LAMMPS commands (``calculator.commands`` of ``name: lammps``, the
+  ``commands`` option of :class:`~rigidmd.lammps.LAMMPSCalculator` or
+  :class:`~rigidmd.lammps.LAMMPSEngine` by their dotted paths, and a
+  ``kspace_parameters`` option): only the commands that define interactions
+  (:data:`SAFE_LAMMPS_COMMANDS`), without ``$`` substitution (which could
+  spell any command) and without Python pair styles.  LAMMPS's ``shell``
+  (runs programs), ``python`` and ``plugin`` (run code), ``include`` and
+  ``jump`` (read other input files), ``if`` and ``run ... every`` (run
+  commands given as strings) and the commands that write files (``dump``,
+  ``write_*``, ``log``, ``print``) are refused; so is LAMMPS's command
+  line (``cmdargs``: ``-log FILE``, ``-in FILE``), with or without a
+  ``water_model``.
+* files written (:func:`check_output_paths`): ``outputs.directory``
+  relative to the configuration's folder and the output files
+  (``outputs.trajectory``, ``log``, ``plot``, ``mdanalysis``,
+  ``checkpoint``, ``relax.trajectory``, ``relax.log``) relative to it,
+  none of them absolute or with a ``..`` part: a run writes only inside its
+  own directory.  A directory given on the command line (``--outdir``) is
+  the user's own choice and may be anywhere.
 
-``rigidmd run --trust`` (and ``export-lammps --trust``) lifts these checks
-for a configuration the user wrote or has read.
+Reading (``structure``, ``restart``, an integrator's ``.yaml``) is not
+limited: ASE's readers and rigidmd's scheme files run no code.
 """
 
 import importlib
-import sys
+import math
+from pathlib import PurePath
 
 from rigidmd.config.quantities import ConfigError
 
-__all__ = ["SAFE_LAMMPS_COMMANDS", "check_lammps_commands", "calculator_class"]
+__all__ = ["SAFE_LAMMPS_COMMANDS", "ALLOWED_CALCULATORS", "GivenOnCommandLine",
+           "check_lammps_commands", "check_calculator", "check_output_paths",
+           "calculator_class"]
 
 #: LAMMPS commands a configuration may give without ``--trust``: interactions only.
 SAFE_LAMMPS_COMMANDS = frozenset({
@@ -42,16 +61,88 @@ SAFE_LAMMPS_COMMANDS = frozenset({
     "mass", "neighbor", "neigh_modify", "comm_modify", "newton", "labelmap",
 })
 
-#: Calculator classes that run programs or commands given in their options.
-_RUNS_PROGRAMS = (
-    ("ase.calculators.calculator", "FileIOCalculator"),
-    ("ase.calculators.genericfileio", "GenericFileIOCalculator"),
-    ("ase.calculators.socketio", "SocketIOCalculator"),
-    ("ase.calculators.lammpslib", "LAMMPSlib"),
-    ("ase.calculators.lammpsrun", "LAMMPS"),
-)
+TRUST_HINT = "rigidmd run --trust allows it (give it only for a configuration you trust)"
 
-_TRUST_HINT = "give it only in a configuration you trust, with rigidmd run --trust"
+
+class GivenOnCommandLine(str):
+    """A path the user gave on the command line (``--outdir``): not the configuration's."""
+
+
+# Kinds of option values: (description, test).
+def _is_number(value):
+    return (isinstance(value, (int, float)) and not isinstance(value, bool)
+            and math.isfinite(value))
+
+
+_NUMBER = ("a number", _is_number)
+_POSITIVE = ("a positive number", lambda v: _is_number(v) and v > 0)
+_NON_NEGATIVE = ("a number >= 0", lambda v: _is_number(v) and v >= 0)
+_FLAG = ("true or false", lambda v: isinstance(v, bool))
+_WHOLE = ("a whole number >= 0",
+          lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 0)
+_COUNT = ("a whole number >= 1",
+          lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1)
+_WHOLE_LIST = ("a list of whole numbers", lambda v: isinstance(v, list) and all(
+    isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in v))
+_TYPES = ("a mapping of element to LAMMPS type (a whole number >= 1)",
+          lambda v: isinstance(v, dict) and all(
+              isinstance(k, str) and isinstance(t, int) and not isinstance(t, bool) and t >= 1
+              for k, t in v.items()))
+_COMMANDS = ("LAMMPS commands (a list of strings)", lambda v: isinstance(v, str) or (
+    isinstance(v, list) and all(isinstance(c, str) for c in v)))
+_KSPACE = ("a kspace_modify command", lambda v: isinstance(v, str) and v.split()[:1] == [
+    "kspace_modify"])
+
+
+def _choice(*words):
+    return (f"one of {', '.join(words)}", lambda v: v in words)
+
+
+#: Options of ASE's water models.
+_WATER = {"rc": _POSITIVE, "width": _POSITIVE}
+#: Options of the in-process LAMMPS calculator (``name: lammps``).
+_LAMMPS = {"exclude_intramolecular": _FLAG, "ase_constants": _FLAG, "skin": _NON_NEGATIVE,
+           "threads": _COUNT, "kspace_parameters": _KSPACE}
+#: Options of a LAMMPS engine in its own process (``name: lammps`` with ``processes``).
+_ENGINE = {"exclude_intramolecular": _FLAG, "ase_constants": _FLAG, "skin": _NON_NEGATIVE,
+           "triclinic": _FLAG, "timeout": _POSITIVE, "connect_timeout": _POSITIVE}
+_DOTTED_LAMMPS = {"commands": _COMMANDS, "atom_types": _TYPES, "molecule_ids": _WHOLE_LIST}
+
+#: What a configuration may name as ``calculator.name`` without ``--trust``, and the
+#: ``calculator.options`` each takes (option name -> (kind, test of the value)).
+ALLOWED_CALCULATORS = {
+    "tip3p": _WATER,
+    "tip4p": _WATER,
+    "lammps": _LAMMPS,
+    "ipi": {"timeout": _POSITIVE, "connect_timeout": _POSITIVE},
+    "ase.calculators.emt.EMT": {"asap_cutoff": _FLAG},
+    "ase.calculators.lj.LennardJones": {"sigma": _POSITIVE, "epsilon": _NUMBER,
+                                        "rc": _POSITIVE, "ro": _POSITIVE, "smooth": _FLAG},
+    "ase.calculators.morse.MorsePotential": {
+        "epsilon": _NUMBER, "r0": _POSITIVE, "rho0": _POSITIVE, "rcut1": _POSITIVE,
+        "rcut2": _POSITIVE},
+    "ase.calculators.tip3p.TIP3P": _WATER,
+    "ase.calculators.tip4p.TIP4P": _WATER,
+    "tblite.ase.TBLite": {
+        "method": _choice("GFN2-xTB", "GFN1-xTB", "IPEA1-xTB"), "charge": _NUMBER,
+        "multiplicity": _COUNT, "accuracy": _POSITIVE, "electronic_temperature": _NON_NEGATIVE,
+        "max_iterations": _COUNT, "mixer_damping": _POSITIVE, "verbosity": _WHOLE},
+    "rigidmd.lammps.LAMMPSCalculator": {**_LAMMPS, **_DOTTED_LAMMPS},
+    "rigidmd.lammps.LAMMPSEngine": {**_ENGINE, **_DOTTED_LAMMPS, "processes": _COUNT,
+                                    "threads": _COUNT},
+}
+
+#: Why some options are left off the lists (said in the message).
+_WHY = {"cmdargs": "LAMMPS's command line can read input files, write files and load code; ",
+        "command": "a command runs a program; ",
+        "directory": "a calculator's directory is where it writes files; ",
+        "label": "a calculator's label names the files it writes; ",
+        "workdir": "the engine writes its input files there; ",
+        "restart": "a restart file is read by the calculator's own reader; "}
+
+#: Output fields that name files, and the folder each is relative to.
+OUTPUT_FILES = {"outputs": ("trajectory", "log", "plot", "mdanalysis", "checkpoint"),
+                "relax": ("trajectory", "log")}
 
 
 def check_lammps_commands(where, commands):
@@ -73,58 +164,106 @@ def check_lammps_commands(where, commands):
         if "$" in line:
             raise ConfigError(f"{where}: {line.strip()!r}: LAMMPS substitutes $ variables "
                               f"before it reads a command, which could spell any command; "
-                              f"{_TRUST_HINT}")
+                              f"{TRUST_HINT}")
         if name not in SAFE_LAMMPS_COMMANDS:
             raise ConfigError(
                 f"{where}: {line.strip()!r}: {name} is not an interaction command (LAMMPS's "
                 "shell, python, plugin, include, if and file-writing commands run programs, "
-                f"code or other input files); {_TRUST_HINT}")
+                f"code or other input files); {TRUST_HINT}")
         if name == "pair_style" and any(w == "python" or w.startswith("python/")
                                         for w in words[1:]):
             raise ConfigError(f"{where}: {line.strip()!r}: pair style python imports Python "
-                              f"code; {_TRUST_HINT}")
+                              f"code; {TRUST_HINT}")
 
 
-def _lammps_options(where, options):
-    if "cmdargs" in options:
-        raise ConfigError(f"{where}.cmdargs: LAMMPS's command line can read input files and "
-                          f"load code; {_TRUST_HINT}")
+def _check_options(where, name, options, allowed):
+    """Each option on the list for ``name``, with a value of its kind."""
+    for key, value in options.items():
+        if key not in allowed:
+            listed = ", ".join(allowed) or "none"
+            why = _WHY.get(key, "")
+            raise ConfigError(f"{where}.{key}: {why}not an option a configuration may pass to "
+                              f"{name} without --trust (allowed: {listed}); {TRUST_HINT}")
+        kind, test = allowed[key]
+        if not test(value):
+            raise ConfigError(f"{where}.{key}: expected {kind}, got {value!r}")
+    if "commands" in options:
+        commands = options["commands"]
+        check_lammps_commands(f"{where}.commands",
+                              [commands] if isinstance(commands, str) else commands)
+    if "kspace_parameters" in options:
+        check_lammps_commands(f"{where}.kspace_parameters", [options["kspace_parameters"]])
 
 
-def check_lammps_calculator(options, commands):
-    """``name: lammps`` without ``--trust``: its commands and options."""
-    check_lammps_commands("calculator.commands", commands)
-    _lammps_options("calculator.options", options)
+def check_calculator(section, trust=False):
+    """Refuse what ``section`` (a CalculatorSection) may not name or pass; its class.
+
+    Parameters
+    ----------
+    section : rigidmd.config.sections.CalculatorSection
+    trust : bool
+        ``--trust``: any calculator class, option and LAMMPS command.
+
+    Returns
+    -------
+    type or None
+        The class a dotted ``name`` names (None for the built-in names).
+    """
+    for field_name, test in (("charges", _is_number), ("atom_types", _COUNT[1])):
+        for element, value in getattr(section, field_name).items():
+            if not test(value):
+                kind = "a number (e)" if field_name == "charges" else "a whole number >= 1"
+                raise ConfigError(f"calculator.{field_name}.{element}: expected {kind}, "
+                                  f"got {value!r}")
+    name = section.name
+    if name in ("tip3p", "tip4p", "lammps", "ipi"):
+        if trust:
+            return None
+        allowed = ALLOWED_CALCULATORS[name]
+        engine = name == "lammps" and (section.processes is not None
+                                       or section.address is not None)
+        if engine:
+            allowed = _ENGINE
+        if name == "lammps" and section.water is None:
+            check_lammps_commands("calculator.commands", section.commands)
+        shown = {"tip3p": "ASE's TIP3P", "tip4p": "ASE's TIP4P", "ipi": "the i-PI calculator",
+                 "lammps": "a LAMMPS engine" if engine else "the LAMMPS calculator"}[name]
+        _check_options("calculator.options", shown, section.options, allowed)
+        return None
+    return calculator_class(name, section.options, trust)
 
 
 def calculator_class(name, options, trust):
     """The ASE calculator class a dotted ``calculator.name`` names, checked.
+
+    Without ``trust`` the name must be on :data:`ALLOWED_CALCULATORS` (checked
+    before its module is imported) and the options on its list.
 
     Parameters
     ----------
     name : str
         ``module.Class``.
     options : dict
-        ``calculator.options`` (checked for a LAMMPSCalculator's commands).
+        ``calculator.options``.
     trust : bool
-        ``--trust``: allow standard-library modules, classes that run programs
-        and any LAMMPS command.
+        ``--trust``: any class (still an ASE calculator class), any option.
 
     Returns
     -------
     type
         A subclass of ``ase.calculators.calculator.BaseCalculator``.
     """
+    module_name, _, class_name = str(name).rpartition(".")
+    if not module_name or not class_name:
+        raise ConfigError(f"calculator.name: {name!r} is not tip3p, tip4p, lammps, ipi or a "
+                          "dotted path such as ase.calculators.emt.EMT")
+    if not trust and name not in ALLOWED_CALCULATORS:
+        dotted = ", ".join(key for key in ALLOWED_CALCULATORS if "." in key)
+        raise ConfigError(f"calculator.name: {name!r} is not a calculator a configuration may "
+                          f"name without --trust (allowed: tip3p, tip4p, lammps, ipi, "
+                          f"{dotted}); {TRUST_HINT}")
     from ase.calculators.calculator import BaseCalculator
 
-    module_name, _, class_name = name.rpartition(".")
-    if not module_name or not class_name:
-        raise ConfigError(f"calculator.name: {name!r} is not tip3p, tip4p, lammps or a dotted "
-                          "path such as ase.calculators.emt.EMT")
-    top = module_name.split(".")[0]
-    if not trust and top in getattr(sys, "stdlib_module_names", ()):
-        raise ConfigError(f"calculator.name: {name!r} is in Python's standard library, which "
-                          f"has no ASE calculator (importing a module runs it); {_TRUST_HINT}")
     try:
         found = getattr(importlib.import_module(module_name), class_name)
     except (ImportError, AttributeError) as err:
@@ -133,21 +272,47 @@ def calculator_class(name, options, trust):
         kind = "a class" if isinstance(found, type) else f"a {type(found).__name__}"
         raise ConfigError(f"calculator.name: {name!r} is {kind}, not an ASE calculator class "
                           "(a subclass of ase.calculators.calculator.BaseCalculator)")
-    if trust:
-        return found
-    for module, cls_name in _RUNS_PROGRAMS:
-        try:
-            base = getattr(importlib.import_module(module), cls_name)
-        except (ImportError, AttributeError):  # pragma: no cover - an older or newer ASE
-            continue
-        if issubclass(found, base):
-            raise ConfigError(f"calculator.name: {name!r} starts programs or runs commands "
-                              f"given in its options (an ASE {cls_name}); {_TRUST_HINT}")
-    from rigidmd.lammps.calculator import LAMMPSCalculator
-
-    if issubclass(found, LAMMPSCalculator):
-        commands = options.get("commands", [])
-        check_lammps_commands("calculator.options.commands",
-                              [commands] if isinstance(commands, str) else list(commands))
-        _lammps_options("calculator.options", options)
+    if not trust:
+        _check_options("calculator.options", name.rpartition(".")[2], options,
+                       ALLOWED_CALCULATORS[name])
     return found
+
+
+def _inside(field_name, value, trust, optional=True):
+    """Refuse an absolute path or one with a ``..`` part (ConfigError naming the field).
+
+    ``optional``: null (or empty) means no such output.
+    """
+    if optional and value in (None, ""):
+        return
+    if not isinstance(value, str) or not value:
+        raise ConfigError(f"{field_name}: expected a file or folder name, got {value!r}")
+    if trust or isinstance(value, GivenOnCommandLine):
+        return
+    path = PurePath(value)
+    if path.is_absolute() or ".." in path.parts:
+        raise ConfigError(f"{field_name}: {value!r} is outside the run's directory (a "
+                          f"configuration writes only inside it: give a relative path without "
+                          f"'..'); {TRUST_HINT}")
+
+
+def check_output_paths(raw, trust=False):
+    """Refuse output paths outside the run's directory (see the module's docstring).
+
+    Parameters
+    ----------
+    raw : dict
+        The configuration as read (``outputs`` and ``relax`` mappings).
+    trust : bool
+        ``--trust``: paths anywhere.
+    """
+    outputs = raw.get("outputs")
+    if isinstance(outputs, dict) and "directory" in outputs:
+        _inside("outputs.directory", outputs["directory"], trust, optional=False)
+    for section, keys in OUTPUT_FILES.items():
+        values = raw.get(section)
+        if isinstance(values, dict):
+            for key in keys:
+                if key in values:
+                    _inside(f"{section}.{key}", values[key], trust,
+                            optional=(section, key) != ("outputs", "checkpoint"))

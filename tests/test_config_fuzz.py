@@ -1,0 +1,214 @@
+"""Fuzzing the configuration reader: random keys, types, units and paths (issue 34).
+
+Each example changes a valid configuration at random places (known fields and
+made-up ones) to random values: numbers of every kind, quantities with real
+and wrong units and numbers Python's ``float`` reads but a person would not
+write, paths outside the run's directory, lists, mappings, text.  The reader
+must either accept the configuration or raise a ConfigError whose message is
+one line starting with the field at fault, and it must touch no file.  The
+YAML file reader gets random text and must do the same.
+"""
+
+import os
+import re
+
+import pytest
+import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from rigidmd.config import ConfigError, check_config, load_config
+from rigidmd.config.quantities import UNIT_TABLES
+
+FAST = settings(max_examples=int(os.environ.get("FUZZ_EXAMPLES", 150)), deadline=None,
+                suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+#: Valid starting points: NVT, NPT (C-rescale, with a compressibility), Monte Carlo, relax.
+BASES = [
+    {"structure": {"builtin": "water_cluster", "n_molecules": 4, "seed": 0},
+     "calculator": {"name": "tip3p", "options": {"rc": 9.0}}, "timestep": "1 fs",
+     "steps": 10, "velocities": {"temperature": "250 K", "seed": 0},
+     "thermostat": {"kind": "langevin", "temperature": "300 K", "friction": "0.01 1/fs"},
+     "outputs": {"directory": "out", "trajectory": "md.traj", "log": "md.log",
+                 "interval": 5}},
+    {"structure": {"builtin": "water_box", "n_side": 2, "seed": 0},
+     "calculator": {"name": "lammps", "water_model": {"name": "tip4p2005", "cutoff": 4.0}},
+     "timestep": "2 fs", "steps": 10,
+     "thermostat": {"kind": "bussi", "temperature": "300 K", "taut": "100 fs"},
+     "barostat": {"kind": "crescale", "pressure": "1 bar", "taup": "1 ps",
+                  "compressibility": "4.5e-5 1/bar", "couple": "iso"},
+     "outputs": {"directory": "out", "checkpoint": "state.npz", "interval": 5}},
+    {"structure": {"builtin": "water_box", "n_side": 2},
+     "calculator": {"name": "lammps", "commands": ["pair_style lj/cut 4.0",
+                                                   "pair_coeff * * 0.0 1.0"],
+                    "charges": {"O": -0.834, "H": 0.417}},
+     "timestep": "1 fs", "steps": 10,
+     "thermostat": {"kind": "nose_hoover", "temperature": "300 K", "tdamp": "100 fs"},
+     "barostat": {"kind": "monte_carlo", "pressure": "1 atm", "every": 5}},
+    {"structure": {"builtin": "water_cluster", "n_molecules": 2},
+     "calculator": {"name": "ase.calculators.lj.LennardJones",
+                    "options": {"sigma": 3.0, "epsilon": 0.005}},
+     "timestep": "0.5 fs", "steps": 4,
+     "relax": {"fmax": 0.1, "steps": 5, "optimizer": "FIRE", "trajectory": "relax.traj"}},
+]
+
+FIELDS = [
+    "structure", "structure.builtin", "structure.n_molecules", "structure.n_side",
+    "structure.seed", "structure.spacing", "structure.jitter", "structure.model",
+    "read_options", "bodies", "restart", "integrator", "integrator_options", "timestep",
+    "steps", "velocities", "velocities.temperature", "velocities.seed", "calculator",
+    "calculator.name", "calculator.options", "calculator.options.rc",
+    "calculator.options.cmdargs", "calculator.commands", "calculator.charges",
+    "calculator.charges.O", "calculator.atom_types", "calculator.atom_types.O",
+    "calculator.water_model", "calculator.water_model.name", "calculator.water_model.cutoff",
+    "calculator.water_model.kspace", "calculator.water_model.accuracy",
+    "calculator.processes", "calculator.threads", "calculator.address", "thermostat",
+    "thermostat.kind", "thermostat.temperature", "thermostat.friction", "thermostat.taut",
+    "thermostat.tdamp", "thermostat.fixcm", "thermostat.tchain", "barostat", "barostat.kind",
+    "barostat.pressure", "barostat.pdamp", "barostat.taup", "barostat.compressibility",
+    "barostat.couple", "barostat.every", "barostat.seed", "outputs", "outputs.directory",
+    "outputs.trajectory", "outputs.log", "outputs.interval", "outputs.plot",
+    "outputs.checkpoint", "outputs.checkpoint_interval", "relax", "relax.fmax",
+    "relax.steps", "relax.optimizer", "relax.cell", "relax.pressure", "relax.trajectory",
+    "relax.log",
+]
+
+UNITS = sorted({unit for table in UNIT_TABLES.values() for unit in table})
+NUMBERS = ["1", "0", "-1", "2.5", "1e-5", ".5", "1.", "1_0", "inf", "nan", "1e999", "٣",
+           "0x10", "1/2", "", "1e", "--1"]
+PATHS = ["/tmp/rigidmd-fuzz/x", "../x", "a/../../x", "sub/x.traj", ".", "..", "", "x\0y",
+         "~/x", "out", "md.traj", "/"]
+
+scalars = st.one_of(
+    st.none(), st.booleans(), st.integers(-10**12, 10**12),
+    st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=12),
+    st.builds(lambda n, u: f"{n} {u}", st.sampled_from(NUMBERS),
+              st.sampled_from(UNITS + ["1/s", "kelvin", "fs fs", "Pa^-1"])),
+    st.sampled_from(PATHS),
+    st.sampled_from(["tip3p", "tip4p", "lammps", "ipi", "langevin", "mtk", "crescale",
+                     "monte_carlo", "iso", "aniso", "tri", "BFGS", "os.system",
+                     "numpy.pi", "water_box", "mol-id", "pppm"]))
+values = st.recursive(scalars, lambda inner: st.one_of(
+    st.lists(inner, max_size=3), st.dictionaries(st.text(max_size=6), inner, max_size=3)),
+    max_leaves=6)
+fields = st.one_of(st.sampled_from(FIELDS),
+                   st.builds(lambda a, b: f"{a}.{b}", st.sampled_from(FIELDS),
+                             st.text(max_size=6)),
+                   st.text(max_size=8))
+
+
+def change(raw, path, value):
+    """``raw`` with the field ``path`` (dotted) set to ``value`` (mappings made on the way)."""
+    keys = path.split(".") if path else [path]
+    here = raw
+    for key in keys[:-1]:
+        if not isinstance(here.get(key), dict):
+            here[key] = {}
+        here = here[key]
+    here[keys[-1]] = value
+
+
+def listing(directory):
+    return sorted((root, tuple(sorted(dirs)), tuple(sorted(files)))
+                  for root, dirs, files in os.walk(directory))
+
+
+#: A message: the field (dotted, maybe quoted or "= value") then a colon, on one line.
+MESSAGE = re.compile(r"^\S[^\n]*?: [^\n]+$")
+
+
+def assert_one_clear_line(err):
+    message = str(err)
+    assert MESSAGE.match(message), repr(message)
+    assert "\n" not in message and "Traceback" not in message
+
+
+@FAST
+@given(base=st.sampled_from(range(len(BASES))),
+       changes=st.lists(st.tuples(fields, values), min_size=1, max_size=4))
+def test_random_configurations_are_accepted_or_refused_in_one_line(tmp_path, monkeypatch,
+                                                                  base, changes):
+    monkeypatch.chdir(tmp_path)
+    raw = yaml.safe_load(yaml.safe_dump(BASES[base]))  # a deep copy
+    for path, value in changes:
+        change(raw, path, value)
+    raw["_base"] = str(tmp_path)
+    before = listing(tmp_path)
+    try:
+        check_config(raw)
+    except ConfigError as err:
+        assert_one_clear_line(err)
+    assert listing(tmp_path) == before
+
+
+@FAST
+@given(text=st.one_of(
+    st.text(max_size=80),
+    st.builds(yaml.safe_dump, st.dictionaries(st.sampled_from(FIELDS + ["x"]), values,
+                                              max_size=5))))
+def test_random_files_are_read_or_refused_in_one_line(tmp_path, monkeypatch, text):
+    monkeypatch.chdir(tmp_path)
+    path = tmp_path / "fuzz.yaml"
+    path.write_text(text, encoding="utf-8")
+    before = listing(tmp_path)
+    try:
+        raw = load_config(path)
+        check_config(raw)
+    except ConfigError as err:
+        assert_one_clear_line(err)
+    assert listing(tmp_path) == before
+
+
+@pytest.mark.parametrize("value, message", [
+    ("1_0 fs", "timestep: '1_0' is not a number"),
+    ("٣ fs", "timestep: '٣' is not a number"),
+    ("infinity fs", "timestep: 'infinity' is not a number"),
+    ("nan fs", "timestep: 'nan' is not a number"),
+])
+def test_numbers_python_reads_but_a_person_would_not_write(tmp_path, value, message):
+    """float() reads '1_0' as 10, '٣' as 3 and 'infinity': refused, not read as 10 fs."""
+    raw = dict(BASES[0], timestep=value, _base=str(tmp_path))
+    with pytest.raises(ConfigError, match=f"^{message}"):
+        check_config(raw)
+
+
+def test_a_compressibility_in_inverse_pascal(tmp_path):
+    """4.5e-10 1/Pa is water's 4.5e-5 1/bar (1 bar = 1e5 Pa)."""
+    def compressibility(value):
+        raw = yaml.safe_load(yaml.safe_dump(BASES[1]))
+        raw["barostat"]["compressibility"] = value
+        raw["_base"] = str(tmp_path)
+        spec = check_config(raw).coupling.specs[-1]
+        return spec.kwargs["compressibility_au"]
+
+    assert compressibility("4.5e-10 1/Pa") == pytest.approx(compressibility("4.5e-5 1/bar"),
+                                                            rel=1e-12)
+
+
+@pytest.mark.parametrize("line, message", [
+    ("steps: 1:30", "steps: expected a whole number >= 1, got '1:30'"),  # YAML 1.1: 90
+    ("steps: 010", "steps: expected a whole number >= 1, got '010'"),    # YAML 1.1: 8
+    ("steps: 0x1f", "steps: expected a whole number >= 1, got '0x1f'"),  # YAML 1.1: 31
+    ("steps: 1_000", "steps: expected a whole number >= 1, got '1_000'"),
+    ("timestep: 1e308 ps", "timestep: must be finite, got '1e308 ps'"),  # inf once in ASE units
+    ("calculator: {name: [tip3p]}", "calculator.name: expected tip3p, tip4p, lammps, ipi or"),
+    ("'': 1", "'': unknown key"),
+    ("outputs: {directory: out, checkpoint: null}",  # was the file 'None'
+     "outputs.checkpoint: expected a file or folder name, got None"),
+    ("outputs: {directory: out, trajectory: 5}", "outputs.trajectory: expected a file or"),
+    ("outputs: {directory: [out]}", "outputs.directory: expected a file or folder name"),
+    ('outputs: {directory: out, "md\\nlog": 1}', "outputs.'md\\nlog': unknown key"),
+])
+def test_quirks_the_fuzzing_found(tmp_path, line, message):
+    """Found by the fuzzing above or while reading the reader.  Each was read as something
+    else (YAML 1.1's base-60, octal, hex and underscored numbers; a null checkpoint as a
+    file 'None', a number or a list as a file name), overflowed to infinity, crashed (a
+    list as the name: TypeError), or gave a message without its field (an empty or
+    multi-line key)."""
+    text = yaml.safe_dump({k: v for k, v in BASES[0].items() if k != line.split(":")[0]})
+    path = tmp_path / "quirk.yaml"
+    path.write_text(text + line + "\n")
+    with pytest.raises(ConfigError) as err:
+        check_config(load_config(path))
+    assert str(err.value).startswith(message), str(err.value)
+    assert_one_clear_line(err.value)

@@ -1,0 +1,207 @@
+"""The trust rule of configurations: an allow-list (rigidmd.config.trust, issue 34 item 7).
+
+Without ``--trust`` a configuration may name only the calculators on the list,
+pass only their listed options with values of the listed kinds, give only
+LAMMPS's interaction commands, and write only inside its run's directory.
+Each case below was a way around the earlier rule; each is refused with one
+line naming the field and saying that ``--trust`` allows it, before any module
+it names is imported and before anything is written.  ``--trust`` lets each
+through.
+"""
+
+import sys
+
+import pytest
+
+from rigidmd.config import ConfigError, check_config
+from rigidmd.config.trust import ALLOWED_CALCULATORS, GivenOnCommandLine
+from rigidmd.relaxrun import relax_only
+
+WATERS = {"builtin": "water_cluster", "n_molecules": 2, "seed": 0}
+LJ = ["pair_style lj/cut 5.0", "pair_coeff * * 0.0 1.0"]
+
+
+def config(tmp_path, **changes):
+    """A small valid configuration (2 waters, ASE's TIP3P), changed."""
+    raw = {"structure": dict(WATERS), "calculator": {"name": "tip3p"}, "timestep": "1 fs",
+           "steps": 2, "outputs": {"directory": "out"}, "_base": str(tmp_path)}
+    raw.update(changes)
+    return raw
+
+
+def refused(raw, field, trust_lets_it=True):
+    """check_config refuses ``raw`` naming ``field`` (one line, --trust named); with
+    --trust it is accepted (or refused for another reason)."""
+    with pytest.raises(ConfigError) as err:
+        check_config(raw)
+    message = str(err.value)
+    assert message.startswith(f"{field}:"), message
+    assert "\n" not in message and "--trust" in message, message
+    if trust_lets_it:
+        check_config(raw, trust=True)
+    return message
+
+
+def nothing_written(tmp_path):
+    assert sorted(p.name for p in tmp_path.iterdir()) == [], list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("name, options", [
+    ("ase.calculators.cp2k.CP2K", {"command": "touch pwned"}),
+    ("ase.calculators.dftd3.DFTD3", {"command": "touch pwned"}),
+    ("ase.calculators.lammpsrun.LAMMPS", {"command": "touch pwned"}),
+    ("ase.calculators.socketio.SocketIOCalculator", {"command": "touch pwned"}),
+])
+def test_calculators_that_run_programs_are_refused_before_import(tmp_path, name, options):
+    """ASE calculators whose ``command`` runs a program: not on the list, refused by name,
+    so their module is not even imported."""
+    module = name.rpartition(".")[0]
+    sys.modules.pop(module, None)
+    refused(config(tmp_path, calculator={"name": name, "options": options}),
+            "calculator.name")
+    nothing_written(tmp_path)
+
+
+def test_a_module_is_not_imported_before_it_is_known_allowed(tmp_path, monkeypatch):
+    """A module that runs code when imported (here: writes a file) named as the calculator:
+    refused without importing it.  (The earlier rule imported it, then found no class.)"""
+    package = tmp_path / "site"
+    package.mkdir()
+    marker = tmp_path / "site" / "imported"
+    (package / "planted_calculator.py").write_text(
+        f"open({str(marker)!r}, 'w').write('ran')\nCalculator = None\n")
+    monkeypatch.syspath_prepend(str(package))
+    raw = config(tmp_path, calculator={"name": "planted_calculator.Calculator"})
+    with pytest.raises(ConfigError, match="not a calculator a configuration may name"):
+        check_config(raw)
+    assert not marker.exists() and "planted_calculator" not in sys.modules
+    sys.modules.pop("planted_calculator", None)
+
+
+def test_allowed_calculators_with_options_of_other_names_or_kinds(tmp_path):
+    """A calculator on the list with an option not on its list (``command``, ``directory``:
+    files written) or of another kind: refused, naming the option."""
+    for name in ("ase.calculators.emt.EMT", "tip3p"):
+        message = refused(config(tmp_path, calculator={"name": name,
+                                                       "options": {"command": "x"}}),
+                          "calculator.options.command", trust_lets_it=False)
+        assert "allowed:" in message
+    lj = "ase.calculators.lj.LennardJones"
+    refused(config(tmp_path, calculator={"name": lj, "options": {"directory": "/etc"}}),
+            "calculator.options.directory")
+    with pytest.raises(ConfigError, match=r"^calculator.options.rc: expected a positive "
+                                          r"number, got '9'$"):
+        check_config(config(tmp_path, calculator={"name": lj, "options": {"rc": "9"}}))
+
+
+def test_what_is_on_the_list_is_accepted(tmp_path):
+    """The allow-list lets ordinary configurations through untouched."""
+    for calc in ({"name": "tip3p", "options": {"rc": 4.0, "width": 1.0}},
+                 {"name": "ase.calculators.lj.LennardJones",
+                  "options": {"sigma": 3.0, "epsilon": 0.005, "rc": 9.0, "smooth": True}},
+                 {"name": "ase.calculators.emt.EMT"},
+                 {"name": "lammps", "commands": LJ, "options": {"skin": 1.0, "threads": 1}},
+                 {"name": "lammps", "commands": LJ, "processes": 2,
+                  "options": {"timeout": 30.0}},
+                 {"name": "lammps", "water_model": {"name": "tip4p2005", "cutoff": 4.0},
+                  "options": {"exclude_intramolecular": True}},
+                 {"name": "rigidmd.lammps.LAMMPSCalculator",
+                  "options": {"commands": LJ, "atom_types": {"O": 1, "H": 2}}}):
+        checked = check_config(config(tmp_path, calculator=calc))
+        assert checked.calculator.name == calc["name"]
+    nothing_written(tmp_path)
+    assert all("." in name or name in ("tip3p", "tip4p", "lammps", "ipi")
+               for name in ALLOWED_CALCULATORS)
+
+
+def test_a_dotted_lammps_engine_has_its_commands_checked(tmp_path):
+    """``rigidmd.lammps.LAMMPSEngine`` by its dotted path: its commands (``shell``) and
+    its file-writing options (``workdir``) were not checked."""
+    engine = "rigidmd.lammps.LAMMPSEngine"
+    refused(config(tmp_path, calculator={
+        "name": engine, "options": {"commands": [*LJ, "shell touch pwned"]}}),
+        "calculator.options.commands")
+    refused(config(tmp_path, calculator={
+        "name": engine, "options": {"commands": LJ, "workdir": "/tmp/anywhere"}}),
+        "calculator.options.workdir")
+    nothing_written(tmp_path)
+
+
+@pytest.mark.parametrize("calc", [
+    {"name": "lammps", "water_model": {"name": "tip3p", "cutoff": 4.0},
+     "options": {"cmdargs": ["-log", "elsewhere.log"]}},
+    {"name": "lammps", "commands": LJ, "options": {"cmdargs": ["-in", "pwned.in"]}},
+    {"name": "lammps", "commands": LJ, "processes": 2, "options": {"cmdargs": ["-log", "x"]}},
+    {"name": "rigidmd.lammps.LAMMPSCalculator",
+     "options": {"commands": LJ, "cmdargs": ["-log", "x"]}},
+])
+def test_lammps_command_line_is_refused_with_or_without_a_water_model(tmp_path, calc):
+    """LAMMPS's command line (``-log FILE`` writes a file, ``-in`` reads commands): with a
+    ``water_model`` it was not checked at all."""
+    refused(config(tmp_path, calculator=calc), "calculator.options.cmdargs")
+    nothing_written(tmp_path)
+
+
+def test_kspace_parameters_are_lammps_commands_too(tmp_path):
+    refused(config(tmp_path, calculator={
+        "name": "lammps", "commands": LJ,
+        "options": {"kspace_parameters": "kspace_modify gewald 0.3\nshell touch pwned"}}),
+        "calculator.options.kspace_parameters")
+
+
+@pytest.mark.parametrize("section, key, value", [
+    ("relax", "trajectory", "/tmp/elsewhere/relax.traj"),
+    ("relax", "trajectory", "../relax.traj"),
+    ("relax", "log", "sub/../../relax.log"),
+    ("outputs", "trajectory", "/tmp/elsewhere/md.traj"),
+    ("outputs", "log", "../md.log"),
+    ("outputs", "checkpoint", "/tmp/checkpoint.npz"),
+    ("outputs", "directory", "/tmp/elsewhere"),
+    ("outputs", "directory", "../elsewhere"),
+])
+def test_outputs_only_inside_the_run_directory(tmp_path, section, key, value):
+    """Absolute paths and ``..`` in output fields: a configuration writes only inside its
+    run's directory."""
+    raw = config(tmp_path)
+    raw.setdefault(section, {})
+    raw[section] = dict(raw[section], **{key: value})
+    message = refused(raw, f"{section}.{key}", trust_lets_it=False)
+    assert "outside the run's directory" in message
+    nothing_written(tmp_path)
+
+
+def test_outputs_with_trust_and_from_the_command_line(tmp_path):
+    """--trust lets output paths be anywhere; ``--outdir`` (the user's own) may be
+    absolute without it; relative paths inside are the ordinary case."""
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    raw = config(tmp_path, outputs={"directory": str(elsewhere), "log": "md.log"})
+    check_config(raw, trust=True)
+    raw = config(tmp_path, outputs={"directory": GivenOnCommandLine(elsewhere),
+                                    "log": "md.log", "trajectory": "md.traj"},
+                 relax={"trajectory": "relax.traj"})
+    assert check_config(raw).outputs.directory == elsewhere
+    (tmp_path / "out" / "frames").mkdir(parents=True)
+    raw = config(tmp_path, outputs={"directory": "out", "trajectory": "frames/md.traj"})
+    assert check_config(raw).outputs.trajectory == tmp_path / "out" / "frames" / "md.traj"
+
+
+def test_rigidmd_relax_checks_its_output_paths_first(tmp_path):
+    """``rigidmd relax`` (its own reader) refuses the same paths before it relaxes."""
+    raw = config(tmp_path, relax={"trajectory": str(tmp_path / "elsewhere" / "r.traj")})
+    with pytest.raises(ConfigError, match="^relax.trajectory: .* outside the run's"):
+        relax_only(raw)
+    nothing_written(tmp_path)
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("atom_types", {"O": "1", "H": 2}, "calculator.atom_types.O: expected a whole number >= 1"),
+    ("atom_types", {"O": 0, "H": 2}, "calculator.atom_types.O: expected a whole number >= 1"),
+    ("charges", {"O": "-0.8", "H": 0.4}, "calculator.charges.O: expected a number"),
+])
+def test_charges_and_types_are_checked(tmp_path, field, value, message):
+    """Values that reach LAMMPS as text: checked as numbers, with or without --trust."""
+    raw = config(tmp_path, calculator={"name": "lammps", "commands": LJ, field: value})
+    for trust in (False, True):
+        with pytest.raises(ConfigError, match=f"^{message}"):
+            check_config(raw, trust=trust)
