@@ -24,6 +24,18 @@ Hartree: ASE's client with ASE's (the default here), LAMMPS's ``fix ipi``
 with 8-digit ones (``bohr``, ``hartree`` take the engine's values, so that its
 numbers come back to roundoff).
 
+Asking for less (rigidmd's extension, for engines that know it)
+    A server made with ``tally_requests=True`` sends, in the same write as
+    each ``POSDATA``, a ``RMDTALLY`` header and one ``int32``: bit 0 asks for
+    the energy, bit 1 for the virial, of that one configuration (forces are
+    always computed).  An engine may then skip what is not asked, as native
+    LAMMPS tallies energy and virial only on output steps; the calculator
+    keeps only the properties asked for.  rigidmd's LAMMPS ``fix rigidmd/ipi``
+    understands it; an engine that does not (``fix ipi``, ASE's client, i-PI
+    drivers) would stop at the unknown header, so the flag is off by default.
+    An engine's ``extra`` string (after the virial) is kept in
+    :attr:`IPICalculator.engine_extra`.
+
 The virial ``W = -V σ`` (eV) gives the stress.  LAMMPS's ``fix ipi`` fills
 only the upper triangle (xy, xz, yz) and leaves the lower one zero (ASE's own
 server would symmetrise that with the zeros and halve every shear stress):
@@ -75,6 +87,10 @@ class IPICalculator(Calculator):
         Seconds to wait for the engine to connect (default ``timeout``).
     bohr, hartree : float
         The engine's Bohr (Å) and Hartree (eV): ASE's by default.
+    tally_requests : bool, default False
+        Say with each configuration whether the energy and the virial are
+        wanted (``RMDTALLY``, see the module notes); only for engines that
+        understand it.
 
     Notes
     -----
@@ -89,7 +105,8 @@ class IPICalculator(Calculator):
     implemented_properties = ["energy", "free_energy", "forces", "stress"]
 
     def __init__(self, unixsocket=None, *, port=None, host="localhost", timeout=120.0,
-                 connect_timeout=None, bohr=units.Bohr, hartree=units.Hartree, **kwargs):
+                 connect_timeout=None, bohr=units.Bohr, hartree=units.Hartree,
+                 tally_requests=False, **kwargs):
         super().__init__(**kwargs)
         if unixsocket is not None and port is not None:
             raise ValueError("IPICalculator: give unixsocket or port, not both")
@@ -107,6 +124,9 @@ class IPICalculator(Calculator):
             connect_timeout)
         self.bohr = float(bohr)
         self.hartree = float(hartree)
+        self.tally_requests = bool(tally_requests)
+        #: The ``extra`` string the engine sent with its last forces (bytes).
+        self.engine_extra = b""
         self._server = None
         self._conn = None
         self._handshaken = False
@@ -250,8 +270,11 @@ class IPICalculator(Calculator):
             self._fail(f"i-PI engine answered STATUS with {status!r}, expected READY")
         self._handshaken = True
 
-    def _exchange(self, cell, positions):
-        """Energy (eV), forces (eV/Å) and virial (eV) for positions in the engine's frame."""
+    def _exchange(self, cell, positions, tally=b""):
+        """Energy (eV), forces (eV/Å) and virial (eV) for positions in the engine's frame.
+
+        ``tally``: what goes before ``POSDATA`` (a ``RMDTALLY`` message, or nothing).
+        """
         self._limit = self.timeout
         deadline = time.monotonic() + self.timeout
         if not self._handshaken:
@@ -259,7 +282,7 @@ class IPICalculator(Calculator):
         bohr, n = self.bohr, len(positions)
         h = cell.T / bohr
         ih = np.linalg.pinv(cell) * bohr if np.any(cell) else np.zeros((3, 3))
-        self._send(_word("POSDATA"), np.ascontiguousarray(h, np.float64).tobytes(),
+        self._send(tally, _word("POSDATA"), np.ascontiguousarray(h, np.float64).tobytes(),
                    np.ascontiguousarray(ih, np.float64).tobytes(),
                    np.array([n], np.int32).tobytes(),
                    np.ascontiguousarray(positions / bohr, np.float64).tobytes(),
@@ -279,8 +302,7 @@ class IPICalculator(Calculator):
         forces = np.frombuffer(body[:24 * n], np.float64).reshape(n, 3)
         virial = np.frombuffer(body[24 * n:24 * n + 72], np.float64).reshape(3, 3)
         extra = int(np.frombuffer(body[-4:], np.int32)[0])
-        if extra:
-            self._recv(extra, deadline, "forces")
+        self.engine_extra = self._recv(extra, deadline, "forces") if extra else b""
         hartree = self.hartree
         return energy * hartree, forces * (hartree / bohr), symmetric_virial(virial) * hartree
 
@@ -303,14 +325,26 @@ class IPICalculator(Calculator):
             positions = positions + origin
         if self._conn is None:
             self._connect(atoms)
-        energy, forces, virial = self._exchange(cell, positions)
+        want_energy = not self.tally_requests or bool({"energy", "free_energy"} & set(properties))
+        want_stress = periodic and (not self.tally_requests or "stress" in properties)
+        tally = b""
+        if self.tally_requests:
+            tally = _word("RMDTALLY") + np.array([want_energy | want_stress << 1],
+                                                 np.int32).tobytes()
+        energy, forces, virial = self._exchange(cell, positions, tally)
         if rotation is not None:
             forces = forces @ rotation.T
             virial = rotation @ virial @ rotation.T
-        self.results = {"energy": energy, "free_energy": energy, "forces": forces.copy()}
-        if periodic:
+        results = {"forces": forces.copy()}
+        if want_energy:
+            results.update(energy=energy, free_energy=energy)
+        if want_stress:
             stress = -virial / abs(np.linalg.det(atoms.cell.array))
-            self.results["stress"] = stress[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
+            results["stress"] = stress[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
+        if system_changes:
+            self.results = results
+        else:  # the same atoms asked for more: keep what was there
+            self.results.update(results)
 
     def close(self):
         """Close the connection, stop the engine and remove the socket file."""

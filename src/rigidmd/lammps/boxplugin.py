@@ -45,10 +45,14 @@ import tempfile
 import warnings
 from pathlib import Path
 
-__all__ = ["BoxPluginUnavailable", "box_plugin", "plugin_source", "warn_fallback"]
+__all__ = ["BoxPluginUnavailable", "box_plugin", "plugin_library", "plugin_source",
+           "warn_fallback"]
 
 #: The plugin's C++ source, shipped in the package.
 SOURCE = Path(__file__).with_name("plugin") / "rigidmd_box.cpp"
+#: Every source built into the library: the box styles and the engine's ``fix rigidmd/ipi``
+#: (:mod:`rigidmd.lammps.engine`), which also makes it loadable by ``plugin load``.
+SOURCES = (SOURCE, SOURCE.with_name("rigidmd_ipi.cpp"))
 #: Compiler flags (``-DLAMMPS_SMALLBIG``: the integer sizes the wheel was built with).
 FLAGS = ("-O2", "-fPIC", "-shared", "-std=c++17", "-DLAMMPS_SMALLBIG")
 #: Seconds a build may take before it counts as failed.
@@ -106,7 +110,7 @@ def _cache_dirs():
 
 
 def _key(compiler, library, includes):
-    digest = hashlib.sha256(SOURCE.read_bytes())
+    digest = hashlib.sha256(b"".join(source.read_bytes() for source in SOURCES))
     stat = library.stat()
     for part in (compiler, *FLAGS, str(library), str(stat.st_size), str(stat.st_mtime_ns),
                  *map(str, includes)):
@@ -118,7 +122,8 @@ def _compile(compiler, includes, target):
     """Build the plugin into ``target`` (a new file, renamed into place when complete)."""
     target.parent.mkdir(parents=True, exist_ok=True)
     partial = target.with_name(f"{target.stem}.{os.getpid()}.partial.so")
-    command = [compiler, *FLAGS, *(f"-I{d}" for d in includes), str(SOURCE), "-o", str(partial)]
+    command = [compiler, *FLAGS, *(f"-I{d}" for d in includes), *map(str, SOURCES), "-o",
+               str(partial)]
     try:
         done = subprocess.run(command, capture_output=True, text=True, timeout=BUILD_TIMEOUT,
                               check=False)
@@ -136,8 +141,9 @@ def _compile(compiler, includes, target):
 def _build():
     if os.environ.get("RIGIDMD_LAMMPS_PLUGIN", "1").strip() in ("0", "no", "false", "off"):
         raise BoxPluginUnavailable("switched off by RIGIDMD_LAMMPS_PLUGIN")
-    if not SOURCE.is_file():
-        raise BoxPluginUnavailable(f"the plugin source is missing ({SOURCE})")
+    missing = [source for source in SOURCES if not source.is_file()]
+    if missing:
+        raise BoxPluginUnavailable(f"the plugin source is missing ({missing[0]})")
     library, includes = _lammps_files()
     compiler = _compiler()
     name = f"rigidmd_box-{_key(compiler, library, includes)}.so"
@@ -155,6 +161,26 @@ def _build():
             failures.append(f"{directory}: {err.strerror or err}")
     raise BoxPluginUnavailable("no writable cache directory for the plugin (" +
                                "; ".join(failures) + ")")
+
+
+def plugin_library():
+    """Path of the plugin library, built once per user (for ``plugin load`` by ``lmp``).
+
+    Raises
+    ------
+    BoxPluginUnavailable
+        As :func:`box_plugin` (the reason is kept: a process tries once).
+    """
+    found = _FOUND.get("plugin")
+    if found is None:
+        try:
+            found = _build()
+        except BoxPluginUnavailable as err:
+            found = err
+        _FOUND["plugin"] = found
+    if isinstance(found, BoxPluginUnavailable):
+        raise found
+    return found
 
 
 def box_plugin(lmp):
@@ -179,15 +205,7 @@ def box_plugin(lmp):
         process tries once.
     """
     key = "plugin"
-    found = _FOUND.get(key)
-    if found is None:
-        try:
-            found = _build()
-        except BoxPluginUnavailable as err:
-            found = err
-        _FOUND[key] = found
-    if isinstance(found, BoxPluginUnavailable):
-        raise found
+    found = plugin_library()
     try:
         if found not in _HANDLES:  # opened once (RTLD_GLOBAL: it uses LAMMPS's symbols)
             library = ctypes.CDLL(str(found), mode=getattr(ctypes, "RTLD_GLOBAL", 0))
