@@ -194,7 +194,7 @@ def test_an_engine_started_elsewhere_over_tcp(tmp_path):
         thread.join()
         for proc in started:
             proc.wait(timeout=30)  # EXIT: LAMMPS leaves (by MPI_Abort)
-    assert f"fix rmd_ipi all ipi localhost {port}" in (tmp_path / "in.engine").read_text()
+    assert f"fix rmd_ipi all rigidmd/ipi localhost {port}" in (tmp_path / "in.engine").read_text()
 
 
 def test_virial_lower_triangle_is_mirrored():
@@ -469,7 +469,7 @@ def test_rigidmd_run_with_an_engine_started_elsewhere(tmp_path):
             assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
             time.sleep(0.05)
         time.sleep(0.2)
-        assert f"fix rmd_ipi all ipi {name} 0 unix" in deck.read_text()
+        assert f"fix rmd_ipi all rigidmd/ipi {name} 0 unix" in deck.read_text()
         lmp, lmp_env = lammps_executable()
         engine = subprocess.Popen([str(lmp), "-in", "in.engine", "-screen", "none"],
                                   cwd=deck.parent, env=lmp_env)

@@ -230,6 +230,7 @@ class LAMMPSEngine(IPICalculator):
         self.poll_us = int(poll_us)
         #: The engine's fix: ``"rigidmd/ipi"`` or ``"ipi"`` (None before the first input).
         self.engine_fix = None
+        self._library = None
         #: The ``kspace_modify`` command fixing the k-space parameters (None before).
         self.kspace_parameters = None
         #: LAMMPS's log of the current (or last failed) engine.
@@ -241,15 +242,27 @@ class LAMMPSEngine(IPICalculator):
         self._flips = None
 
     # ------------------------------------------------------------ the input
+    def _choose_fix(self):
+        """``fix rigidmd/ipi`` (and its plugin library) where it can be had, else ``fix ipi``.
+
+        Decided once per object, before the first positions are sent (the two put the
+        box's origin in different places, see :meth:`origin`).
+        """
+        if self.engine_fix is None:
+            self._library = engine_plugin()
+            if self._library is None:
+                self.engine_fix, self.tally_requests = "ipi", False
+                self.bohr, self.hartree = LAMMPS_IPI_BOHR, LAMMPS_IPI_HARTREE
+            else:
+                self.engine_fix, self.tally_requests = "rigidmd/ipi", True
+                self.bohr, self.hartree = units.Bohr, units.Hartree
+        return self.engine_fix
+
     def _fix_ipi(self):
         address = f"{self.unixsocket} 0 unix" if self.port is None else f"{self.host} {self.port}"
-        library = engine_plugin()
-        if library is None:
-            self.engine_fix, self.tally_requests = "ipi", False
-            self.bohr, self.hartree = LAMMPS_IPI_BOHR, LAMMPS_IPI_HARTREE
+        if self._choose_fix() == "ipi":
             return [f"fix rmd_ipi all ipi {address}"]
-        self.engine_fix, self.tally_requests = "rigidmd/ipi", True
-        self.bohr, self.hartree = units.Bohr, units.Hartree
+        library = self._library
         return [f"plugin load {library}",
                 f"fix rmd_ipi all rigidmd/ipi {address} bohr {units.Bohr!r} hartree "
                 f"{units.Hartree!r} poll {self.poll_us}"]
@@ -361,10 +374,11 @@ class LAMMPSEngine(IPICalculator):
     def engine_cell(self, cell):
         # LAMMPS keeps tilts within half a box length (its minimum image and ghost atoms
         # assume it); a barostat's cell may go further: the same lattice, reduced.
-        return reduce_tilt(cell)[0]
+        # The rotated cell's upper triangle is roundoff (1e-16): LAMMPS's frame has none.
+        return np.tril(reduce_tilt(cell)[0])
 
     def origin(self, cell):
-        if self.engine_fix == "rigidmd/ipi":
+        if self._choose_fix() == "rigidmd/ipi":
             return None  # positions from the box's lower corner, as LAMMPSCalculator's
         # fix ipi centres the box (boxlo = -diag/2).  PPPM is not exactly translation
         # invariant (its mesh is fixed to the box), so positions are shifted to sit where
