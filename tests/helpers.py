@@ -5,6 +5,7 @@ every system used in two places is built in one place.
 """
 
 import functools
+import os
 from pathlib import Path
 
 import numba
@@ -468,3 +469,51 @@ def sample(kind, pressure_bar=None, scale=1.0, steps=12000):
         2 * dyn.get_rotational_kinetic_energy() / (units.kB * dyn.rotational_dof))), interval=5)
     dyn.run(steps)
     return np.array(rows)
+
+
+def processes_named(name):
+    """PIDs of running processes whose executable is ``name`` (zombies excluded)."""
+    found = []
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                stat = f.read()
+        except OSError:
+            continue
+        comm, state = stat[stat.index("(") + 1:stat.rindex(")")], stat[stat.rindex(")") + 2]
+        if comm == name and state != "Z":
+            found.append(int(pid))
+    return found
+
+
+def children_of(pid):
+    """All descendants of ``pid`` (by /proc's parent links)."""
+    parents = {}
+    for p in os.listdir("/proc"):
+        if p.isdigit():
+            try:
+                with open(f"/proc/{p}/stat") as f:
+                    stat = f.read()
+            except OSError:
+                continue
+            parents[int(p)] = int(stat[stat.rindex(")") + 2:].split()[1])
+    found, frontier = [], [pid]
+    while frontier:
+        frontier = [p for p, parent in parents.items() if parent in frontier]
+        found += frontier
+    return found
+
+
+def cpu_seconds(pids):
+    """CPU seconds (user + system) the processes ``pids`` have used so far."""
+    ticks = 0
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        ticks += int(fields[11]) + int(fields[12])
+    return ticks / os.sysconf("SC_CLK_TCK")

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from ase import units
 from ase.io import read
-from helpers import DATA, PPPM_27, water_box_27
+from helpers import DATA, PPPM_27, children_of, processes_named, water_box_27
 
 from rigidmd import RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.ipi import EngineError, IPICalculator
@@ -27,41 +27,6 @@ from rigidmd.lammps import LAMMPSCalculator
 from rigidmd.lammps.engine import LAMMPSEngine
 
 pytestmark = pytest.mark.lammps
-
-
-def processes_named(name):
-    """PIDs of running processes whose executable is ``name`` (zombies excluded)."""
-    found = []
-    for pid in os.listdir("/proc"):
-        if not pid.isdigit():
-            continue
-        try:
-            with open(f"/proc/{pid}/stat") as f:
-                stat = f.read()
-        except OSError:
-            continue
-        comm, state = stat[stat.index("(") + 1:stat.rindex(")")], stat[stat.rindex(")") + 2]
-        if comm == name and state != "Z":
-            found.append(int(pid))
-    return found
-
-
-def children_of(pid):
-    """All descendants of ``pid`` (by /proc's parent links)."""
-    parents = {}
-    for p in os.listdir("/proc"):
-        if p.isdigit():
-            try:
-                with open(f"/proc/{p}/stat") as f:
-                    stat = f.read()
-            except OSError:
-                continue
-            parents[int(p)] = int(stat[stat.rindex(")") + 2:].split()[1])
-    found, frontier = [], [pid]
-    while frontier:
-        frontier = [p for p, parent in parents.items() if parent in frontier]
-        found += frontier
-    return found
 
 
 def assert_same(atoms, reference):

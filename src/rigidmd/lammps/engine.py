@@ -186,10 +186,11 @@ class LAMMPSEngine(IPICalculator):
     workdir : path, optional
         Where the input, data file and LAMMPS's log go (default: a new
         temporary directory, removed by :meth:`close` unless the engine failed).
-    poll_us : int, default 50
-        With ``fix rigidmd/ipi``: microseconds between two looks of a waiting
-        rank (other than 0) for the next call; 0 leaves the wait to MPI (MPICH
-        then keeps a core busy while rigidmd integrates).
+    poll_us : int, default 500
+        With ``fix rigidmd/ipi``: the longest nap (microseconds) of a rank
+        other than 0 waiting for the next call (it naps a twentieth of the last
+        wait, at least 10 µs); 0 leaves the wait to MPI (MPICH then keeps a
+        core busy while rigidmd integrates).
 
     Notes
     -----
@@ -205,7 +206,7 @@ class LAMMPSEngine(IPICalculator):
                  molecule_ids=None, exclude_intramolecular=True, ase_constants=False,
                  skin=2.0, triclinic=None, launch=True, unixsocket=None, port=None,
                  host="localhost", timeout=120.0, connect_timeout=None, workdir=None,
-                 poll_us=50, **kwargs):
+                 poll_us=500, **kwargs):
         super().__init__(unixsocket, port=port, host=host, timeout=timeout,
                          connect_timeout=connect_timeout, bohr=LAMMPS_IPI_BOHR,
                          hartree=LAMMPS_IPI_HARTREE, **kwargs)

@@ -24,8 +24,10 @@
 //     (`bohr`, `hartree`, default ASE's CODATA 2014 values), so the numbers come back to
 //     roundoff;
 //   * ranks other than 0 wait for the next request without spinning: a non-blocking
-//     broadcast tested every `poll` microseconds (default 50; 0: MPI's own blocking
-//     broadcast, which MPICH implements by polling a core at 100 %);
+//     broadcast tested after naps of a twentieth of the last wait (the server's step),
+//     at least 10 and at most `poll` microseconds (default 500; 0: MPI's own blocking
+//     broadcast, which MPICH implements by polling, a core at 100 %), so a wait costs
+//     about twenty wake-ups and is over by at most a twentieth of it late;
 //   * EXIT ends the run at the next step (LAMMPS then finishes normally).
 //
 // Messages (server -> engine): STATUS (answered READY, or HAVEDATA with forces pending),
@@ -54,6 +56,7 @@
 #include <mpi.h>
 
 #include <cerrno>
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <ctime>
@@ -94,7 +97,8 @@ class FixRigidmdIPI : public Fix {
   bool inet = true;
   double bohr = 0.5291772105638411;     // Å (ASE's units.Bohr)
   double hartree = 27.211386024367243;  // eV (ASE's units.Hartree)
-  long poll_us = 50;
+  long poll_us = 500;            // longest nap of a waiting rank (microseconds)
+  double last_wait = 0.0;        // seconds the last wait for the server took
   int sock = -1;
   bigint natoms = 0;
   int flags = ENERGY | VIRIAL;   // what to tally at the step under way
@@ -272,13 +276,16 @@ void FixRigidmdIPI::share(void *data, int count, MPI_Datatype type, bool patient
     MPI_Wait(&pending_request, MPI_STATUS_IGNORE);
     return;
   }
-  struct timespec nap = {poll_us / 1000000, (poll_us % 1000000) * 1000};
+  long nap_us = std::min(poll_us, std::max(10L, static_cast<long>(last_wait * 5e4)));
+  struct timespec nap = {nap_us / 1000000, (nap_us % 1000000) * 1000};
+  const double start = MPI_Wtime();
   int done = 0;
   while (true) {
     MPI_Test(&pending_request, &done, MPI_STATUS_IGNORE);
     if (done) break;
     nanosleep(&nap, nullptr);
   }
+  last_wait = MPI_Wtime() - start;
 }
 
 // Wait for the server's next request: positions (and which tallies), or EXIT.
