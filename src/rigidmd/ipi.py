@@ -55,6 +55,8 @@ import numpy as np
 from ase import units
 from ase.calculators.calculator import Calculator, PropertyNotImplementedError, all_changes
 
+from rigidmd.checks import quick_check_state
+
 __all__ = ["EngineError", "IPICalculator", "symmetric_virial"]
 
 MSGLEN = 12
@@ -281,7 +283,7 @@ class IPICalculator(Calculator):
             self._handshake(deadline)
         bohr, n = self.bohr, len(positions)
         h = cell.T / bohr
-        ih = np.linalg.pinv(cell) * bohr if np.any(cell) else np.zeros((3, 3))
+        ih = np.linalg.inv(h) if np.linalg.det(cell) else np.zeros((3, 3))
         self._send(tally, _word("POSDATA"), np.ascontiguousarray(h, np.float64).tobytes(),
                    np.ascontiguousarray(ih, np.float64).tobytes(),
                    np.array([n], np.int32).tobytes(),
@@ -294,19 +296,24 @@ class IPICalculator(Calculator):
         if header != "FORCEREADY":
             self._fail(f"i-PI engine answered GETFORCE with {header!r}, expected FORCEREADY")
         head = self._recv(12, deadline, "forces")
-        energy = float(np.frombuffer(head[:8], np.float64)[0])
-        natoms = int(np.frombuffer(head[8:], np.int32)[0])
+        energy = float(np.frombuffer(head, np.float64, 1)[0])
+        natoms = int(np.frombuffer(head, np.int32, 1, 8)[0])
         if natoms != n:
             self._fail(f"i-PI engine sent forces on {natoms} atoms, expected {n}")
         body = self._recv(8 * (3 * n + 9) + 4, deadline, "forces")
-        forces = np.frombuffer(body[:24 * n], np.float64).reshape(n, 3)
-        virial = np.frombuffer(body[24 * n:24 * n + 72], np.float64).reshape(3, 3)
-        extra = int(np.frombuffer(body[-4:], np.int32)[0])
+        forces = np.frombuffer(body, np.float64, 3 * n).reshape(n, 3)
+        virial = np.frombuffer(body, np.float64, 9, 24 * n).reshape(3, 3)
+        extra = int(np.frombuffer(body, np.int32, 1, 24 * n + 72)[0])
         self.engine_extra = self._recv(extra, deadline, "forces") if extra else b""
         hartree = self.hartree
         return energy * hartree, forces * (hartree / bohr), symmetric_virial(virial) * hartree
 
     # ------------------------------------------------------------ ASE
+    def check_state(self, atoms, tol=1e-15):
+        """What changed since the last call: ASE's test in a few array operations
+        (:func:`rigidmd.checks.quick_check_state`; it runs at every property asked)."""
+        return quick_check_state(self, atoms, tol, super().check_state)
+
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         super().calculate(atoms, properties, system_changes)
         atoms = self.atoms
