@@ -517,3 +517,33 @@ def cpu_seconds(pids):
             continue
         ticks += int(fields[11]) + int(fields[12])
     return ticks / os.sysconf("SC_CLK_TCK")
+
+
+def free_port():
+    """A TCP port on localhost that nobody listens on now."""
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("localhost", 0))
+        return probe.getsockname()[1]
+
+
+def start_by_hand(engine, directory):
+    """Start ``engine``'s command in ``directory`` once its input is written there, as a
+    user would on another node; returns the thread and the list it puts the process in."""
+    import subprocess
+    import threading
+    import time
+
+    started = []
+
+    def start():
+        while not (directory / "in.engine").exists():
+            time.sleep(0.05)
+        time.sleep(0.2)
+        cmd, env = engine.command_line()
+        started.append(subprocess.Popen(cmd, cwd=directory, env=env))
+
+    thread = threading.Thread(target=start)
+    thread.start()
+    return thread, started

@@ -6,15 +6,20 @@ The liquid is ``tests/data/water_box_27.traj`` (27 TIP3P waters, 9.3 Å box) wit
 ``lj/cut/coul/long 4.5`` and PPPM at 1e-5 (``PPPM_27``).
 """
 
-import socket
-import subprocess
-import threading
 import time
 import warnings
 
 import numpy as np
 import pytest
-from helpers import PPPM_27, children_of, cpu_seconds, processes_named, water_box_27
+from helpers import (
+    PPPM_27,
+    children_of,
+    cpu_seconds,
+    free_port,
+    processes_named,
+    start_by_hand,
+    water_box_27,
+)
 
 from rigidmd.lammps import LAMMPSCalculator, boxplugin
 from rigidmd.lammps import engine as engine_module
@@ -178,26 +183,15 @@ def test_waiting_ranks_do_not_spin():
         assert cpu_seconds(ranks) - before < 0.1
 
 
-def test_an_engine_started_by_hand_over_tcp_on_two_ranks(tmp_path):
+@pytest.mark.parametrize("processes", [1, 2])
+def test_an_engine_started_by_hand_over_tcp(tmp_path, processes):
     """As on a second node: launch=False writes the input, someone starts
-    ``mpirun -np 2 lmp -in in.engine`` there, it connects to our port; results equal
+    ``[mpirun -np 2] lmp -in in.engine`` there, it connects to our port; results equal
     the in-process calculator's; close() sends EXIT and LAMMPS ends its run normally."""
-    with socket.socket() as probe:
-        probe.bind(("localhost", 0))
-        port = probe.getsockname()[1]
-    engine = LAMMPSEngine(PPPM_27, processes=2, launch=False, port=port, workdir=tmp_path,
-                          timeout=60)
-    started = []
-
-    def by_hand():  # once the input is written (what a user copies to the other node)
-        while not (tmp_path / "in.engine").exists():
-            time.sleep(0.05)
-        time.sleep(0.2)
-        cmd, env = engine.command_line()
-        started.append(subprocess.Popen(cmd, cwd=tmp_path, env=env))
-
-    thread = threading.Thread(target=by_hand)
-    thread.start()
+    port = free_port()
+    engine = LAMMPSEngine(PPPM_27, processes=processes, launch=False, port=port,
+                          workdir=tmp_path, timeout=60)
+    thread, started = start_by_hand(engine, tmp_path)
     atoms = water_box_27()
     try:
         atoms.calc = engine
