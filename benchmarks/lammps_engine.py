@@ -21,8 +21,20 @@ Two cores, 1728 waters: native LAMMPS on 2 MPI ranks against
 ``LAMMPSEngine(processes=2)``; native on 2 OpenMP threads against
 ``LAMMPSCalculator(threads=2)`` and ``LAMMPSEngine(threads=2)``.
 
+Scaling (NVE): for each size, native ``fix rigid/nve/small`` (the wheel's
+``lmp``) on 1 and on ``--ranks`` MPI ranks, ``LAMMPSCalculator`` (one
+process) and ``LAMMPSEngine`` on 1 and on ``--ranks`` ranks, interleaved;
+each ratio is to native LAMMPS on as many ranks.
+
+The machine's load (``os.getloadavg``) is printed with every table: on a
+shared machine compare the CPU columns, and re-measure on a quiet one.
+
 Run ``python benchmarks/lammps_engine.py`` (20 minutes on a 2-core machine
-busy with other jobs); the tables are stored in ``benchmarks/lammps_engine.txt``.
+busy with other jobs) or ``--quick`` (216 and 1728 waters, half the steps,
+2 rounds, no C-rescale rows: about 5 minutes); ``--sizes 2 4 8`` adds
+13,824 waters to every table, ``--ranks 16`` scales further on a larger
+machine.  The tables are stored in ``benchmarks/lammps_engine.txt`` (not with
+``--quick``, unless ``--save``).
 """
 
 import argparse
@@ -48,7 +60,7 @@ ROOT = Path(__file__).resolve().parents[1]
 COMMANDS = ["pair_style lj/cut/coul/long 9.0", "pair_coeff * * 0.0 1.0",
             "pair_coeff 1 1 0.0065956819 3.15061", "kspace_style pppm 1e-5"]  # O is type 1
 EXCLUDE = ["neigh_modify exclude molecule/intra all"]
-STEPS = {216: 200, 1728: 40}
+STEPS = {216: 200, 1728: 40, 13824: 10}
 NPT_PARTS = [NoseHooverThermostat(298, 100 * units.fs),
              MTKBarostat(298, 1.01325 * units.bar, 1000 * units.fs)]
 TICK = os.sysconf("SC_CLK_TCK")
@@ -184,7 +196,7 @@ def with_floor(run, floors):
     return measured
 
 
-def one_core(atoms, steps, rounds):
+def one_core(atoms, steps, rounds, quick=False):
     floors = []
     runs = {
         "native NVE (fix rigid/nve/small)": with_floor(lambda: native(atoms, steps), floors),
@@ -201,6 +213,8 @@ def one_core(atoms, steps, rounds):
                                                                      steps),
         "RigidCRescale every 10, LAMMPSEngine": lambda: engine_run(atoms, "crescale10", steps),
     }
+    if quick:
+        runs = {name: run for name, run in runs.items() if "CRescale" not in name}
     results = interleaved(runs, rounds)
     results["LAMMPS force time (Pair+Kspace+Neigh)"] = tuple(np.min(floors, axis=0))
     return results
@@ -222,6 +236,40 @@ def two_cores(atoms, steps, rounds):
     return results
 
 
+def scaling(atoms, steps, rounds, ranks):
+    """NVE: native, in-process and engine on 1 and on ``ranks`` MPI ranks (wall, CPU)."""
+    runs = {
+        "native, 1 rank": lambda: native_parallel(atoms, steps)[:2],
+        f"native, {ranks} ranks": lambda: native_parallel(atoms, steps, processes=ranks)[:2],
+        "LAMMPSCalculator": lambda: calc_run(atoms, "nve", steps),
+        "LAMMPSEngine, 1 rank": lambda: engine_run(atoms, "nve", steps),
+        f"LAMMPSEngine, {ranks} ranks": lambda: engine_run(atoms, "nve", steps,
+                                                           processes=ranks),
+    }
+    return interleaved(runs, rounds)
+
+
+def scaling_table(rows, ranks):
+    """One line per size: ms per step of native and ratios to native on as many ranks."""
+    head = (f"{'waters':>7} {'native 1':>9} {'calc/nat':>9} {'eng/nat':>8} "
+            f"{f'native {ranks}':>9} {f'eng{ranks}/nat{ranks}':>11}")
+    lines = []
+    for column, label in ((0, "wall"), (1, "CPU")):
+        lines += [f"NVE, {label} time per step (ms) and ratios", head]
+        for n, r in rows:
+            one, many = r["native, 1 rank"][column], r[f"native, {ranks} ranks"][column]
+            lines.append(
+                f"{n:>7} {1e3 * one:9.2f} {r['LAMMPSCalculator'][column] / one:9.3f} "
+                f"{r['LAMMPSEngine, 1 rank'][column] / one:8.3f} {1e3 * many:9.2f} "
+                f"{r[f'LAMMPSEngine, {ranks} ranks'][column] / many:11.3f}")
+    return lines
+
+
+def load():
+    """The machine's load averages (1, 5, 15 minutes) as text."""
+    return "load average " + ", ".join(f"{v:.2f}" for v in os.getloadavg())
+
+
 def table(title, results, native_key, floor_key, ratios):
     lines = [title, f"{'run':>42} {'wall ms':>8} {'/native':>7} {'CPU ms':>8} {'/native':>7} "
              f"{'/floor':>6}"]
@@ -239,10 +287,19 @@ def main():
     parser.add_argument("--sizes", type=int, nargs="*", default=[2, 4],
                         help="replicas of the 27-water box per direction")
     parser.add_argument("--no-two-cores", action="store_true")
+    parser.add_argument("--no-scaling", action="store_true")
+    parser.add_argument("--ranks", type=int, default=2, help="MPI ranks of the scaling table")
+    parser.add_argument("--quick", action="store_true",
+                        help="216 and 1728 waters, half the steps, 2 rounds, no C-rescale")
+    parser.add_argument("--save", action="store_true", help="store the tables with --quick")
     args = parser.parse_args()
+    if args.quick:
+        args.rounds = min(args.rounds, 2)
+        for n in STEPS:
+            STEPS[n] //= 2
     lines = [f"lj/cut/coul/long 9.0 + pppm 1e-5, 1 fs, 298 K thermal rigid start; best of "
-             f"{args.rounds} interleaved rounds; 2-core machine shared with other jobs; "
-             "CPU: all processes of the run"]
+             f"{args.rounds} interleaved rounds; {os.cpu_count()} cores; CPU: all processes "
+             f"of the run; at the start: {load()}"]
     npt = {name: "native NPT (fix rigid/npt/small iso)" for name in (
         "RigidNPT (MTK iso) LAMMPSCalculator", "RigidNPT (MTK iso) LAMMPSEngine",
         "RigidCRescale every 1, LAMMPSCalculator", "RigidCRescale every 1, LAMMPSEngine",
@@ -250,8 +307,8 @@ def main():
     for replicas in args.sizes:
         atoms = water_box(replicas)
         n = len(atoms) // 3
-        results = one_core(atoms, STEPS[n], args.rounds)
-        lines += [""] + table(f"{n} waters, one core ({STEPS[n]} steps)", results,
+        results = one_core(atoms, STEPS[n], args.rounds, quick=args.quick)
+        lines += [""] + table(f"{n} waters, one core ({STEPS[n]} steps; {load()})", results,
                               "native NVE (fix rigid/nve/small)",
                               "LAMMPS force time (Pair+Kspace+Neigh)", npt)
         print("\n".join(lines[-len(results) - 2:]), flush=True)
@@ -262,11 +319,21 @@ def main():
                   "native NVE, 2 OpenMP threads": "native NVE, 2 OpenMP threads",
                   "NVE LAMMPSCalculator(threads=2)": "native NVE, 2 OpenMP threads",
                   "NVE LAMMPSEngine(threads=2)": "native NVE, 2 OpenMP threads"}
-        lines += [""] + table("1728 waters, two cores (ratios to native on the same 2 ranks, "
-                              "or threads)", results, "native NVE, 2 MPI ranks",
+        lines += [""] + table(f"1728 waters, two cores (ratios to native on the same 2 ranks, "
+                              f"or threads; {load()})", results, "native NVE, 2 MPI ranks",
                               "LAMMPS force time, 2 ranks", ratios)
         print("\n".join(lines[-len(results) - 2:]), flush=True)
-    (Path(__file__).with_suffix(".txt")).write_text("\n".join(lines) + "\n")
+    if not args.no_scaling:
+        rows = []
+        for replicas in args.sizes:
+            atoms = water_box(replicas)
+            n = len(atoms) // 3
+            rows.append((n, scaling(atoms, STEPS[n], args.rounds, args.ranks)))
+        block = scaling_table(rows, args.ranks)
+        lines += ["", f"Scaling, NVE, best of {args.rounds} interleaved rounds ({load()})"] + block
+        print("\n".join(lines[-len(block) - 1:]), flush=True)
+    if args.save or not args.quick:
+        (Path(__file__).with_suffix(".txt")).write_text("\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

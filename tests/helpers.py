@@ -520,3 +520,46 @@ def start_cli_run(path, config, *args):
     return subprocess.Popen([sys.executable, "-m", "rigidmd.cli", "run", "run.yaml", *args],
                             cwd=path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=env)
+
+
+def cpu_seconds(pids):
+    """CPU seconds (user + system) the processes ``pids`` have used so far."""
+    ticks = 0
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        ticks += int(fields[11]) + int(fields[12])
+    return ticks / os.sysconf("SC_CLK_TCK")
+
+
+def free_port():
+    """A TCP port on localhost that nobody listens on now."""
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("localhost", 0))
+        return probe.getsockname()[1]
+
+
+def start_by_hand(engine, directory):
+    """Start ``engine``'s command in ``directory`` once its input is written there, as a
+    user would on another node; returns the thread and the list it puts the process in."""
+    import subprocess
+    import threading
+    import time
+
+    started = []
+
+    def start():
+        while not (directory / "in.engine").exists():
+            time.sleep(0.05)
+        time.sleep(0.2)
+        cmd, env = engine.command_line()
+        started.append(subprocess.Popen(cmd, cwd=directory, env=env))
+
+    thread = threading.Thread(target=start)
+    thread.start()
+    return thread, started

@@ -7,11 +7,9 @@ The periodic liquid is ``tests/data/water_box_27.traj`` (27 TIP3P waters in a
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import textwrap
-import threading
 import time
 from pathlib import Path
 
@@ -128,38 +126,6 @@ def test_a_tilt_past_half_a_box_is_reduced_and_a_flip_restarts_the_engine():
             stress = reduced.get_stress()
             np.testing.assert_allclose(atoms.get_stress(), stress,
                                        atol=1e-12 * np.abs(stress).max())
-
-
-def test_an_engine_started_elsewhere_over_tcp(tmp_path):
-    """launch=False: the input is written, someone starts lmp, it connects over TCP."""
-    with socket.socket() as probe:
-        probe.bind(("localhost", 0))
-        port = probe.getsockname()[1]
-    engine = LAMMPSEngine(PPPM_27, launch=False, port=port, workdir=tmp_path, timeout=60)
-    started = []
-
-    def start_elsewhere():
-        while not (tmp_path / "in.engine").exists():
-            time.sleep(0.05)
-        time.sleep(0.2)
-        cmd, env = engine.command_line()
-        started.append(subprocess.Popen(cmd, cwd=tmp_path, env=env))
-
-    thread = threading.Thread(target=start_elsewhere)
-    thread.start()
-    atoms = water_box_27()
-    try:
-        atoms.calc = engine
-        atoms.get_potential_energy()
-        reference = atoms.copy()
-        reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
-        assert_same(atoms, reference)
-    finally:
-        engine.close()
-        thread.join()
-        for proc in started:
-            proc.wait(timeout=30)  # EXIT: LAMMPS leaves (by MPI_Abort)
-    assert f"fix rmd_ipi all ipi localhost {port}" in (tmp_path / "in.engine").read_text()
 
 
 def test_virial_lower_triangle_is_mirrored():
@@ -429,7 +395,7 @@ def test_rigidmd_run_with_an_engine_started_elsewhere(tmp_path):
             assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
             time.sleep(0.05)
         time.sleep(0.2)
-        assert f"fix rmd_ipi all ipi {name} 0 unix" in deck.read_text()
+        assert f"fix rmd_ipi all rigidmd/ipi {name} 0 unix" in deck.read_text()
         lmp, lmp_env = lammps_executable()
         engine = subprocess.Popen([str(lmp), "-in", "in.engine", "-screen", "none"],
                                   cwd=deck.parent, env=lmp_env)

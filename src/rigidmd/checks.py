@@ -73,6 +73,19 @@ def check_constraints(atoms: Atoms) -> bool:
     return any(isinstance(c, FixCom) for c in atoms.constraints)
 
 
+def quick_check_state(calc, atoms: Atoms, tol: float, ase_check_state):
+    """A calculator's ``check_state`` through :func:`changed_properties` where it can.
+
+    ``ase_check_state``: ASE's own (the calculator's ``super().check_state``),
+    asked when there is nothing to compare with, with ``ignored_changes``, or
+    when the atoms differ in size or in the arrays they carry.
+    """
+    if calc.atoms is None or calc.ignored_changes:
+        return ase_check_state(atoms, tol)
+    changes = changed_properties(calc.atoms, atoms, tol)
+    return ase_check_state(atoms, tol) if changes is None else changes
+
+
 def changed_properties(old: Atoms, atoms: Atoms, tol: float = 1e-15):
     """ASE's ``compare_atoms`` for atoms of the same size and arrays, in a few array operations.
 

@@ -24,6 +24,18 @@ Hartree: ASE's client with ASE's (the default here), LAMMPS's ``fix ipi``
 with 8-digit ones (``bohr``, ``hartree`` take the engine's values, so that its
 numbers come back to roundoff).
 
+Asking for less (rigidmd's extension, for engines that know it)
+    A server made with ``tally_requests=True`` sends, in the same write as
+    each ``POSDATA``, a ``RMDTALLY`` header and one ``int32``: bit 0 asks for
+    the energy, bit 1 for the virial, of that one configuration (forces are
+    always computed).  An engine may then skip what is not asked, as native
+    LAMMPS tallies energy and virial only on output steps; the calculator
+    keeps only the properties asked for.  rigidmd's LAMMPS ``fix rigidmd/ipi``
+    understands it; an engine that does not (``fix ipi``, ASE's client, i-PI
+    drivers) would stop at the unknown header, so the flag is off by default.
+    An engine's ``extra`` string (after the virial) is kept in
+    :attr:`IPICalculator.engine_extra`.
+
 The virial ``W = -V σ`` (eV) gives the stress.  LAMMPS's ``fix ipi`` fills
 only the upper triangle (xy, xz, yz) and leaves the lower one zero (ASE's own
 server would symmetrise that with the zeros and halve every shear stress):
@@ -44,6 +56,8 @@ import uuid
 import numpy as np
 from ase import units
 from ase.calculators.calculator import Calculator, PropertyNotImplementedError, all_changes
+
+from rigidmd.checks import quick_check_state
 
 __all__ = ["EngineError", "IPICalculator", "add_wait_check", "remove_wait_check",
            "symmetric_virial"]
@@ -99,6 +113,10 @@ class IPICalculator(Calculator):
         Seconds to wait for the engine to connect (default ``timeout``).
     bohr, hartree : float
         The engine's Bohr (Å) and Hartree (eV): ASE's by default.
+    tally_requests : bool, default False
+        Say with each configuration whether the energy and the virial are
+        wanted (``RMDTALLY``, see the module notes); only for engines that
+        understand it.
 
     Notes
     -----
@@ -113,7 +131,8 @@ class IPICalculator(Calculator):
     implemented_properties = ["energy", "free_energy", "forces", "stress"]
 
     def __init__(self, unixsocket=None, *, port=None, host="localhost", timeout=120.0,
-                 connect_timeout=None, bohr=units.Bohr, hartree=units.Hartree, **kwargs):
+                 connect_timeout=None, bohr=units.Bohr, hartree=units.Hartree,
+                 tally_requests=False, **kwargs):
         super().__init__(**kwargs)
         if unixsocket is not None and port is not None:
             raise ValueError("IPICalculator: give unixsocket or port, not both")
@@ -131,6 +150,9 @@ class IPICalculator(Calculator):
             connect_timeout)
         self.bohr = float(bohr)
         self.hartree = float(hartree)
+        self.tally_requests = bool(tally_requests)
+        #: The ``extra`` string the engine sent with its last forces (bytes).
+        self.engine_extra = b""
         self._server = None
         self._conn = None
         self._handshaken = False
@@ -330,16 +352,19 @@ class IPICalculator(Calculator):
             self._fail(f"answered STATUS with {status!r}, expected READY")
         self._handshaken = True
 
-    def _exchange(self, cell, positions):
-        """Energy (eV), forces (eV/Å) and virial (eV) for positions in the engine's frame."""
+    def _exchange(self, cell, positions, tally=b""):
+        """Energy (eV), forces (eV/Å) and virial (eV) for positions in the engine's frame.
+
+        ``tally``: what goes before ``POSDATA`` (a ``RMDTALLY`` message, or nothing).
+        """
         self._limit = self.timeout
         deadline = time.monotonic() + self.timeout
         if not self._handshaken:
             self._handshake(deadline)
         bohr, n = self.bohr, len(positions)
         h = cell.T / bohr
-        ih = np.linalg.pinv(cell) * bohr if np.any(cell) else np.zeros((3, 3))
-        self._send(_word("POSDATA"), np.ascontiguousarray(h, np.float64).tobytes(),
+        ih = np.linalg.inv(h) if np.linalg.det(cell) else np.zeros((3, 3))
+        self._send(tally, _word("POSDATA"), np.ascontiguousarray(h, np.float64).tobytes(),
                    np.ascontiguousarray(ih, np.float64).tobytes(),
                    np.array([n], np.int32).tobytes(),
                    np.ascontiguousarray(positions / bohr, np.float64).tobytes(),
@@ -351,20 +376,24 @@ class IPICalculator(Calculator):
         if header != "FORCEREADY":
             self._fail(f"answered GETFORCE with {header!r}, expected FORCEREADY")
         head = self._recv(12, deadline, "forces")
-        energy = float(np.frombuffer(head[:8], np.float64)[0])
-        natoms = int(np.frombuffer(head[8:], np.int32)[0])
+        energy = float(np.frombuffer(head, np.float64, 1)[0])
+        natoms = int(np.frombuffer(head, np.int32, 1, 8)[0])
         if natoms != n:
             self._fail(f"sent forces on {natoms} atoms, expected {n}")
         body = self._recv(8 * (3 * n + 9) + 4, deadline, "forces")
-        forces = np.frombuffer(body[:24 * n], np.float64).reshape(n, 3)
-        virial = np.frombuffer(body[24 * n:24 * n + 72], np.float64).reshape(3, 3)
-        extra = int(np.frombuffer(body[-4:], np.int32)[0])
-        if extra:
-            self._recv(extra, deadline, "forces")
+        forces = np.frombuffer(body, np.float64, 3 * n).reshape(n, 3)
+        virial = np.frombuffer(body, np.float64, 9, 24 * n).reshape(3, 3)
+        extra = int(np.frombuffer(body, np.int32, 1, 24 * n + 72)[0])
+        self.engine_extra = self._recv(extra, deadline, "forces") if extra else b""
         hartree = self.hartree
         return energy * hartree, forces * (hartree / bohr), symmetric_virial(virial) * hartree
 
     # ------------------------------------------------------------ ASE
+    def check_state(self, atoms, tol=1e-15):
+        """What changed since the last call: ASE's test in a few array operations
+        (:func:`rigidmd.checks.quick_check_state`; it runs at every property asked)."""
+        return quick_check_state(self, atoms, tol, super().check_state)
+
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         super().calculate(atoms, properties, system_changes)
         atoms = self.atoms
@@ -384,8 +413,14 @@ class IPICalculator(Calculator):
             positions = positions + origin
         if self._conn is None:
             self._connect(atoms)
+        want_energy = not self.tally_requests or bool({"energy", "free_energy"} & set(properties))
+        want_stress = periodic and (not self.tally_requests or "stress" in properties)
+        tally = b""
+        if self.tally_requests:
+            tally = _word("RMDTALLY") + np.array([want_energy | want_stress << 1],
+                                                 np.int32).tobytes()
         try:
-            energy, forces, virial = self._exchange(cell, positions)
+            energy, forces, virial = self._exchange(cell, positions, tally)
         except EngineError:
             raise  # dropped by _fail
         except BaseException:
@@ -397,14 +432,20 @@ class IPICalculator(Calculator):
             forces = forces @ rotation.T
             virial = rotation @ virial @ rotation.T
         if not self._verified:
-            why = self.check_first_answer(energy, forces)
+            why = self.check_first_answer(energy if want_energy else None, forces)
             if why is not None:
                 self._fail(f"is not this calculator's engine: {why}")
             self._verified = True
-        self.results = {"energy": energy, "free_energy": energy, "forces": forces.copy()}
-        if periodic:
+        results = {"forces": forces.copy()}
+        if want_energy:
+            results.update(energy=energy, free_energy=energy)
+        if want_stress:
             stress = -virial / abs(np.linalg.det(atoms.cell.array))
-            self.results["stress"] = stress[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
+            results["stress"] = stress[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
+        if system_changes:
+            self.results = results
+        else:  # the same atoms asked for more: keep what was there
+            self.results.update(results)
 
     def close(self):
         """Close the connection, stop the engine and remove the socket file."""

@@ -69,10 +69,14 @@ import tempfile
 import warnings
 from pathlib import Path
 
-__all__ = ["BoxPluginUnavailable", "box_plugin", "plugin_source", "warn_fallback"]
+__all__ = ["BoxPluginUnavailable", "box_plugin", "plugin_library", "plugin_source",
+           "warn_fallback"]
 
 #: The plugin's C++ source, shipped in the package.
 SOURCE = Path(__file__).with_name("plugin") / "rigidmd_box.cpp"
+#: Every source built into the library: the box styles and the engine's ``fix rigidmd/ipi``
+#: (:mod:`rigidmd.lammps.engine`), which also makes it loadable by ``plugin load``.
+SOURCES = (SOURCE, SOURCE.with_name("rigidmd_ipi.cpp"))
 #: Compiler flags (``-DLAMMPS_SMALLBIG``: the integer sizes the wheel was built with).
 FLAGS = ("-O2", "-fPIC", "-shared", "-std=c++17", "-DLAMMPS_SMALLBIG")
 #: Seconds a build may take before it counts as failed.
@@ -134,7 +138,7 @@ def _euid():
 
 def _key(library, includes, version):
     """A hash of what the built library depends on: source, flags, LAMMPS, machine."""
-    digest = hashlib.sha256(SOURCE.read_bytes())
+    digest = hashlib.sha256(b"".join(source.read_bytes() for source in SOURCES))
     info = library.stat()
     for part in (*FLAGS, version, str(library), str(info.st_size), str(info.st_mtime_ns),
                  *map(str, includes), platform.machine(), sys.platform):
@@ -246,7 +250,7 @@ def _compile(compiler, includes, target):
     """Build the plugin into ``target`` (a new file, renamed into place when complete),
     then record its size and SHA-256 beside it."""
     def build(partial):
-        command = [compiler, *FLAGS, *(f"-I{d}" for d in includes), str(SOURCE),
+        command = [compiler, *FLAGS, *(f"-I{d}" for d in includes), *map(str, SOURCES),
                    "-o", str(partial)]
         try:
             done = subprocess.run(command, capture_output=True, text=True,
@@ -270,8 +274,9 @@ def _build():
     """The path of a verified plugin library in a safe cache directory (built if needed)."""
     if os.environ.get("RIGIDMD_LAMMPS_PLUGIN", "1").strip() in ("0", "no", "false", "off"):
         raise BoxPluginUnavailable("switched off by RIGIDMD_LAMMPS_PLUGIN")
-    if not SOURCE.is_file():
-        raise BoxPluginUnavailable(f"the plugin source is missing ({SOURCE})")
+    missing = [source for source in SOURCES if not source.is_file()]
+    if missing:
+        raise BoxPluginUnavailable(f"the plugin source is missing ({missing[0]})")
     library, includes, version = _lammps_files()
     name = f"rigidmd_box-{_key(library, includes, version)}.so"
     directories, failures, safe = list(_cache_dirs()), [], []
@@ -317,6 +322,40 @@ def _build():
     raise BoxPluginUnavailable(f"{what} ({'; '.join(dict.fromkeys(failures))})")
 
 
+def _found():
+    """The built library's path (built once per process), or raise why there is none."""
+    found = _FOUND.get("plugin")
+    if found is None:
+        try:
+            found = _build()
+        except BoxPluginUnavailable as err:
+            found = err
+        _FOUND["plugin"] = found
+    if isinstance(found, BoxPluginUnavailable):
+        raise found
+    return found
+
+
+def plugin_library():
+    """Path of the verified plugin library, built once per user (for ``plugin load``).
+
+    The library is verified (owner, mode, size and SHA-256 against its record)
+    at every call, right before its path is handed to another process.
+
+    Raises
+    ------
+    BoxPluginUnavailable
+        As :func:`box_plugin` (the reason is kept: a process tries once).
+    """
+    found = _found()
+    reason = _verified(found)
+    if reason is not None:
+        failure = BoxPluginUnavailable(f"could not use {found}: {reason}")
+        _FOUND["plugin"] = failure
+        raise failure
+    return found
+
+
 def box_plugin(lmp):
     """Load the box plugin into the LAMMPS instance ``lmp`` (building it once per user).
 
@@ -339,15 +378,7 @@ def box_plugin(lmp):
         process tries once.
     """
     key = "plugin"
-    found = _FOUND.get(key)
-    if found is None:
-        try:
-            found = _build()
-        except BoxPluginUnavailable as err:
-            found = err
-        _FOUND[key] = found
-    if isinstance(found, BoxPluginUnavailable):
-        raise found
+    found = _found()
     try:
         if found not in _HANDLES:  # opened once (RTLD_GLOBAL: it uses LAMMPS's symbols)
             reason = _verified(found)  # checked again right before it is loaded

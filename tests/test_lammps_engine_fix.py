@@ -1,0 +1,212 @@
+"""The engine's own ``fix rigidmd/ipi`` (plugin/rigidmd_ipi.cpp) against the in-process
+calculator: cell shapes and changes, atoms far outside, neighbour builds, what is tallied,
+the fall-back to ``fix ipi``, waiting ranks, and an engine started by hand over TCP.
+
+The liquid is ``tests/data/water_box_27.traj`` (27 TIP3P waters, 9.3 Å box) with
+``lj/cut/coul/long 4.5`` and PPPM at 1e-5 (``PPPM_27``).
+"""
+
+import time
+import warnings
+
+import numpy as np
+import pytest
+from helpers import (
+    PPPM_27,
+    children_of,
+    cpu_seconds,
+    free_port,
+    processes_named,
+    start_by_hand,
+    water_box_27,
+)
+
+from rigidmd.lammps import LAMMPSCalculator, boxplugin
+from rigidmd.lammps import engine as engine_module
+from rigidmd.lammps.engine import LAMMPSEngine
+
+pytestmark = pytest.mark.lammps
+
+
+def assert_equal_to_in_process(atoms, reference):
+    """Energy, forces and stress of ``atoms`` (engine) equal ``reference`` (in-process).
+
+    The reference gets the same atoms wrapped into the cell (the in-process
+    calculator's own handling of far-away atoms is not under test here).  Measured
+    (27 waters, 1 and 2 ranks): energy 0 to 2e-13 eV, forces 2e-14 eV/Å (8e-11 on
+    forces of 1e4 eV/Å after a random 0.8 Å shake), stress 5e-15 relative; the
+    engine's numbers pass Bohr and Hartree both ways.  Bounds: 100 times those.
+    """
+    reference.set_cell(atoms.cell)
+    reference.positions = atoms.positions
+    reference.wrap()
+    energy = reference.get_potential_energy()
+    forces = reference.get_forces()
+    stress = reference.get_stress()
+    assert atoms.get_potential_energy() == pytest.approx(energy, rel=1e-13, abs=1e-11)
+    np.testing.assert_allclose(atoms.get_forces(), forces, rtol=0,
+                               atol=1e-12 * max(1.0, np.abs(forces).max()))
+    np.testing.assert_allclose(atoms.get_stress(), stress, rtol=0,
+                               atol=1e-12 * np.abs(stress).max())
+
+
+def npt_like_cells(cell, tilted, n=4, seed=0):
+    """A sequence of cells as a barostat makes them: small changes of every edge
+    (and, when ``tilted``, of the tilts)."""
+    rng = np.random.default_rng(seed)
+    cells = []
+    for _ in range(n):
+        cell = cell * (1 + rng.normal(scale=2e-3))
+        if tilted:
+            cell = cell + np.tril(rng.normal(scale=0.02, size=(3, 3)), -1)
+        cells.append(cell)
+    return cells
+
+
+@pytest.mark.parametrize("tilted", [False, True])
+def test_equal_to_the_in_process_calculator_through_cells_and_far_atoms(tilted):
+    atoms = water_box_27()
+    if tilted:
+        cell = atoms.cell.array.copy()
+        cell[1, 0], cell[2, 0], cell[2, 1] = 0.9, -0.6, 0.4
+        atoms.set_cell(cell, scale_atoms=True)
+    rng = np.random.default_rng(1)
+    with LAMMPSEngine(PPPM_27) as engine:
+        atoms.calc = engine
+        atoms.get_forces()
+        assert engine.engine_fix == "rigidmd/ipi"
+        reference = atoms.copy()
+        reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
+        assert_equal_to_in_process(atoms, reference)
+        for cell in npt_like_cells(atoms.cell.array, tilted):
+            atoms.set_cell(cell, scale_atoms=True)
+            atoms.positions += rng.normal(scale=0.02, size=atoms.positions.shape)
+            assert_equal_to_in_process(atoms, reference)
+        # whole molecules moved by lattice vectors far out of the cell, both ways
+        far = atoms.get_tags() % 4 == 0
+        atoms.positions[far] += atoms.cell.array.T @ np.array([3, -7, 12])
+        atoms.positions[atoms.get_tags() % 4 == 1] -= 5 * atoms.cell[2]
+        assert_equal_to_in_process(atoms, reference)
+        atoms.set_cell(atoms.cell * 1.002, scale_atoms=True)  # a new cell with them out
+        assert_equal_to_in_process(atoms, reference)
+
+
+def test_it_re_neighbours_only_when_an_atom_moved_half_the_skin():
+    """LAMMPS's count of neighbour-list builds (sent with the forces): none for small
+    moves, moves by lattice vectors and small cell changes; one when an atom moved more
+    than half the skin (2 Å)."""
+    atoms = water_box_27()
+    with LAMMPSEngine(PPPM_27) as engine:
+        atoms.calc = engine
+        atoms.get_forces()
+        assert engine.neighbor_builds == 0  # the set-up's build is not counted
+        for _ in range(5):
+            atoms.positions += 0.05
+            atoms.get_forces()
+        atoms.positions[:9] += 2 * atoms.cell[0] - atoms.cell[1]
+        atoms.get_forces()
+        atoms.set_cell(atoms.cell * 1.001, scale_atoms=True)
+        atoms.get_forces()
+        assert engine.neighbor_builds == 0
+        atoms.positions[3] += [1.2, 0.0, 0.0]
+        atoms.get_forces()
+        assert engine.neighbor_builds == 1
+        atoms.get_forces()
+        assert engine.neighbor_builds == 1
+
+
+def test_only_what_is_asked_for_is_tallied():
+    """RMDTALLY: forces alone carry no energy or stress; the stress alone no energy;
+    what comes equals the in-process calculator's."""
+    atoms = water_box_27()
+    with LAMMPSEngine(PPPM_27) as engine:
+        atoms.calc = engine
+        engine.calculate(atoms, ["forces"], ["positions"])
+        assert set(engine.results) == {"forces"}
+        reference = atoms.copy()
+        reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
+        np.testing.assert_allclose(engine.results["forces"], reference.get_forces(), rtol=0,
+                                   atol=1e-12)
+        engine.calculate(atoms, ["stress"], ["positions"])
+        assert set(engine.results) == {"forces", "stress"}
+        np.testing.assert_allclose(engine.results["stress"], reference.get_stress(), rtol=0,
+                                   atol=1e-12 * np.abs(reference.get_stress()).max())
+        engine.calculate(atoms, ["energy"], [])
+        assert set(engine.results) == {"forces", "stress", "energy", "free_energy"}
+        assert engine.results["energy"] == pytest.approx(reference.get_potential_energy(),
+                                                         rel=1e-13)
+
+
+def test_without_the_plugin_fix_ipi_is_used_and_said_once(monkeypatch):
+    monkeypatch.setenv("RIGIDMD_LAMMPS_PLUGIN", "0")
+    monkeypatch.setattr(engine_module, "_WARNED", [])
+    boxplugin.forget()
+    try:
+        atoms = water_box_27()
+        with pytest.warns(UserWarning, match=r"LAMMPSEngine: no rigidmd LAMMPS plugin "
+                          r"\(switched off by RIGIDMD_LAMMPS_PLUGIN\); the engine runs "
+                          r"LAMMPS's fix ipi"):
+            with LAMMPSEngine(PPPM_27) as engine:
+                atoms.calc = engine
+                atoms.get_forces()
+                assert engine.engine_fix == "ipi"
+                assert "all ipi " in (engine.log.parent / "in.engine").read_text()
+                reference = atoms.copy()
+                reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
+                np.testing.assert_allclose(atoms.get_forces(), reference.get_forces(),
+                                           rtol=0, atol=1e-12)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # the second engine says nothing
+            with LAMMPSEngine(PPPM_27) as engine:
+                atoms.calc = engine
+                atoms.get_forces()
+                assert engine.engine_fix == "ipi"
+    finally:
+        monkeypatch.undo()
+        boxplugin.forget()  # the next user looks for the plugin again
+
+
+def test_waiting_ranks_do_not_spin():
+    """Two ranks: while rigidmd does not call, rank 1 naps (MPICH's own wait polls,
+    a core at 100 %, measured 29 % of a core on this loaded 2-core machine with
+    poll_us=0); measured 0-3 % with the fix's naps.  Bound: 10 % of one second."""
+    atoms = water_box_27()
+    with LAMMPSEngine(PPPM_27, processes=2) as engine:
+        atoms.calc = engine
+        for _ in range(10):
+            atoms.positions += 0.001
+            atoms.get_forces()
+        ranks = [p for p in children_of(engine.pid) if p in processes_named("lmp")]
+        assert len(ranks) == 2
+        before = cpu_seconds(ranks)
+        time.sleep(1.0)
+        assert cpu_seconds(ranks) - before < 0.1
+
+
+@pytest.mark.parametrize("processes", [1, 2])
+def test_an_engine_started_by_hand_over_tcp(tmp_path, processes):
+    """As on a second node: launch=False writes the input, someone starts
+    ``[mpirun -np 2] lmp -in in.engine`` there, it connects to our port; results equal
+    the in-process calculator's; close() sends EXIT and LAMMPS ends its run normally."""
+    port = free_port()
+    engine = LAMMPSEngine(PPPM_27, processes=processes, launch=False, port=port,
+                          workdir=tmp_path, timeout=60)
+    thread, started = start_by_hand(engine, tmp_path)
+    atoms = water_box_27()
+    try:
+        atoms.calc = engine
+        atoms.get_forces()
+        reference = atoms.copy()
+        reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
+        assert_equal_to_in_process(atoms, reference)
+        atoms.set_cell(atoms.cell * 0.998, scale_atoms=True)
+        assert_equal_to_in_process(atoms, reference)
+    finally:
+        engine.close()
+        thread.join()
+        code = started[0].wait(timeout=60)
+    assert code == 0  # EXIT ends the run; LAMMPS leaves by itself
+    text = (tmp_path / "log.lammps").read_text()
+    assert f"fix rmd_ipi all rigidmd/ipi localhost {port}" in text
+    assert "Loop time of" in text
+    assert not [p for p in children_of(started[0].pid) if p in processes_named("lmp")]
