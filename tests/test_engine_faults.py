@@ -230,10 +230,15 @@ def test_another_program_connecting_to_a_launched_engines_socket_is_refused():
     assert not our_lmp()
 
 
-def test_an_engine_set_up_for_another_system_is_refused(tmp_path):
+@pytest.mark.parametrize("fix", ["ipi", "rigidmd/ipi"])
+def test_an_engine_set_up_for_another_system_is_refused(tmp_path, monkeypatch, fix):
     """fix ipi echoes the atom count it is sent: an engine reading another data file
     (here 27 waters minus 8) answered on every atom, with zero force on the missing ones.
-    Its first answer is checked against LAMMPS in this process for the same atoms."""
+    Its first answer is checked against LAMMPS in this process for the same atoms.  The
+    engine's own fix rigidmd/ipi refuses the atom count itself, naming both counts in its
+    log, and the server names the engine that closed the connection."""
+    if fix == "ipi":  # both engines on LAMMPS's own fix (the fall-back without the plugin)
+        monkeypatch.setattr("rigidmd.lammps.engine.engine_plugin", lambda: None)
     name = f"rigidmd-other-{os.getpid()}"
     atoms = water_box_27()
     engine = LAMMPSEngine(PPPM_27, launch=False, unixsocket=name, workdir=tmp_path / "ours",
@@ -251,8 +256,10 @@ def test_an_engine_set_up_for_another_system_is_refused(tmp_path):
     thread = threading.Thread(target=start_the_wrong_one)
     thread.start()
     try:
-        with pytest.raises(EngineError, match=r"is not this calculator's engine: its energy "
-                                              r".* differs from .* eV"):
+        expected = (r"is not this calculator's engine: its energy .* differs from .* eV"
+                    if fix == "ipi" else r"i-PI engine process \d+ \(lmp\) on .*: closed the "
+                    r"connection")
+        with pytest.raises(EngineError, match=expected):
             engine.get_potential_energy(atoms)
     finally:
         engine.close()
@@ -260,6 +267,9 @@ def test_an_engine_set_up_for_another_system_is_refused(tmp_path):
         for proc in started:
             proc.kill()
             proc.wait(timeout=30)
+    if fix == "rigidmd/ipi":
+        log = (tmp_path / "other" / "log.lammps").read_text()
+        assert "the server sent 81 atoms, LAMMPS has 57" in log
 
 
 def test_a_first_answer_with_zero_forces_on_missing_atoms_is_named():
