@@ -1,4 +1,4 @@
-"""The ``rigidmd`` command: ``demo``, ``run``, ``plot`` and ``export-lammps``.
+"""The ``rigidmd`` command: ``demo``, ``run``, ``relax``, ``plot`` and ``export-lammps``.
 
 ``rigidmd demo``                      a TIP3P water cluster, 2 ps, with plots
 ``rigidmd run CONFIG.yaml [flags]``   any system from a configuration file
@@ -36,7 +36,7 @@ from rigidmd.logplot import LogError, plot_log
 from rigidmd.operators import ConvergenceError
 from rigidmd.outputs import OutputError, describe_os_error
 from rigidmd.relaxrun import RelaxationNotConverged, relax_only
-from rigidmd.runner import Run, RunStopped
+from rigidmd.runner import Run, RunStopped, resume_command
 
 __all__ = ["main"]
 
@@ -63,6 +63,22 @@ def _apply_flags(config, args):
         config.setdefault("outputs", {})
         config["outputs"] = dict(config["outputs"], directory=str(Path(args.outdir).resolve()))
     return config
+
+
+def _resume_hint(args):
+    """The exact command that resumes ``rigidmd run`` with these flags (see :func:`resume_command`).
+
+    The flags that define the run are repeated as given; ``--outdir`` is
+    given with its absolute path, so the command cannot act on another run.
+    """
+    flags = []
+    for key in ("structure", "restart", "steps", "timestep", "integrator", "bodies"):
+        value = getattr(args, key, None)
+        if value is not None:
+            flags += [f"--{key}", str(value)]
+    if args.trust:
+        flags.append("--trust")
+    return resume_command(args.config, args.outdir, flags)
 
 
 def _export(config, directory, stream=sys.stdout):
@@ -196,7 +212,7 @@ def main(argv=None):
                 parse_quantity("--timestep", args.timestep, TIME_UNITS)
             mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
             return Run(check_config(config, trust=args.trust), mode=mode,
-                       config_path=args.config).execute()
+                       config_path=args.config, resume_hint=_resume_hint(args)).execute()
         if args.command == "relax":
             return relax_only(_apply_flags(load_config(args.config), args), trust=args.trust)
         if args.command == "export-lammps":
@@ -224,6 +240,11 @@ def main(argv=None):
             return 2
         print(f"rigidmd: run stopped: {message}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        # Ctrl-C before the steps began (reading, building the calculator, relaxing): no run
+        # started, so there is nothing to continue.
+        print(f"rigidmd: interrupted before the {args.command} started", file=sys.stderr)
+        return 130
     except (NonFiniteForceError, ConvergenceError, RelaxationNotConverged) as err:
         # The run stopped; its outputs and checkpoint hold every step before the failure.
         print(f"rigidmd: run stopped: {err}", file=sys.stderr)

@@ -19,17 +19,23 @@
   checkpoint at step 0 starts the run again from its configuration.
 * **Signals**: SIGTERM (what batch schedulers send), SIGINT (Ctrl-C) and
   SIGUSR1 finish the current step and its outputs, write a checkpoint, close
-  the files and exit with 143, 130 or 138, saying how to resume.  A second
-  Ctrl-C stops at once without a checkpoint (the outputs may end mid-step);
-  ``--resume`` continues from the last one.
+  the files and exit with 143, 130 or 138, printing the exact command that
+  resumes (:func:`resume_command`).  A second Ctrl-C during the steps stops at
+  once without a checkpoint (the outputs may end mid-step); ``--resume``
+  continues from the last one.  Once the steps have stopped, further signals
+  are noted, not obeyed: the final checkpoint is always written whole.
 * **Failures after the start** (a full disk, a step that fails) raise
   :class:`RunStopped`: one line naming the file or the reason, the step and
   the last checkpoint, which stays intact (status 1).
+* **A run that never started** (its first force call fails: a LAMMPS input
+  mistake, ...) removes the outputs it had opened, so the corrected
+  configuration starts without ``--overwrite``.
 """
 
 import hashlib
 import json
 import os
+import shlex
 import signal
 import sys
 import time
@@ -49,7 +55,8 @@ from rigidmd.outputs import (
     trim_outputs,
 )
 
-__all__ = ["Run", "RunStopped", "Progress", "StopSignals", "StopRequest", "fingerprint"]
+__all__ = ["Run", "RunStopped", "Progress", "StopSignals", "StopRequest", "fingerprint",
+           "resume_command"]
 
 #: Exit status of a run stopped by each signal (128 + signal number).
 EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGUSR1: 138}
@@ -68,22 +75,29 @@ class StopSignals:
 
     :meth:`check` is attached as the last observer, so a stop comes after
     every output of the step.  A second SIGINT raises ``KeyboardInterrupt``
-    at once.
+    at once, unless :attr:`shielded` (set while the final checkpoint is
+    written): then it is only counted in :attr:`ignored`.
     """
 
     modifies_atoms = False
 
     def __init__(self):
         self.signum = None
+        self.shielded = False
+        self.ignored = 0
         self._previous = {}
 
     def _handler(self, signum, frame):
-        if self.signum is not None and signum == signal.SIGINT:
+        if self.signum is None:
+            self.signum = signum
+        elif self.shielded:
+            self.ignored += 1
+        elif signum == signal.SIGINT:
             raise KeyboardInterrupt
-        self.signum = signum
 
     def check(self):
         if self.signum is not None:
+            self.shielded = True  # from here on the run only writes what it has
             raise StopRequest(self.signum)
 
     def __enter__(self):
@@ -129,6 +143,26 @@ class Progress:
 
 class RunStopped(RuntimeError):
     """The run stopped after it started (a failed write, a failure in a step); one line."""
+
+
+def resume_command(config_path=None, directory=None, flags=()):
+    """The ``rigidmd run ... --resume`` command that continues a run, quoted for a shell.
+
+    Parameters
+    ----------
+    config_path : str, optional
+        The configuration file as given on the command line.
+    directory : path-like, optional
+        The output directory; given as ``--outdir`` with its absolute path, so
+        the command acts on this run from any directory.
+    flags : sequence of str
+        The other command-line flags that defined the run (``--structure``,
+        ``--timestep``, ...), repeated as given.
+    """
+    words = ["rigidmd", "run"] + ([str(config_path)] if config_path else []) + list(flags)
+    if directory is not None:
+        words += ["--outdir", str(Path(directory).resolve())]
+    return shlex.join(words + ["--resume"])
 
 
 def _digest(value):
@@ -231,12 +265,18 @@ class Run:
         The configuration file, for the resume hint.
     stream : file, optional
         Where messages go (default: standard output at construction).
+    resume_hint : str, optional
+        The command that resumes this run (the command line builds it with
+        :func:`resume_command` from its flags); default: the configuration
+        file with ``--outdir`` and ``--resume``.
     """
 
-    def __init__(self, config, mode="new", config_path=None, stream=None):
+    def __init__(self, config, mode="new", config_path=None, stream=None, resume_hint=None):
         self.config, self.mode = config, mode
         self.stream = sys.stdout if stream is None else stream
         self.config_path = config_path
+        self.resume_hint = resume_hint
+        self.created = []  # output files this run created before its first checkpoint
         self.outputs = config.outputs
         self.checkpoint_step = None  # step of the last checkpoint on disk, once known
         self._fingerprint = None
@@ -263,7 +303,25 @@ class Run:
         return files
 
     def _resume_hint(self):
-        return f"rigidmd run {self.config_path or 'CONFIG'} --resume"
+        if self.resume_hint is not None:
+            return self.resume_hint
+        return resume_command(self.config_path or "CONFIG", self.outputs.directory)
+
+    def _remove_unstarted_outputs(self):
+        """Remove the outputs of a new run that failed before its first checkpoint.
+
+        Such a run never started: what it opened (a log header, an empty
+        trajectory) would only block the corrected configuration.  Returns the
+        names removed.
+        """
+        if self.checkpoint_step is not None or not self.created:
+            return []
+        removed = []
+        for path in self.created:
+            if path.exists():
+                path.unlink()
+                removed.append(path.name)
+        return removed
 
     def _is_earlier_demo(self):
         """The checkpoint in the directory is a demo's (same fingerprint, any steps)."""
@@ -355,6 +413,8 @@ class Run:
                             self.stream)
             self._draw_velocities(atoms, bodies)
         out = self.outputs
+        # Nothing of this run's is in the directory now: what appears is this run's.
+        self.created = [p for p in self._all_files() if not p.exists()]
         return RigidDynamics(atoms, self.config.run.timestep, bodies=bodies,
                              couplings=self.config.coupling.parts(),
                              trajectory=str(out.trajectory) if out.trajectory else None,
@@ -464,6 +524,10 @@ class Run:
         try:
             return self._execute()
         except BaseException:
+            removed = self._remove_unstarted_outputs()
+            if removed:
+                print(f"the run did not start: removed {', '.join(removed)}, which it had "
+                      "opened", file=self.stream)
             lock.release()
             if created:  # a run that could not start leaves no empty directory behind
                 try:
@@ -523,12 +587,44 @@ class Run:
         print(f"{dyn.bodies} with {dyn.scheme.name} integrator, {describe(dyn)}, "
               f"steps {dyn.nsteps + 1}-{total} of {config.run.timestep / TIME_UNITS['fs']:g} fs",
               file=self.stream)
-        status = 0
         t0 = time.perf_counter()
+        with stop:
+            status, at_once = self._steps(dyn, remaining, writer)
+            if at_once:
+                return status  # a second Ctrl-C stopped the steps at once
+            # The steps are over: a signal now is noted, not obeyed, until the checkpoint is
+            # whole (a KeyboardInterrupt inside its write would lose it).
+            stop.shielded = True
+            try:
+                self._checkpoint(dyn, None)
+            except OSError as err:
+                raise self._stopped(dyn, describe_os_error(err)) from None
+        if stop.signum is not None and not status:  # a signal during the final checkpoint
+            status = EXIT_STATUS[stop.signum]
+        if stop.ignored:
+            print(f"\n(a further {signal.Signals(stop.signum).name} arrived while the final "
+                  "checkpoint was written; it was written whole first)", file=self.stream)
+        if status:
+            print(f"checkpoint {out.checkpoint} written; continue with: {self._resume_hint()}",
+                  file=self.stream)
+        summary(dyn, rows, time.perf_counter() - t0, self.stream)
+        if out.plot is not None and out.log is not None and not status:
+            from rigidmd.logplot import plot_log
+
+            try:
+                plot_log(out.log, out.plot)
+            except OSError as err:
+                raise self._stopped(dyn, describe_os_error(err)) from None
+        for path in out.files.values():
+            print(f"wrote {path}", file=self.stream)
+        return status
+
+    def _steps(self, dyn, remaining, writer):
+        """Run the steps: (exit status, whether a second Ctrl-C stopped them at once)."""
+        status = 0
         interrupted = False
         try:
-            with stop:
-                dyn.run(remaining)
+            dyn.run(remaining)
         except StopRequest as request:
             status = EXIT_STATUS[request.signum]
             print(f"\nstopped by {request} after step {dyn.nsteps}", file=self.stream)
@@ -555,25 +651,7 @@ class Run:
                       f"checkpoint of step {self.checkpoint_step} is kept: {self._resume_hint()} "
                       "continues from it (cutting back the outputs written after it)",
                       file=self.stream)
-            return status
-        try:
-            self._checkpoint(dyn, None)
-        except OSError as err:
-            raise self._stopped(dyn, describe_os_error(err)) from None
-        if status:
-            print(f"checkpoint {out.checkpoint} written; continue with: {self._resume_hint()}",
-                  file=self.stream)
-        summary(dyn, rows, time.perf_counter() - t0, self.stream)
-        if out.plot is not None and out.log is not None:
-            from rigidmd.logplot import plot_log
-
-            try:
-                plot_log(out.log, out.plot)
-            except OSError as err:
-                raise self._stopped(dyn, describe_os_error(err)) from None
-        for path in out.files.values():
-            print(f"wrote {path}", file=self.stream)
-        return status
+        return status, interrupted
 
 
 def describe(dyn):
