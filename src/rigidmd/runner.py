@@ -673,6 +673,10 @@ def summary(dyn, rows, elapsed, stream):
     print(f"{dyn.nsteps} steps ({elapsed:.1f} s for this run); "
           f"T = {temperature(dyn.atoms):.1f} K ({dyn.degrees_of_freedom} degrees of "
           "freedom)", file=stream)
+    for part in dyn.couplings:  # a part that reports on itself (the Monte Carlo barostat)
+        report = getattr(part, "report", None)
+        if callable(report):
+            print(report(), file=stream)
     if len(rows) >= 3:
         data = np.array(rows)
         t_ps, e = data[:, 0] / TIME_UNITS["ps"], data[:, 1]
