@@ -128,7 +128,8 @@ from rigidmd.thermostats import BussiThermostat
 
 __all__ = ["RigidMCBarostat", "MonteCarloBarostat", "n_move_kinds", "propose_cell",
            "log_acceptance", "log_jacobian", "metropolis", "adapt_step", "cell_widths",
-           "body_span", "calculator_cell_limits", "ADAPT_BLOCK", "ADAPT_FACTOR", "TARGET_ACCEPTANCE", "LARGEST_STEP"]
+           "body_span", "calculator_cell_limits", "ADAPT_BLOCK", "ADAPT_FACTOR",
+           "TARGET_ACCEPTANCE", "LARGEST_STEP"]
 
 #: Attempts of one move kind between two adjustments of its size.
 ADAPT_BLOCK = 10
