@@ -399,7 +399,11 @@ def test_resume_from_a_damaged_checkpoint_is_one_line(tmp_path, monkeypatch, cap
     assert len(messages(stderr)) == 1 and "Traceback" not in stderr
     assert stderr.startswith(f"rigidmd: error: --resume: checkpoint: '{checkpoint}' is not a "
                              "readable checkpoint (")
-    assert stderr.rstrip().endswith("start it again with --overwrite")
+    # The advice keeps the outputs first (--restart into another directory).
+    assert stderr.rstrip().endswith(
+        f"the run cannot be continued from it: start a new run from its last frame with "
+        f"--restart {path / 'out' / 'md.traj'} --outdir NEW_DIRECTORY (which keeps these "
+        "outputs), or start it again with --overwrite (which removes them)")
 
 
 def test_resume_without_a_checkpoint_says_what_to_do(tmp_path, monkeypatch, capsys):

@@ -234,3 +234,118 @@ def test_help_names_every_command(capsys):
     with pytest.raises(SystemExit):
         cli.main(["--help"])
     assert "demo, run, relax, plot and export-lammps" in capsys.readouterr().out
+
+
+def rewrite_checkpoint(path, change):
+    """Rewrite a checkpoint after ``change(arrays, meta)`` (as a damaged or hand-made file)."""
+    import numpy as np
+
+    with np.load(path) as data:
+        arrays = {key: data[key] for key in data.files}
+    meta = json.loads(str(arrays.pop("meta")))
+    change(arrays, meta)
+    arrays["meta"] = np.array(json.dumps(meta))
+    with open(path, "wb") as fh:
+        np.savez(fh, **arrays)
+
+
+@pytest.mark.parametrize("thermostat", ["nve", "langevin"])
+def test_a_run_of_the_previous_release_resumes(tmp_path, monkeypatch, capsys, reference,
+                                               thermostat):
+    """0.1.0 recorded the configuration as one digest: the checkpoint's own contents are compared.
+
+    Before: refused, with advice (--overwrite) that deletes the run.
+    """
+    path = short_project(tmp_path, thermostat=thermostat, checkpoint_interval=50)
+    assert run_here(path, monkeypatch, capsys, "--steps", 20)[0] == 0
+    checkpoint = path / "out" / "checkpoint.npz"
+
+    def earlier_release(arrays, meta):
+        meta["extra"]["fingerprint"] = "3f2a9c0d1e4b5a67"  # 0.1.0's one digest
+
+    rewrite_checkpoint(checkpoint, earlier_release)
+    saved = checkpoint.read_bytes()
+    # A changed timestep or thermostat is still found and named; nothing is touched.
+    text = (path / "run.yaml").read_text()
+    (path / "run.yaml").write_text(text.replace("timestep: 2 fs", "timestep: 1 fs").replace(
+        "friction: 0.02 1/fs", "friction: 0.03 1/fs"))
+    status, _, stderr = run_here(path, monkeypatch, capsys, "--resume")
+    assert status == 2
+    changed = "timestep, thermostat differ" if thermostat == "langevin" else "timestep differs"
+    assert messages(stderr)[0].startswith(f"rigidmd: error: --resume: {changed} from the "
+                                          "checkpoint's run")
+    assert checkpoint.read_bytes() == saved
+    (path / "run.yaml").write_text(text)
+    status, stdout, stderr = run_here(path, monkeypatch, capsys, "--resume")
+    assert status == 0, stderr
+    assert "written by an earlier rigidmd" in stdout and "resuming from step 20" in stdout
+    if thermostat == "nve":
+        assert file_bytes(path) == reference[40]
+
+
+def short_checkpoint(tmp_path, monkeypatch, capsys):
+    path = short_project(tmp_path, steps=20)
+    assert run_here(path, monkeypatch, capsys)[0] == 0
+    return path, path / "out" / "checkpoint.npz"
+
+
+def test_a_checkpoint_one_body_short_names_the_mismatch(tmp_path, monkeypatch, capsys):
+    """Before: "could not broadcast input array from shape (7,3) into shape (8,3)"."""
+    from rigidmd import load_checkpoint
+    from rigidmd.checkpoint import CheckpointError
+
+    path, checkpoint = short_checkpoint(tmp_path, monkeypatch, capsys)
+
+    def one_body_short(arrays, meta):
+        for name in ("state_X", "state_V", "state_q", "state_p", "F", "tau", "model_mass",
+                     "model_moments", "model_starts"):
+            arrays[name] = arrays[name][:-1]
+
+    rewrite_checkpoint(checkpoint, one_body_short)
+    message = (f"checkpoint: '{checkpoint}' does not fit together: F has shape (7, 3), but "
+               "the body ids give 8 bodies x 3 (a body or an atom short or extra: the file "
+               "was changed)")
+    with pytest.raises(CheckpointError) as error:
+        load_checkpoint(checkpoint, None)
+    assert str(error.value) == message
+    status, _, stderr = run_here(path, monkeypatch, capsys, "--resume", "--steps", 40)
+    assert status == 2 and messages(stderr)[0].startswith(f"rigidmd: error: --resume: {message}")
+
+
+def test_a_checkpoint_with_a_quaternion_that_is_not_unit_is_refused(tmp_path, monkeypatch,
+                                                                   capsys):
+    """Before: accepted, and the run went to 2.5e10 K."""
+    path, checkpoint = short_checkpoint(tmp_path, monkeypatch, capsys)
+
+    def stretched(arrays, meta):
+        arrays["state_q"][5] *= 1.3
+
+    rewrite_checkpoint(checkpoint, stretched)
+    status, _, stderr = run_here(path, monkeypatch, capsys, "--resume", "--steps", 40)
+    assert status == 2
+    assert (f"rigidmd: error: --resume: checkpoint: '{checkpoint}': body 5 has an orientation "
+            "quaternion of norm 1.3, not 1 (1 of 8 bodies): orientations must be unit "
+            "quaternions") in messages(stderr)[0]
+    assert len(read(path / "out" / "md.traj", ":")) == 3  # nothing was cut or written
+
+
+def test_a_run_checkpoint_keeps_its_thermostat_and_barostat_attributes(tmp_path):
+    """load_checkpoint of a RigidMCBarostat run: ``.barostat`` and ``.thermostat`` as before."""
+    from ase import units
+    from ase.calculators.tip3p import TIP3P
+
+    from rigidmd import RigidMCBarostat, load_checkpoint
+    from rigidmd.montecarlo import MonteCarloBarostat
+    from rigidmd.systems import water_box
+    from rigidmd.thermostats import BussiThermostat
+
+    atoms = water_box(3, seed=1)
+    atoms.calc = TIP3P(rc=4.5)
+    dyn = RigidMCBarostat(atoms, units.fs, 300, units.bar, 50 * units.fs, every=2,
+                          bodies="connectivity")
+    dyn.run(4)
+    dyn.save_checkpoint(tmp_path / "mc.npz")
+    resumed = load_checkpoint(tmp_path / "mc.npz", TIP3P(rc=4.5))
+    assert isinstance(resumed.barostat, MonteCarloBarostat)
+    assert isinstance(resumed.thermostat, BussiThermostat)
+    assert resumed.barostat.attempted.sum() == dyn.barostat.attempted.sum() == 2

@@ -386,5 +386,5 @@ def check_checkpoint(meta, arrays, path="checkpoint"):
         b = int(bad[0])
         raise CheckpointError(
             f"{where}: body {b} has an orientation quaternion of norm {norms[b]:.9g}, not 1 "
-            f"({bad.size} bodies in all): orientations must be unit quaternions; the file was "
-            "changed or damaged")
+            f"({bad.size} of {len(norms)} bodies): orientations must be unit quaternions; the "
+            "file was changed or damaged")

@@ -46,6 +46,7 @@ import numpy as np
 from ase import units
 
 from rigidmd.config import TIME_UNITS, ConfigError
+from rigidmd.coupling import COUPLINGS
 from rigidmd.dof import temperature
 from rigidmd.outputs import (
     OutputError,
@@ -220,6 +221,17 @@ def _differing_fields(recorded, current):
     return [name for name in current if recorded.get(name) != current[name]]
 
 
+def _plain(value):
+    """Numbers, lists and dicts only (NumPy's as Python's), for comparing parameters."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
 def _observables(dyn):
     """Time, conserved energy and, under a barostat, pressure (bar), volume, density."""
     row = (dyn.get_time(), dyn.get_conserved_energy())
@@ -306,6 +318,15 @@ class Run:
         if self.resume_hint is not None:
             return self.resume_hint
         return resume_command(self.config_path or "CONFIG", self.outputs.directory)
+
+    def _fresh_start_advice(self):
+        """How to go on without the checkpoint: keeping the outputs first, then removing them."""
+        trajectory = self.outputs.trajectory
+        keep = ""
+        if trajectory is not None and trajectory.exists():
+            keep = (f"start a new run from its last frame with --restart {trajectory} "
+                    "--outdir NEW_DIRECTORY (which keeps these outputs), or ")
+        return f"{keep}start it again with --overwrite (which removes them)"
 
     def _remove_unstarted_outputs(self):
         """Remove the outputs of a new run that failed before its first checkpoint.
@@ -437,19 +458,47 @@ class Run:
         try:
             checkpoint = read_checkpoint(out.checkpoint)
         except CheckpointError as err:
-            raise ConfigError(f"--resume: {err}; the run cannot be continued: start it again "
-                              "with --overwrite") from None
+            raise ConfigError(f"--resume: {err}; the run cannot be continued from it: "
+                              f"{self._fresh_start_advice()}") from None
         differing = _differing_fields(checkpoint.extra.get("fingerprint"), self.fingerprint)
         if differing is None:
-            raise ConfigError("--resume: the checkpoint was written by an earlier rigidmd, "
-                              "whose record of the configuration cannot be compared; start "
-                              "anew with --overwrite")
+            differing = self._earlier_release_differences(checkpoint)
+            if not differing:
+                print("the checkpoint was written by an earlier rigidmd, which recorded the "
+                      "configuration as one digest: its atoms, timestep, integrator and "
+                      "thermostat/barostat were compared with the configuration and agree; "
+                      "the calculator and outputs.interval cannot be compared (keep them as "
+                      "they were)", file=self.stream)
         if differing:
             raise ConfigError(
                 f"--resume: {', '.join(differing)} differ{'s' if len(differing) == 1 else ''} "
                 "from the checkpoint's run (only steps may change between a run and its "
                 "continuation); restore it, or start anew with --overwrite")
         return checkpoint
+
+    def _earlier_release_differences(self, checkpoint):
+        """The fields that differ from a checkpoint without a per-field record (0.1.0's).
+
+        Its own contents are compared: the atoms (elements), the timestep, the
+        integrator's name and every coupling part's kind and parameters.
+        """
+        config, meta = self.config, checkpoint.meta
+        differing = []
+        atoms = config.structure.build_atoms()
+        if not np.array_equal(atoms.numbers, checkpoint.arrays["numbers"]):
+            differing.append("structure")
+        if not np.isclose(meta["dt"], config.run.timestep, rtol=1e-12, atol=0):
+            differing.append("timestep")
+        integrator = config.run.integrator
+        if isinstance(integrator, str) and not integrator.endswith((".yaml", ".yml")) and \
+                integrator != meta["scheme_name"]:
+            differing.append("integrator")
+        stored = {COUPLINGS[entry["parameters"]["kind"]].section: _plain(entry["parameters"])
+                  for entry in meta["couplings"] if entry["parameters"]["kind"] in COUPLINGS}
+        current = {part.section: _plain(part.todict()) for part in config.coupling.parts()}
+        differing += [section for section in ("thermostat", "barostat")
+                      if stored.get(section) != current.get(section)]
+        return differing
 
     def _resumed_dynamics(self):
         from rigidmd.logger import RigidLogger
