@@ -422,8 +422,8 @@ def check_masses(masses, symbols, free, order, starts):
             f"atom {a} (X) has mass {float(masses[a]):g} amu, but X (Z = 0) is a massless "
             "virtual site, such as the M of four-site water "
             f"({sites.size} X atoms have mass); give them mass 0 (atoms.set_masses), or keep "
-            "the structure in a format that stores masses (.traj, extended XYZ): PDB and XYZ files have none, and ASE gives X 1 amu; "
-            "a particle with mass needs another element")
+            "the structure in a format that stores masses (.traj, extended XYZ): PDB and XYZ "
+            "files have none, and ASE gives X 1 amu; a particle with mass needs another element")
     massless = free[masses[free] == 0]
     if massless.size:
         a = int(massless[0])
