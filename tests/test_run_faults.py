@@ -372,3 +372,28 @@ def test_a_massive_m_site_from_a_pdb_with_lammps_commands_is_refused(tmp_path, m
     assert messages(stderr)[0].startswith(
         "rigidmd: error: atom 3 (X) has mass 1 amu, but X (Z = 0) is a massless virtual site")
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("cell", ["rotated", "tilted"])
+def test_openmm_water_system_refuses_a_cell_openmm_cannot_take_in_one_line(cell):
+    """Before: OpenMM's own error from deep inside ``createSystem``/``setDefaultPeriodicBox``."""
+    pytest.importorskip("openmm")
+    import numpy as np
+
+    from rigidmd.openmm import water_system
+    from rigidmd.systems import water_box
+    from rigidmd.water import water_model
+
+    atoms = water_box(3, seed=1, model="tip4pew", whole=True)
+    if cell == "rotated":
+        atoms.rotate(30, "z", rotate_cell=True)
+    else:  # lower-triangular, but b's tilt beyond half of a
+        tilted = atoms.cell.array.copy()
+        tilted[1, 0] = 0.7 * tilted[0, 0]
+        atoms.set_cell(tilted)
+    before = atoms.positions.copy()
+    with pytest.raises(ValueError, match=r"^rigidmd.openmm: OpenMM takes a cell in its reduced "
+                                         r"form \(a along x, b in the xy plane, each tilt at most "
+                                         r"half the length below it\), not \[\["):
+        water_system(atoms, water_model("tip4pew"), 3.5)
+    np.testing.assert_array_equal(atoms.positions, before)
