@@ -604,15 +604,19 @@ class Run:
 
     def _execute(self):
         dyn = self._set_up()
-        try:
-            return self._drive(dyn)
-        finally:
-            # A calculator with a process of its own (LAMMPSEngine) stops with the run.
-            close = getattr(dyn.atoms.calc, "close", None)
-            if callable(close):
-                close()
+        stop = StopSignals()
+        # The handlers stay until the calculator is closed: a signal after the steps is noted,
+        # never a KeyboardInterrupt in the final checkpoint's write or the engine's shutdown.
+        with stop:
+            try:
+                return self._drive(dyn, stop)
+            finally:
+                # A calculator with a process of its own (LAMMPSEngine) stops with the run.
+                close = getattr(dyn.atoms.calc, "close", None)
+                if callable(close):
+                    close()
 
-    def _drive(self, dyn):
+    def _drive(self, dyn, stop):
         out, config = self.outputs, self.config
         total = config.run.steps
         remaining = total - dyn.nsteps
@@ -631,28 +635,31 @@ class Run:
             dyn.attach(_NamedOutput(writer, out.mdanalysis), interval=out.interval)
         dyn.attach(Progress(dyn, remaining), interval=max(1, remaining // 1000))
         dyn.attach(lambda: self._checkpoint(dyn, writer), interval=out.checkpoint_interval)
-        stop = StopSignals()
         dyn.attach(stop.check, interval=1)  # last: after every output of the step
         print(f"{dyn.bodies} with {dyn.scheme.name} integrator, {describe(dyn)}, "
               f"steps {dyn.nsteps + 1}-{total} of {config.run.timestep / TIME_UNITS['fs']:g} fs",
               file=self.stream)
         t0 = time.perf_counter()
-        with stop:
-            status, at_once = self._steps(dyn, remaining, writer)
-            if at_once:
-                return status  # a second Ctrl-C stopped the steps at once
-            # The steps are over: a signal now is noted, not obeyed, until the checkpoint is
-            # whole (a KeyboardInterrupt inside its write would lose it).
-            stop.shielded = True
-            try:
-                self._checkpoint(dyn, None)
-            except OSError as err:
-                raise self._stopped(dyn, describe_os_error(err)) from None
+        status, at_once = self._steps(dyn, remaining, writer)
+        if at_once:
+            return status  # a second Ctrl-C stopped the steps at once
+        # The steps are over: a signal now is noted, not obeyed, until the run has written
+        # everything (a KeyboardInterrupt inside the checkpoint's write would lose it).
+        stop.shielded = True
+        return self._finish(dyn, status, stop, rows, t0)
+
+    def _finish(self, dyn, status, stop, rows, t0):
+        """The final checkpoint, the summary and the plot; the exit status."""
+        out = self.outputs
+        try:
+            self._checkpoint(dyn, None)
+        except OSError as err:
+            raise self._stopped(dyn, describe_os_error(err)) from None
         if stop.signum is not None and not status:  # a signal during the final checkpoint
             status = EXIT_STATUS[stop.signum]
         if stop.ignored:
             print(f"\n(a further {signal.Signals(stop.signum).name} arrived while the final "
-                  "checkpoint was written; it was written whole first)", file=self.stream)
+                  "checkpoint was written; it was finished first)", file=self.stream)
         if status:
             print(f"checkpoint {out.checkpoint} written; continue with: {self._resume_hint()}",
                   file=self.stream)
