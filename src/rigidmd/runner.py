@@ -641,11 +641,11 @@ class Run:
               file=self.stream)
         t0 = time.perf_counter()
         status, at_once = self._steps(dyn, remaining, writer)
-        if at_once:
-            return status  # a second Ctrl-C stopped the steps at once
         # The steps are over: a signal now is noted, not obeyed, until the run has written
         # everything (a KeyboardInterrupt inside the checkpoint's write would lose it).
         stop.shielded = True
+        if at_once:
+            return status  # a second Ctrl-C stopped the steps at once
         return self._finish(dyn, status, stop, rows, t0)
 
     def _finish(self, dyn, status, stop, rows, t0):
