@@ -31,12 +31,13 @@ from rigidmd.config import (
 )
 from rigidmd.coupling import NotExportable
 from rigidmd.dynamics import NonFiniteForceError
+from rigidmd.fingerprint import resume_command
 from rigidmd.lammps.library import LammpsError
 from rigidmd.logplot import LogError, plot_log
 from rigidmd.operators import ConvergenceError
 from rigidmd.outputs import OutputError, describe_os_error
 from rigidmd.relaxrun import RelaxationNotConverged, relax_only
-from rigidmd.runner import Run, RunStopped, resume_command
+from rigidmd.runner import Run, RunStopped
 
 __all__ = ["main"]
 

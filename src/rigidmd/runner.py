@@ -32,22 +32,22 @@
   configuration starts without ``--overwrite``.
 """
 
-import hashlib
-import json
 import os
-import shlex
 import signal
 import sys
 import time
-from dataclasses import asdict
-from pathlib import Path
 
 import numpy as np
 from ase import units
 
 from rigidmd.config import TIME_UNITS, ConfigError
-from rigidmd.coupling import COUPLINGS
 from rigidmd.dof import temperature
+from rigidmd.fingerprint import (
+    differing_fields,
+    earlier_release_differences,
+    fingerprint,
+    resume_command,
+)
 from rigidmd.outputs import (
     OutputError,
     OutputLock,
@@ -144,92 +144,6 @@ class Progress:
 
 class RunStopped(RuntimeError):
     """The run stopped after it started (a failed write, a failure in a step); one line."""
-
-
-def resume_command(config_path=None, directory=None, flags=()):
-    """The ``rigidmd run ... --resume`` command that continues a run, quoted for a shell.
-
-    Parameters
-    ----------
-    config_path : str, optional
-        The configuration file as given on the command line.
-    directory : path-like, optional
-        The output directory; given as ``--outdir`` with its absolute path, so
-        the command acts on this run from any directory.
-    flags : sequence of str
-        The other command-line flags that defined the run (``--structure``,
-        ``--timestep``, ...), repeated as given.
-    """
-    words = ["rigidmd", "run"] + ([str(config_path)] if config_path else []) + list(flags)
-    if directory is not None:
-        words += ["--outdir", str(Path(directory).resolve())]
-    return shlex.join(words + ["--resume"])
-
-
-def _digest(value):
-    text = json.dumps(value, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-def _file_digest(path):
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()[:16]
-
-
-def fingerprint(config):
-    """What defines the trajectory, field by field: a digest per configuration field.
-
-    ``steps`` and the output file names are left out, and so is where the
-    files lie: a structure file or an integrator ``.yaml`` counts by its
-    content, so a moved or copied run directory resumes.
-
-    Returns
-    -------
-    dict
-        Field name (as in the configuration) -> 16 hexadecimal digits.
-    """
-    structure = config.structure
-    source = structure.source
-    if isinstance(source, Path):
-        source = {"file content": _file_digest(source)}
-    integrator = config.run.integrator
-    if isinstance(integrator, str) and integrator.endswith((".yaml", ".yml")):
-        integrator = {"file content": _file_digest(integrator)}
-    # Where the forces run (processes, threads, address) is not what they are.
-    calculator = {key: value for key, value in asdict(config.calculator).items()
-                  if key not in ("calculator_class", "processes", "threads", "address")}
-    fields = {
-        "structure": source, "read_options": structure.read_options,
-        "bodies": structure.bodies, "calculator": calculator,
-        "integrator": integrator, "integrator_options": config.run.integrator_options,
-        "timestep": config.run.timestep, "velocities": config.run.velocities,
-        "outputs.interval": config.outputs.interval,
-    }
-    for section in ("thermostat", "barostat"):
-        spec = getattr(config.coupling, section)
-        fields[section] = None if spec is None else [spec.kind, spec.kwargs, spec.seed]
-    return {name: _digest(value) for name, value in fields.items()}
-
-
-def _differing_fields(recorded, current):
-    """The configuration fields whose digests differ (all of them for an old record)."""
-    if not isinstance(recorded, dict):
-        return None
-    return [name for name in current if recorded.get(name) != current[name]]
-
-
-def _plain(value):
-    """Numbers, lists and dicts only (NumPy's as Python's), for comparing parameters."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
 
 
 def _observables(dyn):
@@ -460,9 +374,9 @@ class Run:
         except CheckpointError as err:
             raise ConfigError(f"--resume: {err}; the run cannot be continued from it: "
                               f"{self._fresh_start_advice()}") from None
-        differing = _differing_fields(checkpoint.extra.get("fingerprint"), self.fingerprint)
+        differing = differing_fields(checkpoint.extra.get("fingerprint"), self.fingerprint)
         if differing is None:
-            differing = self._earlier_release_differences(checkpoint)
+            differing = earlier_release_differences(self.config, checkpoint)
             if not differing:
                 print("the checkpoint was written by an earlier rigidmd, which recorded the "
                       "configuration as one digest: its atoms, timestep, integrator and "
@@ -475,30 +389,6 @@ class Run:
                 "from the checkpoint's run (only steps may change between a run and its "
                 "continuation); restore it, or start anew with --overwrite")
         return checkpoint
-
-    def _earlier_release_differences(self, checkpoint):
-        """The fields that differ from a checkpoint without a per-field record (0.1.0's).
-
-        Its own contents are compared: the atoms (elements), the timestep, the
-        integrator's name and every coupling part's kind and parameters.
-        """
-        config, meta = self.config, checkpoint.meta
-        differing = []
-        atoms = config.structure.build_atoms()
-        if not np.array_equal(atoms.numbers, checkpoint.arrays["numbers"]):
-            differing.append("structure")
-        if not np.isclose(meta["dt"], config.run.timestep, rtol=1e-12, atol=0):
-            differing.append("timestep")
-        integrator = config.run.integrator
-        if isinstance(integrator, str) and not integrator.endswith((".yaml", ".yml")) and \
-                integrator != meta["scheme_name"]:
-            differing.append("integrator")
-        stored = {COUPLINGS[entry["parameters"]["kind"]].section: _plain(entry["parameters"])
-                  for entry in meta["couplings"] if entry["parameters"]["kind"] in COUPLINGS}
-        current = {part.section: _plain(part.todict()) for part in config.coupling.parts()}
-        differing += [section for section in ("thermostat", "barostat")
-                      if stored.get(section) != current.get(section)]
-        return differing
 
     def _resumed_dynamics(self):
         from rigidmd.logger import RigidLogger
