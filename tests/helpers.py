@@ -6,6 +6,9 @@ every system used in two places is built in one place.
 
 import functools
 import os
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numba
@@ -13,8 +16,9 @@ import numpy as np
 from ase import Atoms, units
 from ase.calculators.calculator import Calculator, all_changes
 from ase.calculators.tip3p import TIP3P
+from ase.io import write
 
-from rigidmd import rigid_maxwell_boltzmann
+from rigidmd import cli, rigid_maxwell_boltzmann
 from rigidmd.systems import co2_water_mixture, water_cluster
 
 #: The tests' data files.
@@ -506,20 +510,52 @@ def children_of(pid):
         found += frontier
     return found
 
+
+# ---------------------------------------------------------------------------------------
+# ``rigidmd run`` projects: 8 TIP3P waters (ASE's TIP3P, deterministic), 2 fs steps, run as a
+# subprocess (start, finish) or in this process (run_here).
+# ---------------------------------------------------------------------------------------
+
+THERMOSTATS = {
+    "nve": "",
+    "nose_hoover": "thermostat: {kind: nose_hoover, temperature: 250 K, tdamp: 50 fs}",
+    "langevin": "thermostat: {kind: langevin, temperature: 250 K, friction: 0.02 1/fs, seed: 2}",
+    "bussi": "thermostat: {kind: bussi, temperature: 250 K, taut: 50 fs, seed: 3}",
+}
+STEPS = 1500
+
+
+def config_text(thermostat, xtc=True):
+    outputs = "{directory: out, trajectory: md.traj, log: md.log, interval: 10, "
+    outputs += "checkpoint_interval: 50" + (", mdanalysis: md.xtc}" if xtc else "}")
+    return (f"structure: cluster.xyz\nread_options: {{format: extxyz}}\nbodies: mol-id\n"
+            f"calculator: {{name: tip3p, options: {{rc: 40.0}}}}\n"
+            f"velocities: {{temperature: 250 K, seed: 1}}\n{THERMOSTATS[thermostat]}\n"
+            f"timestep: 2 fs\nsteps: {STEPS}\noutputs: {outputs}\n")
+
+
+def project(path, thermostat, xtc=True):
+    path.mkdir(parents=True, exist_ok=True)
+    write(path / "cluster.xyz", water_cluster(8, seed=4), format="extxyz")
+    (path / "run.yaml").write_text(config_text(thermostat, xtc))
+    return path
+
+
+def start(path, *args):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "rigidmd.cli", "run", "run.yaml", *args],
+                            cwd=path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+
+
 def start_cli_run(path, config, *args):
     """``rigidmd run run.yaml ARGS`` in ``path`` (created) with ``config`` as run.yaml.
 
     Returns the :class:`subprocess.Popen` (text pipes for stdout and stderr).
     """
-    import subprocess
-    import sys
-
     path.mkdir(exist_ok=True)
     (path / "run.yaml").write_text(config)
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.Popen([sys.executable, "-m", "rigidmd.cli", "run", "run.yaml", *args],
-                            cwd=path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=env)
+    return start(path, *args)
 
 
 def cpu_seconds(pids):
@@ -563,3 +599,45 @@ def start_by_hand(engine, directory):
     thread = threading.Thread(target=start)
     thread.start()
     return thread, started
+def finish(proc):
+    stdout, stderr = proc.communicate(timeout=600)
+    return proc.returncode, stdout, stderr
+
+
+def wait_for_lines(log, n, proc, timeout=120):
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        if log.exists() and len(log.read_text().splitlines()) > n:
+            return
+        if proc.poll() is not None:
+            raise AssertionError("the run ended before it could be stopped")
+        time.sleep(0.05)
+    raise AssertionError("the run produced no log lines")
+
+
+def short_project(path, steps=40, checkpoint_interval=20, thermostat="nve"):
+    project(path, thermostat, xtc=False)
+    text = config_text(thermostat, xtc=False).replace(f"steps: {STEPS}", f"steps: {steps}")
+    (path / "run.yaml").write_text(text.replace("checkpoint_interval: 50",
+                                                f"checkpoint_interval: {checkpoint_interval}"))
+    return path
+
+
+def run_here(path, monkeypatch, capsys, *args):
+    """``rigidmd run run.yaml ARGS`` in this process: (status, stdout, stderr)."""
+    monkeypatch.chdir(path)
+    status = cli.main(["run", "run.yaml", *map(str, args)])
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
+def messages(err):
+    """stderr without the progress lines."""
+    return [line for line in err.splitlines() if not line.startswith("[")]
+
+
+
+
+def file_bytes(path):
+    """The bytes of a project's ``out/md.traj`` and ``out/md.log``."""
+    return {name: (path / "out" / name).read_bytes() for name in ("md.traj", "md.log")}

@@ -7,67 +7,29 @@ The system is 8 TIP3P waters (ASE's TIP3P, deterministic), 2 fs steps.
 
 import errno
 import json
-import os
 import signal
 import subprocess
 import sys
-import time
 from functools import cache
 
 import numpy as np
 import pytest
 from ase.io import read, write
+from helpers import (  # the rigidmd-run projects these tests share with test_run_faults.py
+    STEPS,
+    config_text,
+    file_bytes,
+    finish,
+    messages,
+    project,
+    run_here,
+    short_project,
+    start,
+    wait_for_lines,
+)
 
 from rigidmd import cli
 from rigidmd.checkpoint import read_checkpoint
-from rigidmd.systems import water_cluster
-
-THERMOSTATS = {
-    "nve": "",
-    "nose_hoover": "thermostat: {kind: nose_hoover, temperature: 250 K, tdamp: 50 fs}",
-    "langevin": "thermostat: {kind: langevin, temperature: 250 K, friction: 0.02 1/fs, seed: 2}",
-    "bussi": "thermostat: {kind: bussi, temperature: 250 K, taut: 50 fs, seed: 3}",
-}
-STEPS = 1500
-
-
-def config_text(thermostat, xtc=True):
-    outputs = "{directory: out, trajectory: md.traj, log: md.log, interval: 10, "
-    outputs += "checkpoint_interval: 50" + (", mdanalysis: md.xtc}" if xtc else "}")
-    return (f"structure: cluster.xyz\nread_options: {{format: extxyz}}\nbodies: mol-id\n"
-            f"calculator: {{name: tip3p, options: {{rc: 40.0}}}}\n"
-            f"velocities: {{temperature: 250 K, seed: 1}}\n{THERMOSTATS[thermostat]}\n"
-            f"timestep: 2 fs\nsteps: {STEPS}\noutputs: {outputs}\n")
-
-
-def project(path, thermostat, xtc=True):
-    path.mkdir(parents=True, exist_ok=True)
-    write(path / "cluster.xyz", water_cluster(8, seed=4), format="extxyz")
-    (path / "run.yaml").write_text(config_text(thermostat, xtc))
-    return path
-
-
-def start(path, *args):
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.Popen([sys.executable, "-m", "rigidmd.cli", "run", "run.yaml", *args],
-                            cwd=path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=env)
-
-
-def finish(proc):
-    stdout, stderr = proc.communicate(timeout=600)
-    return proc.returncode, stdout, stderr
-
-
-def wait_for_lines(log, n, proc, timeout=120):
-    deadline = time.time() + timeout
-    while time.time() < deadline:
-        if log.exists() and len(log.read_text().splitlines()) > n:
-            return
-        if proc.poll() is not None:
-            raise AssertionError("the run ended before it could be stopped")
-        time.sleep(0.05)
-    raise AssertionError("the run produced no log lines")
 
 
 def outputs(path, xtc=True):
@@ -256,31 +218,6 @@ def test_full_disk_stops_with_one_line_and_keeps_the_checkpoint(tmp_path, monkey
 # ---------------------------------------------------------------------------------------
 
 
-def short_project(path, steps=40, checkpoint_interval=20, thermostat="nve"):
-    project(path, thermostat, xtc=False)
-    text = config_text(thermostat, xtc=False).replace(f"steps: {STEPS}", f"steps: {steps}")
-    (path / "run.yaml").write_text(text.replace("checkpoint_interval: 50",
-                                                f"checkpoint_interval: {checkpoint_interval}"))
-    return path
-
-
-def run_here(path, monkeypatch, capsys, *args):
-    """``rigidmd run run.yaml ARGS`` in this process: (status, stdout, stderr)."""
-    monkeypatch.chdir(path)
-    status = cli.main(["run", "run.yaml", *map(str, args)])
-    captured = capsys.readouterr()
-    return status, captured.out, captured.err
-
-
-def messages(err):
-    """stderr without the progress lines."""
-    return [line for line in err.splitlines() if not line.startswith("[")]
-
-
-def file_bytes(path):
-    return {name: (path / "out" / name).read_bytes() for name in ("md.traj", "md.log")}
-
-
 @pytest.fixture(scope="module")
 def short_reference(tmp_path_factory):
     """The bytes of md.traj and md.log of the short run, left alone."""
@@ -462,7 +399,11 @@ def test_resume_from_a_damaged_checkpoint_is_one_line(tmp_path, monkeypatch, cap
     assert len(messages(stderr)) == 1 and "Traceback" not in stderr
     assert stderr.startswith(f"rigidmd: error: --resume: checkpoint: '{checkpoint}' is not a "
                              "readable checkpoint (")
-    assert stderr.rstrip().endswith("start it again with --overwrite")
+    # The advice keeps the outputs first (--restart into another directory).
+    assert stderr.rstrip().endswith(
+        f"the run cannot be continued from it: start a new run from its last frame with "
+        f"--restart {path / 'out' / 'md.traj'} --outdir NEW_DIRECTORY (which keeps these "
+        "outputs), or start it again with --overwrite (which removes them)")
 
 
 def test_resume_without_a_checkpoint_says_what_to_do(tmp_path, monkeypatch, capsys):

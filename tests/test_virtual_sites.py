@@ -145,12 +145,40 @@ def test_body_without_mass_and_mass_at_one_point_are_refused():
     atoms.set_masses([0, 0, 16, 0])
     with pytest.raises(ValueError, match=r"body 0 \(atoms \[0, 1\]\) has no mass"):
         RigidBodies([0, 0, 1, 1]).geometry(atoms)
+    helium = atoms.copy()  # atoms 0 and 1 massive (X must stay massless: He, given 1 amu)
+    helium.numbers[:2] = 2
     with pytest.raises(ValueError, match=r"body 0 \(atoms \[2, 3\]\) has all its mass at one"):
-        RigidBodies([1, 1, 0, 0]).geometry(_massive(atoms, [0, 1]))
+        RigidBodies([1, 1, 0, 0]).geometry(_massive(helium, [0, 1]))
     with pytest.raises(ValueError, match=r"atom 1 \(X\) has mass -1.0 amu"):
         bad = atoms.copy()
         bad.set_masses([1, -1, 16, 0])
         RigidBodies([0, 0, 1, 1]).geometry(bad)
+
+
+@pytest.mark.parametrize("source", ["api", "pdb", "xyz"])
+def test_a_massive_m_site_is_refused_wherever_the_atoms_come_from(tmp_path, source):
+    """Outside ``water_model:``: M of 1 amu (ASE's default for X) ran 5.5 % too dense.
+
+    Through the API, and from a PDB or plain XYZ file (no masses stored), as a
+    configuration with ``commands:`` reads them.
+    """
+    from ase.io import read, write
+
+    atoms = water_cluster(2, model="tip4p2005")
+    if source == "api":
+        masses = atoms.get_masses()
+        masses[[3, 7]] = 1.0
+        atoms.set_masses(masses)
+    else:
+        write(tmp_path / f"w.{source}", atoms, format="proteindatabank" if source == "pdb" else
+              "xyz")
+        atoms = read(tmp_path / f"w.{source}")
+    atoms.calc = CoulombLJ(parameters=water_parameters(WATER_MODELS["tip4p2005"]))
+    with pytest.raises(ValueError, match=r"^atom 3 \(X\) has mass 1 amu, but X \(Z = 0\) is a "
+                                         r"massless virtual site, such as the M of four-site "
+                                         r"water \(2 X atoms have mass\); give them mass 0"):
+        RigidVerlet(atoms, units.fs, bodies=[[0, 1, 2, 3], [4, 5, 6, 7]])
+    assert atoms.constraints == []
 
 
 def _massive(atoms, indices):

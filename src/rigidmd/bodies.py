@@ -386,6 +386,12 @@ def check_masses(masses, symbols, free, order, starts):
     places it rigidly and takes the force on it into its own force and
     torque; a body needs some mass.
 
+    An atom of ASE's dummy element X (Z = 0), the element rigidmd gives every
+    virtual site (:data:`rigidmd.water.M_SYMBOL`), must be massless, wherever
+    the atoms come from: ASE gives X a mass of 1 amu when a file stores no
+    masses (PDB, plain XYZ), which would move M as an atom and make four-site
+    water 5.5 % too dense.
+
     Parameters
     ----------
     masses : numpy.ndarray, shape (n_atoms,)
@@ -409,6 +415,15 @@ def check_masses(masses, symbols, free, order, starts):
             f"atom {a} ({symbols[a]}) has mass {float(masses[a])!r} amu; every atom needs "
             "a finite mass, positive (or 0 for a virtual site inside a rigid body)"
         )
+    sites = np.flatnonzero((np.asarray(symbols) == "X") & (masses != 0))
+    if sites.size:
+        a = int(sites[0])
+        raise ValueError(
+            f"atom {a} (X) has mass {float(masses[a]):g} amu, but X (Z = 0) is a massless "
+            "virtual site, such as the M of four-site water "
+            f"({sites.size} X atoms have mass); give them mass 0 (atoms.set_masses), or keep "
+            "the structure in a format that stores masses (.traj, extended XYZ): PDB and XYZ "
+            "files have none, and ASE gives X 1 amu; a particle with mass needs another element")
     massless = free[masses[free] == 0]
     if massless.size:
         a = int(massless[0])

@@ -40,8 +40,8 @@ from rigidmd.coupling import COUPLINGS, Coupling, new_rng
 from rigidmd.model import BodyModel
 from rigidmd.state import STATE_FIELDS
 
-__all__ = ["save_checkpoint", "read_checkpoint", "atomic_write", "remove_stale_temporaries",
-           "Checkpoint", "CheckpointError", "FORMAT"]
+__all__ = ["save_checkpoint", "read_checkpoint", "check_checkpoint", "atomic_write",
+           "remove_stale_temporaries", "Checkpoint", "CheckpointError", "FORMAT"]
 
 #: Identifies the file format (with a version number).
 FORMAT = "rigidmd-checkpoint-1"
@@ -313,4 +313,78 @@ def read_checkpoint(path):
     missing += [name for name in _REQUIRED_META if name not in meta]
     if missing:
         raise CheckpointError(f"checkpoint: {str(path)!r} is incomplete (no {missing[0]!r})")
+    check_checkpoint(meta, arrays, path)
     return Checkpoint(meta, arrays)
+
+
+#: How far a stored orientation's norm may be from 1.  A run keeps it to roundoff: each
+#: free rotation is an exact rotation, so |q| drifts by ~1e-16 a step (below 1e-10 after
+#: 1e8 steps); anything near 1e-6 was written by hand or damaged.
+QUATERNION_NORM_TOLERANCE = 1e-6
+
+
+def _shapes(meta, arrays):
+    """The shape each array of a checkpoint must have, from its atoms and its body ids."""
+    n_atoms = len(arrays["numbers"])
+    ids = np.asarray(arrays["body_ids"]).reshape(-1)
+    n_bodies = int(ids.max()) + 1 if ids.size and ids.max() >= 0 else 0
+    n_body_atoms = int(np.count_nonzero(ids >= 0))
+    n_free = n_atoms - n_body_atoms
+    per = {"atoms": n_atoms, "bodies": n_bodies, "body atoms": n_body_atoms,
+           "free atoms": n_free}
+    expected = {name: ("atoms", 3) for name in ("positions", "momenta")}
+    expected.update({name: ("atoms", None) for name in ("masses", "tags", "charges",
+                                                        "body_ids")})
+    expected.update({"F": ("bodies", 3), "tau": ("bodies", 3), "f": ("free atoms", 3),
+                     "model_mass": ("bodies", None), "model_moments": ("bodies", 3),
+                     "model_starts": ("bodies", None), "model_order": ("body atoms", None),
+                     "model_atom_body": ("body atoms", None),
+                     "model_atom_masses": ("body atoms", None),
+                     "model_body_coordinates": ("body atoms", 3),
+                     "model_free": ("free atoms", None), "model_free_masses": ("free atoms", None),
+                     "state_X": ("bodies", 3), "state_V": ("bodies", 3), "state_q": ("bodies", 4),
+                     "state_p": ("bodies", 4), "state_x": ("free atoms", 3),
+                     "state_v": ("free atoms", 3)})
+    return per, expected
+
+
+def check_checkpoint(meta, arrays, path="checkpoint"):
+    """Refuse a checkpoint whose parts do not fit together, naming the part and the body.
+
+    Every per-atom, per-body and per-free-atom array must have as many rows
+    as the atoms and the body ids say (a body short or extra is named, not
+    left to a broadcasting error), the metadata's atom count must agree,
+    every stored number must be finite, and every orientation a unit
+    quaternion (within :data:`QUATERNION_NORM_TOLERANCE`).
+
+    Raises
+    ------
+    CheckpointError
+    """
+    where = f"checkpoint: {str(path)!r}"
+    per, expected = _shapes(meta, arrays)
+    for name, (count, width) in expected.items():
+        shape = np.shape(arrays[name])
+        rows, columns = (shape[0] if shape else None), (shape[1] if len(shape) > 1 else None)
+        if rows != per[count] or (width is not None and columns != width):
+            want = f"{per[count]} {count}" + (f" x {width}" if width else "")
+            raise CheckpointError(
+                f"{where} does not fit together: {name} has shape {shape}, but the body ids "
+                f"give {want} (a body or an atom short or extra: the file was changed)")
+    if meta["model_n_atoms"] != per["atoms"]:
+        raise CheckpointError(f"{where} does not fit together: its metadata says "
+                              f"{meta['model_n_atoms']} atoms, its arrays hold {per['atoms']}")
+    if np.shape(arrays["cell"]) != (3, 3):
+        raise CheckpointError(f"{where}: cell has shape {np.shape(arrays['cell'])}, not (3, 3)")
+    for name, values in arrays.items():
+        values = np.asarray(values)
+        if values.dtype.kind == "f" and not np.isfinite(values).all():
+            raise CheckpointError(f"{where}: {name} holds a non-finite number")
+    norms = np.linalg.norm(arrays["state_q"], axis=1)
+    bad = np.flatnonzero(np.abs(norms - 1.0) > QUATERNION_NORM_TOLERANCE)
+    if bad.size:
+        b = int(bad[0])
+        raise CheckpointError(
+            f"{where}: body {b} has an orientation quaternion of norm {norms[b]:.9g}, not 1 "
+            f"({bad.size} of {len(norms)} bodies): orientations must be unit quaternions; the "
+            "file was changed or damaged")

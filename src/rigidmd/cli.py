@@ -1,4 +1,4 @@
-"""The ``rigidmd`` command: ``demo``, ``run``, ``plot`` and ``export-lammps``.
+"""The ``rigidmd`` command: ``demo``, ``run``, ``relax``, ``plot`` and ``export-lammps``.
 
 ``rigidmd demo``                      a TIP3P water cluster, 2 ps, with plots
 ``rigidmd run CONFIG.yaml [flags]``   any system from a configuration file
@@ -32,6 +32,7 @@ from rigidmd.config import (
 from rigidmd.config.trust import GivenOnCommandLine
 from rigidmd.coupling import NotExportable
 from rigidmd.dynamics import NonFiniteForceError
+from rigidmd.fingerprint import resume_command
 from rigidmd.lammps.library import LammpsError
 from rigidmd.logplot import LogError, plot_log
 from rigidmd.operators import ConvergenceError
@@ -66,6 +67,22 @@ def _apply_flags(config, args):
         outdir = GivenOnCommandLine(Path(args.outdir).resolve())
         config["outputs"] = dict(config["outputs"], directory=outdir)
     return config
+
+
+def _resume_hint(args):
+    """The exact command that resumes ``rigidmd run`` with these flags (see :func:`resume_command`).
+
+    The flags that define the run are repeated as given; ``--outdir`` is
+    given with its absolute path, so the command cannot act on another run.
+    """
+    flags = []
+    for key in ("structure", "restart", "steps", "timestep", "integrator", "bodies"):
+        value = getattr(args, key, None)
+        if value is not None:
+            flags += [f"--{key}", str(value)]
+    if args.trust:
+        flags.append("--trust")
+    return resume_command(args.config, args.outdir, flags)
 
 
 def _export(config, directory, stream=sys.stdout):
@@ -200,7 +217,7 @@ def main(argv=None):
                 parse_quantity("--timestep", args.timestep, TIME_UNITS)
             mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
             return Run(check_config(config, trust=args.trust), mode=mode,
-                       config_path=args.config).execute()
+                       config_path=args.config, resume_hint=_resume_hint(args)).execute()
         if args.command == "relax":
             return relax_only(_apply_flags(load_config(args.config), args), trust=args.trust)
         if args.command == "export-lammps":
@@ -228,6 +245,11 @@ def main(argv=None):
             return 2
         print(f"rigidmd: run stopped: {message}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        # Ctrl-C before the steps began (reading, building the calculator, relaxing): no run
+        # started, so there is nothing to continue.
+        print(f"rigidmd: interrupted before the {args.command} started", file=sys.stderr)
+        return 130
     except (NonFiniteForceError, ConvergenceError, RelaxationNotConverged) as err:
         # The run stopped; its outputs and checkpoint hold every step before the failure.
         print(f"rigidmd: run stopped: {err}", file=sys.stderr)

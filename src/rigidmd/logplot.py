@@ -22,17 +22,27 @@ def read_log(path):
     dict of str to numpy.ndarray
     """
     names, rows = None, []
-    with open(path) as fh:
-        for line in fh:
-            parts = line.split()
-            if not parts:
-                continue
-            try:
-                rows.append([float(v) for v in parts])
-            except ValueError:
-                names = parts
+    try:
+        with open(path, encoding="utf-8") as fh:
+            for line in fh:
+                if "\0" in line:
+                    raise UnicodeError
+                parts = line.split()
+                if not parts:
+                    continue
+                try:
+                    rows.append([float(v) for v in parts])
+                except ValueError:
+                    names = parts
+    except UnicodeError:
+        raise LogError(f"log: {path} is not an MD log but a binary file (a trajectory or "
+                       "checkpoint?); give the run's text log, e.g. md.log") from None
     if not rows or names is None:
         raise LogError(f"log: {path} holds no MD log lines")
+    missing = [name for name in ("Time[ps]", "Etot[eV]", "Epot[eV]", "Ekin[eV]", "T[K]")
+               if name not in names]
+    if missing:
+        raise LogError(f"log: {path} is not an MD log (no {missing[0]} column)")
     width = min(len(row) for row in rows)
     data = np.array([row[:width] for row in rows])
     return {name: data[:, i] for i, name in enumerate(names[:width])}

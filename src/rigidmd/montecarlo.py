@@ -93,9 +93,21 @@ reading of a body's atoms (by rigidmd and by most calculators) fails there;
 treating it as a hard wall keeps detailed balance, whereas stopping the run
 would end a valid simulation on one unlucky proposal.  A cell already like
 that at the start is refused.
+
+Cells the calculator cannot take
+--------------------------------
+Some calculators take only some cells: ASE's ``TIP3P`` and ``TIP4P`` need an
+orthorhombic cell whose every length is at least twice their cut-off
+``rc`` (:func:`calculator_cell_limits`).  A trial cell below that is
+rejected in the same way, as a hard wall, without calling the calculator
+(the NPT distribution is then sampled over the cells the calculator can
+take; the log's ``MCwall`` column counts both kinds of wall).  What can
+never work is refused at set-up, naming the cut-off: a start cell below
+``2 rc``, a tilted cell, or ``couple="tri"`` with such a calculator.
 """
 
 import numpy as np
+from ase.calculators.tip3p import TIP3P
 
 from rigidmd import observables as obs
 from rigidmd.barostats import COUPLING, PRESSURE, Barostat, BarostattedDynamics
@@ -116,7 +128,8 @@ from rigidmd.thermostats import BussiThermostat
 
 __all__ = ["RigidMCBarostat", "MonteCarloBarostat", "n_move_kinds", "propose_cell",
            "log_acceptance", "log_jacobian", "metropolis", "adapt_step", "cell_widths",
-           "body_span", "ADAPT_BLOCK", "ADAPT_FACTOR", "TARGET_ACCEPTANCE", "LARGEST_STEP"]
+           "body_span", "calculator_cell_limits", "ADAPT_BLOCK", "ADAPT_FACTOR",
+           "TARGET_ACCEPTANCE", "LARGEST_STEP"]
 
 #: Attempts of one move kind between two adjustments of its size.
 ADAPT_BLOCK = 10
@@ -234,6 +247,25 @@ def body_span(body_coordinates, starts):
     return 2.0 * np.maximum.reduceat(radius, starts)
 
 
+def calculator_cell_limits(calc):
+    """The cells a calculator takes: (orthorhombic only, smallest length or width in Å, name).
+
+    ASE's ``TIP3P`` and ``TIP4P`` (and subclasses) assert an orthorhombic
+    cell with every periodic length at least ``2 rc``; another calculator
+    that takes only orthorhombic cells says so with ``orthorhombic_only =
+    True`` (as :class:`rigidmd.lammps.LAMMPSCalculator` can).  Any other
+    calculator takes any cell: ``(False, 0.0, name)``.
+    """
+    name = type(calc).__name__
+    if isinstance(calc, TIP3P):
+        return True, 2.0 * float(calc.rc), f"ASE's {name} (rc = {float(calc.rc):g} Å)"
+    return bool(getattr(calc, "orthorhombic_only", False)), 0.0, name
+
+
+def _orthorhombic(cell):
+    cell = np.asarray(cell)
+    return bool(np.all(cell == np.diag(np.diag(cell))))
+
 
 # ---------------------------------------------------------------- the coupling part
 @register
@@ -283,6 +315,9 @@ class MonteCarloBarostat(Barostat):
         Attempts and acceptances of each kind since the start.
     too_thin : int
         Moves rejected because a body would span half the trial cell.
+    refused : int
+        Moves rejected because the calculator cannot take the trial cell
+        (:func:`calculator_cell_limits`: below ``2 rc`` for ASE's TIP3P/TIP4P).
     exchanged : float
         Potential energy the accepted moves put in (eV).
 
@@ -304,7 +339,7 @@ class MonteCarloBarostat(Barostat):
                   Parameter("rng", "seed", "seed", required=False),
                   Parameter("adapt_moves", "adapt_moves", "integer", required=False,
                             default=500))
-    log_columns = ("MCacc[%]",)
+    log_columns = ("MCacc[%]", "MCwall")
 
     def __init__(self, temperature_K, pressure_au, couple="iso", every=25, rng=None,
                  adapt_moves=500, step=0.01):
@@ -328,9 +363,11 @@ class MonteCarloBarostat(Barostat):
         self.accepted = np.zeros(n, dtype=np.int64)
         self.block = np.zeros((n, 2), dtype=np.int64)  # (accepted, attempted) in this block
         self.too_thin = 0
+        self.refused = 0
         self.exchanged = 0.0
         self.n_particles = 0  # N of the acceptance rule, set by bind
         self._span = 0.0      # the largest body span (Å), set by bind
+        self._limits = (False, 0.0, "")  # the calculator's cell limits, set by check
 
     # -------------------------------------------------------------- set-up
     def check(self, atoms, model, dt):
@@ -349,10 +386,19 @@ class MonteCarloBarostat(Barostat):
             raise ValueError("couple='tri' moves a lower-triangular cell (a along x, b in the xy "
                              "plane, as LAMMPS); rotate the system into that form first "
                              "(ase.cell.Cell.standard_form)")
-        if self.couple == "tri" and getattr(atoms.calc, "orthorhombic_only", False):
+        self._limits = orthorhombic, smallest, name = calculator_cell_limits(atoms.calc)
+        if orthorhombic and self.couple == "tri":
             raise ValueError(
-                f"couple='tri' shears the cell, but the calculator {type(atoms.calc).__name__} "
-                "needs an orthorhombic cell; use couple='aniso' or 'iso'")
+                f"couple='tri' shears the cell, but the calculator {name} takes only "
+                "orthorhombic cells; use couple='aniso' or 'iso'")
+        if orthorhombic and not _orthorhombic(cell):
+            raise ValueError(f"the calculator {name} takes only orthorhombic cells, and this "
+                             f"cell is not one ({cell.round(6).tolist()})")
+        if smallest and self._refuses(cell):
+            raise ValueError(
+                f"the cell's lengths {np.diag(cell).round(4).tolist()} Å must be at least "
+                f"{smallest:g} Å (twice the cut-off) for the calculator {name}; use a larger "
+                "cell or a smaller rc")
         span = body_span(model.body_coordinates, model.starts)
         widths = cell_widths(cell)
         if len(span) and span.max() >= 0.5 * widths.min():
@@ -403,6 +449,10 @@ class MonteCarloBarostat(Barostat):
             self.too_thin += 1  # a move to infinite energy: no calculator call
             self._count(kind, False)
             return False
+        if self._refuses(new_cell):
+            self.refused += 1  # the calculator cannot take it: a wall as well
+            self._count(kind, False)
+            return False
         volume, new_volume = record.volume, obs.volume(new_cell)
         energy = record.energy
         if energy is None:  # a calculator that left the energy out of the force call
@@ -428,6 +478,13 @@ class MonteCarloBarostat(Barostat):
         self._count(kind, accepted)
         return accepted
 
+    def _refuses(self, cell):
+        """Whether the calculator cannot take ``cell`` (see :func:`calculator_cell_limits`)."""
+        orthorhombic, smallest, _ = self._limits
+        if orthorhombic and not _orthorhombic(cell):
+            return True
+        return bool(smallest) and bool(np.diag(cell).min() < smallest)
+
     def _count(self, kind, accepted):
         self.attempted[kind] += 1
         self.accepted[kind] += accepted
@@ -451,8 +508,19 @@ class MonteCarloBarostat(Barostat):
         return bool(self.attempted.sum() < self.adapt_moves)
 
     def log_values(self) -> tuple:
-        """The acceptance since the start, in %."""
-        return (100.0 * self.acceptance,)
+        """The acceptance since the start (%) and the moves rejected as walls since the start."""
+        return (100.0 * self.acceptance, float(self.too_thin + self.refused))
+
+    def report(self) -> str:
+        """One line on the moves: accepted, and rejected as walls (for the run's summary)."""
+        total = int(self.attempted.sum())
+        line = f"Monte Carlo barostat: {int(self.accepted.sum())} of {total} moves accepted"
+        if self.too_thin:
+            line += f"; {self.too_thin} rejected because a body would span half the cell"
+        if self.refused:
+            line += (f"; {self.refused} rejected because the calculator {self._limits[2]} "
+                     f"cannot take the cell (below {self._limits[1]:g} Å or tilted)")
+        return line
 
     def energy(self, view: CouplingView) -> float:
         return -self.exchanged
@@ -460,7 +528,8 @@ class MonteCarloBarostat(Barostat):
     def get_state(self):
         return {"steps": self.steps.copy(), "attempted": self.attempted.copy(),
                 "accepted": self.accepted.copy(), "block": self.block.copy(),
-                "too_thin": self.too_thin, "exchanged": self.exchanged,
+                "too_thin": self.too_thin, "refused": self.refused,
+                "exchanged": self.exchanged,
                 "rng": rng_state(self.rng)}
 
     def set_state(self, state):
@@ -469,6 +538,7 @@ class MonteCarloBarostat(Barostat):
         self.accepted[...] = state["accepted"]
         self.block[...] = state["block"]
         self.too_thin = int(state["too_thin"])
+        self.refused = int(state.get("refused", 0))  # (absent from older checkpoints)
         self.exchanged = float(state["exchanged"])
         set_rng_state(self.rng, state["rng"])
 

@@ -88,6 +88,28 @@ def _check_whole(atoms, model):
             "RigidBodies.whole_positions)")
 
 
+def _check_reduced_cell(cell):
+    """Refuse a cell OpenMM cannot take: it needs its reduced form (OpenMM's ``System``).
+
+    That is a along x, b in the xy plane (lower-triangular, positive diagonal)
+    and each tilt at most half the length below it: ``|b_x| <= a_x/2``,
+    ``|c_x| <= a_x/2``, ``|c_y| <= b_y/2``.
+    """
+    cell = np.asarray(cell, dtype=float)
+    scale = np.abs(cell).max()
+    lower = np.all(np.abs(cell[[0, 0, 1], [1, 2, 2]]) <= 1e-12 * scale)
+    tilts = [(1, 0, 0), (2, 0, 0), (2, 1, 1)]
+    reduced = lower and np.all(np.diag(cell) > 0) and all(
+        abs(cell[row, column]) <= 0.5 * cell[length, length] * (1 + 1e-12)
+        for row, column, length in tilts)
+    if not reduced:
+        raise ValueError(
+            f"rigidmd.openmm: OpenMM takes a cell in its reduced form (a along x, b in the xy "
+            f"plane, each tilt at most half the length below it), not {cell.round(4).tolist()}; "
+            "give the atoms that cell first (ase.cell.Cell.standard_form rotates it, "
+            "ase.geometry.minkowski_reduce reduces the tilts)")
+
+
 def water_system(atoms, model, cutoff, *, tail=True, parameters="file",
                  error_tolerance=1e-6):
     """OpenMM's topology and system for whole waters of ``model`` in a periodic cell.
@@ -129,6 +151,7 @@ def water_system(atoms, model, cutoff, *, tail=True, parameters="file",
                          f"got {parameters!r}")
     if not atoms.pbc.all():
         raise ValueError("rigidmd.openmm: the atoms need a periodic cell (PME)")
+    _check_reduced_cell(atoms.cell.array)
     half = cell_widths(atoms.cell).min() / 2
     if not 0 < cutoff <= half:
         raise ValueError(f"rigidmd.openmm: cutoff {cutoff} Å must be positive and at most "

@@ -66,6 +66,13 @@ class OutputLock:
                 fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
             except FileExistsError:
                 holder = self._holder()
+                if holder is not None and holder.get("host") != socket.gethostname():
+                    raise OutputError(
+                        f"outputs.directory: {self.path.parent} is locked by process "
+                        f"{holder.get('pid')} on host {holder.get('host')!r}, which this "
+                        f"machine ({socket.gethostname()!r}) cannot check; wait for that run, "
+                        f"or, if it is no longer running on {holder.get('host')}, remove "
+                        f"{self.path} and try again") from None
                 if holder is not None and self._lives(holder):
                     raise OutputError(
                         f"outputs.directory: {self.path.parent} is in use by process "

@@ -29,7 +29,10 @@ def load_checkpoint(path, calculator, **kwargs) -> RigidDynamics:
     RigidDynamics
         At the checkpoint's step and time; ``dyn.atoms`` are new Atoms.  The
         class is :class:`RigidDynamics` with the stored coupling parts
-        (``dyn.couplings``).
+        (``dyn.couplings``); as on the classes that build them
+        (:class:`~rigidmd.RigidMCBarostat`, :class:`~rigidmd.RigidNPT`, the
+        thermostat classes), the thermostat part is ``dyn.thermostat`` and the
+        barostat part ``dyn.barostat`` when the run had one.
     """
     checkpoint = path if isinstance(path, Checkpoint) else read_checkpoint(path)
     saved = checkpoint.dynamics_state()
@@ -43,4 +46,7 @@ def load_checkpoint(path, calculator, **kwargs) -> RigidDynamics:
                         backend=saved["backend"], couplings=checkpoint.couplings(),
                         **kwargs)
     dyn.set_state(saved)
+    for part in dyn.couplings:
+        if part.section in ("thermostat", "barostat"):
+            setattr(dyn, part.section, part)
     return dyn

@@ -19,28 +19,35 @@
   checkpoint at step 0 starts the run again from its configuration.
 * **Signals**: SIGTERM (what batch schedulers send), SIGINT (Ctrl-C) and
   SIGUSR1 finish the current step and its outputs, write a checkpoint, close
-  the files and exit with 143, 130 or 138, saying how to resume.  A second
-  Ctrl-C stops at once without a checkpoint (the outputs may end mid-step);
-  ``--resume`` continues from the last one.
+  the files and exit with 143, 130 or 138, printing the exact command that
+  resumes (:func:`resume_command`).  A second Ctrl-C during the steps stops at
+  once without a checkpoint (the outputs may end mid-step); ``--resume``
+  continues from the last one.  Once the steps have stopped, further signals
+  are noted, not obeyed: the final checkpoint is always written whole.
 * **Failures after the start** (a full disk, a step that fails) raise
   :class:`RunStopped`: one line naming the file or the reason, the step and
   the last checkpoint, which stays intact (status 1).
+* **A run that never started** (its first force call fails: a LAMMPS input
+  mistake, ...) removes the outputs it had opened, so the corrected
+  configuration starts without ``--overwrite``.
 """
 
-import hashlib
-import json
 import os
 import signal
 import sys
 import time
-from dataclasses import asdict
-from pathlib import Path
 
 import numpy as np
 from ase import units
 
 from rigidmd.config import TIME_UNITS, ConfigError
 from rigidmd.dof import temperature
+from rigidmd.fingerprint import (
+    differing_fields,
+    earlier_release_differences,
+    fingerprint,
+    resume_command,
+)
 from rigidmd.ipi import EngineError, add_wait_check, remove_wait_check
 from rigidmd.outputs import (
     OutputError,
@@ -50,7 +57,8 @@ from rigidmd.outputs import (
     trim_outputs,
 )
 
-__all__ = ["Run", "RunStopped", "Progress", "StopSignals", "StopRequest", "fingerprint"]
+__all__ = ["Run", "RunStopped", "Progress", "StopSignals", "StopRequest", "fingerprint",
+           "resume_command"]
 
 #: Exit status of a run stopped by each signal (128 + signal number).
 EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGUSR1: 138}
@@ -69,22 +77,29 @@ class StopSignals:
 
     :meth:`check` is attached as the last observer, so a stop comes after
     every output of the step.  A second SIGINT raises ``KeyboardInterrupt``
-    at once.
+    at once, unless :attr:`shielded` (set while the final checkpoint is
+    written): then it is only counted in :attr:`ignored`.
     """
 
     modifies_atoms = False
 
     def __init__(self):
         self.signum = None
+        self.shielded = False
+        self.ignored = 0
         self._previous = {}
 
     def _handler(self, signum, frame):
-        if self.signum is not None and signum == signal.SIGINT:
+        if self.signum is None:
+            self.signum = signum
+        elif self.shielded:
+            self.ignored += 1
+        elif signum == signal.SIGINT:
             raise KeyboardInterrupt
-        self.signum = signum
 
     def check(self):
         if self.signum is not None:
+            self.shielded = True  # from here on the run only writes what it has
             raise StopRequest(self.signum)
 
     def __enter__(self):
@@ -134,61 +149,6 @@ class RunStopped(RuntimeError):
     """The run stopped after it started (a failed write, a failure in a step); one line."""
 
 
-def _digest(value):
-    text = json.dumps(value, sort_keys=True, default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-def _file_digest(path):
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()[:16]
-
-
-def fingerprint(config):
-    """What defines the trajectory, field by field: a digest per configuration field.
-
-    ``steps`` and the output file names are left out, and so is where the
-    files lie: a structure file or an integrator ``.yaml`` counts by its
-    content, so a moved or copied run directory resumes.
-
-    Returns
-    -------
-    dict
-        Field name (as in the configuration) -> 16 hexadecimal digits.
-    """
-    structure = config.structure
-    source = structure.source
-    if isinstance(source, Path):
-        source = {"file content": _file_digest(source)}
-    integrator = config.run.integrator
-    if isinstance(integrator, str) and integrator.endswith((".yaml", ".yml")):
-        integrator = {"file content": _file_digest(integrator)}
-    # Where the forces run (processes, threads, address) is not what they are.
-    calculator = {key: value for key, value in asdict(config.calculator).items()
-                  if key not in ("calculator_class", "processes", "threads", "address")}
-    fields = {
-        "structure": source, "read_options": structure.read_options,
-        "bodies": structure.bodies, "calculator": calculator,
-        "integrator": integrator, "integrator_options": config.run.integrator_options,
-        "timestep": config.run.timestep, "velocities": config.run.velocities,
-        "outputs.interval": config.outputs.interval,
-    }
-    for section in ("thermostat", "barostat"):
-        spec = getattr(config.coupling, section)
-        fields[section] = None if spec is None else [spec.kind, spec.kwargs, spec.seed]
-    return {name: _digest(value) for name, value in fields.items()}
-
-
-def _differing_fields(recorded, current):
-    """The configuration fields whose digests differ (all of them for an old record)."""
-    if not isinstance(recorded, dict):
-        return None
-    return [name for name in current if recorded.get(name) != current[name]]
-
-
 def _observables(dyn):
     """Time, conserved energy and, under a barostat, pressure (bar), volume, density."""
     row = (dyn.get_time(), dyn.get_conserved_energy())
@@ -234,12 +194,18 @@ class Run:
         The configuration file, for the resume hint.
     stream : file, optional
         Where messages go (default: standard output at construction).
+    resume_hint : str, optional
+        The command that resumes this run (the command line builds it with
+        :func:`resume_command` from its flags); default: the configuration
+        file with ``--outdir`` and ``--resume``.
     """
 
-    def __init__(self, config, mode="new", config_path=None, stream=None):
+    def __init__(self, config, mode="new", config_path=None, stream=None, resume_hint=None):
         self.config, self.mode = config, mode
         self.stream = sys.stdout if stream is None else stream
         self.config_path = config_path
+        self.resume_hint = resume_hint
+        self.created = []  # output files this run created before its first checkpoint
         self.outputs = config.outputs
         self.checkpoint_step = None  # step of the last checkpoint on disk, once known
         self._fingerprint = None
@@ -266,7 +232,34 @@ class Run:
         return files
 
     def _resume_hint(self):
-        return f"rigidmd run {self.config_path or 'CONFIG'} --resume"
+        if self.resume_hint is not None:
+            return self.resume_hint
+        return resume_command(self.config_path or "CONFIG", self.outputs.directory)
+
+    def _fresh_start_advice(self):
+        """How to go on without the checkpoint: keeping the outputs first, then removing them."""
+        trajectory = self.outputs.trajectory
+        keep = ""
+        if trajectory is not None and trajectory.exists():
+            keep = (f"start a new run from its last frame with --restart {trajectory} "
+                    "--outdir NEW_DIRECTORY (which keeps these outputs), or ")
+        return f"{keep}start it again with --overwrite (which removes them)"
+
+    def _remove_unstarted_outputs(self):
+        """Remove the outputs of a new run that failed before its first checkpoint.
+
+        Such a run never started: what it opened (a log header, an empty
+        trajectory) would only block the corrected configuration.  Returns the
+        names removed.
+        """
+        if self.checkpoint_step is not None or not self.created:
+            return []
+        removed = []
+        for path in self.created:
+            if path.exists():
+                path.unlink()
+                removed.append(path.name)
+        return removed
 
     def _is_earlier_demo(self):
         """The checkpoint in the directory is a demo's (same fingerprint, any steps)."""
@@ -358,6 +351,8 @@ class Run:
                             self.stream)
             self._draw_velocities(atoms, bodies)
         out = self.outputs
+        # Nothing of this run's is in the directory now: what appears is this run's.
+        self.created = [p for p in self._all_files() if not p.exists()]
         return RigidDynamics(atoms, self.config.run.timestep, bodies=bodies,
                              couplings=self.config.coupling.parts(),
                              trajectory=str(out.trajectory) if out.trajectory else None,
@@ -380,13 +375,17 @@ class Run:
         try:
             checkpoint = read_checkpoint(out.checkpoint)
         except CheckpointError as err:
-            raise ConfigError(f"--resume: {err}; the run cannot be continued: start it again "
-                              "with --overwrite") from None
-        differing = _differing_fields(checkpoint.extra.get("fingerprint"), self.fingerprint)
+            raise ConfigError(f"--resume: {err}; the run cannot be continued from it: "
+                              f"{self._fresh_start_advice()}") from None
+        differing = differing_fields(checkpoint.extra.get("fingerprint"), self.fingerprint)
         if differing is None:
-            raise ConfigError("--resume: the checkpoint was written by an earlier rigidmd, "
-                              "whose record of the configuration cannot be compared; start "
-                              "anew with --overwrite")
+            differing = earlier_release_differences(self.config, checkpoint)
+            if not differing:
+                print("the checkpoint was written by an earlier rigidmd, which recorded the "
+                      "configuration as one digest: its atoms, timestep, integrator and "
+                      "thermostat/barostat were compared with the configuration and agree; "
+                      "the calculator and outputs.interval cannot be compared (keep them as "
+                      "they were)", file=self.stream)
         if differing:
             raise ConfigError(
                 f"--resume: {', '.join(differing)} differ{'s' if len(differing) == 1 else ''} "
@@ -475,6 +474,10 @@ class Run:
         try:
             return self._execute()
         except BaseException:
+            removed = self._remove_unstarted_outputs()
+            if removed:
+                print(f"the run did not start: removed {', '.join(removed)}, which it had "
+                      "opened", file=self.stream)
             lock.release()
             if created:  # a run that could not start leaves no empty directory behind
                 try:
@@ -502,15 +505,19 @@ class Run:
 
     def _execute(self):
         dyn = self._set_up()
-        try:
-            return self._drive(dyn)
-        finally:
-            # A calculator with a process of its own (LAMMPSEngine) stops with the run.
-            close = getattr(dyn.atoms.calc, "close", None)
-            if callable(close):
-                close()
+        stop = StopSignals()
+        # The handlers stay until the calculator is closed: a signal after the steps is noted,
+        # never a KeyboardInterrupt in the final checkpoint's write or the engine's shutdown.
+        with stop:
+            try:
+                return self._drive(dyn, stop)
+            finally:
+                # A calculator with a process of its own (LAMMPSEngine) stops with the run.
+                close = getattr(dyn.atoms.calc, "close", None)
+                if callable(close):
+                    close()
 
-    def _drive(self, dyn):
+    def _drive(self, dyn, stop):
         out, config = self.outputs, self.config
         total = config.run.steps
         remaining = total - dyn.nsteps
@@ -529,17 +536,52 @@ class Run:
             dyn.attach(_NamedOutput(writer, out.mdanalysis), interval=out.interval)
         dyn.attach(Progress(dyn, remaining), interval=max(1, remaining // 1000))
         dyn.attach(lambda: self._checkpoint(dyn, writer), interval=out.checkpoint_interval)
-        stop = StopSignals()
         dyn.attach(stop.check, interval=1)  # last: after every output of the step
         print(f"{dyn.bodies} with {dyn.scheme.name} integrator, {describe(dyn)}, "
               f"steps {dyn.nsteps + 1}-{total} of {config.run.timestep / TIME_UNITS['fs']:g} fs",
               file=self.stream)
-        status = 0
         t0 = time.perf_counter()
+        status, at_once = self._steps(dyn, remaining, writer)
+        # The steps are over: a signal now is noted, not obeyed, until the run has written
+        # everything (a KeyboardInterrupt inside the checkpoint's write would lose it).
+        stop.shielded = True
+        if at_once:
+            return status  # a second Ctrl-C stopped the steps at once
+        return self._finish(dyn, status, stop, rows, t0)
+
+    def _finish(self, dyn, status, stop, rows, t0):
+        """The final checkpoint, the summary and the plot; the exit status."""
+        out = self.outputs
+        try:
+            self._checkpoint(dyn, None)
+        except OSError as err:
+            raise self._stopped(dyn, describe_os_error(err)) from None
+        if stop.signum is not None and not status:  # a signal during the final checkpoint
+            status = EXIT_STATUS[stop.signum]
+        if stop.ignored:
+            print(f"\n(a further {signal.Signals(stop.signum).name} arrived while the final "
+                  "checkpoint was written; it was finished first)", file=self.stream)
+        if status:
+            print(f"checkpoint {out.checkpoint} written; continue with: {self._resume_hint()}",
+                  file=self.stream)
+        summary(dyn, rows, time.perf_counter() - t0, self.stream)
+        if out.plot is not None and out.log is not None and not status:
+            from rigidmd.logplot import plot_log
+
+            try:
+                plot_log(out.log, out.plot)
+            except OSError as err:
+                raise self._stopped(dyn, describe_os_error(err)) from None
+        for path in out.files.values():
+            print(f"wrote {path}", file=self.stream)
+        return status
+
+    def _steps(self, dyn, remaining, writer):
+        """Run the steps: (exit status, whether a second Ctrl-C stopped them at once)."""
+        status = 0
         interrupted = False
         try:
-            with stop:
-                dyn.run(remaining)
+            dyn.run(remaining)
         except StopRequest as request:
             status = EXIT_STATUS[request.signum]
             print(f"\nstopped by {request} after step {dyn.nsteps}", file=self.stream)
@@ -568,25 +610,7 @@ class Run:
                       f"checkpoint of step {self.checkpoint_step} is kept: {self._resume_hint()} "
                       "continues from it (cutting back the outputs written after it)",
                       file=self.stream)
-            return status
-        try:
-            self._checkpoint(dyn, None)
-        except OSError as err:
-            raise self._stopped(dyn, describe_os_error(err)) from None
-        if status:
-            print(f"checkpoint {out.checkpoint} written; continue with: {self._resume_hint()}",
-                  file=self.stream)
-        summary(dyn, rows, time.perf_counter() - t0, self.stream)
-        if out.plot is not None and out.log is not None:
-            from rigidmd.logplot import plot_log
-
-            try:
-                plot_log(out.log, out.plot)
-            except OSError as err:
-                raise self._stopped(dyn, describe_os_error(err)) from None
-        for path in out.files.values():
-            print(f"wrote {path}", file=self.stream)
-        return status
+        return status, interrupted
 
 
 def describe(dyn):
@@ -608,6 +632,10 @@ def summary(dyn, rows, elapsed, stream):
     print(f"{dyn.nsteps} steps ({elapsed:.1f} s for this run); "
           f"T = {temperature(dyn.atoms):.1f} K ({dyn.degrees_of_freedom} degrees of "
           "freedom)", file=stream)
+    for part in dyn.couplings:  # a part that reports on itself (the Monte Carlo barostat)
+        report = getattr(part, "report", None)
+        if callable(report):
+            print(report(), file=stream)
     if len(rows) >= 3:
         data = np.array(rows)
         t_ps, e = data[:, 0] / TIME_UNITS["ps"], data[:, 1]
