@@ -1,4 +1,4 @@
-"""The ``rigidmd`` command: ``demo``, ``run``, ``plot`` and ``export-lammps``.
+"""The ``rigidmd`` command: ``demo``, ``run``, ``relax``, ``plot`` and ``export-lammps``.
 
 ``rigidmd demo``                      a TIP3P water cluster, 2 ps, with plots
 ``rigidmd run CONFIG.yaml [flags]``   any system from a configuration file
@@ -114,6 +114,14 @@ def _export(config, directory, stream=sys.stdout):
     return 0
 
 
+#: What the demo's user sees, and why (printed before it runs).
+DEMO_NOTE = ("rigidmd demo: 32 rigid TIP3P waters, built on a lattice and not relaxed, "
+             "velocities at 250 K, no thermostat (NVE). As the cluster settles, potential "
+             "energy becomes kinetic: the temperature climbs to about 350 K within the "
+             "first 0.5 ps while the total energy stays constant. For a steady temperature "
+             "relax first and add a thermostat (rigidmd run with relax: and thermostat:).")
+
+
 def _parser():
     description = __doc__.splitlines()[0].replace("``", "")  # no reStructuredText in --help
     parser = argparse.ArgumentParser(prog="rigidmd", description=description)
@@ -177,6 +185,7 @@ def main(argv=None):
         if args.command == "demo":
             config = {k: (dict(v) if isinstance(v, dict) else v) for k, v in DEMO_CONFIG.items()}
             config = _apply_flags(config, args)
+            print(DEMO_NOTE, file=sys.stderr)
             return Run(check_config(config), mode="demo").execute()
         if args.command == "run":
             if args.config:
