@@ -57,6 +57,15 @@ def public_modules():
             if importlib.util.find_spec(name) is not None]
 
 
+def _summary(module, name):
+    """The first paragraph of a class's or function's docstring, on one line."""
+    obj = getattr(module, name)
+    if not (inspect.isclass(obj) or inspect.isroutine(obj)):
+        return "constant"
+    paragraph = (inspect.getdoc(obj) or "").split("\n\n")[0]
+    return " ".join(paragraph.split()) or "(no docstring)"
+
+
 def _directive(module, name):
     obj = getattr(module, name)
     full = f"{module.__name__}.{name}"
@@ -73,8 +82,10 @@ def api_page(module_name, summary):
     """The MyST source of one module's page: its docstring, a table, every name."""
     module = importlib.import_module(module_name)
     names = list(module.__all__)
+    rows = "".join(f"   * - :py:obj:`~{module_name}.{n}`\n     - {_summary(module, n)}\n"
+                   for n in names)
     rst = [f".. automodule:: {module_name}\n   :no-members:\n",
-           ".. autosummary::\n   :nosignatures:\n\n" + "".join(f"   {n}\n" for n in names)]
+           ".. list-table::\n   :widths: 30 70\n\n" + rows]
     rst += [_directive(module, name) for name in names]
     return (f"# `{module_name}`\n\n{summary}.\n\n```{{eval-rst}}\n" + "\n".join(rst)
             + "```\n")
