@@ -116,10 +116,11 @@ def _export(config, directory, stream=sys.stdout):
 
 #: What the demo's user sees, and why (printed before it runs).
 DEMO_NOTE = ("rigidmd demo: 32 rigid TIP3P waters, built on a lattice and not relaxed, "
-             "velocities at 250 K, no thermostat (NVE). As the cluster settles, potential "
-             "energy becomes kinetic: the temperature climbs to about 350 K within the "
-             "first 0.5 ps while the total energy stays constant. For a steady temperature "
-             "relax first and add a thermostat (rigidmd run with relax: and thermostat:).")
+             "velocities drawn at 250 K, no thermostat (NVE). As the cluster settles, its "
+             "potential energy becomes kinetic: the temperature climbs from about 230 K to "
+             "350-430 K within 0.4 ps while the total energy stays constant. For a steady "
+             "temperature, relax first and add a thermostat (relax: and thermostat: in a "
+             "configuration for rigidmd run).")
 
 
 def _parser():
