@@ -19,7 +19,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from codeblocks import blocks, run_page
+from codeblocks import blocks, run_page, shell_lines
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -37,9 +37,14 @@ def pages():
                   if not p.relative_to(DOCS).parts[0].startswith("_"))
 
 
+def runs_something(lang, body):
+    return lang == "python" or (lang == "bash" and any(
+        not skipped for _, skipped in shell_lines(body)))
+
+
 def runnable_pages():
     return [page for page in pages()
-            if any(lang in ("python", "bash") for lang, _ in blocks((DOCS / page).read_text()))]
+            if any(runs_something(lang, body) for lang, body in blocks((DOCS / page).read_text()))]
 
 
 def test_the_pages_have_samples_to_run():
