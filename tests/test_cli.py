@@ -29,6 +29,9 @@ def test_demo(tmp_path):
     assert (out / "demo-energy.png").stat().st_size > 10_000
     assert "T = " in result.stdout and "drift" in result.stdout
     assert "200/200 steps" in result.stderr and "steps/s" in result.stderr
+    # What the user sees is said, and a long run says how long it has left.
+    assert "not relaxed" in result.stderr and "temperature climbs" in result.stderr
+    assert any(line.endswith(" left") for line in result.stderr.splitlines())
 
 
 CONFIG = """

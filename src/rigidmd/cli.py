@@ -134,6 +134,15 @@ def _export(config, directory, stream=sys.stdout):
     return 0
 
 
+#: What the demo's user sees, and why (printed before it runs).
+DEMO_NOTE = ("rigidmd demo: 32 rigid TIP3P waters, built on a lattice and not relaxed, "
+             "velocities drawn at 250 K, no thermostat (NVE). As the cluster settles, its "
+             "potential energy becomes kinetic: the temperature climbs from about 230 K to "
+             "350-430 K within 0.4 ps while the total energy stays constant. For a steady "
+             "temperature, relax first and add a thermostat (relax: and thermostat: in a "
+             "configuration for rigidmd run).")
+
+
 def _parser():
     description = __doc__.splitlines()[0].replace("``", "")  # no reStructuredText in --help
     parser = argparse.ArgumentParser(prog="rigidmd", description=description)
@@ -198,6 +207,7 @@ def main(argv=None):
         if args.command == "demo":
             config = {k: (dict(v) if isinstance(v, dict) else v) for k, v in DEMO_CONFIG.items()}
             config = _apply_flags(config, args)
+            print(DEMO_NOTE, file=sys.stderr)
             return Run(check_config(config), mode="demo").execute()
         if args.command == "run":
             if args.config:

@@ -115,6 +115,16 @@ class StopSignals:
         return False
 
 
+def time_left(steps, rate):
+    """``"  12m05s left"`` for ``steps`` more at ``rate`` steps per second; empty when unknown."""
+    if steps <= 0 or not rate > 0:
+        return ""
+    seconds = int(round(steps / rate))
+    hours, rest = divmod(seconds, 3600)
+    text = f"{hours}h{rest // 60:02d}m" if hours else f"{rest // 60}m{rest % 60:02d}s"
+    return f"  {text} left"
+
+
 class Progress:
     """A progress line on stderr: in place on a terminal, else every 1 % or 30 s."""
 
@@ -135,7 +145,8 @@ class Progress:
         rate = done / (now - self.t0) if now > self.t0 else 0.0
         bar = "#" * int(self.width * fraction)
         line = (f"[{bar:<{self.width}}] {done:>{len(str(self.total))}}/{self.total} steps "
-                f"{rate:8.1f} steps/s  T {temperature(self.dyn.atoms):7.1f} K")
+                f"{rate:8.1f} steps/s  T {temperature(self.dyn.atoms):7.1f} K"
+                f"{time_left(self.total - done, rate)}")
         if self.tty:
             self.stream.write("\r" + line + ("\n" if done >= self.total else ""))
         elif fraction + 1e-12 >= self.next_report or done >= self.total or now - self.last > 30:

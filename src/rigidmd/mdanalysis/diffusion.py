@@ -156,7 +156,7 @@ class MeanSquaredDisplacement(AnalysisBase):
         α of MSD ∝ t^α fitted in the window (1 for diffusion, 2 for
         ballistic motion).
     results.diffusive : bool
-        Whether |α - 1| <= 0.25, the condition for a diffusion coefficient.
+        Whether ``|α - 1| <= 0.25``, the condition for a diffusion coefficient.
     results.diffusion_coefficient_cm2_s : float
         cm²/s.
     results.fit_range : tuple of float

@@ -1,0 +1,334 @@
+"""Pages generated from the code at build time, so that they cannot drift from it.
+
+* ``docs/_generated/configuration.md``: every configuration key, its unit,
+  default and allowed values, read from the tables of :mod:`rigidmd.config`,
+  the coupling registry (:data:`rigidmd.coupling.COUPLINGS`) and the tables the
+  sections check against (schemes, optimizers, water models, trusted LAMMPS
+  commands).
+* ``docs/api/<module>.md``: one page per public module listing every name of
+  its ``__all__`` with its rendered docstring.
+* ``docs/examples/<script>.md``: one page per script in ``examples/``.
+
+Each file is rewritten only when its text changes, so incremental builds stay
+incremental.  The functions are plain Python (no Sphinx needed) so that
+``tests/test_docs.py`` can check what they produce.
+"""
+
+import ast
+import dataclasses
+import importlib
+import importlib.util
+import inspect
+import re
+from pathlib import Path
+
+DOCS = Path(__file__).resolve().parents[1]
+ROOT = DOCS.parent
+
+#: The modules whose ``__all__`` is the public API, in the order the reference shows
+#: them (a module that does not exist in this checkout is left out).
+PUBLIC_MODULES = (
+    ("rigidmd", "Dynamics, thermostats, barostats, bodies, velocities, checkpoints"),
+    ("rigidmd.systems", "Builders: water clusters and boxes, CO2 mixtures, ice Ih"),
+    ("rigidmd.water", "Water models: geometry, charges, Lennard-Jones, LAMMPS commands"),
+    ("rigidmd.optimize", "Rigid relaxation with ASE's optimizers"),
+    ("rigidmd.relax", "Bodies in the geometry a calculator relaxes them to"),
+    ("rigidmd.lammps", "LAMMPS forces: in-process calculator, engine, data files, export"),
+    ("rigidmd.ipi", "Forces from any i-PI engine"),
+    ("rigidmd.openmm", "Water models as OpenMM systems, for comparison"),
+    ("rigidmd.mdanalysis", "MDAnalysis Universes, writers and water analyses"),
+    ("rigidmd.config", "Configuration files of the rigidmd command"),
+)
+
+
+def write_if_changed(path, text):
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not path.is_file() or path.read_text(encoding="utf-8") != text:
+        path.write_text(text, encoding="utf-8")
+
+
+# --------------------------------------------------------------------------- API
+
+
+def public_modules():
+    """``(module name, summary)`` of the public modules present in this checkout."""
+    return [(name, summary) for name, summary in PUBLIC_MODULES
+            if importlib.util.find_spec(name) is not None]
+
+
+def _summary(module, name):
+    """The first paragraph of a class's or function's docstring, on one line."""
+    obj = getattr(module, name)
+    if not (inspect.isclass(obj) or inspect.isroutine(obj)):
+        return "constant"
+    paragraph = (inspect.getdoc(obj) or "").split("\n\n")[0]
+    return " ".join(paragraph.split()) or "(no docstring)"
+
+
+def _directive(module, name):
+    obj = getattr(module, name)
+    full = f"{module.__name__}.{name}"
+    if inspect.isclass(obj):
+        if issubclass(obj, BaseException):
+            return f".. autoexception:: {full}\n"
+        return f".. autoclass:: {full}\n   :members:\n   :show-inheritance:\n"
+    if inspect.isroutine(obj):
+        return f".. autofunction:: {full}\n"
+    return f".. autodata:: {full}\n   :no-value:\n"
+
+
+def api_page(module_name, summary):
+    """The MyST source of one module's page: its docstring, a table, every name."""
+    module = importlib.import_module(module_name)
+    names = list(module.__all__)
+    rows = "".join(f"   * - :py:obj:`~{module_name}.{n}`\n     - {_summary(module, n)}\n"
+                   for n in names)
+    rst = [f".. automodule:: {module_name}\n   :no-members:\n",
+           ".. list-table::\n   :widths: 30 70\n\n" + rows]
+    rst += [_directive(module, name) for name in names]
+    return (f"# `{module_name}`\n\n{summary}.\n\n```{{eval-rst}}\n" + "\n".join(rst)
+            + "```\n")
+
+
+def write_api(outdir=DOCS / "api"):
+    """One page per public module, and the list of them for the index's toctree."""
+    modules = public_modules()
+    for name, summary in modules:
+        write_if_changed(Path(outdir) / f"{name}.md", api_page(name, summary))
+    rows = "".join(f"| [`{name}`]({name}.md) | {summary} |\n" for name, summary in modules)
+    toc = "".join(f"{name}\n" for name, _ in modules)
+    write_if_changed(DOCS / "_generated" / "api_modules.md",
+                     "| module | what |\n|---|---|\n" + rows
+                     + f"\n```{{toctree}}\n:hidden:\n\n{toc}```\n")
+
+
+# -------------------------------------------------------------- configuration
+
+
+def _attribute_docs(cls):
+    """Field name -> description from a section class's numpydoc ``Attributes``."""
+    from numpydoc.docscrape import NumpyDocString
+
+    out = {}
+    for attr in NumpyDocString(inspect.getdoc(cls) or "")["Attributes"]:
+        for name in attr.name.split(","):
+            out[name.strip()] = (attr.type, " ".join(attr.desc))
+    return out
+
+
+def _units(table):
+    return ", ".join(f"`{u}`" for u in table)
+
+
+def _default(cls, name):
+    for f in dataclasses.fields(cls):
+        if f.name == name:
+            if f.default is not dataclasses.MISSING:
+                return f.default
+            if f.default_factory is not dataclasses.MISSING:
+                return f.default_factory()
+    return dataclasses.MISSING
+
+
+def _cell(value):
+    """A table cell: RST roles in MyST's spelling, no pipes or line breaks."""
+    text = re.sub(r":(\w+):`", r"{\1}`", str(value))
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def configuration_reference():
+    """The MyST text of the full configuration reference, from the code's tables."""
+    from rigidmd.config import DEMO_CONFIG, known_keys
+    from rigidmd.config.quantities import UNIT_TABLES
+    from rigidmd.config.relaxsection import RelaxSection
+    from rigidmd.config.sections import (
+        BODY_RULES,
+        BUILDER_FIELDS,
+        REQUIRED_BUILDER_FIELD,
+        WATER_MODEL_FIELDS,
+        CalculatorSection,
+        CouplingSection,
+        OutputsSection,
+        RunSection,
+        StructureSection,
+    )
+    from rigidmd.config.trust import SAFE_LAMMPS_COMMANDS
+    from rigidmd.coupling import COUPLINGS
+    from rigidmd.optimize import OPTIMIZERS
+    from rigidmd.relaxcell import CELL_MODES
+    from rigidmd.schemes import BUILTIN_SCHEMES
+    from rigidmd.water import WATER_MODELS
+
+    sections = (StructureSection, RunSection, CalculatorSection, CouplingSection,
+                OutputsSection, RelaxSection)
+    documented = {key for section in sections for key in section.KEYS}
+    if documented != known_keys():  # a new section must be added to this page
+        raise RuntimeError(f"configuration keys not in the reference: "
+                           f"{sorted(known_keys() - documented)}")
+    out = []
+    add = out.append
+    add("## Top-level keys\n\n| key | section | required |\n|---|---|---|\n")
+    required = {"structure": "yes (or `restart`)", "timestep": "yes", "steps": "yes"}
+    for section in sections:
+        for key in section.KEYS:
+            add(f"| `{key}` | {section.__name__} | {required.get(key, 'no')} |\n")
+    add("\n## Quantities and their units\n\nA quantity is a string `\"<number> <unit>\"` "
+        "(`\"2 fs\"`, `\"1 bar\"`); it is converted to ASE units when the file is read.\n\n"
+        "| quantity | units accepted |\n|---|---|\n")
+    for quantity, table in UNIT_TABLES.items():
+        add(f"| {quantity} | {_units(table)} |\n")
+
+    add("\n## `structure`, `read_options`, `bodies`, `restart`\n\n")
+    docs = _attribute_docs(StructureSection)
+    add("| key | type | meaning |\n|---|---|---|\n")
+    for key, attr in (("structure", "source"), ("read_options", "read_options"),
+                      ("bodies", "bodies"), ("restart", "restart")):
+        kind, text = docs[attr]
+        add(f"| `{key}` | {_cell(kind)} | {_cell(text)} |\n")
+    add(f"\n`bodies` allows: {', '.join(f'`{r}`' for r in BODY_RULES)}.\n\n"
+        "### Built-in structures (`structure: {builtin: NAME, ...}`)\n\n"
+        "| builder | field | type | smallest | largest | required |\n"
+        "|---|---|---|---|---|---|\n")
+    for builder, fields in BUILDER_FIELDS.items():
+        for name, kind, low, high in fields:
+            allowed = ", ".join(WATER_MODELS) if kind == "water_model" else kind
+            req = "yes" if REQUIRED_BUILDER_FIELD.get(builder) == name else "no"
+            add(f"| `{builder}` | `{name}` | {allowed} | {'' if low is None else low} | "
+                f"{'' if high is None else high} | {req} |\n")
+
+    add("\n## `integrator`, `integrator_options`, `timestep`, `steps`, `velocities`\n\n")
+    docs = _attribute_docs(RunSection)
+    add("| key | type / unit | default | meaning |\n|---|---|---|---|\n")
+    defaults = {"integrator": "`no_squish`", "integrator_options": "`{}`"}
+    missing = {"integrator_options": "Keyword arguments of the integrator (e.g. `tol`, "
+               "`max_iter` of `rozmanov_kusalik`).", "steps": "Number of steps (at least 1)."}
+    for key in RunSection.KEYS:
+        kind, text = docs[key]
+        text = text or missing.get(key, "")
+        unit = " (time: " + _units(UNIT_TABLES["time"]) + ")" if key == "timestep" else ""
+        add(f"| `{key}` | {_cell(kind)}{unit} | {defaults.get(key, '')} | {_cell(text)} |\n")
+    add(f"\n`integrator` allows {', '.join(f'`{s}`' for s in BUILTIN_SCHEMES)}, a YAML "
+        "file of operators, or a list of operators.  `velocities` takes `temperature` "
+        f"({_units(UNIT_TABLES['temperature'])}) and an optional integer `seed`.\n\n")
+
+    add("## `calculator`\n\n")
+    docs = _attribute_docs(CalculatorSection)
+    add("| field | type | meaning |\n|---|---|---|\n")
+    for name in CalculatorSection.FIELDS:
+        kind, text = docs.get(name, docs.get("water", ("", "")))
+        if name == "name":
+            text = ("`tip3p` (the default), `tip4p` (ASE's), `lammps`, `ipi`, or an ASE "
+                    "calculator class's dotted path (`ase.calculators.emt.EMT`).")
+        if name == "pair":
+            kind, text = "list of str", "Another name for `commands`."
+        if name == "water_model":
+            kind, text = docs["water"]
+        add(f"| `{name}` | {_cell(kind)} | {_cell(text)} |\n")
+    add(f"\n`water_model` takes {', '.join(f'`{f}`' for f in WATER_MODEL_FIELDS)}; "
+        f"its `name` is one of {', '.join(f'`{m}`' for m in WATER_MODELS)}.  Without "
+        "`--trust`, `commands` may hold only these LAMMPS commands: "
+        f"{', '.join(f'`{c}`' for c in sorted(SAFE_LAMMPS_COMMANDS))}.\n\n")
+
+    add("## `thermostat` and `barostat`\n\nEach names a `kind`; the other fields are the "
+        "kind's parameters.  A barostat takes the thermostat's temperature unless it "
+        "gives its own.\n\n")
+    for section in ("thermostat", "barostat"):
+        for kind, cls in COUPLINGS.items():
+            if cls.section != section:
+                continue
+            summary = (inspect.getdoc(cls) or "").split("\n\n")[0].replace("\n", " ")
+            add(f"### `{section}: {{kind: {kind}}}`\n\n{summary}\n\n"
+                "| field | quantity | units | required | default | allowed |\n"
+                "|---|---|---|---|---|---|\n")
+            for p in cls.parameters:
+                table = UNIT_TABLES.get(p.quantity)
+                unit = _units(table) if table else ""
+                allowed = ", ".join(f"`{c}`" for c in p.choices)
+                if p.quantity == "integer":
+                    allowed = "≥ 1"
+                if p.quantity == "flag":
+                    allowed = "`true`, `false`"
+                if p.quantity == "seed":
+                    allowed = "integer ≥ 0 (absent: a fresh random seed)"
+                default = "" if p.default is None else f"`{p.default}`"
+                add(f"| `{p.field}` | {p.quantity} | {unit} | "
+                    f"{'yes' if p.required else 'no'} | {default} | {allowed} |\n")
+            add("\n")
+
+    add("## `outputs`\n\n")
+    docs = _attribute_docs(OutputsSection)
+    add("| field | type | default | meaning |\n|---|---|---|---|\n")
+    for name in OutputsSection.FIELDS:
+        kind, text = docs.get(name, docs.get("trajectory", ("", "")))
+        default = _default(OutputsSection, name)
+        default = {"directory": "`.`", "checkpoint": "`checkpoint.npz`"}.get(
+            name, "" if default in (None, dataclasses.MISSING) else f"`{default}`")
+        if name in ("trajectory", "log", "plot", "mdanalysis"):
+            kind, text = "path or absent", f"The {name} file, in `directory`; absent: none."
+        add(f"| `{name}` | {_cell(kind)} | {default} | {_cell(text)} |\n")
+
+    add("\n## `relax`\n\n")
+    docs = _attribute_docs(RelaxSection)
+    add("| field | type / unit | default | meaning |\n|---|---|---|---|\n")
+    allowed = {"optimizer": ", ".join(f"`{o}`" for o in OPTIMIZERS),
+               "cell": "`false`, `true`, " + ", ".join(f"`{c}`" for c in CELL_MODES),
+               "pressure": "pressure: " + _units(UNIT_TABLES["pressure"]),
+               "fmax": "eV/Å (a number or `\"0.05 eV/A\"`)"}
+    for name in RelaxSection.FIELDS:
+        kind, text = docs.get(name, docs.get("trajectory", ("", "")))
+        text = allowed.get(name, text)
+        add(f"| `{name}` | {_cell(kind)} | `{_default(RelaxSection, name)}` | "
+            f"{_cell(text)} |\n")
+
+    add("\n## The demo's configuration\n\n`rigidmd demo` runs this configuration "
+        "(`rigidmd.config.DEMO_CONFIG`):\n\n```text\n")
+    import yaml
+
+    add(yaml.safe_dump(DEMO_CONFIG, sort_keys=False))
+    add("```\n")
+    return "".join(out)
+
+
+def write_configuration(path=DOCS / "_generated" / "configuration.md"):
+    write_if_changed(path, configuration_reference())
+
+
+# ------------------------------------------------------------------- examples
+
+
+def example_scripts():
+    return sorted((ROOT / "examples").glob("*.py"))
+
+
+def example_page(script):
+    """A page for one example: its docstring, how to run it, its code."""
+    doc = ast.get_docstring(ast.parse(script.read_text(encoding="utf-8"))) or script.stem
+    title, _, body = doc.partition("\n")
+    rel = f"../../examples/{script.name}"
+    return (f"# {title.strip().rstrip('.')}\n\n`examples/{script.name}`\n\n"
+            f"```{{eval-rst}}\n{body.strip()}\n```\n\n## The script\n\n"
+            f"```{{literalinclude}} {rel}\n:language: python\n"
+            f":lines: {_code_start(script)}-\n```\n")
+
+
+def _code_start(script):
+    """The first line after the module docstring."""
+    tree = ast.parse(script.read_text(encoding="utf-8"))
+    return tree.body[0].end_lineno + 2 if isinstance(tree.body[0], ast.Expr) else 1
+
+
+def write_examples(outdir=DOCS / "examples"):
+    for script in example_scripts():
+        write_if_changed(Path(outdir) / f"{script.stem}.md", example_page(script))
+
+
+def generate(app=None):
+    write_configuration()
+    write_api()
+    write_examples()
+
+
+def setup(app):
+    app.connect("builder-inited", generate, priority=100)
+    return {"parallel_read_safe": True, "parallel_write_safe": True}
