@@ -269,7 +269,7 @@ def dimer_fluid(n_side=4, spacing=4.2, bond=1.1, seed=0, temperature_K=80, **lj)
     liquid-nitrogen density at 4.2 Å), random orientations, rigid velocities
     at ``temperature_K``, with :class:`PeriodicLJ` (keyword arguments ``lj``).
     """
-    from rigidmd import quaternion as quat
+    from rigidmd.core import quaternion as quat
     from rigidmd.systems import random_quaternions
 
     rng = np.random.default_rng(seed)
@@ -322,7 +322,7 @@ def lammps_instances(monkeypatch, module):
 
 def water_dimer(seed, model="tip3p"):
     """Two waters of ``model`` in random orientations, centres 3-4 Å apart, ``mol-id`` set."""
-    from rigidmd import quaternion as quat
+    from rigidmd.core import quaternion as quat
     from rigidmd.systems import random_quaternions, water_molecule
 
     rng = np.random.default_rng(seed)
@@ -340,10 +340,12 @@ def water_dimer(seed, model="tip3p"):
 
 
 def benchmark_module(script="water_models"):
-    """``benchmarks/<script>.py`` as a module (the scripts are not a package)."""
+    """``validation/<script>.py`` or ``benchmarks/<script>.py`` as a module (not a package)."""
     import importlib.util
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{script}.py"
+    root = Path(__file__).resolve().parents[1]
+    paths = [root / folder / f"{script}.py" for folder in ("validation", "benchmarks")]
+    path = next((p for p in paths if p.exists()), paths[0])
     spec = importlib.util.spec_from_file_location(script, path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
