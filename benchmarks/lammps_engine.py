@@ -51,10 +51,10 @@ from ase import units
 from ase.io import read
 
 from rigidmd import RigidBodies, RigidCRescale, RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
-from rigidmd.barostats import MTKBarostat
+from rigidmd.couplings.barostats import MTKBarostat
+from rigidmd.couplings.thermostats import NoseHooverThermostat
 from rigidmd.lammps import LAMMPSCalculator, export_lammps, run_rigid_reference, tip3p_charges
 from rigidmd.lammps.engine import LAMMPSEngine, lammps_executable
-from rigidmd.thermostats import NoseHooverThermostat
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMANDS = ["pair_style lj/cut/coul/long 9.0", "pair_coeff * * 0.0 1.0",

@@ -41,7 +41,7 @@ from ase.constraints import FixBondLengths
 from ase.io import read, write
 from ase.optimize import BFGS
 
-from rigidmd import quaternion as quat
+from rigidmd.core import quaternion as quat
 from rigidmd.optimize import RigidFilter, relax
 from rigidmd.systems import random_quaternions, water_box, water_cluster
 
@@ -63,7 +63,7 @@ def perturbed(atoms, seed, shift=0.1, angle=0.1):
     out = atoms.copy()
     x = RigidFilter(atoms).get_positions()[:n]  # centres of mass (whole molecules)
     positions = out.positions.reshape(n, 3, 3)
-    from rigidmd.bodies import RigidBodies
+    from rigidmd.core.bodies import RigidBodies
     whole = RigidBodies.resolve(atoms).whole_positions(atoms).reshape(n, 3, 3)
     axis = random_quaternions(n, rng)[:, 1:]
     axis /= np.linalg.norm(axis, axis=1, keepdims=True)

@@ -30,11 +30,11 @@ CHECKED_ELSEWHERE = (
     ("sphinx", ".ci/run builds the documentation with -W"),
     ("examples/tip3p_water.py --outdir out", "tests/test_examples.py runs it with --quick"),
     ("examples/tip4p2005.py --outdir out4", "tests/test_examples.py runs it with --quick"),
-    ("benchmarks/water_models.py --jobs 2", "hours; tests/test_water_properties.py runs its "
+    ("validation/water_models.py --jobs 2", "hours; tests/test_water_properties.py runs its "
      "--quick form"),
-    ("benchmarks/water_lammps_check.py --models", "needs a finished water_models.py run; "
+    ("validation/water_lammps_check.py --models", "needs a finished water_models.py run; "
      "tests/test_water_properties.py runs its --quick form"),
-    ("benchmarks/water_openmm_check.py --models", "minutes a model; tests/test_water_openmm.py "
+    ("validation/water_openmm_check.py --models", "minutes a model; tests/test_water_openmm.py "
      "runs its --quick form"),
     ("examples/mace_water.py --quick", "tests/test_ml_potential.py runs it where mace-torch "
      "is installed (the ml extra, not the test extra)"),
@@ -91,7 +91,7 @@ def run_page(text, cwd, timeout=900):
                     continue
                 args = shlex.split(command)
                 if args[0] == "rigidmd":
-                    args = [sys.executable, "-m", "rigidmd.cli", *args[1:]]
+                    args = [sys.executable, "-m", "rigidmd.run.cli", *args[1:]]
                 elif args[0] == "python":
                     args = [sys.executable, *args[1:]]
                     args = [str(ROOT / a) if a.startswith(("examples/", "benchmarks/")) else a

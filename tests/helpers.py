@@ -18,7 +18,8 @@ from ase.calculators.calculator import Calculator, all_changes
 from ase.calculators.tip3p import TIP3P
 from ase.io import write
 
-from rigidmd import cli, rigid_maxwell_boltzmann
+from rigidmd import rigid_maxwell_boltzmann
+from rigidmd.run import cli
 from rigidmd.systems import co2_water_mixture, water_cluster
 
 #: The tests' data files.
@@ -274,7 +275,7 @@ def dimer_fluid(n_side=4, spacing=4.2, bond=1.1, seed=0, temperature_K=80, **lj)
     liquid-nitrogen density at 4.2 Å), random orientations, rigid velocities
     at ``temperature_K``, with :class:`PeriodicLJ` (keyword arguments ``lj``).
     """
-    from rigidmd import quaternion as quat
+    from rigidmd.core import quaternion as quat
     from rigidmd.systems import random_quaternions
 
     rng = np.random.default_rng(seed)
@@ -327,7 +328,7 @@ def lammps_instances(monkeypatch, module):
 
 def water_dimer(seed, model="tip3p"):
     """Two waters of ``model`` in random orientations, centres 3-4 Å apart, ``mol-id`` set."""
-    from rigidmd import quaternion as quat
+    from rigidmd.core import quaternion as quat
     from rigidmd.systems import random_quaternions, water_molecule
 
     rng = np.random.default_rng(seed)
@@ -345,10 +346,12 @@ def water_dimer(seed, model="tip3p"):
 
 
 def benchmark_module(script="water_models"):
-    """``benchmarks/<script>.py`` as a module (the scripts are not a package)."""
+    """``validation/<script>.py`` or ``benchmarks/<script>.py`` as a module (not a package)."""
     import importlib.util
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{script}.py"
+    root = Path(__file__).resolve().parents[1]
+    paths = [root / folder / f"{script}.py" for folder in ("validation", "benchmarks")]
+    path = next((p for p in paths if p.exists()), paths[0])
     spec = importlib.util.spec_from_file_location(script, path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
@@ -543,7 +546,7 @@ def project(path, thermostat, xtc=True):
 
 def start(path, *args):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.Popen([sys.executable, "-m", "rigidmd.cli", "run", "run.yaml", *args],
+    return subprocess.Popen([sys.executable, "-m", "rigidmd.run.cli", "run", "run.yaml", *args],
                             cwd=path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=env)
 

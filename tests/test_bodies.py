@@ -5,7 +5,7 @@ import pytest
 from ase import Atoms
 
 from rigidmd import RigidBodies
-from rigidmd import quaternion as quat
+from rigidmd.core import quaternion as quat
 from rigidmd.systems import co2_water_mixture, water_box, water_cluster
 
 
@@ -138,8 +138,8 @@ def test_the_quick_bound_of_check_bodies_fit_never_passes_a_body_that_does_not_f
     """check_bodies_fit returns early when 2 R |g_k| < 1/2 (R: the model's radius); over
     random sheared and shrunk cells around the threshold it refuses exactly the cells in
     which a body's extent along a cell vector, computed atom by atom, reaches one half."""
-    from rigidmd.bodies import check_bodies_fit
-    from rigidmd.dynamics import RigidVerlet
+    from rigidmd.core.bodies import check_bodies_fit
+    from rigidmd.core.dynamics import RigidVerlet
 
     atoms = co2_water_mixture(n_co2=2, n_water=2, box=True)
     dyn = RigidVerlet(atoms, 1.0, bodies="mol-id")

@@ -16,7 +16,7 @@ from rigidmd.systems import water_cluster
 
 def rigidmd(*args, cwd):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.run([sys.executable, "-m", "rigidmd.cli", *map(str, args)], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "rigidmd.run.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, env=env, timeout=600)
 
 

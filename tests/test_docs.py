@@ -95,7 +95,7 @@ def test_every_package_is_public_or_internal():
 
 def test_the_configuration_reference_covers_the_reader():
     from rigidmd.config import known_keys
-    from rigidmd.coupling import COUPLINGS
+    from rigidmd.couplings.base import COUPLINGS
 
     text = rigidmd_docs.configuration_reference()
     for key in known_keys():

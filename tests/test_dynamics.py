@@ -518,7 +518,7 @@ caching.CacheImpl._locator_classes = []  # what a read-only install with no home
 import numpy as np
 from ase import units
 from ase.calculators.tip3p import TIP3P
-import rigidmd._numba as compiled
+import rigidmd.core._numba as compiled
 from rigidmd import RigidVerlet
 from rigidmd.systems import water_cluster
 assert not compiled.CACHED

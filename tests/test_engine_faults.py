@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 from rigidmd.ipi import EngineError, IPICalculator
 from rigidmd.lammps import LAMMPSCalculator
 from rigidmd.lammps.engine import LAMMPSEngine, lammps_executable
-from rigidmd.runner import StopRequest, StopSignals
+from rigidmd.run.runner import StopRequest, StopSignals
 
 pytestmark = pytest.mark.lammps
 
@@ -433,7 +433,7 @@ def test_rigidmd_run_stops_at_once_with_a_hung_engine(tmp_path):
     assert took < 5
     assert proc.returncode == 143, stderr
     step = int(stdout.split("stopped by SIGTERM after step ")[1].split()[0])
-    from rigidmd.checkpoint import read_checkpoint
+    from rigidmd.run.checkpoint import read_checkpoint
 
     assert read_checkpoint(tmp_path / "out" / "checkpoint.npz").nsteps == step
     assert "--resume" in stdout
@@ -457,6 +457,6 @@ def test_rigidmd_run_checkpoints_the_undone_step_when_its_engine_dies(tmp_path):
     step = int(stderr.split("(at step ")[1].split(")")[0])
     assert step > 0
     assert f"the last checkpoint is intact (step {step})" in stderr
-    from rigidmd.checkpoint import read_checkpoint
+    from rigidmd.run.checkpoint import read_checkpoint
 
     assert read_checkpoint(tmp_path / "out" / "checkpoint.npz").nsteps == step

@@ -7,9 +7,9 @@ from free_top import exact_body_angular_velocity
 from helpers import ZeroForce, mixture, waters
 
 from rigidmd import RigidBodies, RigidVerlet
-from rigidmd import quaternion as quat
+from rigidmd.core import quaternion as quat
+from rigidmd.core.operators import ConvergenceError
 from rigidmd.lammps import run_rigid_reference, tip3p_charges, tip3p_pair_commands
-from rigidmd.operators import ConvergenceError
 from rigidmd.systems import R_CO
 
 INTEGRATORS = ["no_squish", "richardson", "rozmanov_kusalik", "pcdm", "exadem"]

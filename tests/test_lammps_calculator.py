@@ -239,7 +239,7 @@ def test_check_state_finds_what_ases_comparison_finds(monkeypatch):
     import ase.calculators.calculator as ase_calculator
     from ase.calculators.calculator import compare_atoms
 
-    from rigidmd.checks import changed_properties
+    from rigidmd.core.checks import changed_properties
 
     atoms = water_box_27()
     calc = LAMMPSCalculator(PPPM_27)

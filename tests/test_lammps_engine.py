@@ -385,7 +385,7 @@ def test_rigidmd_run_with_an_engine_started_elsewhere(tmp_path):
     (path / "run.yaml").write_text(RUN.replace("processes: PROCESSES", f"address: unix:{name}")
                                    .replace("steps: 60", "steps: 20"))
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen([sys.executable, "-m", "rigidmd.cli", "run", "run.yaml"], cwd=path,
+    proc = subprocess.Popen([sys.executable, "-m", "rigidmd.run.cli", "run", "run.yaml"], cwd=path,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     engine = None
     try:

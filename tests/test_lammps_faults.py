@@ -18,9 +18,9 @@ from helpers import PPPM_27, lammps_instances, water_box_27
 
 import rigidmd.lammps.calculator as lammps_calculator
 from rigidmd import RigidBodies, RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
-from rigidmd.checkpoint import save_checkpoint
 from rigidmd.lammps import LAMMPSCalculator
-from rigidmd.restart import load_checkpoint
+from rigidmd.run.checkpoint import save_checkpoint
+from rigidmd.run.restart import load_checkpoint
 from rigidmd.systems import water_box
 from rigidmd.water import water_model
 
@@ -315,7 +315,7 @@ def test_a_massive_m_site_is_refused_by_the_water_model():
 
 
 def rigidmd_cli(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "rigidmd.cli", *map(str, args)], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "rigidmd.run.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, timeout=600)
 
 

@@ -25,7 +25,7 @@ from ase.io import read
 from helpers import ZeroForce
 
 from rigidmd import RigidBodies, RigidVerlet, rigid_maxwell_boltzmann
-from rigidmd import quaternion as quat
+from rigidmd.core import quaternion as quat
 from rigidmd.lammps import tip3p_charges
 from rigidmd.mdanalysis import (
     PS,

@@ -1,4 +1,4 @@
-"""The Monte Carlo barostat (rigidmd.montecarlo: MonteCarloBarostat, RigidMCBarostat).
+"""The Monte Carlo barostat (rigidmd.couplings.montecarlo: MonteCarloBarostat, RigidMCBarostat).
 
 Pure functions (proposals, acceptance with its Jacobian, adaptation) are
 checked on their own, and the acceptance rule by a chain of cell moves for an
@@ -24,8 +24,8 @@ from helpers import (
 )
 
 from rigidmd import RigidMCBarostat, load_checkpoint
-from rigidmd.coupling import NotExportable
-from rigidmd.montecarlo import (
+from rigidmd.couplings.base import NotExportable
+from rigidmd.couplings.montecarlo import (
     MonteCarloBarostat,
     adapt_step,
     body_span,
@@ -35,7 +35,7 @@ from rigidmd.montecarlo import (
     n_move_kinds,
     propose_cell,
 )
-from rigidmd.thermostats import LangevinThermostat, NoseHooverThermostat
+from rigidmd.couplings.thermostats import LangevinThermostat, NoseHooverThermostat
 
 T = 80.0
 
@@ -600,7 +600,7 @@ def test_command_line_runs_npt_with_a_calculator_without_stress(tmp_path):
         "barostat: {kind: monte_carlo, pressure: 1 bar, every: 5, seed: 3}\n"
         "timestep: 1 fs\nsteps: 20\n"
         "outputs: {directory: out, log: md.log, interval: 10}\n")
-    result = subprocess.run([sys.executable, "-m", "rigidmd.cli", "run", "run.yaml"],
+    result = subprocess.run([sys.executable, "-m", "rigidmd.run.cli", "run", "run.yaml"],
                             cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr
     assert "monte_carlo barostat at 1 bar (iso)" in result.stdout

@@ -30,8 +30,8 @@ from helpers import (
 )
 
 from rigidmd import RigidCRescale, RigidNPT, RigidVerlet
-from rigidmd import quaternion as quat
-from rigidmd.barostats import BarostatError
+from rigidmd.core import quaternion as quat
+from rigidmd.couplings.barostats import BarostatError
 
 T = 80.0
 
@@ -426,8 +426,8 @@ def test_one_target_temperature_per_dynamics():
     """A barostat at another temperature than the thermostat is refused; set_temperature
     changes both (issue 22, item 15)."""
     from rigidmd import RigidDynamics
-    from rigidmd.barostats import MTKBarostat
-    from rigidmd.thermostats import NoseHooverThermostat
+    from rigidmd.couplings.barostats import MTKBarostat
+    from rigidmd.couplings.thermostats import NoseHooverThermostat
 
     atoms = dimer_fluid(n_side=4, rc=7.0)
     before = atoms.positions.copy()
@@ -457,7 +457,7 @@ def test_crescale_at_0_K_is_one_clear_error():
 def test_one_npt_step_evaluates_everything_once(monkeypatch):
     """Nosé–Hoover + MTK: one calculator call, one stress, one volume, one kinetic tensor and
     one rotational kinetic energy per step (the per-step record)."""
-    from rigidmd import observables
+    from rigidmd.core import observables
 
     atoms = dimer_fluid(n_side=4, rc=7.0)
     dyn = npt(atoms, "mtk")
@@ -514,7 +514,7 @@ def test_a_part_that_needs_the_energy_reads_it_from_every_force_call():
     """A coupling part with needs_energy (a Monte Carlo move's old energy) finds the potential
     energy of the last force call in the record, without a call of its own."""
     from rigidmd import RigidDynamics
-    from rigidmd.coupling import Coupling
+    from rigidmd.couplings.base import Coupling
 
     class Watcher(Coupling):
         kind, section, needs_energy = "watcher", "thermostat", True

@@ -248,7 +248,7 @@ def rigidmd(*args, cwd):
     import sys
 
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.run([sys.executable, "-m", "rigidmd.cli", *map(str, args)], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "rigidmd.run.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, env=env, timeout=600)
 
 
@@ -317,7 +317,7 @@ def test_relax_section_errors_are_one_line(tmp_path, relax_section, message):
 def test_ice_builder_obeys_the_ice_rules_with_zero_dipole():
     from ase.neighborlist import neighbor_list
 
-    from rigidmd.bodies import RigidBodies
+    from rigidmd.core.bodies import RigidBodies
     from rigidmd.systems import ice_ih
 
     atoms = ice_ih((2, 1, 1), seed=3)

@@ -28,8 +28,8 @@ from helpers import (  # the rigidmd-run projects these tests share with test_ru
     wait_for_lines,
 )
 
-from rigidmd import cli
-from rigidmd.checkpoint import read_checkpoint
+from rigidmd.run import cli
+from rigidmd.run.checkpoint import read_checkpoint
 
 
 def outputs(path, xtc=True):
@@ -188,7 +188,7 @@ def test_demo_replaces_its_own_outputs(tmp_path):
 
 def test_full_disk_stops_with_one_line_and_keeps_the_checkpoint(tmp_path, monkeypatch, capsys):
     """ENOSPC while writing the log: status 1, one line naming the file, checkpoint intact."""
-    from rigidmd.logger import RigidLogger
+    from rigidmd.run.logger import RigidLogger
 
     path = project(tmp_path, "langevin", xtc=False)
     original = RigidLogger.__call__
@@ -257,7 +257,7 @@ def test_restart_from_this_directorys_trajectory_with_overwrite(tmp_path, monkey
 def test_overwrite_keeps_the_outputs_when_the_new_run_cannot_start(tmp_path, monkeypatch,
                                                                   capsys):
     """A dynamics that refuses to start removes nothing (it is checked on a copy first)."""
-    from rigidmd import dynamics
+    from rigidmd.core import dynamics
 
     path = short_project(tmp_path, steps=20)
     assert run_here(path, monkeypatch, capsys)[0] == 0
@@ -275,7 +275,7 @@ def test_overwrite_keeps_the_outputs_when_the_new_run_cannot_start(tmp_path, mon
 def test_a_run_killed_before_its_first_checkpoint_resumes_without_repeats(
         tmp_path, monkeypatch, capsys, short_reference):
     """Only the step-0 checkpoint exists: frame 0 and the step-0 log line are written once."""
-    from rigidmd.logger import RigidLogger
+    from rigidmd.run.logger import RigidLogger
 
     path = short_project(tmp_path, checkpoint_interval=40)
     original, calls = RigidLogger.__call__, []
@@ -300,7 +300,7 @@ def test_a_run_killed_before_its_first_checkpoint_resumes_without_repeats(
 def test_a_second_ctrl_c_between_a_frame_and_its_log_line(tmp_path, monkeypatch, capsys,
                                                         short_reference):
     """Stopping at once keeps the last whole checkpoint; --resume loses no log line."""
-    from rigidmd.logger import RigidLogger
+    from rigidmd.run.logger import RigidLogger
 
     path = short_project(tmp_path, checkpoint_interval=20)
     original, calls = RigidLogger.__call__, []
@@ -423,7 +423,7 @@ def test_resume_without_a_checkpoint_says_what_to_do(tmp_path, monkeypatch, caps
 
 
 def test_a_read_only_directory_is_refused_before_anything_runs(tmp_path, monkeypatch, capsys):
-    import rigidmd.outputs
+    import rigidmd.run.outputs
 
     path = short_project(tmp_path, steps=20)
     (path / "out").mkdir()
@@ -431,7 +431,7 @@ def test_a_read_only_directory_is_refused_before_anything_runs(tmp_path, monkeyp
     def read_only(*args, **kwargs):
         raise OSError(errno.EROFS, "Read-only file system", args[0])
 
-    monkeypatch.setattr(rigidmd.outputs.os, "open", read_only)
+    monkeypatch.setattr(rigidmd.run.outputs.os, "open", read_only)
     status, _, stderr = run_here(path, monkeypatch, capsys)
     assert status == 2
     assert messages(stderr) == [f"rigidmd: error: outputs.directory: cannot write in "
@@ -462,8 +462,8 @@ def test_a_full_disk_names_the_trajectory(tmp_path, monkeypatch, capsys):
 
 def test_a_failure_during_the_run_exits_1_not_2(tmp_path, monkeypatch, capsys):
     """A part that fails mid-run (a BarostatError, say) is no configuration mistake."""
-    from rigidmd.barostats import BarostatError
-    from rigidmd.coupling import COUPLINGS
+    from rigidmd.couplings.barostats import BarostatError
+    from rigidmd.couplings.base import COUPLINGS
 
     path = short_project(tmp_path, checkpoint_interval=20, thermostat="bussi")
     bussi = COUPLINGS["bussi"]

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from rigidmd import quaternion as quat
+from rigidmd.core import quaternion as quat
 from rigidmd.systems import random_quaternions
 
 

@@ -17,8 +17,8 @@ import pytest
 from ase.io import read
 from helpers import file_bytes, finish, messages, run_here, short_project, start, wait_for_lines
 
-from rigidmd import cli
-from rigidmd.checkpoint import read_checkpoint
+from rigidmd.run import cli
+from rigidmd.run.checkpoint import read_checkpoint
 
 #: Steps of the runs stopped by a real signal: long enough to be stopped after step 30 under
 #: load (15 ms a step measured on the shared 2-core machine), short enough to stay fast.
@@ -39,10 +39,10 @@ def reference(tmp_path_factory):
 
 
 def command_line(hint):
-    """The printed resume command, run as ``python -m rigidmd.cli`` (same arguments)."""
+    """The printed resume command, run as ``python -m rigidmd.run.cli`` (same arguments)."""
     words = shlex.split(hint)
     assert words[:2] == ["rigidmd", "run"], hint
-    return [sys.executable, "-m", "rigidmd.cli", *words[1:]]
+    return [sys.executable, "-m", "rigidmd.run.cli", *words[1:]]
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
@@ -114,8 +114,8 @@ def test_a_second_ctrl_c_during_the_final_checkpoint_is_noted_and_the_checkpoint
 
     Before: a ``KeyboardInterrupt`` traceback out of the write (and no checkpoint of the stop).
     """
-    from rigidmd import checkpoint as checkpoint_module
-    from rigidmd.logger import RigidLogger
+    from rigidmd.run import checkpoint as checkpoint_module
+    from rigidmd.run.logger import RigidLogger
 
     path = short_project(tmp_path, steps=40, checkpoint_interval=50)
     original_log, original_write = RigidLogger.__call__, checkpoint_module.atomic_write
@@ -160,7 +160,7 @@ def test_a_second_ctrl_c_during_the_final_checkpoint_is_noted_and_the_checkpoint
 
 
 def test_ctrl_c_before_the_steps_begin_is_one_line(tmp_path, monkeypatch, capsys):
-    from rigidmd.runner import Run
+    from rigidmd.run.runner import Run
 
     def interrupted(self):
         raise KeyboardInterrupt
@@ -317,7 +317,7 @@ def short_checkpoint(tmp_path, monkeypatch, capsys):
 def test_a_checkpoint_one_body_short_names_the_mismatch(tmp_path, monkeypatch, capsys):
     """Before: "could not broadcast input array from shape (7,3) into shape (8,3)"."""
     from rigidmd import load_checkpoint
-    from rigidmd.checkpoint import CheckpointError
+    from rigidmd.run.checkpoint import CheckpointError
 
     path, checkpoint = short_checkpoint(tmp_path, monkeypatch, capsys)
 
@@ -360,9 +360,9 @@ def test_a_run_checkpoint_keeps_its_thermostat_and_barostat_attributes(tmp_path)
     from ase.calculators.tip3p import TIP3P
 
     from rigidmd import RigidMCBarostat, load_checkpoint
-    from rigidmd.montecarlo import MonteCarloBarostat
+    from rigidmd.couplings.montecarlo import MonteCarloBarostat
+    from rigidmd.couplings.thermostats import BussiThermostat
     from rigidmd.systems import water_box
-    from rigidmd.thermostats import BussiThermostat
 
     atoms = water_box(3, seed=1)
     atoms.calc = TIP3P(rc=4.5)

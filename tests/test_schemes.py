@@ -6,7 +6,7 @@ from ase import units
 from helpers import mixture, waters
 
 from rigidmd import RigidVerlet
-from rigidmd.schemes import BUILTIN_SCHEMES, OPERATORS, Scheme, resolve_scheme
+from rigidmd.core.schemes import BUILTIN_SCHEMES, OPERATORS, Scheme, resolve_scheme
 
 
 def test_builtins_are_valid_schemes():
@@ -100,7 +100,7 @@ def test_builtin_parameters():
 
 
 def test_every_operator_is_documented():
-    import rigidmd.schemes as module
+    import rigidmd.core.schemes as module
 
     for name in OPERATORS:
         assert f"``{name}``" in module.__doc__, name
@@ -108,9 +108,9 @@ def test_every_operator_is_documented():
 
 def test_compiled_kernel_matches_its_operators():
     """Each fused loop of the no_squish kernel against the operators it fuses, one by one."""
-    from rigidmd import _numba
-    from rigidmd import observables as obs
-    from rigidmd import operators as ops
+    from rigidmd.core import _numba
+    from rigidmd.core import observables as obs
+    from rigidmd.core import operators as ops
 
     atoms = mixture()
     dyn = RigidVerlet(atoms, units.fs, bodies="mol-id", backend="numpy")

@@ -22,10 +22,10 @@ from rigidmd import (
     RigidVerlet,
     rigid_maxwell_boltzmann,
 )
-from rigidmd.barostats import CRescaleBarostat
+from rigidmd.couplings.barostats import CRescaleBarostat
+from rigidmd.couplings.thermostats import BussiThermostat
 from rigidmd.lammps import run_rigid_reference, tip3p_charges, tip3p_pair_commands
 from rigidmd.systems import co2_water_mixture, water_box, water_cluster
-from rigidmd.thermostats import BussiThermostat
 
 T = 250.0
 KT = units.kB * T

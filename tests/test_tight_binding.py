@@ -12,7 +12,7 @@ from ase import units
 from ase.build import molecule
 
 from rigidmd import RigidVerlet, rigid_maxwell_boltzmann
-from rigidmd import quaternion as quat
+from rigidmd.core import quaternion as quat
 from rigidmd.systems import random_quaternions, water_cluster, water_molecule
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")

@@ -7,7 +7,7 @@ from ase.calculators.tip4p import TIP4P
 from helpers import CoulombLJ, water_parameters
 
 from rigidmd import RigidBodies, RigidVerlet, rigid_maxwell_boltzmann
-from rigidmd.dof import kinetic_energy, temperature
+from rigidmd.core.dof import kinetic_energy, temperature
 from rigidmd.systems import water_box, water_cluster
 from rigidmd.water import WATER_MODELS, water_model
 

@@ -159,7 +159,7 @@ def test_what_openmm_cannot_take_is_refused_with_one_line():
 
 @pytest.mark.slow
 def test_openmm_check_benchmark_quick(tmp_path):
-    """``benchmarks/water_openmm_check.py --quick``: OpenMM's NPT from the benchmark's start,
+    """``validation/water_openmm_check.py --quick``: OpenMM's NPT from the benchmark's start,
     density and ΔH_vap (with TIP4P-Ew's polarisation correction) stored and printed."""
     import json
 

@@ -243,7 +243,7 @@ def test_dielectric_takes_the_m_site_charges_from_the_topology():
 @pytest.mark.lammps
 @pytest.mark.slow
 def test_water_models_benchmark_quick(tmp_path):
-    """``benchmarks/water_models.py --quick`` runs every stage for one model and writes the
+    """``validation/water_models.py --quick`` runs every stage for one model and writes the
     table (each property with error, published value and citation) and the plot; a
     second call resumes: the finished model is not run again."""
     import json

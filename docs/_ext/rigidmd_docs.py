@@ -2,7 +2,7 @@
 
 * ``docs/_generated/configuration.md``: every configuration key, its unit,
   default and allowed values, read from the tables of :mod:`rigidmd.config`,
-  the coupling registry (:data:`rigidmd.coupling.COUPLINGS`) and the tables the
+  the coupling registry (:data:`rigidmd.couplings.base.COUPLINGS`) and the tables the
   sections check against (schemes, optimizers, water models, trusted LAMMPS
   commands).
 * ``docs/api/<module>.md``: one page per public module listing every name of
@@ -154,10 +154,10 @@ def configuration_reference():
         StructureSection,
     )
     from rigidmd.config.trust import SAFE_LAMMPS_COMMANDS
-    from rigidmd.coupling import COUPLINGS
+    from rigidmd.core.schemes import BUILTIN_SCHEMES
+    from rigidmd.couplings.base import COUPLINGS
     from rigidmd.optimize import OPTIMIZERS
     from rigidmd.relaxcell import CELL_MODES
-    from rigidmd.schemes import BUILTIN_SCHEMES
     from rigidmd.water import WATER_MODELS
 
     sections = (StructureSection, RunSection, CalculatorSection, CouplingSection,

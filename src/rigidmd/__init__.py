@@ -5,20 +5,20 @@ LAMMPS ``fix rigid/nve``) with forces from any ASE calculator; atoms in no
 body move as point particles in the same step.
 """
 
-from rigidmd.barostats import RigidCRescale, RigidNPT
-from rigidmd.bodies import RigidBodies
-from rigidmd.dof import RigidBodyDOF, kinetic_energy, temperature
-from rigidmd.dynamics import NonFiniteForceError, RigidDynamics, RigidVerlet
-from rigidmd.model import BodyGeometry, BodyModel
-from rigidmd.montecarlo import RigidMCBarostat
-from rigidmd.restart import load_checkpoint
-from rigidmd.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover
-from rigidmd.velocities import (
+from rigidmd.core.bodies import RigidBodies
+from rigidmd.core.dof import RigidBodyDOF, kinetic_energy, temperature
+from rigidmd.core.dynamics import NonFiniteForceError, RigidDynamics, RigidVerlet
+from rigidmd.core.model import BodyGeometry, BodyModel
+from rigidmd.core.velocities import (
     rigid_maxwell_boltzmann,
     rigid_stationary,
     rigid_temperature,
     rigid_zero_rotation,
 )
+from rigidmd.couplings.barostats import RigidCRescale, RigidNPT
+from rigidmd.couplings.montecarlo import RigidMCBarostat
+from rigidmd.couplings.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover
+from rigidmd.run.restart import load_checkpoint
 
 __all__ = [
     "RigidDynamics",

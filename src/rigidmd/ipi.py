@@ -57,7 +57,7 @@ import numpy as np
 from ase import units
 from ase.calculators.calculator import Calculator, PropertyNotImplementedError, all_changes
 
-from rigidmd.checks import quick_check_state
+from rigidmd.core.checks import quick_check_state
 
 __all__ = ["EngineError", "IPICalculator", "add_wait_check", "remove_wait_check",
            "symmetric_virial"]
@@ -391,7 +391,7 @@ class IPICalculator(Calculator):
     # ------------------------------------------------------------ ASE
     def check_state(self, atoms, tol=1e-15):
         """What changed since the last call: ASE's test in a few array operations
-        (:func:`rigidmd.checks.quick_check_state`; it runs at every property asked)."""
+        (:func:`rigidmd.core.checks.quick_check_state`; it runs at every property asked)."""
         return quick_check_state(self, atoms, tol, super().check_state)
 
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):

@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from ase import units
 
-from rigidmd.bodies import cell_widths
+from rigidmd.core.bodies import cell_widths
 
 __all__ = ["FORCE_FIELD_FILES", "water_topology", "water_system", "real_atom_forces"]
 

@@ -42,14 +42,14 @@ from dataclasses import dataclass
 import numpy as np
 from ase.calculators.calculator import PropertyNotImplementedError
 
-from rigidmd import operators as ops
-from rigidmd import quaternion as quat
 from rigidmd import relaxcell
-from rigidmd.bodies import RigidBodies
-from rigidmd.checks import check_finite
-from rigidmd.dof import RigidBodyDOF
-from rigidmd.forces import calculate_together
-from rigidmd.model import describe_atoms
+from rigidmd.core import operators as ops
+from rigidmd.core import quaternion as quat
+from rigidmd.core.bodies import RigidBodies
+from rigidmd.core.checks import check_finite
+from rigidmd.core.dof import RigidBodyDOF
+from rigidmd.core.forces import calculate_together
+from rigidmd.core.model import describe_atoms
 
 try:  # ASE >= 3.24
     from ase.filters import OptimizableFilter as _Optimizable

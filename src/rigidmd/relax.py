@@ -16,8 +16,8 @@ import numpy as np
 from ase import Atoms
 from ase.optimize import BFGS
 
-from rigidmd.bodies import RigidBodies
-from rigidmd.model import describe_atoms
+from rigidmd.core.bodies import RigidBodies
+from rigidmd.core.model import describe_atoms
 
 __all__ = ["relax_bodies", "Relaxation"]
 

@@ -27,13 +27,13 @@ the enthalpy :math:`E + pV` at the target pressure :math:`p` (eV/Å³, ASE's
 projected onto the mode's coordinates.  :math:`W` is the calculator's atomic
 virial :math:`-V\sigma` less the intramolecular part
 :math:`\sum_b\sum_{i\in b} r_i \otimes f_i`, whose symmetric part is
-:func:`rigidmd.operators.intramolecular_virial` and whose antisymmetric part
+:func:`rigidmd.core.operators.intramolecular_virial` and whose antisymmetric part
 is half the bodies' total torque (:math:`R_{ij} - R_{ji} = \epsilon_{ijk}\tau_k`).
 """
 
 import numpy as np
 
-from rigidmd import operators as ops
+from rigidmd.core import operators as ops
 
 __all__ = ["CELL_MODES", "deformation", "molecular_virial", "cell_gradient", "cell_mode"]
 
@@ -91,7 +91,7 @@ def molecular_virial(stress, volume, r, forces, torques, model):
               \quad [\tau]_{\times,ij} = \epsilon_{ijk} \textstyle\sum_b \tau_{b,k}
 
     with :math:`\mathrm{sym}(R)` from
-    :func:`rigidmd.operators.intramolecular_virial`.
+    :func:`rigidmd.core.operators.intramolecular_virial`.
 
     Parameters
     ----------
@@ -105,7 +105,7 @@ def molecular_virial(stress, volume, r, forces, torques, model):
         eV/Å.
     torques : numpy.ndarray, shape (n_bodies, 3)
         Lab torques about the centres of mass (eV).
-    model : rigidmd.model.BodyModel
+    model : rigidmd.core.model.BodyModel
     """
     tx, ty, tz = torques.sum(axis=0) if len(torques) else np.zeros(3)
     antisym = 0.5 * np.array([[0.0, tz, -ty], [-tz, 0.0, tx], [ty, -tx, 0.0]])

@@ -42,7 +42,7 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout):
         Not converged within ``section.steps`` (the trajectory holds the
         structure reached).
     """
-    from rigidmd.bodies import store_bodies_in_tags
+    from rigidmd.core.bodies import store_bodies_in_tags
 
     directory.mkdir(parents=True, exist_ok=True)
     store_bodies_in_tags(atoms, bodies.body_ids)  # every frame carries the bodies

@@ -6,7 +6,7 @@ rigidmd carries M as an explicit atom (chemical symbol ``X``, mass 0) inside
 the rigid body of its molecule: any calculator that sees it as a charged atom
 gives the right forces, the body takes the force on M into its own force and
 torque, and M adds no mass and no degree of freedom (see
-:mod:`rigidmd.model`).  Molecules are ordered O, H, H (, M).
+:mod:`rigidmd.core.model`).  Molecules are ordered O, H, H (, M).
 
 ==============  ========  =========  ========  ========  ========  =============
 model           r_OH (Å)  HOH (deg)  d_OM (Å)  q_H (e)   σ_OO (Å)  ε_OO (kJ/mol)

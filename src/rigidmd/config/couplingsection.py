@@ -1,6 +1,6 @@
 """The coupling section of a run configuration: ``thermostat`` and ``barostat``.
 
-It reads the registry of coupling kinds (:data:`rigidmd.coupling.COUPLINGS`),
+It reads the registry of coupling kinds (:data:`rigidmd.couplings.base.COUPLINGS`),
 so a new thermostat or barostat needs no change here.
 """
 
@@ -41,7 +41,7 @@ class CouplingSpec:
 
     @property
     def cls(self):
-        from rigidmd.coupling import COUPLINGS
+        from rigidmd.couplings.base import COUPLINGS
 
         return COUPLINGS[self.kind]
 
@@ -63,7 +63,7 @@ def parse_coupling(section, raw, defaults=None):
     -------
     CouplingSpec
     """
-    from rigidmd.coupling import COUPLINGS
+    from rigidmd.couplings.base import COUPLINGS
 
     raw = mapping(section, raw)
     defaults = defaults or {}

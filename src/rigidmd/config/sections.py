@@ -244,7 +244,7 @@ class RunSection:
 
     @classmethod
     def from_config(cls, raw, base):
-        from rigidmd.schemes import resolve_scheme
+        from rigidmd.core.schemes import resolve_scheme
 
         integrator = raw.get("integrator", "no_squish")
         options = dict(mapping("integrator_options", raw.get("integrator_options", {})))
@@ -491,7 +491,7 @@ def _check_output_paths(directory, files):
     Two outputs on one path would overwrite each other (the MDAnalysis output
     also writes its topology, ``.psf``, and the directory holds the lock file).
     """
-    from rigidmd.outputs import LOCK_NAME
+    from rigidmd.run.outputs import LOCK_NAME
 
     claimed = {(directory / LOCK_NAME).resolve(): "the lock file"}
     paths = dict(files)

@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
-from rigidmd.checks import check_finite, quick_check_state
+from rigidmd.core.checks import check_finite, quick_check_state
 from rigidmd.lammps.atomarrays import AtomArrays
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, box_plugin, warn_fallback
 from rigidmd.lammps.data import MASSLESS_SITE_MASS
@@ -183,7 +183,7 @@ class LAMMPSCalculator(Calculator):
     constant of a rigid molecule); a net charge with a ``kspace_style`` is
     warned of too.  :meth:`get_checkpoint_state` and
     :meth:`set_checkpoint_state` carry the k-space parameters through
-    :func:`rigidmd.checkpoint.save_checkpoint` and ``load_checkpoint``.
+    :func:`rigidmd.run.checkpoint.save_checkpoint` and ``load_checkpoint``.
     """
 
     implemented_properties = ["energy", "free_energy", "forces", "stress"]

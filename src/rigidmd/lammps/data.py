@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 from ase import Atoms
 
-from rigidmd.bodies import RigidBodies
+from rigidmd.core.bodies import RigidBodies
+from rigidmd.core.velocities import rigid_velocities
 from rigidmd.lammps.library import charge_factor, velocity_factor
-from rigidmd.velocities import rigid_velocities
 
 __all__ = ["LammpsData", "write_data", "check_body_ids", "atom_types_of", "lammps_box",
            "MASSLESS_SITE_MASS"]

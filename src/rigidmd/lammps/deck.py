@@ -37,13 +37,13 @@ def setup_commands(data: LammpsData, pair_commands: Iterable[str]) -> list[str]:
 def coupling_fix(couplings=(), time_unit=1.0, seed=12345, free_atoms=False):
     """The LAMMPS fixes of a run's coupling parts (thermostat and barostat), combined.
 
-    Each part says what it is in LAMMPS (:meth:`rigidmd.coupling.Coupling.lammps_fix`);
+    Each part says what it is in LAMMPS (:meth:`rigidmd.couplings.base.Coupling.lammps_fix`);
     here they are joined into one rigid fix: ``nve`` (NVE or Langevin),
     ``nvt`` (Nosé–Hoover), ``npt`` (Nosé–Hoover and MTK) or ``nph`` (MTK alone).
 
     Parameters
     ----------
-    couplings : sequence of rigidmd.coupling.Coupling
+    couplings : sequence of rigidmd.couplings.base.Coupling
     time_unit : float
         The LAMMPS time unit in ASE time units.
     seed : int
@@ -54,14 +54,14 @@ def coupling_fix(couplings=(), time_unit=1.0, seed=12345, free_atoms=False):
 
     Returns
     -------
-    rigidmd.coupling.LammpsFix
+    rigidmd.couplings.base.LammpsFix
 
     Raises
     ------
-    rigidmd.coupling.NotExportable
+    rigidmd.couplings.base.NotExportable
         A part, or a combination of parts, LAMMPS cannot do.
     """
-    from rigidmd.coupling import LammpsFix, NotExportable
+    from rigidmd.couplings.base import LammpsFix, NotExportable
 
     fixes = {part.section: part.lammps_fix(time_unit=time_unit, seed=seed)
              for part in couplings}
@@ -93,7 +93,7 @@ def integration_commands(data, body_ids, timestep, fix, couplings=(), seed=12345
         The rigid fix style: ``"rigid"`` (Richardson), or ``"rigid/<style>"``
         and ``"rigid/<style>/small"`` where ``<style>`` must be what the
         couplings make (``nve``, ``nvt``, ``npt``, ``nph``).
-    couplings : sequence of rigidmd.coupling.Coupling
+    couplings : sequence of rigidmd.couplings.base.Coupling
     seed : int
     """
     vf = data.velocity_factor
@@ -166,7 +166,7 @@ def export_lammps(
     timestep : float
         ASE time units.
     nsteps : int
-    couplings : sequence of rigidmd.coupling.Coupling, optional
+    couplings : sequence of rigidmd.couplings.base.Coupling, optional
         The run's thermostat and barostat parts.
     temperature_K, tdamp, friction : float, optional
         A thermostat given by value instead: ``tdamp`` (ASE time) for
@@ -185,10 +185,10 @@ def export_lammps(
 
     Raises
     ------
-    rigidmd.coupling.NotExportable
+    rigidmd.couplings.base.NotExportable
         A coupling LAMMPS has no equivalent for (Bussi, C-rescale, ``tri``).
     """
-    from rigidmd.thermostats import LangevinThermostat, NoseHooverThermostat
+    from rigidmd.couplings.thermostats import LangevinThermostat, NoseHooverThermostat
 
     if tdamp is not None and friction is not None:
         raise ValueError("give tdamp (Nose-Hoover) or friction (Langevin), not both")

@@ -286,7 +286,7 @@ def run_rigid_reference(
     temperature_K, tdamp : float, optional
         Target temperature (K) and damping time (ASE time units) of an
         ``nvt`` fix (``temp T T tdamp``): a Nosé–Hoover thermostat part.
-    couplings : sequence of rigidmd.coupling.Coupling, optional
+    couplings : sequence of rigidmd.couplings.base.Coupling, optional
         Thermostat and barostat parts; their LAMMPS equivalent
         (:func:`~rigidmd.lammps.deck.coupling_fix`) must match ``fix``.
     seed : int
@@ -306,7 +306,7 @@ def run_rigid_reference(
     RuntimeError
         If a LAMMPS command fails (the message names the command).
     """
-    from rigidmd.thermostats import NoseHooverThermostat
+    from rigidmd.couplings.thermostats import NoseHooverThermostat
 
     if fix not in RIGID_FIX_STYLES:
         raise ValueError(f"fix must be one of {RIGID_FIX_STYLES}, got {fix!r}")

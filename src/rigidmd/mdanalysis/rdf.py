@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rigidmd.bodies import cell_widths
+from rigidmd.core.bodies import cell_widths
 from rigidmd.mdanalysis._base import InterRDF, finish_figure, group_of, new_figure
 
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rigidmd import quaternion as quat
+from rigidmd.core import quaternion as quat
 from rigidmd.mdanalysis._base import (
     AnalysisBase,
     ResidueLayout,

@@ -14,7 +14,7 @@ from ase import Atoms
 from ase.formula import Formula
 from ase.geometry import cell_to_cellpar
 
-from rigidmd.bodies import RigidBodies
+from rigidmd.core.bodies import RigidBodies
 from rigidmd.mdanalysis._base import PS, mda, require_mdanalysis
 
 

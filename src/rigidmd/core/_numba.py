@@ -1,0 +1,343 @@
+r"""Compiled NO_SQUISH half-steps: one loop over bodies each, no temporaries.
+
+The same arithmetic as the NumPy reference in :mod:`rigidmd.core.operators`, fused
+so that a step touches every body twice (before and after the force call).
+Measured on 4096 rigid waters: about 0.1 µs per body per step here against
+about 2 µs for the NumPy path, whose cost is dominated by temporaries.
+
+Only imported when numba is available; :data:`AVAILABLE` says whether it is.
+"""
+
+import numpy as np
+
+try:
+    import numba
+except ImportError:  # pragma: no cover - exercised only without numba
+    numba = None
+
+AVAILABLE = numba is not None
+
+__all__ = ["AVAILABLE", "resolve_backend", "pack_model", "first_half", "second_half", "place",
+           "momenta", "largest_angular_speed"]
+
+
+def resolve_backend(backend=None):
+    """The backend a dynamics runs on, decided once: ``"numba"`` or ``"numpy"``.
+
+    ``None`` picks numba when it is installed; an unknown name, or numba
+    asked for but missing, is a ValueError.
+    """
+    if backend is None:
+        return "numba" if AVAILABLE else "numpy"
+    if backend not in ("numba", "numpy"):
+        raise ValueError(f"backend must be 'numba' or 'numpy', got {backend!r}")
+    if backend == "numba" and not AVAILABLE:
+        raise ValueError("backend='numba' but numba is not installed")
+    return backend
+
+
+#: Whether compiled functions are cached on disk (False when numba finds no writable place).
+CACHED = True
+
+
+def _jit(func):
+    """``numba.njit`` with an on-disk cache, or without one when no cache can be written.
+
+    numba caches next to the package or under the user's home (or
+    ``NUMBA_CACHE_DIR``); on a read-only install with no writable home it
+    refuses ``cache=True`` with a RuntimeError at decoration.  The functions
+    are then compiled at every start (a few seconds) instead.
+    """
+    global CACHED
+    if numba is None:  # pragma: no cover
+        return func
+    if CACHED:
+        try:
+            return numba.njit(cache=True, fastmath=False, nogil=True)(func)
+        except RuntimeError as err:
+            if "cannot cache" not in str(err):
+                raise
+            CACHED = False
+    return numba.njit(cache=False, fastmath=False, nogil=True)(func)
+
+
+def _inline(func):
+    """A helper of the kernels, compiled into each caller (``inline="always"``).
+
+    Inlined in numba's own IR the five free-rotor sub-steps and the kick
+    stay in registers: measured 10-12 % off the first loop on 64 and 4096
+    waters against LLVM's own (partial) inlining of separately compiled helpers.
+    """
+    if numba is None:  # pragma: no cover
+        return func
+    return numba.njit(inline="always", nogil=True)(func)
+
+
+@_inline
+def _matrix(q0, q1, q2, q3):
+    """R(q) as nine scalars, row by row."""
+    return (1.0 - 2.0 * (q2 * q2 + q3 * q3), 2.0 * (q1 * q2 - q0 * q3), 2.0 * (q1 * q3 + q0 * q2),
+            2.0 * (q1 * q2 + q0 * q3), 1.0 - 2.0 * (q1 * q1 + q3 * q3), 2.0 * (q2 * q3 - q0 * q1),
+            2.0 * (q1 * q3 - q0 * q2), 2.0 * (q2 * q3 + q0 * q1), 1.0 - 2.0 * (q1 * q1 + q2 * q2))
+
+
+@_inline
+def _kick(q0, q1, q2, q3, p0, p1, p2, p3, t0, t1, t2, h2):
+    """p + h2 * q ⊗ (0, R(q)ᵀ t), for a lab torque t."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _matrix(q0, q1, q2, q3)
+    b0 = r00 * t0 + r10 * t1 + r20 * t2
+    b1 = r01 * t0 + r11 * t1 + r21 * t2
+    b2 = r02 * t0 + r12 * t1 + r22 * t2
+    return (p0 + h2 * (-q1 * b0 - q2 * b1 - q3 * b2),
+            p1 + h2 * (q0 * b0 + q2 * b2 - q3 * b1),
+            p2 + h2 * (q0 * b1 - q1 * b2 + q3 * b0),
+            p3 + h2 * (q0 * b2 + q1 * b1 - q2 * b0))
+
+
+@_inline
+def _place_body(b, X, q0, q1, q2, q3, d, bounds, order, r, positions):
+    """Lab displacements r_j = R(q) d_j and positions X + r_j of body b's atoms."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _matrix(q0, q1, q2, q3)
+    for j in range(bounds[b], bounds[b + 1]):
+        i = order[j]
+        d0, d1, d2 = d[j, 0], d[j, 1], d[j, 2]
+        x = r00 * d0 + r01 * d1 + r02 * d2
+        y = r10 * d0 + r11 * d1 + r12 * d2
+        z = r20 * d0 + r21 * d1 + r22 * d2
+        r[j, 0], r[j, 1], r[j, 2] = x, y, z
+        positions[i, 0] = X[b, 0] + x
+        positions[i, 1] = X[b, 1] + y
+        positions[i, 2] = X[b, 2] + z
+
+
+# Taylor coefficients of sin and cos.  On |x| <= 0.25 the first omitted
+# terms, x**13/13! and x**14/14!, are below 3e-18, far below one unit in the
+# last place: the polynomials are as exact as the library functions and
+# about three times cheaper.  NO_SQUISH sub-step angles are phi*h ~ omega*dt/4
+# (0.03 for water at 1 fs), so the library is only called for fast rotors.
+_SIN = (1.0, -1.0 / 6, 1.0 / 120, -1.0 / 5040, 1.0 / 362880, -1.0 / 39916800)
+_COS = (1.0, -1.0 / 2, 1.0 / 24, -1.0 / 720, 1.0 / 40320, -1.0 / 3628800, 1.0 / 479001600)
+
+
+@_inline
+def _sincos(x):
+    """(sin x, cos x); polynomials in Estrin form (short dependency chains)."""
+    if abs(x) > 0.25:
+        return np.sin(x), np.cos(x)
+    y = x * x
+    y2 = y * y
+    y4 = y2 * y2
+    s = ((_SIN[0] + _SIN[1] * y) + y2 * (_SIN[2] + _SIN[3] * y)
+         + y4 * (_SIN[4] + _SIN[5] * y))
+    c = ((_COS[0] + _COS[1] * y) + y2 * (_COS[2] + _COS[3] * y)
+         + y4 * ((_COS[4] + _COS[5] * y) + y2 * _COS[6]))
+    return s * x, c
+
+
+@_inline
+def _rotate(q0, q1, q2, q3, p0, p1, p2, p3, inv4i, k, h):
+    """NO_SQUISH free rotation about body axis k (0, 1, 2) for time h.
+
+    ``inv4i`` is 1 / (4 I_k), or 0 for a zero moment (no rotation).  Works on
+    scalars so the five sub-steps of a body stay in registers.
+    """
+    if k == 0:
+        kq0, kq1, kq2, kq3 = -q1, q0, q3, -q2
+        kp0, kp1, kp2, kp3 = -p1, p0, p3, -p2
+    elif k == 1:
+        kq0, kq1, kq2, kq3 = -q2, -q3, q0, q1
+        kp0, kp1, kp2, kp3 = -p2, -p3, p0, p1
+    else:
+        kq0, kq1, kq2, kq3 = -q3, q2, -q1, q0
+        kp0, kp1, kp2, kp3 = -p3, p2, -p1, p0
+    phi = (p0 * kq0 + p1 * kq1 + p2 * kq2 + p3 * kq3) * inv4i
+    s, c = _sincos(phi * h)
+    return (c * q0 + s * kq0, c * q1 + s * kq1, c * q2 + s * kq2, c * q3 + s * kq3,
+            c * p0 + s * kp0, c * p1 + s * kp1, c * p2 + s * kp2, c * p3 + s * kp3)
+
+
+def pack_model(inv_mass, inv_moments, body_coordinates, atom_masses, bounds, order):
+    """The body model as the three arrays :func:`first_half` and :func:`second_half` take.
+
+    Returns
+    -------
+    body : numpy.ndarray, shape (n_bodies, 7)
+        Per body: :math:`1/M`, :math:`1/(4 I_k)` (three), :math:`1/I_k` (three),
+        0 where :math:`I_k = 0`.
+    atom : numpy.ndarray, shape (n_body_atoms, 4)
+        Per body atom, in body order: body-frame coordinates (Å) and mass (amu).
+    index : numpy.ndarray of int64, shape (n_bodies + 1 + n_body_atoms,)
+        ``bounds`` (body ``b``'s atoms are ``bounds[b]:bounds[b + 1]`` in body
+        order) followed by ``order`` (their atom indices).
+    """
+    body = np.column_stack([inv_mass, 0.25 * inv_moments, inv_moments])
+    atom = np.column_stack([body_coordinates, atom_masses])
+    index = np.concatenate([bounds, order]).astype(np.int64)
+    return (np.ascontiguousarray(body, dtype=float), np.ascontiguousarray(atom, dtype=float),
+            index)
+
+
+@_inline
+def _unpack(data, n):
+    """Views X, V, q, p of the first n bodies' part of a state buffer."""
+    X = data[0:3 * n].reshape((n, 3))
+    V = data[3 * n:6 * n].reshape((n, 3))
+    q = data[6 * n:10 * n].reshape((n, 4))
+    p = data[10 * n:14 * n].reshape((n, 4))
+    return X, V, q, p
+
+
+@_jit
+def first_half(data, n, F, tau, body, atom, index, dt, r, positions, ABS, affine):
+    r"""Kick (dt/2), drift (dt), free rotor (dt), and place the body atoms.
+
+    ``data`` is a :attr:`rigidmd.core.state.RigidState.data` buffer with ``n``
+    bodies (its ``X, V, q, p`` updated in place); ``body, atom, index`` are
+    :func:`pack_model`'s.  Writes the lab displacements ``r`` (in body-atom
+    order) and the atom ``positions`` (atom order).  With ``affine`` the
+    drift moves the centres of mass with the cell, :math:`X \leftarrow A X + B V`,
+    :math:`V \leftarrow S V` (``ABS`` = the three 3x3 matrices from a
+    barostat, stacked); otherwise :math:`X \mathrel{+}= dt\, V`.
+    """
+    X, V, q, p = _unpack(data, n)
+    bounds, order = index[:n + 1], index[n + 1:]
+    d = atom[:, :3]
+    A, B, S = ABS[0], ABS[1], ABS[2]
+    half = 0.5 * dt
+    for b in range(n):
+        hm = half * body[b, 0]
+        for a in range(3):
+            V[b, a] += hm * F[b, a]
+        if affine:
+            x0, x1, x2 = X[b, 0], X[b, 1], X[b, 2]
+            v0, v1, v2 = V[b, 0], V[b, 1], V[b, 2]
+            for a in range(3):
+                X[b, a] = (A[a, 0] * x0 + A[a, 1] * x1 + A[a, 2] * x2
+                           + B[a, 0] * v0 + B[a, 1] * v1 + B[a, 2] * v2)
+                V[b, a] = S[a, 0] * v0 + S[a, 1] * v1 + S[a, 2] * v2
+        else:
+            for a in range(3):
+                X[b, a] += dt * V[b, a]
+        q0, q1, q2, q3 = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+        p0, p1, p2, p3 = _kick(q0, q1, q2, q3, p[b, 0], p[b, 1], p[b, 2], p[b, 3],
+                               tau[b, 0], tau[b, 1], tau[b, 2], dt)
+        i0, i1, i2 = body[b, 1], body[b, 2], body[b, 3]
+        q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i2, 2, half)
+        q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i1, 1, half)
+        q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i0, 0, dt)
+        q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i1, 1, half)
+        q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i2, 2, half)
+        q[b, 0], q[b, 1], q[b, 2], q[b, 3] = q0, q1, q2, q3
+        p[b, 0], p[b, 1], p[b, 2], p[b, 3] = p0, p1, p2, p3
+        _place_body(b, X, q0, q1, q2, q3, d, bounds, order, r, positions)
+
+
+@_jit
+def second_half(data, n, F, tau, body, atom, index, dt, forces, r, momenta, write_momenta):
+    """Reduce forces to bodies, kick (dt/2), and (optionally) write rigid atom momenta.
+
+    Arguments as in :func:`first_half`.  First checks that the body atoms'
+    ``forces`` are finite: if any is not, returns False having written
+    nothing.  Otherwise overwrites ``F, tau`` with the new body forces and
+    lab torques, updates ``V, p`` in place and, if ``write_momenta``, writes
+    ``momenta`` (atom order) of the body atoms, and returns True.  (A coupled
+    dynamics changes ``V, p`` after this and writes the momenta once, with
+    :func:`momenta`.)
+    """
+    X, V, q, p = _unpack(data, n)
+    bounds, order = index[:n + 1], index[n + 1:]
+    inv_moments = body[:, 4:7]
+    m = atom[:, 3]
+    # One reduction: a NaN or an infinity anywhere makes the sum non-finite.
+    total = 0.0
+    for j in range(order.shape[0]):
+        i = order[j]
+        total += forces[i, 0] + forces[i, 1] + forces[i, 2]
+    if not np.isfinite(total):
+        return False
+    half = 0.5 * dt
+    for b in range(n):
+        fx = fy = fz = 0.0
+        tx = ty = tz = 0.0
+        for j in range(bounds[b], bounds[b + 1]):
+            i = order[j]
+            f0, f1, f2 = forces[i, 0], forces[i, 1], forces[i, 2]
+            r0, r1, r2 = r[j, 0], r[j, 1], r[j, 2]
+            fx += f0
+            fy += f1
+            fz += f2
+            tx += r1 * f2 - r2 * f1
+            ty += r2 * f0 - r0 * f2
+            tz += r0 * f1 - r1 * f0
+        F[b, 0], F[b, 1], F[b, 2] = fx, fy, fz
+        tau[b, 0], tau[b, 1], tau[b, 2] = tx, ty, tz
+        hm = half * body[b, 0]
+        vx = V[b, 0] + hm * fx
+        vy = V[b, 1] + hm * fy
+        vz = V[b, 2] + hm * fz
+        V[b, 0], V[b, 1], V[b, 2] = vx, vy, vz
+        w, x, y, z = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+        p0, p1, p2, p3 = _kick(w, x, y, z, p[b, 0], p[b, 1], p[b, 2], p[b, 3], tx, ty, tz, dt)
+        p[b, 0], p[b, 1], p[b, 2], p[b, 3] = p0, p1, p2, p3
+        if write_momenta:
+            _body_momenta(b, vx, vy, vz, w, x, y, z, p0, p1, p2, p3, inv_moments, bounds, order,
+                          m, r, momenta)
+    return True
+
+
+@_inline
+def _body_momenta(b, vx, vy, vz, w, x, y, z, p0, p1, p2, p3, inv_moments, bounds, order, m, r,
+                  momenta):
+    """Rigid momenta m_j (V + ω × r_j) of body b's atoms."""
+    # L_b = ½ vec(q* ⊗ p); ω_b = L_b / I (0 about a zero-moment axis); ω = R ω_b.
+    l0 = 0.5 * (w * p1 - x * p0 - y * p3 + z * p2)
+    l1 = 0.5 * (w * p2 + x * p3 - y * p0 - z * p1)
+    l2 = 0.5 * (w * p3 - x * p2 + y * p1 - z * p0)
+    w0 = l0 * inv_moments[b, 0]
+    w1 = l1 * inv_moments[b, 1]
+    w2 = l2 * inv_moments[b, 2]
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _matrix(w, x, y, z)
+    ox = r00 * w0 + r01 * w1 + r02 * w2
+    oy = r10 * w0 + r11 * w1 + r12 * w2
+    oz = r20 * w0 + r21 * w1 + r22 * w2
+    for j in range(bounds[b], bounds[b + 1]):
+        i = order[j]
+        mj = m[j]
+        r0, r1, r2 = r[j, 0], r[j, 1], r[j, 2]
+        momenta[i, 0] = mj * (vx + oy * r2 - oz * r1)
+        momenta[i, 1] = mj * (vy + oz * r0 - ox * r2)
+        momenta[i, 2] = mj * (vz + ox * r1 - oy * r0)
+
+
+@_jit
+def momenta(V, q, p, inv_moments, bounds, order, m, r, out):
+    """Rigid momenta of all body atoms from the state, as :func:`second_half` writes them."""
+    for b in range(V.shape[0]):
+        _body_momenta(b, V[b, 0], V[b, 1], V[b, 2], q[b, 0], q[b, 1], q[b, 2], q[b, 3],
+                      p[b, 0], p[b, 1], p[b, 2], p[b, 3], inv_moments, bounds, order, m, r, out)
+
+
+@_jit
+def place(X, q, d, bounds, order, r, positions):
+    """Lab displacements ``r`` and ``positions`` of the body atoms, as in :func:`first_half`."""
+    for b in range(X.shape[0]):
+        _place_body(b, X, q[b, 0], q[b, 1], q[b, 2], q[b, 3], d, bounds, order, r, positions)
+
+
+@_jit
+def largest_angular_speed(q, p, inv_moments):
+    """The body turning fastest and its |ω| (rad / ASE time).
+
+    As :func:`rigidmd.core.observables.largest_angular_speed` computes them; (-1, 0.0)
+    without bodies."""
+    best, best2 = -1, -1.0
+    for b in range(q.shape[0]):
+        w, x, y, z = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+        p0, p1, p2, p3 = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
+        o1 = 0.5 * (w * p1 - x * p0 - y * p3 + z * p2) * inv_moments[b, 0]
+        o2 = 0.5 * (w * p2 - y * p0 - z * p1 + x * p3) * inv_moments[b, 1]
+        o3 = 0.5 * (w * p3 - z * p0 - x * p2 + y * p1) * inv_moments[b, 2]
+        speed2 = o1 * o1 + o2 * o2 + o3 * o3
+        if speed2 > best2:
+            best, best2 = b, speed2
+    return best, np.sqrt(best2) if best >= 0 else 0.0

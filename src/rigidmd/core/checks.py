@@ -1,0 +1,121 @@
+"""Checks of what a user hands a rigid dynamics, run before any state changes.
+
+Each raises one ``ValueError`` (or ``TypeError``) naming the atom, the cell
+vector or the parameter at fault.
+"""
+
+import numpy as np
+from ase import Atoms
+from ase.constraints import FixCom
+
+from rigidmd.core.dof import RigidBodyDOF
+
+__all__ = ["check_finite", "check_massless_momenta", "check_timestep", "check_constraints",
+           "changed_properties"]
+
+
+def check_timestep(timestep: float) -> float:
+    """``timestep`` as a positive finite float (ASE time units), or a clear error."""
+    try:
+        dt = float(timestep)
+    except (TypeError, ValueError):
+        raise TypeError(f"timestep must be a number, got {timestep!r}") from None
+    if not (np.isfinite(dt) and dt > 0):
+        raise ValueError(f"timestep must be positive and finite, got {timestep!r}")
+    return dt
+
+
+def check_finite(values, quantity: str, unit: str, when: str = "") -> None:
+    """Raise a ValueError naming the first atom whose ``quantity`` is NaN or infinite.
+
+    One reduction when everything is finite (a NaN or an infinity anywhere
+    makes the sum non-finite).
+    """
+    values = np.asarray(values, dtype=float)
+    if np.isfinite(values.sum()):
+        return
+    bad = np.flatnonzero(~np.isfinite(values.reshape(len(values), -1)).all(axis=1))
+    what = "cell vector" if quantity == "cell" else "atom"
+    raise ValueError(f"{what} {int(bad[0])} has a non-finite {quantity} "
+                     f"{values[bad[0]].tolist()} ({unit}){' ' + when if when else ''}"
+                     f"{f'; {len(bad)} in all' if len(bad) > 1 else ''}")
+
+
+def check_massless_momenta(atoms: Atoms, when: str = "") -> None:
+    """Refuse a momentum on an atom of mass 0: a virtual site only moves with its body.
+
+    ASE's velocity tools (``MaxwellBoltzmannDistribution``, ``Stationary``,
+    ``set_velocities``) give such atoms zero momentum; a non-zero one was set
+    by hand and has no rigid-body meaning, so it is refused, not dropped.
+    """
+    masses = atoms.get_masses()
+    if np.all(masses > 0):
+        return
+    momenta = atoms.get_momenta()
+    bad = np.flatnonzero((masses == 0) & np.any(momenta != 0, axis=1))
+    if bad.size:
+        a = int(bad[0])
+        raise ValueError(
+            f"atom {a} ({atoms[a].symbol}) has mass 0 but momentum {momenta[a].tolist()} "
+            f"(amu Å / ASE time){' ' + when if when else ''}: a massless atom (a virtual site) "
+            "moves with its body; give it zero momentum")
+
+
+def check_constraints(atoms: Atoms) -> bool:
+    """Refuse ASE constraints other than FixCom; returns whether FixCom is there."""
+    others = [c for c in atoms.constraints if not isinstance(c, (RigidBodyDOF, FixCom))]
+    if others:
+        raise ValueError(
+            f"rigid-body dynamics cannot honour other ASE constraints ({others[0]!r}); "
+            "remove them (rigid bodies replace bond constraints; atoms in no body are "
+            "free point particles; FixCom is honoured)"
+        )
+    return any(isinstance(c, FixCom) for c in atoms.constraints)
+
+
+def quick_check_state(calc, atoms: Atoms, tol: float, ase_check_state):
+    """A calculator's ``check_state`` through :func:`changed_properties` where it can.
+
+    ``ase_check_state``: ASE's own (the calculator's ``super().check_state``),
+    asked when there is nothing to compare with, with ``ignored_changes``, or
+    when the atoms differ in size or in the arrays they carry.
+    """
+    if calc.atoms is None or calc.ignored_changes:
+        return ase_check_state(atoms, tol)
+    changes = changed_properties(calc.atoms, atoms, tol)
+    return ase_check_state(atoms, tol) if changes is None else changes
+
+
+def changed_properties(old: Atoms, atoms: Atoms, tol: float = 1e-15):
+    """ASE's ``compare_atoms`` for atoms of the same size and arrays, in a few array operations.
+
+    Parameters
+    ----------
+    old, atoms : ase.Atoms
+        The atoms of the last calculation and the atoms asked about.
+    tol : float
+        Each of ASE's ``all_changes`` counts as changed unless every element is
+        within ``tol`` absolute plus ``tol`` relative (as ``numpy.allclose``).
+
+    Returns
+    -------
+    list of str or None
+        The changed properties, as ASE's ``compare_atoms`` finds them; None when
+        the atoms differ in size or in the arrays they carry (ask ASE then).
+    """
+    from ase.calculators.calculator import all_changes
+
+    if len(old) != len(atoms) or set(old.arrays) != set(atoms.arrays):
+        return None
+    pairs = [("cell", old.cell.array, atoms.cell.array), ("pbc", old.pbc, atoms.pbc)]
+    pairs += [(name, old.arrays[name], atoms.arrays[name]) for name in all_changes
+              if name in old.arrays]
+    changes = []
+    for name, a, b in pairs:
+        if a.shape != b.shape:
+            changes.append(name)
+        elif not np.array_equal(a, b) and not (
+                a.dtype != bool and np.all(np.abs(a - b) <= tol * (1 + np.abs(b)))):
+            changes.append(name)
+    return changes
+

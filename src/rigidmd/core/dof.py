@@ -1,0 +1,83 @@
+"""What ASE's temperature reads on a rigid system: degrees of freedom and kinetic energy.
+
+:class:`RigidBodyDOF` is the marker a rigid dynamics puts in
+``atoms.constraints``; :func:`kinetic_energy` and :func:`temperature` are
+ASE's, with massless virtual sites left out.
+"""
+
+import numpy as np
+from ase import Atoms, units
+
+__all__ = ["RigidBodyDOF", "kinetic_energy", "temperature"]
+
+
+class RigidBodyDOF:
+    """Marks rigid bodies for ASE's degree-of-freedom count.
+
+    A rigid dynamics puts one of these in ``atoms.constraints`` so that
+    :meth:`ase.Atoms.get_temperature` and :class:`ase.md.MDLogger` count 6
+    degrees of freedom per body (5 per linear body) and 3 per point particle,
+    3 fewer when the dynamics holds the total momentum (a thermostat's
+    ``fixcm=True``; ASE's ``FixCom`` counts its own 3).  It never changes
+    positions, momenta or forces.  It has no ``todict``, so trajectory
+    writers skip it and ``.traj`` files stay readable by plain
+    :func:`ase.io.read`.
+
+    Parameters
+    ----------
+    removed_dof : int
+        ``3 * len(atoms)`` minus the degrees of freedom left.
+    molecule_ids : array_like of int, shape (n_atoms,), optional
+        Each atom's body as a molecule ID (body ``b`` is ``b + 1``, an atom in
+        no body -1; :func:`rigidmd.core.bodies.molecule_ids`), for calculators
+        that need molecules (:class:`rigidmd.lammps.LAMMPSCalculator`
+        excludes pairs within one; IDs <= 0 are no molecule).
+    """
+
+    def __init__(self, removed_dof: int, molecule_ids=None):
+        self.removed_dof = int(removed_dof)
+        self.body_ids = None if molecule_ids is None else np.array(molecule_ids)
+
+    def get_removed_dof(self, atoms):
+        return self.removed_dof
+
+    def adjust_positions(self, atoms, new):
+        pass
+
+    def adjust_momenta(self, atoms, momenta):
+        pass
+
+    def adjust_forces(self, atoms, forces):
+        pass
+
+    def index_shuffle(self, atoms, ind):
+        # A subset of atoms is no longer the same set of bodies: drop it.
+        raise NotImplementedError
+
+    def __repr__(self):
+        return f"RigidBodyDOF(removed_dof={self.removed_dof})"
+
+
+def kinetic_energy(atoms: Atoms) -> float:
+    r"""Kinetic energy of the atoms, :math:`\sum_i |p_i|^2 / 2 m_i` over atoms with mass (eV).
+
+    ASE's :meth:`ase.Atoms.get_kinetic_energy` forms :math:`p/m`, which is
+    0/0 (NaN) on a massless virtual site; a virtual site carries no kinetic
+    energy, so it is left out here.
+    """
+    momenta, masses = atoms.get_momenta(), atoms.get_masses()
+    massive = masses > 0
+    if massive.all():  # ASE's own arithmetic, to the bit
+        return float(0.5 * np.vdot(momenta, momenta / masses[:, None]))
+    p = momenta[massive]
+    return float(0.5 * np.vdot(p, p / masses[massive, None]))
+
+
+def temperature(atoms: Atoms) -> float:
+    """Temperature (K) as :meth:`ase.Atoms.get_temperature`, with :func:`kinetic_energy`.
+
+    Degrees of freedom: 3 per atom less what the constraints remove (a
+    :class:`RigidBodyDOF` leaves the rigid ones).
+    """
+    dof = 3 * len(atoms) - sum(c.get_removed_dof(atoms) for c in atoms.constraints)
+    return 2.0 * kinetic_energy(atoms) / (dof * units.kB)

@@ -1,0 +1,210 @@
+r"""The body link: an :class:`ase.Atoms` on one side, the rigid state on the other.
+
+:class:`BodyLink` places the atoms from a :class:`~rigidmd.core.state.RigidState`
+(massless virtual sites too), writes their momenta, reads positions and
+momenta back (a best rigid fit and a projection onto rigid motion), and
+notices changes made to the Atoms between steps.  The backend (the
+compiled loops of :mod:`rigidmd.core._numba` or the NumPy operators) is chosen
+once, at construction.  It never calls a calculator; an optimizer or a
+Monte Carlo move can use it without a dynamics::
+
+    link = BodyLink(atoms, geometry.model)
+    state = link.initial_state(geometry)
+    r = link.place(state)          # atoms.positions now hold the rigid positions
+"""
+
+import warnings
+
+import numpy as np
+from ase import Atoms
+
+from rigidmd.core import _numba
+from rigidmd.core import observables as obs
+from rigidmd.core import operators as ops
+from rigidmd.core.bodies import unwrap_bodies
+from rigidmd.core.checks import check_finite, check_massless_momenta
+from rigidmd.core.model import BodyGeometry, BodyModel
+from rigidmd.core.state import RigidState
+
+__all__ = ["BodyLink", "FIT_TOLERANCE"]
+
+#: Largest rigid-fit residual (Å) accepted silently when re-reading positions.
+FIT_TOLERANCE = 1e-6
+
+
+class BodyLink:
+    """Atoms ↔ rigid state, with the backend chosen once.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+        Written in place: ``atoms.arrays["positions"]`` and ``["momenta"]``.
+    model : BodyModel
+    backend : {None, "numba", "numpy"}
+        See :func:`rigidmd.core._numba.resolve_backend`.
+
+    Attributes
+    ----------
+    atoms, model, backend
+    removed_kinetic_energy : float
+        Kinetic energy (eV) the last :meth:`read_momenta` removed by projecting
+        the atoms' velocities onto rigid motion.
+    """
+
+    def __init__(self, atoms: Atoms, model: BodyModel, backend: str | None = None):
+        self.atoms, self.model = atoms, model
+        self.backend = _numba.resolve_backend(backend)
+        self.compiled = self.backend == "numba"
+        self.masses = atoms.get_masses()
+        self.removed_kinetic_energy = 0.0
+
+    def initial_state(self, geometry: BodyGeometry) -> RigidState:
+        """The state of measured bodies at rest (velocities are read by :meth:`read_momenta`)."""
+        m, atoms = self.model, self.atoms
+        return RigidState(
+            X=geometry.com.copy(), V=np.zeros((m.n_bodies, 3)), q=geometry.quaternions.copy(),
+            p=np.zeros((m.n_bodies, 4)), x=atoms.positions[m.free].copy(),
+            v=np.zeros((m.n_free, 3)), cell=atoms.cell.array.copy())
+
+    # ------------------------------------------------------------ state -> atoms
+    def place(self, state: RigidState, r: np.ndarray | None = None) -> np.ndarray:
+        """Write the rigid positions of ``state`` to the atoms; returns the lab displacements.
+
+        ``r`` (shape (n_body_atoms, 3)) is filled in place on the compiled
+        path, whose arithmetic is the kernel's, so a restored state gives
+        bit-identical positions.
+        """
+        m = self.model
+        positions = self.atoms.arrays["positions"]
+        if self.compiled:
+            if r is None:
+                r = np.empty((len(m.order), 3))
+            _numba.place(state.X, state.q, m.body_coordinates, m.bounds, m.order, r, positions)
+        else:
+            r, positions[m.order] = ops.place_atoms(state, m)
+        positions[m.free] = state.x
+        return r
+
+    def write_momenta(self, state: RigidState, r: np.ndarray) -> None:
+        """Write the rigid momenta of ``state`` to the atoms (positions placed with ``r``)."""
+        m = self.model
+        momenta = self.atoms.arrays["momenta"]
+        if self.compiled:
+            _numba.momenta(state.V, state.q, state.p, m.inv_moments, m.bounds, m.order,
+                           m.atom_masses, r, momenta)
+        else:
+            momenta[m.order] = m.atom_masses[:, None] * ops.atom_velocities(state, r, m)
+        momenta[m.free] = m.free_masses[:, None] * state.v
+
+    def largest_angular_speed(self, state: RigidState) -> tuple[int, float]:
+        """The body turning fastest and its :math:`|\\omega|` (rad / ASE time), on the backend.
+
+        See :func:`rigidmd.core.observables.largest_angular_speed`; the compiled
+        loop gives the same numbers without two dozen array operations.
+        """
+        if self.compiled:
+            b, speed = _numba.largest_angular_speed(state.q, state.p, self.model.inv_moments)
+            return int(b), float(speed)
+        return obs.largest_angular_speed(state, self.model)
+
+    # ------------------------------------------------------------ atoms -> state
+    def read_momenta(self, state: RigidState, previous: np.ndarray | None = None,
+                     owner: str = "RigidDynamics") -> float:
+        """Project the atoms' velocities onto rigid motion of the bodies; returns the KE removed.
+
+        With ``previous`` (the momenta last written to the atoms, positions
+        unchanged since), a body whose atom momenta were all scaled by one
+        factor (a velocity flip, a rescaling) has its whole momentum scaled
+        instead of projected afresh.  This keeps, bit for bit, the axial
+        NO_SQUISH momentum of a linear body, which its atoms' velocities
+        cannot express, so that flipping velocities reverses a run exactly.
+        A removal above roundoff is reported by a warning naming ``owner``.
+        """
+        m, atoms = self.model, self.atoms
+        momenta = atoms.get_momenta()
+        # Massless atoms (virtual sites) carry no momentum (check_massless_momenta).
+        massive = self.masses > 0
+        ke_atoms = 0.5 * np.sum(momenta[massive] ** 2 / self.masses[massive, None])
+        r, _ = ops.place_atoms(state, m)
+        V, L_body = ops.rigid_projection(momenta[m.order], r, state.q, m)
+        p = ops.conjugate_momentum(state.q, L_body)
+        if previous is not None:
+            scale, uniform = ops.uniform_rescale(momenta[m.order], previous[m.order], m)
+            V = np.where(uniform[:, None], scale[:, None] * state.V, V)
+            p = np.where(uniform[:, None], scale[:, None] * state.p, p)
+        state.V, state.p = V, p
+        state.v = momenta[m.free] / m.free_masses[:, None]
+        ke_rigid = (float(obs.translational_kinetic_energies(state, m).sum()
+                          + obs.free_kinetic_energy(state, m))
+                    + obs.rotational_kinetic_energy(state, m))
+        removed = float(ke_atoms - ke_rigid)
+        self.removed_kinetic_energy = removed
+        # Rigid input loses only roundoff (~1e-16 of the kinetic energy).
+        if removed > 1e-10 * ke_atoms + 1e-12:
+            warnings.warn(
+                f"{owner}: projecting the atoms' velocities onto rigid-body motion removed "
+                f"{removed:.6g} eV of kinetic energy ({100 * removed / ke_atoms:.3g}% of "
+                f"{ke_atoms:.6g} eV)", stacklevel=5)
+        return removed
+
+    def read_positions(self, state: RigidState, owner: str = "RigidDynamics") -> None:
+        """Refit centres of mass and orientations to the atoms' positions (and the cell)."""
+        m, atoms = self.model, self.atoms
+        state.cell[...] = atoms.cell.array
+        x = unwrap_bodies(atoms, m.order, m.starts, m.atom_body)
+        if m.n_bodies:
+            X, q, residual = ops.fit_bodies(x, m)
+            worst = int(np.argmax(residual))
+            if residual[worst] > FIT_TOLERANCE:
+                warnings.warn(
+                    f"{owner}: the atoms of body {worst} are {residual[worst]:.3g} Å from a "
+                    "rigid image of the body; they were moved onto it", stacklevel=5)
+            state.X, state.q = X, q
+        state.x = atoms.positions[m.free].copy()
+
+    # ------------------------------------------------------------ changes between steps
+    def snapshot(self) -> tuple:
+        """Copies of the atoms' positions, momenta and cell, to compare with later."""
+        atoms = self.atoms
+        return (atoms.arrays["positions"].copy(), atoms.arrays["momenta"].copy(),
+                atoms.cell.array.copy())
+
+    def differs(self, snapshot: tuple) -> bool:
+        """Whether positions, momenta or cell differ from ``snapshot``."""
+        positions, momenta, cell = snapshot
+        atoms = self.atoms
+        return not (np.array_equal(atoms.arrays["positions"], positions)
+                    and np.array_equal(atoms.arrays["momenta"], momenta)
+                    and np.array_equal(atoms.cell.array, cell))
+
+    def check_unchanged_system(self) -> None:
+        """Refuse atoms added or removed, or masses changed, since construction."""
+        atoms = self.atoms
+        if len(atoms) != self.model.n_atoms:
+            raise ValueError(f"the atoms changed from {self.model.n_atoms} to {len(atoms)}; "
+                             "create a new dynamics")
+        if not np.array_equal(atoms.get_masses(), self.masses):
+            raise ValueError("the atoms' masses changed; create a new dynamics")
+
+    def changes_since(self, written: tuple, when: str) -> tuple[bool, bool]:
+        """(moved, kicked): what changed since ``written``, checked finite; nothing is read yet."""
+        atoms = self.atoms
+        positions, momenta, cell = written
+        moved = not (np.array_equal(atoms.positions, positions)
+                     and np.array_equal(atoms.cell.array, cell))
+        kicked = not np.array_equal(atoms.get_momenta(), momenta)
+        if moved:
+            check_finite(atoms.positions, "position", "Å", when)
+            check_finite(atoms.cell.array, "cell", "Å", when)
+        if kicked:
+            new = atoms.get_momenta()
+            check_finite(new, "momentum", "amu Å / ASE time", when)
+            check_massless_momenta(atoms, when)
+            if not new.any() and momenta.any() and not self.masses.all():
+                warnings.warn(
+                    "every momentum was set to zero between steps, and the atoms have massless "
+                    "sites: ASE's Stationary, ZeroRotation and force_temperature read a NaN "
+                    "temperature there and zero the momenta; rigidmd.rigid_stationary and "
+                    "rigidmd.rigid_zero_rotation do what they mean (going on from rest)",
+                    stacklevel=4)
+        return moved, kicked

@@ -1,0 +1,298 @@
+r"""The time-invariant description of a system's rigid bodies.
+
+A :class:`BodyModel` holds what never changes during a run: which atoms form
+which body and in what order, masses, principal moments of inertia (and their
+safe inverses), body-frame atom coordinates, the free atoms and the degrees of
+freedom.  What a step changes (centres of mass, orientations, momenta, the
+cell) lives in :class:`rigidmd.core.state.RigidState`.  :func:`measure` builds a
+model from a partition of the atoms and one configuration, and returns that
+configuration's centres of mass and orientations alongside.
+
+Conventions (see also :mod:`rigidmd.core.quaternion`): atom :math:`i` of body
+:math:`b` sits at :math:`x_i = X_b + R(q_b)\, d_i`, where :math:`X_b` is the
+centre of mass and :math:`d_i` the body-frame coordinate.  The body frame is
+the principal frame, so the inertia tensor there is
+:math:`\mathrm{diag}(I_1, I_2, I_3)` with :math:`I_1 \le I_2 \le I_3`.  A
+moment below ``LINEAR_TOLERANCE * max(I)`` is set to exactly 0 (a linear
+body), the rule LAMMPS ``fix rigid`` uses.
+
+Atoms of mass 0 (virtual sites, such as the M site of TIP4P water) belong to
+a body like any other atom: they are placed at :math:`X_b + R(q_b)\, d_i`
+every step and the force on them enters the body's force and torque, but
+they add nothing to its mass, inertia, momenta or degrees of freedom.
+"""
+
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from rigidmd.core import quaternion as quat
+
+__all__ = ["BodyModel", "BodyGeometry", "LINEAR_TOLERANCE", "measure", "inertia_tensors",
+           "safe_inverse"]
+
+#: Relative threshold below which a principal moment counts as zero.
+LINEAR_TOLERANCE = 1e-7
+
+
+def safe_inverse(moments):
+    r""":math:`1/I` componentwise, 0 where :math:`I = 0` (the axis of a linear body).
+
+    Parameters
+    ----------
+    moments : numpy.ndarray, shape (..., 3)
+        Principal moments (amu Å²).
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3)
+        amu⁻¹ Å⁻².
+    """
+    moments = np.asarray(moments, dtype=float)
+    positive = moments > 0
+    return np.where(positive, 1.0 / np.where(positive, moments, 1.0), 0.0)
+
+
+def describe_atoms(indices, limit=6):
+    """``"[i, j, ...]"``: a short list of atom indices for messages."""
+    indices = [int(i) for i in indices]
+    text = ", ".join(str(i) for i in indices[:limit])
+    return f"[{text}{', ...' if len(indices) > limit else ''}]"
+
+
+@dataclass(frozen=True, eq=False)
+class BodyModel:
+    """What never changes during a run: the bodies' make-up and inertia.
+
+    Body atoms are stored grouped by body: ``order[bounds[b]:bounds[b + 1]]``
+    are the atom indices of body ``b``.
+
+    Attributes
+    ----------
+    n_atoms : int
+        Number of atoms in the system.
+    order : numpy.ndarray of int, shape (n_body_atoms,)
+        Atom index of each body atom, grouped by body.
+    starts : numpy.ndarray of int, shape (n_bodies,)
+        Offset of each body's first atom in ``order``.
+    atom_body : numpy.ndarray of int, shape (n_body_atoms,)
+        Body of each entry of ``order``.
+    atom_masses : numpy.ndarray, shape (n_body_atoms,)
+        Masses of the body atoms (amu), in ``order``.
+    mass : numpy.ndarray, shape (n_bodies,)
+        Body masses (amu).
+    moments : numpy.ndarray, shape (n_bodies, 3)
+        Principal moments of inertia, ascending (amu Å²); 0 marks the axis of
+        a linear body.
+    body_coordinates : numpy.ndarray, shape (n_body_atoms, 3)
+        Body-frame coordinates :math:`d_i` (Å), in ``order``.
+    free : numpy.ndarray of int, shape (n_free,)
+        Indices of the atoms that move as point particles.
+    free_masses : numpy.ndarray, shape (n_free,)
+        Their masses (amu).
+    bounds : numpy.ndarray of int, shape (n_bodies + 1,)
+        ``starts`` with ``len(order)`` appended.
+    inv_mass : numpy.ndarray, shape (n_bodies,)
+        :math:`1/M` (amu⁻¹).
+    inv_moments : numpy.ndarray, shape (n_bodies, 3)
+        :math:`1/I_k`, 0 about a zero-moment axis (:func:`safe_inverse`).
+    linear : numpy.ndarray of bool, shape (n_bodies,)
+        Bodies with one zero moment.
+    radius : float
+        The largest distance of a body atom from its centre of mass (Å), 0
+        without bodies: no body is wider than twice this in any direction.
+    """
+
+    #: The fields a checkpoint stores (the others are derived from them).
+    STORED: ClassVar[tuple] = ("order", "starts", "atom_body", "atom_masses", "mass", "moments",
+                               "body_coordinates", "free", "free_masses")
+
+    n_atoms: int
+    order: np.ndarray
+    starts: np.ndarray
+    atom_body: np.ndarray
+    atom_masses: np.ndarray
+    mass: np.ndarray
+    moments: np.ndarray
+    body_coordinates: np.ndarray
+    free: np.ndarray
+    free_masses: np.ndarray
+    bounds: np.ndarray = field(init=False, repr=False)
+    inv_mass: np.ndarray = field(init=False, repr=False)
+    inv_moments: np.ndarray = field(init=False, repr=False)
+    linear: np.ndarray = field(init=False, repr=False)
+    radius: float = field(init=False, repr=False)
+
+    def __post_init__(self):
+        derived = {
+            "bounds": np.append(self.starts, len(self.order)).astype(np.int64),
+            "inv_mass": 1.0 / self.mass if len(self.mass) else np.zeros(0),
+            "inv_moments": safe_inverse(self.moments),
+            "linear": self.moments[:, 0] == 0.0,
+        }
+        for name, value in derived.items():
+            object.__setattr__(self, name, value)
+        for name in ("order", "starts", "atom_body", "atom_masses", "mass", "moments",
+                     "body_coordinates", "free", "free_masses", *derived):
+            getattr(self, name).flags.writeable = False
+        coordinates = self.body_coordinates
+        object.__setattr__(self, "radius", float(np.sqrt(np.max(np.sum(
+            coordinates * coordinates, axis=1)))) if len(coordinates) else 0.0)
+
+    @property
+    def n_bodies(self):
+        """Number of rigid bodies."""
+        return len(self.mass)
+
+    @property
+    def n_free(self):
+        """Number of point particles (atoms in no body)."""
+        return len(self.free)
+
+    @property
+    def translational_dof(self):
+        """Centre-of-mass and point-particle degrees of freedom: 3 each."""
+        return 3 * (self.n_bodies + self.n_free)
+
+    @property
+    def rotational_dof(self):
+        """Rotational degrees of freedom: 3 per body, 2 per linear body."""
+        return int(np.count_nonzero(self.moments))
+
+    @property
+    def degrees_of_freedom(self):
+        """All degrees of freedom: 6 per body, 5 per linear body, 3 per point particle.
+
+        No centre-of-mass correction (as everywhere in ASE; LAMMPS subtracts 3).
+        """
+        return self.translational_dof + self.rotational_dof
+
+    def atoms_of(self, b):
+        """Atom indices of body ``b``."""
+        return self.order[self.bounds[b]:self.bounds[b + 1]]
+
+
+@dataclass(frozen=True, eq=False)
+class BodyGeometry:
+    """A :class:`BodyModel` and the pose of its bodies in one configuration.
+
+    Attributes
+    ----------
+    model : BodyModel
+    com : numpy.ndarray, shape (n_bodies, 3)
+        Centres of mass (Å), from unwrapped atom positions.
+    quaternions : numpy.ndarray, shape (n_bodies, 4)
+        Orientations ``(w, x, y, z)``: ``R(q)`` maps body to lab frame.
+    """
+
+    model: BodyModel
+    com: np.ndarray
+    quaternions: np.ndarray
+
+
+def inertia_tensors(r, m, starts):
+    r"""Inertia tensors :math:`\sum_i m_i (|r_i|^2 \mathbb{1} - r_i r_i^\mathsf{T})`.
+
+    Parameters
+    ----------
+    r : numpy.ndarray, shape (n_body_atoms, 3)
+        Positions relative to each body's centre of mass (Å), grouped by body.
+    m : numpy.ndarray, shape (n_body_atoms,)
+        Atom masses (amu).
+    starts : numpy.ndarray of int, shape (n_bodies,)
+
+    Returns
+    -------
+    numpy.ndarray, shape (n_bodies, 3, 3)
+        amu Å².
+    """
+    outer = m[:, None, None] * r[:, :, None] * r[:, None, :]
+    sq = np.trace(outer, axis1=1, axis2=2)
+    per_atom = sq[:, None, None] * np.eye(3) - outer
+    return np.add.reduceat(per_atom, starts, axis=0)
+
+
+def _refuse_off_axis_sites(d, m, moments, mass, order, atom_body):
+    """Refuse an atom off the axis of a linear body.
+
+    A linear body has no orientation about its axis (no moment there), so an
+    atom off the axis would have no defined place and the axial part of its
+    torque would be dropped.  A body is linear when its smallest moment is
+    below ``LINEAR_TOLERANCE`` of its largest, which a massless site, or an
+    atom of tiny mass, far from the axis does not prevent; so every atom is
+    checked by distance.  "Off" uses the same tolerance: a squared distance
+    from the axis above ``LINEAR_TOLERANCE`` times the body's largest moment
+    per unit mass (3e-4 Å for CO2).
+    """
+    linear = moments[:, 0] == 0.0
+    if not np.any(linear):
+        return
+    scale = LINEAR_TOLERANCE * moments[:, 2] / mass
+    off = linear[atom_body] & (d[:, 1] ** 2 + d[:, 2] ** 2 > scale[atom_body])
+    if np.any(off):
+        i = int(np.flatnonzero(off)[0])
+        b = int(atom_body[i])
+        what = "massless" if m[i] == 0 else f"of mass {m[i]:.3g} amu"
+        raise ValueError(
+            f"atom {int(order[i])} is {what} and {np.hypot(d[i, 1], d[i, 2]):.3g} Å off the "
+            f"axis of the linear body {b} (atoms {describe_atoms(order[atom_body == b])}): "
+            "a linear body has no orientation about its axis to carry it"
+        )
+
+
+def measure(order, starts, atom_body, free, masses, x):
+    """Build the model of given bodies from one configuration.
+
+    Parameters
+    ----------
+    order, starts, atom_body : numpy.ndarray of int
+        Body layout, as in :class:`BodyModel`.
+    free : numpy.ndarray of int, shape (n_free,)
+        Indices of the free atoms.
+    masses : numpy.ndarray, shape (n_atoms,)
+        Atom masses (amu), already checked finite, positive or 0 in a body
+        (:func:`rigidmd.core.bodies.check_masses`).
+    x : numpy.ndarray, shape (n_body_atoms, 3)
+        Unwrapped positions of the body atoms (Å), in ``order``.
+
+    Returns
+    -------
+    BodyGeometry
+
+    Raises
+    ------
+    ValueError
+        A body whose mass sits at one point (it has no orientation); a
+        massless atom off the axis of a linear body.
+    """
+    m = masses[order]
+    n_bodies = len(starts)
+    if n_bodies == 0:
+        model = BodyModel(
+            n_atoms=len(masses), order=order, starts=starts, atom_body=atom_body,
+            atom_masses=m, mass=np.zeros(0), moments=np.zeros((0, 3)),
+            body_coordinates=np.zeros((0, 3)), free=free, free_masses=masses[free])
+        return BodyGeometry(model, np.zeros((0, 3)), np.zeros((0, 4)))
+    mass = np.add.reduceat(m, starts)
+    com = np.add.reduceat(m[:, None] * x, starts) / mass[:, None]
+    r = x - com[atom_body]
+    moments, axes = np.linalg.eigh(inertia_tensors(r, m, starts))
+    # Right-handed principal frames: R(q) = axes (columns are body axes).
+    flip = np.linalg.det(axes) < 0
+    axes[flip, :, 2] *= -1.0
+    imax = moments[:, 2]
+    point = ~(imax > 0)
+    if np.any(point):
+        b = int(np.flatnonzero(point)[0])
+        raise ValueError(
+            f"body {b} (atoms {describe_atoms(order[atom_body == b])}) has all its "
+            "mass at one point: it has no orientation"
+        )
+    moments = np.where(moments < LINEAR_TOLERANCE * imax[:, None], 0.0, moments)
+    d = np.einsum("nji,nj->ni", axes[atom_body], r)
+    _refuse_off_axis_sites(d, m, moments, mass, order, atom_body)
+    model = BodyModel(
+        n_atoms=len(masses), order=order, starts=starts, atom_body=atom_body, atom_masses=m,
+        mass=mass, moments=moments, body_coordinates=d, free=free, free_masses=masses[free])
+    return BodyGeometry(model, com, quat.from_matrix(axes))

@@ -1,0 +1,169 @@
+r"""The per-step record: what one step computed, each quantity at most once.
+
+The force evaluator (:mod:`rigidmd.core.forces`) fills a :class:`StepRecord` at
+every force call (body forces and torques, the lab displacements of the body
+atoms, the molecular virial and the potential energy when they were asked
+for); the volume and the kinetic quantities are computed on first request
+and kept until the state they depend on changes.  Coupling parts read the
+record instead of asking again, and tell it how they changed the velocities
+(:meth:`StepRecord.scale_translation`, :meth:`StepRecord.scale_rotation`) so
+that a known scaling updates the kinetic tensor instead of recomputing it.
+
+Over one step with a Nosé–Hoover thermostat and the MTK barostat this gives
+one calculator call, one volume, one kinetic tensor, one rotational kinetic
+energy and one stress (a test counts them).
+"""
+
+import numpy as np
+
+from rigidmd.core import observables as obs
+from rigidmd.core.model import BodyModel
+from rigidmd.core.state import RigidState
+
+__all__ = ["StepRecord"]
+
+#: Names of the array fields a step overwrites and a rollback restores.
+_FORCE_FIELDS = ("F", "tau", "f", "r")
+
+
+class StepRecord:
+    r"""Forces of the last call and the quantities derived from the state, computed once.
+
+    Attributes
+    ----------
+    state : RigidState
+        The state the derived quantities describe (the same object the step advances).
+    model : BodyModel
+    F, tau : numpy.ndarray, shape (n_bodies, 3)
+        Body forces (eV/Å) and lab torques (eV) of the last force call.
+    f : numpy.ndarray, shape (n_free, 3)
+        Forces on the point particles (eV/Å).
+    r : numpy.ndarray, shape (n_body_atoms, 3)
+        Lab displacements :math:`R(q)\,d_i` of the body atoms at the last
+        placement (Å), in ``model.order``.
+    virial : numpy.ndarray, shape (3, 3), or None
+        Molecular virial of the last call (eV) when the stress was asked for.
+    energy : float or None
+        Potential energy of the last call (eV) when it was asked for.
+    scratch : dict
+        Values an operator hands to a later one (exaDEM's accelerations,
+        PCDM's start-of-step values); kept across steps.
+    cell_move : object or None
+        What a barostat's drift query returned during this step (see
+        :meth:`rigidmd.couplings.base.Coupling.drift_matrices`); None before the drift.
+    """
+
+    def __init__(self, state: RigidState, model: BodyModel):
+        nb, nf = model.n_bodies, model.n_free
+        self.state, self.model = state, model
+        self.F, self.tau = np.zeros((nb, 3)), np.zeros((nb, 3))
+        self.f = np.zeros((nf, 3))
+        self.r = np.zeros((len(model.order), 3))
+        self.virial = None
+        self.energy = None
+        self.scratch = {}
+        self.cell_move = None
+        self._volume = None
+        self._kinetic = None
+        self._rotational = None
+
+    # ------------------------------------------------------------ derived, once
+    @property
+    def volume(self) -> float:
+        """Volume of ``state.cell`` (Å³), computed once per cell."""
+        if self._volume is None:
+            self._volume = obs.volume(self.state.cell)
+        return self._volume
+
+    @property
+    def kinetic_tensor(self) -> np.ndarray:
+        """Translational kinetic tensor (eV, 3x3; :func:`.observables.kinetic_tensor`)."""
+        if self._kinetic is None:
+            self._kinetic = obs.kinetic_tensor(self.state, self.model)
+        return self._kinetic
+
+    @property
+    def translational_energy(self) -> float:
+        """Kinetic energy of the centres of mass and point particles (eV)."""
+        return 0.5 * float(np.trace(self.kinetic_tensor))
+
+    @property
+    def rotational_energy(self) -> float:
+        """Rotational kinetic energy of the bodies (eV)."""
+        if self._rotational is None:
+            self._rotational = obs.rotational_kinetic_energy(self.state, self.model)
+        return self._rotational
+
+    # ------------------------------------------------------------ what changed
+    def cell_changed(self) -> None:
+        """The cell moved: the volume is asked again."""
+        self._volume = None
+
+    def velocities_changed(self) -> None:
+        """Velocities or angular momenta changed in a way the record cannot follow."""
+        self._kinetic = None
+        self._rotational = None
+
+    def scale_translation(self, factor) -> None:
+        """Every translational velocity was multiplied by ``factor`` (a number or a 3x3 matrix).
+
+        A matrix acts on each velocity as :math:`V \\leftarrow F V`; the kinetic
+        tensor becomes :math:`F K F^\\mathsf{T}` without a new sum over bodies.
+        """
+        if self._kinetic is None:
+            return
+        factor = np.asarray(factor, dtype=float)
+        if factor.ndim == 0:
+            self._kinetic = self._kinetic * float(factor) ** 2
+        else:
+            self._kinetic = factor @ self._kinetic @ factor.T
+
+    def scale_rotation(self, factor: float) -> None:
+        """Every angular momentum was multiplied by ``factor``."""
+        if self._rotational is not None:
+            self._rotational = self._rotational * float(factor) ** 2
+
+    # ------------------------------------------------------------ rollback and checkpoints
+    def get_state(self) -> dict:
+        """Copies of everything the record holds (for a rollback or a checkpoint)."""
+        return {"F": self.F.copy(), "tau": self.tau.copy(), "f": self.f.copy(),
+                "r": self.r.copy(),
+                "virial": None if self.virial is None else self.virial.copy(),
+                "energy": self.energy, "scratch": dict(self.scratch),
+                "volume": self._volume,
+                "kinetic": None if self._kinetic is None else self._kinetic.copy(),
+                "rotational": self._rotational}
+
+    def set_state(self, saved: dict) -> None:
+        """Restore what :meth:`get_state` returned; absent keys leave a quantity to recompute."""
+        for name in _FORCE_FIELDS:
+            if saved.get(name) is not None:
+                setattr(self, name, np.array(saved[name], dtype=float))
+        self.virial = None if saved.get("virial") is None else np.array(saved["virial"])
+        self.energy = saved.get("energy")
+        self.scratch = dict(saved.get("scratch", {}))
+        self.cell_move = None
+        volume, kinetic = saved.get("volume"), saved.get("kinetic")
+        self._volume = None if volume is None else float(volume)
+        self._kinetic = None if kinetic is None else np.array(kinetic, dtype=float)
+        rotational = saved.get("rotational")
+        self._rotational = None if rotational is None else float(rotational)
+
+    def backup(self, copy: bool = True) -> tuple:
+        """A token for :meth:`restore` within one step.
+
+        ``copy=False`` keeps references only: enough when the step replaces
+        the force arrays rather than writing into them (the fused kernel
+        writes them only after the force call succeeded).
+        """
+        if copy:
+            return (self.F.copy(), self.tau.copy(), self.f.copy(), self.virial, self.energy,
+                    self._volume, self._kinetic, self._rotational, dict(self.scratch))
+        return (self.F, self.tau, self.f, self.virial, self.energy, self._volume,
+                self._kinetic, self._rotational, self.scratch)
+
+    def restore(self, token: tuple) -> None:
+        """Put back what :meth:`backup` returned (a failed step)."""
+        (self.F, self.tau, self.f, self.virial, self.energy, self._volume, self._kinetic,
+         self._rotational, self.scratch) = token
+        self.cell_move = None

@@ -1,0 +1,278 @@
+r"""What a scheme's operators work on during a step, the operators' adapters, the fused driver.
+
+:class:`StepContext` hands the operators of a :class:`~rigidmd.core.schemes.Scheme`
+the state, the body model, the per-step record (forces, torques, scratch
+values), a force evaluator and, under a barostat, the part whose drift moves
+the cell.  The ``apply_*`` functions adapt each operator of
+:mod:`rigidmd.core.operators` to that context (``apply_drift(ctx, h)`` runs
+:func:`rigidmd.core.operators.drift` or :func:`rigidmd.core.operators.affine_drift`);
+:func:`fused_no_squish` is the ``no_squish`` scheme as two compiled loops.
+Nothing here reaches back to the dynamics.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rigidmd.core import _numba
+from rigidmd.core import observables as obs
+from rigidmd.core import operators as ops
+from rigidmd.core.forces import ForceEvaluator, NonFiniteForceError
+from rigidmd.core.model import BodyModel
+from rigidmd.core.record import StepRecord
+from rigidmd.core.state import RigidState
+
+__all__ = ["StepContext", "fused_no_squish"]
+
+
+@dataclass
+class StepContext:
+    """What operators read and write during a step.
+
+    The time step is not stored here: :meth:`rigidmd.core.schemes.Scheme.run`
+    receives it at every step, so a changed ``dyn.dt`` takes effect at once
+    on every path.
+
+    Attributes
+    ----------
+    state : rigidmd.core.state.RigidState
+    model : rigidmd.core.model.BodyModel
+    record : rigidmd.core.record.StepRecord
+        Forces ``F``, torques ``tau``, free-atom forces ``f``, lab
+        displacements ``r`` of the last force call, and ``scratch``: values
+        an operator hands to a later one (exaDEM's accelerations, PCDM's
+        start-of-step values), kept across steps.
+    evaluator : rigidmd.core.forces.ForceEvaluator
+        ``evaluate(state)`` places the atoms, calls the calculator and fills
+        the record; ``calculator_forces(state)`` calls it on the atoms as the
+        fused kernel placed them.
+    positions, momenta : numpy.ndarray, shape (n_atoms, 3)
+        The Atoms' own position and momentum arrays, written in place.
+    write_momenta : bool
+        Whether the scheme writes the atom momenta at the end of its step
+        (False when coupling parts act after it; the dynamics then writes them).
+    cell_motion : object or None
+        A barostat: its ``drift_matrices(view, h)`` answers, without changing
+        anything, the matrices ``A, B, S`` of a drift over ``h`` in which the
+        centres of mass, the point particles and the cell move with the cell
+        (:func:`~rigidmd.core.operators.affine_drift`), and a note the context
+        keeps in ``record.cell_move`` for the barostat's second half.
+    view : object or None
+        What ``cell_motion`` reads (a :class:`rigidmd.couplings.base.CouplingView`).
+    """
+
+    state: RigidState
+    model: BodyModel
+    record: StepRecord
+    evaluator: ForceEvaluator
+    positions: np.ndarray
+    momenta: np.ndarray
+    write_momenta: bool = True
+    cell_motion: object = None
+    view: object = None
+
+    def __post_init__(self):
+        self.use_model(self.model)
+
+    def use_model(self, model: BodyModel) -> None:
+        """Work with ``model`` (a checkpoint's, equal to the measured one but for roundoff)."""
+        self.model = model
+        # The model as the fused kernel takes it (three arrays: few arguments to pass).
+        self.packed_model = _numba.pack_model(model.inv_mass, model.inv_moments,
+                                              model.body_coordinates, model.atom_masses,
+                                              model.bounds, model.order)
+        self.n_bodies, self.n_free = model.n_bodies, model.n_free
+
+    def cell_move(self, h):
+        """The barostat's drift matrices ``A, B, S`` over ``h``; its note goes to the record."""
+        A, B, S, note = self.cell_motion.drift_matrices(self.view, h)
+        if note is not None:
+            self.record.cell_move = note
+        return A, B, S
+
+    def omega(self):
+        """Lab angular velocities of the bodies (rad / ASE time), shape (n_bodies, 3)."""
+        return obs.angular_velocities(self.state, self.model)
+
+    def set_omega(self, omega):
+        """Set the bodies' lab angular velocities (at the current orientations)."""
+        L = ops.lab_from_omega(self.state.q, omega, self.model.moments)
+        self.state.p = ops.momentum_from_lab(self.state.q, L)
+
+    def accelerations(self):
+        """exaDEM's stored accelerations ``(a_bodies, a_free)``, from the forces if absent."""
+        if "a" not in self.record.scratch:
+            apply_force_to_accel(self)
+        return self.record.scratch["a"], self.record.scratch["a_free"]
+
+    def angular_acceleration(self):
+        """exaDEM's stored lab angular accelerations, from ω and τ if absent."""
+        if "alpha" not in self.record.scratch:
+            apply_push_to_angular_acceleration(self)
+        return self.record.scratch["alpha"]
+
+
+# ---------------------------------------------------------------- operators
+# Each takes the context, h = dt_scale * dt, and its own keyword parameters.
+
+def apply_translational_kick(ctx, h):
+    ops.translational_kick(ctx.state, ctx.record.F, ctx.record.f, ctx.model, h)
+
+
+def apply_drift(ctx, h):
+    if ctx.cell_motion is None:
+        ops.drift(ctx.state, h)
+    else:
+        ops.affine_drift(ctx.state, *ctx.cell_move(h))
+
+
+def apply_rotational_kick(ctx, h):
+    ops.rotational_kick(ctx.state, ctx.record.tau, h)
+
+
+def apply_no_squish_rotate(ctx, h):
+    ops.free_rotor(ctx.state, ctx.model.inv_moments, h)
+
+
+def apply_richardson_rotate(ctx, h):
+    ops.richardson_rotate(ctx.state, ctx.model.inv_moments, h)
+
+
+def apply_rozmanov_kusalik_rotate(ctx, h, tol=1e-13, max_iter=100):
+    ops.rozmanov_kusalik_rotate(ctx.state, ctx.record.tau, ctx.model.inv_moments, h, tol=tol,
+                                max_iter=max_iter)
+
+
+def apply_pcdm_predict(ctx, h):
+    s, m = ctx.state, ctx.model
+    q0 = s.q.copy()
+    q_half, omega_body0, domega_body0 = ops.pcdm_predict(q0, ctx.omega(), ctx.record.tau, m.moments,
+                                                         m.inv_moments, h)
+    ctx.record.scratch["pcdm"] = (q0, q_half, omega_body0, domega_body0)
+    L = ops.lab_angular_momentum(s.q, s.p)
+    s.q = q_half  # the midpoint force call places the atoms here
+    s.p = ops.momentum_from_lab(s.q, L)
+
+
+def apply_pcdm_correct(ctx, h):
+    if "pcdm" not in ctx.record.scratch:
+        raise RuntimeError("pcdm_correct needs a pcdm_predict earlier in the step")
+    q0, q_half, omega_body0, domega_body0 = ctx.record.scratch.pop("pcdm")
+    m = ctx.model
+    q1, omega1 = ops.pcdm_correct(q0, q_half, omega_body0, domega_body0, ctx.record.tau, m.moments,
+                                  m.inv_moments, h)
+    ctx.state.q = q1
+    ctx.set_omega(omega1)
+
+
+def apply_compute_force(ctx):
+    ctx.evaluator.evaluate(ctx.state)
+
+
+def apply_reset_force_moment(ctx):
+    ctx.record.F[...] = 0.0
+    ctx.record.tau[...] = 0.0
+    ctx.record.f[...] = 0.0
+
+
+def apply_force_to_accel(ctx):
+    ctx.record.scratch["a"] = ctx.record.F / ctx.model.mass[:, None]
+    ctx.record.scratch["a_free"] = ctx.record.f / ctx.model.free_masses[:, None]
+
+
+def apply_push_f_v_r(ctx, h):
+    a, a_free = ctx.accelerations()
+    s = ctx.state
+    if ctx.cell_motion is None:
+        s.X += h * s.V + 0.5 * h * h * a
+        s.x += h * s.v + 0.5 * h * h * a_free
+        return
+    # With a barostat: the cell's drift, at the mean velocity V + (h/2) a.
+    A, B, S = ctx.cell_move(h)
+    s.X = s.X @ A.T + (s.V + 0.5 * h * a) @ B.T
+    s.x = s.x @ A.T + (s.v + 0.5 * h * a_free) @ B.T
+    s.V = s.V @ S.T
+    s.v = s.v @ S.T
+    s.cell = s.cell @ A.T
+
+
+def apply_push_f_v(ctx, h):
+    a, a_free = ctx.accelerations()
+    ctx.state.V += 0.5 * h * a
+    ctx.state.v += 0.5 * h * a_free
+
+
+def apply_push_to_quaternion(ctx, h):
+    q, omega = ops.exadem_push_to_quaternion(ctx.state.q, ctx.omega(),
+                                             ctx.angular_acceleration(), h)
+    ctx.state.q = q
+    ctx.set_omega(omega)
+
+
+def apply_push_to_angular_acceleration(ctx):
+    m = ctx.model
+    ctx.record.scratch["alpha"] = ops.exadem_angular_acceleration(ctx.state.q, ctx.omega(),
+                                                                  ctx.record.tau,
+                                                           m.moments, m.inv_moments)
+
+
+def apply_push_to_angular_velocity(ctx, h):
+    ctx.set_omega(ctx.omega() + 0.5 * h * ctx.angular_acceleration())
+
+
+# ---------------------------------------------------------------- fused kernel
+_IDENTITY = np.array([np.eye(3)] * 3)
+
+
+def fused_no_squish(ctx, dt):
+    """NO_SQUISH as two compiled loops over bodies: the ``no_squish`` scheme, fused.
+
+    The same arithmetic as the operator list ``translational_kick(1/2), drift,
+    rotational_kick(1/2), no_squish_rotate, compute_force,
+    translational_kick(1/2), rotational_kick(1/2)`` (checked operator by
+    operator in the tests), with each body touched twice: before the force
+    call (kick, drift, free rotor, placement) and after it (finiteness of
+    the forces, reduction, kick, momenta).  Free atoms take plain velocity
+    Verlet in NumPy.
+    """
+    s, record = ctx.state, ctx.record
+    body, atom, index = ctx.packed_model
+    n = ctx.n_bodies
+    if ctx.cell_motion is not None:
+        # A barostat reads the pressure after the half kick: kick first, then
+        # move the cell, and let the loop's own kick add nothing.
+        m, half = ctx.model, 0.5 * dt
+        s.V += (half * m.inv_mass)[:, None] * record.F
+        s.v += half * record.f / m.free_masses[:, None]
+        A, B, S = ctx.cell_move(dt)
+        s.cell[...] = s.cell @ A.T
+        _numba.first_half(s.data, n, np.zeros_like(record.F), record.tau, body, atom, index, dt,
+                          record.r, ctx.positions, np.array([A, B, S]), True)
+        if ctx.n_free:
+            s.x[...] = s.x @ A.T + s.v @ B.T
+            s.v[...] = s.v @ S.T
+            ctx.positions[m.free] = s.x
+    else:
+        _numba.first_half(s.data, n, record.F, record.tau, body, atom, index, dt, record.r,
+                          ctx.positions, _IDENTITY, False)
+        if ctx.n_free:
+            m = ctx.model
+            s.v += 0.5 * dt * record.f / m.free_masses[:, None]
+            s.x += dt * s.v
+            ctx.positions[m.free] = s.x
+    evaluator = ctx.evaluator
+    forces = evaluator.calculator_forces(s, check=False)
+    if ctx.n_free:
+        evaluator.check_forces(forces)  # before anything is written
+    # The body forces and torques are overwritten only after the forces were found finite.
+    if not _numba.second_half(s.data, n, record.F, record.tau, body, atom, index, dt, forces,
+                              record.r, ctx.momenta, ctx.write_momenta):
+        evaluator.check_forces(forces)
+        raise NonFiniteForceError(f"calculator returned forces whose sum is not finite after "
+                                  f"step {evaluator.step}")
+    if ctx.n_free:
+        m = ctx.model
+        record.f = forces[m.free]
+        s.v += 0.5 * dt * record.f / m.free_masses[:, None]
+        if ctx.write_momenta:
+            ctx.momenta[m.free] = m.free_masses[:, None] * s.v

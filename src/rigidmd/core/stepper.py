@@ -1,0 +1,121 @@
+r"""The step: coupling halves around the integrator's scheme, with rollback, and the time.
+
+One step of :math:`\Delta t` is the symmetric splitting
+
+.. code-block:: text
+
+    part_1.first_half(Δt/2) ... part_n.first_half(Δt/2)
+    the scheme's deterministic step (kicks, drift, rotation, force calls)
+    part_n.second_half(Δt/2) ... part_1.second_half(Δt/2)
+
+after which the atom momenta are written once.  If anything fails (the
+calculator, an iteration, a coupling part, a cell too small for a body), the
+state, the per-step record, the parts' variables and the atoms are put back
+as they were at the start of the step.  The stepper never reads the Atoms:
+the force evaluator and the body link do.
+"""
+
+from collections.abc import Sequence
+
+from rigidmd.core.link import BodyLink
+from rigidmd.core.schemes import Scheme
+from rigidmd.core.stepcontext import StepContext
+from rigidmd.couplings.base import Coupling, CouplingView
+
+__all__ = ["Stepper", "remove_centre_velocity"]
+
+
+def remove_centre_velocity(state, model) -> None:
+    r"""Make the total momentum zero: :math:`V, v \mathrel{-}= U` with :math:`U = P/M`."""
+    total = model.mass.sum() + model.free_masses.sum()
+    U = (model.mass @ state.V + model.free_masses @ state.v) / total
+    state.V -= U
+    state.v -= U
+
+
+class Stepper:
+    """Advances a :class:`StepContext` by whole steps, undoing a step that fails.
+
+    Parameters
+    ----------
+    scheme : Scheme
+    context : StepContext
+    couplings : sequence of Coupling
+        Applied in this order before the scheme and in reverse after it.
+    view : CouplingView
+        What the parts see (its ``step`` is set before each step).
+    link : BodyLink
+        Writes the momenta once per step, and the atoms back after a rollback.
+    fused : bool
+        Run the scheme's compiled kernel.
+    fixcom : bool
+        Hold the total momentum at zero (ASE's ``FixCom``).
+
+    Attributes
+    ----------
+    time : float
+        Simulated time (ASE units), summed step by step.
+    """
+
+    def __init__(self, scheme: Scheme, context: StepContext, couplings: Sequence[Coupling],
+                 view: CouplingView, link: BodyLink, fused: bool = False,
+                 fixcom: bool = False):
+        self.scheme, self.context, self.couplings = scheme, context, tuple(couplings)
+        self.view, self.link, self.fixcom = view, link, fixcom
+        #: The compiled kernel this stepper runs, or None (the scheme's operators).
+        self.kernel = scheme.kernel if fused else None
+        self.cell_moves = context.cell_motion is not None
+        self.state, self.record = context.state, context.record
+        self._backup = self.state.copy()
+        self.time = 0.0
+
+    def step(self, dt: float, step: int) -> None:
+        """Advance one step of ``dt`` (ASE time units); ``step`` steps were completed before."""
+        ctx, state, record, view = self.context, self.state, self.record, self.view
+        backup = self._backup
+        state.copy_into(backup)
+        saved = record.backup(copy=self.kernel is None)
+        couplings = self.couplings
+        coupled = [part.get_state() for part in couplings] if couplings else ()
+        try:
+            record.cell_move = None
+            view.step = step
+            half = 0.5 * dt
+            if couplings:
+                for part in couplings:
+                    part.first_half(view, half)
+                record.velocities_changed()  # what the scheme's drift may ask is fresh
+            if self.kernel is not None:
+                self.kernel(ctx, dt)
+            else:
+                self.scheme.run(ctx, dt)
+            record.velocities_changed()
+            if self.fixcom:
+                remove_centre_velocity(state, ctx.model)
+            for part in reversed(couplings):
+                part.second_half(view, half)
+            if not ctx.write_momenta or self.kernel is None:
+                self.link.write_momenta(state, record.r)
+            self.time += dt
+        except BaseException:
+            backup.copy_into(state)
+            record.restore(saved)
+            for part, variables in zip(couplings, coupled, strict=True):
+                part.set_state(variables)
+            if self.cell_moves:
+                self.link.atoms.set_cell(state.cell)
+            record.r = self.link.place(state, record.r)
+            self.link.write_momenta(state, record.r)
+            raise
+
+    def get_state(self) -> dict:
+        """The time and the parts' variables (copies)."""
+        return {"time": self.time, "couplings": [part.get_state() for part in self.couplings]}
+
+    def set_state(self, saved: dict) -> None:
+        """Restore what :meth:`get_state` returned."""
+        self.time = float(saved["time"])
+        for part, variables in zip(self.couplings, saved["couplings"], strict=True):
+            part.set_state(variables)
+
+
