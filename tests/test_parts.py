@@ -74,7 +74,7 @@ def test_the_sync_notices_a_change_and_reads_it_once():
     assert not sync.sync(sync.synced, lambda: evaluations.append(1), step=0)
     # An observer that shifts every atom: noted while it runs, read before the next step.
     shift = np.array([0.3, 0.0, 0.0])
-    sync.call([(lambda: atoms.set_positions(atoms.positions + shift), (), {})])
+    sync.call([(lambda: atoms.set_positions(atoms.positions + shift), 1, (), {})])
     assert sync.changed is not None
     X = state.X.copy()
     assert sync.before_step(lambda: evaluations.append(1), step=1)
@@ -89,7 +89,7 @@ def test_the_sync_notices_a_change_and_reads_it_once():
         def __call__(self):
             atoms.positions  # noqa: B018 - reads
 
-    sync.call([(Reader(), (), {})])
+    sync.call([(Reader(), 1, (), {})])
     assert sync.changed is None
 
 

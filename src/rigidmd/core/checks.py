@@ -153,11 +153,12 @@ class StepSizeCheck:
 
     def __call__(self) -> None:
         dyn = self.dyn
-        step, dt = dyn.nsteps, dyn.dt
-        if self.warned or step == 0:  # step 0: no step taken yet
-            return
-        message = None
-        if step % 10 == 0 and dyn.model.n_bodies:
+        step = dyn.nsteps
+        rotation = step % 10 == 0
+        if self.warned or step == 0 or not (rotation or dyn.evaluator.energy_known):
+            return  # step 0: no step taken yet; else nothing to check at this step
+        dt, message = dyn.dt, None
+        if rotation and dyn.model.n_bodies:
             b, speed = dyn.link.largest_angular_speed(dyn.state)
             if speed * dt > MAX_ROTATION_PER_STEP:
                 message = (f"body {b} turns by {speed * dt:.2f} rad per step at step "

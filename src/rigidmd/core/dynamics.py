@@ -308,9 +308,11 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
 
     def call_observers(self):
         """Call the observers due at this step, noting whether they changed the Atoms."""
-        n = self.nsteps
-        due = [(function, args, kwargs) for function, interval, args, kwargs in self.observers
-               if (n % interval == 0 if interval > 0 else n == -interval)]
+        n, due = self.nsteps, []
+        for observer in self.observers:
+            interval = observer[1]
+            if n % interval == 0 if interval > 0 else n == -interval:
+                due.append(observer)
         if due:
             self.sync.call(due)
 
@@ -329,8 +331,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
                 self._evaluate_forces, self.nsteps, type(self).__name__):
             self.step_check.reset()
         observed = self._observed(self.nsteps + 1)
-        self.stepper.step(self._dt, self.nsteps, energy=self.needs_energy or observed,
-                          stress=self.stress_on_observed_steps and observed)
+        self.stepper.step(self._dt, self.nsteps, self.needs_energy or observed,
+                          self.stress_on_observed_steps and observed)
 
     def _observed(self, step):
         """Whether an observer that reads the calculator's results is due at ``step``."""

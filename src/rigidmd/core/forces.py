@@ -93,6 +93,7 @@ class ForceEvaluator:
         self.link, self.record = link, record
         self.atoms, self.model = link.atoms, link.model
         self.stress, self.cell_moves = stress, cell_moves
+        self._shape = (len(self.atoms), 3)  # of the forces (the atoms cannot change in number)
         self._energy = False  # the energy with the forces (begin_step)
         self._stress = False  # the stress with the forces (begin_step)
         self.energy_known = False
@@ -156,7 +157,7 @@ class ForceEvaluator:
             if len(wanted) > 1:
                 calculate_together(atoms.calc, atoms, wanted)
         forces = np.asarray(atoms.get_forces(md=True), dtype=float)
-        if forces.shape != (len(atoms), 3):
+        if forces.shape != self._shape:
             raise ValueError(f"calculator returned forces of shape {forces.shape}, "
                              f"expected {(len(atoms), 3)}")
         if check or together:  # the energy's and stress's messages assume finite forces

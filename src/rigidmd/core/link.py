@@ -330,19 +330,20 @@ class AtomsSync:
                 self.changed = written
 
     def call(self, due) -> None:
-        """Call the observers ``due`` now (``(function, args, kwargs)``), noting their changes."""
+        """Call the observers ``due`` now (``(function, interval, args, kwargs)``), noting
+        their changes."""
         reads_only = self.reads_only
-        for function, _, _ in due:
+        for function, _, _, _ in due:
             if function not in reads_only:
                 reads_only[function] = _observer_reads_only(function)
             if not reads_only[function]:
                 break
         else:
-            for function, args, kwargs in due:
+            for function, _, args, kwargs in due:
                 function(*args, **kwargs)
             return
         written = self.link.snapshot()
-        for function, args, kwargs in due:
+        for function, _, args, kwargs in due:
             function(*args, **kwargs)
         if self.changed is None and self.link.differs(written):
             self.changed = written
