@@ -120,9 +120,11 @@ def main():
     parser.add_argument("--quick", action="store_true", help="fewer steps, up to 4096 waters")
     parser.add_argument("--ratio", action="store_true",
                         help="only rigidmd / LAMMPS at 64 and 4096 waters, interleaved rounds")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="interleaved rounds of --ratio (more on a busy machine)")
     args = parser.parse_args()
     if args.ratio:
-        ratio()
+        ratio(rounds=args.rounds)
         return
     sides = [4, 8, 16] if args.quick else [4, 8, 16, 32]
     print(f"{'waters':>7} {'rigidmd':>10} {'(numpy)':>10} {'LAMMPS':>10} {'ASE RATTLE':>11}"
