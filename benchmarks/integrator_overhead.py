@@ -20,9 +20,9 @@ Run:  python benchmarks/integrator_overhead.py [--quick]
 
 ``--ratio`` measures only the ratio the README's table reports: rigidmd and
 LAMMPS's fix at 64 and 4096 waters, three rounds interleaved (rigidmd, then
-LAMMPS, at each size, three times), best of each side::
+LAMMPS, at each size, three times; ``--rounds N`` on a busy machine), best of each side::
 
-    python benchmarks/integrator_overhead.py --ratio
+    python benchmarks/integrator_overhead.py --ratio [--rounds 7]
 """
 
 import argparse
