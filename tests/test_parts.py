@@ -74,23 +74,27 @@ def test_the_sync_notices_a_change_and_reads_it_once():
     assert not sync.sync(sync.synced, lambda: evaluations.append(1), step=0)
     # An observer that shifts every atom: noted while it runs, read before the next step.
     shift = np.array([0.3, 0.0, 0.0])
-    sync.call([(lambda: atoms.set_positions(atoms.positions + shift), 1, (), {})])
+    sync.call_observers([(lambda: atoms.set_positions(atoms.positions + shift), 1, (), {})],
+                        step=1)
     assert sync.changed is not None
     X = state.X.copy()
     assert sync.before_step(lambda: evaluations.append(1), step=1)
     np.testing.assert_allclose(state.X, X + shift, atol=1e-12)
     assert evaluations == [1] and sync.changed is None
     assert not sync.before_step(lambda: evaluations.append(1), step=1)
-    # An observer marked as only reading costs no snapshot and is never suspected.
+    # An observer marked as only reading costs no snapshot (even if it did change the
+    # Atoms, which it promised not to); one not due is not called.
 
     class Reader:
         modifies_atoms = False
+        calls = 0
 
         def __call__(self):
-            atoms.positions  # noqa: B018 - reads
+            Reader.calls += 1
+            atoms.positions[0] += 0.1
 
-    sync.call([(Reader(), 1, (), {})])
-    assert sync.changed is None
+    sync.call_observers([(Reader(), 1, (), {}), (Reader(), 3, (), {})], step=4)
+    assert Reader.calls == 1 and sync.changed is None
 
 
 # ------------------------------------------------------------------ the force evaluator

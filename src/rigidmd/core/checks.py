@@ -143,7 +143,7 @@ class StepSizeCheck:
     interval = 1
 
     def __init__(self, dyn):
-        self.dyn = dyn
+        self.dyn, self.evaluator = dyn, dyn.evaluator
         self.reference = None  # (step, conserved energy) compared to
         self.warned = False
 
@@ -155,7 +155,7 @@ class StepSizeCheck:
         dyn = self.dyn
         step = dyn.nsteps
         rotation = step % 10 == 0
-        if self.warned or step == 0 or not (rotation or dyn.evaluator.energy_known):
+        if self.warned or step == 0 or not (rotation or self.evaluator.energy_known):
             return  # step 0: no step taken yet; else nothing to check at this step
         dt, message = dyn.dt, None
         if rotation and dyn.model.n_bodies:

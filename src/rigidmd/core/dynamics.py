@@ -298,7 +298,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         """
         if self.sync.start(self._evaluate_forces, self.nsteps, type(self).__name__):
             self.step_check.reset()
-        steps = super().irun(steps)
+        steps = self._steps(steps)
         if not self._driven_by_run:  # code runs between the items: watch for its changes
             steps = self.sync.watch(steps)
         try:
@@ -306,18 +306,21 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         finally:
             self.sync.synced = self.link.snapshot()
 
+    def _steps(self, steps):
+        """ASE's ``MolecularDynamics.irun`` loop, without the hooks this class leaves empty."""
+        self.max_steps = self.nsteps + steps
+        if self.nsteps == 0:
+            self.call_observers()
+        yield self.nsteps == self.max_steps
+        while self.nsteps < self.max_steps:
+            self.step()
+            self.nsteps += 1
+            self.call_observers()
+            yield self.nsteps == self.max_steps
+
     def call_observers(self):
         """Call the observers due at this step, noting whether they changed the Atoms."""
-        n, due = self.nsteps, []
-        for observer in self.observers:
-            interval = observer[1]
-            if n % interval == 0 if interval > 0 else n == -interval:
-                due.append(observer)
-        if due:
-            self.sync.call(due)
-
-    def _refresh_properties(self):
-        pass  # the forces of the current positions were evaluated in step() or at irun's start
+        self.sync.call_observers(self.observers, self.nsteps)
 
     # ------------------------------------------------------------ the step
     def step(self):
@@ -348,11 +351,6 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self.evaluator.begin_step(self.nsteps, energy=self.needs_energy or observed,
                                   stress=self.stress_on_observed_steps and observed)
         self.evaluator.evaluate(self.state)
-
-    @property
-    def removed_kinetic_energy(self) -> float:
-        """Kinetic energy (eV) the last projection onto rigid motion removed."""
-        return self.link.removed_kinetic_energy
 
     # ------------------------------------------------------------ state export
     def get_state(self) -> dict:

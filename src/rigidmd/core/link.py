@@ -329,19 +329,28 @@ class AtomsSync:
             if self.changed is None and link.differs(written):
                 self.changed = written
 
-    def call(self, due) -> None:
-        """Call the observers ``due`` now (``(function, interval, args, kwargs)``), noting
-        their changes."""
-        reads_only = self.reads_only
-        for function, _, _, _ in due:
-            if function not in reads_only:
-                reads_only[function] = _observer_reads_only(function)
-            if not reads_only[function]:
-                break
+    def call_observers(self, observers, step: int) -> None:
+        """Call the ``observers`` (ASE's ``(function, interval, args, kwargs)``) due at ``step``,
+        noting a change they make to the Atoms (a snapshot only when one of them may)."""
+        due, reads_only, watch = [], self.reads_only, False
+        for observer in observers:
+            interval = observer[1]
+            if step % interval == 0 if interval > 0 else step == -interval:
+                due.append(observer)
+                function = observer[0]
+                known = reads_only.get(function)
+                if known is None:
+                    known = reads_only[function] = _observer_reads_only(function)
+                watch = watch or not known
+        if watch:
+            self.call(due)
         else:
             for function, _, args, kwargs in due:
                 function(*args, **kwargs)
-            return
+
+    def call(self, due) -> None:
+        """Call the observers ``due`` (``(function, interval, args, kwargs)``), noting a change
+        they make to the Atoms."""
         written = self.link.snapshot()
         for function, _, args, kwargs in due:
             function(*args, **kwargs)

@@ -155,9 +155,14 @@ class RigidObservables:
     """The observables a rigid dynamics offers, read from its parts (a mixin).
 
     The class using it provides ``state``, ``model``, ``record``,
-    ``evaluator`` (a :class:`~rigidmd.core.forces.ForceEvaluator`), ``view``
-    and ``couplings`` (the coupling parts and what they see) and ``atoms``.
+    ``evaluator`` (a :class:`~rigidmd.core.forces.ForceEvaluator`), ``link``,
+    ``view`` and ``couplings`` (the coupling parts and what they see) and ``atoms``.
     """
+
+    @property
+    def removed_kinetic_energy(self) -> float:
+        """Kinetic energy (eV) the last projection onto rigid motion removed (``link``'s)."""
+        return self.link.removed_kinetic_energy
 
     @property
     def degrees_of_freedom(self) -> int:

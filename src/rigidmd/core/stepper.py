@@ -17,6 +17,8 @@ the force evaluator and the body link do.
 
 from collections.abc import Sequence
 
+import numpy as np
+
 from rigidmd.core.link import BodyLink
 from rigidmd.core.operators import remove_centre_velocity
 from rigidmd.core.schemes import Scheme
@@ -71,7 +73,7 @@ class Stepper:
         ctx, state, record, view = self.context, self.state, self.record, self.view
         ctx.evaluator.begin_step(step, energy, stress)
         backup = self._backup
-        state.copy_into(backup)
+        np.copyto(backup.data, state.data)  # state.copy_into(backup), without a call
         saved = record.backup(copy=self.kernel is None)
         couplings = self.couplings
         coupled = [part.get_state() for part in couplings] if couplings else ()
@@ -90,8 +92,9 @@ class Stepper:
             record.velocities_changed()
             if self.fixcom:
                 remove_centre_velocity(state, ctx.model)
-            for part in reversed(couplings):
-                part.second_half(view, half)
+            if couplings:
+                for part in reversed(couplings):
+                    part.second_half(view, half)
             if not ctx.write_momenta or self.kernel is None:
                 self.link.write_momenta(state, record.r)
             self.time += dt
