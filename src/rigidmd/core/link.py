@@ -3,7 +3,9 @@ r"""The body link: an :class:`ase.Atoms` on one side, the rigid state on the oth
 :class:`BodyLink` places the atoms from a :class:`~rigidmd.core.state.RigidState`
 (massless virtual sites too), writes their momenta, reads positions and
 momenta back (a best rigid fit and a projection onto rigid motion), and
-notices changes made to the Atoms between steps.  The backend (the
+notices changes made to the Atoms between steps; :class:`AtomsSync`, its change
+detection for a dynamics, calls the observers, remembers what was written and
+reads a change before the next step.  The backend (the
 compiled loops of :mod:`rigidmd.core._numba` or the NumPy operators) is chosen
 once, at construction.  It never calls a calculator; an optimizer or a
 Monte Carlo move can use it without a dynamics::
