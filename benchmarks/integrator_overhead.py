@@ -20,9 +20,9 @@ Run:  python benchmarks/integrator_overhead.py [--quick]
 
 ``--ratio`` measures only the ratio the README's table reports: rigidmd and
 LAMMPS's fix at 64 and 4096 waters, three rounds interleaved (rigidmd, then
-LAMMPS, at each size, three times), best of each side::
+LAMMPS, at each size, three times; ``--rounds N`` on a busy machine), best of each side::
 
-    python benchmarks/integrator_overhead.py --ratio
+    python benchmarks/integrator_overhead.py --ratio [--rounds 7]
 """
 
 import argparse
@@ -120,9 +120,11 @@ def main():
     parser.add_argument("--quick", action="store_true", help="fewer steps, up to 4096 waters")
     parser.add_argument("--ratio", action="store_true",
                         help="only rigidmd / LAMMPS at 64 and 4096 waters, interleaved rounds")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="interleaved rounds of --ratio (more on a busy machine)")
     args = parser.parse_args()
     if args.ratio:
-        ratio()
+        ratio(rounds=args.rounds)
         return
     sides = [4, 8, 16] if args.quick else [4, 8, 16, 32]
     print(f"{'waters':>7} {'rigidmd':>10} {'(numpy)':>10} {'LAMMPS':>10} {'ASE RATTLE':>11}"

@@ -183,8 +183,8 @@ def test_unchanged_atoms_are_not_re_read():
     atoms = waters(4)
     dyn = RigidVerlet(atoms, units.fs)
     calls = []
-    original = dyn._sync_from_atoms
-    dyn._sync_from_atoms = lambda written: calls.append(1) or original(written)
+    original = dyn.sync.sync
+    dyn.sync.sync = lambda *args: calls.append(1) or original(*args)
     dyn.attach(lambda: atoms.get_kinetic_energy(), interval=1)  # reads only
     dyn.run(10)
     assert calls == [1]  # once, at the start of the run, not at every step

@@ -1,7 +1,10 @@
 """The package's layout, read with ``ast``: no private access across objects, no import cycles.
 
 Checked over every module under ``src/rigidmd`` (lazy imports inside functions
-count: a lazy import is still a dependency).
+count: a lazy import is still a dependency); modules are grouped in packages
+by concern (``core``, ``couplings``, ``run``, ``systems``, ...: see
+``docs/developer/layout.md``), with few left at the top, and no module or class
+grows past what a reader takes in.
 """
 
 import ast
@@ -10,6 +13,15 @@ from pathlib import Path
 SOURCE = Path(__file__).resolve().parents[1] / "src" / "rigidmd"
 #: Longest module accepted (lines).
 MAX_LINES = 700
+#: Most modules left flat in ``src/rigidmd`` (``__init__.py`` not counted).
+MAX_TOP_MODULES = 12
+#: Longest class accepted (lines, docstring included).
+MAX_CLASS_LINES = 350
+#: Classes over MAX_CLASS_LINES today, each with the length it may not exceed: to be split
+#: by the work on their modules (the LAMMPS calculator's and the runner's, both changed by
+#: other work at the time of the layout).
+LONG_CLASSES = {"rigidmd.lammps.calculator.LAMMPSCalculator": 561,
+                "rigidmd.run.runner.Run": 360}
 
 
 def modules():
@@ -107,3 +119,52 @@ def test_no_module_is_over_700_lines():
     long = {name: n for name, path in modules().items()
             if (n := len(path.read_text().splitlines())) > MAX_LINES}
     assert long == {}
+
+
+def class_lengths():
+    """``{module.Class: lines}`` of every class of the package (nested ones too)."""
+    found = {}
+    for name, path in modules().items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ClassDef):
+                found[f"{name}.{node.name}"] = node.end_lineno - node.lineno + 1
+    return found
+
+
+def test_at_most_a_dozen_modules_at_the_top():
+    top = sorted(path.name for path in SOURCE.glob("*.py") if path.name != "__init__.py")
+    assert len(top) <= MAX_TOP_MODULES, top
+    for package in ("core", "couplings", "run", "systems"):
+        assert (SOURCE / package / "__init__.py").is_file(), package
+
+
+def test_no_class_is_over_350_lines():
+    lengths = class_lengths()
+    assert lengths["rigidmd.core.dynamics.RigidDynamics"] <= MAX_CLASS_LINES
+    long = {name: n for name, n in lengths.items()
+            if n > LONG_CLASSES.get(name, MAX_CLASS_LINES)}
+    assert long == {}, "\n".join(f"{name}: {n} lines" for name, n in long.items())
+
+
+#: Packages whose ``__init__`` still holds code: ``config`` (its loader, changed by the
+#: configuration-trust work at the time of the layout; to move into a module of its own).
+INIT_WITH_CODE = {"config"}
+
+
+def test_init_files_only_re_export():
+    """A package's ``__init__`` holds imports, ``__all__``, ``__version__`` and a docstring."""
+    offences = []
+    for path in SOURCE.rglob("__init__.py"):
+        if path.parent.name in INIT_WITH_CODE:
+            continue
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                continue
+            if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant):
+                continue  # the docstring
+            if isinstance(node, ast.Assign) and all(
+                    isinstance(t, ast.Name) and t.id in ("__all__", "__version__")
+                    for t in node.targets):
+                continue
+            offences.append(f"{path.relative_to(SOURCE)}:{node.lineno}")
+    assert offences == [], offences

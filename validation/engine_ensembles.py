@@ -1,4 +1,6 @@
-"""Anisotropic and triclinic NPT through LAMMPSEngine: the same cell and density as in-process.
+"""Shows: NPT through LAMMPSEngine (fix ipi) gives in-process LAMMPS's cell and density.
+
+Anisotropic and triclinic NPT through LAMMPSEngine: the same cell and density as in-process.
 
 64 TIP3P waters (``rigidmd.systems.water_box(4)``; ``--n-side 6``: 216),
 ``lj/cut/coul/long 6.0``

@@ -1,4 +1,6 @@
-"""Energy conservation of rigidmd's integrators beside LAMMPS fix rigid/nve and fix rigid.
+"""Shows: each integrator's energy drift and noise against time step, beside LAMMPS's fixes.
+
+Energy conservation of rigidmd's integrators beside LAMMPS fix rigid/nve and fix rigid.
 
 A cluster of 32 rigid TIP3P waters (``water_cluster(32, seed=0)``, bodies from
 ``mol-id``, rigid Maxwell-Boltzmann velocities at 250 K from

@@ -1,4 +1,6 @@
-"""The Monte Carlo barostat on TIP4P/2005 water with a calculator that hides its stress.
+"""Shows: the Monte Carlo barostat, on a calculator without stress, gives TIP4P/2005's density.
+
+The Monte Carlo barostat on TIP4P/2005 water with a calculator that hides its stress.
 
 216 rigid TIP4P/2005 waters (M explicit, massless), LAMMPS forces through
 :class:`rigidmd.lammps.LAMMPSCalculator` (lj/cut/coul/long 8.5 Å, tail

@@ -1,4 +1,6 @@
-r"""η and D of a finished ``water_models.py`` run: rigidmd and LAMMPS from the same state.
+r"""Shows: rigidmd and LAMMPS, from one state, give the same water viscosity and diffusion.
+
+η and D of a finished ``water_models.py`` run: rigidmd and LAMMPS from the same state.
 
 The shear viscosity and the diffusion coefficient that ``water_models.py``
 measures come from rigidmd's integrator and its molecular stress.  This

@@ -1,4 +1,6 @@
-r"""Six rigid water models at 298 K and 1 bar: density, ΔH_vap, D, η and ε against their papers.
+r"""Shows: six rigid water models' density, ΔH_vap, D, η and ε at 298 K against their papers.
+
+Six rigid water models at 298 K and 1 bar: density, ΔH_vap, D, η and ε against their papers.
 
 For TIP3P, SPC/E, TIP4P, TIP4P-Ew, TIP4P/2005 and OPC (:mod:`rigidmd.water`):
 216 molecules (``--n-side 6``), forces from LAMMPS (``lj/cut/coul/long``, PPPM

@@ -1,4 +1,6 @@
-r"""Density and ΔH_vap of ``water_models.py``'s NPT stage, run again in OpenMM.
+r"""Shows: OpenMM, from the same start with its own model files, gives the same density and ΔH_vap.
+
+Density and ΔH_vap of ``water_models.py``'s NPT stage, run again in OpenMM.
 
 ``water_models.py`` measures each model's density and heat of vaporisation
 with rigidmd's integrator, barostat and LAMMPS set-up.  This script runs the

@@ -161,48 +161,8 @@ class RigidBodies:
         return cls(labels, rule="connectivity")
 
     def warn_merged(self, atoms, unique_formulas=False):
-        """Warn when connectivity probably joined or split molecules.
-
-        A body whose composition is a multiple of another body's (two waters
-        that came within covalent reach, say) is reported; with
-        ``unique_formulas`` (the default rule) so is a body whose formula no
-        other body has while other formulas repeat (a CO2 joined to a water
-        among CO2 and water molecules, or a water split by a stretched bond).
-        """
-        if self.n_bodies < 2:
-            return
-        inside = self.body_ids >= 0
-        elements, element_index = np.unique(atoms.numbers[inside], return_inverse=True)
-        counts = np.zeros((self.n_bodies, len(elements)), dtype=np.int64)
-        np.add.at(counts, (self.body_ids[inside], element_index), 1)
-        formulas, first, repeats = np.unique(counts, axis=0, return_index=True,
-                                             return_counts=True)
-        advice = ("Give the bodies explicitly (bodies='mol-id', 'tags' or a list) if that is "
-                  "wrong")
-        for i, big in enumerate(formulas):
-            for small in formulas:
-                ratio = big.sum() // max(small.sum(), 1)
-                if ratio >= 2 and np.array_equal(big, ratio * small):
-                    b = int(first[i])
-                    warnings.warn(
-                        f"bodies by connectivity: body {b} "
-                        f"(atoms {describe_atoms(self.atoms_of(b))}) "
-                        f"has {ratio} times the atoms of another body; molecules that came "
-                        f"within covalent reach were joined. {advice}",
-                        stacklevel=4,
-                    )
-                    return
-        if unique_formulas and repeats.max() >= 2 and np.any(repeats == 1):
-            i = int(np.flatnonzero(repeats == 1)[0])
-            b = int(first[i])
-            formula = atoms[self.atoms_of(b)].get_chemical_formula()
-            warnings.warn(
-                f"bodies by connectivity: body {b} (atoms {describe_atoms(self.atoms_of(b))}) "
-                f"is the only {formula} among {self.n_bodies} bodies whose other formulas "
-                f"repeat; molecules may have been joined or split by the covalent cutoffs. "
-                f"{advice}",
-                stacklevel=4,
-            )
+        """Warn when connectivity probably joined or split molecules (:func:`warn_merged`)."""
+        warn_merged(self, atoms, unique_formulas)
 
     def warn_unbonded(self, atoms):
         """Warn when a body holds atoms that no chain of covalent bonds joins.
@@ -376,6 +336,51 @@ class RigidBodies:
         check_masses(masses, atoms.get_chemical_symbols(), self.free_indices, order, starts)
         x = unwrap_bodies(atoms, order, starts, atom_body)
         return measure(order, starts, atom_body, self.free_indices, masses, x)
+
+
+def warn_merged(bodies, atoms, unique_formulas=False):
+    """Warn when connectivity probably joined or split the molecules of ``bodies``.
+
+    A body whose composition is a multiple of another body's (two waters
+    that came within covalent reach, say) is reported; with
+    ``unique_formulas`` (the default rule) so is a body whose formula no
+    other body has while other formulas repeat (a CO2 joined to a water
+    among CO2 and water molecules, or a water split by a stretched bond).
+    """
+    if bodies.n_bodies < 2:
+        return
+    inside = bodies.body_ids >= 0
+    elements, element_index = np.unique(atoms.numbers[inside], return_inverse=True)
+    counts = np.zeros((bodies.n_bodies, len(elements)), dtype=np.int64)
+    np.add.at(counts, (bodies.body_ids[inside], element_index), 1)
+    formulas, first, repeats = np.unique(counts, axis=0, return_index=True,
+                                         return_counts=True)
+    advice = ("Give the bodies explicitly (bodies='mol-id', 'tags' or a list) if that is "
+              "wrong")
+    for i, big in enumerate(formulas):
+        for small in formulas:
+            ratio = big.sum() // max(small.sum(), 1)
+            if ratio >= 2 and np.array_equal(big, ratio * small):
+                b = int(first[i])
+                warnings.warn(
+                    f"bodies by connectivity: body {b} "
+                    f"(atoms {describe_atoms(bodies.atoms_of(b))}) "
+                    f"has {ratio} times the atoms of another body; molecules that came "
+                    f"within covalent reach were joined. {advice}",
+                    stacklevel=5,
+                )
+                return
+    if unique_formulas and repeats.max() >= 2 and np.any(repeats == 1):
+        i = int(np.flatnonzero(repeats == 1)[0])
+        b = int(first[i])
+        formula = atoms[bodies.atoms_of(b)].get_chemical_formula()
+        warnings.warn(
+            f"bodies by connectivity: body {b} (atoms {describe_atoms(bodies.atoms_of(b))}) "
+            f"is the only {formula} among {bodies.n_bodies} bodies whose other formulas "
+            f"repeat; molecules may have been joined or split by the covalent cutoffs. "
+            f"{advice}",
+            stacklevel=5,
+        )
 
 
 def check_masses(masses, symbols, free, order, starts):

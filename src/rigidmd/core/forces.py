@@ -81,13 +81,9 @@ class ForceEvaluator:
 
     Attributes
     ----------
-    want_energy : bool
-        Ask for the energy in the next call too (an observer will read it).
-    want_stress : bool
-        Ask for the stress in the next call too, with a periodic cell (an
-        observer will read it), without forming the molecular virial.
     step : int
-        Steps completed, for the messages.
+        Steps completed before the step being taken, for the messages
+        (:meth:`begin_step` sets it).
     energy_known : bool
         Whether the last call computed the energy.
     """
@@ -97,10 +93,28 @@ class ForceEvaluator:
         self.link, self.record = link, record
         self.atoms, self.model = link.atoms, link.model
         self.stress, self.cell_moves = stress, cell_moves
-        self.want_energy = False
-        self.want_stress = False
+        self._shape = (len(self.atoms), 3)  # of the forces (the atoms cannot change in number)
+        self._energy = False  # the energy with the forces (begin_step)
+        self._stress = False  # the stress with the forces (begin_step)
         self.energy_known = False
         self.step = 0
+
+    def begin_step(self, step: int, energy: bool = False, stress: bool = False) -> None:
+        """What the calls of the step after ``step`` completed steps must compute.
+
+        Parameters
+        ----------
+        step : int
+            Steps completed (for the messages).
+        energy : bool
+            The energy too, in the same call (an observer or a coupling part
+            will read it).
+        stress : bool
+            The stress too, with a periodic cell (an observer will read it),
+            without forming the molecular virial (a barostat's ``stress`` at
+            construction forms it at every call).
+        """
+        self.step, self._energy, self._stress = step, energy, stress
 
     # ------------------------------------------------------------ one step's call
     def evaluate(self, state: RigidState) -> None:
@@ -133,23 +147,23 @@ class ForceEvaluator:
                              "it; the step was undone")
             atoms.set_cell(state.cell)
             record.cell_changed()
-        together = self.stress or self.want_energy or self.want_stress
+        together = self.stress or self._energy or self._stress
         if together:
             wanted = ["forces"]
-            if self.stress or (self.want_stress and atoms.pbc.all()):
+            if self.stress or (self._stress and atoms.pbc.all()):
                 wanted.append("stress")  # a barostat, or an observer (a stress recorder)
-            if self.want_energy:
+            if self._energy:
                 wanted.append("energy")  # a logger will ask: one calculator call, not two
             if len(wanted) > 1:
                 calculate_together(atoms.calc, atoms, wanted)
         forces = np.asarray(atoms.get_forces(md=True), dtype=float)
-        if forces.shape != (len(atoms), 3):
+        if forces.shape != self._shape:
             raise ValueError(f"calculator returned forces of shape {forces.shape}, "
                              f"expected {(len(atoms), 3)}")
         if check or together:  # the energy's and stress's messages assume finite forces
             self.check_forces(forces)
         record.energy = None
-        self.energy_known = self.want_energy and "energy" in getattr(atoms.calc, "results", {})
+        self.energy_known = self._energy and "energy" in getattr(atoms.calc, "results", {})
         if self.energy_known:
             results = atoms.calc.results
             energy = results["energy"]

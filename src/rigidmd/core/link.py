@@ -3,7 +3,9 @@ r"""The body link: an :class:`ase.Atoms` on one side, the rigid state on the oth
 :class:`BodyLink` places the atoms from a :class:`~rigidmd.core.state.RigidState`
 (massless virtual sites too), writes their momenta, reads positions and
 momenta back (a best rigid fit and a projection onto rigid motion), and
-notices changes made to the Atoms between steps.  The backend (the
+notices changes made to the Atoms between steps; :class:`AtomsSync`, its change
+detection for a dynamics, calls the observers, remembers what was written and
+reads a change before the next step.  The backend (the
 compiled loops of :mod:`rigidmd.core._numba` or the NumPy operators) is chosen
 once, at construction.  It never calls a calculator; an optimizer or a
 Monte Carlo move can use it without a dynamics::
@@ -17,16 +19,20 @@ import warnings
 
 import numpy as np
 from ase import Atoms
+from ase.constraints import FixCom
+from ase.io.trajectory import TrajectoryWriter
+from ase.md.logger import MDLogger
 
 from rigidmd.core import _numba
 from rigidmd.core import observables as obs
 from rigidmd.core import operators as ops
-from rigidmd.core.bodies import unwrap_bodies
-from rigidmd.core.checks import check_finite, check_massless_momenta
+from rigidmd.core.bodies import molecule_ids, unwrap_bodies
+from rigidmd.core.checks import check_constraints, check_finite, check_massless_momenta
+from rigidmd.core.dof import RigidBodyDOF
 from rigidmd.core.model import BodyGeometry, BodyModel
 from rigidmd.core.state import RigidState
 
-__all__ = ["BodyLink", "FIT_TOLERANCE"]
+__all__ = ["BodyLink", "AtomsSync", "FIT_TOLERANCE"]
 
 #: Largest rigid-fit residual (Å) accepted silently when re-reading positions.
 FIT_TOLERANCE = 1e-6
@@ -208,3 +214,154 @@ class BodyLink:
                     "rigidmd.rigid_zero_rotation do what they mean (going on from rest)",
                     stacklevel=4)
         return moved, kicked
+
+
+def _observer_reads_only(function) -> bool:
+    """True for observers known not to change the Atoms (ASE's logger and writer, ours)."""
+    owner = getattr(function, "__self__", function)
+    return (isinstance(owner, (MDLogger, TrajectoryWriter))
+            or getattr(owner, "modifies_atoms", True) is False)
+
+
+class AtomsSync:
+    """The body link's change detection: what was written to the Atoms, and what changed since.
+
+    A dynamics writes the atoms once per step (:meth:`write_atoms`).  Code
+    that runs between steps (an observer, the caller of ``irun``, a user
+    between two ``run`` calls) may change positions, momenta or the cell;
+    this object notices it (a snapshot before the code, compared after it)
+    and reads the change into the state before the next step
+    (:meth:`sync`), refitting moved bodies.  Observers known to only read
+    (ASE's logger and trajectory writer, objects with ``modifies_atoms =
+    False``) cost no snapshot.
+
+    Parameters
+    ----------
+    link : BodyLink
+    state : rigidmd.core.state.RigidState
+    record : rigidmd.core.record.StepRecord
+    body_ids : numpy.ndarray of int
+        Each atom's body (-1: free), for the degree-of-freedom marker.
+    fixcom : bool
+        ASE's ``FixCom`` is on the atoms (the total momentum is held at zero).
+    holds_momentum : bool
+        The total momentum is held (``FixCom`` or a thermostat's ``fixcm``).
+    """
+
+    def __init__(self, link: BodyLink, state: RigidState, record, body_ids: np.ndarray,
+                 fixcom: bool, holds_momentum: bool):
+        self.link, self.state, self.record = link, state, record
+        self.body_ids, self.fixcom, self.holds_momentum = body_ids, fixcom, holds_momentum
+        self.synced = None        # (positions, momenta, cell) at the end of the last run
+        self.changed = None       # (positions, momenta, cell) written before a change
+        self.forces_current = False  # forces restored from a checkpoint: no call at a start
+        self.reads_only = {}  # observer -> whether it is known to only read the Atoms
+
+    def mark_atoms(self) -> None:
+        """Put the rigid degree-of-freedom marker in ``atoms.constraints`` (FixCom kept)."""
+        atoms, model = self.link.atoms, self.link.model
+        removed = 3 * len(atoms) - model.degrees_of_freedom
+        if self.holds_momentum and not self.fixcom:
+            removed += 3  # fixcm keeps the total momentum; FixCom counts its own 3
+        marker = RigidBodyDOF(removed, molecule_ids(self.body_ids))
+        kept = [c for c in atoms.constraints if isinstance(c, FixCom)]
+        atoms.constraints = kept + [marker]
+
+    def write_atoms(self) -> None:
+        """Write positions and rigid momenta of the state to the atoms, and remember them."""
+        record, link = self.record, self.link
+        record.r = link.place(self.state, record.r)
+        link.write_momenta(self.state, record.r)
+        self.synced = link.snapshot()
+
+    def sync(self, written: tuple, evaluate, step: int, owner: str = "RigidDynamics") -> bool:
+        """Read changes made to the Atoms since ``written`` (positions, momenta, cell) was true.
+
+        Moved atoms are refitted and ``evaluate()`` gives their forces; ``step``
+        (steps completed) is for the messages.
+        Returns whether anything changed.
+        """
+        link, state, record = self.link, self.state, self.record
+        atoms = link.atoms
+        link.check_unchanged_system()
+        if check_constraints(atoms) != self.fixcom:
+            raise ValueError("FixCom was added to or removed from the atoms; create a new "
+                             "dynamics")
+        if not any(isinstance(c, RigidBodyDOF) for c in atoms.constraints):
+            self.mark_atoms()
+        moved, kicked = link.changes_since(written, f"(set after step {step}; nothing was "
+                                                    "changed)")
+        if moved:
+            link.read_positions(state, owner=owner)
+            record.cell_changed()
+        if moved or kicked:
+            link.read_momenta(state, previous=None if moved else written[1], owner=owner)
+            if self.fixcom:
+                ops.remove_centre_velocity(state, link.model)
+            record.velocities_changed()
+            self.write_atoms()
+            record.scratch.clear()
+        if moved:
+            evaluate()
+        return moved or kicked
+
+    def start(self, evaluate, step: int, owner: str = "RigidDynamics") -> bool:
+        """At a run's start: read changes since the last run, and have current forces.
+
+        Returns whether the atoms had changed.
+        """
+        changed = self.sync(self.synced, evaluate, step, owner)
+        if not changed and self.forces_current:
+            self.record.r = self.link.place(self.state, self.record.r)  # the restored forces'
+        else:
+            evaluate()
+        self.forces_current = False
+        return changed
+
+    def watch(self, steps):
+        """Pass on the items of ``steps`` (a run's generator), noting changes made between them.
+
+        For a generator whose caller runs code between the items (``irun``
+        driven by hand); ``run()`` runs none and needs no watch.
+        """
+        link = self.link
+        for item in steps:
+            written = link.snapshot()
+            yield item
+            if self.changed is None and link.differs(written):
+                self.changed = written
+
+    def call_observers(self, observers, step: int) -> None:
+        """Call the ``observers`` (ASE's ``(function, interval, args, kwargs)``) due at ``step``,
+        noting a change they make to the Atoms (a snapshot only when one of them may)."""
+        due, reads_only, watch = [], self.reads_only, False
+        for observer in observers:
+            interval = observer[1]
+            if step % interval == 0 if interval > 0 else step == -interval:
+                due.append(observer)
+                function = observer[0]
+                known = reads_only.get(function)
+                if known is None:
+                    known = reads_only[function] = _observer_reads_only(function)
+                watch = watch or not known
+        if watch:
+            self.call(due)
+        else:
+            for function, _, args, kwargs in due:
+                function(*args, **kwargs)
+
+    def call(self, due) -> None:
+        """Call the observers ``due`` (``(function, interval, args, kwargs)``), noting a change
+        they make to the Atoms."""
+        written = self.link.snapshot()
+        for function, _, args, kwargs in due:
+            function(*args, **kwargs)
+        if self.changed is None and self.link.differs(written):
+            self.changed = written
+
+    def before_step(self, evaluate, step: int, owner: str = "RigidDynamics") -> bool:
+        """Read a change noted since the last step (see :meth:`watch`); whether there was one."""
+        if self.changed is None:
+            return False
+        written, self.changed = self.changed, None
+        return self.sync(written, evaluate, step, owner)

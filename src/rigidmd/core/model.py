@@ -28,6 +28,7 @@ from typing import ClassVar
 import numpy as np
 
 from rigidmd.core import quaternion as quat
+from rigidmd.core._numba import pack_model
 
 __all__ = ["BodyModel", "BodyGeometry", "LINEAR_TOLERANCE", "measure", "inertia_tensors",
            "safe_inverse"]
@@ -102,6 +103,13 @@ class BodyModel:
     radius : float
         The largest distance of a body atom from its centre of mass (Å), 0
         without bodies: no body is wider than twice this in any direction.
+    packed : tuple of numpy.ndarray
+        The model as the fused kernel takes it (:func:`rigidmd.core._numba.pack_model`).
+
+    One model serves every part of a dynamics (link, record, evaluator, step
+    context, coupling view): they hold the same object, and a restore
+    replaces its contents in place (:meth:`update_from`), so none can keep
+    an old model.
     """
 
     #: The fields a checkpoint stores (the others are derived from them).
@@ -123,6 +131,7 @@ class BodyModel:
     inv_moments: np.ndarray = field(init=False, repr=False)
     linear: np.ndarray = field(init=False, repr=False)
     radius: float = field(init=False, repr=False)
+    packed: tuple = field(init=False, repr=False)
 
     def __post_init__(self):
         derived = {
@@ -139,6 +148,24 @@ class BodyModel:
         coordinates = self.body_coordinates
         object.__setattr__(self, "radius", float(np.sqrt(np.max(np.sum(
             coordinates * coordinates, axis=1)))) if len(coordinates) else 0.0)
+        object.__setattr__(self, "packed", pack_model(
+            self.inv_mass, self.inv_moments, self.body_coordinates, self.atom_masses,
+            self.bounds, self.order))
+
+    def update_from(self, other: "BodyModel") -> None:
+        """Take every field of ``other`` (a checkpoint's model of the same atoms), in place.
+
+        Every holder of this model sees the new one at once.  Refuses a model
+        of another number of atoms, bodies or free atoms (ValueError), before
+        changing anything.
+        """
+        if (other.n_atoms, other.n_bodies, other.n_free) != (self.n_atoms, self.n_bodies,
+                                                             self.n_free):
+            raise ValueError(f"the stored body model has {other.n_atoms} atoms, "
+                             f"{other.n_bodies} bodies and {other.n_free} free atoms; these "
+                             f"atoms have {self.n_atoms}, {self.n_bodies} and {self.n_free}")
+        for name in self.__dataclass_fields__:
+            object.__setattr__(self, name, getattr(other, name))
 
     @property
     def n_bodies(self):

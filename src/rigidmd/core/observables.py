@@ -1,23 +1,36 @@
-r"""What a rigid system reports, as functions of its state, model and per-step record.
+r"""What a rigid system reports: the one home of every observable.
 
-Each function reads :class:`~rigidmd.core.state.RigidState`,
-:class:`~rigidmd.core.model.BodyModel` and, for the pressure, a
-:class:`~rigidmd.core.record.StepRecord`; none changes them.
-:class:`~rigidmd.core.dynamics.RigidDynamics` exposes them as thin properties
-(``dyn.angular_velocities``, ``dyn.get_stress()``, ...).  Units are ASE's: Å,
-eV, amu and ASE time.
+Two layers, both here:
+
+* functions of :class:`~rigidmd.core.state.RigidState`,
+  :class:`~rigidmd.core.model.BodyModel` and, for the pressure, the
+  per-step record's virial and kinetic tensor; none changes its arguments
+  (the per-step record, :class:`~rigidmd.core.record.StepRecord`, caches
+  some of them for a step, computing them with these functions);
+* :class:`RigidObservables`, the accessors a dynamics offers
+  (``dyn.angular_velocities``, ``dyn.get_stress()``, ...), each a thin call
+  of a function above; :class:`~rigidmd.core.dynamics.RigidDynamics` inherits
+  them.
+
+A new observable is a function here (and, when a dynamics should offer it,
+an accessor on :class:`RigidObservables`); a quantity a coupling part reads
+every step goes into the record too, computed by the function here.  Units
+are ASE's: Å, eV, amu and ASE time.
 """
 
 import numpy as np
+from ase import units
 
 from rigidmd.core import operators as ops
+from rigidmd.core.dof import kinetic_energy
 from rigidmd.core.model import BodyModel
 from rigidmd.core.state import RigidState
 
 __all__ = ["volume", "kinetic_tensor", "kinetic_tensor_of", "translational_kinetic_energies",
            "rotational_kinetic_energies", "rotational_kinetic_energy", "angular_momenta",
            "angular_velocities", "largest_angular_speed", "total_angular_momentum",
-           "free_kinetic_energy", "molecular_virial", "stress_tensor", "voigt"]
+           "free_kinetic_energy", "molecular_virial", "stress_tensor", "voigt",
+           "RigidObservables"]
 
 
 def volume(cell: np.ndarray) -> float:
@@ -133,3 +146,155 @@ def stress_tensor(virial: np.ndarray, kinetic: np.ndarray | None, cell_volume: f
 def voigt(sigma: np.ndarray) -> np.ndarray:
     """A symmetric 3x3 tensor in ASE's Voigt order ``(xx, yy, zz, yz, xz, xy)``."""
     return sigma[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
+
+
+_voigt = voigt  # RigidObservables.get_stress's argument ``voigt`` hides the function
+
+
+class RigidObservables:
+    """The observables a rigid dynamics offers, read from its parts (a mixin).
+
+    The class using it provides ``state``, ``model``, ``record``,
+    ``evaluator`` (a :class:`~rigidmd.core.forces.ForceEvaluator`), ``link``,
+    ``view`` and ``couplings`` (the coupling parts and what they see) and ``atoms``.
+    """
+
+    @property
+    def removed_kinetic_energy(self) -> float:
+        """Kinetic energy (eV) the last projection onto rigid motion removed (``link``'s)."""
+        return self.link.removed_kinetic_energy
+
+    @property
+    def degrees_of_freedom(self) -> int:
+        """Rigid degrees of freedom: 6 per body, 5 per linear body, 3 per point particle."""
+        return self.model.degrees_of_freedom
+
+    @property
+    def translational_dof(self) -> int:
+        """Centre-of-mass and point-particle degrees of freedom: 3 each."""
+        return self.model.translational_dof
+
+    @property
+    def rotational_dof(self) -> int:
+        """Rotational degrees of freedom: 3 per body, 2 per linear body."""
+        return self.model.rotational_dof
+
+    @property
+    def com_positions(self) -> np.ndarray:
+        """Centres of mass of the bodies (Å), unwrapped, shape (n_bodies, 3)."""
+        return self.state.X.copy()
+
+    @property
+    def com_velocities(self) -> np.ndarray:
+        """Centre-of-mass velocities (Å per ASE time unit), shape (n_bodies, 3)."""
+        return self.state.V.copy()
+
+    @property
+    def quaternions(self) -> np.ndarray:
+        """Orientations ``(w, x, y, z)``, body to lab frame, shape (n_bodies, 4)."""
+        return self.state.q.copy()
+
+    @property
+    def moments_of_inertia(self) -> np.ndarray:
+        """Principal moments (amu Å²), ascending, shape (n_bodies, 3)."""
+        return self.model.moments.copy()
+
+    @property
+    def angular_momenta(self) -> np.ndarray:
+        """Lab angular momenta about the centres of mass (amu Å² / ASE time), (n_bodies, 3)."""
+        return angular_momenta(self.state, self.model)
+
+    @property
+    def angular_velocities(self) -> np.ndarray:
+        """Lab-frame angular velocities (rad / ASE time), shape (n_bodies, 3)."""
+        return angular_velocities(self.state, self.model)
+
+    @property
+    def translational_kinetic_energies(self) -> np.ndarray:
+        r"""Per-body :math:`\tfrac12 M |V|^2` (eV), shape (n_bodies,)."""
+        return translational_kinetic_energies(self.state, self.model)
+
+    @property
+    def rotational_kinetic_energies(self) -> np.ndarray:
+        r"""Per-body rotational energy :math:`\tfrac12 \sum_k L_{b,k}^2 / I_k` (eV), (n_bodies,)."""
+        return rotational_kinetic_energies(self.state, self.model)
+
+    def get_angular_momentum(self) -> np.ndarray:
+        r"""Total angular momentum about the origin (amu Å² / ASE time), shape (3,).
+
+        For a linear body this includes the axial component that NO_SQUISH's
+        splitting builds up (as in LAMMPS), which atom velocities cannot show;
+        this total, not the atoms' :math:`\sum_i x_i \times p_i`, is what the
+        integrator conserves (:func:`rigidmd.core.observables.total_angular_momentum`).
+        """
+        return total_angular_momentum(self.state, self.model)
+
+    def get_translational_kinetic_energy(self) -> float:
+        """Kinetic energy of the centres of mass plus that of the point particles (eV)."""
+        return float(self.translational_kinetic_energies.sum()
+                     + free_kinetic_energy(self.state, self.model))
+
+    def get_rotational_kinetic_energy(self) -> float:
+        """Rotational kinetic energy of all bodies (eV)."""
+        return rotational_kinetic_energy(self.state, self.model)
+
+    def get_volume(self) -> float:
+        """Volume of the cell (Å³); a clear error for a cell that is not periodic."""
+        if not self.atoms.pbc.all():
+            raise ValueError("the volume and pressure need a cell periodic in all three "
+                             f"directions; atoms.pbc is {self.atoms.pbc.tolist()}")
+        return self.record.volume
+
+    def get_density(self) -> float:
+        """Mass density (g/cm³)."""
+        grams = self.atoms.get_masses().sum() / units.kg * 1e3
+        return float(grams / (self.get_volume() * 1e-24))
+
+    def molecular_virial(self) -> np.ndarray:
+        r"""Molecular virial :math:`\sum_b X_b \otimes F_b + \sum_{free} x\otimes f` (eV, 3x3).
+
+        The calculator's atomic virial :math:`-V\sigma` less the
+        intramolecular part :math:`\sum_b\sum_{i\in b} d_i \otimes f_i`
+        (symmetrised), at the current positions: the per-step record's under
+        a barostat, else asked of the calculator now.
+        """
+        if self.evaluator.stress and self.record.virial is not None:
+            return self.record.virial
+        self.get_volume()  # a clear error for a cell that is not periodic
+        forces = np.asarray(self.atoms.get_forces(md=True), dtype=float)
+        return self.evaluator.molecular_virial(forces)
+
+    def get_stress(self, include_ideal_gas: bool = True, voigt: bool = True) -> np.ndarray:
+        r"""Molecular stress (eV/Å³) in ASE's sign convention and Voigt order.
+
+        :math:`\sigma = -(\mathsf W + \mathsf K)/V` with the positional part
+        :math:`\mathsf W` from :meth:`molecular_virial` and the kinetic tensor
+        :math:`\mathsf K` of the centres of mass and point particles (only with
+        ``include_ideal_gas``); see :func:`rigidmd.core.observables.stress_tensor`.
+        Centres of mass, not atoms, carry the pressure of rigid molecules; the
+        atomic pressure including the constraint forces has the same trace.
+
+        Raises
+        ------
+        ase.calculators.calculator.PropertyNotImplementedError
+            The calculator provides no stress (the message names it).
+        ValueError
+            The cell is not periodic in all three directions.
+        """
+        volume = self.get_volume()
+        kinetic = self.record.kinetic_tensor if include_ideal_gas else None
+        sigma = stress_tensor(self.molecular_virial(), kinetic, volume)
+        return _voigt(sigma) if voigt else sigma
+
+    def get_pressure(self) -> float:
+        """Instantaneous molecular pressure, minus a third of the stress trace (eV/Å³)."""
+        return float(-np.trace(self.get_stress(voigt=False)) / 3.0)
+
+    def get_conserved_energy(self) -> float:
+        """Total energy plus every coupling part's term (eV): what the dynamics conserves.
+
+        For NVE this is the total energy; a stochastic thermostat subtracts the
+        energy it put in, Nosé–Hoover chains add their own energy.
+        """
+        energy = self.atoms.get_potential_energy() + kinetic_energy(self.atoms)
+        return float(energy + sum(part.energy(self.view) for part in self.couplings))

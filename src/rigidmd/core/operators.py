@@ -21,6 +21,7 @@ from rigidmd.core import quaternion as quat
 
 __all__ = [
     "translational_kick",
+    "remove_centre_velocity",
     "drift",
     "rotational_kick",
     "no_squish_rotate",
@@ -610,3 +611,11 @@ def affine_drift(state, A, B, S):
     state.V = state.V @ S.T
     state.v = state.v @ S.T
     state.cell = state.cell @ A.T
+
+
+def remove_centre_velocity(state, model) -> None:
+    r"""Make the total momentum zero: :math:`V, v \mathrel{-}= U` with :math:`U = P/M`."""
+    total = model.mass.sum() + model.free_masses.sum()
+    U = (model.mass @ state.V + model.free_masses @ state.v) / total
+    state.V -= U
+    state.v -= U

@@ -71,17 +71,14 @@ class StepContext:
     cell_motion: object = None
     view: object = None
 
-    def __post_init__(self):
-        self.use_model(self.model)
+    @property
+    def packed_model(self) -> tuple:
+        """The model as the fused kernel takes it (three arrays: few arguments to pass)."""
+        return self.model.packed
 
-    def use_model(self, model: BodyModel) -> None:
-        """Work with ``model`` (a checkpoint's, equal to the measured one but for roundoff)."""
-        self.model = model
-        # The model as the fused kernel takes it (three arrays: few arguments to pass).
-        self.packed_model = _numba.pack_model(model.inv_mass, model.inv_moments,
-                                              model.body_coordinates, model.atom_masses,
-                                              model.bounds, model.order)
-        self.n_bodies, self.n_free = model.n_bodies, model.n_free
+    def __post_init__(self):
+        # Counts a restore cannot change (BodyModel.update_from refuses other counts).
+        self.n_bodies, self.n_free = self.model.n_bodies, self.model.n_free
 
     def cell_move(self, h):
         """The barostat's drift matrices ``A, B, S`` over ``h``; its note goes to the record."""
@@ -236,7 +233,7 @@ def fused_no_squish(ctx, dt):
     Verlet in NumPy.
     """
     s, record = ctx.state, ctx.record
-    body, atom, index = ctx.packed_model
+    body, atom, index = ctx.model.packed
     n = ctx.n_bodies
     if ctx.cell_motion is not None:
         # A barostat reads the pressure after the half kick: kick first, then

@@ -17,20 +17,15 @@ the force evaluator and the body link do.
 
 from collections.abc import Sequence
 
+import numpy as np
+
 from rigidmd.core.link import BodyLink
+from rigidmd.core.operators import remove_centre_velocity
 from rigidmd.core.schemes import Scheme
 from rigidmd.core.stepcontext import StepContext
 from rigidmd.couplings.base import Coupling, CouplingView
 
 __all__ = ["Stepper", "remove_centre_velocity"]
-
-
-def remove_centre_velocity(state, model) -> None:
-    r"""Make the total momentum zero: :math:`V, v \mathrel{-}= U` with :math:`U = P/M`."""
-    total = model.mass.sum() + model.free_masses.sum()
-    U = (model.mass @ state.V + model.free_masses @ state.v) / total
-    state.V -= U
-    state.v -= U
 
 
 class Stepper:
@@ -69,11 +64,16 @@ class Stepper:
         self._backup = self.state.copy()
         self.time = 0.0
 
-    def step(self, dt: float, step: int) -> None:
-        """Advance one step of ``dt`` (ASE time units); ``step`` steps were completed before."""
+    def step(self, dt: float, step: int, energy: bool = False, stress: bool = False) -> None:
+        """Advance one step of ``dt`` (ASE time units); ``step`` steps were completed before.
+
+        ``energy`` and ``stress``: the step's force call computes them too
+        (see :meth:`rigidmd.core.forces.ForceEvaluator.begin_step`).
+        """
         ctx, state, record, view = self.context, self.state, self.record, self.view
+        ctx.evaluator.begin_step(step, energy, stress)
         backup = self._backup
-        state.copy_into(backup)
+        np.copyto(backup.data, state.data)  # state.copy_into(backup), without a call
         saved = record.backup(copy=self.kernel is None)
         couplings = self.couplings
         coupled = [part.get_state() for part in couplings] if couplings else ()
@@ -92,8 +92,9 @@ class Stepper:
             record.velocities_changed()
             if self.fixcom:
                 remove_centre_velocity(state, ctx.model)
-            for part in reversed(couplings):
-                part.second_half(view, half)
+            if couplings:
+                for part in reversed(couplings):
+                    part.second_half(view, half)
             if not ctx.write_momenta or self.kernel is None:
                 self.link.write_momenta(state, record.r)
             self.time += dt

@@ -40,7 +40,7 @@ from rigidmd.core.state import RigidState
 
 __all__ = ["Coupling", "CouplingView", "Parameter", "COUPLINGS", "register", "NotExportable",
            "LammpsFix", "NoseHooverChain", "check_rng", "rng_state", "set_rng_state",
-           "rng_kind", "new_rng", "check_composition",
+           "rng_kind", "new_rng", "check_composition", "export_parts",
            "check_temperature", "check_time", "check_flag", "check_positive_integer",
            "TEMPERATURE"]
 
@@ -432,3 +432,20 @@ def check_composition(couplings, fixcom: bool):
                 f"{reference:g} K: one dynamics has one target temperature "
                 "(set_temperature changes every part)")
     return movers[0] if movers else None
+
+
+def export_parts(couplings) -> list[dict]:
+    """Each coupling part as a checkpoint stores it: class, parameters, variables, generator.
+
+    ``rng_owner`` is the index of the first part with the same generator
+    object (a shared generator stays shared when the parts are rebuilt).
+    """
+    parts = []
+    for part in couplings:
+        rng = getattr(part, "rng", None)
+        owner = None if rng is None else next(
+            i for i, other in enumerate(couplings) if getattr(other, "rng", None) is rng)
+        parts.append({"class": type(part).__name__, "parameters": part.todict(),
+                      "state": part.get_state(), "rng_owner": owner,
+                      "rng": None if rng is None else rng_kind(rng)})
+    return parts
