@@ -347,7 +347,8 @@ def test_a_four_site_structure_without_masses_is_refused_by_the_configuration(tm
     (tmp_path / "w.yaml").write_text(config)
     result = rigidmd_cli("run", "w.yaml", cwd=tmp_path)
     assert result.returncode == 2, result.stderr
-    assert result.stderr.startswith("rigidmd: error: calculator.water_model.name: tip4p2005: "
-                                    "atom 3 (X, the M site of molecule 0) has mass 1 amu but M "
-                                    "is massless")
+    # Refused by the rule for every source of atoms (a massive X is never a virtual site),
+    # before the water model's own check would name the molecule.
+    assert result.stderr.startswith("rigidmd: error: atom 3 (X) has mass 1 amu, but X (Z = 0) "
+                                    "is a massless virtual site")
     assert result.stderr.count("\n") == 1
