@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from ase import Atoms, units
+from ase.calculators.calculator import Calculator, all_changes
 from ase.calculators.tip3p import TIP3P
 from ase.calculators.tip4p import TIP4P
 from ase.constraints import FixAtoms, FixBondLengths, FixCom
@@ -409,3 +410,62 @@ def test_relax_section_refuses_a_restart_before_touching_the_outputs(tmp_path):
     assert result.returncode == 2
     assert "relax: a restart continues a run's dynamics" in result.stderr
     assert (tmp_path / "out" / "md.traj").read_text() == "earlier run"
+
+
+# ---------------------------------------------------------------- a body spanning half the cell
+def one_water_in_a_box(edge):
+    atoms = water_cluster(1, seed=0)
+    atoms.set_cell([edge] * 3, scale_atoms=False)
+    atoms.center()
+    atoms.pbc = True
+    return atoms
+
+
+class IdealStress(Calculator):
+    """No interactions, with stress: nothing resists a cell shrinking under pressure."""
+
+    implemented_properties = ["energy", "forces", "stress"]
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        self.results = {"energy": 0.0, "forces": np.zeros((len(self.atoms), 3)),
+                        "stress": np.zeros(6)}
+
+
+def test_one_rule_refuses_one_water_in_a_3_1_A_box_everywhere():
+    """Issue 34 item 3: MTK ran it while the Monte Carlo barostat refused it; now the MD
+    barostats, the Monte Carlo barostat and cell relaxation refuse it with one message."""
+    from rigidmd import RigidCRescale, RigidMCBarostat, RigidNPT
+
+    makers = [
+        lambda a: RigidNPT(a, units.fs, 300, units.bar, 100 * units.fs, 100 * units.fs),
+        lambda a: RigidCRescale(a, units.fs, 300, units.bar, 100 * units.fs, 500 * units.fs,
+                                4.5e-5 / units.bar),
+        lambda a: RigidMCBarostat(a, units.fs, 300, units.bar, 100 * units.fs),
+        lambda a: RigidFilter(a, cell="iso"),
+    ]
+    for make in makers:
+        atoms = one_water_in_a_box(3.1)
+        atoms.calc = IdealStress()
+        before = atoms.positions.copy()
+        with pytest.raises(ValueError, match=r"body 0 \(atoms \[0, 1, 2\]\) spans 1.8\d\d Å .*not "
+                                             r"less than half the periodic cell's width across "
+                                             r"cell vector \d \(3.100 Å\)"):
+            make(atoms)
+        np.testing.assert_array_equal(atoms.positions, before)
+    atoms = one_water_in_a_box(3.8)  # 1.84 Å < 1.9 Å: fits, and every route takes it
+    atoms.calc = IdealStress()
+    for make in makers:
+        make(atoms)
+
+
+def test_cell_relaxation_refuses_to_shrink_the_cell_below_a_body():
+    """Issue 34 item 3: under pressure with nothing to resist it the cell used to shrink to
+    15 g/cm³ and report convergence; now the step that makes a body span half the cell
+    stops the relaxation naming the body, with the atoms in the last cell that fitted."""
+    atoms = one_water_in_a_box(6.0)
+    atoms.calc = IdealStress()
+    with pytest.raises(ValueError, match=r"body 0 .* not less than half the periodic cell's "
+                                         r"width .* the cell relaxation shrank the cell"):
+        relax(atoms, cell="iso", scalar_pressure=0.01, steps=500)
+    assert 4 * 0.9 < atoms.cell.lengths().min()  # the atoms' cell still fits the water

@@ -49,7 +49,7 @@ from ase.calculators.calculator import PropertyNotImplementedError
 from rigidmd import operators as ops
 from rigidmd import quaternion as quat
 from rigidmd import relaxcell
-from rigidmd.bodies import RigidBodies
+from rigidmd.bodies import RigidBodies, check_bodies_fit
 from rigidmd.checks import check_finite
 from rigidmd.dof import RigidBodyDOF
 from rigidmd.forces import calculate_together
@@ -172,6 +172,7 @@ class RigidFilter:
         rigid = RigidBodies.resolve(atoms, bodies)
         geometry = rigid.geometry(atoms)
         model = geometry.model
+        check_bodies_fit(model, atoms.cell.array, atoms.pbc, "in RigidFilter; use a larger cell")
         self._fixed_bodies, self._fixed_free = _honoured_constraints(atoms, model)
         n_units = model.n_bodies + model.n_free
         if cell_factor is None:
@@ -228,7 +229,13 @@ class RigidFilter:
         positions[model.order] = X[model.atom_body] + r
         positions[model.free] = self._x[self._slices[2]] @ D.T
         if self.mode is not None:
-            self.atoms.set_cell(self._cell0 @ D.T, scale_atoms=False)
+            cell = self._cell0 @ D.T
+            check_bodies_fit(self.model, cell, self.atoms.pbc,
+                             "the cell relaxation shrank the cell below the bodies (a "
+                             "calculator without a repulsion at short range, or a pressure "
+                             "too high, collapses the cell); the atoms keep the last cell "
+                             "that fitted")
+            self.atoms.set_cell(cell, scale_atoms=False)
         self.atoms.set_positions(positions, apply_constraint=False)
         self._placed = (positions, r, q, D)
 
