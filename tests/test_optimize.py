@@ -292,8 +292,10 @@ def test_relaxation_short_of_its_steps_is_one_line_and_keeps_the_structure(tmp_p
     (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "3"))
     result = rigidmd("run", "relax.yaml", cwd=tmp_path)
     assert result.returncode == 1
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and "did not reach fmax 0.01 eV/Å in 3 steps" in lines[0]
+    lines = result.stderr.strip().splitlines()  # progress lines, then one line for the stop
+    assert "did not reach fmax 0.01 eV/Å in 3 steps" in lines[-1] and "Traceback" not in \
+        result.stderr
+    assert all(line.startswith("relax step ") for line in lines[:-1])
     assert len(read(tmp_path / "out" / "relax.traj", ":")) == 4  # start and 3 steps
     assert not (tmp_path / "out" / "md.traj").exists()
 
@@ -469,3 +471,140 @@ def test_cell_relaxation_refuses_to_shrink_the_cell_below_a_body():
                                          r"width .* the cell relaxation shrank the cell"):
         relax(atoms, cell="iso", scalar_pressure=0.01, steps=500)
     assert 4 * 0.9 < atoms.cell.lengths().min()  # the atoms' cell still fits the water
+
+
+# ---------------------------------------------------------------- rigidmd relax as a product path
+def relax_config(tmp_path, steps=2000, structure="{builtin: water_cluster, n_molecules: 6, "
+                 "seed: 2}"):
+    text = RELAX_CONFIG.replace("STEPS", str(steps)).replace(
+        "{builtin: water_cluster, n_molecules: 6, seed: 2}", structure).replace(
+        ", optimizer: FIRE", "")
+    path = tmp_path / "relax.yaml"
+    path.write_text(text)
+    from rigidmd.config import load_config
+
+    return load_config(path)
+
+
+def signal_at_call(monkeypatch, n, *signums):
+    """Send ``signums`` to this process at the ``n``-th generalized force call."""
+    import os
+
+    original, calls = RigidFilter.get_forces, []
+
+    def get_forces(self, **kwargs):
+        calls.append(1)
+        if len(calls) == n:
+            for signum in signums:
+                os.kill(os.getpid(), signum)
+        return original(self, **kwargs)
+
+    monkeypatch.setattr(RigidFilter, "get_forces", get_forces)
+
+
+@pytest.mark.parametrize("signums, status, said", [
+    (("SIGTERM",), 143, "stopped by SIGTERM"), (("SIGINT",), 130, "stopped by SIGINT"),
+    (("SIGINT", "SIGINT"), 130, "interrupted at once (second Ctrl-C)")])
+def test_a_signal_stops_rigidmd_relax_after_a_step_and_resume_finishes(
+        tmp_path, monkeypatch, signums, status, said):
+    """Issue 34 item 9: the stop finishes the step and its frame, says how to continue and
+    exits 143/130 (a second Ctrl-C too, without a traceback); --resume continues from the
+    last frame, appending, to the minimum an uninterrupted relaxation reaches."""
+    import io
+    import signal
+
+    from ase.io import read
+
+    from rigidmd.relaxrun import relax_only
+
+    raw = relax_config(tmp_path)
+    reference = tmp_path / "reference"
+    reference.mkdir()
+    assert relax_only(relax_config(reference), io.StringIO()) == 0
+    uninterrupted = read(reference / "out" / "relax.traj", ":")
+
+    signal_at_call(monkeypatch, 12, *(getattr(signal, name) for name in signums))
+    out = io.StringIO()
+    assert relax_only(raw, out, config_path="relax.yaml") == status
+    message = out.getvalue().strip().splitlines()[-1]
+    assert said in message
+    assert message.endswith(f"continue with: rigidmd relax relax.yaml --outdir "
+                            f"{tmp_path / 'out'} --resume")
+    frames = read(tmp_path / "out" / "relax.traj", ":")
+    assert 2 <= len(frames) < len(uninterrupted)  # the start, and at least one step
+    from rigidmd.outputs import LOCK_NAME
+
+    assert not (tmp_path / "out" / LOCK_NAME).exists()
+    monkeypatch.undo()
+    out = io.StringIO()
+    assert relax_only(raw, out, mode="resume") == 0
+    assert f"after step {len(frames) - 1}" in out.getvalue()
+    resumed = read(tmp_path / "out" / "relax.traj", ":")
+    for a, b in zip(frames, resumed[:len(frames)]):  # appended, nothing rewritten
+        np.testing.assert_array_equal(a.positions, b.positions)
+    last = resumed[-1]
+    last.calc = TIP3P(rc=40.0)
+    assert np.linalg.norm(RigidFilter(last, bodies="tags").get_forces(), axis=1).max() < 0.01
+    # The continued relaxation starts a fresh optimizer memory, so it need not follow the
+    # uninterrupted path (measured: -2.07150 eV against -2.07111 eV, two minima of the
+    # 6-water cluster); it goes on downhill from where it stopped.
+    stopped_at = frames[-1]
+    stopped_at.calc = TIP3P(rc=40.0)
+    assert last.get_potential_energy() < stopped_at.get_potential_energy()
+
+
+def test_rigidmd_relax_never_deletes_its_input(tmp_path):
+    """Issue 34 item 8: continuing from the relaxation's own relax.traj as a structure deleted
+    it before the first frame; now that is refused (naming --resume) and the file is kept,
+    an earlier relaxation is replaced only with --overwrite, and --resume continues it."""
+    import io
+
+    from ase.io import read
+
+    from rigidmd.config.quantities import ConfigError
+    from rigidmd.outputs import OutputError
+    from rigidmd.relaxrun import relax_only
+
+    from rigidmd.relaxrun import RelaxationNotConverged
+
+    with pytest.raises(RelaxationNotConverged, match="raise relax.steps and continue with"):
+        relax_only(relax_config(tmp_path, steps=5), io.StringIO())
+    traj = tmp_path / "out" / "relax.traj"
+    before = traj.read_bytes()
+    stopped = read(traj, ":")
+    own = relax_config(tmp_path, structure="out/relax.traj")
+    for mode in ("new", "overwrite"):
+        with pytest.raises(ConfigError, match="is this relaxation's own trajectory; continue "
+                                              "it with --resume"):
+            relax_only(own, io.StringIO(), mode=mode)
+        assert traj.read_bytes() == before
+    with pytest.raises(OutputError, match="holds an earlier relaxation; continue it with "
+                                          "--resume or replace it with --overwrite"):
+        relax_only(relax_config(tmp_path), io.StringIO())
+    assert traj.read_bytes() == before
+    assert relax_only(own, io.StringIO(), mode="resume") == 0
+    resumed = read(traj, ":")
+    assert len(stopped) == 6 and len(resumed) > 6
+    for a, b in zip(stopped, resumed):  # the earlier frames kept, the new ones appended
+        np.testing.assert_array_equal(a.positions, b.positions)
+
+
+def test_export_lammps_starts_from_the_relaxed_structure(tmp_path):
+    """Issue 34 item 5: the deck started from the unrelaxed structure; with a relax: section
+    export-lammps relaxes as rigidmd run does and writes the relaxed positions."""
+    from ase.io import read
+
+    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "2000"))
+    result = rigidmd("export-lammps", "relax.yaml", "deck", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "relaxed RigidBodies(n_bodies=6" in result.stdout
+    relaxed = read(tmp_path / "deck" / "relax.traj")
+    lines = (tmp_path / "deck" / "data.rigidmd").read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("Atoms")) + 2
+    rows = [line.split() for line in lines[start:start + len(relaxed)]]
+    order = np.array([int(row[0]) for row in rows]) - 1
+    positions = np.array([[float(v) for v in row[4:7]] for row in rows])[np.argsort(order)]
+    # The data file's positions carry 8 decimals or more (measured gap 5e-9 Å).
+    assert np.abs(positions - relaxed.positions).max() < 1e-6
+    unrelaxed = water_cluster(6, seed=2).positions
+    assert np.abs(positions - unrelaxed).max() > 0.05

@@ -527,7 +527,8 @@ def optimizer_class(name):
 
 
 def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", cell=False,
-          scalar_pressure=0.0, trajectory=None, logfile=None, **kwargs) -> Relaxation:
+          scalar_pressure=0.0, trajectory=None, logfile=None, observers=(),
+          append_trajectory=False, **kwargs) -> Relaxation:
     """Relax the rigid bodies of ``atoms`` (and the cell) in place with an ASE optimizer.
 
     Parameters
@@ -551,6 +552,13 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         As for :class:`RigidFilter` (pressure in eV/Å³).
     trajectory, logfile : str or file, optional
         Passed to the optimizer (ASE's trajectory of the atoms, its log).
+    observers : sequence of callables, optional
+        Each called after every step as ``observer(step, energy, fmax)``
+        (step of this call, energy in eV with :math:`pV`, largest generalized
+        force in eV/Å; no extra force call); an exception it raises stops
+        the relaxation after the step's trajectory frame.
+    append_trajectory : bool, default False
+        Append to ``trajectory`` (continuing a relaxation) instead of replacing it.
     **kwargs
         Further optimizer arguments (``maxstep``, ...).  With ASE's BFGS,
         ``alpha`` (initial Hessian, eV/Å² times the identity in the rows of
@@ -571,8 +579,23 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         from rigidmd.relaxprecon import RigidPrecon
 
         kwargs["precon"] = RigidPrecon()
-    with cls(view, trajectory=trajectory, logfile=logfile, **kwargs) as opt:
+    with cls(view, trajectory=trajectory, logfile=logfile, append_trajectory=append_trajectory,
+             **kwargs) as opt:
+        for observer in observers:
+            opt.attach(_Report(observer, opt, view), interval=1)
         converged = bool(opt.run(fmax=fmax, steps=int(steps)))
         nsteps = opt.get_number_of_steps()
     left = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.0
     return Relaxation(converged, int(nsteps), float(atoms.get_potential_energy()), left)
+
+
+class _Report:
+    """``observer(step, energy, fmax)`` of the optimizer's current point (cached: no call)."""
+
+    def __init__(self, observer, opt, view):
+        self.observer, self.opt, self.view = observer, opt, view
+
+    def __call__(self):
+        forces = self.view.get_forces()
+        fmax = float(np.sqrt(np.sum(forces * forces, axis=1).max())) if len(forces) else 0.0
+        self.observer(self.opt.nsteps, self.view.get_potential_energy(), fmax)

@@ -352,7 +352,8 @@ class Run:
             from rigidmd.relaxrun import relax_structure
 
             relax_structure(atoms, bodies, self.config.relax, self.outputs.directory,
-                            self.stream)
+                            self.stream, hint=f"rigidmd run {self.config_path or 'CONFIG'} "
+                            "--overwrite (it relaxes again from the structure)")
             self._draw_velocities(atoms, bodies)
         out = self.outputs
         return RigidDynamics(atoms, self.config.run.timestep, bodies=bodies,
