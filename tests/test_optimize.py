@@ -540,7 +540,7 @@ def test_a_signal_stops_rigidmd_relax_after_a_step_and_resume_finishes(
     assert relax_only(raw, out, mode="resume") == 0
     assert f"after step {len(frames) - 1}" in out.getvalue()
     resumed = read(tmp_path / "out" / "relax.traj", ":")
-    for a, b in zip(frames, resumed[:len(frames)]):  # appended, nothing rewritten
+    for a, b in zip(frames, resumed[:len(frames)], strict=True):  # appended, nothing rewritten
         np.testing.assert_array_equal(a.positions, b.positions)
     last = resumed[-1]
     last.calc = TIP3P(rc=40.0)
@@ -563,9 +563,7 @@ def test_rigidmd_relax_never_deletes_its_input(tmp_path):
 
     from rigidmd.config.quantities import ConfigError
     from rigidmd.outputs import OutputError
-    from rigidmd.relaxrun import relax_only
-
-    from rigidmd.relaxrun import RelaxationNotConverged
+    from rigidmd.relaxrun import RelaxationNotConverged, relax_only
 
     with pytest.raises(RelaxationNotConverged, match="raise relax.steps and continue with"):
         relax_only(relax_config(tmp_path, steps=5), io.StringIO())
@@ -585,7 +583,7 @@ def test_rigidmd_relax_never_deletes_its_input(tmp_path):
     assert relax_only(own, io.StringIO(), mode="resume") == 0
     resumed = read(traj, ":")
     assert len(stopped) == 6 and len(resumed) > 6
-    for a, b in zip(stopped, resumed):  # the earlier frames kept, the new ones appended
+    for a, b in zip(stopped, resumed[:6], strict=True):  # earlier frames kept, new appended
         np.testing.assert_array_equal(a.positions, b.positions)
 
 
