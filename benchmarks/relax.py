@@ -229,10 +229,100 @@ def alpha_rows(key, route="RigidFilter", fmaxes=(0.05, 0.01)):
     return out
 
 
+# ---------------------------------------------------------------- relax() defaults vs ASE's route
+def unrelaxed(kind, size, seed):
+    """An unrelaxed structure as built (``water_cluster`` or ``water_box``) and its cut-off."""
+    if kind == "cluster":
+        return water_cluster(size, seed=seed), 20.0
+    return water_box(size, seed=seed), 6.0
+
+
+def run_defaults(route, start, rc, fmaxes, log=None, steps=5000):
+    """``{fmax: (calls, steps, converged, energy, wall)}``: ``relax()`` with its defaults
+    (``"relax"``) or ASE's BFGS with defaults on the atoms with ``FixBondLengths``
+    (``"ASE"``), one run to the smallest ``fmax`` (the steps of either do not depend on it).
+    ``wall`` is the run's time; ``optimizer`` time is reported by :func:`defaults_rows`."""
+    atoms = start.copy()
+    atoms.calc = CountingTIP3P(rc=rc)
+    CountingTIP3P.calls = 0
+    if route == "relax":
+        from rigidmd.relaxopt import RigidLBFGS
+
+        target = RigidFilter(atoms)
+        opt = RigidLBFGS(target, logfile=None)
+    else:
+        n = len(atoms) // 3
+        atoms.set_constraint(FixBondLengths(
+            [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]))
+        opt = BFGS(atoms, logfile=None)
+    with opt:
+        recorder = Recorder(opt, atoms, fmaxes, log)
+        opt.run(fmax=min(fmaxes), steps=steps)
+    for fmax in recorder.todo:  # not reached within steps
+        recorder.found[fmax] = (CountingTIP3P.calls, opt.nsteps, False,
+                                atoms.get_potential_energy(), time.perf_counter() - recorder.t0)
+    return recorder.found
+
+
+#: (kind, size, seed), smallest first: clusters of 8-64 molecules, boxes of 64-512.
+DEFAULT_SYSTEMS = sorted([("cluster", n, seed) for n in (8, 16, 24, 32, 64) for seed in (0, 1, 2)]
+                         + [("box", side, seed) for side in (4, 5, 6, 8) for seed in (0, 1)],
+                         key=lambda s: (s[1] ** 3 if s[0] == "box" else s[1], s[0], s[2]))
+
+
+def defaults_rows(largest=64, routes=("relax", "ASE"), fmaxes=(0.05, 0.01), out=None):
+    """One table row per system, fmax and route (systems up to ``largest`` molecules)."""
+    rows = []
+    for kind, size, seed in DEFAULT_SYSTEMS:
+        start, rc = unrelaxed(kind, size, seed)
+        n = len(start) // 3
+        if n > largest:
+            continue
+        for route in routes:
+            found = run_defaults(route, start, rc, fmaxes)
+            for fmax in sorted(found, reverse=True):
+                calls, steps, converged, energy, wall = found[fmax]
+                rows.append(f"| {kind} {n} seed {seed} | {fmax} | {route} | {calls} | {steps} "
+                            f"| {converged} | {energy / n:.6f} | {wall:.1f} |")
+                print(rows[-1], flush=True)
+                if out is not None:
+                    with open(out, "a") as fh:
+                        fh.write(rows[-1] + "\n")
+    return rows
+
+
+def totals(lines):
+    """Sum of force calls and mean energy per molecule per (fmax, route) over systems that
+    both routes finished: ``{fmax: {route: (calls, mean energy)}}``."""
+    table = {}
+    for line in lines:
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) < 8 or not cells[3].isdigit():
+            continue
+        table.setdefault((cells[0], cells[1]), {})[cells[2]] = (int(cells[3]), float(cells[6]))
+    out = {}
+    for (_system, fmax), routes in table.items():
+        if len(routes) < 2:
+            continue
+        for route, (calls, energy) in routes.items():
+            c, e, k = out.setdefault(fmax, {}).get(route, (0, 0.0, 0))
+            out[fmax][route] = (c + calls, e + energy, k + 1)
+    return {fmax: {route: (c, e / k) for route, (c, e, k) in r.items()}
+            for fmax, r in out.items()}
+
+
 def main():
     import sys
 
     args = sys.argv[1:]
+    if args[:1] == ["defaults"]:  # defaults [LARGEST [FILE]]: relax() against ASE's route
+        largest = int(args[1]) if len(args) > 1 else 64
+        defaults_rows(largest, out=args[2] if len(args) > 2 else None)
+        return
+    if args[:1] == ["totals"]:  # totals FILE: sums over the systems both routes finished
+        for fmax, routes in totals(Path(args[1]).read_text().splitlines()).items():
+            print(fmax, routes)
+        return
     if args[:1] == ["alpha"]:  # alpha SYSTEM [ROUTE]: BFGS's alpha swept, rows to stdout
         alpha_rows(args[1], *args[2:])
         return

@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from ase.calculators.calculator import PropertyNotImplementedError
 
+from rigidmd import observables as obs
 from rigidmd import operators as ops
 from rigidmd import quaternion as quat
 from rigidmd import relaxcell
@@ -389,7 +390,7 @@ class RigidFilter:
                                 dtype=float)
             check_finite(stress, "stress", "eV/Å³", "in RigidFilter")
             volume = self.atoms.get_volume()
-            W = relaxcell.molecular_virial(stress, volume, r, forces, tau, model)
+            W = obs.molecular_virial(stress, volume, r, forces, model, torques=tau)
             out[self._slices[3]] = -relaxcell.cell_gradient(
                 W, volume, D, self.scalar_pressure, self.mode, self.cell_factor)
         return out
