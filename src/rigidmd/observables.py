@@ -17,7 +17,8 @@ from rigidmd.state import RigidState
 __all__ = ["volume", "kinetic_tensor", "kinetic_tensor_of", "translational_kinetic_energies",
            "rotational_kinetic_energies", "rotational_kinetic_energy", "angular_momenta",
            "angular_velocities", "largest_angular_speed", "total_angular_momentum",
-           "free_kinetic_energy", "molecular_virial", "stress_tensor", "voigt"]
+           "free_kinetic_energy", "molecular_virial", "torque_virial", "stress_tensor",
+           "voigt"]
 
 
 def volume(cell: np.ndarray) -> float:
@@ -102,23 +103,16 @@ def total_angular_momentum(state: RigidState, model: BodyModel) -> np.ndarray:
 
 
 def molecular_virial(atomic_stress: np.ndarray, cell_volume: float, r: np.ndarray,
-                     forces: np.ndarray, model: BodyModel,
-                     torques: np.ndarray | None = None) -> np.ndarray:
+                     forces: np.ndarray, model: BodyModel) -> np.ndarray:
     r"""Molecular virial (eV, 3x3): the atomic virial :math:`-V\sigma` less its intramolecular part.
 
-    .. math:: W = -V\sigma - \mathrm{sym}(R)
-              \;\big[ - \tfrac12 [\textstyle\sum_b \tau_b]_\times \big],
-              \quad [\tau]_{\times,ij} = \epsilon_{ijk} \tau_k,
-
-    :math:`\mathrm{sym}(R)` the symmetric part of
+    The symmetric part :math:`\mathrm{sym}(R)` of
     :math:`R = \sum_b\sum_{i\in b} r_i\otimes f_i`
-    (:func:`rigidmd.operators.intramolecular_virial`).  Its symmetric part is
-    what the pressure needs (the barostats); with ``torques`` the
-    antisymmetric part of :math:`R` (half the bodies' total torque) is taken
-    out too, which gives the full :math:`W = \sum_b X_b\otimes F_b +
-    \sum_\mathrm{free} x\otimes f`: the derivative of the energy under a
-    deformation of the cell that moves the centres of mass and keeps the
-    orientations (:mod:`rigidmd.relaxcell`).
+    (:func:`rigidmd.operators.intramolecular_virial`) is taken out: what the
+    pressure needs (the barostats).  Less :func:`torque_virial` too, it is the
+    full :math:`W = \sum_b X_b\otimes F_b + \sum_\mathrm{free} x\otimes f`,
+    the derivative of the energy under a deformation of the cell that moves
+    the centres of mass and keeps the orientations (:mod:`rigidmd.relaxcell`).
 
     Parameters
     ----------
@@ -131,14 +125,19 @@ def molecular_virial(atomic_stress: np.ndarray, cell_volume: float, r: np.ndarra
     forces : numpy.ndarray, shape (n_atoms, 3)
         Atom forces (eV/Å).
     model : BodyModel
-    torques : numpy.ndarray, shape (n_bodies, 3), optional
-        Lab torques about the centres of mass (eV): the full, unsymmetrised virial.
     """
-    W = -cell_volume * atomic_stress - ops.intramolecular_virial(r, forces, model)
-    if torques is not None and len(torques):
-        tx, ty, tz = torques.sum(axis=0)
-        W = W - 0.5 * np.array([[0.0, tz, -ty], [-tz, 0.0, tx], [ty, -tx, 0.0]])
-    return W
+    return -cell_volume * atomic_stress - ops.intramolecular_virial(r, forces, model)
+
+
+def torque_virial(torques: np.ndarray) -> np.ndarray:
+    r"""The antisymmetric part of the intramolecular virial, :math:`\tfrac12[\sum_b\tau_b]_\times`.
+
+    :math:`[\tau]_{\times,ij} = \epsilon_{ijk}\tau_k` (eV, 3x3), from the lab
+    torques about the centres of mass, ``torques`` of shape (n_bodies, 3) (eV):
+    :math:`R_{ij} - R_{ji}` of :math:`R = \sum_b\sum_{i\in b} r_i\otimes f_i`.
+    """
+    tx, ty, tz = torques.sum(axis=0) if len(torques) else np.zeros(3)
+    return 0.5 * np.array([[0.0, tz, -ty], [-tz, 0.0, tx], [ty, -tx, 0.0]])
 
 
 def stress_tensor(virial: np.ndarray, kinetic: np.ndarray | None, cell_volume: float

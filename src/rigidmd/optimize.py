@@ -47,14 +47,15 @@ import numpy as np
 from ase.calculators.calculator import PropertyNotImplementedError
 
 from rigidmd import observables as obs
-from rigidmd import operators as ops
 from rigidmd import quaternion as quat
 from rigidmd import relaxcell
 from rigidmd.bodies import RigidBodies, check_bodies_fit
 from rigidmd.checks import check_finite
 from rigidmd.dof import RigidBodyDOF
-from rigidmd.forces import calculate_together
+from rigidmd.forces import ForceEvaluator
+from rigidmd.link import BodyLink
 from rigidmd.model import describe_atoms
+from rigidmd.record import StepRecord
 
 try:  # ASE >= 3.24
     from ase.filters import OptimizableFilter as _Optimizable
@@ -194,6 +195,14 @@ class RigidFilter:
         else:
             self.lengths = np.zeros(0)
         self._q_ref = geometry.quaternions.copy()
+        # The machinery of the dynamics: the body link places the atoms, the force evaluator
+        # calls the calculator (energy, forces and with the cell the stress in one call) and
+        # reduces the forces to the bodies, with the molecular virial.
+        self._link = BodyLink(atoms, model)
+        self._state = self._link.initial_state(geometry)
+        self._record = StepRecord(self._state, model)
+        self._evaluator = ForceEvaluator(self._link, self._record, stress=mode is not None)
+        self._evaluator.want_energy = True
         self._cell0 = atoms.cell.array.copy()
         nb, nf = model.n_bodies, model.n_free
         self._slices = (slice(0, nb), slice(nb, 2 * nb), slice(2 * nb, 2 * nb + nf),
@@ -221,24 +230,24 @@ class RigidFilter:
         return quat.multiply(self._q_ref, rotation_quaternion(self._phi()))
 
     def _place(self):
-        """Write positions (and cell) of the coordinates into the atoms."""
-        model, D = self.model, self._deformation()
+        """Write positions (and cell) of the coordinates into the atoms, through the body link."""
+        model, D, state = self.model, self._deformation(), self._state
         q = self._orientations()
-        r = quat.rotate(q[model.atom_body], model.body_coordinates)
-        X = self._x[self._slices[0]] @ D.T
-        positions = self.atoms.positions.copy()
-        positions[model.order] = X[model.atom_body] + r
-        positions[model.free] = self._x[self._slices[2]] @ D.T
+        state.X = self._x[self._slices[0]] @ D.T
+        state.q = q
+        state.x = self._x[self._slices[2]] @ D.T
         if self.mode is not None:
             cell = self._cell0 @ D.T
-            check_bodies_fit(self.model, cell, self.atoms.pbc,
+            check_bodies_fit(model, cell, self.atoms.pbc,
                              "the cell relaxation shrank the cell below the bodies (a "
                              "calculator without a repulsion at short range, or a pressure "
                              "too high, collapses the cell); the atoms keep the last cell "
                              "that fitted")
+            state.cell = cell
             self.atoms.set_cell(cell, scale_atoms=False)
-        self.atoms.set_positions(positions, apply_constraint=False)
-        self._placed = (positions, r, q, D)
+            self._record.cell_changed()
+        r = self._link.place(state, self._record.r)
+        self._placed = (self.atoms.positions.copy(), r, q, D)
 
     def get_positions(self):
         """The generalized coordinates, shape (n, 3) (Å; the cell rows dimensionless × c).
@@ -321,13 +330,6 @@ class RigidFilter:
         return self._placed
 
     # ------------------------------------------------------------ energy and gradient
-    def _evaluate(self):
-        names = ["energy", "forces"] + (["stress"] if self.mode else [])
-        calculate_together(self.atoms.calc, self.atoms, names)
-        forces = np.asarray(self.atoms.get_forces(apply_constraint=False), dtype=float)
-        check_finite(forces, "force", "eV/Å", "in RigidFilter")
-        return forces
-
     def _cached(self):
         """(energy, generalized forces) of the current coordinates if computed, else None."""
         self._current()
@@ -368,10 +370,10 @@ class RigidFilter:
         return out
 
     def _generalized_forces(self):
-        _, r, q, D = self._current()
-        model = self.model
-        forces = self._evaluate()
-        F, tau = ops.reduce_forces(forces, r, model)
+        _, _, q, D = self._current()
+        model, record = self.model, self._record
+        self._evaluator.evaluate(self._state)  # the dynamics' force call and reduction
+        F, tau = record.F, record.tau
         out = np.zeros_like(self._x)
         out[self._slices[0]] = F @ D
         if model.n_bodies:
@@ -379,20 +381,18 @@ class RigidFilter:
             g = right_jacobian_transpose(self._phi(), torque_body) / self.lengths[:, None]
             g[model.linear, 0] = 0.0
             out[self._slices[1]] = g
-        out[self._slices[2]] = forces[model.free] @ D
+        out[self._slices[2]] = record.f @ D
         for rows, mask in ((self._slices[0], self._fixed_bodies),
                            (self._slices[1], self._fixed_bodies),
                            (self._slices[2], self._fixed_free)):
             block = out[rows]
             block[mask] = 0.0
         if self.mode is not None:
-            stress = np.asarray(self.atoms.get_stress(voigt=False, apply_constraint=False),
-                                dtype=float)
-            check_finite(stress, "stress", "eV/Å³", "in RigidFilter")
-            volume = self.atoms.get_volume()
-            W = obs.molecular_virial(stress, volume, r, forces, model, torques=tau)
+            # The barostats' molecular virial (symmetric) and its antisymmetric part, half
+            # the bodies' total torque: the full virial of a deformation at fixed orientations.
+            W = record.virial - obs.torque_virial(tau)
             out[self._slices[3]] = -relaxcell.cell_gradient(
-                W, volume, D, self.scalar_pressure, self.mode, self.cell_factor)
+                W, record.volume, D, self.scalar_pressure, self.mode, self.cell_factor)
         return out
 
     # ------------------------------------------------------------ what ASE asks of a filter

@@ -30,7 +30,7 @@ virial :math:`-V\sigma` less the intramolecular part
 :func:`rigidmd.operators.intramolecular_virial` and whose antisymmetric part
 is half the bodies' total torque (:math:`R_{ij} - R_{ji} = \epsilon_{ijk}\tau_k`): the one
 molecular virial of the package, :func:`rigidmd.observables.molecular_virial`
-with ``torques``.
+(the barostats' one) less :func:`rigidmd.observables.torque_virial`.
 """
 
 import numpy as np
@@ -90,7 +90,8 @@ def cell_gradient(virial, volume, D, scalar_pressure, mode, cell_factor):
     Parameters
     ----------
     virial : numpy.ndarray, shape (3, 3)
-        :math:`W` of :func:`rigidmd.observables.molecular_virial` with ``torques`` (eV).
+        The full :math:`W` (eV): :func:`rigidmd.observables.molecular_virial` less
+        :func:`rigidmd.observables.torque_virial`.
     volume : float
         Current volume (Å³).
     D : numpy.ndarray, shape (3, 3)
