@@ -676,3 +676,19 @@ def test_defaults_do_not_depend_on_the_number_of_blas_threads():
         results.append((result.energy, atoms.positions.copy()))
     assert results[0][0] == results[1][0]
     np.testing.assert_array_equal(results[0][1], results[1][1])
+
+
+def test_the_preconditioner_s_pairs_are_ase_s_neighbour_list():
+    """RigidPrecon finds the centres' pairs with a k-d tree where it can (no periodicity, or
+    an orthorhombic cell twice the cut-off wide): the same pairs and distances as ASE's."""
+    from ase.neighborlist import neighbor_list
+
+    from rigidmd.relaxprecon import _pairs
+    from rigidmd.systems import water_box
+
+    for atoms in (water_box(4), water_cluster(20), water_box(3)):  # the last: ASE's route
+        centres = Atoms(positions=atoms.positions[::3], cell=atoms.cell, pbc=atoms.pbc)
+        ours, ase = _pairs(centres, 5.6), neighbor_list("ijd", centres, 5.6)
+        assert len(ours[0]) == len(ase[0]) > 0
+        key = lambda i, j, d: sorted(zip(i, j, np.round(d, 9), strict=True))  # noqa: E731
+        assert key(*ours) == key(*ase)

@@ -116,8 +116,7 @@ class RigidPrecon(Precon):
         if self.r_NN is None:
             self.r_NN = _nearest_distance(points)
         r_cut = self.r_cut if self.r_cut is not None else 2.0 * self.r_NN
-        i, j, d = neighbor_list("ijd", points, r_cut) if m > 1 else (
-            np.zeros(0, int), np.zeros(0, int), np.zeros(0))
+        i, j, d = _pairs(points, r_cut)
         w = np.exp(-self.A * (d / self.r_NN - 1.0))
         W = sparse.coo_matrix((w, (i, j)), shape=(m, m)).tocsr()
         degree = np.asarray(W.sum(axis=1)).ravel()
@@ -269,3 +268,29 @@ def _nearest_distance(points):
             finite = nearest[np.isfinite(nearest)]
             return float(np.median(finite)) if len(finite) else 1.0
         radius *= 2.0
+
+
+def _pairs(points, r_cut):
+    """Pairs (i, j, distance) of points within ``r_cut``, both orders, all periodic images.
+
+    A k-d tree (scipy's ``cKDTree``) without periodicity or in an orthorhombic
+    cell at least ``2 r_cut`` wide (one image per pair), else ASE's
+    ``neighbor_list``; both O(n).
+    """
+    from scipy.spatial import cKDTree
+
+    m = len(points)
+    if m < 2:
+        return np.zeros(0, int), np.zeros(0, int), np.zeros(0)
+    pbc, cell = points.pbc, points.cell.array
+    orthorhombic = np.allclose(cell, np.diag(np.diag(cell)))
+    lengths = np.diag(cell)
+    if not pbc.any():
+        tree = cKDTree(points.positions)
+    elif pbc.all() and orthorhombic and np.all(lengths > 2 * r_cut):
+        tree = cKDTree(np.mod(points.positions, lengths), boxsize=lengths)
+    else:
+        return neighbor_list("ijd", points, r_cut)
+    pairs = tree.sparse_distance_matrix(tree, r_cut, output_type="coo_matrix")
+    keep = pairs.row != pairs.col
+    return pairs.row[keep], pairs.col[keep], pairs.data[keep]
