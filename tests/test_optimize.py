@@ -515,7 +515,7 @@ def test_a_signal_stops_rigidmd_relax_after_a_step_and_resume_finishes(
 
     from ase.io import read
 
-    from rigidmd.relaxrun import relax_only
+    from rigidmd.relaxcli import relax_only
 
     raw = relax_config(tmp_path)
     reference = tmp_path / "reference"
@@ -563,7 +563,8 @@ def test_rigidmd_relax_never_deletes_its_input(tmp_path):
 
     from rigidmd.config.quantities import ConfigError
     from rigidmd.outputs import OutputError
-    from rigidmd.relaxrun import RelaxationNotConverged, relax_only
+    from rigidmd.relaxcli import relax_only
+    from rigidmd.relaxrun import RelaxationNotConverged
 
     with pytest.raises(RelaxationNotConverged, match="raise relax.steps and continue with"):
         relax_only(relax_config(tmp_path, steps=5), io.StringIO())

@@ -35,7 +35,8 @@ from rigidmd.lammps.library import LammpsError
 from rigidmd.logplot import LogError, plot_log
 from rigidmd.operators import ConvergenceError
 from rigidmd.outputs import OutputError, describe_os_error
-from rigidmd.relaxrun import RelaxationNotConverged, RelaxationStopped, relax_only
+from rigidmd.relaxcli import relax_only
+from rigidmd.relaxrun import RelaxationNotConverged, RelaxationStopped
 from rigidmd.runner import Run, RunStopped
 
 __all__ = ["main"]
@@ -70,7 +71,7 @@ def _export(config, directory, stream=sys.stdout):
 
     atoms, bodies = Run(config).start_atoms()
     if config.relax is not None:  # the deck starts where `rigidmd run` would start its MD
-        from rigidmd.relaxrun import relax_for_export
+        from rigidmd.relaxcli import relax_for_export
 
         relax_for_export(config, atoms, bodies, directory, stream)
     atoms.positions = bodies.whole_positions(atoms)

@@ -1,4 +1,4 @@
-"""Relaxing the structure of a run: ``rigidmd relax CONFIG`` and the ``relax:`` section.
+"""Relaxing the structure of a run: the ``relax:`` section (the command: rigidmd.relaxcli).
 
 :func:`relax_structure` relaxes the rigid bodies (and the cell) of a run's
 start with :func:`rigidmd.optimize.relax`, writing the optimizer's trajectory
@@ -25,14 +25,13 @@ to continue.
 
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
 from rigidmd.optimize import relax
 
-__all__ = ["relax_structure", "RelaxationNotConverged", "RelaxationStopped", "relax_only",
-           "RelaxProgress", "continue_from", "relax_for_export"]
+__all__ = ["relax_structure", "RelaxationNotConverged", "RelaxationStopped", "RelaxProgress",
+           "continue_from"]
 
 
 class RelaxationNotConverged(RuntimeError):
@@ -127,7 +126,7 @@ def continue_from(atoms, trajectory):
 
 
 def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, resume=False,
-                    done=0, hint=None, progress=None):
+                    done=0, hint=None, progress=None, stop=None):
     """Relax ``atoms`` in place as ``section`` says; files go to ``directory``.
 
     Parameters
@@ -147,6 +146,9 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
         The command that continues this relaxation, for the messages.
     progress : file, optional
         Where progress goes (default stderr).
+    stop : rigidmd.runner.StopSignals, optional
+        Signal handling for the relaxation (installed around it; checked after
+        every step).  Without it a signal does what it does outside rigidmd.
 
     Returns
     -------
@@ -160,8 +162,9 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     RelaxationStopped
         A stop signal (after the step's frame; the message was printed).
     """
+    from contextlib import nullcontext
+
     from rigidmd.bodies import store_bodies_in_tags
-    from rigidmd.runner import EXIT_STATUS, StopRequest, StopSignals
 
     directory.mkdir(parents=True, exist_ok=True)
     store_bodies_in_tags(atoms, bodies.body_ids)  # every frame carries the bodies
@@ -169,18 +172,21 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     log = directory / section.log
     left = max(section.steps - done, 0)
     report = RelaxProgress(section.steps, done, section.fmax, progress)
-    stop = StopSignals()
+    observers = (report,) if stop is None else (report, lambda *_: stop.check())
     continuing = hint or "rigidmd relax CONFIG --resume"
     status = 0
     try:
-        with stop, open(log, "a" if resume else "w", encoding="utf-8") as logfile:
+        with stop or nullcontext(), open(log, "a" if resume else "w",
+                                         encoding="utf-8") as logfile:
             result = relax(atoms, bodies, fmax=section.fmax, steps=left,
                            optimizer=section.optimizer, cell=section.cell,
                            scalar_pressure=section.pressure, trajectory=str(trajectory),
-                           logfile=logfile, append_trajectory=resume,
-                           observers=(report, lambda *_: stop.check()))
-    except StopRequest as request:
-        status, message = EXIT_STATUS[request.signum], f"stopped by {request}"
+                           logfile=logfile, append_trajectory=resume, observers=observers)
+    except Exception as err:
+        signum = getattr(err, "signum", None)  # the stop's StopRequest, after a whole step
+        if stop is None or signum is None:
+            raise
+        status, message = 128 + int(signum), f"stopped by {err}"
     except KeyboardInterrupt:
         status, message = 130, "interrupted at once (second Ctrl-C)"
     finally:
@@ -201,124 +207,3 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
           f"fmax {result.fmax:.3g} eV/Å, energy {result.energy:.6f} eV; wrote {trajectory} and "
           f"{log}", file=stream)
     return result
-
-
-def _hint(directory, config_path):
-    return f"rigidmd relax {config_path or 'CONFIG'} --outdir {directory} --resume"
-
-
-def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None):
-    """``rigidmd relax CONFIG``: build the structure and calculator, relax, write.
-
-    Parameters
-    ----------
-    raw : dict
-        A configuration as :func:`rigidmd.config.load_config` returns; the MD
-        keys may be present and are ignored, a missing ``relax:`` section is
-        the defaults of :class:`~rigidmd.config.relaxsection.RelaxSection`.
-    trust : bool
-        ``--trust``: let the calculator section run what could run code
-        (:mod:`rigidmd.config.trust`), as for ``rigidmd run``.
-    mode : str
-        ``"new"`` (refuses a directory holding a relaxation's outputs),
-        ``"overwrite"`` (replaces them, after every input was read) or
-        ``"resume"`` (continues from the last frame of the trajectory).
-    config_path : str, optional
-        The configuration's file, for the message that says how to continue.
-
-    Returns
-    -------
-    int
-        Exit status: 0, or 130/143/138 after a stop signal.
-    """
-    from rigidmd.config import known_keys
-    from rigidmd.config.quantities import ConfigError
-    from rigidmd.config.relaxsection import RelaxSection
-    from rigidmd.config.sections import CalculatorSection, OutputsSection, StructureSection
-    from rigidmd.outputs import OutputError, OutputLock
-
-    raw = dict(raw)
-    base = Path(raw.pop("_base", "."))
-    unknown = sorted(set(raw) - known_keys(), key=str)
-    if unknown:
-        raise ConfigError(f"{unknown[0]}: unknown key; allowed: "
-                          f"{', '.join(sorted(known_keys()))}")
-    structure = StructureSection.from_config(raw, base)
-    calculator = CalculatorSection.from_config(raw, base)
-    calculator.check_trust(trust)
-    outputs = OutputsSection.from_config(raw, base)
-    section = RelaxSection.from_config(raw, base) or RelaxSection()
-    atoms = structure.build_atoms()  # every input is read before any output is touched
-    bodies = structure.resolve_bodies(atoms)
-    directory = outputs.directory
-    trajectory, log = directory / section.trajectory, directory / section.log
-    source = structure.source if isinstance(structure.source, Path) else None
-    own = source is not None and source.resolve() == trajectory.resolve()
-    directory.mkdir(parents=True, exist_ok=True)
-    lock = OutputLock(directory)
-    lock.acquire()
-    try:
-        done = 0
-        if mode == "resume":
-            done = continue_from(atoms, trajectory)
-            print(f"continuing the relaxation of {trajectory} after step {done}", file=stream)
-        else:
-            existing = [p for p in (trajectory, log) if p.exists()]
-            if own:
-                raise ConfigError(f"structure: {source} is this relaxation's own trajectory; "
-                                  "continue it with --resume (or copy it elsewhere first)")
-            if existing and mode != "overwrite":
-                raise OutputError(f"relax: {existing[0]} holds an earlier relaxation; "
-                                  "continue it with --resume or replace it with --overwrite")
-            for path in existing:
-                path.unlink()
-        atoms.calc = calculator.build(atoms)
-        try:
-            relax_structure(atoms, bodies, section, directory, stream, resume=mode == "resume",
-                            done=done, hint=_hint(directory, config_path))
-        except RelaxationStopped as stopped:
-            return stopped.status
-        finally:
-            close = getattr(atoms.calc, "close", None)
-            if callable(close):
-                close()
-    finally:
-        lock.release()
-    return 0
-
-
-def relax_for_export(config, atoms, bodies, directory, stream=sys.stdout):
-    """Relax a run's start as ``rigidmd run`` would, for ``rigidmd export-lammps``.
-
-    The configuration's ``relax:`` section relaxes ``atoms`` in place with its
-    calculator (trajectory and log in ``directory``, beside the deck), and the
-    velocities are drawn again for the relaxed bodies, as the run does, so
-    that the deck starts from the structure the run's MD starts from.
-
-    Parameters
-    ----------
-    config : rigidmd.config.RunConfig
-        With a ``relax`` section.
-    atoms : ase.Atoms
-        The start (:meth:`rigidmd.runner.Run.start_atoms`); no calculator is left on it.
-    bodies : rigidmd.RigidBodies
-    directory : pathlib.Path
-        The export directory.
-    stream : file
-    """
-    from rigidmd import rigid_maxwell_boltzmann
-
-    directory.mkdir(parents=True, exist_ok=True)
-    atoms.calc = config.calculator.build(atoms, directory / "engine")
-    try:
-        relax_structure(atoms, bodies, config.relax, directory, stream,
-                        hint="rigidmd export-lammps CONFIG DIRECTORY (it relaxes again)")
-    finally:
-        close = getattr(atoms.calc, "close", None)
-        if callable(close):
-            close()
-        atoms.calc = None
-    velocities = config.run.velocities
-    if velocities is not None and config.structure.restart is None:
-        rigid_maxwell_boltzmann(atoms, velocities["temperature_K"], bodies=bodies,
-                                rng=np.random.default_rng(velocities["seed"]))

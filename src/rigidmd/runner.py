@@ -353,7 +353,8 @@ class Run:
 
             relax_structure(atoms, bodies, self.config.relax, self.outputs.directory,
                             self.stream, hint=f"rigidmd run {self.config_path or 'CONFIG'} "
-                            "--overwrite (it relaxes again from the structure)")
+                            "--overwrite (it relaxes again from the structure)",
+                            stop=StopSignals())
             self._draw_velocities(atoms, bodies)
         out = self.outputs
         return RigidDynamics(atoms, self.config.run.timestep, bodies=bodies,
