@@ -122,12 +122,23 @@ def run_route(route, start, rc, fmaxes, log=None, steps=5000, **bfgs):
     if route == "RigidFilter":
         target = RigidFilter(atoms)
     else:
-        n = len(atoms) // 3
-        atoms.set_constraint(FixBondLengths(
-            [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]))
+        fix_water_bonds(atoms)
         target = atoms
     CountingTIP3P.calls = 0
-    with BFGS(target, logfile=None, **bfgs) as opt:
+    return recorded(BFGS(target, logfile=None, **bfgs), atoms, fmaxes, log, steps)
+
+
+def fix_water_bonds(atoms):
+    """ASE's rigid water: ``FixBondLengths`` on the three distances of every molecule."""
+    n = len(atoms) // 3
+    atoms.set_constraint(FixBondLengths(
+        [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]))
+
+
+def recorded(opt, atoms, fmaxes, log, steps):
+    """Run ``opt`` to the smallest ``fmax``: ``{fmax: (calls, steps, converged, energy,
+    wall)}`` (a ``fmax`` not reached within ``steps`` gives the end's values)."""
+    with opt:
         recorder = Recorder(opt, atoms, fmaxes, log)
         opt.run(fmax=min(fmaxes), steps=steps)
     for fmax in recorder.todo:  # not reached within steps
@@ -251,17 +262,9 @@ def run_defaults(route, start, rc, fmaxes, log=None, steps=5000):
         target = RigidFilter(atoms)
         opt = RigidLBFGS(target, logfile=None)
     else:
-        n = len(atoms) // 3
-        atoms.set_constraint(FixBondLengths(
-            [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]))
+        fix_water_bonds(atoms)
         opt = BFGS(atoms, logfile=None)
-    with opt:
-        recorder = Recorder(opt, atoms, fmaxes, log)
-        opt.run(fmax=min(fmaxes), steps=steps)
-    for fmax in recorder.todo:  # not reached within steps
-        recorder.found[fmax] = (CountingTIP3P.calls, opt.nsteps, False,
-                                atoms.get_potential_energy(), time.perf_counter() - recorder.t0)
-    return recorder.found
+    return recorded(opt, atoms, fmaxes, log, steps)
 
 
 #: (kind, size, seed), smallest first: clusters of 8-64 molecules, boxes of 64-512.

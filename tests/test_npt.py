@@ -16,6 +16,7 @@ from helpers import (
     P_LIQUID,
     T_LIQUID,
     PeriodicLJ,
+    ZeroStress,
     argon_crystal,
     assert_ideal_gas_volumes,
     block_mean,
@@ -390,17 +391,6 @@ def test_crescale_every_n_steps_moves_the_cell_only_then():
 
 
 # ---------------------------------------------------------------- seams and faults
-class ZeroStress(Calculator):
-    """No interactions, with stress: an ideal gas of rigid bodies."""
-
-    implemented_properties = ["energy", "forces", "stress"]
-
-    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
-        super().calculate(atoms, properties, system_changes)
-        self.results = {"energy": 0.0, "forces": np.zeros((len(self.atoms), 3)),
-                        "stress": np.zeros(6)}
-
-
 def test_a_cell_shrinking_below_a_body_stops_and_rolls_back():
     """One water under MTK at a high pressure: the step that makes the body span half the
     cell stops with one line naming the body, and the step is undone (issue 22, item 14)."""

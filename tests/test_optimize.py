@@ -3,11 +3,10 @@
 import numpy as np
 import pytest
 from ase import Atoms, units
-from ase.calculators.calculator import Calculator, all_changes
 from ase.calculators.tip3p import TIP3P
 from ase.calculators.tip4p import TIP4P
 from ase.constraints import FixAtoms, FixBondLengths, FixCom
-from helpers import CoulombLJ, dimer_fluid, water_dimer, water_parameters
+from helpers import CoulombLJ, ZeroStress, dimer_fluid, water_dimer, water_parameters
 
 from rigidmd.optimize import RigidFilter, relax
 from rigidmd.systems import water_cluster
@@ -423,17 +422,6 @@ def one_water_in_a_box(edge):
     return atoms
 
 
-class IdealStress(Calculator):
-    """No interactions, with stress: nothing resists a cell shrinking under pressure."""
-
-    implemented_properties = ["energy", "forces", "stress"]
-
-    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
-        super().calculate(atoms, properties, system_changes)
-        self.results = {"energy": 0.0, "forces": np.zeros((len(self.atoms), 3)),
-                        "stress": np.zeros(6)}
-
-
 def test_one_rule_refuses_one_water_in_a_3_1_A_box_everywhere():
     """Issue 34 item 3: MTK ran it while the Monte Carlo barostat refused it; now the MD
     barostats, the Monte Carlo barostat and cell relaxation refuse it with one message."""
@@ -448,7 +436,7 @@ def test_one_rule_refuses_one_water_in_a_3_1_A_box_everywhere():
     ]
     for make in makers:
         atoms = one_water_in_a_box(3.1)
-        atoms.calc = IdealStress()
+        atoms.calc = ZeroStress()
         before = atoms.positions.copy()
         with pytest.raises(ValueError, match=r"body 0 \(atoms \[0, 1, 2\]\) spans 1.8\d\d Å .*not "
                                              r"less than half the periodic cell's width across "
@@ -456,7 +444,7 @@ def test_one_rule_refuses_one_water_in_a_3_1_A_box_everywhere():
             make(atoms)
         np.testing.assert_array_equal(atoms.positions, before)
     atoms = one_water_in_a_box(3.8)  # 1.84 Å < 1.9 Å: fits, and every route takes it
-    atoms.calc = IdealStress()
+    atoms.calc = ZeroStress()
     for make in makers:
         make(atoms)
 
@@ -466,7 +454,7 @@ def test_cell_relaxation_refuses_to_shrink_the_cell_below_a_body():
     15 g/cm³ and report convergence; now the step that makes a body span half the cell
     stops the relaxation naming the body, with the atoms in the last cell that fitted."""
     atoms = one_water_in_a_box(6.0)
-    atoms.calc = IdealStress()
+    atoms.calc = ZeroStress()
     with pytest.raises(ValueError, match=r"body 0 .* not less than half the periodic cell's "
                                          r"width .* the cell relaxation shrank the cell"):
         relax(atoms, cell="iso", scalar_pressure=0.01, steps=500)
