@@ -351,10 +351,50 @@ def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000):
             f"| {own:.1f} ({100 * own / total:.1f} %) |")
 
 
+def cell_rows(optimizers=("RigidLBFGS", "BFGS"), modes=("iso", "aniso", "full"), fmax=0.01):
+    """Cell relaxation at 0 bar with LAMMPS forces: TIP4P/2005 ice Ih (96 molecules) and a
+    216-molecule SPC/E box, per mode and optimizer: force calls, steps, density, energy."""
+    from rigidmd.lammps import LAMMPSCalculator
+    from rigidmd.systems import ice_ih
+    from rigidmd.water import water_model
+
+    rows = []
+    for name, model, build in (("ice Ih", "tip4p2005", lambda: ice_ih((3, 2, 2), seed=0)),
+                               ("liquid", "spce", lambda: water_box(6, seed=0, model="spce"))):
+        water = water_model(model)
+        for mode in modes:
+            for optimizer in optimizers:
+                atoms = build()
+                n = len(atoms) // water.sites
+                atoms.set_initial_charges(water.charges(n))
+                types = {"O": 1, "H": 2, "X": 3} if water.sites == 4 else {"O": 1, "H": 2}
+                atoms.calc = LAMMPSCalculator(water.lammps_commands(8.5, "pppm", 1e-5, tail=True),
+                                              atom_types=types)
+                calls = [0]
+                original = atoms.calc.calculate
+
+                def calculate(*args, _original=original, _calls=calls, **kwargs):
+                    _calls[0] += 1
+                    _original(*args, **kwargs)
+
+                atoms.calc.calculate = calculate
+                t0 = time.perf_counter()
+                result = relax(atoms, fmax=fmax, steps=3000, cell=mode, optimizer=optimizer)
+                density = atoms.get_masses().sum() / atoms.get_volume() * 1e24 / 6.02214076e23
+                rows.append(f"| {name} ({n}) | {mode} | {optimizer} | {calls[0]} "
+                            f"| {result.steps} | {result.converged} | {density:.4f} "
+                            f"| {result.energy / n:.5f} | {time.perf_counter() - t0:.1f} |")
+                print(rows[-1], flush=True)
+    return rows
+
+
 def main():
     import sys
 
     args = sys.argv[1:]
+    if args[:1] == ["cell"]:  # cell: cell relaxation with LAMMPS forces, rows to stdout
+        cell_rows()
+        return
     if args[:1] == ["large"]:  # large [N_SIDE [CELL]]: optimizer's own time, LAMMPS forces
         print(large(int(args[1]) if len(args) > 1 else 12,
                     cell=args[2] if len(args) > 2 else False), flush=True)

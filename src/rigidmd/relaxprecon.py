@@ -288,7 +288,9 @@ def _pairs(points, r_cut):
     if not pbc.any():
         tree = cKDTree(points.positions)
     elif pbc.all() and orthorhombic and np.all(lengths > 2 * r_cut):
-        tree = cKDTree(np.mod(points.positions, lengths), boxsize=lengths)
+        wrapped = np.mod(points.positions, lengths)
+        wrapped[wrapped >= lengths] = 0.0  # -1e-17 mod L rounds to L, outside the box
+        tree = cKDTree(wrapped, boxsize=lengths)
     else:
         return neighbor_list("ijd", points, r_cut)
     pairs = tree.sparse_distance_matrix(tree, r_cut, output_type="coo_matrix")
