@@ -45,8 +45,10 @@ from scipy import sparse
 
 __all__ = ["RigidPrecon", "MU_FLOOR", "conjugate_gradient", "CG_TOLERANCE"]
 
-#: Relative residual at which :func:`conjugate_gradient` stops.
-CG_TOLERANCE = 1e-10
+#: Relative residual at which :func:`conjugate_gradient` stops: a preconditioner need not be
+#: exact (measured over 8- and 16-water clusters, 3 seeds each: 167 and 278 force calls to
+#: fmax 0.05 and 0.01 against 167 and 277 at 1e-10, half the iterations).
+CG_TOLERANCE = 1e-6
 
 #: Smallest scale :math:`\mu` estimated (eV/Å²); a smaller one is noise of a flat start.
 MU_FLOOR = 0.05
