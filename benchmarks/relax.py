@@ -22,9 +22,23 @@ steps and the energy left above the minimum per molecule.  ``alpha`` sweeps
 BFGS's initial Hessian (``alpha`` eV/Å² times the identity, in the
 coordinates each route shows the optimizer).
 
+``defaults`` compares what users get without tuning: ``relax()`` with its
+defaults (:class:`rigidmd.relaxopt.RigidLBFGS` with
+:class:`rigidmd.relaxprecon.RigidPrecon`) against ASE's BFGS with defaults on
+the atoms with ``FixBondLengths``, from structures as built (unrelaxed
+``water_cluster`` of 8-64 molecules, seeds 0-2; ``water_box`` of 64-512,
+seeds 0-1), both to fmax 0.01 eV/Å, the 0.05 row read off the same run.
+``large`` times the default on SPC/E boxes with LAMMPS forces (the
+optimizer's own time: everything outside the calculator), ``cell`` relaxes
+the cell (iso, aniso, full) of TIP4P/2005 ice Ih and an SPC/E liquid.
+
 Run::
 
-    python benchmarks/relax.py                     # everything, in turn
+    python benchmarks/relax.py defaults 64 rows.txt  # systems up to 64 molecules
+    python benchmarks/relax.py totals rows.txt     # sums over systems both routes finished
+    python benchmarks/relax.py large 12            # 1728 waters, LAMMPS forces
+    python benchmarks/relax.py cell                # cell relaxation, LAMMPS forces
+    python benchmarks/relax.py                     # the perturbed-minimum study, in turn
     python benchmarks/relax.py box FixBondLengths  # one system (and route): rows to
                                                    # stdout, every step to stderr
     python benchmarks/relax.py alpha cluster       # BFGS's alpha swept (RigidFilter)
