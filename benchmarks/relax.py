@@ -22,9 +22,23 @@ steps and the energy left above the minimum per molecule.  ``alpha`` sweeps
 BFGS's initial Hessian (``alpha`` eV/Å² times the identity, in the
 coordinates each route shows the optimizer).
 
+``defaults`` compares what users get without tuning: ``relax()`` with its
+defaults (:class:`rigidmd.relaxopt.RigidLBFGS` with
+:class:`rigidmd.relaxprecon.RigidPrecon`) against ASE's BFGS with defaults on
+the atoms with ``FixBondLengths``, from structures as built (unrelaxed
+``water_cluster`` of 8-64 molecules, seeds 0-2; ``water_box`` of 64-512,
+seeds 0-1), both to fmax 0.01 eV/Å, the 0.05 row read off the same run.
+``large`` times the default on SPC/E boxes with LAMMPS forces (the
+optimizer's own time: everything outside the calculator), ``cell`` relaxes
+the cell (iso, aniso, full) of TIP4P/2005 ice Ih and an SPC/E liquid.
+
 Run::
 
-    python benchmarks/relax.py                     # everything, in turn
+    python benchmarks/relax.py defaults 64 rows.txt  # systems up to 64 molecules
+    python benchmarks/relax.py totals rows.txt     # sums over systems both routes finished
+    python benchmarks/relax.py large 12            # 1728 waters, LAMMPS forces
+    python benchmarks/relax.py cell                # cell relaxation, LAMMPS forces
+    python benchmarks/relax.py                     # the perturbed-minimum study, in turn
     python benchmarks/relax.py box FixBondLengths  # one system (and route): rows to
                                                    # stdout, every step to stderr
     python benchmarks/relax.py alpha cluster       # BFGS's alpha swept (RigidFilter)
@@ -122,12 +136,23 @@ def run_route(route, start, rc, fmaxes, log=None, steps=5000, **bfgs):
     if route == "RigidFilter":
         target = RigidFilter(atoms)
     else:
-        n = len(atoms) // 3
-        atoms.set_constraint(FixBondLengths(
-            [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]))
+        fix_water_bonds(atoms)
         target = atoms
     CountingTIP3P.calls = 0
-    with BFGS(target, logfile=None, **bfgs) as opt:
+    return recorded(BFGS(target, logfile=None, **bfgs), atoms, fmaxes, log, steps)
+
+
+def fix_water_bonds(atoms):
+    """ASE's rigid water: ``FixBondLengths`` on the three distances of every molecule."""
+    n = len(atoms) // 3
+    atoms.set_constraint(FixBondLengths(
+        [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]))
+
+
+def recorded(opt, atoms, fmaxes, log, steps):
+    """Run ``opt`` to the smallest ``fmax``: ``{fmax: (calls, steps, converged, energy,
+    wall)}`` (a ``fmax`` not reached within ``steps`` gives the end's values)."""
+    with opt:
         recorder = Recorder(opt, atoms, fmaxes, log)
         opt.run(fmax=min(fmaxes), steps=steps)
     for fmax in recorder.todo:  # not reached within steps
@@ -229,10 +254,173 @@ def alpha_rows(key, route="RigidFilter", fmaxes=(0.05, 0.01)):
     return out
 
 
+# ---------------------------------------------------------------- relax() defaults vs ASE's route
+def unrelaxed(kind, size, seed):
+    """An unrelaxed structure as built (``water_cluster`` or ``water_box``) and its cut-off."""
+    if kind == "cluster":
+        return water_cluster(size, seed=seed), 20.0
+    return water_box(size, seed=seed), 6.0
+
+
+def run_defaults(route, start, rc, fmaxes, log=None, steps=5000):
+    """``{fmax: (calls, steps, converged, energy, wall)}``: ``relax()`` with its defaults
+    (``"relax"``) or ASE's BFGS with defaults on the atoms with ``FixBondLengths``
+    (``"ASE"``), one run to the smallest ``fmax`` (the steps of either do not depend on it).
+    ``wall`` is the run's time; ``optimizer`` time is reported by :func:`defaults_rows`."""
+    atoms = start.copy()
+    atoms.calc = CountingTIP3P(rc=rc)
+    CountingTIP3P.calls = 0
+    if route == "relax":
+        from rigidmd.relaxopt import RigidLBFGS
+
+        target = RigidFilter(atoms)
+        opt = RigidLBFGS(target, logfile=None)
+    else:
+        fix_water_bonds(atoms)
+        opt = BFGS(atoms, logfile=None)
+    return recorded(opt, atoms, fmaxes, log, steps)
+
+
+#: (kind, size, seed), smallest first: clusters of 8-64 molecules, boxes of 64-512.
+DEFAULT_SYSTEMS = sorted([("cluster", n, seed) for n in (8, 16, 24, 32, 64) for seed in (0, 1, 2)]
+                         + [("box", side, seed) for side in (4, 5, 6, 8) for seed in (0, 1)],
+                         key=lambda s: (s[1] ** 3 if s[0] == "box" else s[1], s[0], s[2]))
+
+
+def defaults_rows(largest=64, routes=("relax", "ASE"), fmaxes=(0.05, 0.01), out=None):
+    """One table row per system, fmax and route (systems up to ``largest`` molecules)."""
+    rows = []
+    for kind, size, seed in DEFAULT_SYSTEMS:
+        start, rc = unrelaxed(kind, size, seed)
+        n = len(start) // 3
+        if n > largest:
+            continue
+        for route in routes:
+            found = run_defaults(route, start, rc, fmaxes)
+            for fmax in sorted(found, reverse=True):
+                calls, steps, converged, energy, wall = found[fmax]
+                rows.append(f"| {kind} {n} seed {seed} | {fmax} | {route} | {calls} | {steps} "
+                            f"| {converged} | {energy / n:.6f} | {wall:.1f} |")
+                print(rows[-1], flush=True)
+                if out is not None:
+                    with open(out, "a") as fh:
+                        fh.write(rows[-1] + "\n")
+    return rows
+
+
+def totals(lines):
+    """Sum of force calls and mean energy per molecule per (fmax, route) over systems that
+    both routes finished: ``{fmax: {route: (calls, mean energy)}}``."""
+    table = {}
+    for line in lines:
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) < 8 or not cells[3].isdigit():
+            continue
+        table.setdefault((cells[0], cells[1]), {})[cells[2]] = (int(cells[3]), float(cells[6]))
+    out = {}
+    for (_system, fmax), routes in table.items():
+        if len(routes) < 2:
+            continue
+        for route, (calls, energy) in routes.items():
+            c, e, k = out.setdefault(fmax, {}).get(route, (0, 0.0, 0))
+            out[fmax][route] = (c + calls, e + energy, k + 1)
+    return {fmax: {route: (c, e / k) for route, (c, e, k) in r.items()}
+            for fmax, r in out.items()}
+
+
+def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000):
+    """``relax()`` defaults on ``n_side**3`` waters with LAMMPS forces: the optimizer's own time.
+
+    SPC/E (``water_box``, 3.1 Å spacing), ``lj/cut/coul/long`` 9 Å with PPPM 1e-5 through
+    :class:`rigidmd.lammps.LAMMPSCalculator`.  Time inside the calculator is measured around
+    its ``calculate``; everything else (the filter's placement and reduction, the
+    preconditioner, the optimizer) is the optimizer's own.  Returns a table row.
+    """
+    from rigidmd.lammps import LAMMPSCalculator
+    from rigidmd.water import water_model
+
+    water = water_model(model)
+    atoms = water_box(n_side, seed=0, model=water.name)
+    atoms.set_initial_charges(water.charges(len(atoms) // water.sites))
+    calc = LAMMPSCalculator(water.lammps_commands(9.0, "pppm", 1e-5, tail=True),
+                            atom_types={"O": 1, "H": 2})
+    spent = [0.0, 0]
+    original = calc.calculate
+
+    def calculate(*args, **kwargs):
+        t = time.perf_counter()
+        original(*args, **kwargs)
+        spent[0] += time.perf_counter() - t
+        spent[1] += 1
+
+    calc.calculate = calculate
+    atoms.calc = calc
+    t0 = time.perf_counter()
+    result = relax(atoms, fmax=fmax, steps=steps, cell=cell)
+    total = time.perf_counter() - t0
+    n = len(atoms) // water.sites
+    own = total - spent[0]
+    return (f"| {n} {model} waters{', cell ' + cell if cell else ''} | {fmax} | {spent[1]} "
+            f"| {result.steps} | {result.converged} | {result.energy / n:.6f} | {total:.1f} "
+            f"| {own:.1f} ({100 * own / total:.1f} %) |")
+
+
+def cell_rows(optimizers=("RigidLBFGS", "BFGS"), modes=("iso", "aniso", "full"), fmax=0.01):
+    """Cell relaxation at 0 bar with LAMMPS forces: TIP4P/2005 ice Ih (96 molecules) and a
+    216-molecule SPC/E box, per mode and optimizer: force calls, steps, density, energy."""
+    from rigidmd.lammps import LAMMPSCalculator
+    from rigidmd.systems import ice_ih
+    from rigidmd.water import water_model
+
+    rows = []
+    for name, model, build in (("ice Ih", "tip4p2005", lambda: ice_ih((3, 2, 2), seed=0)),
+                               ("liquid", "spce", lambda: water_box(6, seed=0, model="spce"))):
+        water = water_model(model)
+        for mode in modes:
+            for optimizer in optimizers:
+                atoms = build()
+                n = len(atoms) // water.sites
+                atoms.set_initial_charges(water.charges(n))
+                types = {"O": 1, "H": 2, "X": 3} if water.sites == 4 else {"O": 1, "H": 2}
+                atoms.calc = LAMMPSCalculator(water.lammps_commands(8.5, "pppm", 1e-5, tail=True),
+                                              atom_types=types)
+                calls = [0]
+                original = atoms.calc.calculate
+
+                def calculate(*args, _original=original, _calls=calls, **kwargs):
+                    _calls[0] += 1
+                    _original(*args, **kwargs)
+
+                atoms.calc.calculate = calculate
+                t0 = time.perf_counter()
+                result = relax(atoms, fmax=fmax, steps=3000, cell=mode, optimizer=optimizer)
+                density = atoms.get_masses().sum() / atoms.get_volume() * 1e24 / 6.02214076e23
+                rows.append(f"| {name} ({n}) | {mode} | {optimizer} | {calls[0]} "
+                            f"| {result.steps} | {result.converged} | {density:.4f} "
+                            f"| {result.energy / n:.5f} | {time.perf_counter() - t0:.1f} |")
+                print(rows[-1], flush=True)
+    return rows
+
+
 def main():
     import sys
 
     args = sys.argv[1:]
+    if args[:1] == ["cell"]:  # cell: cell relaxation with LAMMPS forces, rows to stdout
+        cell_rows()
+        return
+    if args[:1] == ["large"]:  # large [N_SIDE [CELL]]: optimizer's own time, LAMMPS forces
+        print(large(int(args[1]) if len(args) > 1 else 12,
+                    cell=args[2] if len(args) > 2 else False), flush=True)
+        return
+    if args[:1] == ["defaults"]:  # defaults [LARGEST [FILE]]: relax() against ASE's route
+        largest = int(args[1]) if len(args) > 1 else 64
+        defaults_rows(largest, out=args[2] if len(args) > 2 else None)
+        return
+    if args[:1] == ["totals"]:  # totals FILE: sums over the systems both routes finished
+        for fmax, routes in totals(Path(args[1]).read_text().splitlines()).items():
+            print(fmax, routes)
+        return
     if args[:1] == ["alpha"]:  # alpha SYSTEM [ROUTE]: BFGS's alpha swept, rows to stdout
         alpha_rows(args[1], *args[2:])
         return

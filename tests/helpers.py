@@ -151,6 +151,18 @@ def coulomb_lj_lammps(atoms, cutoff=60.0):
     return cmds, charges, labels
 
 
+class ZeroStress(Calculator):
+    """No interactions, with stress: an ideal gas of rigid bodies (nothing resists a cell
+    shrinking under pressure)."""
+
+    implemented_properties = ["energy", "forces", "stress"]
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        self.results = {"energy": 0.0, "forces": np.zeros((len(self.atoms), 3)),
+                        "stress": np.zeros(6)}
+
+
 class ZeroForce(Calculator):
     """No interactions: zero energy and forces (a free rigid body)."""
 

@@ -134,31 +134,41 @@ def test_body_larger_than_half_the_cell_is_refused():
         RigidBodies.resolve(chain, [[0, 1, 2]]).geometry(chain)
 
 
-def test_the_quick_bound_of_check_bodies_fit_never_passes_a_body_that_does_not_fit():
-    """check_bodies_fit returns early when 2 R |g_k| < 1/2 (R: the model's radius); over
-    random sheared and shrunk cells around the threshold it refuses exactly the cells in
-    which a body's extent along a cell vector, computed atom by atom, reaches one half."""
-    from rigidmd.core.bodies import check_bodies_fit
+def test_the_one_rule_for_a_body_spanning_half_the_cell():
+    """body_too_wide refuses exactly the cells with 2 R_b >= w_k / 2 (R_b: the body's radius,
+    w_k: the width across a periodic cell vector); every body of a cell it passes reaches
+    less than half the cell along every cell vector, computed atom by atom, so the
+    minimum image is unambiguous (random sheared and shrunk cells around the threshold)."""
+    from rigidmd.core.bodies import body_radii, body_too_wide, cell_widths, check_bodies_fit
     from rigidmd.core.dynamics import RigidVerlet
 
     atoms = co2_water_mixture(n_co2=2, n_water=2, box=True)
     dyn = RigidVerlet(atoms, 1.0, bodies="mol-id")
     model, r = dyn.model, dyn.record.r
+    spans = 2 * body_radii(model)
     rng = np.random.default_rng(0)
     refused = passed = 0
     for _ in range(400):
-        cell = np.diag(rng.uniform(2.0, 6.0, 3)) + np.tril(rng.uniform(-1.5, 1.5, (3, 3)), -1)
-        frac = np.linalg.solve(cell.T, r.T).T
-        extent = (np.maximum.reduceat(frac, model.starts)
-                  - np.minimum.reduceat(frac, model.starts)).max()
-        if extent >= 0.5:
-            with pytest.raises(ValueError, match="minimum image is ambiguous"):
-                check_bodies_fit(r, model, cell, [True] * 3)
+        cell = np.diag(rng.uniform(2.0, 12.0, 3)) + np.tril(rng.uniform(-1.5, 1.5, (3, 3)), -1)
+        wide = body_too_wide(model, cell, [True] * 3)
+        if spans.max() >= 0.5 * cell_widths(cell).min():
+            b, k, span, width = wide
+            assert span == spans.max() and width == cell_widths(cell).min()
+            with pytest.raises(ValueError, match=f"body {b} .* not less than half the periodic "
+                                                 f"cell's width across cell vector {k}"):
+                check_bodies_fit(model, cell, [True] * 3)
             refused += 1
         else:
-            check_bodies_fit(r, model, cell, [True] * 3)
+            assert wide is None
+            check_bodies_fit(model, cell, [True] * 3)
+            frac = np.linalg.solve(cell.T, r.T).T
+            extent = np.maximum.reduceat(frac, model.starts) - np.minimum.reduceat(
+                frac, model.starts)
+            assert extent.max() < 0.5
             passed += 1
     assert refused > 50 and passed > 50  # both sides of the threshold were tried
+    # A direction that is not periodic never refuses.
+    assert body_too_wide(model, np.diag([1.0, 50.0, 50.0]), [False, True, True]) is None
 
 
 def test_connectivity_warns_about_joined_molecules():

@@ -18,9 +18,13 @@ Orientation :math:`q_b = q_{\mathrm{ref},b} \otimes \exp(\varphi_b)`: the
 rotation vector :math:`\varphi_b` is in the body's principal frame about a
 reference orientation; when :math:`|\varphi_b|` exceeds
 :data:`ANCHOR_ANGLE` the reference becomes the current orientation and the
-row 0 (the rotation vector's chart stays well conditioned: the right
-Jacobian :math:`J_r(\varphi)` has singular values between
-:math:`\sin(|\varphi|/2)/(|\varphi|/2) \ge 0.84` and 1 below 2 rad).  The
+row 0, when the optimizer next reads the coordinates (the rotation vector's
+chart stays well conditioned: the right Jacobian :math:`J_r(\varphi)` has
+singular values between :math:`\sin(|\varphi|/2)/(|\varphi|/2) \ge 0.76`
+and 1 below 2.5 rad).  The row jumps then: an optimizer's memory of earlier
+steps no longer fits it (:class:`rigidmd.relaxopt.RigidLBFGS` clears its
+memory; a line search of ASE's BFGSLineSearch failed after one on a water
+dimer at 2 rad, which is why the angle is 2.5, not less).  The
 body-frame torque :math:`\tau_b` (eV) becomes a force in eV/Å through the
 body's length :math:`\ell_b`, the root-mean-square distance of its atoms
 from its centre of mass (0.75 Å for a TIP3P water): a torque :math:`\tau`
@@ -43,13 +47,15 @@ import numpy as np
 from ase.calculators.calculator import PropertyNotImplementedError
 
 from rigidmd import relaxcell
-from rigidmd.core import operators as ops
+from rigidmd.core import observables as obs
 from rigidmd.core import quaternion as quat
-from rigidmd.core.bodies import RigidBodies
+from rigidmd.core.bodies import RigidBodies, check_bodies_fit
 from rigidmd.core.checks import check_finite
 from rigidmd.core.dof import RigidBodyDOF
-from rigidmd.core.forces import calculate_together
+from rigidmd.core.forces import ForceEvaluator
+from rigidmd.core.link import BodyLink
 from rigidmd.core.model import describe_atoms
+from rigidmd.core.record import StepRecord
 
 try:  # ASE >= 3.24
     from ase.filters import OptimizableFilter as _Optimizable
@@ -60,7 +66,7 @@ __all__ = ["RigidFilter", "relax", "Relaxation", "OPTIMIZERS", "optimizer_class"
            "rotation_quaternion", "right_jacobian_transpose"]
 
 #: Rotation (rad) beyond which a body's reference orientation is moved to its current one.
-ANCHOR_ANGLE = 2.0
+ANCHOR_ANGLE = 2.5
 
 
 def rotation_quaternion(phi):
@@ -168,6 +174,7 @@ class RigidFilter:
         rigid = RigidBodies.resolve(atoms, bodies)
         geometry = rigid.geometry(atoms)
         model = geometry.model
+        check_bodies_fit(model, atoms.cell.array, atoms.pbc, "in RigidFilter; use a larger cell")
         self._fixed_bodies, self._fixed_free = _honoured_constraints(atoms, model)
         n_units = model.n_bodies + model.n_free
         if cell_factor is None:
@@ -188,6 +195,14 @@ class RigidFilter:
         else:
             self.lengths = np.zeros(0)
         self._q_ref = geometry.quaternions.copy()
+        # The machinery of the dynamics: the body link places the atoms, the force evaluator
+        # calls the calculator (energy, forces and with the cell the stress in one call) and
+        # reduces the forces to the bodies, with the molecular virial.
+        self._link = BodyLink(atoms, model)
+        self._state = self._link.initial_state(geometry)
+        self._record = StepRecord(self._state, model)
+        self._evaluator = ForceEvaluator(self._link, self._record, stress=mode is not None)
+        self._evaluator.begin_step(0, energy=True)  # the energy with every call
         self._cell0 = atoms.cell.array.copy()
         nb, nf = model.n_bodies, model.n_free
         self._slices = (slice(0, nb), slice(nb, 2 * nb), slice(2 * nb, 2 * nb + nf),
@@ -197,6 +212,7 @@ class RigidFilter:
         x[self._slices[2]] = atoms.positions[model.free]
         self._x = x
         self._placed = None  # (positions array, r) last written, to notice outside moves
+        self._results = {}  # coordinates (bytes) -> (energy, generalized forces), at most 2
         self.constraints = []
         self.info = atoms.info
 
@@ -214,21 +230,34 @@ class RigidFilter:
         return quat.multiply(self._q_ref, rotation_quaternion(self._phi()))
 
     def _place(self):
-        """Write positions (and cell) of the coordinates into the atoms."""
-        model, D = self.model, self._deformation()
+        """Write positions (and cell) of the coordinates into the atoms, through the body link."""
+        model, D, state = self.model, self._deformation(), self._state
         q = self._orientations()
-        r = quat.rotate(q[model.atom_body], model.body_coordinates)
-        X = self._x[self._slices[0]] @ D.T
-        positions = self.atoms.positions.copy()
-        positions[model.order] = X[model.atom_body] + r
-        positions[model.free] = self._x[self._slices[2]] @ D.T
+        state.X = self._x[self._slices[0]] @ D.T
+        state.q = q
+        state.x = self._x[self._slices[2]] @ D.T
         if self.mode is not None:
-            self.atoms.set_cell(self._cell0 @ D.T, scale_atoms=False)
-        self.atoms.set_positions(positions, apply_constraint=False)
-        self._placed = (positions, r, q, D)
+            cell = self._cell0 @ D.T
+            check_bodies_fit(model, cell, self.atoms.pbc,
+                             "the cell relaxation shrank the cell below the bodies (a "
+                             "calculator without a repulsion at short range, or a pressure "
+                             "too high, collapses the cell); the atoms keep the last cell "
+                             "that fitted")
+            state.cell = cell
+            self.atoms.set_cell(cell, scale_atoms=False)
+            self._record.cell_changed()
+        r = self._link.place(state, self._record.r)
+        self._placed = (self.atoms.positions.copy(), r, q, D)
 
     def get_positions(self):
-        """The generalized coordinates, shape (n, 3) (Å; the cell rows dimensionless × c)."""
+        """The generalized coordinates, shape (n, 3) (Å; the cell rows dimensionless × c).
+
+        A body turned by more than :data:`ANCHOR_ANGLE` from its reference is
+        re-anchored here (its reference becomes its orientation, its rows 0),
+        when the optimizer reads the coordinates at the start of a step, never
+        between the trial points of a line search.
+        """
+        self._reanchor()
         return self._x.copy()
 
     def set_positions(self, new, **kwargs):
@@ -243,15 +272,56 @@ class RigidFilter:
             block = self._x[rows]
             block[mask] = fixed[rows][mask]
         self._place()
-        phi = self._phi()
-        far = np.linalg.norm(phi, axis=1) > ANCHOR_ANGLE
+
+    def _reanchor(self):
+        if not self.model.n_bodies:
+            return
+        far = np.linalg.norm(self._phi(), axis=1) > ANCHOR_ANGLE
         if np.any(far):
-            self._q_ref[far] = self._placed[2][far]
+            q = self._current()[2]
+            self._q_ref[far] = q[far]
             block = self._x[self._slices[1]]
             block[far] = 0.0
             self.reanchored += int(far.sum())
+            self._results.clear()  # the coordinates of earlier results meant other references
 
     positions = property(get_positions, set_positions)
+
+    def restore(self, x):
+        """Move back to coordinates ``x`` visited before, keeping their energy and forces.
+
+        For a probe (a preconditioner's estimate): ``set_positions(x + v)``,
+        ``get_forces()``, ``restore(x)`` costs one force call, not two.
+        """
+        self._x = np.asarray(x, dtype=float).reshape(self._x.shape).copy()
+        self._place()
+
+    def rigid_rows(self):
+        """Which rows are what, for a preconditioner (:class:`rigidmd.relaxprecon.RigidPrecon`).
+
+        Returns
+        -------
+        dict
+            ``centres`` (m, 3): the bodies' centres of mass then the free
+            atoms (Å, lab frame, current cell); ``translation_rows`` (m,):
+            their rows; ``rotation_rows`` (n_bodies,) and ``rotation_centre``
+            (n_bodies,): the rotation rows and the index of their body's
+            centre in ``centres``; ``cell_rows`` (0 or 3,); ``n_rows``.
+        """
+        _, _, _, D = self._current()
+        t, r, f, c = (np.arange(len(self._x))[s] for s in self._slices)
+        centres = self._x[np.concatenate([t, f])] @ D.T
+        return {"centres": centres, "translation_rows": np.concatenate([t, f]),
+                "rotation_rows": r, "rotation_centre": np.arange(len(r)),
+                "cell_rows": c, "n_rows": len(self._x)}
+
+    def fixed_rows(self):
+        """Rows that ``FixAtoms`` holds, as a boolean mask of shape (n,)."""
+        mask = np.zeros(len(self._x), dtype=bool)
+        mask[self._slices[0]] = self._fixed_bodies
+        mask[self._slices[1]] = self._fixed_bodies
+        mask[self._slices[2]] = self._fixed_free
+        return mask
 
     def _current(self):
         """The placement of the current coordinates, placing them first if needed."""
@@ -260,16 +330,24 @@ class RigidFilter:
         return self._placed
 
     # ------------------------------------------------------------ energy and gradient
-    def _evaluate(self):
-        names = ["energy", "forces"] + (["stress"] if self.mode else [])
-        calculate_together(self.atoms.calc, self.atoms, names)
-        forces = np.asarray(self.atoms.get_forces(apply_constraint=False), dtype=float)
-        check_finite(forces, "force", "eV/Å", "in RigidFilter")
-        return forces
+    def _cached(self):
+        """(energy, generalized forces) of the current coordinates if computed, else None."""
+        self._current()
+        return self._results.get(self._x.tobytes())
+
+    def _remember(self, energy=None, forces=None):
+        key = self._x.tobytes()
+        old = self._results.get(key, (None, None))
+        if key not in self._results and len(self._results) >= 2:
+            self._results.pop(next(iter(self._results)))
+        self._results[key] = (old[0] if energy is None else energy,
+                              old[1] if forces is None else forces)
 
     def get_potential_energy(self, force_consistent=False, **kwargs):
         """Potential energy (eV), plus :math:`pV` when the cell relaxes (the enthalpy)."""
-        self._current()
+        cached = self._cached()
+        if cached is not None and cached[0] is not None and not force_consistent:
+            return cached[0]
         try:
             energy = self.atoms.get_potential_energy(force_consistent=force_consistent)
         except PropertyNotImplementedError:
@@ -278,14 +356,24 @@ class RigidFilter:
             energy = self.atoms.get_potential_energy()
         if self.mode is not None:
             energy += self.scalar_pressure * self.atoms.get_volume()
+        if not force_consistent:
+            self._remember(energy=float(energy))
         return float(energy)
 
     def get_forces(self, **kwargs):
         """Generalized forces, minus the gradient of the energy, shape (n, 3) (eV/Å)."""
-        _, r, q, D = self._current()
-        model = self.model
-        forces = self._evaluate()
-        F, tau = ops.reduce_forces(forces, r, model)
+        cached = self._cached()
+        if cached is not None and cached[1] is not None:
+            return cached[1].copy()
+        out = self._generalized_forces()
+        self._remember(forces=out.copy())
+        return out
+
+    def _generalized_forces(self):
+        _, _, q, D = self._current()
+        model, record = self.model, self._record
+        self._evaluator.evaluate(self._state)  # the dynamics' force call and reduction
+        F, tau = record.F, record.tau
         out = np.zeros_like(self._x)
         out[self._slices[0]] = F @ D
         if model.n_bodies:
@@ -293,20 +381,18 @@ class RigidFilter:
             g = right_jacobian_transpose(self._phi(), torque_body) / self.lengths[:, None]
             g[model.linear, 0] = 0.0
             out[self._slices[1]] = g
-        out[self._slices[2]] = forces[model.free] @ D
+        out[self._slices[2]] = record.f @ D
         for rows, mask in ((self._slices[0], self._fixed_bodies),
                            (self._slices[1], self._fixed_bodies),
                            (self._slices[2], self._fixed_free)):
             block = out[rows]
             block[mask] = 0.0
         if self.mode is not None:
-            stress = np.asarray(self.atoms.get_stress(voigt=False, apply_constraint=False),
-                                dtype=float)
-            check_finite(stress, "stress", "eV/Å³", "in RigidFilter")
-            volume = self.atoms.get_volume()
-            W = relaxcell.molecular_virial(stress, volume, r, forces, tau, model)
+            # The barostats' molecular virial (symmetric) and its antisymmetric part, half
+            # the bodies' total torque: the full virial of a deformation at fixed orientations.
+            W = record.virial - obs.torque_virial(tau)
             out[self._slices[3]] = -relaxcell.cell_gradient(
-                W, volume, D, self.scalar_pressure, self.mode, self.cell_factor)
+                W, record.volume, D, self.scalar_pressure, self.mode, self.cell_factor)
         return out
 
     # ------------------------------------------------------------ what ASE asks of a filter
@@ -390,8 +476,14 @@ def _honoured_constraints(atoms, model):
     return fixed_bodies, fixed[model.free]
 
 
-#: The optimizers :func:`relax` takes by name (all of :mod:`ase.optimize` that take Atoms).
-OPTIMIZERS = ("BFGS", "LBFGS", "FIRE", "BFGSLineSearch", "GPMin", "MDMin")
+#: The optimizers :func:`relax` takes by name: rigidmd's default
+#: (:class:`rigidmd.relaxopt.RigidLBFGS`), ASE's preconditioned ones (given a
+#: :class:`rigidmd.relaxprecon.RigidPrecon`) and all of :mod:`ase.optimize` that take Atoms.
+OPTIMIZERS = ("RigidLBFGS", "PreconLBFGS", "PreconFIRE", "BFGS", "LBFGS", "FIRE",
+              "BFGSLineSearch", "GPMin", "MDMin")
+
+#: The optimizers that take a preconditioner (``precon``); :func:`relax` gives them a RigidPrecon.
+PRECONDITIONED = ("RigidLBFGS", "PreconLBFGS", "PreconFIRE")
 
 
 @dataclass
@@ -422,13 +514,22 @@ def optimizer_class(name):
         return name
     if name not in OPTIMIZERS:
         raise ValueError(f"optimizer={name!r}: expected one of {', '.join(OPTIMIZERS)}")
+    if name == "RigidLBFGS":
+        from rigidmd.relaxopt import RigidLBFGS
+
+        return RigidLBFGS
+    if name in ("PreconLBFGS", "PreconFIRE"):
+        import ase.optimize.precon
+
+        return getattr(ase.optimize.precon, name)
     import ase.optimize
 
     return getattr(ase.optimize, name)
 
 
-def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="BFGS", cell=False,
-          scalar_pressure=0.0, trajectory=None, logfile=None, **kwargs) -> Relaxation:
+def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", cell=False,
+          scalar_pressure=0.0, trajectory=None, logfile=None, observers=(),
+          append_trajectory=False, **kwargs) -> Relaxation:
     """Relax the rigid bodies of ``atoms`` (and the cell) in place with an ASE optimizer.
 
     Parameters
@@ -441,17 +542,29 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="BFGS", cell=F
         Largest generalized force at convergence (eV/Å; see :class:`RigidFilter`).
     steps : int, default 1000
         Optimizer steps allowed.
-    optimizer : str or ase.optimize.Optimizer subclass, default "BFGS"
+    optimizer : str or ase.optimize.Optimizer subclass, default "RigidLBFGS"
+        One of :data:`OPTIMIZERS` or a class.  The default,
+        :class:`rigidmd.relaxopt.RigidLBFGS`, needs no tuning: limited-memory
+        BFGS preconditioned by :class:`rigidmd.relaxprecon.RigidPrecon`
+        (O(n) per step, independent of the number of BLAS threads).
+        ``PreconLBFGS`` and ``PreconFIRE`` (ASE's) get a ``RigidPrecon``
+        unless ``precon`` is given.
     cell, scalar_pressure :
         As for :class:`RigidFilter` (pressure in eV/Å³).
     trajectory, logfile : str or file, optional
         Passed to the optimizer (ASE's trajectory of the atoms, its log).
+    observers : sequence of callables, optional
+        Each called after every step as ``observer(step, energy, fmax)``
+        (step of this call, energy in eV with :math:`pV`, largest generalized
+        force in eV/Å; no extra force call); an exception it raises stops
+        the relaxation after the step's trajectory frame.
+    append_trajectory : bool, default False
+        Append to ``trajectory`` (continuing a relaxation) instead of replacing it.
     **kwargs
-        Further optimizer arguments (``maxstep``, ...).  BFGS's ``alpha``
-        (initial Hessian, eV/Å² times the identity in the rows of
-        :class:`RigidFilter`; ASE's default 70) sets most of the cost: on
-        a 32-water cluster and a 64-water box ``alpha=5.0`` took 12 and 13
-        force calls to fmax 0.01 eV/Å against 53 (``benchmarks/relax.txt``).
+        Further optimizer arguments (``maxstep``, ...).  With ASE's BFGS,
+        ``alpha`` (initial Hessian, eV/Å² times the identity in the rows of
+        :class:`RigidFilter`; ASE's default 70) sets most of the cost
+        (``benchmarks/relax.txt``); the default optimizer needs none.
 
     Returns
     -------
@@ -463,8 +576,27 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="BFGS", cell=F
         raise ValueError(f"relax: steps={steps!r} must be a whole number >= 0")
     cls = optimizer_class(optimizer)
     view = RigidFilter(atoms, bodies, cell=cell, scalar_pressure=scalar_pressure)
-    with cls(view, trajectory=trajectory, logfile=logfile, **kwargs) as opt:
+    if cls.__name__ in PRECONDITIONED and "precon" not in kwargs:
+        from rigidmd.relaxprecon import RigidPrecon
+
+        kwargs["precon"] = RigidPrecon()
+    with cls(view, trajectory=trajectory, logfile=logfile, append_trajectory=append_trajectory,
+             **kwargs) as opt:
+        for observer in observers:
+            opt.attach(_Report(observer, opt, view), interval=1)
         converged = bool(opt.run(fmax=fmax, steps=int(steps)))
         nsteps = opt.get_number_of_steps()
     left = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.0
     return Relaxation(converged, int(nsteps), float(atoms.get_potential_energy()), left)
+
+
+class _Report:
+    """``observer(step, energy, fmax)`` of the optimizer's current point (cached: no call)."""
+
+    def __init__(self, observer, opt, view):
+        self.observer, self.opt, self.view = observer, opt, view
+
+    def __call__(self):
+        forces = self.view.get_forces()
+        fmax = float(np.sqrt(np.sum(forces * forces, axis=1).max())) if len(forces) else 0.0
+        self.observer(self.opt.nsteps, self.view.get_potential_energy(), fmax)

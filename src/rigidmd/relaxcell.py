@@ -28,14 +28,14 @@ projected onto the mode's coordinates.  :math:`W` is the calculator's atomic
 virial :math:`-V\sigma` less the intramolecular part
 :math:`\sum_b\sum_{i\in b} r_i \otimes f_i`, whose symmetric part is
 :func:`rigidmd.core.operators.intramolecular_virial` and whose antisymmetric part
-is half the bodies' total torque (:math:`R_{ij} - R_{ji} = \epsilon_{ijk}\tau_k`).
+is half the bodies' total torque (:math:`R_{ij} - R_{ji} = \epsilon_{ijk}\tau_k`): the one
+molecular virial of the package, :func:`rigidmd.core.observables.molecular_virial`
+(the barostats' one) less :func:`rigidmd.core.observables.torque_virial`.
 """
 
 import numpy as np
 
-from rigidmd.core import operators as ops
-
-__all__ = ["CELL_MODES", "deformation", "molecular_virial", "cell_gradient", "cell_mode"]
+__all__ = ["CELL_MODES", "deformation", "cell_gradient", "cell_mode"]
 
 #: The cell relaxations: isotropic, the three cell lengths, the full (symmetric) strain.
 CELL_MODES = ("iso", "aniso", "full")
@@ -84,41 +84,14 @@ def deformation(u, mode, cell_factor):
     return np.eye(3) + 0.5 * (u + u.T) / cell_factor
 
 
-def molecular_virial(stress, volume, r, forces, torques, model):
-    r"""The full (unsymmetrised) molecular virial :math:`W` (eV, 3x3).
-
-    .. math:: W = -V\sigma - \mathrm{sym}(R) - \tfrac12 [\tau]_\times,
-              \quad [\tau]_{\times,ij} = \epsilon_{ijk} \textstyle\sum_b \tau_{b,k}
-
-    with :math:`\mathrm{sym}(R)` from
-    :func:`rigidmd.core.operators.intramolecular_virial`.
-
-    Parameters
-    ----------
-    stress : numpy.ndarray, shape (3, 3)
-        The calculator's stress (eV/Å³), ASE's sign.
-    volume : float
-        Å³.
-    r : numpy.ndarray, shape (n_body_atoms, 3)
-        Lab displacements of the body atoms from their centres of mass (Å).
-    forces : numpy.ndarray, shape (n_atoms, 3)
-        eV/Å.
-    torques : numpy.ndarray, shape (n_bodies, 3)
-        Lab torques about the centres of mass (eV).
-    model : rigidmd.core.model.BodyModel
-    """
-    tx, ty, tz = torques.sum(axis=0) if len(torques) else np.zeros(3)
-    antisym = 0.5 * np.array([[0.0, tz, -ty], [-tz, 0.0, tx], [ty, -tx, 0.0]])
-    return -volume * stress - ops.intramolecular_virial(r, forces, model) - antisym
-
-
 def cell_gradient(virial, volume, D, scalar_pressure, mode, cell_factor):
     r"""Gradient of :math:`E + pV` with respect to the cell rows ``u`` (eV).
 
     Parameters
     ----------
     virial : numpy.ndarray, shape (3, 3)
-        :math:`W` of :func:`molecular_virial` (eV).
+        The full :math:`W` (eV): :func:`rigidmd.core.observables.molecular_virial` less
+        :func:`rigidmd.core.observables.torque_virial`.
     volume : float
         Current volume (Å³).
     D : numpy.ndarray, shape (3, 3)

@@ -1,25 +1,132 @@
-"""Relaxing the structure of a run: ``rigidmd relax CONFIG`` and the ``relax:`` section.
+"""Relaxing the structure of a run: the ``relax:`` section (the command: rigidmd.relaxcli).
 
 :func:`relax_structure` relaxes the rigid bodies (and the cell) of a run's
 start with :func:`rigidmd.optimize.relax`, writing the optimizer's trajectory
 (every step, so the last frame is the structure reached) and log in the
-output directory.  A relaxation that does not converge within its steps
-raises :class:`RelaxationNotConverged` with one line naming the trajectory
-whose last frame holds the structure reached.
+output directory.  It is a product path as ``rigidmd run`` is:
+
+* **Progress** on stderr: step, energy, largest generalized force and
+  elapsed time, in place on a terminal, a line every 10 steps or 30 s otherwise.
+* **Signals**: SIGTERM, SIGINT (Ctrl-C) and SIGUSR1 finish the current
+  step and its trajectory frame, then stop with exit status 143, 130 or 138
+  and one line saying how to continue (:class:`RelaxationStopped`); a second
+  Ctrl-C stops at once, without a traceback.
+* **Resume**: ``rigidmd relax CONFIG --resume`` continues from the last frame
+  of the relaxation's trajectory, appending to it and to its log (the
+  optimizer's memory of earlier steps starts afresh).
+* **Nothing read is lost**: the structure is read before any output is
+  touched; an earlier relaxation's outputs are replaced only with
+  ``--overwrite``, and never when the structure *is* that trajectory.
+
+A relaxation that does not converge within its steps raises
+:class:`RelaxationNotConverged` with one line naming the trajectory and how
+to continue.
 """
 
 import sys
+import time
+
+import numpy as np
 
 from rigidmd.optimize import relax
 
-__all__ = ["relax_structure", "RelaxationNotConverged", "relax_only"]
+__all__ = ["relax_structure", "RelaxationNotConverged", "RelaxationStopped", "RelaxProgress",
+           "continue_from"]
 
 
 class RelaxationNotConverged(RuntimeError):
     """A relaxation reached its step limit above ``fmax``."""
 
 
-def relax_structure(atoms, bodies, section, directory, stream=sys.stdout):
+class RelaxationStopped(RuntimeError):
+    """A stop signal ended a relaxation after a whole step; ``status`` is the exit status."""
+
+    def __init__(self, message, status):
+        super().__init__(message)
+        self.status = status
+
+
+class RelaxProgress:
+    """Progress of a relaxation on ``stream``: in place on a terminal, else a line every 10
+    steps or 30 s (step, energy, largest generalized force, elapsed time)."""
+
+    def __init__(self, total, done=0, fmax=0.05, stream=None, width=20):
+        self.total, self.done, self.fmax, self.width = int(total), int(done), fmax, width
+        self.stream = sys.stderr if stream is None else stream
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.t0 = self.last = time.perf_counter()
+
+    def __call__(self, step, energy, fmax):
+        now = time.perf_counter()
+        step = self.done + step
+        # Progress toward fmax on a log scale: a bar that fills as the force falls.
+        start = getattr(self, "first", None)
+        if start is None:
+            start = self.first = max(fmax, self.fmax * 1.0001)
+        fraction = np.clip(np.log(start / max(fmax, 1e-300)) / np.log(start / self.fmax), 0, 1)
+        line = (f"relax step {step:>{len(str(self.total))}}/{self.total}  energy "
+                f"{energy:.6f} eV  fmax {fmax:.4f} eV/Å (target {self.fmax:g})  "
+                f"{now - self.t0:.1f} s")
+        if self.tty:
+            bar = "#" * int(self.width * fraction)
+            self.stream.write(f"\r[{bar:<{self.width}}] {line}")
+        elif step % 10 == 0 or now - self.last > 30 or fmax < self.fmax:
+            self.stream.write(line + "\n")
+            self.last = now
+        self.stream.flush()
+
+    def finish(self):
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def continue_from(atoms, trajectory):
+    """Put the last frame of a relaxation's ``trajectory`` into ``atoms``; steps it holds.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+        The configuration's structure (its atoms, bodies and calculator are kept).
+    trajectory : pathlib.Path
+
+    Returns
+    -------
+    int
+        Optimizer steps the trajectory records (frames less one).
+
+    Raises
+    ------
+    rigidmd.config.quantities.ConfigError
+        No trajectory, an unreadable or empty one, or one of other atoms.
+    """
+    from ase.io import read
+
+    from rigidmd.config.quantities import ConfigError
+
+    if not trajectory.is_file():
+        raise ConfigError(f"--resume: no relaxation to continue ({trajectory} does not "
+                          "exist); start one without --resume")
+    try:
+        frames = read(trajectory, index=":")
+    except Exception as err:  # ASE raises many kinds on a damaged file  # noqa: BLE001
+        raise ConfigError(f"--resume: cannot read {trajectory} "
+                          f"({type(err).__name__}: {' '.join(str(err).split())})") from None
+    if not frames:
+        raise ConfigError(f"--resume: {trajectory} holds no frame; start again with "
+                          "--overwrite")
+    last = frames[-1]
+    if len(last) != len(atoms) or np.any(last.numbers != atoms.numbers):
+        raise ConfigError(f"--resume: {trajectory} holds {len(last)} atoms "
+                          f"({last.get_chemical_formula()}), the configuration's structure "
+                          f"{len(atoms)} ({atoms.get_chemical_formula()}); not its relaxation")
+    atoms.set_cell(last.cell, scale_atoms=False)
+    atoms.positions = last.positions
+    return len(frames) - 1
+
+
+def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, resume=False,
+                    done=0, hint=None, progress=None, stop=None):
     """Relax ``atoms`` in place as ``section`` says; files go to ``directory``.
 
     Parameters
@@ -30,7 +137,18 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout):
     section : rigidmd.config.relaxsection.RelaxSection
     directory : pathlib.Path
     stream : file
-        Where the one-line summary goes.
+        Where the summary and the stop message go.
+    resume : bool
+        Append to the trajectory and log (a continued relaxation).
+    done : int
+        Steps already taken (a continued relaxation): ``section.steps`` counts them.
+    hint : str, optional
+        The command that continues this relaxation, for the messages.
+    progress : file, optional
+        Where progress goes (default stderr).
+    stop : rigidmd.run.runner.StopSignals, optional
+        Signal handling for the relaxation (installed around it; checked after
+        every step).  Without it a signal does what it does outside rigidmd.
 
     Returns
     -------
@@ -41,70 +159,51 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout):
     RelaxationNotConverged
         Not converged within ``section.steps`` (the trajectory holds the
         structure reached).
+    RelaxationStopped
+        A stop signal (after the step's frame; the message was printed).
     """
+    from contextlib import nullcontext
+
     from rigidmd.core.bodies import store_bodies_in_tags
 
     directory.mkdir(parents=True, exist_ok=True)
     store_bodies_in_tags(atoms, bodies.body_ids)  # every frame carries the bodies
     trajectory = directory / section.trajectory
     log = directory / section.log
-    result = relax(atoms, bodies, fmax=section.fmax, steps=section.steps,
-                   optimizer=section.optimizer, cell=section.cell,
-                   scalar_pressure=section.pressure, trajectory=str(trajectory),
-                   logfile=str(log))
+    left = max(section.steps - done, 0)
+    report = RelaxProgress(section.steps, done, section.fmax, progress)
+    observers = (report,) if stop is None else (report, lambda *_: stop.check())
+    continuing = hint or "rigidmd relax CONFIG --resume"
+    status = 0
+    try:
+        with stop or nullcontext(), open(log, "a" if resume else "w",
+                                         encoding="utf-8") as logfile:
+            result = relax(atoms, bodies, fmax=section.fmax, steps=left,
+                           optimizer=section.optimizer, cell=section.cell,
+                           scalar_pressure=section.pressure, trajectory=str(trajectory),
+                           logfile=logfile, append_trajectory=resume, observers=observers)
+    except Exception as err:
+        signum = getattr(err, "signum", None)  # the stop's StopRequest, after a whole step
+        if stop is None or signum is None:
+            raise
+        status, message = 128 + int(signum), f"stopped by {err}"
+    except KeyboardInterrupt:
+        status, message = 130, "interrupted at once (second Ctrl-C)"
+    finally:
+        report.finish()
+    if status:
+        text = (f"relax: {message}; the structure reached is the last frame of {trajectory}; "
+                f"continue with: {continuing}")
+        print(text, file=stream)
+        raise RelaxationStopped(text, status)
     cell = f", cell {section.cell}" if section.cell else ""
     if not result.converged:
         raise RelaxationNotConverged(
             f"relax: {section.optimizer} did not reach fmax {section.fmax:g} eV/Å in "
             f"{section.steps} steps (largest generalized force {result.fmax:.3g} eV/Å); the "
-            f"structure reached is the last frame of {trajectory}; raise relax.steps or "
-            "restart from it")
-    print(f"relaxed {bodies} ({section.optimizer}{cell}) in {result.steps} steps to fmax "
-          f"{result.fmax:.3g} eV/Å, energy {result.energy:.6f} eV; wrote {trajectory} and "
+            f"structure reached is the last frame of {trajectory}; raise relax.steps and "
+            f"continue with: {continuing}")
+    print(f"relaxed {bodies} ({section.optimizer}{cell}) in {done + result.steps} steps to "
+          f"fmax {result.fmax:.3g} eV/Å, energy {result.energy:.6f} eV; wrote {trajectory} and "
           f"{log}", file=stream)
     return result
-
-
-def relax_only(raw, stream=sys.stdout, trust=False):
-    """``rigidmd relax CONFIG``: build the structure and calculator, relax, write.
-
-    Parameters
-    ----------
-    raw : dict
-        A configuration as :func:`rigidmd.config.load_config` returns; the MD
-        keys may be present and are ignored, a missing ``relax:`` section is
-        the defaults of :class:`~rigidmd.config.relaxsection.RelaxSection`.
-    trust : bool
-        ``--trust``: let the calculator section run what could run code
-        (:mod:`rigidmd.config.trust`), as for ``rigidmd run``.
-
-    Returns
-    -------
-    int
-        Exit status: 0.
-    """
-    from pathlib import Path
-
-    from rigidmd.config import known_keys
-    from rigidmd.config.quantities import ConfigError
-    from rigidmd.config.relaxsection import RelaxSection
-    from rigidmd.config.sections import CalculatorSection, OutputsSection, StructureSection
-    from rigidmd.config.trust import check_output_paths
-
-    raw = dict(raw)
-    base = Path(raw.pop("_base", "."))
-    unknown = sorted(set(raw) - known_keys(), key=str)
-    if unknown:
-        raise ConfigError(f"{unknown[0]}: unknown key; allowed: "
-                          f"{', '.join(sorted(known_keys()))}")
-    check_output_paths(raw, trust)
-    structure = StructureSection.from_config(raw, base)
-    calculator = CalculatorSection.from_config(raw, base)
-    calculator.check_trust(trust)
-    outputs = OutputsSection.from_config(raw, base)
-    section = RelaxSection.from_config(raw, base) or RelaxSection()
-    atoms = structure.build_atoms()
-    bodies = structure.resolve_bodies(atoms)
-    atoms.calc = calculator.build(atoms)
-    relax_structure(atoms, bodies, section, outputs.directory, stream)
-    return 0

@@ -5,7 +5,8 @@
     relax:
       fmax: 0.05                  # eV/Å (a bare number, or '0.05 eV/A')
       steps: 1000                 # optimizer steps allowed
-      optimizer: BFGS             # BFGS | LBFGS | FIRE | BFGSLineSearch | GPMin | MDMin
+      optimizer: RigidLBFGS       # RigidLBFGS | PreconLBFGS | PreconFIRE | BFGS | LBFGS | FIRE
+                                  # | BFGSLineSearch | GPMin | MDMin
       cell: false                 # false | true (full) | iso | aniso | full
       pressure: 0 bar             # target pressure with the cell (bar, atm, GPa, Pa, eV/A^3)
       trajectory: relax.traj      # in outputs.directory; every optimizer step
@@ -54,7 +55,7 @@ class RelaxSection:
 
     fmax: float = 0.05
     steps: int = 1000
-    optimizer: str = "BFGS"
+    optimizer: str = "RigidLBFGS"
     cell: object = False
     pressure: float = 0.0
     trajectory: str = "relax.traj"

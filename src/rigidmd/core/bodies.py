@@ -592,14 +592,55 @@ def store_bodies_in_tags(atoms, body_ids) -> None:
     atoms.set_tags(molecule_ids(body_ids))
 
 
-def check_bodies_fit(r, model, cell, pbc, when=""):
-    """Refuse a cell in which a body reaches half the cell's width in a periodic direction.
+def body_radii(model) -> np.ndarray:
+    """Largest distance of each body's atoms from its centre of mass (Å), shape (n_bodies,)."""
+    if model.n_bodies == 0:
+        return np.zeros(0)
+    d = model.body_coordinates
+    return np.sqrt(np.maximum.reduceat(np.sum(d * d, axis=1), model.starts))
+
+
+def body_too_wide(model, cell, pbc):
+    r"""The one rule for "a body spans half the cell": the first body that breaks it, or None.
+
+    A body of radius :math:`R_b` (its largest atom distance from its centre
+    of mass) fits a cell when :math:`2R_b < w_k/2` for every periodic
+    direction ``k``, :math:`w_k` the distance between the cell's opposite
+    faces (:func:`cell_widths`).  The rule does not depend on the body's
+    orientation (a body that fits stays fitting as it turns) and bounds the
+    body's extent along every cell vector below one half, where the minimum
+    image is unambiguous.  The MD barostats (:class:`rigidmd.core.forces.ForceEvaluator`),
+    the Monte Carlo barostat and cell relaxation all use it.
 
     Parameters
     ----------
-    r : numpy.ndarray, shape (n_body_atoms, 3)
-        Lab displacements of the body atoms from their centres of mass (Å),
-        in ``model.order``.
+    model : rigidmd.core.model.BodyModel
+    cell : numpy.ndarray, shape (3, 3)
+    pbc : array_like of bool, shape (3,)
+
+    Returns
+    -------
+    tuple or None
+        ``(b, k, span, width)``: the body, the cell vector across which it
+        does not fit, its span :math:`2R_b` and the width (Å).
+    """
+    pbc = np.asarray(pbc, dtype=bool)
+    if not pbc.any() or model.n_bodies == 0:
+        return None
+    widths = np.where(pbc, cell_widths(cell), np.inf)
+    k = int(np.argmin(widths))
+    if 4.0 * model.radius < widths[k]:
+        return None
+    spans = 2.0 * body_radii(model)
+    b = int(np.argmax(spans))
+    return b, k, float(spans[b]), float(widths[k])
+
+
+def check_bodies_fit(model, cell, pbc, when=""):
+    """Refuse a cell in which a body spans half the cell (the rule of :func:`body_too_wide`).
+
+    Parameters
+    ----------
     model : rigidmd.core.model.BodyModel
     cell : numpy.ndarray, shape (3, 3)
     pbc : array_like of bool, shape (3,)
@@ -611,20 +652,11 @@ def check_bodies_fit(r, model, cell, pbc, when=""):
     ValueError
         Naming the body, its atoms, the cell vector and the widths.
     """
-    pbc = np.asarray(pbc, dtype=bool)
-    if not pbc.any() or model.n_bodies == 0:
-        return
-    # A body's extent along fractional axis k is at most 2 R |g_k|, with R the largest
-    # atom distance from a centre of mass and g_k the k-th reciprocal vector (column k
-    # of the inverse cell): when that bound is below one half, every body fits, and the
-    # per-atom check (a solve over all body atoms, at every barostat step) is not needed.
-    reciprocal = np.linalg.inv(cell)
-    if 2.0 * model.radius * np.sqrt((reciprocal * reciprocal).sum(axis=0)[pbc].max()) < 0.5:
-        return
-    frac = np.linalg.solve(cell.T, r.T).T
-    extent = np.maximum.reduceat(frac, model.starts) - np.minimum.reduceat(frac, model.starts)
-    extent[:, ~pbc] = 0.0
-    b, k = np.unravel_index(np.argmax(extent), extent.shape)
-    if extent[b, k] >= 0.5:
-        _refuse_long_body(model.atoms_of(int(b)), int(b), int(k), extent[b, k], cell,
-                          f"the minimum image is ambiguous{'; ' + when if when else ''}")
+    wide = body_too_wide(model, cell, pbc)
+    if wide is not None:
+        b, k, span, width = wide
+        raise ValueError(
+            f"body {b} (atoms {describe_atoms(model.atoms_of(b))}) spans {span:.3f} Å (twice "
+            f"its largest atom distance from its centre of mass), not less than half the "
+            f"periodic cell's width across cell vector {k} ({width:.3f} Å): the minimum image "
+            f"is ambiguous{'; ' + when if when else ''}")

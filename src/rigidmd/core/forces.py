@@ -142,7 +142,7 @@ class ForceEvaluator:
         """
         atoms, record = self.atoms, self.record
         if self.cell_moves and not np.array_equal(atoms.cell.array, state.cell):
-            check_bodies_fit(record.r, self.model, state.cell, atoms.pbc,
+            check_bodies_fit(self.model, state.cell, atoms.pbc,
                              f"the barostat's cell at step {self.step + 1} is too small for "
                              "it; the step was undone")
             atoms.set_cell(state.cell)
@@ -218,9 +218,9 @@ class ForceEvaluator:
         on rejection, :meth:`evaluate` gives the forces on acceptance.
         """
         atoms = self.atoms
-        r = self.link.place(state)
+        self.link.place(state)
         if not np.array_equal(atoms.cell.array, state.cell):
-            check_bodies_fit(r, self.model, state.cell, atoms.pbc, "a trial cell")
+            check_bodies_fit(self.model, state.cell, atoms.pbc, "a trial cell")
             atoms.set_cell(state.cell)
             self.record.cell_changed()
         energy = float(atoms.get_potential_energy())

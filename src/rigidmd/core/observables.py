@@ -29,8 +29,8 @@ from rigidmd.core.state import RigidState
 __all__ = ["volume", "kinetic_tensor", "kinetic_tensor_of", "translational_kinetic_energies",
            "rotational_kinetic_energies", "rotational_kinetic_energy", "angular_momenta",
            "angular_velocities", "largest_angular_speed", "total_angular_momentum",
-           "free_kinetic_energy", "molecular_virial", "stress_tensor", "voigt",
-           "RigidObservables"]
+           "free_kinetic_energy", "molecular_virial", "torque_virial", "stress_tensor",
+           "voigt", "RigidObservables"]
 
 
 def volume(cell: np.ndarray) -> float:
@@ -118,6 +118,14 @@ def molecular_virial(atomic_stress: np.ndarray, cell_volume: float, r: np.ndarra
                      forces: np.ndarray, model: BodyModel) -> np.ndarray:
     r"""Molecular virial (eV, 3x3): the atomic virial :math:`-V\sigma` less its intramolecular part.
 
+    The symmetric part :math:`\mathrm{sym}(R)` of
+    :math:`R = \sum_b\sum_{i\in b} r_i\otimes f_i`
+    (:func:`rigidmd.core.operators.intramolecular_virial`) is taken out: what the
+    pressure needs (the barostats).  Less :func:`torque_virial` too, it is the
+    full :math:`W = \sum_b X_b\otimes F_b + \sum_\mathrm{free} x\otimes f`,
+    the derivative of the energy under a deformation of the cell that moves
+    the centres of mass and keeps the orientations (:mod:`rigidmd.relaxcell`).
+
     Parameters
     ----------
     atomic_stress : numpy.ndarray, shape (3, 3)
@@ -131,6 +139,17 @@ def molecular_virial(atomic_stress: np.ndarray, cell_volume: float, r: np.ndarra
     model : BodyModel
     """
     return -cell_volume * atomic_stress - ops.intramolecular_virial(r, forces, model)
+
+
+def torque_virial(torques: np.ndarray) -> np.ndarray:
+    r"""The antisymmetric part of the intramolecular virial, :math:`\tfrac12[\sum_b\tau_b]_\times`.
+
+    :math:`[\tau]_{\times,ij} = \epsilon_{ijk}\tau_k` (eV, 3x3), from the lab
+    torques about the centres of mass, ``torques`` of shape (n_bodies, 3) (eV):
+    :math:`R_{ij} - R_{ji}` of :math:`R = \sum_b\sum_{i\in b} r_i\otimes f_i`.
+    """
+    tx, ty, tz = torques.sum(axis=0) if len(torques) else np.zeros(3)
+    return 0.5 * np.array([[0.0, tz, -ty], [-tz, 0.0, tx], [ty, -tx, 0.0]])
 
 
 def stress_tensor(virial: np.ndarray, kinetic: np.ndarray | None, cell_volume: float

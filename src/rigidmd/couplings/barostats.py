@@ -25,6 +25,7 @@ import numpy as np
 from ase import units
 
 from rigidmd.core import observables as obs
+from rigidmd.core.bodies import check_bodies_fit
 from rigidmd.core.dynamics import RigidDynamics
 from rigidmd.couplings.base import (
     TEMPERATURE,
@@ -160,6 +161,7 @@ class Barostat(Coupling):
             raise ValueError(
                 f"couple='tri' shears the cell, but the calculator {type(calc).__name__} needs "
                 "an orthorhombic cell; use couple='aniso' or 'iso'")
+        check_bodies_fit(model, atoms.cell.array, atoms.pbc, "use a larger cell")
 
     @staticmethod
     def pressure_tensor(view: CouplingView) -> np.ndarray:

@@ -87,7 +87,9 @@ Bodies that would span half the cell
 ------------------------------------
 A trial cell in which a body would reach across half of the cell's smallest
 width (twice the largest distance of a body's atom from its centre of mass,
-against half the distance between opposite faces) is rejected without
+against half the distance between opposite faces: the one rule of
+:func:`rigidmd.core.bodies.body_too_wide`, as for the MD barostats and cell
+relaxation) is rejected without
 calling the calculator, as a move to infinite energy.  The minimum-image
 reading of a body's atoms (by rigidmd and by most calculators) fails there;
 treating it as a hard wall keeps detailed balance, whereas stopping the run
@@ -110,7 +112,7 @@ import numpy as np
 from ase.calculators.tip3p import TIP3P
 
 from rigidmd.core import observables as obs
-from rigidmd.core.bodies import cell_widths
+from rigidmd.core.bodies import body_too_wide, cell_widths, check_bodies_fit
 from rigidmd.couplings.barostats import COUPLING, PRESSURE, Barostat, BarostattedDynamics
 from rigidmd.couplings.base import (
     TEMPERATURE,
@@ -366,7 +368,6 @@ class MonteCarloBarostat(Barostat):
         self.refused = 0
         self.exchanged = 0.0
         self.n_particles = 0  # N of the acceptance rule, set by bind
-        self._span = 0.0      # the largest body span (Å), set by bind
         self._limits = (False, 0.0, "")  # the calculator's cell limits, set by check
 
     # -------------------------------------------------------------- set-up
@@ -399,19 +400,11 @@ class MonteCarloBarostat(Barostat):
                 f"the cell's lengths {np.diag(cell).round(4).tolist()} Å must be at least "
                 f"{smallest:g} Å (twice the cut-off) for the calculator {name}; use a larger "
                 "cell or a smaller rc")
-        span = body_span(model.body_coordinates, model.starts)
-        widths = cell_widths(cell)
-        if len(span) and span.max() >= 0.5 * widths.min():
-            b = int(np.argmax(span))
-            raise ValueError(f"body {b} spans {span[b]:.3g} Å, not less than half the cell's "
-                             f"smallest width ({0.5 * widths.min():.3g} Å): the minimum image "
-                             "cannot place it; use a larger cell")
+        check_bodies_fit(model, cell, atoms.pbc, "use a larger cell")
 
     def bind(self, view: CouplingView) -> None:
         super().bind(view)
         model = view.model
-        span = body_span(model.body_coordinates, model.starts)
-        self._span = float(span.max()) if len(span) else 0.0
         self.n_particles = int(model.n_bodies + model.n_free)
 
     # -------------------------------------------------------------- the step
@@ -445,7 +438,7 @@ class MonteCarloBarostat(Barostat):
         uniform = rng.random()
         cell = state.cell.copy()
         new_cell = propose_cell(cell, self.couple, kind, epsilon)
-        if self._span >= 0.5 * cell_widths(new_cell).min():
+        if body_too_wide(view.model, new_cell, (True, True, True)) is not None:
             self.too_thin += 1  # a move to infinite energy: no calculator call
             self._count(kind, False)
             return False

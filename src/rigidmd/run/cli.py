@@ -34,7 +34,8 @@ from rigidmd.core.dynamics import NonFiniteForceError
 from rigidmd.core.operators import ConvergenceError
 from rigidmd.couplings.base import NotExportable
 from rigidmd.lammps.library import LammpsError
-from rigidmd.relaxrun import RelaxationNotConverged, relax_only
+from rigidmd.relaxcli import relax_only
+from rigidmd.relaxrun import RelaxationNotConverged, RelaxationStopped
 from rigidmd.run.fingerprint import resume_command
 from rigidmd.run.logplot import LogError, plot_log
 from rigidmd.run.outputs import OutputError, describe_os_error
@@ -89,6 +90,10 @@ def _export(config, directory, stream=sys.stdout):
     from rigidmd.lammps import export_lammps, tip3p_charges, tip3p_pair_commands
 
     atoms, bodies = Run(config).start_atoms()
+    if config.relax is not None:  # the deck starts where `rigidmd run` would start its MD
+        from rigidmd.relaxcli import relax_for_export
+
+        relax_for_export(config, atoms, bodies, directory, stream)
     atoms.positions = bodies.whole_positions(atoms)
     calc = config.calculator
     if calc.name == "tip3p":
@@ -187,9 +192,14 @@ def _relax_parser(sub, trust_help):
     relax = sub.add_parser("relax", help="relax the rigid bodies (and the cell) of a "
                                          "configuration's structure")
     relax.add_argument("config", help="YAML configuration; its relax: section (default "
-                                      "BFGS to fmax 0.05 eV/Å) says how")
+                                      "RigidLBFGS to fmax 0.05 eV/Å) says how")
     relax.add_argument("--outdir", help="output directory")
     relax.add_argument("--trust", action="store_true", help=trust_help)
+    mode = relax.add_mutually_exclusive_group()
+    mode.add_argument("--resume", action="store_true",
+                      help="continue the relaxation from the last frame of its trajectory")
+    mode.add_argument("--overwrite", action="store_true",
+                      help="replace an earlier relaxation's outputs in the output directory")
 
 
 def main(argv=None):
@@ -229,7 +239,9 @@ def main(argv=None):
             return Run(check_config(config, trust=args.trust), mode=mode,
                        config_path=args.config, resume_hint=_resume_hint(args)).execute()
         if args.command == "relax":
-            return relax_only(_apply_flags(load_config(args.config), args), trust=args.trust)
+            mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
+            return relax_only(_apply_flags(load_config(args.config), args), trust=args.trust,
+                              mode=mode, config_path=args.config)
         if args.command == "export-lammps":
             config = _apply_flags(load_config(args.config), args)
             return _export(check_config(config, trust=args.trust), Path(args.directory))
@@ -241,6 +253,8 @@ def main(argv=None):
             raise
         print(f"rigidmd: error: {' '.join(str(err).split())}", file=sys.stderr)
         return 2
+    except RelaxationStopped as err:  # a stop signal in a run's relaxation: said already
+        return err.status
     except RunStopped as err:
         # The run started and stopped: a failed write, a failure in a step.  The message
         # names the step and the checkpoint to continue from.

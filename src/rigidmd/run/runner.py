@@ -359,7 +359,9 @@ class Run:
             from rigidmd.relaxrun import relax_structure
 
             relax_structure(atoms, bodies, self.config.relax, self.outputs.directory,
-                            self.stream)
+                            self.stream, hint=f"rigidmd run {self.config_path or 'CONFIG'} "
+                            "--overwrite (it relaxes again from the structure)",
+                            stop=StopSignals())
             self._draw_velocities(atoms, bodies)
         out = self.outputs
         # Nothing of this run's is in the directory now: what appears is this run's.

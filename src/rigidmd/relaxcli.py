@@ -1,0 +1,143 @@
+"""``rigidmd relax CONFIG`` and the relaxation before ``rigidmd export-lammps``.
+
+The command's side of :mod:`rigidmd.relaxrun`: the configuration's
+sections, the output directory's lock, the outputs of an earlier
+relaxation (refused, replaced with ``--overwrite`` or continued with
+``--resume``, never the structure being read), and signals.
+"""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from rigidmd.relaxrun import RelaxationStopped, continue_from, relax_structure
+from rigidmd.run.runner import StopSignals
+
+__all__ = ["relax_only", "relax_for_export"]
+
+
+def _hint(directory, config_path):
+    return f"rigidmd relax {config_path or 'CONFIG'} --outdir {directory} --resume"
+
+
+def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None):
+    """``rigidmd relax CONFIG``: build the structure and calculator, relax, write.
+
+    Parameters
+    ----------
+    raw : dict
+        A configuration as :func:`rigidmd.config.load_config` returns; the MD
+        keys may be present and are ignored, a missing ``relax:`` section is
+        the defaults of :class:`~rigidmd.config.relaxsection.RelaxSection`.
+    trust : bool
+        ``--trust``: let the calculator section run what could run code
+        (:mod:`rigidmd.config.trust`), as for ``rigidmd run``.
+    mode : str
+        ``"new"`` (refuses a directory holding a relaxation's outputs),
+        ``"overwrite"`` (replaces them, after every input was read) or
+        ``"resume"`` (continues from the last frame of the trajectory).
+    config_path : str, optional
+        The configuration's file, for the message that says how to continue.
+
+    Returns
+    -------
+    int
+        Exit status: 0, or 130/143/138 after a stop signal.
+    """
+    from rigidmd.config import known_keys
+    from rigidmd.config.quantities import ConfigError
+    from rigidmd.config.relaxsection import RelaxSection
+    from rigidmd.config.sections import CalculatorSection, OutputsSection, StructureSection
+    from rigidmd.config.trust import check_output_paths
+    from rigidmd.run.outputs import OutputError, OutputLock
+
+    raw = dict(raw)
+    base = Path(raw.pop("_base", "."))
+    unknown = sorted(set(raw) - known_keys(), key=str)
+    if unknown:
+        raise ConfigError(f"{unknown[0]}: unknown key; allowed: "
+                          f"{', '.join(sorted(known_keys()))}")
+    check_output_paths(raw, trust)
+    structure = StructureSection.from_config(raw, base)
+    calculator = CalculatorSection.from_config(raw, base)
+    calculator.check_trust(trust)
+    outputs = OutputsSection.from_config(raw, base)
+    section = RelaxSection.from_config(raw, base) or RelaxSection()
+    atoms = structure.build_atoms()  # every input is read before any output is touched
+    bodies = structure.resolve_bodies(atoms)
+    directory = outputs.directory
+    trajectory, log = directory / section.trajectory, directory / section.log
+    source = structure.source if isinstance(structure.source, Path) else None
+    own = source is not None and source.resolve() == trajectory.resolve()
+    directory.mkdir(parents=True, exist_ok=True)
+    lock = OutputLock(directory)
+    lock.acquire()
+    try:
+        done = 0
+        if mode == "resume":
+            done = continue_from(atoms, trajectory)
+            print(f"continuing the relaxation of {trajectory} after step {done}", file=stream)
+        else:
+            existing = [p for p in (trajectory, log) if p.exists()]
+            if own:
+                raise ConfigError(f"structure: {source} is this relaxation's own trajectory; "
+                                  "continue it with --resume (or copy it elsewhere first)")
+            if existing and mode != "overwrite":
+                raise OutputError(f"relax: {existing[0]} holds an earlier relaxation; "
+                                  "continue it with --resume or replace it with --overwrite")
+            for path in existing:
+                path.unlink()
+        atoms.calc = calculator.build(atoms)
+        try:
+            relax_structure(atoms, bodies, section, directory, stream, resume=mode == "resume",
+                            done=done, hint=_hint(directory, config_path),
+                            stop=StopSignals())
+        except RelaxationStopped as stopped:
+            return stopped.status
+        finally:
+            close = getattr(atoms.calc, "close", None)
+            if callable(close):
+                close()
+    finally:
+        lock.release()
+    return 0
+
+
+
+def relax_for_export(config, atoms, bodies, directory, stream=sys.stdout):
+    """Relax a run's start as ``rigidmd run`` would, for ``rigidmd export-lammps``.
+
+    The configuration's ``relax:`` section relaxes ``atoms`` in place with its
+    calculator (trajectory and log in ``directory``, beside the deck), and the
+    velocities are drawn again for the relaxed bodies, as the run does, so
+    that the deck starts from the structure the run's MD starts from.
+
+    Parameters
+    ----------
+    config : rigidmd.config.RunConfig
+        With a ``relax`` section.
+    atoms : ase.Atoms
+        The start (:meth:`rigidmd.run.runner.Run.start_atoms`); no calculator is left on it.
+    bodies : rigidmd.RigidBodies
+    directory : pathlib.Path
+        The export directory.
+    stream : file
+    """
+    from rigidmd import rigid_maxwell_boltzmann
+
+    directory.mkdir(parents=True, exist_ok=True)
+    atoms.calc = config.calculator.build(atoms, directory / "engine")
+    try:
+        relax_structure(atoms, bodies, config.relax, directory, stream,
+                        hint="rigidmd export-lammps CONFIG DIRECTORY (it relaxes again)",
+                        stop=StopSignals())
+    finally:
+        close = getattr(atoms.calc, "close", None)
+        if callable(close):
+            close()
+        atoms.calc = None
+    velocities = config.run.velocities
+    if velocities is not None and config.structure.restart is None:
+        rigid_maxwell_boltzmann(atoms, velocities["temperature_K"], bodies=bodies,
+                                rng=np.random.default_rng(velocities["seed"]))

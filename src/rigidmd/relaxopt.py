@@ -1,0 +1,144 @@
+r"""The default optimizer of :func:`rigidmd.optimize.relax`: preconditioned limited-memory BFGS.
+
+:class:`RigidLBFGS` is L-BFGS (Nocedal & Wright, *Numerical Optimization*,
+2nd ed., algorithm 7.4) whose initial inverse Hessian is the inverse of a
+preconditioner (by default :class:`rigidmd.relaxprecon.RigidPrecon`),
+scaled at every step by :math:`\gamma_k = s^\mathsf{T}y / y^\mathsf{T}P^{-1}y`
+(their eq. 7.20, in the metric of :math:`P`), so that no ``alpha`` needs
+tuning: the curvature comes from the preconditioner's estimate (one force
+call at the start) and then from the steps themselves.
+
+Each step costs one force call.  A step that raises the energy is halved
+(from the last accepted point, at most :data:`MAX_HALVINGS` times) and the
+memory is cleared; every step is capped at ``maxstep`` (Å, the largest row,
+as ASE's ``LBFGS``).  Memory and time per step are O(n) (``memory`` pairs of
+vectors, a sparse preconditioner), and every sum is numpy's own pairwise sum
+rather than a BLAS dot product, so that the path does not depend on the
+number of BLAS threads.
+"""
+
+import numpy as np
+from ase.optimize.optimize import Optimizer
+
+from rigidmd.relaxprecon import RigidPrecon
+
+__all__ = ["RigidLBFGS", "MAX_HALVINGS"]
+
+#: Halvings of a step that raised the energy before it is accepted anyway.
+MAX_HALVINGS = 8
+
+
+def _dot(a, b):
+    """:math:`a \\cdot b` by numpy's pairwise sum (independent of BLAS threads)."""
+    return float(np.sum(a * b))
+
+
+class RigidLBFGS(Optimizer):
+    """Preconditioned L-BFGS with a scaled initial Hessian (see the module docstring).
+
+    Parameters
+    ----------
+    atoms : rigidmd.optimize.RigidFilter
+        Or any ASE optimizable when ``precon`` is None (then the initial
+        inverse Hessian is the identity times :math:`\\gamma_k`).
+    restart, logfile, trajectory, append_trajectory :
+        As for every ASE optimizer.
+    maxstep : float, default 0.2
+        Largest displacement of one row in one step (Å).
+    memory : int, default 20
+        Pairs of steps remembered.
+    precon : RigidPrecon, None or "auto", default "auto"
+        ``"auto"``: a new :class:`~rigidmd.relaxprecon.RigidPrecon`.
+    **kwargs
+        Further arguments of :class:`ase.optimize.optimize.Optimizer`.
+    """
+
+    defaults = {**Optimizer.defaults, "maxstep": 0.2}
+
+    def __init__(self, atoms, restart=None, logfile="-", trajectory=None, maxstep=None,
+                 memory=20, precon="auto", **kwargs):
+        if maxstep is None:
+            maxstep = self.defaults["maxstep"]
+        if not (np.isfinite(maxstep) and maxstep > 0):
+            raise ValueError(f"RigidLBFGS: maxstep={maxstep!r} Å must be positive")
+        if int(memory) != memory or memory < 1:
+            raise ValueError(f"RigidLBFGS: memory={memory!r} must be a whole number >= 1")
+        self.maxstep = float(maxstep)
+        self.memory = int(memory)
+        self.precon = RigidPrecon() if isinstance(precon, str) and precon == "auto" else precon
+        self._target = atoms
+        self._anchored = 0
+        super().__init__(atoms, restart=restart, logfile=logfile, trajectory=trajectory,
+                         **kwargs)
+
+    def initialize(self):
+        self.s, self.y, self.rho = [], [], []
+        self.x0 = self.g0 = self.e0 = None
+        self.halvings = 0
+        self._anchored = getattr(self._target, "reanchored", 0)
+
+    def read(self):
+        (self.s, self.y, self.rho, self.x0, self.g0, self.e0,
+         self.halvings) = self.load()
+
+    def todict(self):
+        d = super().todict()
+        d.update(maxstep=self.maxstep, memory=self.memory)
+        return d
+
+    def _solve(self, q):
+        if self.precon is None:
+            return q.copy()
+        self.precon.make_precon(self._target)
+        return self.precon.solve(q)
+
+    def step(self, forces=None):
+        """One step: accept (or halve) the last one, update the memory, move."""
+        opt = self.optimizable
+        x = opt.get_x()
+        g = opt.get_gradient() if forces is None else -np.asarray(forces).ravel()
+        e = opt.get_value()
+        anchored = getattr(self._target, "reanchored", 0)
+        if anchored != self._anchored:  # rows of re-anchored bodies jumped: a fresh start
+            self._anchored = anchored
+            self.s, self.y, self.rho = [], [], []
+            self.x0 = None
+        if self.x0 is not None and e > self.e0 and self.halvings < MAX_HALVINGS:
+            # The energy went up: back to half the step, forget the curvature pairs.
+            self.halvings += 1
+            self.s, self.y, self.rho = [], [], []
+            opt.set_x(self.x0 + 0.5 * (x - self.x0))
+            self.dump(self._state())
+            return
+        if self.x0 is not None:
+            s, y = x - self.x0, g - self.g0
+            sy = _dot(s, y)
+            if sy > 1e-12 * np.sqrt(_dot(s, s) * _dot(y, y)):  # curvature condition
+                self.s.append(s)
+                self.y.append(y)
+                self.rho.append(1.0 / sy)
+                if len(self.s) > self.memory:
+                    del self.s[0], self.y[0], self.rho[0]
+        self.halvings = 0
+        q = g.copy()
+        a = np.empty(len(self.s))
+        for i in range(len(self.s) - 1, -1, -1):
+            a[i] = self.rho[i] * _dot(self.s[i], q)
+            q -= a[i] * self.y[i]
+        z = self._solve(q)
+        if self.s:
+            Hy = self._solve(self.y[-1])
+            z *= _dot(self.s[-1], self.y[-1]) / _dot(self.y[-1], Hy)
+        for i in range(len(self.s)):
+            b = self.rho[i] * _dot(self.y[i], z)
+            z += self.s[i] * (a[i] - b)
+        dx = -z.reshape(-1, 3)
+        longest = np.sqrt(np.sum(dx * dx, axis=1)).max() if len(dx) else 0.0
+        if longest > self.maxstep:
+            dx *= self.maxstep / longest
+        self.x0, self.g0, self.e0 = x, g, e
+        opt.set_x(x + dx.ravel())
+        self.dump(self._state())
+
+    def _state(self):
+        return (self.s, self.y, self.rho, self.x0, self.g0, self.e0, self.halvings)
