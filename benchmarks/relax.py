@@ -3,7 +3,7 @@
 ASE's route to a minimum of rigid molecules is an optimizer on the atoms with
 ``FixBondLengths`` on the three distances of every water (RATTLE-like
 projection of positions and forces); rigidmd's is the same optimizer on
-:class:`rigidmd.optimize.RigidFilter` (centres of mass, rotation vectors).
+:class:`rigidmd.relax.filter.RigidFilter` (centres of mass, rotation vectors).
 Both start from the same structure, a minimum perturbed by a random rigid
 displacement of every molecule (centre of mass 0.1 Å, rotation 0.1 rad,
 normal distributions), so that both fall back into one basin, and use ASE's
@@ -23,8 +23,8 @@ BFGS's initial Hessian (``alpha`` eV/Å² times the identity, in the
 coordinates each route shows the optimizer).
 
 ``defaults`` compares what users get without tuning: ``relax()`` with its
-defaults (:class:`rigidmd.relaxopt.RigidLBFGS` with
-:class:`rigidmd.relaxprecon.RigidPrecon`) against ASE's BFGS with defaults on
+defaults (:class:`rigidmd.relax.lbfgs.RigidLBFGS` with
+:class:`rigidmd.relax.precon.RigidPrecon`) against ASE's BFGS with defaults on
 the atoms with ``FixBondLengths``, from structures as built (unrelaxed
 ``water_cluster`` of 8-64 molecules, seeds 0-2; ``water_box`` of 64-512,
 seeds 0-1), both to fmax 0.01 eV/Å, the 0.05 row read off the same run.
@@ -56,7 +56,7 @@ from ase.io import read, write
 from ase.optimize import BFGS
 
 from rigidmd.core import quaternion as quat
-from rigidmd.optimize import RigidFilter, relax
+from rigidmd.relax.filter import RigidFilter, relax
 from rigidmd.systems import random_quaternions, water_box, water_cluster
 
 
@@ -271,7 +271,7 @@ def run_defaults(route, start, rc, fmaxes, log=None, steps=5000):
     atoms.calc = CountingTIP3P(rc=rc)
     CountingTIP3P.calls = 0
     if route == "relax":
-        from rigidmd.relaxopt import RigidLBFGS
+        from rigidmd.relax.lbfgs import RigidLBFGS
 
         target = RigidFilter(atoms)
         opt = RigidLBFGS(target, logfile=None)

@@ -1,4 +1,4 @@
-"""Relaxing rigid bodies and the cell with ASE's optimizers (rigidmd.optimize)."""
+"""Relaxing rigid bodies and the cell with ASE's optimizers (rigidmd.relax.filter)."""
 
 import numpy as np
 import pytest
@@ -8,7 +8,7 @@ from ase.calculators.tip4p import TIP4P
 from ase.constraints import FixAtoms, FixBondLengths, FixCom
 from helpers import CoulombLJ, ZeroStress, dimer_fluid, water_dimer, water_parameters
 
-from rigidmd.optimize import RigidFilter, relax
+from rigidmd.relax.filter import RigidFilter, relax
 from rigidmd.systems import water_cluster
 from rigidmd.water import water_model
 
@@ -503,7 +503,7 @@ def test_a_signal_stops_rigidmd_relax_after_a_step_and_resume_finishes(
 
     from ase.io import read
 
-    from rigidmd.relaxcli import relax_only
+    from rigidmd.relax.command import relax_only
 
     raw = relax_config(tmp_path)
     reference = tmp_path / "reference"
@@ -550,8 +550,8 @@ def test_rigidmd_relax_never_deletes_its_input(tmp_path):
     from ase.io import read
 
     from rigidmd.config.quantities import ConfigError
-    from rigidmd.relaxcli import relax_only
-    from rigidmd.relaxrun import RelaxationNotConverged
+    from rigidmd.relax.command import relax_only
+    from rigidmd.relax.structure import RelaxationNotConverged
     from rigidmd.run.outputs import OutputError
 
     with pytest.raises(RelaxationNotConverged, match="raise relax.steps and continue with"):
@@ -614,7 +614,7 @@ def test_rigid_preconditioner_drives_ase_s_preconditioned_optimizers(name):
     """RigidPrecon on RigidFilter's rows with ASE's own PreconLBFGS and PreconFIRE."""
     import ase.optimize.precon
 
-    from rigidmd.relaxprecon import RigidPrecon
+    from rigidmd.relax.precon import RigidPrecon
 
     atoms = water_cluster(8, seed=1)
     atoms.calc = TIP3P(rc=20.0)
@@ -672,7 +672,7 @@ def test_the_preconditioner_s_pairs_are_ase_s_neighbour_list():
     an orthorhombic cell twice the cut-off wide): the same pairs and distances as ASE's."""
     from ase.neighborlist import neighbor_list
 
-    from rigidmd.relaxprecon import _pairs
+    from rigidmd.relax.precon import _pairs
     from rigidmd.systems import water_box
 
     for atoms in (water_box(4), water_cluster(20), water_box(3)):  # the last: ASE's route

@@ -31,8 +31,7 @@ PUBLIC_MODULES = (
     ("rigidmd", "Dynamics, thermostats, barostats, bodies, velocities, checkpoints"),
     ("rigidmd.systems", "Builders: water clusters and boxes, CO2 mixtures, ice Ih"),
     ("rigidmd.water", "Water models: geometry, charges, Lennard-Jones, LAMMPS commands"),
-    ("rigidmd.optimize", "Rigid relaxation with ASE's optimizers"),
-    ("rigidmd.relax", "Bodies in the geometry a calculator relaxes them to"),
+    ("rigidmd.relax", "Rigid relaxation (bodies and cell) with ASE's optimizers"),
     ("rigidmd.lammps", "LAMMPS forces: in-process calculator, engine, data files, export"),
     ("rigidmd.ipi", "Forces from any i-PI engine"),
     ("rigidmd.openmm", "Water models as OpenMM systems, for comparison"),
@@ -156,8 +155,8 @@ def configuration_reference():
     from rigidmd.config.trust import SAFE_LAMMPS_COMMANDS
     from rigidmd.core.schemes import BUILTIN_SCHEMES
     from rigidmd.couplings.base import COUPLINGS
-    from rigidmd.optimize import OPTIMIZERS
-    from rigidmd.relaxcell import CELL_MODES
+    from rigidmd.relax.cell import CELL_MODES
+    from rigidmd.relax.filter import OPTIMIZERS
     from rigidmd.water import WATER_MODELS
 
     sections = (StructureSection, RunSection, CalculatorSection, CouplingSection,

@@ -14,7 +14,7 @@
 
 ``rigidmd run`` relaxes the structure first (a new run, not a restart or a
 resume), then draws velocities and runs MD from the relaxed structure;
-``rigidmd relax CONFIG`` only relaxes (see :mod:`rigidmd.relaxrun`).
+``rigidmd relax CONFIG`` only relaxes (see :mod:`rigidmd.relax.structure`).
 """
 
 from dataclasses import dataclass
@@ -64,8 +64,8 @@ class RelaxSection:
     @classmethod
     def from_config(cls, raw, base=None):
         """The section of ``raw["relax"]``, or None when there is none."""
-        from rigidmd.optimize import OPTIMIZERS
-        from rigidmd.relaxcell import CELL_MODES
+        from rigidmd.relax.cell import CELL_MODES
+        from rigidmd.relax.filter import OPTIMIZERS
 
         if "relax" not in raw or raw["relax"] is None:
             return None

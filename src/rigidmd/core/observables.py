@@ -124,7 +124,7 @@ def molecular_virial(atomic_stress: np.ndarray, cell_volume: float, r: np.ndarra
     pressure needs (the barostats).  Less :func:`torque_virial` too, it is the
     full :math:`W = \sum_b X_b\otimes F_b + \sum_\mathrm{free} x\otimes f`,
     the derivative of the energy under a deformation of the cell that moves
-    the centres of mass and keeps the orientations (:mod:`rigidmd.relaxcell`).
+    the centres of mass and keeps the orientations (:mod:`rigidmd.relax.cell`).
 
     Parameters
     ----------

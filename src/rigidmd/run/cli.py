@@ -34,8 +34,8 @@ from rigidmd.core.dynamics import NonFiniteForceError
 from rigidmd.core.operators import ConvergenceError
 from rigidmd.couplings.base import NotExportable
 from rigidmd.lammps.library import LammpsError
-from rigidmd.relaxcli import relax_only
-from rigidmd.relaxrun import RelaxationNotConverged, RelaxationStopped
+from rigidmd.relax.command import relax_only
+from rigidmd.relax.structure import RelaxationNotConverged, RelaxationStopped
 from rigidmd.run.fingerprint import resume_command
 from rigidmd.run.logplot import LogError, plot_log
 from rigidmd.run.outputs import OutputError, describe_os_error
@@ -91,7 +91,7 @@ def _export(config, directory, stream=sys.stdout):
 
     atoms, bodies = Run(config).start_atoms()
     if config.relax is not None:  # the deck starts where `rigidmd run` would start its MD
-        from rigidmd.relaxcli import relax_for_export
+        from rigidmd.relax.command import relax_for_export
 
         relax_for_export(config, atoms, bodies, directory, stream)
     atoms.positions = bodies.whole_positions(atoms)

@@ -356,7 +356,7 @@ class Run:
                           couplings=self.config.coupling.parts(), **self._dynamics_arguments())
         self._prepare_directory(replace)
         if self.config.relax is not None:  # (a restart with relax: is refused by the config)
-            from rigidmd.relaxrun import relax_structure
+            from rigidmd.relax.structure import relax_structure
 
             relax_structure(atoms, bodies, self.config.relax, self.outputs.directory,
                             self.stream, hint=f"rigidmd run {self.config_path or 'CONFIG'} "

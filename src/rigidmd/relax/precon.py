@@ -5,7 +5,7 @@ a condensed system of atoms as a weighted graph Laplacian of its pairs,
 :math:`P = \mu\,(L + c_\mathrm{stab}\mathbb{1})` with pair weights
 :math:`w_{ij} = \exp(-A\,(r_{ij}/r_\mathrm{NN} - 1))` within :math:`r_\mathrm{cut}`
 (Packwood et al., J. Chem. Phys. 144, 164109 (2016)).  :class:`RigidPrecon`
-does the same for the rows of :class:`rigidmd.optimize.RigidFilter`:
+does the same for the rows of :class:`rigidmd.relax.filter.RigidFilter`:
 
 =====================  ==============================================================
 rows                   block of :math:`P`
@@ -55,20 +55,20 @@ MU_FLOOR = 0.05
 
 
 def _view_of(atoms):
-    """The :class:`~rigidmd.optimize.RigidFilter` behind what an optimizer passes."""
+    """The :class:`~rigidmd.relax.filter.RigidFilter` behind what an optimizer passes."""
     view = getattr(atoms, "rigid_rows", None)
     if view is None:
-        raise TypeError("RigidPrecon: works on a rigidmd.optimize.RigidFilter, got "
+        raise TypeError("RigidPrecon: works on a rigidmd.relax.filter.RigidFilter, got "
                         f"{type(atoms).__name__}; wrap the atoms in RigidFilter(atoms)")
     return atoms
 
 
 class RigidPrecon(Precon):
-    r"""Exp-like preconditioner on the rows of a :class:`~rigidmd.optimize.RigidFilter`.
+    r"""Exp-like preconditioner on the rows of a :class:`~rigidmd.relax.filter.RigidFilter`.
 
     Pass it to ASE's :class:`~ase.optimize.precon.PreconLBFGS` or
     :class:`~ase.optimize.precon.PreconFIRE` (``precon=RigidPrecon()``) with
-    a ``RigidFilter`` as the atoms; :func:`rigidmd.optimize.relax` uses it by default.
+    a ``RigidFilter`` as the atoms; :func:`rigidmd.relax.filter.relax` uses it by default.
 
     Parameters
     ----------
@@ -188,7 +188,7 @@ class RigidPrecon(Precon):
 
         Parameters
         ----------
-        atoms : rigidmd.optimize.RigidFilter
+        atoms : rigidmd.relax.filter.RigidFilter
         H : None
             Accepted for ASE's signature; must be None.
 

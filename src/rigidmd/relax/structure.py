@@ -1,7 +1,7 @@
-"""Relaxing the structure of a run: the ``relax:`` section (the command: rigidmd.relaxcli).
+"""Relaxing the structure of a run: the ``relax:`` section (the command: rigidmd.relax.command).
 
 :func:`relax_structure` relaxes the rigid bodies (and the cell) of a run's
-start with :func:`rigidmd.optimize.relax`, writing the optimizer's trajectory
+start with :func:`rigidmd.relax.filter.relax`, writing the optimizer's trajectory
 (every step, so the last frame is the structure reached) and log in the
 output directory.  It is a product path as ``rigidmd run`` is:
 
@@ -28,7 +28,7 @@ import time
 
 import numpy as np
 
-from rigidmd.optimize import relax
+from rigidmd.relax.filter import relax
 
 __all__ = ["relax_structure", "RelaxationNotConverged", "RelaxationStopped", "RelaxProgress",
            "continue_from"]
@@ -152,7 +152,7 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
 
     Returns
     -------
-    rigidmd.optimize.Relaxation
+    rigidmd.relax.filter.Relaxation
 
     Raises
     ------

@@ -1,6 +1,6 @@
 """``rigidmd relax CONFIG`` and the relaxation before ``rigidmd export-lammps``.
 
-The command's side of :mod:`rigidmd.relaxrun`: the configuration's
+The command's side of :mod:`rigidmd.relax.structure`: the configuration's
 sections, the output directory's lock, the outputs of an earlier
 relaxation (refused, replaced with ``--overwrite`` or continued with
 ``--resume``, never the structure being read), and signals.
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rigidmd.relaxrun import RelaxationStopped, continue_from, relax_structure
+from rigidmd.relax.structure import RelaxationStopped, continue_from, relax_structure
 from rigidmd.run.runner import StopSignals
 
 __all__ = ["relax_only", "relax_for_export"]

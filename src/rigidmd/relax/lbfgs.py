@@ -1,8 +1,8 @@
-r"""The default optimizer of :func:`rigidmd.optimize.relax`: preconditioned limited-memory BFGS.
+r"""The default optimizer of :func:`rigidmd.relax.filter.relax`: preconditioned limited-memory BFGS.
 
 :class:`RigidLBFGS` is L-BFGS (Nocedal & Wright, *Numerical Optimization*,
 2nd ed., algorithm 7.4) whose initial inverse Hessian is the inverse of a
-preconditioner (by default :class:`rigidmd.relaxprecon.RigidPrecon`),
+preconditioner (by default :class:`rigidmd.relax.precon.RigidPrecon`),
 scaled at every step by :math:`\gamma_k = s^\mathsf{T}y / y^\mathsf{T}P^{-1}y`
 (their eq. 7.20, in the metric of :math:`P`), so that no ``alpha`` needs
 tuning: the curvature comes from the preconditioner's estimate (one force
@@ -20,7 +20,7 @@ number of BLAS threads.
 import numpy as np
 from ase.optimize.optimize import Optimizer
 
-from rigidmd.relaxprecon import RigidPrecon
+from rigidmd.relax.precon import RigidPrecon
 
 __all__ = ["RigidLBFGS", "MAX_HALVINGS"]
 
@@ -38,7 +38,7 @@ class RigidLBFGS(Optimizer):
 
     Parameters
     ----------
-    atoms : rigidmd.optimize.RigidFilter
+    atoms : rigidmd.relax.filter.RigidFilter
         Or any ASE optimizable when ``precon`` is None (then the initial
         inverse Hessian is the identity times :math:`\\gamma_k`).
     restart, logfile, trajectory, append_trajectory :
@@ -48,7 +48,7 @@ class RigidLBFGS(Optimizer):
     memory : int, default 20
         Pairs of steps remembered.
     precon : RigidPrecon, None or "auto", default "auto"
-        ``"auto"``: a new :class:`~rigidmd.relaxprecon.RigidPrecon`.
+        ``"auto"``: a new :class:`~rigidmd.relax.precon.RigidPrecon`.
     **kwargs
         Further arguments of :class:`ase.optimize.optimize.Optimizer`.
     """

@@ -1,0 +1,27 @@
+"""Rigid relaxation: bodies and cell at the calculator's minimum, with ASE's optimizers.
+
+* :func:`relax` and :class:`RigidFilter` (:mod:`rigidmd.relax.filter`): the centres
+  of mass, orientations (and the cell) as the rows an ASE optimizer moves;
+  :class:`RigidLBFGS` (:mod:`rigidmd.relax.lbfgs`) with :class:`RigidPrecon`
+  (:mod:`rigidmd.relax.precon`) is the default, needing no tuning;
+* the cell's part (:mod:`rigidmd.relax.cell`);
+* :func:`relax_bodies` (:mod:`rigidmd.relax.bodies`): each kind of molecule in
+  the internal geometry a calculator prefers, before it is made rigid;
+* the ``relax:`` section and ``rigidmd relax`` (:mod:`rigidmd.relax.structure`,
+  :mod:`rigidmd.relax.command`).
+"""
+
+from rigidmd.relax.bodies import Relaxation, relax_bodies
+from rigidmd.relax.cell import CELL_MODES
+from rigidmd.relax.filter import OPTIMIZERS, RigidFilter, optimizer_class, relax
+from rigidmd.relax.lbfgs import RigidLBFGS
+from rigidmd.relax.precon import RigidPrecon
+from rigidmd.relax.structure import (
+    RelaxationNotConverged,
+    RelaxationStopped,
+    relax_structure,
+)
+
+__all__ = ["relax", "RigidFilter", "RigidLBFGS", "RigidPrecon", "OPTIMIZERS", "optimizer_class",
+           "CELL_MODES", "relax_bodies", "Relaxation", "relax_structure",
+           "RelaxationNotConverged", "RelaxationStopped"]

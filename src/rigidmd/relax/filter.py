@@ -1,0 +1,602 @@
+r"""Relax rigid bodies (and the cell) with ASE's optimizers.
+
+:class:`RigidFilter` shows an :class:`ase.Atoms` to an ASE optimizer as ASE's
+filters do (:mod:`ase.filters`): ``get_positions``/``set_positions`` of a
+generalized coordinate array of shape ``(n, 3)``, ``get_forces`` (minus the
+gradient), ``get_potential_energy``, ``len``.  The rows are
+
+=====================  ===========================  ====================================
+rows                   coordinate                   generalized force
+=====================  ===========================  ====================================
+one per body           centre of mass :math:`s_b`   body force :math:`F_b` (eV/Å)
+one per body           :math:`\ell_b\varphi_b` (Å)  :math:`J_r^\mathsf{T}\tau_b/\ell_b` (eV/Å)
+one per free atom      position (Å)                 force (eV/Å)
+three, with ``cell``   :math:`c\,(D - 1)`           :mod:`rigidmd.relax.cell`
+=====================  ===========================  ====================================
+
+Orientation :math:`q_b = q_{\mathrm{ref},b} \otimes \exp(\varphi_b)`: the
+rotation vector :math:`\varphi_b` is in the body's principal frame about a
+reference orientation; when :math:`|\varphi_b|` exceeds
+:data:`ANCHOR_ANGLE` the reference becomes the current orientation and the
+row 0, when the optimizer next reads the coordinates (the rotation vector's
+chart stays well conditioned: the right Jacobian :math:`J_r(\varphi)` has
+singular values between :math:`\sin(|\varphi|/2)/(|\varphi|/2) \ge 0.76`
+and 1 below 2.5 rad).  The row jumps then: an optimizer's memory of earlier
+steps no longer fits it (:class:`rigidmd.relax.lbfgs.RigidLBFGS` clears its
+memory; a line search of ASE's BFGSLineSearch failed after one on a water
+dimer at 2 rad, which is why the angle is 2.5, not less).  The
+body-frame torque :math:`\tau_b` (eV) becomes a force in eV/Å through the
+body's length :math:`\ell_b`, the root-mean-square distance of its atoms
+from its centre of mass (0.75 Å for a TIP3P water): a torque :math:`\tau`
+reads as the force :math:`\tau/\ell_b` on an atom at the body's typical
+radius.  For a linear body the component about its axis is no coordinate:
+its gradient is 0 and its value is ignored (2 rotational degrees of freedom).
+
+Convergence, as every ASE optimizer judges it, is every row's norm below
+``fmax``: :math:`|F_b| < f_\max` for the force on each body,
+:math:`|J_r^\mathsf{T}\tau_b|/\ell_b < f_\max` for its torque, the force on
+each free atom, and with the cell :math:`|g_{\mathrm{cell}}| < f_\max` per
+row of the cell gradient (:func:`rigidmd.relax.cell.cell_gradient`, eV per
+``cell_factor``).  Massless atoms (the M site of four-site water) are placed
+rigidly with their body and the force on them enters its force and torque.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from ase.calculators.calculator import PropertyNotImplementedError
+
+from rigidmd.core import observables as obs
+from rigidmd.core import quaternion as quat
+from rigidmd.core.bodies import RigidBodies, check_bodies_fit
+from rigidmd.core.checks import check_finite
+from rigidmd.core.dof import RigidBodyDOF
+from rigidmd.core.forces import ForceEvaluator
+from rigidmd.core.link import BodyLink
+from rigidmd.core.model import describe_atoms
+from rigidmd.core.record import StepRecord
+from rigidmd.relax import cell as relaxcell
+
+try:  # ASE >= 3.24
+    from ase.filters import OptimizableFilter as _Optimizable
+except ImportError:  # pragma: no cover - ASE 3.23
+    from ase.optimize.optimize import OptimizableAtoms as _Optimizable
+
+__all__ = ["RigidFilter", "relax", "Relaxation", "OPTIMIZERS", "optimizer_class", "ANCHOR_ANGLE",
+           "rotation_quaternion", "right_jacobian_transpose"]
+
+#: Rotation (rad) beyond which a body's reference orientation is moved to its current one.
+ANCHOR_ANGLE = 2.5
+
+
+def rotation_quaternion(phi):
+    r"""Unit quaternion of a rotation vector, :math:`\exp(\varphi)`.
+
+    :math:`(\cos\tfrac{\theta}2, \hat\varphi\sin\tfrac{\theta}2)`, :math:`\theta = |\varphi|`.
+
+    Parameters
+    ----------
+    phi : numpy.ndarray, shape (..., 3)
+        Rotation vectors (rad).
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 4)
+    """
+    angle = np.linalg.norm(phi, axis=-1, keepdims=True)
+    half = 0.5 * angle
+    # sin(θ/2)/θ, with its series below 1e-4 rad.
+    small = angle < 1e-4
+    factor = np.where(small, 0.5 - angle**2 / 48.0,
+                      np.sin(half) / np.where(small, 1.0, angle))
+    return np.concatenate([np.cos(half), factor * phi], axis=-1)
+
+
+def right_jacobian_transpose(phi, v):
+    r""":math:`J_r(\varphi)^\mathsf{T} v` for the rotation vector :math:`\varphi`.
+
+    :math:`\exp(\varphi + \delta) = \exp(\varphi)\exp(J_r(\varphi)\,\delta) + O(\delta^2)`,
+    :math:`J_r = 1 - a[\varphi]_\times + b[\varphi]_\times^2`, so
+    :math:`J_r^\mathsf{T} v = v + a\,\varphi\times v + b\,\varphi\times(\varphi\times v)`
+    with :math:`a = (1-\cos\theta)/\theta^2`, :math:`b = (\theta-\sin\theta)/\theta^3`,
+    :math:`\theta = |\varphi|` (series below 1e-3 rad).
+
+    Parameters
+    ----------
+    phi, v : numpy.ndarray, shape (n, 3)
+
+    Returns
+    -------
+    numpy.ndarray, shape (n, 3)
+    """
+    t = np.linalg.norm(phi, axis=-1, keepdims=True)
+    small = t < 1e-3
+    ts = np.where(small, 1.0, t)
+    a = np.where(small, 0.5 - t**2 / 24.0, (1.0 - np.cos(ts)) / ts**2)
+    b = np.where(small, 1.0 / 6.0 - t**2 / 120.0, (ts - np.sin(ts)) / ts**3)
+    c = np.cross(phi, v)
+    return v + a * c + b * np.cross(phi, c)
+
+
+class RigidFilter:
+    r"""An :class:`ase.Atoms` seen by ASE's optimizers as rigid bodies (and a cell).
+
+    Use it where an optimizer takes atoms (``BFGS(RigidFilter(atoms)).run(fmax=0.05)``).
+    See the module docstring for the coordinates and the convergence criterion.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+        With a calculator.  Its positions (and cell) change as the optimizer
+        moves the coordinates; nothing changes on construction.
+    bodies : optional
+        Body specification, as for :class:`~rigidmd.RigidVerlet`
+        (:meth:`rigidmd.RigidBodies.resolve`).
+    cell : bool or str, default False
+        Also relax the cell: ``True`` or ``"full"`` (symmetric strain),
+        ``"aniso"`` (the three axes) or ``"iso"`` (the volume only), with
+        molecular scaling.  Needs a cell periodic in all directions and a
+        calculator with stress.
+    scalar_pressure : float, default 0.0
+        Target pressure (eV/Å³), as for :class:`ase.filters.FrechetCellFilter`.
+    cell_factor : float, optional
+        :math:`c` of the cell rows; default the number of bodies plus free atoms.
+
+    Raises
+    ------
+    ValueError
+        Atoms without a calculator; ``cell`` with a cell not periodic in
+        all directions or a calculator without stress; a constraint the
+        bodies cannot honour (only ``FixAtoms`` on whole bodies or free atoms,
+        ``FixBondLengths`` within bodies and :class:`~rigidmd.RigidBodyDOF`
+        are); a bad ``cell``, ``scalar_pressure`` or ``cell_factor``; every
+        error of :meth:`rigidmd.RigidBodies.geometry`.  All before anything
+        changes.
+    """
+
+    def __init__(self, atoms, bodies=None, *, cell=False, scalar_pressure=0.0,
+                 cell_factor=None):
+        if atoms.calc is None:
+            raise ValueError("RigidFilter: the atoms have no calculator")
+        mode = relaxcell.cell_mode(cell)
+        if not np.isfinite(scalar_pressure):
+            raise ValueError(f"RigidFilter: scalar_pressure={scalar_pressure!r} eV/Å³ is not "
+                             "finite")
+        if mode is not None:
+            if not atoms.pbc.all():
+                raise ValueError(f"RigidFilter: cell={cell!r} needs a cell periodic in all "
+                                 f"three directions; atoms.pbc is {atoms.pbc.tolist()}")
+            implemented = getattr(atoms.calc, "implemented_properties", ())
+            if "stress" not in implemented:
+                raise ValueError(f"RigidFilter: cell={cell!r} needs the stress, which the "
+                                 f"calculator {type(atoms.calc).__name__} does not provide")
+        check_finite(atoms.positions, "position", "Å", "in RigidFilter")
+        rigid = RigidBodies.resolve(atoms, bodies)
+        geometry = rigid.geometry(atoms)
+        model = geometry.model
+        check_bodies_fit(model, atoms.cell.array, atoms.pbc, "in RigidFilter; use a larger cell")
+        self._fixed_bodies, self._fixed_free = _honoured_constraints(atoms, model)
+        n_units = model.n_bodies + model.n_free
+        if cell_factor is None:
+            cell_factor = float(max(n_units, 1))
+        if not (np.isfinite(cell_factor) and cell_factor > 0):
+            raise ValueError(f"RigidFilter: cell_factor={cell_factor!r} must be positive")
+        self.atoms = atoms
+        self.model = model
+        self.mode = mode
+        self.scalar_pressure = float(scalar_pressure)
+        self.cell_factor = float(cell_factor)
+        self.reanchored = 0
+        d = model.body_coordinates
+        if model.n_bodies:
+            counts = np.diff(model.bounds)
+            self.lengths = np.sqrt(np.add.reduceat(np.sum(d * d, axis=1), model.starts)
+                                   / counts)
+        else:
+            self.lengths = np.zeros(0)
+        self._q_ref = geometry.quaternions.copy()
+        # The machinery of the dynamics: the body link places the atoms, the force evaluator
+        # calls the calculator (energy, forces and with the cell the stress in one call) and
+        # reduces the forces to the bodies, with the molecular virial.
+        self._link = BodyLink(atoms, model)
+        self._state = self._link.initial_state(geometry)
+        self._record = StepRecord(self._state, model)
+        self._evaluator = ForceEvaluator(self._link, self._record, stress=mode is not None)
+        self._evaluator.begin_step(0, energy=True)  # the energy with every call
+        self._cell0 = atoms.cell.array.copy()
+        nb, nf = model.n_bodies, model.n_free
+        self._slices = (slice(0, nb), slice(nb, 2 * nb), slice(2 * nb, 2 * nb + nf),
+                        slice(2 * nb + nf, 2 * nb + nf + (3 if mode else 0)))
+        x = np.zeros((2 * nb + nf + (3 if mode else 0), 3))
+        x[self._slices[0]] = geometry.com
+        x[self._slices[2]] = atoms.positions[model.free]
+        self._x = x
+        self._placed = None  # (positions array, r) last written, to notice outside moves
+        self._results = {}  # coordinates (bytes) -> (energy, generalized forces), at most 2
+        self.constraints = []
+        self.info = atoms.info
+
+    # ------------------------------------------------------------ coordinates
+    def _deformation(self):
+        if self.mode is None:
+            return np.eye(3)
+        return relaxcell.deformation(self._x[self._slices[3]], self.mode, self.cell_factor)
+
+    def _phi(self):
+        phi = self._x[self._slices[1]] / self.lengths[:, None]
+        return np.where(self.model.linear[:, None] & (np.arange(3) == 0), 0.0, phi)
+
+    def _orientations(self):
+        return quat.multiply(self._q_ref, rotation_quaternion(self._phi()))
+
+    def _place(self):
+        """Write positions (and cell) of the coordinates into the atoms, through the body link."""
+        model, D, state = self.model, self._deformation(), self._state
+        q = self._orientations()
+        state.X = self._x[self._slices[0]] @ D.T
+        state.q = q
+        state.x = self._x[self._slices[2]] @ D.T
+        if self.mode is not None:
+            cell = self._cell0 @ D.T
+            check_bodies_fit(model, cell, self.atoms.pbc,
+                             "the cell relaxation shrank the cell below the bodies (a "
+                             "calculator without a repulsion at short range, or a pressure "
+                             "too high, collapses the cell); the atoms keep the last cell "
+                             "that fitted")
+            state.cell = cell
+            self.atoms.set_cell(cell, scale_atoms=False)
+            self._record.cell_changed()
+        r = self._link.place(state, self._record.r)
+        self._placed = (self.atoms.positions.copy(), r, q, D)
+
+    def get_positions(self):
+        """The generalized coordinates, shape (n, 3) (Å; the cell rows dimensionless × c).
+
+        A body turned by more than :data:`ANCHOR_ANGLE` from its reference is
+        re-anchored here (its reference becomes its orientation, its rows 0),
+        when the optimizer reads the coordinates at the start of a step, never
+        between the trial points of a line search.
+        """
+        self._reanchor()
+        return self._x.copy()
+
+    def set_positions(self, new, **kwargs):
+        """Move the bodies (and cell) to the coordinates ``new``, shape (n, 3)."""
+        new = np.asarray(new, dtype=float).reshape(self._x.shape)
+        check_finite(new, "generalized coordinate", "Å", "set by the optimizer")
+        fixed = self._x.copy()
+        self._x = new.copy()
+        for rows, mask in ((self._slices[0], self._fixed_bodies),
+                           (self._slices[1], self._fixed_bodies),
+                           (self._slices[2], self._fixed_free)):
+            block = self._x[rows]
+            block[mask] = fixed[rows][mask]
+        self._place()
+
+    def _reanchor(self):
+        if not self.model.n_bodies:
+            return
+        far = np.linalg.norm(self._phi(), axis=1) > ANCHOR_ANGLE
+        if np.any(far):
+            q = self._current()[2]
+            self._q_ref[far] = q[far]
+            block = self._x[self._slices[1]]
+            block[far] = 0.0
+            self.reanchored += int(far.sum())
+            self._results.clear()  # the coordinates of earlier results meant other references
+
+    positions = property(get_positions, set_positions)
+
+    def restore(self, x):
+        """Move back to coordinates ``x`` visited before, keeping their energy and forces.
+
+        For a probe (a preconditioner's estimate): ``set_positions(x + v)``,
+        ``get_forces()``, ``restore(x)`` costs one force call, not two.
+        """
+        self._x = np.asarray(x, dtype=float).reshape(self._x.shape).copy()
+        self._place()
+
+    def rigid_rows(self):
+        """Which rows are what, for a preconditioner (:class:`rigidmd.relax.precon.RigidPrecon`).
+
+        Returns
+        -------
+        dict
+            ``centres`` (m, 3): the bodies' centres of mass then the free
+            atoms (Å, lab frame, current cell); ``translation_rows`` (m,):
+            their rows; ``rotation_rows`` (n_bodies,) and ``rotation_centre``
+            (n_bodies,): the rotation rows and the index of their body's
+            centre in ``centres``; ``cell_rows`` (0 or 3,); ``n_rows``.
+        """
+        _, _, _, D = self._current()
+        t, r, f, c = (np.arange(len(self._x))[s] for s in self._slices)
+        centres = self._x[np.concatenate([t, f])] @ D.T
+        return {"centres": centres, "translation_rows": np.concatenate([t, f]),
+                "rotation_rows": r, "rotation_centre": np.arange(len(r)),
+                "cell_rows": c, "n_rows": len(self._x)}
+
+    def fixed_rows(self):
+        """Rows that ``FixAtoms`` holds, as a boolean mask of shape (n,)."""
+        mask = np.zeros(len(self._x), dtype=bool)
+        mask[self._slices[0]] = self._fixed_bodies
+        mask[self._slices[1]] = self._fixed_bodies
+        mask[self._slices[2]] = self._fixed_free
+        return mask
+
+    def _current(self):
+        """The placement of the current coordinates, placing them first if needed."""
+        if self._placed is None or not np.array_equal(self._placed[0], self.atoms.positions):
+            self._place()
+        return self._placed
+
+    # ------------------------------------------------------------ energy and gradient
+    def _cached(self):
+        """(energy, generalized forces) of the current coordinates if computed, else None."""
+        self._current()
+        return self._results.get(self._x.tobytes())
+
+    def _remember(self, energy=None, forces=None):
+        key = self._x.tobytes()
+        old = self._results.get(key, (None, None))
+        if key not in self._results and len(self._results) >= 2:
+            self._results.pop(next(iter(self._results)))
+        self._results[key] = (old[0] if energy is None else energy,
+                              old[1] if forces is None else forces)
+
+    def get_potential_energy(self, force_consistent=False, **kwargs):
+        """Potential energy (eV), plus :math:`pV` when the cell relaxes (the enthalpy)."""
+        cached = self._cached()
+        if cached is not None and cached[0] is not None and not force_consistent:
+            return cached[0]
+        try:
+            energy = self.atoms.get_potential_energy(force_consistent=force_consistent)
+        except PropertyNotImplementedError:
+            if not force_consistent:
+                raise
+            energy = self.atoms.get_potential_energy()
+        if self.mode is not None:
+            energy += self.scalar_pressure * self.atoms.get_volume()
+        if not force_consistent:
+            self._remember(energy=float(energy))
+        return float(energy)
+
+    def get_forces(self, **kwargs):
+        """Generalized forces, minus the gradient of the energy, shape (n, 3) (eV/Å)."""
+        cached = self._cached()
+        if cached is not None and cached[1] is not None:
+            return cached[1].copy()
+        out = self._generalized_forces()
+        self._remember(forces=out.copy())
+        return out
+
+    def _generalized_forces(self):
+        _, _, q, D = self._current()
+        model, record = self.model, self._record
+        self._evaluator.evaluate(self._state)  # the dynamics' force call and reduction
+        F, tau = record.F, record.tau
+        out = np.zeros_like(self._x)
+        out[self._slices[0]] = F @ D
+        if model.n_bodies:
+            torque_body = quat.rotate_inverse(q, tau)
+            g = right_jacobian_transpose(self._phi(), torque_body) / self.lengths[:, None]
+            g[model.linear, 0] = 0.0
+            out[self._slices[1]] = g
+        out[self._slices[2]] = record.f @ D
+        for rows, mask in ((self._slices[0], self._fixed_bodies),
+                           (self._slices[1], self._fixed_bodies),
+                           (self._slices[2], self._fixed_free)):
+            block = out[rows]
+            block[mask] = 0.0
+        if self.mode is not None:
+            # The barostats' molecular virial (symmetric) and its antisymmetric part, half
+            # the bodies' total torque: the full virial of a deformation at fixed orientations.
+            W = record.virial - obs.torque_virial(tau)
+            out[self._slices[3]] = -relaxcell.cell_gradient(
+                W, record.volume, D, self.scalar_pressure, self.mode, self.cell_factor)
+        return out
+
+    # ------------------------------------------------------------ what ASE asks of a filter
+    def __len__(self):
+        return len(self._x)
+
+    def get_global_number_of_atoms(self):
+        return len(self._x)
+
+    def iterimages(self):
+        """The real atoms, for trajectories."""
+        return self.atoms.iterimages()
+
+    def get_cell(self):
+        return self.atoms.get_cell()
+
+    def get_pbc(self):
+        return self.atoms.get_pbc()
+
+    @property
+    def calc(self):
+        return self.atoms.calc
+
+    def get_calculator(self):
+        return self.atoms.calc
+
+    def get_chemical_symbols(self):
+        return self.atoms.get_chemical_symbols()
+
+    def has(self, name):
+        return self.atoms.has(name)
+
+    def __ase_optimizable__(self):
+        return _Optimizable(self)
+
+    def get_stress(self, *args, **kwargs):
+        return self.atoms.get_stress(*args, **kwargs)
+
+
+def _honoured_constraints(atoms, model):
+    """Bodies and free atoms that ``FixAtoms`` holds; refuse constraints the bodies cannot honour.
+
+    Returns
+    -------
+    fixed_bodies : numpy.ndarray of bool, shape (n_bodies,)
+    fixed_free : numpy.ndarray of bool, shape (n_free,)
+    """
+    from ase.constraints import FixAtoms, FixBondLengths
+
+    fixed = np.zeros(len(atoms), dtype=bool)
+    body_of = np.full(len(atoms), -1)
+    body_of[model.order] = model.atom_body
+    for c in atoms.constraints:
+        if isinstance(c, RigidBodyDOF):
+            continue
+        if isinstance(c, FixAtoms):
+            fixed[c.get_indices()] = True
+            continue
+        if isinstance(c, FixBondLengths):
+            pairs = np.asarray(c.pairs)
+            across = (body_of[pairs[:, 0]] < 0) | (body_of[pairs[:, 0]] != body_of[pairs[:, 1]])
+            if np.any(across):
+                i, j = pairs[np.flatnonzero(across)[0]]
+                raise ValueError(f"RigidFilter: FixBondLengths joins atoms {int(i)} and "
+                                 f"{int(j)}, which are not in one rigid body; the bodies "
+                                 "cannot honour it")
+            continue  # every fixed length lies inside a rigid body: kept by the bodies
+        raise ValueError(f"RigidFilter: cannot honour the constraint {type(c).__name__} "
+                         "(only FixAtoms on whole bodies or free atoms and FixBondLengths "
+                         "within bodies); remove it")
+    fixed_bodies = np.zeros(model.n_bodies, dtype=bool)
+    if fixed.any() and model.n_bodies:
+        per_body = np.add.reduceat(fixed[model.order].astype(int), model.starts)
+        counts = np.diff(model.bounds)
+        partial = np.flatnonzero((per_body > 0) & (per_body < counts))
+        if partial.size:
+            b = int(partial[0])
+            raise ValueError(f"RigidFilter: FixAtoms holds some but not all atoms of body {b} "
+                             f"(atoms {describe_atoms(model.atoms_of(b))}); fix a body whole")
+        fixed_bodies = per_body == counts
+    return fixed_bodies, fixed[model.free]
+
+
+#: The optimizers :func:`relax` takes by name: rigidmd's default
+#: (:class:`rigidmd.relax.lbfgs.RigidLBFGS`), ASE's preconditioned ones (given a
+#: :class:`rigidmd.relax.precon.RigidPrecon`) and all of :mod:`ase.optimize` that take Atoms.
+OPTIMIZERS = ("RigidLBFGS", "PreconLBFGS", "PreconFIRE", "BFGS", "LBFGS", "FIRE",
+              "BFGSLineSearch", "GPMin", "MDMin")
+
+#: The optimizers that take a preconditioner (``precon``); :func:`relax` gives them a RigidPrecon.
+PRECONDITIONED = ("RigidLBFGS", "PreconLBFGS", "PreconFIRE")
+
+
+@dataclass
+class Relaxation:
+    """What :func:`relax` did.
+
+    Attributes
+    ----------
+    converged : bool
+        Whether every generalized force fell below ``fmax`` within ``steps``.
+    steps : int
+        Optimizer steps taken.
+    energy : float
+        Final potential energy (eV), without :math:`pV`.
+    fmax : float
+        Largest generalized force left (eV/Å).
+    """
+
+    converged: bool
+    steps: int
+    energy: float
+    fmax: float
+
+
+def optimizer_class(name):
+    """The ASE optimizer class named ``name`` (one of :data:`OPTIMIZERS`), or a class as is."""
+    if not isinstance(name, str):
+        return name
+    if name not in OPTIMIZERS:
+        raise ValueError(f"optimizer={name!r}: expected one of {', '.join(OPTIMIZERS)}")
+    if name == "RigidLBFGS":
+        from rigidmd.relax.lbfgs import RigidLBFGS
+
+        return RigidLBFGS
+    if name in ("PreconLBFGS", "PreconFIRE"):
+        import ase.optimize.precon
+
+        return getattr(ase.optimize.precon, name)
+    import ase.optimize
+
+    return getattr(ase.optimize, name)
+
+
+def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", cell=False,
+          scalar_pressure=0.0, trajectory=None, logfile=None, observers=(),
+          append_trajectory=False, **kwargs) -> Relaxation:
+    """Relax the rigid bodies of ``atoms`` (and the cell) in place with an ASE optimizer.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+        With a calculator; moved to the relaxed structure (or as far as it got).
+    bodies : optional
+        Body specification (:meth:`rigidmd.RigidBodies.resolve`).
+    fmax : float, default 0.05
+        Largest generalized force at convergence (eV/Å; see :class:`RigidFilter`).
+    steps : int, default 1000
+        Optimizer steps allowed.
+    optimizer : str or ase.optimize.Optimizer subclass, default "RigidLBFGS"
+        One of :data:`OPTIMIZERS` or a class.  The default,
+        :class:`rigidmd.relax.lbfgs.RigidLBFGS`, needs no tuning: limited-memory
+        BFGS preconditioned by :class:`rigidmd.relax.precon.RigidPrecon`
+        (O(n) per step, independent of the number of BLAS threads).
+        ``PreconLBFGS`` and ``PreconFIRE`` (ASE's) get a ``RigidPrecon``
+        unless ``precon`` is given.
+    cell, scalar_pressure :
+        As for :class:`RigidFilter` (pressure in eV/Å³).
+    trajectory, logfile : str or file, optional
+        Passed to the optimizer (ASE's trajectory of the atoms, its log).
+    observers : sequence of callables, optional
+        Each called after every step as ``observer(step, energy, fmax)``
+        (step of this call, energy in eV with :math:`pV`, largest generalized
+        force in eV/Å; no extra force call); an exception it raises stops
+        the relaxation after the step's trajectory frame.
+    append_trajectory : bool, default False
+        Append to ``trajectory`` (continuing a relaxation) instead of replacing it.
+    **kwargs
+        Further optimizer arguments (``maxstep``, ...).  With ASE's BFGS,
+        ``alpha`` (initial Hessian, eV/Å² times the identity in the rows of
+        :class:`RigidFilter`; ASE's default 70) sets most of the cost
+        (``benchmarks/relax.txt``); the default optimizer needs none.
+
+    Returns
+    -------
+    Relaxation
+    """
+    if not (np.isfinite(fmax) and fmax > 0):
+        raise ValueError(f"relax: fmax={fmax!r} eV/Å must be positive")
+    if int(steps) != steps or steps < 0:
+        raise ValueError(f"relax: steps={steps!r} must be a whole number >= 0")
+    cls = optimizer_class(optimizer)
+    view = RigidFilter(atoms, bodies, cell=cell, scalar_pressure=scalar_pressure)
+    if cls.__name__ in PRECONDITIONED and "precon" not in kwargs:
+        from rigidmd.relax.precon import RigidPrecon
+
+        kwargs["precon"] = RigidPrecon()
+    with cls(view, trajectory=trajectory, logfile=logfile, append_trajectory=append_trajectory,
+             **kwargs) as opt:
+        for observer in observers:
+            opt.attach(_Report(observer, opt, view), interval=1)
+        converged = bool(opt.run(fmax=fmax, steps=int(steps)))
+        nsteps = opt.get_number_of_steps()
+    left = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.0
+    return Relaxation(converged, int(nsteps), float(atoms.get_potential_energy()), left)
+
+
+class _Report:
+    """``observer(step, energy, fmax)`` of the optimizer's current point (cached: no call)."""
+
+    def __init__(self, observer, opt, view):
+        self.observer, self.opt, self.view = observer, opt, view
+
+    def __call__(self):
+        forces = self.view.get_forces()
+        fmax = float(np.sqrt(np.sum(forces * forces, axis=1).max())) if len(forces) else 0.0
+        self.observer(self.opt.nsteps, self.view.get_potential_energy(), fmax)
