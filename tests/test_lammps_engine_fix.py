@@ -166,12 +166,10 @@ def test_without_the_plugin_fix_ipi_is_used_and_said_once(monkeypatch):
         boxplugin.forget()  # the next user looks for the plugin again
 
 
-def test_waiting_ranks_do_not_spin():
-    """Two ranks: while rigidmd does not call, rank 1 naps (MPICH's own wait polls,
-    a core at 100 %, measured 29 % of a core on this loaded 2-core machine with
-    poll_us=0); measured 0-3 % with the fix's naps.  Bound: 10 % of one second."""
+def idle_rank_cpu(poll_us):
+    """CPU seconds the two ranks of an engine use in one second without a call."""
     atoms = water_box_27()
-    with LAMMPSEngine(PPPM_27, processes=2) as engine:
+    with LAMMPSEngine(PPPM_27, processes=2, poll_us=poll_us) as engine:
         atoms.calc = engine
         for _ in range(10):
             atoms.positions += 0.001
@@ -180,7 +178,18 @@ def test_waiting_ranks_do_not_spin():
         assert len(ranks) == 2
         before = cpu_seconds(ranks)
         time.sleep(1.0)
-        assert cpu_seconds(ranks) - before < 0.1
+        return cpu_seconds(ranks) - before
+
+
+def test_waiting_ranks_do_not_spin():
+    """Two ranks: while rigidmd does not call, rank 1 naps, where MPICH's own wait
+    (poll_us=0) polls.  Measured against that spinning wait in the same test, since what
+    a spinning rank gets depends on the machine's load: quiet, it takes a whole core and
+    the naps 0-3 % of one; at load 9-10 on 2 cores the spinner got 0.29 s and the napping
+    ranks 0.18 s in a second.  Bound: half the spinning wait's CPU."""
+    spinning = idle_rank_cpu(0)
+    napping = idle_rank_cpu(500)
+    assert napping < 0.5 * spinning, (napping, spinning)
 
 
 @pytest.mark.parametrize("processes", [1, 2])
