@@ -339,11 +339,11 @@ def water_dimer(seed, model="tip3p"):
     return atoms
 
 
-def benchmark_module(script="water_models"):
-    """``benchmarks/<script>.py`` as a module (the scripts are not a package)."""
+def benchmark_module(script="water_models", folder="benchmarks"):
+    """``<folder>/<script>.py`` as a module (the scripts are not a package)."""
     import importlib.util
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{script}.py"
+    path = Path(__file__).resolve().parents[1] / folder / f"{script}.py"
     spec = importlib.util.spec_from_file_location(script, path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
