@@ -390,8 +390,9 @@ def run_openmm(state, dt_fs, ps, ensemble, tau_ps, track_ps, seed):
             kt, kr = body_kinetic_energies(x, v_now, masses)
             rec["K_tr"].append(kt)
             rec["K_rot"].append(kr)
+            # (the chain's energy: OpenMM 8.6.1 crashes when asked before the first step)
             rec["E"].append(u + kt + kr + (integrator.computeHeatBathEnergy().value_in_unit(
-                unit.kilojoule_per_mole) if ensemble == "nvt" else 0.0))
+                unit.kilojoule_per_mole) if ensemble == "nvt" and s > 0 else 0.0))
         if s % frame_every == 0:
             rec["frames"].append(np.array(x))
         if s <= track_steps and s % ke_every == 0:
@@ -480,11 +481,11 @@ def report(stems, outdir, name):
         stem = Path(stem)
         r = json.loads(stem.with_suffix(".json").read_text())
         results = results or r
-        runs += r["runs"]
+        runs += [{"ps": r["ps"], "ensemble": r["ensemble"]} | run for run in r["runs"]]
         if stem.with_suffix(".tracks.npz").exists():
             with np.load(stem.with_suffix(".tracks.npz")) as data:
                 tracks.update({k: data[k] for k in data.files})
-    runs.sort(key=lambda r: (r["dt_fs"], r["code"] != "rigidmd"))
+    runs.sort(key=lambda r: (r["ensemble"], r["ps"], r["dt_fs"], r["code"] != "rigidmd"))
     results["runs"] = runs
     cache = next(Path(outdir).glob("water_openmm_nve.start*.npz"), None)
     cell = np.load(cache)["cell"] if cache is not None else None
@@ -498,13 +499,12 @@ def report(stems, outdir, name):
 
 
 def table(results):
-    lines = [f"TIP4P-Ew, {results['molecules']} waters, {DENSITY} g/cm³, {results['ensemble']}, "
-             f"{results['ps']:g} ps per run from one state (seed {results['seed']}); "
-             "mean ± standard error of 5 blocks",
+    lines = [f"TIP4P-Ew, {results['molecules']} waters, {DENSITY} g/cm³, every run from one "
+             f"state (seed {results['seed']}); mean ± standard error of 5 blocks",
              "T_tr: 3N-3 dof, T_rot: 3N; T_conf from forces and torques (OpenMM's force field "
              "for both codes' frames); U: OpenMM's potential energy per molecule",
              "",
-             f"{'code':8} {'dt/fs':>5} {'T_tr':>14} {'T_rot':>14} {'T_6N-3':>14} "
+             f"{'code':8} {'run':>8} {'dt/fs':>5} {'T_tr':>14} {'T_rot':>14} {'T_6N-3':>14} "
              f"{'Tconf_tr':>14} {'Tconf_rot':>14} {'U kJ/mol':>16} {'E fluct':>8} "
              f"{'E drift/ns':>10}"]
     for r in results["runs"]:
@@ -512,7 +512,8 @@ def table(results):
             v, e = r[key]
             return f"{v:7.2f} ± {e:4.2f}"
         u, ue = r["U_per_molecule"]
-        lines.append(f"{r['code']:8} {r['dt_fs']:5g} {f('T_tr'):>14} {f('T_rot'):>14} "
+        run = f"{r.get('ensemble', results['ensemble'])} {r.get('ps', results['ps']):g}"
+        lines.append(f"{r['code']:8} {run:>8} {r['dt_fs']:5g} {f('T_tr'):>14} {f('T_rot'):>14} "
                      f"{f('T_6N-3'):>14} {f('Tconf_tr'):>14} {f('Tconf_rot'):>14} "
                      f"{u:9.4f} ± {ue:5.3f} {r['E_fluct_per_molecule']:8.1e} "
                      f"{r['E_drift_per_molecule_per_ns']:10.1e}")
@@ -523,7 +524,8 @@ def table(results):
         lines.append(f"O positions rigidmd vs OpenMM, dt {dt} fs (RMS Å): {marks}")
     lines.append("")
     for r in results["runs"]:
-        lines.append(f"{r['code']} {r['dt_fs']:g} fs: {r['seconds']:.0f} s")
+        lines.append(f"{r['code']} {r.get('ensemble', '')} {r.get('ps', '')} ps at "
+                     f"{r['dt_fs']:g} fs: {r['seconds']:.0f} s")
     return "\n".join(lines)
 
 
@@ -582,7 +584,8 @@ def main(argv=None):
         for code in args.codes:
             rec, seconds = runners[code](state, dt, args.ps, args.ensemble, args.tau_ps,
                                          args.track_ps, args.seed)
-            r = {"code": code, "dt_fs": dt, "seconds": seconds,
+            r = {"code": code, "dt_fs": dt, "ps": args.ps, "ensemble": args.ensemble,
+                 "seconds": seconds,
                  **analyse(rec, state, masses, context, np.random.default_rng(args.seed), dt)}
             results["runs"].append(r)
             tracks[f"{code}_{dt:g}"] = np.asarray(rec["O"])
