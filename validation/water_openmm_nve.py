@@ -102,7 +102,9 @@ DENSITY = 0.9953  # g/cm³: the water study's NPT mean for TIP4P-Ew (and the iss
 CUTOFF = 9.0  # Å
 KB_KJ = 0.0083144626  # kJ/mol/K
 KE_FS = 10.0  # kinetic energies every 10 fs
-FRAME_FS = 100.0  # configurations (U, T_conf) every 100 fs
+FRAME_FS = 100.0  # configurations (U, T_conf) every 100 fs (--frame-fs)
+#: Picoseconds each run makes before it records (--skip-ps).
+SKIP = {"ps": 0.0}
 EPS_NM, EPS_RAD = 5e-4, 5e-3  # Hutchinson displacements (see the module docstring)
 PROBES = 4  # Hutchinson vectors per frame
 
@@ -293,9 +295,14 @@ def run_rigidmd(state, dt_fs, ps, ensemble, tau_ps, track_ps, seed):
            "frames": [], "O": []}
     ke_every, frame_every = _steps(dt_fs, KE_FS), _steps(dt_fs, FRAME_FS)
     track_steps = int(round(track_ps * 1000 / dt_fs))
+    if SKIP["ps"] > 0:
+        if ensemble == "nve":
+            raise ValueError("--skip-ps is for thermostatted runs")
+        dyn.run(int(round(SKIP["ps"] * 1000 / dt_fs)))
+    start = dyn.nsteps
 
     def observe():
-        s = dyn.nsteps
+        s = dyn.nsteps - start
         if s % ke_every == 0:
             rec["K_tr"].append(dyn.get_translational_kinetic_energy() / kj)
             rec["K_rot"].append(dyn.get_rotational_kinetic_energy() / kj)
@@ -347,6 +354,9 @@ def run_openmm(state, dt_fs, ps, ensemble, tau_ps, track_ps, seed):
         integrator = openmm.VerletIntegrator(dt_fs * 1e-3)
     else:
         integrator = openmm.NoseHooverIntegrator(TEMPERATURE_K, 1 / tau_ps, dt_fs * 1e-3)
+    if ensemble == "langevin":  # velocities half a step off: kinetic columns not on-step
+        integrator = openmm.LangevinMiddleIntegrator(TEMPERATURE_K, 1 / tau_ps, dt_fs * 1e-3)
+        integrator.setRandomNumberSeed(seed)
     context = openmm.Context(system, integrator, openmm.Platform.getPlatformByName("CPU"),
                              {"Threads": "1"})
     masses = np.array([system.getParticleMass(i).value_in_unit(unit.dalton)
@@ -380,6 +390,10 @@ def run_openmm(state, dt_fs, ps, ensemble, tau_ps, track_ps, seed):
         context.applyVelocityConstraints(1e-10)
     else:
         context.setVelocities(v)
+    if SKIP["ps"] > 0:
+        if ensemble == "nve":
+            raise ValueError("--skip-ps is for thermostatted runs")
+        integrator.step(int(round(SKIP["ps"] * 1000 / dt_fs)))
     t0 = time.perf_counter()
     s = 0
     x, vel, u = read()
@@ -396,7 +410,8 @@ def run_openmm(state, dt_fs, ps, ensemble, tau_ps, track_ps, seed):
             rec["K_rot"].append(kr)
             # (the chain's energy: OpenMM 8.6.1 crashes when asked before the first step)
             rec["E"].append(u + kt + kr + (integrator.computeHeatBathEnergy().value_in_unit(
-                unit.kilojoule_per_mole) if ensemble == "nvt" and s > 0 else 0.0))
+                unit.kilojoule_per_mole) if ensemble == "nvt" and (s > 0 or SKIP["ps"] > 0)
+                else 0.0))
         if s % frame_every == 0:
             rec["frames"].append(np.array(x))
         if s <= track_steps and s % ke_every == 0:
@@ -537,7 +552,13 @@ def parse(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--dt-fs", type=float, nargs="+", default=[0.5, 1.0, 2.0, 3.0])
     p.add_argument("--ps", type=float, default=10.0, help="each run's length (ps)")
-    p.add_argument("--ensemble", choices=("nve", "nvt"), default="nve")
+    p.add_argument("--ensemble", choices=("nve", "nvt", "langevin"), default="nve",
+                   help="langevin: OpenMM's LangevinMiddleIntegrator (friction 1/--tau-ps), "
+                        "OpenMM only")
+    p.add_argument("--skip-ps", type=float, default=0.0,
+                   help="thermostatted runs: ps made before recording")
+    p.add_argument("--frame-fs", type=float, default=FRAME_FS,
+                   help="fs between configurations (U, T_conf: 9 force calls each)")
     p.add_argument("--tau-ps", type=float, default=0.5,
                    help="NVT: Bussi τ (rigidmd) and Nosé–Hoover 1/collision frequency (OpenMM)")
     p.add_argument("--codes", nargs="+", choices=("rigidmd", "openmm"),
@@ -571,6 +592,11 @@ def main(argv=None):
     args.outdir.mkdir(parents=True, exist_ok=True)
     if args.report:
         return report(args.report, args.outdir, args.name)
+    if args.ensemble == "langevin" and args.codes != ["openmm"]:
+        raise SystemExit("water_openmm_nve: --ensemble langevin is OpenMM's; add --codes openmm")
+    global FRAME_FS
+    FRAME_FS = args.frame_fs
+    SKIP["ps"] = args.skip_ps
     stem = args.outdir / args.name
     cache = args.outdir / f"water_openmm_nve.start{args.n_side}.{args.seed}.npz"
     state = equilibrated_state(args.n_side, args.seed, args.eq_ps, cache=cache)
