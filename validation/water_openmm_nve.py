@@ -500,7 +500,8 @@ def report(stems, outdir, name):
         stem = Path(stem)
         r = json.loads(stem.with_suffix(".json").read_text())
         results = results or r
-        runs += [{"ps": r["ps"], "ensemble": r["ensemble"]} | run for run in r["runs"]]
+        runs += [{"ps": r["ps"], "ensemble": r["ensemble"], "tau_ps": r["tau_ps"]} | run
+                 for run in r["runs"]]
         if r["ensemble"] == "nve" and stem.with_suffix(".tracks.npz").exists():
             with np.load(stem.with_suffix(".tracks.npz")) as data:
                 tracks.update({k: data[k] for k in data.files})
@@ -521,9 +522,11 @@ def table(results):
     lines = [f"TIP4P-Ew, {results['molecules']} waters, {DENSITY} g/cm³, every run from one "
              f"state (seed {results['seed']}); mean ± standard error of 5 blocks",
              "T_tr: 3N-3 dof, T_rot: 3N; T_conf from forces and torques (OpenMM's force field "
-             "for both codes' frames); U: OpenMM's potential energy per molecule",
+             "for both codes' frames); U: OpenMM's potential energy per molecule; run: "
+             "ensemble, ps recorded, thermostat τ (ps; langevin: 1/friction) - langevin's "
+             "kinetic columns are half-step velocities",
              "",
-             f"{'code':8} {'run':>8} {'dt/fs':>5} {'T_tr':>14} {'T_rot':>14} {'T_6N-3':>14} "
+             f"{'code':8} {'run':>17} {'dt/fs':>5} {'T_tr':>14} {'T_rot':>14} {'T_6N-3':>14} "
              f"{'Tconf_tr':>14} {'Tconf_rot':>14} {'U kJ/mol':>16} {'E fluct':>8} "
              f"{'E drift/ns':>10}"]
     for r in results["runs"]:
@@ -532,7 +535,9 @@ def table(results):
             return f"{v:7.2f} ± {e:4.2f}"
         u, ue = r["U_per_molecule"]
         run = f"{r.get('ensemble', results['ensemble'])} {r.get('ps', results['ps']):g}"
-        lines.append(f"{r['code']:8} {run:>8} {r['dt_fs']:5g} {f('T_tr'):>14} {f('T_rot'):>14} "
+        if run.split()[0] != "nve":
+            run += f" τ{r.get('tau_ps', results['tau_ps']):g}"
+        lines.append(f"{r['code']:8} {run:>17} {r['dt_fs']:5g} {f('T_tr'):>14} {f('T_rot'):>14} "
                      f"{f('T_6N-3'):>14} {f('Tconf_tr'):>14} {f('Tconf_rot'):>14} "
                      f"{u:9.4f} ± {ue:5.3f} {r['E_fluct_per_molecule']:8.1e} "
                      f"{r['E_drift_per_molecule_per_ns']:10.1e}")
@@ -615,7 +620,7 @@ def main(argv=None):
             rec, seconds = runners[code](state, dt, args.ps, args.ensemble, args.tau_ps,
                                          args.track_ps, args.seed)
             r = {"code": code, "dt_fs": dt, "ps": args.ps, "ensemble": args.ensemble,
-                 "seconds": seconds,
+                 "tau_ps": args.tau_ps, "skip_ps": args.skip_ps, "seconds": seconds,
                  **analyse(rec, state, masses, context, np.random.default_rng(args.seed), dt)}
             results["runs"].append(r)
             tracks[f"{code}_{dt:g}"] = np.asarray(rec["O"])
