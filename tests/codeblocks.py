@@ -36,6 +36,8 @@ CHECKED_ELSEWHERE = (
      "tests/test_water_properties.py runs its --quick form"),
     ("validation/water_openmm_check.py --models", "minutes a model; tests/test_water_openmm.py "
      "runs its --quick form"),
+    ("validation/water_openmm_nve.py", "an hour and more on 2 cores; "
+     "tests/test_water_openmm.py runs its --quick form and a 27-water tracking check"),
     ("examples/mace_water.py --quick", "tests/test_ml_potential.py runs it where mace-torch "
      "is installed (the ml extra, not the test extra)"),
     ("benchmarks/", "benchmarks measure speed or physics for minutes to hours; each is run "
@@ -94,7 +96,8 @@ def run_page(text, cwd, timeout=900):
                     args = [sys.executable, "-m", "rigidmd.run.cli", *args[1:]]
                 elif args[0] == "python":
                     args = [sys.executable, *args[1:]]
-                    args = [str(ROOT / a) if a.startswith(("examples/", "benchmarks/")) else a
+                    args = [str(ROOT / a) if a.startswith(("examples/", "benchmarks/",
+                                                            "validation/")) else a
                             for a in args]
                 result = subprocess.run(args, cwd=cwd, capture_output=True, text=True,
                                         env=env, timeout=timeout)
