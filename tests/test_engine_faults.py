@@ -181,9 +181,9 @@ def test_a_socket_another_process_serves_is_refused_and_kept():
 
 def test_a_live_socket_is_found_by_connecting_where_proc_does_not_list_it(monkeypatch):
     """Without Linux's /proc/net/unix, liveness is a connection tried (and closed)."""
-    import rigidmd.ipi
+    import rigidmd.ipi.connection
 
-    monkeypatch.setattr(rigidmd.ipi, "_listening_unix_paths", lambda: None)
+    monkeypatch.setattr(rigidmd.ipi.connection, "_listening_unix_paths", lambda: None)
     name = f"rigidmd-probe-{os.getpid()}"
     server = listening_unix(name)
     try:

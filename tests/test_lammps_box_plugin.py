@@ -18,6 +18,7 @@ from helpers import PPPM_27, water_box_27
 import rigidmd.lammps.boxplugin as boxplugin
 from rigidmd import RigidCRescale, RigidNPT, rigid_maxwell_boltzmann
 from rigidmd.lammps import LAMMPSCalculator
+from rigidmd.lammps.instance import LammpsInstance
 
 pytestmark = pytest.mark.lammps
 
@@ -26,13 +27,13 @@ pytestmark = pytest.mark.lammps
 def commands(monkeypatch):
     """The LAMMPS commands every LAMMPSCalculator runs from now on (a list, appended to)."""
     seen = []
-    original = LAMMPSCalculator._execute
+    original = LammpsInstance.execute
 
     def recording(self, cmds):
         seen.extend(cmds)
         return original(self, cmds)
 
-    monkeypatch.setattr(LAMMPSCalculator, "_execute", recording)
+    monkeypatch.setattr(LammpsInstance, "execute", recording)
     return seen
 
 

@@ -8,6 +8,10 @@ module                 owns
 ``deck``               set-up and integration commands, :func:`export_lammps`
 ``reference``          rigid-body reference runs and single-point energies
 ``calculator``         :class:`LAMMPSCalculator`, LAMMPS forces at LAMMPS speed
+``instance``           the calculator's LAMMPS instance and its set-up
+``topology``           the type and molecule LAMMPS gets for each atom
+``box``                the instance's box and a new cell given to it
+``atomarrays``         LAMMPS's per-atom arrays as NumPy views
 ``boxplugin``          the LAMMPS plugin for a cell change without a set-up
 ``engine``             :class:`LAMMPSEngine`, LAMMPS in its own process(es) (i-PI)
 =====================  ======================================================

@@ -1,55 +1,12 @@
-r"""Forces from an engine in another process: an ASE calculator speaking the i-PI protocol.
+r"""The i-PI server as an ASE calculator: :class:`IPICalculator` (see :mod:`rigidmd.ipi`).
 
-i-PI's socket protocol (Ceriotti, More and Manolopoulos, Comput. Phys. Commun.
-185, 1019 (2014)) is spoken by LAMMPS (``fix ipi``), CP2K, Quantum ESPRESSO,
-FHI-aims, DFTB+ and ASE's own :class:`ase.calculators.socketio.SocketClient`
-(which wraps any ASE calculator).  :class:`IPICalculator` is the server side:
-it listens on a Unix socket ``/tmp/ipi_<name>`` or a TCP port, an engine
-connects, and every force call is one exchange of fixed-size messages (12-byte
-headers, then native-endian ``float64``/``int32`` arrays)::
-
-    server                     engine
-    STATUS            ->
-                      <-       READY (or NEEDINIT: the server sends INIT first)
-    POSDATA h h^-1 N x ->      (the cell h = cell.T, Bohr; positions, Bohr)
-    GETFORCE          ->
-                      <-       FORCEREADY E N f W len extra
-                               (Hartree, Hartree/Bohr, virial W in Hartree)
-
-After the first exchange the ``STATUS`` polls are skipped: positions and the
-request for forces go out in one write, the answer comes back in one read.
-
-Units on the wire are atomic units.  Engines convert with their own Bohr and
-Hartree: ASE's client with ASE's (the default here), LAMMPS's ``fix ipi``
-with 8-digit ones (``bohr``, ``hartree`` take the engine's values, so that its
-numbers come back to roundoff).
-
-Asking for less (rigidmd's extension, for engines that know it)
-    A server made with ``tally_requests=True`` sends, in the same write as
-    each ``POSDATA``, a ``RMDTALLY`` header and one ``int32``: bit 0 asks for
-    the energy, bit 1 for the virial, of that one configuration (forces are
-    always computed).  An engine may then skip what is not asked, as native
-    LAMMPS tallies energy and virial only on output steps; the calculator
-    keeps only the properties asked for.  rigidmd's LAMMPS ``fix rigidmd/ipi``
-    understands it; an engine that does not (``fix ipi``, ASE's client, i-PI
-    drivers) would stop at the unknown header, so the flag is off by default.
-    An engine's ``extra`` string (after the virial) is kept in
-    :attr:`IPICalculator.engine_extra`.
-
-The virial ``W = -V σ`` (eV) gives the stress.  LAMMPS's ``fix ipi`` fills
-only the upper triangle (xy, xz, yz) and leaves the lower one zero (ASE's own
-server would symmetrise that with the zeros and halve every shear stress):
-here a zero lower (or upper) triangle is mirrored from the other, and a full
-virial is symmetrised.
+Each force call is one exchange of messages with the connected engine; the
+sockets (listening, accepting, waiting) are :mod:`rigidmd.ipi.connection`'s.
 """
 
 from __future__ import annotations
 
-import errno
 import os
-import select
-import socket
-import struct
 import time
 import uuid
 
@@ -58,40 +15,18 @@ from ase import units
 from ase.calculators.calculator import Calculator, PropertyNotImplementedError, all_changes
 
 from rigidmd.core.checks import quick_check_state
+from rigidmd.ipi.connection import (
+    MSGLEN,
+    EngineError,
+    accept,
+    close_sockets,
+    open_server,
+    unlink_if_ours,
+    wait_readable,
+    word,
+)
 
-__all__ = ["EngineError", "IPICalculator", "add_wait_check", "remove_wait_check",
-           "symmetric_virial"]
-
-MSGLEN = 12
-#: Seconds between looks at :func:`add_wait_check`'s checks while an engine is awaited.
-WAIT_SLICE = 0.1
-
-_wait_checks = []
-
-
-def add_wait_check(check):
-    """Call ``check()`` every :data:`WAIT_SLICE` seconds while an engine is awaited.
-
-    Whatever ``check`` raises (a stop request after a signal) ends the wait:
-    the engine is dropped (its exchange cannot be finished) and the exception
-    propagates out of the force call, whose step a rigidmd dynamics undoes.
-    A force call that is answered within one slice is never interrupted.
-    """
-    _wait_checks.append(check)
-
-
-def remove_wait_check(check):
-    """Undo :func:`add_wait_check` (no error when ``check`` is not there)."""
-    if check in _wait_checks:
-        _wait_checks.remove(check)
-
-
-class EngineError(RuntimeError):
-    """An i-PI engine died, hung or broke the protocol (the message says which and where)."""
-
-
-def _word(text):
-    return text.encode("ascii").ljust(MSGLEN)
+__all__ = ["IPICalculator", "symmetric_virial"]
 
 
 class IPICalculator(Calculator):
@@ -115,13 +50,13 @@ class IPICalculator(Calculator):
         The engine's Bohr (Å) and Hartree (eV): ASE's by default.
     tally_requests : bool, default False
         Say with each configuration whether the energy and the virial are
-        wanted (``RMDTALLY``, see the module notes); only for engines that
+        wanted (``RMDTALLY``, see :mod:`rigidmd.ipi`); only for engines that
         understand it.
 
     Notes
     -----
     Properties: ``energy`` (``free_energy``), ``forces`` and, for a periodic
-    cell, ``stress`` (from the virial; see the module notes).  Every call
+    cell, ``stress`` (from the virial; see :mod:`rigidmd.ipi`).  Every call
     computes all of them (the protocol has no cheaper call).  An engine that
     closes the connection, or does not answer within ``timeout``, raises
     :class:`EngineError`; the connection is dropped, and the next call waits
@@ -225,29 +160,7 @@ class IPICalculator(Calculator):
             self._listen()
 
     def _listen(self):
-        if self.port is None:
-            if len(self.socketfile) > 100:
-                raise ValueError(f"IPICalculator: unixsocket name too long: {self.socketfile}")
-            server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-            try:
-                self._bound = _bind_unix(server, self.socketfile)
-            except BaseException:
-                server.close()
-                raise
-        else:
-            server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-            server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            try:
-                server.bind((self.host, self.port))
-            except OSError as err:
-                server.close()
-                if err.errno == errno.EADDRINUSE:
-                    raise EngineError(f"IPICalculator: port {self.port} on {self.host!r} is in "
-                                      "use by another process; give another port") from None
-                raise EngineError(f"IPICalculator: cannot listen on {self.host}:{self.port} "
-                                  f"({err.strerror or err})") from None
-        server.listen(1)
-        self._server = server
+        self._server, self._bound = open_server(self.socketfile, self.host, self.port)
 
     @property
     def address(self):
@@ -267,17 +180,11 @@ class IPICalculator(Calculator):
         raise EngineError(f"{who}: {message}{detail}{self.where_to_look()}")
 
     def _wait_readable(self, sock, deadline, what):
-        while True:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                self._fail(f"no {what} within {self._limit:g} s")
-            ready, _, _ = select.select([sock], [], [], min(left, WAIT_SLICE))
-            if ready:
-                return
-            for check in list(_wait_checks):
-                check()  # a stop request ends the wait (see add_wait_check)
-            if self.engine_failure() is not None:
-                self._fail(f"died before its {what}")
+        trouble = wait_readable(sock, deadline, self.engine_failure)
+        if trouble == "timeout":
+            self._fail(f"no {what} within {self._limit:g} s")
+        if trouble == "died":
+            self._fail(f"died before its {what}")
 
     def _connect(self, atoms):
         self.listen()
@@ -286,22 +193,12 @@ class IPICalculator(Calculator):
             self._limit = self.connect_timeout
             self._wait_readable(self._server, time.monotonic() + self.connect_timeout,
                                 "connection")
-            conn, peer = self._server.accept()
+            conn, self._peer, self._peer_pid = accept(self._server, self.socketfile)
         except EngineError:
             raise  # dropped by _fail, which named what it kept
         except BaseException:
             self._shutdown(keep_files=False)
             raise
-        if conn.family != socket.AF_UNIX:
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._peer = f"i-PI engine at {peer[0]}:{peer[1]}"
-            self._peer_pid = None
-        else:
-            self._peer_pid = _peer_pid(conn)
-            self._peer = (f"i-PI engine on {self.socketfile}" if self._peer_pid is None else
-                          f"i-PI engine process {self._peer_pid} ({_command_name(self._peer_pid)})"
-                          f" on {self.socketfile}")
-        conn.setblocking(True)
         self._conn = conn
         self._handshaken = False
         self._verified = False
@@ -342,11 +239,11 @@ class IPICalculator(Calculator):
         return self._recv(MSGLEN, deadline, what).decode("ascii", "replace").strip()
 
     def _handshake(self, deadline):
-        self._send(_word("STATUS"))
+        self._send(word("STATUS"))
         status = self._header(deadline, "status")
         if status == "NEEDINIT":
-            self._send(_word("INIT"), np.array([0, 1], np.int32).tobytes(), b"\0")
-            self._send(_word("STATUS"))
+            self._send(word("INIT"), np.array([0, 1], np.int32).tobytes(), b"\0")
+            self._send(word("STATUS"))
             status = self._header(deadline, "status")
         if status != "READY":
             self._fail(f"answered STATUS with {status!r}, expected READY")
@@ -364,11 +261,11 @@ class IPICalculator(Calculator):
         bohr, n = self.bohr, len(positions)
         h = cell.T / bohr
         ih = np.linalg.inv(h) if np.linalg.det(cell) else np.zeros((3, 3))
-        self._send(tally, _word("POSDATA"), np.ascontiguousarray(h, np.float64).tobytes(),
+        self._send(tally, word("POSDATA"), np.ascontiguousarray(h, np.float64).tobytes(),
                    np.ascontiguousarray(ih, np.float64).tobytes(),
                    np.array([n], np.int32).tobytes(),
                    np.ascontiguousarray(positions / bohr, np.float64).tobytes(),
-                   _word("GETFORCE"))
+                   word("GETFORCE"))
         while True:
             header = self._header(deadline, "forces")
             if header != "HAVEDATA":  # an engine may still answer a poll
@@ -417,7 +314,7 @@ class IPICalculator(Calculator):
         want_stress = periodic and (not self.tally_requests or "stress" in properties)
         tally = b""
         if self.tally_requests:
-            tally = _word("RMDTALLY") + np.array([want_energy | want_stress << 1],
+            tally = word("RMDTALLY") + np.array([want_energy | want_stress << 1],
                                                  np.int32).tobytes()
         try:
             energy, forces, virial = self._exchange(cell, positions, tally)
@@ -452,24 +349,13 @@ class IPICalculator(Calculator):
         self._shutdown(keep_files=False)
 
     def _shutdown(self, keep_files):
-        if self._conn is not None and not keep_files:
-            try:  # a polite engine ends on EXIT (LAMMPS aborts; its watchdog cleans up)
-                self._conn.setblocking(False)
-                self._conn.send(_word("EXIT"))
-            except OSError:
-                pass
-        for sock in (self._conn, self._server):
-            if sock is not None:
-                try:
-                    sock.close()
-                except OSError:
-                    pass
+        close_sockets(self._conn, self._server, say_exit=not keep_files)
         self._conn = self._server = None
         self._handshaken = False
         self._peer = self._peer_pid = None
         self.stop_engine(keep_files)
         if self._bound is not None:
-            _unlink_if_ours(self.socketfile, self._bound)
+            unlink_if_ours(self.socketfile, self._bound)
             self._bound = None
 
     def __enter__(self):
@@ -485,99 +371,8 @@ class IPICalculator(Calculator):
             pass
 
 
-def _listening_unix_paths():
-    """Paths of the listening Unix sockets on this machine (Linux), or None if unknown."""
-    try:
-        with open("/proc/net/unix") as f:
-            lines = f.read().splitlines()[1:]
-    except OSError:
-        return None
-    paths = set()
-    for line in lines:
-        fields = line.split(None, 7)
-        if len(fields) == 8 and int(fields[3], 16) & 0x10000:  # __SO_ACCEPTCON: listening
-            paths.add(fields[7])
-    return paths
-
-
-def _served(path):
-    """Whether a live process listens on the Unix socket ``path``.
-
-    Linux lists listening sockets in ``/proc/net/unix``: looked up there, so
-    that the server is not disturbed.  Elsewhere a connection is tried (and
-    closed at once).
-    """
-    listening = _listening_unix_paths()
-    if listening is not None:
-        if path in listening:
-            return True
-        time.sleep(0.2)  # a process that has bound the socket but not yet listened on it
-        return path in (_listening_unix_paths() or ())
-    probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    probe.settimeout(1.0)
-    try:
-        probe.connect(path)
-    except OSError:
-        return False
-    finally:
-        probe.close()
-    return True
-
-
-def _bind_unix(server, path):
-    """Bind ``server`` to ``path``; a stale socket file is replaced, a live one refused.
-
-    Returns the socket file's ``(st_dev, st_ino)``, so that only this file is
-    removed at the end (never another process's).
-    """
-    try:
-        server.bind(path)
-    except OSError as err:
-        if err.errno != errno.EADDRINUSE:
-            raise EngineError(f"IPICalculator: cannot create the socket {path} "
-                              f"({err.strerror or err})") from None
-        if _served(path):
-            raise EngineError(f"IPICalculator: the socket {path} is in use by another live "
-                              "process (another run's engine server?); give another "
-                              "unixsocket name") from None
-        os.unlink(path)  # left by a process that is gone
-        server.bind(path)
-    info = os.stat(path)
-    return info.st_dev, info.st_ino
-
-
-def _unlink_if_ours(path, bound):
-    try:
-        info = os.stat(path)
-        if (info.st_dev, info.st_ino) == bound:
-            os.unlink(path)
-    except OSError:
-        pass
-
-
-def _peer_pid(conn):
-    """The process at the other end of a Unix socket (Linux's SO_PEERCRED), or None."""
-    option = getattr(socket, "SO_PEERCRED", None)
-    if option is None:
-        return None
-    try:
-        pid, _, _ = struct.unpack("3i", conn.getsockopt(socket.SOL_SOCKET, option,
-                                                        struct.calcsize("3i")))
-    except OSError:
-        return None
-    return pid if pid > 0 else None
-
-
-def _command_name(pid):
-    try:
-        with open(f"/proc/{pid}/comm") as f:
-            return f.read().strip()
-    except OSError:
-        return "unknown program"
-
-
 def symmetric_virial(virial):
-    """The symmetric virial from what an engine sent (see the module notes).
+    """The symmetric virial from what an engine sent (see :mod:`rigidmd.ipi`).
 
     Parameters
     ----------

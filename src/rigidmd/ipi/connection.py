@@ -1,0 +1,262 @@
+"""The socket side of :class:`~rigidmd.ipi.IPICalculator`: listening, accepting, waiting.
+
+A Unix socket ``/tmp/ipi_<name>`` or a TCP port is opened
+(:func:`open_server`); a stale socket file (its process gone) is replaced, a
+live one refused, and only the file this process bound is removed at the end
+(:func:`unlink_if_ours`).  An engine that connects through a Unix socket is
+named by its process (Linux's ``SO_PEERCRED``, :func:`accept`).  While an
+engine is awaited, the checks of :func:`add_wait_check` run every
+:data:`WAIT_SLICE` seconds (:func:`wait_readable`).
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import select
+import socket
+import struct
+import time
+
+__all__ = ["MSGLEN", "WAIT_SLICE", "EngineError", "accept", "add_wait_check", "close_sockets",
+           "open_server", "remove_wait_check", "unlink_if_ours", "wait_readable", "word"]
+
+#: Length of an i-PI header (bytes).
+MSGLEN = 12
+#: Seconds between looks at :func:`add_wait_check`'s checks while an engine is awaited.
+WAIT_SLICE = 0.1
+
+_wait_checks = []
+
+
+def add_wait_check(check):
+    """Call ``check()`` every :data:`WAIT_SLICE` seconds while an engine is awaited.
+
+    Whatever ``check`` raises (a stop request after a signal) ends the wait:
+    the engine is dropped (its exchange cannot be finished) and the exception
+    propagates out of the force call, whose step a rigidmd dynamics undoes.
+    A force call that is answered within one slice is never interrupted.
+    """
+    _wait_checks.append(check)
+
+
+def remove_wait_check(check):
+    """Undo :func:`add_wait_check` (no error when ``check`` is not there)."""
+    if check in _wait_checks:
+        _wait_checks.remove(check)
+
+
+class EngineError(RuntimeError):
+    """An i-PI engine died, hung or broke the protocol (the message says which and where)."""
+
+
+def word(text):
+    """An i-PI header: ``text`` in ASCII, padded with blanks to :data:`MSGLEN` bytes."""
+    return text.encode("ascii").ljust(MSGLEN)
+
+
+def wait_readable(sock, deadline, engine_failure):
+    """Wait until ``sock`` can be read, running :func:`add_wait_check`'s checks meanwhile.
+
+    Parameters
+    ----------
+    sock : socket.socket
+    deadline : float
+        ``time.monotonic()`` at which to give up.
+    engine_failure : callable
+        Returns why the engine is gone (a sentence), or None while it runs.
+
+    Returns
+    -------
+    str or None
+        None when readable, ``"timeout"`` past the deadline, ``"died"`` when
+        ``engine_failure`` says so.
+    """
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            return "timeout"
+        ready, _, _ = select.select([sock], [], [], min(left, WAIT_SLICE))
+        if ready:
+            return None
+        for check in list(_wait_checks):
+            check()  # a stop request ends the wait (see add_wait_check)
+        if engine_failure() is not None:
+            return "died"
+
+
+def open_server(socketfile, host, port):
+    """A listening socket: the Unix socket ``socketfile`` when ``port`` is None, else TCP.
+
+    Returns
+    -------
+    server : socket.socket
+    bound : tuple or None
+        ``(st_dev, st_ino)`` of the socket file bound (None for TCP).
+
+    Raises
+    ------
+    ValueError
+        The socket file's path is too long.
+    EngineError
+        The socket file is served by a live process, or the port is in use.
+    """
+    bound = None
+    if port is None:
+        if len(socketfile) > 100:
+            raise ValueError(f"IPICalculator: unixsocket name too long: {socketfile}")
+        server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        try:
+            bound = _bind_unix(server, socketfile)
+        except BaseException:
+            server.close()
+            raise
+    else:
+        server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            server.bind((host, port))
+        except OSError as err:
+            server.close()
+            if err.errno == errno.EADDRINUSE:
+                raise EngineError(f"IPICalculator: port {port} on {host!r} is in "
+                                  "use by another process; give another port") from None
+            raise EngineError(f"IPICalculator: cannot listen on {host}:{port} "
+                              f"({err.strerror or err})") from None
+    server.listen(1)
+    return server, bound
+
+
+def accept(server, socketfile):
+    """Accept the engine waiting on ``server`` (readable); a blocking connection.
+
+    Returns
+    -------
+    conn : socket.socket
+    peer : str
+        The engine in words (its process and program for a Unix socket, when the
+        system says, else its address).
+    peer_pid : int or None
+        Its process (Unix socket, Linux).
+    """
+    conn, address = server.accept()
+    if conn.family != socket.AF_UNIX:
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        peer, pid = f"i-PI engine at {address[0]}:{address[1]}", None
+    else:
+        pid = _peer_pid(conn)
+        peer = (f"i-PI engine on {socketfile}" if pid is None else
+                f"i-PI engine process {pid} ({_command_name(pid)}) on {socketfile}")
+    conn.setblocking(True)
+    return conn, peer, pid
+
+
+def close_sockets(conn, server, say_exit):
+    """Close the connection and the server (either may be None); ``say_exit``: send EXIT first.
+
+    A polite engine ends on ``EXIT`` (LAMMPS aborts; its watchdog cleans up).
+    """
+    if conn is not None and say_exit:
+        try:
+            conn.setblocking(False)
+            conn.send(word("EXIT"))
+        except OSError:
+            pass
+    for sock in (conn, server):
+        if sock is not None:
+            try:
+                sock.close()
+            except OSError:
+                pass
+
+
+def unlink_if_ours(path, bound):
+    """Remove the socket file ``path`` if it is still the one bound (``(st_dev, st_ino)``)."""
+    try:
+        info = os.stat(path)
+        if (info.st_dev, info.st_ino) == bound:
+            os.unlink(path)
+    except OSError:
+        pass
+
+
+def _listening_unix_paths():
+    """Paths of the listening Unix sockets on this machine (Linux), or None if unknown."""
+    try:
+        with open("/proc/net/unix") as f:
+            lines = f.read().splitlines()[1:]
+    except OSError:
+        return None
+    paths = set()
+    for line in lines:
+        fields = line.split(None, 7)
+        if len(fields) == 8 and int(fields[3], 16) & 0x10000:  # __SO_ACCEPTCON: listening
+            paths.add(fields[7])
+    return paths
+
+
+def _served(path):
+    """Whether a live process listens on the Unix socket ``path``.
+
+    Linux lists listening sockets in ``/proc/net/unix``: looked up there, so
+    that the server is not disturbed.  Elsewhere a connection is tried (and
+    closed at once).
+    """
+    listening = _listening_unix_paths()
+    if listening is not None:
+        if path in listening:
+            return True
+        time.sleep(0.2)  # a process that has bound the socket but not yet listened on it
+        return path in (_listening_unix_paths() or ())
+    probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    probe.settimeout(1.0)
+    try:
+        probe.connect(path)
+    except OSError:
+        return False
+    finally:
+        probe.close()
+    return True
+
+
+def _bind_unix(server, path):
+    """Bind ``server`` to ``path``; a stale socket file is replaced, a live one refused.
+
+    Returns the socket file's ``(st_dev, st_ino)``, so that only this file is
+    removed at the end (never another process's).
+    """
+    try:
+        server.bind(path)
+    except OSError as err:
+        if err.errno != errno.EADDRINUSE:
+            raise EngineError(f"IPICalculator: cannot create the socket {path} "
+                              f"({err.strerror or err})") from None
+        if _served(path):
+            raise EngineError(f"IPICalculator: the socket {path} is in use by another live "
+                              "process (another run's engine server?); give another "
+                              "unixsocket name") from None
+        os.unlink(path)  # left by a process that is gone
+        server.bind(path)
+    info = os.stat(path)
+    return info.st_dev, info.st_ino
+
+
+def _peer_pid(conn):
+    """The process at the other end of a Unix socket (Linux's SO_PEERCRED), or None."""
+    option = getattr(socket, "SO_PEERCRED", None)
+    if option is None:
+        return None
+    try:
+        pid, _, _ = struct.unpack("3i", conn.getsockopt(socket.SOL_SOCKET, option,
+                                                        struct.calcsize("3i")))
+    except OSError:
+        return None
+    return pid if pid > 0 else None
+
+
+def _command_name(pid):
+    try:
+        with open(f"/proc/{pid}/comm") as f:
+            return f.read().strip()
+    except OSError:
+        return "unknown program"
