@@ -205,3 +205,25 @@ def test_charges_and_types_are_checked(tmp_path, field, value, message):
     for trust in (False, True):
         with pytest.raises(ConfigError, match=f"^{message}"):
             check_config(raw, trust=trust)
+
+
+@pytest.mark.parametrize("name", ["ipi", "lammps"])
+@pytest.mark.parametrize("host", ["0.0.0.0", "10.1.2.3", "node7.cluster", "::"])
+def test_a_socket_other_machines_can_reach_needs_trust(tmp_path, name, host):
+    """``address: 0.0.0.0:PORT`` opened a port any machine could connect to (and be sent
+    the run's positions, and have its forces used) without --trust.  Only a Unix socket
+    or loopback is allowed; the check comes before anything listens."""
+    calc = {"name": name, "address": f"{host}:31415"}
+    if name == "lammps":
+        calc["commands"] = LJ
+    message = refused(config(tmp_path, calculator=calc), "calculator.address")
+    assert "other machines can reach" in message
+    nothing_written(tmp_path)
+
+
+@pytest.mark.parametrize("address", ["unix:rigidmd-test", "localhost:31415",
+                                     "127.0.0.1:31415", "127.0.1.1:31415"])
+def test_a_unix_socket_or_loopback_needs_no_trust(tmp_path, address):
+    check_config(config(tmp_path, calculator={"name": "ipi", "address": address}))
+    check_config(config(tmp_path, calculator={"name": "lammps", "commands": LJ,
+                                              "address": address}))

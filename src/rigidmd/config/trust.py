@@ -38,12 +38,19 @@ wrote or has read.  What is allowed without it:
   none of them absolute or with a ``..`` part: a run writes only inside its
   own directory.  A directory given on the command line (``--outdir``) is
   the user's own choice and may be anywhere.
+* sockets listened on (:func:`check_listen_address`): ``calculator.address``
+  of ``ipi`` and of ``lammps`` (an engine started elsewhere) is a Unix socket
+  (``unix:NAME``) or a loopback address (``localhost``, ``127.x.x.x``,
+  ``::1``).  Any other host (``0.0.0.0``, a host name, an interface's
+  address) opens a port other machines can reach, and whatever connects
+  there is sent the run's positions and cell and its forces are used.
 
 Reading (``structure``, ``restart``, an integrator's ``.yaml``) is not
 limited: ASE's readers and rigidmd's scheme files run no code.
 """
 
 import importlib
+import ipaddress
 import math
 from pathlib import PurePath
 
@@ -51,7 +58,7 @@ from rigidmd.config.quantities import ConfigError
 
 __all__ = ["SAFE_LAMMPS_COMMANDS", "ALLOWED_CALCULATORS", "GivenOnCommandLine",
            "check_lammps_commands", "check_calculator", "check_output_paths",
-           "calculator_class"]
+           "check_listen_address", "calculator_class"]
 
 #: LAMMPS commands a configuration may give without ``--trust``: interactions only.
 SAFE_LAMMPS_COMMANDS = frozenset({
@@ -176,6 +183,41 @@ def check_lammps_commands(where, commands):
                               f"code; {TRUST_HINT}")
 
 
+def check_listen_address(where, address):
+    """Refuse (ConfigError naming ``where``) a TCP address other machines can reach.
+
+    Parameters
+    ----------
+    where : str
+        The configuration field, e.g. ``"calculator.address"``.
+    address : str
+        ``unix:NAME`` or ``HOST:PORT`` (the form is checked elsewhere).
+
+    Notes
+    -----
+    A Unix socket, ``localhost`` and loopback addresses (``127.0.0.0/8``,
+    ``::1``) are reachable from this machine only.  Any other host, a name
+    included (it may resolve to any interface), needs ``--trust``.
+    """
+    text = str(address)
+    if text.startswith("unix:"):
+        return
+    host = text.rpartition(":")[0].strip("[]")
+    if host.lower() == "localhost":
+        return
+    try:
+        if ipaddress.ip_address(host).is_loopback:
+            return
+    except ValueError:
+        pass  # a host name, or "" (every interface)
+    shown = repr(host) if host else "'' (every interface)"
+    raise ConfigError(f"{where}: {text!r} listens on {shown}, which other machines can reach "
+                      f"(an engine connecting there is sent the run's positions and its "
+                      f"forces are used); without --trust a configuration may listen only on "
+                      f"a Unix socket (unix:NAME) or loopback (localhost:PORT, 127.0.0.1:PORT); "
+                      f"{TRUST_HINT}")
+
+
 def _check_options(where, name, options, allowed):
     """Each option on the list for ``name``, with a value of its kind."""
     for key, value in options.items():
@@ -216,6 +258,8 @@ def check_calculator(section, trust=False):
                 raise ConfigError(f"calculator.{field_name}.{element}: expected {kind}, "
                                   f"got {value!r}")
     name = section.name
+    if section.address is not None and not trust:
+        check_listen_address("calculator.address", section.address)
     if name in ("tip3p", "tip4p", "lammps", "ipi"):
         if trust:
             return None

@@ -40,7 +40,11 @@ class IPICalculator(Calculator):
     port : int, optional
         Listen on this TCP port instead (an engine on another host).
     host : str, default "localhost"
-        Interface the TCP server binds to (``""``: all of them).
+        Interface the TCP server binds to (``""`` or ``"0.0.0.0"``: all of them,
+        without a warning: the Python API does what it is told).  Any process
+        that can reach the port may connect; over TCP the engine cannot be told
+        from another (see :doc:`/guide/trust`).  A configuration may name only
+        loopback or a Unix socket without ``--trust``.
     timeout : float, default 120.0
         Seconds an engine may take to answer one force call (and to connect,
         see ``connect_timeout``) before :class:`EngineError` is raised.
