@@ -5,6 +5,7 @@ with ``lj/cut/coul/long 4.5`` and PPPM at 1e-5 (``helpers.PPPM_27``).
 """
 
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -220,11 +221,14 @@ def test_another_program_connecting_to_a_launched_engines_socket_is_refused():
     intruder = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     intruder.connect(engine.socketfile)  # first in the queue: accepted first
     try:
-        with pytest.raises(EngineError, match=rf"process {os.getpid()} \(.*\).*is not this "
-                                              r"calculator's engine"):
+        with pytest.raises(EngineError, match=rf"process {os.getpid()} \(.*, in "
+                                              rf"{re.escape(os.getcwd())}\).*is not this "
+                                              r"calculator's engine") as err:
             engine.get_potential_energy(atoms)
     finally:
         intruder.close()
+    # Not "see LAMMPS's log" as if the log told about the intruder.
+    assert str(err.value).endswith("was stopped with it; the next call starts it again")
     assert engine.get_potential_energy(atoms) < 0  # its own engine, on the next call
     engine.close()
     assert not our_lmp()
@@ -257,10 +261,18 @@ def test_an_engine_set_up_for_another_system_is_refused(tmp_path, monkeypatch, f
     thread.start()
     try:
         expected = (r"is not this calculator's engine: its energy .* differs from .* eV"
-                    if fix == "ipi" else r"i-PI engine process \d+ \(lmp\) on .*: closed the "
-                    r"connection")
-        with pytest.raises(EngineError, match=expected):
+                    if fix == "ipi" else r"i-PI engine process \d+ \(lmp, in .*other\) on .*: "
+                    r"closed the connection")
+        with pytest.raises(EngineError, match=expected) as err:
             engine.get_potential_energy(atoms)
+        # It names the intruder's folder, not this calculator's (absent) log as the place
+        # to look (the message named ours/log.lammps, which no engine had written).
+        message = str(err.value)
+        assert message.endswith(f"; it is not the engine this calculator waits for, which is "
+                                f"started in {tmp_path / 'ours'} (cd {tmp_path / 'ours'} && "
+                                f"lmp -in in.engine); the log of the one that connected is "
+                                f"in {tmp_path / 'other'}"), message
+        assert "log.lammps" not in message
     finally:
         engine.close()
         thread.join()

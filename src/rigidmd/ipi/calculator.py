@@ -21,6 +21,7 @@ from rigidmd.ipi.connection import (
     accept,
     close_sockets,
     open_server,
+    process_folder,
     unlink_if_ours,
     wait_readable,
     word,
@@ -98,6 +99,7 @@ class IPICalculator(Calculator):
         self._bound = None      # (device, inode) of the socket file this calculator bound
         self._peer = None       # the connected engine, in words
         self._peer_pid = None   # its process (Unix socket), when the system says
+        self._peer_folder = None  # that process's working folder, when the system says
         self._verified = False  # its first answer was checked (check_first_answer)
 
     # ------------------------------------------------------------ hooks
@@ -114,7 +116,8 @@ class IPICalculator(Calculator):
         return None
 
     def where_to_look(self):
-        """Where the engine's own messages are (appended to errors)."""
+        """Where the engine's own messages are (appended to errors; called while the
+        connected engine, :attr:`peer_pid`, is still known)."""
         return ""
 
     def frame(self, cell):
@@ -152,6 +155,17 @@ class IPICalculator(Calculator):
         """
 
     @property
+    def peer_pid(self):
+        """The process of the connected engine (Unix socket, Linux), or None."""
+        return self._peer_pid
+
+    @property
+    def peer_folder(self):
+        """The working folder of the connected engine's process when it connected (Unix
+        socket, Linux, a process of this user), or None."""
+        return self._peer_folder
+
+    @property
     def connected(self):
         """Whether an engine is connected."""
         return self._conn is not None
@@ -179,9 +193,10 @@ class IPICalculator(Calculator):
         """Drop the engine and raise one error naming it and where to look."""
         why = self.engine_failure()
         who = self.describe_engine()
+        look = self.where_to_look()  # while the engine and its peer are known
         self._shutdown(keep_files=True)
         detail = f": {why}" if why else ""
-        raise EngineError(f"{who}: {message}{detail}{self.where_to_look()}")
+        raise EngineError(f"{who}: {message}{detail}{look}")
 
     def _wait_readable(self, sock, deadline, what):
         trouble = wait_readable(sock, deadline, self.engine_failure)
@@ -198,6 +213,8 @@ class IPICalculator(Calculator):
             self._wait_readable(self._server, time.monotonic() + self.connect_timeout,
                                 "connection")
             conn, self._peer, self._peer_pid = accept(self._server, self.socketfile)
+            self._peer_folder = None if self._peer_pid is None else process_folder(
+                self._peer_pid)
         except EngineError:
             raise  # dropped by _fail, which named what it kept
         except BaseException:
@@ -356,7 +373,7 @@ class IPICalculator(Calculator):
         close_sockets(self._conn, self._server, say_exit=not keep_files)
         self._conn = self._server = None
         self._handshaken = False
-        self._peer = self._peer_pid = None
+        self._peer = self._peer_pid = self._peer_folder = None
         self.stop_engine(keep_files)
         if self._bound is not None:
             unlink_if_ours(self.socketfile, self._bound)

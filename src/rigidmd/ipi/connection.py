@@ -19,7 +19,8 @@ import struct
 import time
 
 __all__ = ["MSGLEN", "WAIT_SLICE", "EngineError", "accept", "add_wait_check", "close_sockets",
-           "open_server", "remove_wait_check", "unlink_if_ours", "wait_readable", "word"]
+           "open_server", "process_folder", "remove_wait_check", "unlink_if_ours",
+           "wait_readable", "word"]
 
 #: Length of an i-PI header (bytes).
 MSGLEN = 12
@@ -134,8 +135,8 @@ def accept(server, socketfile):
     -------
     conn : socket.socket
     peer : str
-        The engine in words (its process and program for a Unix socket, when the
-        system says, else its address).
+        The engine in words (its process, program and working folder for a Unix
+        socket, when the system says, else its address).
     peer_pid : int or None
         Its process (Unix socket, Linux).
     """
@@ -145,8 +146,12 @@ def accept(server, socketfile):
         peer, pid = f"i-PI engine at {address[0]}:{address[1]}", None
     else:
         pid = _peer_pid(conn)
-        peer = (f"i-PI engine on {socketfile}" if pid is None else
-                f"i-PI engine process {pid} ({_command_name(pid)}) on {socketfile}")
+        if pid is None:
+            peer = f"i-PI engine on {socketfile}"
+        else:
+            folder = process_folder(pid)
+            where = "" if folder is None else f", in {folder}"
+            peer = f"i-PI engine process {pid} ({_command_name(pid)}{where}) on {socketfile}"
     conn.setblocking(True)
     return conn, peer, pid
 
@@ -252,6 +257,14 @@ def _peer_pid(conn):
     except OSError:
         return None
     return pid if pid > 0 else None
+
+
+def process_folder(pid):
+    """The working folder of process ``pid`` (Linux, a process of this user), or None."""
+    try:
+        return os.readlink(f"/proc/{pid}/cwd")
+    except OSError:
+        return None
 
 
 def _command_name(pid):

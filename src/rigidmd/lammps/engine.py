@@ -311,6 +311,7 @@ class LAMMPSEngine(IPICalculator):
         self.kspace_parameters = None
         #: LAMMPS's log of the current (or last failed) engine.
         self.log = None
+        self._intruder = None  # a process check_peer refused
         self._proc = None
         self._workdir = None
         self._engine_triclinic = None
@@ -457,7 +458,43 @@ class LAMMPSEngine(IPICalculator):
         return why
 
     def where_to_look(self):
-        return "" if self.log is None else f"; see LAMMPS's log {self.log}"
+        if self.log is None:
+            return ""
+        elsewhere = self._started_elsewhere()
+        return f"; see LAMMPS's log {self.log}" if elsewhere is None else elsewhere
+
+    def _started_elsewhere(self):
+        """Where to look when the engine that connected is not known to be this
+        calculator's (a clause), or None: its log is this calculator's log.
+
+        A launched engine's process is checked when it connects (:meth:`check_peer`).
+        One started elsewhere (``launch=False``) is this calculator's when it runs in
+        the folder its input was written to; a process in another folder, or an engine
+        that answered while no log was written there, is another run's, and its own
+        log is where it runs.
+        """
+        if self._proc is not None:
+            if self._intruder is None or self._intruder != self.peer_pid:
+                return None
+            return (f"; it was refused before any exchange, and this calculator's engine "
+                    f"(process {self._proc.pid}, log {self.log}) was stopped with it; the "
+                    "next call starts it again")
+        ours = self._workdir
+        folder = self.peer_folder
+        if folder is not None and Path(folder).resolve() == Path(ours).resolve():
+            return None
+        if folder is None and (self.log.exists() or not self.connected):
+            if self.connected:
+                return None  # over TCP: it may be this calculator's engine
+            return (f"; no engine was started for it ({self.log} does not exist): "
+                    f"cd {ours} && {' '.join(self.command_line()[0])}")
+        started = f"cd {ours} && lmp -in in.engine"
+        if folder is not None:
+            return (f"; it is not the engine this calculator waits for, which is started in "
+                    f"{ours} ({started}); the log of the one that connected is in {folder}")
+        return (f"; it is not known to be the engine this calculator waits for, which is "
+                f"started in {ours} ({started}) and has written no log there; look for the "
+                "log where the engine that connected runs")
 
     def frame(self, cell):
         return lower_triangular(cell)[0]
@@ -474,6 +511,7 @@ class LAMMPSEngine(IPICalculator):
             return None  # started elsewhere (launch=False): its first answer is checked
         if _descends_from(pid, self._proc.pid):
             return None
+        self._intruder = pid
         return (f"this calculator started its engine as process {self._proc.pid}; process "
                 f"{pid} is another program's")
 
