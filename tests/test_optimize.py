@@ -294,6 +294,8 @@ def test_relaxation_short_of_its_steps_is_one_line_and_keeps_the_structure(tmp_p
     lines = result.stderr.strip().splitlines()  # progress lines, then one line for the stop
     assert "did not reach fmax 0.01 eV/Å in 3 steps" in lines[-1] and "Traceback" not in \
         result.stderr
+    assert lines[-1].endswith("raise relax.steps and continue with: rigidmd run relax.yaml "
+                              "--resume")  # the relaxation, then the MD
     assert all(line.startswith("relax step ") for line in lines[:-1])
     assert len(read(tmp_path / "out" / "relax.traj", ":")) == 4  # start and 3 steps
     assert not (tmp_path / "out" / "md.traj").exists()
@@ -539,6 +541,54 @@ def test_a_signal_stops_rigidmd_relax_after_a_step_and_resume_finishes(
     stopped_at = frames[-1]
     stopped_at.calc = TIP3P(rc=40.0)
     assert last.get_potential_energy() < stopped_at.get_potential_energy()
+
+
+@pytest.mark.parametrize("signame, status", [("SIGTERM", 143), ("SIGINT", 130)])
+def test_a_run_stopped_while_relaxing_resumes_the_relaxation_then_the_md(
+        tmp_path, monkeypatch, capsys, signame, status):
+    """``rigidmd run`` with a relax: section, stopped during its relaxation, said to start
+    again with --overwrite (relaxing again from the structure).  Now it says the exact
+    --resume command, which continues the relaxation from its last frame (appending to
+    its trajectory) and then runs the MD from the relaxed structure."""
+    import shlex
+    import signal
+
+    from ase.io import read
+
+    from rigidmd.run.cli import main
+
+    config = tmp_path / "relax.yaml"
+    config.write_text(RELAX_CONFIG.replace("STEPS", "2000").replace(", optimizer: FIRE", ""))
+    out = tmp_path / "out"
+    signal_at_call(monkeypatch, 12, getattr(signal, signame))
+    assert main(["run", str(config)]) == status
+    said = capsys.readouterr().out.strip().splitlines()[-1]
+    assert said.startswith(f"relax: stopped by {signame}; the structure reached is the last "
+                           f"frame of {out / 'relax.traj'}; continue with: rigidmd run "), said
+    hint = said.split("continue with: ")[1]
+    assert "--resume" in hint and "--overwrite" not in hint
+    frames = read(out / "relax.traj", ":")
+    assert 2 <= len(frames) < 30 and not (out / "md.traj").exists()
+    stopped = (out / "relax.traj").read_bytes()
+    # A plain run again is refused, and replaces nothing.
+    assert main(["run", str(config)]) == 2
+    assert "already holds relax.traj, relax.log, checkpoint.npz" in capsys.readouterr().err
+    assert (out / "relax.traj").read_bytes() == stopped
+    monkeypatch.undo()
+    assert main(shlex.split(hint)[1:]) == 0
+    said = capsys.readouterr().out
+    assert f"continuing the relaxation of {out / 'relax.traj'} after step {len(frames) - 1}" \
+        in said
+    resumed = read(out / "relax.traj", ":")
+    for a, b in zip(frames, resumed[:len(frames)], strict=True):  # appended, nothing rewritten
+        np.testing.assert_array_equal(a.positions, b.positions)
+    last = resumed[-1]
+    last.calc = TIP3P(rc=40.0)
+    assert np.linalg.norm(RigidFilter(last, bodies="tags").get_forces(), axis=1).max() < 0.01
+    md = read(out / "md.traj", ":")
+    assert len(md) == 3  # steps 0, 10 and 20
+    np.testing.assert_allclose(md[0].positions, last.positions, rtol=0, atol=1e-9)
+    assert md[0].get_kinetic_energy() > 0  # velocities drawn for the relaxed bodies
 
 
 def test_rigidmd_relax_never_deletes_its_input(tmp_path):

@@ -46,12 +46,18 @@ class RunCheckpoints:
         return self._fingerprint
 
     # ------------------------------------------------------------ writing
-    def write(self, dyn, writer=None):
-        """Flush ``writer`` (an MDAnalysis writer, or None) and checkpoint ``dyn``."""
+    def write(self, dyn, writer=None, relaxation=None):
+        """Flush ``writer`` (an MDAnalysis writer, or None) and checkpoint ``dyn``.
+
+        ``relaxation``: the run stopped in its ``relax:`` section, whose trajectory
+        (this file name) ``--resume`` continues before the MD (``dyn`` is the start).
+        """
         if writer is not None:
             writer.flush()
         extra = {"outputs": output_lengths(self.files.appended()),
                  "fingerprint": self.fingerprint, "steps": self.config.run.steps}
+        if relaxation is not None:
+            extra["relaxation"] = relaxation
         dyn.save_checkpoint(self.files.outputs.checkpoint, extra=extra)
         self.step = dyn.nsteps
 

@@ -45,6 +45,10 @@ class RunFiles:
         As for :class:`rigidmd.run.runner.Run`.
     stream : file
         Where messages go.
+    relax : rigidmd.config.relaxsection.RelaxSection, optional
+        The run's ``relax:`` section: its trajectory and log are the run's
+        outputs too (a new run does not replace an earlier relaxation unless
+        ``--overwrite``).
 
     Attributes
     ----------
@@ -52,8 +56,10 @@ class RunFiles:
         The output files this run creates (none was there before it).
     """
 
-    def __init__(self, outputs, mode, stream):
+    def __init__(self, outputs, mode, stream, relax=None):
         self.outputs, self.mode, self.stream = outputs, mode, stream
+        self.relaxation = [] if relax is None else [outputs.directory / relax.trajectory,
+                                                   outputs.directory / relax.log]
         self.created = []
         self.made_directory = False
 
@@ -69,7 +75,7 @@ class RunFiles:
         if self.outputs.mdanalysis is not None:
             files.append(self.outputs.mdanalysis.with_suffix(".psf"))
         files += [p for p in (self.outputs.plot, self.outputs.checkpoint) if p]
-        return files
+        return self.relaxation + files
 
     def fresh_start_advice(self):
         """How to go on without the checkpoint: keeping the outputs first, then removing them."""
@@ -130,7 +136,7 @@ class RunFiles:
                 removed.append(path.name)
         return removed
 
-    def prepare(self, earlier_demo, replace=False):
+    def prepare(self, earlier_demo, replace=False, keep=()):
         """Make the directory ready for the run's mode, before anything is written.
 
         Parameters
@@ -140,10 +146,13 @@ class RunFiles:
             this demo's (asked only for a demo into a directory with outputs).
         replace : bool
             Remove the outputs under ``--resume`` too (a resume from step 0).
+        keep : sequence of pathlib.Path
+            Outputs that ``replace`` keeps (a stopped relaxation continued: its
+            trajectory, log and checkpoint).
         """
         from rigidmd.run.checkpoint import remove_stale_temporaries
 
-        existing = [p for p in self.all() if p.exists()]
+        existing = [p for p in self.all() if p.exists() and p not in keep]
         names = ", ".join(p.name for p in existing)
         if self.mode == "new" and existing:
             raise ConfigError(

@@ -24,6 +24,10 @@
   once without a checkpoint (the outputs may end mid-step); ``--resume``
   continues from the last one.  Once the steps have stopped, further signals
   are noted, not obeyed: the final checkpoint is always written whole.
+* **A relaxation first** (``relax:``): stopped by a signal or short of its
+  steps, it leaves a checkpoint at step 0 that says so; ``--resume``
+  continues the relaxation from the last frame of its trajectory, then runs
+  the MD.
 * **Failures after the start** (a full disk, a step that fails) raise
   :class:`RunStopped`: one line naming the file or the reason, the step and
   the last checkpoint, which stays intact (status 1).
@@ -85,7 +89,7 @@ class Run:
         self.config_path = config_path
         self.resume_hint = resume_hint
         self.outputs = config.outputs
-        self.files = RunFiles(self.outputs, mode, self.stream)
+        self.files = RunFiles(self.outputs, mode, self.stream, config.relax)
         self.checkpoints = RunCheckpoints(config, self.files, self.stream)
 
     @property
@@ -130,13 +134,15 @@ class Run:
         return dict(integrator=self.config.run.integrator,
                     integrator_options=self.config.run.integrator_options)
 
-    def _new_dynamics(self, replace=False):
+    def _new_dynamics(self, replace=False, relaxation=False):
         """Read the inputs and check the dynamics on a copy; build it after the outputs' turn.
 
         ``replace``: remove the directory's outputs (a resume from step 0).  A
         ``relax:`` section relaxes the structure after that (relaxing is not
         reading an input: it writes its own trajectory and log), and the
-        velocities are drawn again for the relaxed bodies.
+        velocities are drawn again for the relaxed bodies.  ``relaxation``: a
+        relaxation stopped earlier (its checkpoint says so) is continued from
+        the last frame of its trajectory, which is kept, as its log is.
         """
         import warnings
 
@@ -148,25 +154,51 @@ class Run:
         probe.calc = atoms.calc
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the real construction below warns, once
-            RigidDynamics(probe, self.config.run.timestep, bodies=bodies,
-                          couplings=self.config.coupling.parts(), **self._dynamics_arguments())
-        self.files.prepare(self.checkpoints.is_earlier_demo, replace)
-        if self.config.relax is not None:  # (a restart with relax: is refused by the config)
-            from rigidmd.relax.structure import relax_structure
-
-            relax_structure(atoms, bodies, self.config.relax, self.outputs.directory,
-                            self.stream, hint=f"rigidmd run {self.config_path or 'CONFIG'} "
-                            "--overwrite (it relaxes again from the structure)",
-                            stop=StopSignals())
-            self._draw_velocities(atoms, bodies)
-        out = self.outputs
-        # Nothing of this run's is in the directory now: what appears is this run's.
+            start = RigidDynamics(probe, self.config.run.timestep, bodies=bodies,
+                                  couplings=self.config.coupling.parts(),
+                                  **self._dynamics_arguments())
+        keep = self.files.relaxation + [self.outputs.checkpoint] if relaxation else ()
+        self.files.prepare(self.checkpoints.is_earlier_demo, replace, keep)
+        # Nothing of this run's is in the directory now (but a relaxation it continues):
+        # what appears is this run's.
         self.files.note_created()
+        if self.config.relax is not None:  # (a restart with relax: is refused by the config)
+            self._relax(atoms, bodies, start, relaxation)
+        out = self.outputs
         return RigidDynamics(atoms, self.config.run.timestep, bodies=bodies,
                              couplings=self.config.coupling.parts(),
                              trajectory=str(out.trajectory) if out.trajectory else None,
                              logfile=str(out.log) if out.log else None,
                              loginterval=out.interval, **self._dynamics_arguments())
+
+    def _relax(self, atoms, bodies, start, continuing):
+        """The ``relax:`` section on ``atoms``, then velocities for the relaxed bodies.
+
+        A relaxation that stops (a signal) or falls short of ``relax.steps``
+        leaves a checkpoint of the run's start (``start``, a dynamics of its
+        unrelaxed atoms) at step 0 that records it: ``--resume`` then continues
+        the relaxation from the last frame of its trajectory, and the MD after it.
+        """
+        from rigidmd.relax.structure import (
+            RelaxationNotConverged,
+            RelaxationStopped,
+            continue_from,
+            relax_structure,
+        )
+
+        section, directory = self.config.relax, self.outputs.directory
+        done = 0
+        if continuing:
+            done = continue_from(atoms, directory / section.trajectory)
+            print(f"continuing the relaxation of {directory / section.trajectory} after step "
+                  f"{done}", file=self.stream)
+        try:
+            relax_structure(atoms, bodies, section, directory, self.stream, resume=continuing,
+                            done=done, hint=self._resume_hint(), stop=StopSignals())
+        except (RelaxationStopped, RelaxationNotConverged):
+            self.checkpoints.write(start, relaxation=str(section.trajectory))
+            raise
+        self._draw_velocities(atoms, bodies)
 
     def _resumed_dynamics(self):
         from rigidmd.run.logger import RigidLogger
@@ -174,6 +206,10 @@ class Run:
 
         out = self.outputs
         checkpoint = self.checkpoints.read_for_resume()
+        if checkpoint.nsteps == 0 and checkpoint.extra.get("relaxation") and \
+                self.config.relax is not None:
+            # Stopped while relaxing: the relaxation goes on, then the MD.
+            return self._new_dynamics(relaxation=True)
         if checkpoint.nsteps == 0:
             # Killed before its first interval checkpoint: the step-0 checkpoint holds the
             # configuration's start, so the run starts again (writing step 0 once).
