@@ -732,3 +732,24 @@ def test_the_preconditioner_s_pairs_are_ase_s_neighbour_list():
         assert len(ours[0]) == len(ase[0]) > 0
         key = lambda i, j, d: sorted(zip(i, j, np.round(d, 9), strict=True))  # noqa: E731
         assert key(*ours) == key(*ase)
+
+
+def test_the_two_relaxation_results_have_two_names():
+    """rigidmd.relax.Relaxation (relax_bodies's result) and rigidmd.relax.filter.Relaxation
+    (relax()'s) were two classes of one name; relax_bodies's is BodyRelaxation now, and
+    its 0.1.0 name still works, with a warning that names both."""
+    import rigidmd.relax
+    from rigidmd.relax import BodyRelaxation
+    from rigidmd.relax.bodies import BodyRelaxation as same
+    from rigidmd.relax.filter import Relaxation
+
+    assert same is BodyRelaxation and BodyRelaxation is not Relaxation
+    assert "Relaxation" not in rigidmd.relax.__all__
+    with pytest.warns(DeprecationWarning, match=r"BodyRelaxation; relax\(\)'s result is "
+                                                r"rigidmd.relax.filter.Relaxation"):
+        assert rigidmd.relax.Relaxation is BodyRelaxation
+    cluster = water_cluster(2, seed=0)
+    cluster.calc = TIP3P(rc=20.0)
+    assert type(relax(cluster, fmax=0.5)) is Relaxation
+    with pytest.raises(AttributeError):
+        rigidmd.relax.NoSuchName  # noqa: B018

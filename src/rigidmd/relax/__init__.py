@@ -6,12 +6,19 @@
   (:mod:`rigidmd.relax.precon`) is the default, needing no tuning;
 * the cell's part (:mod:`rigidmd.relax.cell`);
 * :func:`relax_bodies` (:mod:`rigidmd.relax.bodies`): each kind of molecule in
-  the internal geometry a calculator prefers, before it is made rigid;
+  the internal geometry a calculator prefers, before it is made rigid (its
+  result is a :class:`BodyRelaxation`; :func:`relax`'s is a
+  :class:`rigidmd.relax.filter.Relaxation`);
 * the ``relax:`` section and ``rigidmd relax`` (:mod:`rigidmd.relax.structure`,
   :mod:`rigidmd.relax.command`).
+
+``rigidmd.relax.Relaxation``, :func:`relax_bodies`'s result in rigidmd 0.1.0, is
+a deprecated name of :class:`BodyRelaxation` (it warns).
 """
 
-from rigidmd.relax.bodies import Relaxation, relax_bodies
+import warnings
+
+from rigidmd.relax.bodies import BodyRelaxation, relax_bodies
 from rigidmd.relax.cell import CELL_MODES
 from rigidmd.relax.filter import OPTIMIZERS, RigidFilter, optimizer_class, relax
 from rigidmd.relax.lbfgs import RigidLBFGS
@@ -23,5 +30,14 @@ from rigidmd.relax.structure import (
 )
 
 __all__ = ["relax", "RigidFilter", "RigidLBFGS", "RigidPrecon", "OPTIMIZERS", "optimizer_class",
-           "CELL_MODES", "relax_bodies", "Relaxation", "relax_structure",
+           "CELL_MODES", "relax_bodies", "BodyRelaxation", "relax_structure",
            "RelaxationNotConverged", "RelaxationStopped"]
+
+
+def __getattr__(name):
+    if name == "Relaxation":  # rigidmd 0.1.0's name, when rigidmd.relax was one module
+        warnings.warn("rigidmd.relax.Relaxation is relax_bodies's result, now named "
+                      "rigidmd.relax.BodyRelaxation; relax()'s result is "
+                      "rigidmd.relax.filter.Relaxation", DeprecationWarning, stacklevel=2)
+        return BodyRelaxation
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

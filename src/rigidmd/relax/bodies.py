@@ -19,12 +19,13 @@ from ase.optimize import BFGS
 from rigidmd.core.bodies import RigidBodies
 from rigidmd.core.model import describe_atoms
 
-__all__ = ["relax_bodies", "Relaxation"]
+__all__ = ["relax_bodies", "BodyRelaxation"]
 
 
 @dataclass
-class Relaxation:
-    """What :func:`relax_bodies` did.
+class BodyRelaxation:
+    """What :func:`relax_bodies` did (``rigidmd.relax.Relaxation`` before 0.2, deprecated:
+    :func:`~rigidmd.relax.filter.relax` returns :class:`rigidmd.relax.filter.Relaxation`).
 
     Attributes
     ----------
@@ -95,7 +96,7 @@ def relax_bodies(atoms, calculator, bodies=None, *, fmax=1e-3, steps=500, optimi
 
     Returns
     -------
-    Relaxation
+    BodyRelaxation
         The new atoms and, per kind, the relaxed molecule and its strain
         energy.
 
@@ -121,7 +122,7 @@ def relax_bodies(atoms, calculator, bodies=None, *, fmax=1e-3, steps=500, optimi
     out.calc = None
     if "momenta" in out.arrays:
         del out.arrays["momenta"]
-    result = Relaxation(out)
+    result = BodyRelaxation(out)
     kinds = {}
     for b in range(model.n_bodies):
         kinds.setdefault(tuple(numbers[model.atoms_of(b)]), []).append(b)
