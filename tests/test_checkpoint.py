@@ -18,7 +18,7 @@ from rigidmd import (
     RigidVerlet,
     load_checkpoint,
 )
-from rigidmd.run.checkpoint import CheckpointError, read_checkpoint, remove_stale_temporaries
+from rigidmd.core.checkpoint import CheckpointError, read_checkpoint, remove_stale_temporaries
 
 KINDS = ["nve", "langevin", "bussi", "nose_hoover", "mtk", "crescale"]
 

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from rigidmd import load_checkpoint
+from rigidmd.core.checkpoint import read_checkpoint
 from rigidmd.couplings.barostats import CRescaleBarostat
 from rigidmd.couplings.thermostats import BussiThermostat
-from rigidmd.run.checkpoint import read_checkpoint
 
 DATA = Path(__file__).with_name("data")
 sys.path.insert(0, str(DATA))

@@ -445,7 +445,7 @@ def test_rigidmd_run_stops_at_once_with_a_hung_engine(tmp_path):
     assert took < 5
     assert proc.returncode == 143, stderr
     step = int(stdout.split("stopped by SIGTERM after step ")[1].split()[0])
-    from rigidmd.run.checkpoint import read_checkpoint
+    from rigidmd.core.checkpoint import read_checkpoint
 
     assert read_checkpoint(tmp_path / "out" / "checkpoint.npz").nsteps == step
     assert "--resume" in stdout
@@ -469,6 +469,6 @@ def test_rigidmd_run_checkpoints_the_undone_step_when_its_engine_dies(tmp_path):
     step = int(stderr.split("(at step ")[1].split(")")[0])
     assert step > 0
     assert f"the last checkpoint is intact (step {step})" in stderr
-    from rigidmd.run.checkpoint import read_checkpoint
+    from rigidmd.core.checkpoint import read_checkpoint
 
     assert read_checkpoint(tmp_path / "out" / "checkpoint.npz").nsteps == step

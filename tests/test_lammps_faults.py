@@ -18,8 +18,8 @@ from helpers import PPPM_27, lammps_instances, water_box_27
 
 import rigidmd.lammps.calculator as lammps_calculator
 from rigidmd import RigidBodies, RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
+from rigidmd.core.checkpoint import save_checkpoint
 from rigidmd.lammps import LAMMPSCalculator
-from rigidmd.run.checkpoint import save_checkpoint
 from rigidmd.run.restart import load_checkpoint
 from rigidmd.systems import water_box
 from rigidmd.water import water_model

@@ -28,8 +28,8 @@ from helpers import (  # the rigidmd-run projects these tests share with test_ru
     wait_for_lines,
 )
 
+from rigidmd.core.checkpoint import read_checkpoint
 from rigidmd.run import cli
-from rigidmd.run.checkpoint import read_checkpoint
 
 
 def outputs(path, xtc=True):
@@ -188,7 +188,7 @@ def test_demo_replaces_its_own_outputs(tmp_path):
 
 def test_full_disk_stops_with_one_line_and_keeps_the_checkpoint(tmp_path, monkeypatch, capsys):
     """ENOSPC while writing the log: status 1, one line naming the file, checkpoint intact."""
-    from rigidmd.run.logger import RigidLogger
+    from rigidmd.core.logger import RigidLogger
 
     path = project(tmp_path, "langevin", xtc=False)
     original = RigidLogger.__call__
@@ -275,7 +275,7 @@ def test_overwrite_keeps_the_outputs_when_the_new_run_cannot_start(tmp_path, mon
 def test_a_run_killed_before_its_first_checkpoint_resumes_without_repeats(
         tmp_path, monkeypatch, capsys, short_reference):
     """Only the step-0 checkpoint exists: frame 0 and the step-0 log line are written once."""
-    from rigidmd.run.logger import RigidLogger
+    from rigidmd.core.logger import RigidLogger
 
     path = short_project(tmp_path, checkpoint_interval=40)
     original, calls = RigidLogger.__call__, []
@@ -300,7 +300,7 @@ def test_a_run_killed_before_its_first_checkpoint_resumes_without_repeats(
 def test_a_second_ctrl_c_between_a_frame_and_its_log_line(tmp_path, monkeypatch, capsys,
                                                         short_reference):
     """Stopping at once keeps the last whole checkpoint; --resume loses no log line."""
-    from rigidmd.run.logger import RigidLogger
+    from rigidmd.core.logger import RigidLogger
 
     path = short_project(tmp_path, checkpoint_interval=20)
     original, calls = RigidLogger.__call__, []

@@ -17,8 +17,8 @@ import pytest
 from ase.io import read
 from helpers import file_bytes, finish, messages, run_here, short_project, start, wait_for_lines
 
+from rigidmd.core.checkpoint import read_checkpoint
 from rigidmd.run import cli
-from rigidmd.run.checkpoint import read_checkpoint
 
 #: Steps of the runs stopped by a real signal: long enough to be stopped after step 30 under
 #: load (15 ms a step measured on the shared 2-core machine), short enough to stay fast.
@@ -114,8 +114,8 @@ def test_a_second_ctrl_c_during_the_final_checkpoint_is_noted_and_the_checkpoint
 
     Before: a ``KeyboardInterrupt`` traceback out of the write (and no checkpoint of the stop).
     """
-    from rigidmd.run import checkpoint as checkpoint_module
-    from rigidmd.run.logger import RigidLogger
+    from rigidmd.core import checkpoint as checkpoint_module
+    from rigidmd.core.logger import RigidLogger
 
     path = short_project(tmp_path, steps=40, checkpoint_interval=50)
     original_log, original_write = RigidLogger.__call__, checkpoint_module.atomic_write
@@ -317,7 +317,7 @@ def short_checkpoint(tmp_path, monkeypatch, capsys):
 def test_a_checkpoint_one_body_short_names_the_mismatch(tmp_path, monkeypatch, capsys):
     """Before: "could not broadcast input array from shape (7,3) into shape (8,3)"."""
     from rigidmd import load_checkpoint
-    from rigidmd.run.checkpoint import CheckpointError
+    from rigidmd.core.checkpoint import CheckpointError
 
     path, checkpoint = short_checkpoint(tmp_path, monkeypatch, capsys)
 

@@ -388,7 +388,7 @@ class Stage:
         return series
 
     def _meta(self):
-        from rigidmd.run.checkpoint import read_checkpoint
+        from rigidmd.core.checkpoint import read_checkpoint
 
         return json.dumps(read_checkpoint(self.checkpoint).extra)
 

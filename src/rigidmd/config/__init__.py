@@ -1,57 +1,20 @@
 """Run configurations for the ``rigidmd`` command: reading, checking, building.
 
-A configuration is a YAML mapping (every key optional except ``structure``
-(or ``restart``), ``timestep`` and ``steps``)::
-
-    structure: water.xyz          # any file ase.io.read reads, or a builder:
-    #   {builtin: water_cluster, n_molecules: 32, seed: 0}  (or water_box, n_side)
-    read_options: {format: lammps-data, atom_style: full}   # passed to ase.io.read
-    bodies: mol-id                # mol-id | tags | connectivity (default: the first
-                                  # the atoms have: mol-id, tags, else connectivity)
-    calculator:
-      name: tip3p                 # tip3p | tip4p | lammps | an ASE calculator class's path
-      options: {rc: 9.0}          # keyword arguments of the calculator
-      commands: [...]             # lammps: pair_style, pair_coeff, kspace_style, ...
-      charges: {O: -0.834, H: 0.417}   # lammps: charge per element
-    integrator: no_squish         # or richardson, rozmanov_kusalik, pcdm, exadem
-    integrator_options: {}
-    thermostat:                   # omit for NVE
-      kind: langevin              # langevin | bussi | nose_hoover
-      temperature: 300 K
-      friction: 0.01 1/fs         # langevin;  taut: 100 fs (bussi);  tdamp: 100 fs
-    barostat:                     # omit for constant volume (a periodic cell and a
-      kind: mtk                   # calculator with stress); mtk | crescale | monte_carlo
-      pressure: 1 bar             # bar, atm, GPa, Pa or eV/A^3
-      pdamp: 1 ps                 # mtk;  crescale: taup: 1 ps, compressibility: 4.5e-5 1/bar
-      couple: iso                 # iso | aniso | tri
-                                  # monte_carlo (no stress needed): every: 25, seed: 0,
-                                  # adapt_moves: 500
-    velocities: {temperature: 250 K, seed: 0}   # draw rigid velocities first
-    timestep: 1 fs                # with a unit: fs, ps, or ase (ASE time units)
-    steps: 2000
-    restart: previous.traj        # continue from the last frame of a trajectory
-    outputs:
-      directory: .
-      trajectory: md.traj
-      log: md.log
-      interval: 10                # steps between frames and log lines
-      plot: energy.png            # energy and temperature against time
-      mdanalysis: md.xtc          # needs rigidmd[analysis]
-      checkpoint: checkpoint.npz  # the default; written every checkpoint_interval steps
-      checkpoint_interval: 1000   # (default) and at every stop; rigidmd run --resume reads it
-    relax:                        # relax first (rigid bodies, optionally the cell); see
-      fmax: 0.05                  # rigidmd.config.relaxsection; rigidmd relax CONFIG
-      optimizer: BFGS             # relaxes only
-
-Quantities with units are strings ``"<number> <unit>"``.  Every mistake is
-a :class:`ConfigError` naming the field.  Each group of keys is checked by
-its section (:mod:`rigidmd.config.sections`); :func:`check_config` assembles
-them into a :class:`RunConfig`.
+The loader is :mod:`rigidmd.config.loader` (the keys, :func:`load_config`,
+:func:`check_config`, :class:`RunConfig`); each group of keys is checked by its
+section (:mod:`rigidmd.config.sections`, :mod:`rigidmd.config.couplingsection`,
+:mod:`rigidmd.config.relaxsection`), quantities with units by
+:mod:`rigidmd.config.quantities`, and what a configuration may do without
+``--trust`` by :mod:`rigidmd.config.trust`.  The names below are re-exported.
 """
 
-from dataclasses import dataclass
-from pathlib import Path
-
+from rigidmd.config.loader import (
+    DEMO_CONFIG,
+    RunConfig,
+    check_config,
+    known_keys,
+    load_config,
+)
 from rigidmd.config.quantities import (
     COMPRESSIBILITY_UNITS,
     PRESSURE_UNITS,
@@ -59,154 +22,11 @@ from rigidmd.config.quantities import (
     TEMPERATURE_UNITS,
     TIME_UNITS,
     ConfigError,
-    key_name,
     parse_quantity,
 )
 from rigidmd.config.relaxsection import RelaxSection
-from rigidmd.config.sections import (
-    CalculatorSection,
-    CouplingSection,
-    OutputsSection,
-    RunSection,
-    StructureSection,
-)
-from rigidmd.config.trust import check_output_paths
 
 __all__ = ["ConfigError", "RunConfig", "load_config", "check_config", "parse_quantity",
            "known_keys", "RelaxSection",
            "DEMO_CONFIG", "TIME_UNITS", "RATE_UNITS", "TEMPERATURE_UNITS", "PRESSURE_UNITS",
            "COMPRESSIBILITY_UNITS"]
-
-#: The built-in demo: a TIP3P water cluster, 2 ps at 1 fs.
-DEMO_CONFIG = {
-    "structure": {"builtin": "water_cluster", "n_molecules": 32, "seed": 0},
-    "calculator": {"name": "tip3p", "options": {"rc": 40.0}},
-    "velocities": {"temperature": "250 K", "seed": 0},
-    "timestep": "1 fs",
-    "steps": 2000,
-    "outputs": {"directory": "rigidmd-demo", "trajectory": "demo.traj", "log": "demo.log",
-                "interval": 20, "plot": "demo-energy.png", "checkpoint": "demo-checkpoint.npz"},
-}
-
-_SECTIONS = {"structure": StructureSection, "run": RunSection, "calculator": CalculatorSection,
-             "coupling": CouplingSection, "outputs": OutputsSection, "relax": RelaxSection}
-
-
-@dataclass
-class RunConfig:
-    """A checked configuration: one object per section (quantities in ASE units)."""
-
-    structure: StructureSection
-    run: RunSection
-    calculator: CalculatorSection
-    coupling: CouplingSection
-    outputs: OutputsSection
-    relax: RelaxSection | None = None
-
-
-def known_keys():
-    """Every top-level key a configuration may hold."""
-    return {key for section in _SECTIONS.values() for key in section.KEYS}
-
-
-#: Numbers as YAML 1.2 writes them.  YAML 1.1 (PyYAML's) also reads ``1:30`` as 90
-#: (base 60), ``010`` as 8 (octal), ``0x1f``, ``0b11`` and ``1_000``: these stay text, so
-#: the field that wanted a number says so.
-_YAML_INT = r"^[-+]?(?:0|[1-9][0-9]*)$"
-_YAML_FLOAT = (r"^(?:[-+]?(?:[0-9]+\.[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?"
-               r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$")
-
-
-def _strict_loader():
-    """A YAML safe loader that refuses a key given twice in one mapping (and reads numbers
-    as YAML 1.2 does: see ``_YAML_INT``)."""
-    import re
-
-    import yaml
-
-    class StrictLoader(yaml.SafeLoader):
-        pass
-
-    numbers = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
-    StrictLoader.yaml_implicit_resolvers = {
-        first: [(tag, regexp) for tag, regexp in resolvers if tag not in numbers]
-        for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
-    StrictLoader.add_implicit_resolver(numbers[0], re.compile(_YAML_INT), list("-+0123456789"))
-    StrictLoader.add_implicit_resolver(numbers[1], re.compile(_YAML_FLOAT),
-                                       list("-+0123456789."))
-
-    def construct_mapping(loader, node, deep=False):
-        seen = {}
-        for key_node, _ in node.value:
-            key = loader.construct_object(key_node, deep=deep)
-            if key in seen:
-                raise ConfigError(
-                    f"{key}: given twice (lines {seen[key] + 1} and "
-                    f"{key_node.start_mark.line + 1}); keep one")
-            seen[key] = key_node.start_mark.line
-        return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
-
-    StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
-                                 construct_mapping)
-    return StrictLoader
-
-
-def load_config(path):
-    """Read a YAML configuration file (not yet checked).
-
-    Relative paths inside the file are resolved against the file's directory.
-    A key given twice in one mapping is refused (YAML would keep the last).
-    """
-    import yaml
-
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"config: no such file {str(path)!r}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise ConfigError(f"config: {path} is not a text (UTF-8) file; give a YAML "
-                          "configuration") from None
-    try:
-        data = yaml.load(text, Loader=_strict_loader())  # noqa: S506 - a SafeLoader subclass
-    except yaml.YAMLError as err:
-        where = getattr(err, "problem_mark", None)
-        line = f" at line {where.line + 1}" if where is not None else ""
-        problem = getattr(err, "problem", None) or " ".join(str(err).split())
-        raise ConfigError(f"config: {path} is not valid YAML{line} ({problem})") from None
-    if not isinstance(data, dict):
-        raise ConfigError(f"config: {path} must hold a mapping of settings")
-    data.setdefault("_base", str(path.resolve().parent))
-    return data
-
-
-def check_config(config, trust=False):
-    """Validate a raw configuration mapping and build its sections.
-
-    Parameters
-    ----------
-    config : dict
-        As :func:`load_config` returns; ``_base`` is the directory relative
-        paths are resolved against (default: the current directory).
-    trust : bool, default False
-        Allow what is not on the allow-list of :mod:`rigidmd.config.trust`:
-        any calculator class and option, LAMMPS commands beyond the
-        interactions (``shell``, ``python``, ...), output paths outside the
-        run's directory (``rigidmd run --trust``).
-
-    Returns
-    -------
-    RunConfig
-    """
-    config = dict(config)
-    base = Path(config.pop("_base", "."))
-    known = known_keys()
-    unknown = sorted(set(config) - known, key=str)
-    if unknown:
-        raise ConfigError(f"{key_name(unknown[0])}: unknown key; allowed: "
-                          f"{', '.join(sorted(known))}")
-    check_output_paths(config, trust)
-    checked = RunConfig(**{name: section.from_config(config, base)
-                           for name, section in _SECTIONS.items()})
-    checked.calculator.check_trust(trust)
-    return checked

@@ -26,7 +26,7 @@ serves every part; :meth:`RigidDynamics.set_state` updates it in place.
 
 The time step is read from :attr:`RigidDynamics.dt` at every step.
 :class:`RigidVerlet` is the plain NVE case.  :func:`rigidmd.run.restart.load_checkpoint`
-rebuilds a dynamics from a file :mod:`rigidmd.run.checkpoint` wrote.
+rebuilds a dynamics from a file :mod:`rigidmd.core.checkpoint` wrote.
 """
 
 import warnings
@@ -37,6 +37,7 @@ from ase.md.md import MolecularDynamics
 
 from rigidmd.core import _numba
 from rigidmd.core.bodies import RigidBodies, store_bodies_in_tags
+from rigidmd.core.checkpoint import save_checkpoint
 from rigidmd.core.checks import (
     StepSizeCheck,
     check_constraints,
@@ -47,6 +48,7 @@ from rigidmd.core.checks import (
 from rigidmd.core.dof import RigidBodyDOF
 from rigidmd.core.forces import ForceEvaluator, NonFiniteForceError
 from rigidmd.core.link import AtomsSync, BodyLink
+from rigidmd.core.logger import RigidLogger
 from rigidmd.core.model import BodyModel
 from rigidmd.core.observables import RigidObservables
 from rigidmd.core.operators import remove_centre_velocity
@@ -56,8 +58,6 @@ from rigidmd.core.state import STATE_FIELDS
 from rigidmd.core.stepcontext import StepContext
 from rigidmd.core.stepper import Stepper
 from rigidmd.couplings.base import CouplingView, check_composition, export_parts
-from rigidmd.run.checkpoint import save_checkpoint
-from rigidmd.run.logger import RigidLogger
 
 __all__ = ["RigidDynamics", "RigidVerlet", "RigidBodyDOF", "NonFiniteForceError",
            "check_timestep"]
@@ -99,7 +99,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
     :attr:`sync` (its change detection), :attr:`evaluator` (filling the
     per-step :attr:`record`) and :attr:`stepper` (the step and its rollback).
     :meth:`get_state` and :meth:`set_state` export and restore everything an
-    exact continuation needs (:mod:`rigidmd.run.checkpoint` writes it to a file).
+    exact continuation needs (:mod:`rigidmd.core.checkpoint` writes it to a file).
 
     Parameters
     ----------
@@ -399,7 +399,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
     def save_checkpoint(self, path, extra: dict | None = None) -> None:
         """Write everything an exact continuation needs to ``path`` (atomically).
 
-        See :mod:`rigidmd.run.checkpoint`; :func:`rigidmd.load_checkpoint` continues.
+        See :mod:`rigidmd.core.checkpoint`; :func:`rigidmd.load_checkpoint` continues.
         """
         save_checkpoint(self, path, extra)
 

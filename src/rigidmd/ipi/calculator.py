@@ -41,11 +41,10 @@ class IPICalculator(Calculator):
     port : int, optional
         Listen on this TCP port instead (an engine on another host).
     host : str, default "localhost"
-        Interface the TCP server binds to (``""`` or ``"0.0.0.0"``: all of them,
-        without a warning: the Python API does what it is told).  Any process
-        that can reach the port may connect; over TCP the engine cannot be told
-        from another (see :doc:`/guide/trust`).  A configuration may name only
-        loopback or a Unix socket without ``--trust``.
+        Interface the TCP server binds to (``""`` or ``"0.0.0.0"``: all of them, without
+        a warning).  Any process that can reach the port may connect, and over TCP one
+        engine cannot be told from another; a configuration may name only loopback or a
+        Unix socket without ``--trust`` (:doc:`/guide/trust`).
     timeout : float, default 120.0
         Seconds an engine may take to answer one force call (and to connect,
         see ``connect_timeout``) before :class:`EngineError` is raised.
@@ -117,7 +116,7 @@ class IPICalculator(Calculator):
 
     def where_to_look(self):
         """Where the engine's own messages are (appended to errors; called while the
-        connected engine, :attr:`peer_pid`, is still known)."""
+        connected engine's process and folder, ``_peer_pid`` and ``_peer_folder``, are known)."""
         return ""
 
     def frame(self, cell):
@@ -153,17 +152,6 @@ class IPICalculator(Calculator):
 
         ``keep_files``: the engine failed; keep what names the failure (its log).
         """
-
-    @property
-    def peer_pid(self):
-        """The process of the connected engine (Unix socket, Linux), or None."""
-        return self._peer_pid
-
-    @property
-    def peer_folder(self):
-        """The working folder of the connected engine's process when it connected (Unix
-        socket, Linux, a process of this user), or None."""
-        return self._peer_folder
 
     @property
     def connected(self):

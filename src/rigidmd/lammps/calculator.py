@@ -125,7 +125,7 @@ class LAMMPSCalculator(Calculator):
     constant of a rigid molecule); a net charge with a ``kspace_style`` is
     warned of too.  :meth:`get_checkpoint_state` and
     :meth:`set_checkpoint_state` carry the k-space parameters through
-    :func:`rigidmd.run.checkpoint.save_checkpoint` and ``load_checkpoint``.
+    :func:`rigidmd.core.checkpoint.save_checkpoint` and ``load_checkpoint``.
     """
 
     implemented_properties = ["energy", "free_energy", "forces", "stress"]

@@ -474,13 +474,13 @@ class LAMMPSEngine(IPICalculator):
         log is where it runs.
         """
         if self._proc is not None:
-            if self._intruder is None or self._intruder != self.peer_pid:
+            if self._intruder is None or self._intruder != self._peer_pid:
                 return None
             return (f"; it was refused before any exchange, and this calculator's engine "
                     f"(process {self._proc.pid}, log {self.log}) was stopped with it; the "
                     "next call starts it again")
         ours = self._workdir
-        folder = self.peer_folder
+        folder = self._peer_folder
         if folder is not None and Path(folder).resolve() == Path(ours).resolve():
             return None
         if folder is None and (self.log.exists() or not self.connected):

@@ -16,9 +16,8 @@
 a deprecated name of :class:`BodyRelaxation` (it warns).
 """
 
-import warnings
-
 from rigidmd.relax.bodies import BodyRelaxation, relax_bodies
+from rigidmd.relax.bodies import old_name as __getattr__  # noqa: F401 - 0.1.0's Relaxation
 from rigidmd.relax.cell import CELL_MODES
 from rigidmd.relax.filter import OPTIMIZERS, RigidFilter, optimizer_class, relax
 from rigidmd.relax.lbfgs import RigidLBFGS
@@ -33,11 +32,3 @@ __all__ = ["relax", "RigidFilter", "RigidLBFGS", "RigidPrecon", "OPTIMIZERS", "o
            "CELL_MODES", "relax_bodies", "BodyRelaxation", "relax_structure",
            "RelaxationNotConverged", "RelaxationStopped"]
 
-
-def __getattr__(name):
-    if name == "Relaxation":  # rigidmd 0.1.0's name, when rigidmd.relax was one module
-        warnings.warn("rigidmd.relax.Relaxation is relax_bodies's result, now named "
-                      "rigidmd.relax.BodyRelaxation; relax()'s result is "
-                      "rigidmd.relax.filter.Relaxation", DeprecationWarning, stacklevel=2)
-        return BodyRelaxation
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

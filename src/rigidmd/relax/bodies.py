@@ -10,6 +10,7 @@ geometry, each superposed on the body as it was (same centre of mass, best
 fit orientation), so the start is the calculator's own rigid molecule.
 """
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -47,6 +48,17 @@ class BodyRelaxation:
     strain_energies: dict = field(default_factory=dict)
     bodies: dict = field(default_factory=dict)
 
+
+
+def old_name(name):
+    """``rigidmd.relax``'s module ``__getattr__``: its 0.1.0 name ``Relaxation`` (when it was
+    one module), deprecated, is :class:`BodyRelaxation`."""
+    if name == "Relaxation":
+        warnings.warn("rigidmd.relax.Relaxation is relax_bodies's result, now named "
+                      "rigidmd.relax.BodyRelaxation; relax()'s result is "
+                      "rigidmd.relax.filter.Relaxation", DeprecationWarning, stacklevel=2)
+        return BodyRelaxation
+    raise AttributeError(f"module 'rigidmd.relax' has no attribute {name!r}")
 
 def _kabsch(reference, target, weights):
     r"""Rotations :math:`R` minimising :math:`\sum_i w_i |R a_i - b_i|^2` for centred sets.

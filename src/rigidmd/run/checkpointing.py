@@ -72,7 +72,7 @@ class RunCheckpoints:
     # ------------------------------------------------------------ reading
     def is_earlier_demo(self):
         """The checkpoint in the directory is a demo's (same fingerprint, any steps)."""
-        from rigidmd.run.checkpoint import CheckpointError, read_checkpoint
+        from rigidmd.core.checkpoint import CheckpointError, read_checkpoint
 
         try:
             checkpoint = read_checkpoint(self.files.outputs.checkpoint)
@@ -85,7 +85,7 @@ class RunCheckpoints:
 
         Returns
         -------
-        rigidmd.run.checkpoint.Checkpoint
+        rigidmd.core.checkpoint.Checkpoint
 
         Raises
         ------
@@ -93,7 +93,7 @@ class RunCheckpoints:
             No checkpoint, an unreadable one, or one whose run differs from
             the configuration (the fields are named).
         """
-        from rigidmd.run.checkpoint import CheckpointError, read_checkpoint
+        from rigidmd.core.checkpoint import CheckpointError, read_checkpoint
 
         out = self.files.outputs
         if not out.checkpoint.exists():

@@ -150,7 +150,7 @@ class RunFiles:
             Outputs that ``replace`` keeps (a stopped relaxation continued: its
             trajectory, log and checkpoint).
         """
-        from rigidmd.run.checkpoint import remove_stale_temporaries
+        from rigidmd.core.checkpoint import remove_stale_temporaries
 
         existing = [p for p in self.all() if p.exists() and p not in keep]
         names = ", ".join(p.name for p in existing)

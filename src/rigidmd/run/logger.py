@@ -1,81 +1,9 @@
-"""The MD log of a rigid dynamics: ASE's columns, the conserved energy, and P, V, density.
+"""The MD log's old path: :mod:`rigidmd.core.logger` holds it now.
 
-The first five columns are those of ASE's :class:`~ase.md.MDLogger`
-(``Time[ps] Etot[eV] Epot[eV] Ekin[eV] T[K]``), so tools that read ASE logs
-read these; then the quantity the dynamics conserves (``Econs[eV]``, the total
-energy for NVE) and, for a periodic cell, the molecular pressure (``P[bar]``,
-when a barostat runs or ``log_pressure`` asks for it), the volume
-(``V[A^3]``) and the density (``rho[g/cm3]``), then the columns of the coupling
-parts that have any (:attr:`rigidmd.couplings.base.Coupling.log_columns`, e.g.
-``MCacc[%]``, a Monte Carlo barostat's acceptance since the start).  Energies
-carry 6 decimals (µeV), so a slow drift shows as a line, not as steps.
+The dynamics opens its own log (``logfile=``), so the logger lives in the core;
+the names are re-exported here for code written for this path.
 """
 
-from ase import units
-from ase.md.logger import MDLogger
-
-from rigidmd.core.dof import kinetic_energy, temperature
+from rigidmd.core.logger import LOG_COLUMNS, RigidLogger
 
 __all__ = ["RigidLogger", "LOG_COLUMNS"]
-
-#: Column names, in order; the last four are optional.
-LOG_COLUMNS = ("Time[ps]", "Etot[eV]", "Epot[eV]", "Ekin[eV]", "T[K]", "Econs[eV]", "P[bar]",
-               "V[A^3]", "rho[g/cm3]")
-
-
-class RigidLogger(MDLogger):
-    """Log lines of a :class:`~rigidmd.core.dynamics.RigidDynamics` (an ASE ``MDLogger``).
-
-    Parameters
-    ----------
-    dyn : rigidmd.core.dynamics.RigidDynamics
-    logfile : str or file
-        ``"-"`` for standard output.
-    pressure : bool
-        Log the molecular pressure (needs a calculator with stress).
-    mode : str, default ``"a"``
-        How a named file is opened.
-    header : bool, default True
-    """
-
-    def __init__(self, dyn, logfile, pressure=False, mode="a", header=True):
-        self.log_pressure = bool(pressure)
-        self.periodic = bool(dyn.atoms.pbc.all())
-        super().__init__(dyn, dyn.atoms, logfile, header=False, mode=mode, comm=dyn.comm)
-        columns = list(LOG_COLUMNS[:6])
-        self.fmt = "%-10.4f %14.6f %14.6f %14.6f %8.2f %14.6f"
-        if self.log_pressure:
-            columns.append("P[bar]")
-            self.fmt += " %11.3f"
-        if self.periodic:
-            columns += ["V[A^3]", "rho[g/cm3]"]
-            self.fmt += " %12.3f %10.5f"
-        widths = [-10, 14, 14, 14, 8, 14] + ([11] if self.log_pressure else [])
-        widths += [12, 10] if self.periodic else []
-        #: The coupling parts that add columns (their ``log_values()`` at each line).
-        self.parts = [part for part in getattr(dyn, "couplings", ()) if part.log_columns]
-        for part in self.parts:
-            for name in part.log_columns:
-                columns.append(name)
-                widths.append(max(9, len(name)))
-                self.fmt += f" %{widths[-1]}.2f"
-        self.fmt += "\n"
-        self.hdr = " ".join(f"{name:{'<' if w < 0 else '>'}{abs(w)}}"
-                            for name, w in zip(columns, widths, strict=True))
-        if header:
-            self.logfile.write(self.hdr + "\n")
-
-    def __call__(self):
-        dyn, atoms = self.dyn, self.atoms
-        epot = atoms.get_potential_energy()
-        ekin = kinetic_energy(atoms)  # ASE's is NaN with a massless site
-        row = [dyn.get_time() / (1000 * units.fs), epot + ekin, epot, ekin,
-               temperature(atoms), dyn.get_conserved_energy()]
-        if self.log_pressure:
-            row.append(dyn.get_pressure() / units.bar)
-        if self.periodic:
-            row += [dyn.get_volume(), dyn.get_density()]
-        for part in self.parts:
-            row += part.log_values()
-        self.logfile.write(self.fmt % tuple(row))
-        self.logfile.flush()

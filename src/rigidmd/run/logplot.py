@@ -14,7 +14,7 @@ class LogError(ValueError):
 def read_log(path):
     """Columns of an MD log by header name, e.g. ``"Time[ps]"``, ``"Econs[eV]"``, ``"T[K]"``.
 
-    Reads the logs of :class:`~rigidmd.run.logger.RigidLogger` and of ASE's
+    Reads the logs of :class:`~rigidmd.core.logger.RigidLogger` and of ASE's
     ``MDLogger`` (header lines are skipped; the last header names the columns).
 
     Returns

@@ -1,13 +1,13 @@
 """Rebuild a rigid dynamics from a checkpoint file and continue exactly.
 
-:mod:`rigidmd.run.checkpoint` reads and writes the file;
+:mod:`rigidmd.core.checkpoint` reads and writes the file;
 :class:`~rigidmd.core.dynamics.RigidDynamics` exports and restores its state;
 :func:`load_checkpoint` joins the two.
 """
 
+from rigidmd.core.checkpoint import Checkpoint, read_checkpoint
 from rigidmd.core.dynamics import RigidDynamics
 from rigidmd.core.schemes import Scheme
-from rigidmd.run.checkpoint import Checkpoint, read_checkpoint
 
 __all__ = ["load_checkpoint"]
 
@@ -17,7 +17,7 @@ def load_checkpoint(path, calculator, **kwargs) -> RigidDynamics:
 
     Parameters
     ----------
-    path : str, os.PathLike or rigidmd.run.checkpoint.Checkpoint
+    path : str, os.PathLike or rigidmd.core.checkpoint.Checkpoint
     calculator : ase.calculators.calculator.Calculator
         Attached to the rebuilt atoms (the checkpoint holds no calculator; one with
         ``set_checkpoint_state`` gets what its ``get_checkpoint_state`` gave).

@@ -201,7 +201,7 @@ class Run:
         self._draw_velocities(atoms, bodies)
 
     def _resumed_dynamics(self):
-        from rigidmd.run.logger import RigidLogger
+        from rigidmd.core.logger import RigidLogger
         from rigidmd.run.restart import load_checkpoint
 
         out = self.outputs
