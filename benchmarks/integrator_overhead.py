@@ -18,7 +18,7 @@ measured side by side in this one run, on one core.
 
 Run:  python benchmarks/integrator_overhead.py [--quick]
 
-``--ratio`` measures only the ratio the README's table reports: rigidmd and
+``--ratio`` measures only the ratio docs/performance.md reports: rigidmd and
 LAMMPS's fix at 64 and 4096 waters, three rounds interleaved (rigidmd, then
 LAMMPS, at each size, three times; ``--rounds N`` on a busy machine), best of each side::
 

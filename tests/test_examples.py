@@ -46,7 +46,7 @@ def test_tip3p_water_quick(tmp_path):
 def test_tip4p2005_quick(tmp_path):
     """216 TIP4P/2005 waters (explicit M), LAMMPS PPPM with tail corrections, C-rescale NPT.
 
-    The full run (200 ps) is what the README reports; this one checks that the
+    The full run (200 ps) is what docs/validation/water.md reports; this one checks that the
     pipeline runs and gives liquid-like numbers after 1.4 ps from a quenched lattice.
     """
     proc = subprocess.run(

@@ -376,7 +376,7 @@ def test_tip4p2005_ice_relaxes_with_its_cell_and_stays_there_at_10_K():
     intra = 0.5 * units.Hartree * units.Bohr * np.sum(
         (q[:, None] * q[None] * erf(g * r) / r)[~np.eye(4, dtype=bool)])
     lattice = (result.energy / n - intra) / (units.kJ / units.mol)
-    # Measured: 0.9535 g/cm3 and -63.0 kJ/mol (README); the start was 0.931 g/cm3.
+    # Measured: 0.9535 g/cm3 and -63.0 kJ/mol (docs/guide/relaxation.md); the start was 0.931 g/cm3.
     assert density == pytest.approx(0.9535, abs=0.002)
     assert lattice == pytest.approx(-63.0, abs=0.2)
     assert abs(start_volume / volume - 1) > 0.02

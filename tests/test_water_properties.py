@@ -160,8 +160,9 @@ def test_green_kubo_viscosity_of_an_ornstein_uhlenbeck_stress(rng):
 
 # --------------------------------------------------- Yeh–Hummer correction
 def test_yeh_hummer_correction():
-    """ξ kT/(6πηL): 0.372e-5 cm²/s for real water's η in the README's 18.6 Å TIP3P box, and
-    1.04e-5 with TIP3P's own 0.321 mPa s (González & Abascal 2010)."""
+    """ξ kT/(6πηL): 0.372e-5 cm²/s for real water's η in the 18.6 Å TIP3P box of
+    docs/validation/water.md, and 1.04e-5 with TIP3P's own 0.321 mPa s (González & Abascal
+    2010)."""
     assert yeh_hummer_correction(298.0, 0.896, 18.6) * 1e-4 == pytest.approx(0.372e-5,
                                                                                rel=2e-3)
     assert yeh_hummer_correction(298.0, 0.321, 18.6) * 1e-4 == pytest.approx(1.037e-5,

@@ -128,13 +128,13 @@ I14 = "Izadi, Anandakrishnan & Onufriev, J. Phys. Chem. Lett. 5, 3863 (2014), Ta
 WMP14 = "Wang, Martinez & Pande, J. Phys. Chem. Lett. 5, 1885 (2014), Table 1"
 KCAL = 4.184  # kJ per kcal (thermochemical)
 #: Published values at 298 K (300 K where said), 1 bar: (value, citation, checked).
-#: ``checked`` True: the number was read in the source named (or in the page named that cites
-#: it) during this work; False: not found in a readable source, to be checked against the
-#: paper before the numbers are compared in the README.  Units: g/cm³, kJ/mol, 1e-5 cm²/s,
-#: mPa s, -.  ΔH_vap is the uncorrected -<U>/N + RT (what the benchmark's main number is)
-#: unless the citation says otherwise; D is D∞ (extrapolated or corrected to infinite box)
-#: where the citation says "D∞", else the finite-box D_PBC of the box the citation names.
-#: Each comment says what matters for the comparison: corrections, box size, conditions.
+#: ``checked`` True: the number was read in the source named (or in the page named that cites it)
+#: during this work; False: not found in a readable source, to be checked against the paper before
+#: the numbers are compared in docs/validation/water.md.  Units: g/cm³, kJ/mol, 1e-5 cm²/s, mPa s,
+#: -.  ΔH_vap is the uncorrected -<U>/N + RT (what the benchmark's main number is) unless the
+#: citation says otherwise; D is D∞ (extrapolated or corrected to infinite box) where the citation
+#: says "D∞", else the finite-box D_PBC of the box the citation names. Each comment says what
+#: matters for the comparison: corrections, box size, conditions.
 PUBLISHED = {
     "tip3p": {
         # Vega & Abascal 2011 / Mahoney & Jorgensen 2000 as quoted by I14 (conditions of the

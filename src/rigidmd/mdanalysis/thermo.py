@@ -59,7 +59,7 @@ POLARIZATION_CORRECTED = {
     # kcal/mol at 298 K in Horn's table) that is not applied here, and take the gas dipole
     # and polarisability from experiment (1.855 D, 1.495 Å³, which reproduce the 1.04
     # kcal/mol Wang et al. 2009 quote for TIP4P-Ew) rather than Berendsen's 1.85 D and
-    # 1.44 Å³: together -0.03 kJ/mol for TIP4P-Ew, +0.14 for OPC (README).
+    # 1.44 Å³: together -0.03 kJ/mol for TIP4P-Ew, +0.14 for OPC (docs/validation/water.md).
     "tip4pew": "Horn et al., J. Chem. Phys. 120, 9665 (2004)",
     "opc": "Izadi, Anandakrishnan & Onufriev, J. Phys. Chem. Lett. 5, 3863 (2014), SI eq. 15",
 }
