@@ -33,6 +33,12 @@ extensions = [
     "rigidmd_docs",
 ]
 
+# MathJax from a local copy: sphinx-mathjax-offline (in the docs extra) copies MathJax
+# 3.2.2 into _static/mathjax and points the pages at it, so the maths renders without a
+# network.  Without that package the pages load MathJax from its CDN.
+if importlib.util.find_spec("sphinx-mathjax-offline") is not None:
+    extensions.append("sphinx-mathjax-offline")
+
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 root_doc = "index"
 exclude_patterns = ["_build", "_generated", "Thumbs.db", ".DS_Store"]

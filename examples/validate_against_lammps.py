@@ -4,7 +4,7 @@ Prints, for water clusters of 2, 8 and 27 TIP3P molecules (and a CO2 + water
 + neon mixture), the largest atom-position gap every 100 steps of 1 fs and
 the largest total-energy gap over 500 steps, with LAMMPS run on ASE's unit
 constants (the algorithm alone) and on its own ``metal`` constants.  The
-README's validation table and the test comments quote this script's output.
+table of docs/validation/lammps.md and the test comments quote this script's output.
 
 Run:  python examples/validate_against_lammps.py
 """
