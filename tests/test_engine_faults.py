@@ -284,6 +284,22 @@ def test_an_engine_set_up_for_another_system_is_refused(tmp_path, monkeypatch, f
         assert "the server sent 81 atoms, LAMMPS has 57" in log
 
 
+def test_an_engine_never_started_is_said_so_not_pointed_at_an_absent_log(tmp_path):
+    """An engine to be started elsewhere that never connects: the message pointed at
+    LAMMPS's log in its folder, which no engine had written; now it says that no engine
+    was started there, and how to start it."""
+    engine = LAMMPSEngine(PPPM_27, launch=False, unixsocket=f"rigidmd-none-{os.getpid()}",
+                          workdir=tmp_path / "ours", connect_timeout=0.3)
+    with pytest.raises(EngineError) as err:
+        engine.get_potential_energy(water_box_27())
+    message = str(err.value)
+    assert "no connection within 0.3 s; no engine has been started in " \
+           f"{tmp_path / 'ours'} ({tmp_path / 'ours' / 'log.lammps'} does not exist): " \
+           f"cd {tmp_path / 'ours'} && " in message, message
+    assert "see LAMMPS's log" not in message
+    engine.close()
+
+
 def test_a_first_answer_with_zero_forces_on_missing_atoms_is_named():
     """What fix ipi of a smaller system sends: forces on the atoms it has, zero on the
     rest; also when the energy was not asked for (None)."""

@@ -483,10 +483,10 @@ class LAMMPSEngine(IPICalculator):
         folder = self._peer_folder
         if folder is not None and Path(folder).resolve() == Path(ours).resolve():
             return None
-        if folder is None and (self.log.exists() or not self.connected):
-            if self.connected:
-                return None  # over TCP: it may be this calculator's engine
-            return (f"; no engine was started for it ({self.log} does not exist): "
+        if folder is None and self.log.exists():
+            return None  # over TCP: it may be this calculator's engine, which logs there
+        if not self.connected:
+            return (f"; no engine has been started in {ours} ({self.log} does not exist): "
                     f"cd {ours} && {' '.join(self.command_line()[0])}")
         started = f"cd {ours} && lmp -in in.engine"
         if folder is not None:
