@@ -46,8 +46,8 @@ def water(n):
 def mixture():
     """4 CO2, 4 waters and 2 neon atoms with the tests' charges + LJ force field."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    from conftest import coulomb_lj_lammps
-    from test_dynamics import mixture as build
+    from helpers import coulomb_lj_lammps
+    from helpers import mixture as build
 
     atoms = build()
     return (atoms, *coulomb_lj_lammps(atoms))

@@ -300,15 +300,36 @@ def example_scripts():
     return sorted((ROOT / "examples").glob("*.py"))
 
 
+def example_output(script):
+    """The committed output of an example (``examples/output/<name>.txt``), or None.
+
+    Its first line is the command that printed it (``$ python examples/...``);
+    ``tests/test_examples.py`` runs each command and checks that the text is
+    still what the script prints, numbers aside (timings and short runs vary).
+    """
+    path = script.parent / "output" / f"{script.stem}.txt"
+    return path if path.is_file() else None
+
+
 def example_page(script):
-    """A page for one example: its docstring, how to run it, its code."""
+    """A page for one example: its docstring, how to run it, its code and its output."""
     doc = ast.get_docstring(ast.parse(script.read_text(encoding="utf-8"))) or script.stem
     title, _, body = doc.partition("\n")
     rel = f"../../examples/{script.name}"
-    return (f"# {title.strip().rstrip('.')}\n\n`examples/{script.name}`\n\n"
+    page = (f"# {title.strip().rstrip('.')}\n\n`examples/{script.name}`\n\n"
             f"```{{eval-rst}}\n{body.strip()}\n```\n\n## The script\n\n"
             f"```{{literalinclude}} {rel}\n:language: python\n"
             f":lines: {_code_start(script)}-\n```\n")
+    output = example_output(script)
+    if output is None:
+        return page + ("\n## Output\n\nNone recorded: the script needs a package the "
+                       "test extra does not install (see its docstring), so no test could "
+                       "keep a recorded output current.\n")
+    return page + ("\n## Output\n\nWhat the command on the first line printed (standard "
+                   "output), recorded in `examples/output/`; timings, and the numbers of a "
+                   "shortened run, differ from machine to machine and run to run.\n\n"
+                   f"```{{literalinclude}} ../../examples/output/{output.name}\n"
+                   ":language: text\n```\n")
 
 
 def _code_start(script):
