@@ -69,6 +69,8 @@ import tempfile
 import warnings
 from pathlib import Path
 
+from rigidmd.lammps.library import mpich_prefix
+
 __all__ = ["BoxPluginUnavailable", "box_plugin", "plugin_library", "plugin_source",
            "warn_fallback"]
 
@@ -112,7 +114,7 @@ def _lammps_files():
     if not (headers / "domain.h").is_file():
         raise BoxPluginUnavailable(f"the LAMMPS package ships no headers ({headers})")
     includes = [headers]
-    mpi = Path(sys.prefix) / "include"
+    mpi = Path(mpich_prefix()) / "include"
     if (mpi / "mpi.h").is_file():
         includes.append(mpi)
     library = next((p for p in (package / "liblammps.so", package / "liblammps.dylib")

