@@ -668,17 +668,22 @@ def test_defaults_do_not_depend_on_the_number_of_blas_threads():
 
 
 def test_the_preconditioner_s_pairs_are_ase_s_neighbour_list():
-    """RigidPrecon finds the centres' pairs with a k-d tree where it can (no periodicity, or
-    an orthorhombic cell twice the cut-off wide): the same pairs and distances as ASE's."""
+    """RigidPrecon lists the centres' pairs (each once, with its cell shift) with a k-d tree
+    where it can (no periodicity, or an orthorhombic cell twice the cut-off wide): the same
+    pairs and distances as ASE's neighbour list, which it uses elsewhere."""
     from ase.neighborlist import neighbor_list
 
     from rigidmd.relax.precon import _pairs
     from rigidmd.systems import water_box
 
-    for atoms in (water_box(4), water_cluster(20), water_box(3)):  # the last: ASE's route
+    for atoms in (water_box(4), water_cluster(20), water_box(3), water_box(2)):
         centres = Atoms(positions=atoms.positions[::3], cell=atoms.cell, pbc=atoms.pbc)
         centres.positions[0, 0] = -1e-17  # wraps to the box's length in floating point
-        ours, ase = _pairs(centres, 5.6), neighbor_list("ijd", centres, 5.6)
+        i, j, shifts = _pairs(centres, 5.6)
+        vectors = centres.positions[j] - centres.positions[i] + shifts @ centres.cell.array
+        d = np.linalg.norm(vectors, axis=1)
+        ours = (np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([d, d]))
+        ase = neighbor_list("ijd", centres, 5.6)
         assert len(ours[0]) == len(ase[0]) > 0
         key = lambda i, j, d: sorted(zip(i, j, np.round(d, 9), strict=True))  # noqa: E731
         assert key(*ours) == key(*ase)

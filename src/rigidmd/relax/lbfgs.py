@@ -12,14 +12,16 @@ Each step costs one force call.  A step that raises the energy is halved
 (from the last accepted point, at most :data:`MAX_HALVINGS` times) and the
 memory is cleared; every step is capped at ``maxstep`` (Å, the largest row,
 as ASE's ``LBFGS``).  Memory and time per step are O(n) (``memory`` pairs of
-vectors, a sparse preconditioner), and every sum is numpy's own pairwise sum
-rather than a BLAS dot product, so that the path does not depend on the
-number of BLAS threads.
+vectors, a sparse preconditioner solved once per step for both vectors it
+is applied to), and every sum is a compiled loop in a fixed order
+(:mod:`rigidmd.relax.kernels`) rather than a BLAS dot product, so that the
+path does not depend on the number of BLAS threads.
 """
 
 import numpy as np
 from ase.optimize.optimize import Optimizer
 
+from rigidmd.relax import kernels
 from rigidmd.relax.precon import RigidPrecon
 
 __all__ = ["RigidLBFGS", "MAX_HALVINGS"]
@@ -29,8 +31,8 @@ MAX_HALVINGS = 8
 
 
 def _dot(a, b):
-    """:math:`a \\cdot b` by numpy's pairwise sum (independent of BLAS threads)."""
-    return float(np.sum(a * b))
+    """:math:`a \\cdot b` in a fixed order (:func:`rigidmd.relax.kernels.dot`; no BLAS)."""
+    return float(kernels.dot(a, b))
 
 
 class RigidLBFGS(Optimizer):
@@ -86,11 +88,14 @@ class RigidLBFGS(Optimizer):
         d.update(maxstep=self.maxstep, memory=self.memory)
         return d
 
-    def _solve(self, q):
+    def _solve(self, *vectors):
+        """:math:`P^{-1} v` for each of ``vectors`` (one solve for all with a RigidPrecon)."""
         if self.precon is None:
-            return q.copy()
+            return [v.copy() for v in vectors]
         self.precon.make_precon(self._target)
-        return self.precon.solve(q)
+        if isinstance(self.precon, RigidPrecon):
+            return list(self.precon.solve(np.stack(vectors)))
+        return [self.precon.solve(v) for v in vectors]
 
     def step(self, forces=None):
         """One step: accept (or halve) the last one, update the memory, move."""
@@ -125,10 +130,11 @@ class RigidLBFGS(Optimizer):
         for i in range(len(self.s) - 1, -1, -1):
             a[i] = self.rho[i] * _dot(self.s[i], q)
             q -= a[i] * self.y[i]
-        z = self._solve(q)
         if self.s:
-            Hy = self._solve(self.y[-1])
+            z, Hy = self._solve(q, self.y[-1])
             z *= _dot(self.s[-1], self.y[-1]) / _dot(self.y[-1], Hy)
+        else:
+            (z,) = self._solve(q)
         for i in range(len(self.s)):
             b = self.rho[i] * _dot(self.y[i], z)
             z += self.s[i] * (a[i] - b)
