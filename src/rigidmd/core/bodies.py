@@ -149,15 +149,16 @@ class RigidBodies:
         ``mult``).  Each connected component is a body; isolated atoms are
         point particles.
         """
-        from ase.neighborlist import natural_cutoffs
+        from ase.data import covalent_radii
         from scipy import sparse
         from scipy.sparse.csgraph import connected_components
 
         n = len(atoms)
         if n == 0:
             return cls(np.zeros(0, dtype=np.int64), rule="connectivity")
-        # ASE's NeighborList adds its skin, 0.3 Å, to every radius: bonded below r_i + r_j + 0.6.
-        radii = np.asarray(natural_cutoffs(atoms, mult=mult)) + 0.3
+        # ASE's natural_cutoffs and NeighborList, whose skin (0.3 Å) is added to every radius:
+        # bonded below r_i + r_j + 0.6 Å.
+        radii = mult * covalent_radii[atoms.numbers] + 0.3
         i, j = _close_pairs(atoms, radii)
         graph = sparse.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
         _, labels = connected_components(graph, directed=False)

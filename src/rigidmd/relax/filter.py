@@ -114,8 +114,17 @@ def right_jacobian_transpose(phi, v):
     ts = np.where(small, 1.0, t)
     a = np.where(small, 0.5 - t**2 / 24.0, (1.0 - np.cos(ts)) / ts**2)
     b = np.where(small, 1.0 / 6.0 - t**2 / 120.0, (ts - np.sin(ts)) / ts**3)
-    c = np.cross(phi, v)
-    return v + a * c + b * np.cross(phi, c)
+    c = _cross(phi, v)
+    return v + a * c + b * _cross(phi, c)
+
+
+def _cross(u, v):
+    """Row-wise cross product of (n, 3) arrays (numpy's ``cross`` without its axis handling)."""
+    out = np.empty(np.broadcast_shapes(u.shape, v.shape))
+    out[..., 0] = u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1]
+    out[..., 1] = u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2]
+    out[..., 2] = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    return out
 
 
 class RigidFilter:
@@ -211,6 +220,10 @@ class RigidFilter:
         x[self._slices[0]] = geometry.com
         x[self._slices[2]] = atoms.positions[model.free]
         self._x = x
+        self._key = x.tobytes()  # of the coordinates, for the results below (set by _place)
+        t, r, f, c = (np.arange(len(x))[s] for s in self._slices)
+        self._rows = {"translation_rows": np.concatenate([t, f]), "rotation_rows": r,
+                      "rotation_centre": np.arange(len(r)), "cell_rows": c, "n_rows": len(x)}
         self._placed = None  # (positions array, r) last written, to notice outside moves
         self._results = {}  # coordinates (bytes) -> (energy, generalized forces), at most 2
         self.constraints = []
@@ -247,6 +260,7 @@ class RigidFilter:
             self.atoms.set_cell(cell, scale_atoms=False)
             self._record.cell_changed()
         r = self._link.place(state, self._record.r)
+        self._key = self._x.tobytes()
         self._placed = (self.atoms.positions.copy(), r, q, D)
 
     def get_positions(self):
@@ -283,6 +297,7 @@ class RigidFilter:
             block = self._x[self._slices[1]]
             block[far] = 0.0
             self.reanchored += int(far.sum())
+            self._key = self._x.tobytes()
             self._results.clear()  # the coordinates of earlier results meant other references
 
     positions = property(get_positions, set_positions)
@@ -309,11 +324,7 @@ class RigidFilter:
             centre in ``centres``; ``cell_rows`` (0 or 3,); ``n_rows``.
         """
         _, _, _, D = self._current()
-        t, r, f, c = (np.arange(len(self._x))[s] for s in self._slices)
-        centres = self._x[np.concatenate([t, f])] @ D.T
-        return {"centres": centres, "translation_rows": np.concatenate([t, f]),
-                "rotation_rows": r, "rotation_centre": np.arange(len(r)),
-                "cell_rows": c, "n_rows": len(self._x)}
+        return {"centres": self._x[self._rows["translation_rows"]] @ D.T, **self._rows}
 
     def fixed_rows(self):
         """Rows that ``FixAtoms`` holds, as a boolean mask of shape (n,)."""
@@ -333,10 +344,10 @@ class RigidFilter:
     def _cached(self):
         """(energy, generalized forces) of the current coordinates if computed, else None."""
         self._current()
-        return self._results.get(self._x.tobytes())
+        return self._results.get(self._key)
 
     def _remember(self, energy=None, forces=None):
-        key = self._x.tobytes()
+        key = self._key
         old = self._results.get(key, (None, None))
         if key not in self._results and len(self._results) >= 2:
             self._results.pop(next(iter(self._results)))
@@ -377,7 +388,10 @@ class RigidFilter:
         out = np.zeros_like(self._x)
         out[self._slices[0]] = F @ D
         if model.n_bodies:
-            torque_body = quat.rotate_inverse(q, tau)
+            # R(q)^T tau, as quat.rotate_inverse computes it, without np.cross's axis handling.
+            u = -q[:, 1:]
+            t = 2.0 * _cross(u, tau)
+            torque_body = tau + q[:, :1] * t + _cross(u, t)
             g = right_jacobian_transpose(self._phi(), torque_body) / self.lengths[:, None]
             g[model.linear, 0] = 0.0
             out[self._slices[1]] = g

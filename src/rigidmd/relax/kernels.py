@@ -4,7 +4,8 @@ The preconditioner :class:`rigidmd.relax.precon.RigidPrecon` and the optimizer
 :class:`rigidmd.relax.lbfgs.RigidLBFGS` spend their time here: the weights of
 the centres' pair graph from a list of candidate pairs (:func:`pair_graph`),
 conjugate gradients on :math:`\mu(L + c\mathbb{1})` (:func:`conjugate_gradient`,
-several right-hand sides at once) and dot products (:func:`dot`).  Each loop
+several right-hand sides at once), dot products and updates of vectors
+(:func:`dot`, :func:`axpy`).  Each loop
 is sequential, with a fixed number of partial sums combined in a fixed
 order, and numba compiles it without ``fastmath`` (no reassociation): the
 results do not depend on the number of BLAS or OpenMP threads, nor on how
@@ -18,7 +19,7 @@ import numpy as np
 
 from rigidmd.core._numba import _jit
 
-__all__ = ["dot", "pair_graph", "laplacian_product", "conjugate_gradient"]
+__all__ = ["dot", "axpy", "pair_graph", "laplacian_product", "conjugate_gradient"]
 
 
 @_jit
@@ -35,6 +36,13 @@ def dot(a, b):
     for i in range(m, n):
         s0 += a[i] * b[i]
     return (s0 + s1) + (s2 + s3)
+
+
+@_jit
+def axpy(alpha, x, y):
+    """``y += alpha * x`` in place, flat float arrays (no temporary)."""
+    for i in range(x.shape[0]):
+        y[i] += alpha * x[i]
 
 
 @_jit
@@ -83,7 +91,7 @@ def pair_graph(centres, cell, first, second, shifts, r_cut, r_nn, decay):
     for i in range(m):
         indptr[i + 1] += indptr[i]
     fill = indptr[:m].copy()
-    indices = np.empty(indptr[m], np.int64)
+    indices = np.empty(indptr[m], np.int32)
     weights = np.empty(indptr[m])
     for k in range(p):
         if w[k] > 0.0:
@@ -103,10 +111,28 @@ def pair_graph(centres, cell, first, second, shifts, r_cut, r_nn, decay):
 def laplacian_product(indptr, indices, weights, diagonal, x, out):
     """``out = A x`` for :math:`A = \\mathrm{diag}(d) - W`, ``x`` and ``out`` of shape (m, k).
 
-    Three columns at a time, summed in registers (a vector's three components).
+    Six or three columns at a time, summed in registers (one pass over ``W`` for the two
+    vectors of :class:`rigidmd.relax.lbfgs.RigidLBFGS`'s step, whose components they are).
     """
     m, k = x.shape
-    for c0 in range(0, k - k % 3, 3):
+    c0 = 0
+    while k - c0 >= 6:
+        for i in range(m):
+            d = diagonal[i]
+            a0, a1, a2 = d * x[i, c0], d * x[i, c0 + 1], d * x[i, c0 + 2]
+            a3, a4, a5 = d * x[i, c0 + 3], d * x[i, c0 + 4], d * x[i, c0 + 5]
+            for n in range(indptr[i], indptr[i + 1]):
+                j, w = indices[n], weights[n]
+                a0 -= w * x[j, c0]
+                a1 -= w * x[j, c0 + 1]
+                a2 -= w * x[j, c0 + 2]
+                a3 -= w * x[j, c0 + 3]
+                a4 -= w * x[j, c0 + 4]
+                a5 -= w * x[j, c0 + 5]
+            out[i, c0], out[i, c0 + 1], out[i, c0 + 2] = a0, a1, a2
+            out[i, c0 + 3], out[i, c0 + 4], out[i, c0 + 5] = a3, a4, a5
+        c0 += 6
+    while k - c0 >= 3:
         for i in range(m):
             d = diagonal[i]
             a0, a1, a2 = d * x[i, c0], d * x[i, c0 + 1], d * x[i, c0 + 2]
@@ -116,7 +142,8 @@ def laplacian_product(indptr, indices, weights, diagonal, x, out):
                 a1 -= w * x[j, c0 + 1]
                 a2 -= w * x[j, c0 + 2]
             out[i, c0], out[i, c0 + 1], out[i, c0 + 2] = a0, a1, a2
-    for c in range(k - k % 3, k):
+        c0 += 3
+    for c in range(c0, k):
         for i in range(m):
             a = diagonal[i] * x[i, c]
             for n in range(indptr[i], indptr[i + 1]):
@@ -154,6 +181,7 @@ def conjugate_gradient(indptr, indices, weights, diagonal, b, tol, maxiter, mean
 
     Jacobi-preconditioned conjugate gradients on the columns of ``b`` at
     once; a column stops when :math:`|b - Ax| \le` ``tol`` :math:`|b|`.
+    Each column's sums run over the rows in order, whatever the other columns.
 
     Parameters
     ----------
@@ -187,16 +215,17 @@ def conjugate_gradient(indptr, indices, weights, diagonal, b, tol, maxiter, mean
     _precondition(r, inverse, mean_free, z)
     p = z.copy()
     ap = np.empty((m, k))
-    rz, rz_new, rr, pap = np.empty(k), np.empty(k), np.empty(k), np.empty(k)
+    rz, rr, pap = np.empty(k), np.empty(k), np.empty(k)
+    alpha, beta, total = np.empty(k), np.empty(k), np.empty(k)
     target = np.empty(k)
     _column_dots(r, z, rz)
+    _column_dots(r, r, rr)
     _column_dots(b, b, target)
     for c in range(k):
         target[c] = tol * np.sqrt(target[c])
     active = np.empty(k, np.bool_)
     iterations = 0
     for _ in range(maxiter):
-        _column_dots(r, r, rr)
         any_active = False
         for c in range(k):
             active[c] = np.sqrt(rr[c]) > target[c]
@@ -207,15 +236,29 @@ def conjugate_gradient(indptr, indices, weights, diagonal, b, tol, maxiter, mean
         laplacian_product(indptr, indices, weights, diagonal, p, ap)
         _column_dots(p, ap, pap)
         for c in range(k):
-            alpha = rz[c] / pap[c] if active[c] and pap[c] > 0 else 0.0
-            for i in range(m):
-                x[i, c] += alpha * p[i, c]
-                r[i, c] -= alpha * ap[i, c]
-        _precondition(r, inverse, mean_free, z)
-        _column_dots(r, z, rz_new)
+            alpha[c] = rz[c] / pap[c] if active[c] and pap[c] > 0 else 0.0
+            total[c] = 0.0
+        # x += alpha p, r -= alpha A p, z = D^-1 r (and its column sums): one pass.
+        for i in range(m):
+            for c in range(k):
+                x[i, c] += alpha[c] * p[i, c]
+                r[i, c] -= alpha[c] * ap[i, c]
+                z[i, c] = r[i, c] * inverse[i]
+                total[c] += z[i, c]
         for c in range(k):
-            beta = rz_new[c] / rz[c] if active[c] and rz[c] > 0 else 0.0
-            for i in range(m):
-                p[i, c] = z[i, c] + beta * p[i, c]
-            rz[c] = rz_new[c]
+            total[c] = total[c] / m if mean_free else 0.0
+            beta[c] = 0.0  # rz_new, then beta
+            rr[c] = 0.0
+        for i in range(m):
+            for c in range(k):
+                z[i, c] -= total[c]
+                beta[c] += r[i, c] * z[i, c]
+                rr[c] += r[i, c] * r[i, c]
+        for c in range(k):
+            rz_new = beta[c]
+            beta[c] = rz_new / rz[c] if active[c] and rz[c] > 0 else 0.0
+            rz[c] = rz_new
+        for i in range(m):
+            for c in range(k):
+                p[i, c] = z[i, c] + beta[c] * p[i, c]
     return x, iterations

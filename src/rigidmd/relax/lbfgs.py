@@ -129,7 +129,7 @@ class RigidLBFGS(Optimizer):
         a = np.empty(len(self.s))
         for i in range(len(self.s) - 1, -1, -1):
             a[i] = self.rho[i] * _dot(self.s[i], q)
-            q -= a[i] * self.y[i]
+            kernels.axpy(-a[i], self.y[i], q)
         if self.s:
             z, Hy = self._solve(q, self.y[-1])
             z *= _dot(self.s[-1], self.y[-1]) / _dot(self.y[-1], Hy)
@@ -137,7 +137,7 @@ class RigidLBFGS(Optimizer):
             (z,) = self._solve(q)
         for i in range(len(self.s)):
             b = self.rho[i] * _dot(self.y[i], z)
-            z += self.s[i] * (a[i] - b)
+            kernels.axpy(a[i] - b, self.s[i], z)
         dx = -z.reshape(-1, 3)
         longest = np.sqrt(np.sum(dx * dx, axis=1)).max() if len(dx) else 0.0
         if longest > self.maxstep:
