@@ -42,6 +42,7 @@ rigidly with their body and the force on them enters its force and torque.
 """
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from ase.calculators.calculator import PropertyNotImplementedError
@@ -53,9 +54,10 @@ from rigidmd.core.checks import check_finite
 from rigidmd.core.dof import RigidBodyDOF
 from rigidmd.core.forces import ForceEvaluator
 from rigidmd.core.link import BodyLink
-from rigidmd.core.model import describe_atoms
+from rigidmd.core.model import BodyModel, describe_atoms
 from rigidmd.core.record import StepRecord
 from rigidmd.relax import cell as relaxcell
+from rigidmd.relax import state as relaxstate
 
 try:  # ASE >= 3.24
     from ase.filters import OptimizableFilter as _Optimizable
@@ -196,13 +198,7 @@ class RigidFilter:
         self.scalar_pressure = float(scalar_pressure)
         self.cell_factor = float(cell_factor)
         self.reanchored = 0
-        d = model.body_coordinates
-        if model.n_bodies:
-            counts = np.diff(model.bounds)
-            self.lengths = np.sqrt(np.add.reduceat(np.sum(d * d, axis=1), model.starts)
-                                   / counts)
-        else:
-            self.lengths = np.zeros(0)
+        self.lengths = _body_lengths(model)
         self._q_ref = geometry.quaternions.copy()
         # The machinery of the dynamics: the body link places the atoms, the force evaluator
         # calls the calculator (energy, forces and with the cell the stress in one call) and
@@ -225,7 +221,7 @@ class RigidFilter:
         self._rows = {"translation_rows": np.concatenate([t, f]), "rotation_rows": r,
                       "rotation_centre": np.arange(len(r)), "cell_rows": c, "n_rows": len(x)}
         self._placed = None  # (positions array, r) last written, to notice outside moves
-        self._results = {}  # coordinates (bytes) -> (energy, generalized forces), at most 2
+        self._results = {}  # coordinates (bytes) -> {energy, free_energy, forces}, at most 2
         self.constraints = []
         self.info = atoms.info
 
@@ -311,6 +307,47 @@ class RigidFilter:
         self._x = np.asarray(x, dtype=float).reshape(self._x.shape).copy()
         self._place()
 
+    def get_state(self):
+        """What continues this view exactly (:func:`relax`'s ``state_file``): a dict of arrays.
+
+        The coordinates, the bodies' reference orientations and the reference
+        cell of the rows (the chart the optimizer's memory is written in), and
+        the energy and generalized forces at the coordinates when known.
+        """
+        state = {"x": self._x.copy(), "q_ref": self._q_ref.copy(), "cell0": self._cell0.copy(),
+                 "reanchored": np.array(self.reanchored), "n_atoms": np.array(len(self.atoms)),
+                 **{f"model.{name}": getattr(self.model, name) for name in BodyModel.STORED}}
+        for name, value in self._cached().items():
+            state[f"known.{name}"] = np.array(value)
+        return state
+
+    def set_state(self, state):
+        """Continue from :meth:`get_state` of a view of the same bodies; moves the atoms.
+
+        Raises
+        ------
+        ValueError
+            A state of other rows or bodies (nothing changes then).
+        """
+        x, q_ref = np.asarray(state["x"], dtype=float), np.asarray(state["q_ref"], dtype=float)
+        if x.shape != self._x.shape or q_ref.shape != self._q_ref.shape:
+            raise ValueError(f"RigidFilter.set_state: a state of {len(x)} rows and "
+                             f"{len(q_ref)} bodies, this view has {len(self._x)} and "
+                             f"{len(self._q_ref)}")
+        # The body frames the orientations refer to (measured again from other positions,
+        # a principal axis may come out flipped).
+        self.model.update_from(BodyModel(n_atoms=int(state["n_atoms"]), **{
+            name: np.asarray(state[f"model.{name}"]) for name in BodyModel.STORED}))
+        self.lengths = _body_lengths(self.model)
+        self._q_ref = q_ref.copy()
+        self._cell0 = np.asarray(state["cell0"], dtype=float).copy()
+        self.reanchored = int(state["reanchored"])
+        self._x = x.copy()
+        self._place()
+        self._results.clear()
+        self._remember(**{k[6:]: (v.copy() if v.ndim else float(v)) for k, v in state.items()
+                          if k.startswith("known.")})
+
     def rigid_rows(self):
         """Which rows are what, for a preconditioner (:class:`rigidmd.relax.precon.RigidPrecon`).
 
@@ -342,23 +379,27 @@ class RigidFilter:
 
     # ------------------------------------------------------------ energy and gradient
     def _cached(self):
-        """(energy, generalized forces) of the current coordinates if computed, else None."""
+        """What is known at the current coordinates (dict: ``energy``, ``free_energy``,
+        ``forces``), placing them first if needed."""
         self._current()
-        return self._results.get(self._key)
+        return self._results.get(self._key, {})
 
-    def _remember(self, energy=None, forces=None):
+    def _remember(self, **known):
         key = self._key
-        old = self._results.get(key, (None, None))
         if key not in self._results and len(self._results) >= 2:
             self._results.pop(next(iter(self._results)))
-        self._results[key] = (old[0] if energy is None else energy,
-                              old[1] if forces is None else forces)
+        self._results.setdefault(key, {}).update(known)
 
     def get_potential_energy(self, force_consistent=False, **kwargs):
-        """Potential energy (eV), plus :math:`pV` when the cell relaxes (the enthalpy)."""
-        cached = self._cached()
-        if cached is not None and cached[0] is not None and not force_consistent:
-            return cached[0]
+        """Potential energy (eV), plus :math:`pV` when the cell relaxes (the enthalpy).
+
+        ``force_consistent``: the free energy where the calculator has one
+        (ASE's optimizers ask for it), else the energy.
+        """
+        name = "free_energy" if force_consistent else "energy"
+        cached = self._cached().get(name)
+        if cached is not None:
+            return cached
         try:
             energy = self.atoms.get_potential_energy(force_consistent=force_consistent)
         except PropertyNotImplementedError:
@@ -367,15 +408,14 @@ class RigidFilter:
             energy = self.atoms.get_potential_energy()
         if self.mode is not None:
             energy += self.scalar_pressure * self.atoms.get_volume()
-        if not force_consistent:
-            self._remember(energy=float(energy))
+        self._remember(**{name: float(energy)})
         return float(energy)
 
     def get_forces(self, **kwargs):
         """Generalized forces, minus the gradient of the energy, shape (n, 3) (eV/Å)."""
-        cached = self._cached()
-        if cached is not None and cached[1] is not None:
-            return cached[1].copy()
+        cached = self._cached().get("forces")
+        if cached is not None:
+            return cached.copy()
         out = self._generalized_forces()
         self._remember(forces=out.copy())
         return out
@@ -444,6 +484,14 @@ class RigidFilter:
 
     def get_stress(self, *args, **kwargs):
         return self.atoms.get_stress(*args, **kwargs)
+
+
+def _body_lengths(model):
+    """Root-mean-square distance of each body's atoms from its centre (Å), shape (n_bodies,)."""
+    if not model.n_bodies:
+        return np.zeros(0)
+    d = model.body_coordinates
+    return np.sqrt(np.add.reduceat(np.sum(d * d, axis=1), model.starts) / np.diff(model.bounds))
 
 
 def _honoured_constraints(atoms, model):
@@ -543,7 +591,7 @@ def optimizer_class(name):
 
 def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", cell=False,
           scalar_pressure=0.0, trajectory=None, logfile=None, observers=(),
-          append_trajectory=False, **kwargs) -> Relaxation:
+          append_trajectory=False, state_file=None, resume=False, **kwargs) -> Relaxation:
     """Relax the rigid bodies of ``atoms`` (and the cell) in place with an ASE optimizer.
 
     Parameters
@@ -574,6 +622,15 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         the relaxation after the step's trajectory frame.
     append_trajectory : bool, default False
         Append to ``trajectory`` (continuing a relaxation) instead of replacing it.
+    state_file : str or pathlib.Path, optional
+        Where the relaxation's state is written when it stops before
+        converging, after a whole step (an observer raised, or ``steps`` were
+        taken): the view's chart and the optimizer's memory
+        (:mod:`rigidmd.relax.state`); removed when the relaxation converges.
+    resume : bool, default False
+        Continue from ``state_file``, written at ``atoms``' positions by this
+        optimizer: the steps are those the uninterrupted relaxation would have
+        taken (ValueError when it does not match the atoms).
     **kwargs
         Further optimizer arguments (``maxstep``, ...).  With ASE's BFGS,
         ``alpha`` (initial Hessian, eV/Å² times the identity in the rows of
@@ -594,12 +651,28 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         from rigidmd.relax.precon import RigidPrecon
 
         kwargs["precon"] = RigidPrecon()
+    saved = relaxstate.resumed_state(state_file, atoms, cls.__name__) if resume else None
     with cls(view, trajectory=trajectory, logfile=logfile, append_trajectory=append_trajectory,
              **kwargs) as opt:
-        for observer in observers:
-            opt.attach(_Report(observer, opt, view), interval=1)
-        converged = bool(opt.run(fmax=fmax, steps=int(steps)))
+        if saved is not None:
+            view.set_state(relaxstate.split(saved, "view"))
+            if hasattr(opt, "set_state"):
+                opt.set_state(relaxstate.split(saved, "opt"))
+        reports = [_Report(observer, opt, view) for observer in observers]
+        for report in reports:
+            opt.attach(report, interval=1)
+        try:
+            converged = bool(opt.run(fmax=fmax, steps=int(steps)))
+        except Exception:
+            if state_file is not None and any(report.raised for report in reports):
+                relaxstate.write_state(state_file, view, opt)  # after a whole step
+            raise
         nsteps = opt.get_number_of_steps()
+        if state_file is not None:
+            if converged:
+                Path(state_file).unlink(missing_ok=True)
+            else:
+                relaxstate.write_state(state_file, view, opt)
     left = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.0
     return Relaxation(converged, int(nsteps), float(atoms.get_potential_energy()), left)
 
@@ -609,8 +682,13 @@ class _Report:
 
     def __init__(self, observer, opt, view):
         self.observer, self.opt, self.view = observer, opt, view
+        self.raised = False  # the observer raised: the step and its frame are whole
 
     def __call__(self):
         forces = self.view.get_forces()
         fmax = float(np.sqrt(np.sum(forces * forces, axis=1).max())) if len(forces) else 0.0
-        self.observer(self.opt.nsteps, self.view.get_potential_energy(), fmax)
+        try:
+            self.observer(self.opt.nsteps, self.view.get_potential_energy(), fmax)
+        except BaseException:
+            self.raised = True
+            raise

@@ -146,5 +146,49 @@ class RigidLBFGS(Optimizer):
         opt.set_x(x + dx.ravel())
         self.dump(self._state())
 
+    def get_state(self):
+        """Everything the next step depends on, as a dict of arrays (and the preconditioner's,
+        under ``precon.``): :func:`rigidmd.relax.filter.relax` writes it when a relaxation
+        stops early, so that a continued one takes the steps an uninterrupted one would."""
+        n = 3 * len(self._target) if self.x0 is None else len(self.x0)
+        state = {"s": np.array(self.s).reshape(-1, n), "y": np.array(self.y).reshape(-1, n),
+                 "rho": np.array(self.rho, dtype=float), "halvings": np.array(self.halvings),
+                 "anchored": np.array(self._anchored), "memory": np.array(self.memory),
+                 "maxstep": np.array(self.maxstep)}
+        if self.x0 is not None:
+            state.update(x0=self.x0, g0=self.g0, e0=np.array(self.e0))
+        if isinstance(self.precon, RigidPrecon):
+            state.update({f"precon.{k}": v for k, v in self.precon.get_state().items()})
+        return state
+
+    def set_state(self, state):
+        """Continue from :meth:`get_state` (on the view the state was taken from, restored).
+
+        Raises
+        ------
+        ValueError
+            A state of another memory length or step size, or of other rows.
+        """
+        for name in ("memory", "maxstep"):
+            if float(state[name]) != getattr(self, name):
+                raise ValueError(f"RigidLBFGS: the state was taken with {name}="
+                                 f"{state[name].item()!r}, this optimizer has "
+                                 f"{getattr(self, name)!r}")
+        n = 3 * len(self._target)
+        if state["s"].shape[1:] != (n,) or ("x0" in state and len(state["x0"]) != n):
+            raise ValueError(f"RigidLBFGS: the state holds vectors of {state['s'].shape[1]} "
+                             f"components, this view {n}")
+        self.s, self.y = [v.copy() for v in state["s"]], [v.copy() for v in state["y"]]
+        self.rho = [float(v) for v in state["rho"]]
+        self.halvings, self._anchored = int(state["halvings"]), int(state["anchored"])
+        self.x0 = self.g0 = self.e0 = None
+        if "x0" in state:
+            self.x0, self.g0 = state["x0"].copy(), state["g0"].copy()
+            self.e0 = float(state["e0"])
+        if isinstance(self.precon, RigidPrecon):
+            prefix = "precon."
+            self.precon.set_state({k[len(prefix):]: v for k, v in state.items()
+                                   if k.startswith(prefix)}, self._target)
+
     def _state(self):
         return (self.s, self.y, self.rho, self.x0, self.g0, self.e0, self.halvings)

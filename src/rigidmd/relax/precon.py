@@ -155,7 +155,11 @@ class RigidPrecon(Precon):
         if self.r_NN is None:
             self.r_NN = _nearest_distance(Atoms(positions=centres, cell=atoms.cell,
                                                 pbc=atoms.pbc))
-        _, first, second, shifts, cell = self._candidates(view, centres)
+        self._candidates(view, centres)
+        self._assemble_at(centres, rows, mu, mu_rot, mu_c)
+
+    def _assemble_at(self, centres, rows, mu, mu_rot, mu_c):
+        _, first, second, shifts, cell = self._listed
         indptr, indices, weights, degree = kernels.pair_graph(
             np.ascontiguousarray(centres, dtype=float), cell, first, second, shifts,
             float(self._cut()), float(self.r_NN), self.A)
@@ -267,6 +271,33 @@ class RigidPrecon(Precon):
         self.mu, self.mu_rot, self.mu_c = scales
         self._graph = self._P = None
         return tuple(scales)
+
+    # ------------------------------------------------------------ continuing exactly
+    def get_state(self):
+        """The scales and the centres the matrix and the pair list were built at (dict)."""
+        state = {"scales": np.array([np.nan if v is None else v
+                                     for v in (self.mu, self.mu_rot, self.mu_c, self.r_NN)])}
+        if self._built_at is not None and self._listed is not None:
+            state["built_at"] = self._built_at.copy()
+            state["listed_at"], state["listed_cell"] = self._listed[0], self._listed[4]
+        return state
+
+    def set_state(self, state, atoms):
+        """Continue from :meth:`get_state`: the same scales and the same matrix, rebuilt for
+        the RigidFilter ``atoms`` (whose rows must be those of the state's)."""
+        view = _view_of(atoms)
+        self.mu, self.mu_rot, self.mu_c, self.r_NN = (
+            None if np.isnan(v) else float(v) for v in state["scales"])
+        self._graph = self._P = self._built_at = self._listed = None
+        if "built_at" not in state:
+            return
+        rows = view.rigid_rows()
+        listed_at, cell = state["listed_at"], state["listed_cell"]
+        points = Atoms(positions=listed_at, cell=cell, pbc=view.atoms.pbc)
+        i, j, shifts = _pairs(points, self._cut() + SKIN * self.r_NN)
+        self._listed = (listed_at.copy(), i, j, np.ascontiguousarray(shifts, dtype=float),
+                        cell.copy())
+        self._assemble_at(state["built_at"], rows, self.mu, self.mu_rot, self.mu_c)
 
     # ------------------------------------------------------------ what the optimizers call
     def Pdot(self, x):
