@@ -417,8 +417,20 @@ class RigidFilter:
         if cached is not None:
             return cached.copy()
         out = self._generalized_forces()
-        self._remember(forces=out.copy())
+        self._remember(forces=out.copy(), **self._energies())
         return out
+
+    def _energies(self):
+        """The energies the force call computed with the forces (no further call), as
+        :meth:`get_potential_energy` gives them: ``energy`` and ``free_energy``."""
+        calc = self.atoms.calc
+        results, done = getattr(calc, "results", None), getattr(calc, "atoms", None)
+        if (not isinstance(results, dict) or "energy" not in results or done is None
+                or not np.array_equal(done.positions, self.atoms.positions)):
+            return {}  # not ASE's record of this very call: asked for when needed
+        pv = self.scalar_pressure * self.atoms.get_volume() if self.mode is not None else 0.0
+        return {"energy": float(results["energy"]) + pv,
+                "free_energy": float(results.get("free_energy", results["energy"])) + pv}
 
     def _generalized_forces(self):
         _, _, q, D = self._current()
