@@ -58,11 +58,8 @@ from rigidmd.core.model import BodyModel, describe_atoms
 from rigidmd.core.record import StepRecord
 from rigidmd.relax import cell as relaxcell
 from rigidmd.relax import state as relaxstate
-
-try:  # ASE >= 3.24
-    from ase.filters import OptimizableFilter as _Optimizable
-except ImportError:  # pragma: no cover - ASE 3.23
-    from ase.optimize.optimize import OptimizableAtoms as _Optimizable
+from rigidmd.relax.facade import AtomsFacade
+from rigidmd.relax.rotation import cross, right_jacobian_transpose, rotation_quaternion
 
 __all__ = ["RigidFilter", "relax", "Relaxation", "OPTIMIZERS", "optimizer_class", "ANCHOR_ANGLE",
            "rotation_quaternion", "right_jacobian_transpose"]
@@ -71,65 +68,7 @@ __all__ = ["RigidFilter", "relax", "Relaxation", "OPTIMIZERS", "optimizer_class"
 ANCHOR_ANGLE = 2.5
 
 
-def rotation_quaternion(phi):
-    r"""Unit quaternion of a rotation vector, :math:`\exp(\varphi)`.
-
-    :math:`(\cos\tfrac{\theta}2, \hat\varphi\sin\tfrac{\theta}2)`, :math:`\theta = |\varphi|`.
-
-    Parameters
-    ----------
-    phi : numpy.ndarray, shape (..., 3)
-        Rotation vectors (rad).
-
-    Returns
-    -------
-    numpy.ndarray, shape (..., 4)
-    """
-    angle = np.linalg.norm(phi, axis=-1, keepdims=True)
-    half = 0.5 * angle
-    # sin(θ/2)/θ, with its series below 1e-4 rad.
-    small = angle < 1e-4
-    factor = np.where(small, 0.5 - angle**2 / 48.0,
-                      np.sin(half) / np.where(small, 1.0, angle))
-    return np.concatenate([np.cos(half), factor * phi], axis=-1)
-
-
-def right_jacobian_transpose(phi, v):
-    r""":math:`J_r(\varphi)^\mathsf{T} v` for the rotation vector :math:`\varphi`.
-
-    :math:`\exp(\varphi + \delta) = \exp(\varphi)\exp(J_r(\varphi)\,\delta) + O(\delta^2)`,
-    :math:`J_r = 1 - a[\varphi]_\times + b[\varphi]_\times^2`, so
-    :math:`J_r^\mathsf{T} v = v + a\,\varphi\times v + b\,\varphi\times(\varphi\times v)`
-    with :math:`a = (1-\cos\theta)/\theta^2`, :math:`b = (\theta-\sin\theta)/\theta^3`,
-    :math:`\theta = |\varphi|` (series below 1e-3 rad).
-
-    Parameters
-    ----------
-    phi, v : numpy.ndarray, shape (n, 3)
-
-    Returns
-    -------
-    numpy.ndarray, shape (n, 3)
-    """
-    t = np.linalg.norm(phi, axis=-1, keepdims=True)
-    small = t < 1e-3
-    ts = np.where(small, 1.0, t)
-    a = np.where(small, 0.5 - t**2 / 24.0, (1.0 - np.cos(ts)) / ts**2)
-    b = np.where(small, 1.0 / 6.0 - t**2 / 120.0, (ts - np.sin(ts)) / ts**3)
-    c = _cross(phi, v)
-    return v + a * c + b * _cross(phi, c)
-
-
-def _cross(u, v):
-    """Row-wise cross product of (n, 3) arrays (numpy's ``cross`` without its axis handling)."""
-    out = np.empty(np.broadcast_shapes(u.shape, v.shape))
-    out[..., 0] = u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1]
-    out[..., 1] = u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2]
-    out[..., 2] = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-    return out
-
-
-class RigidFilter:
+class RigidFilter(AtomsFacade):
     r"""An :class:`ase.Atoms` seen by ASE's optimizers as rigid bodies (and a cell).
 
     Use it where an optimizer takes atoms (``BFGS(RigidFilter(atoms)).run(fmax=0.05)``).
@@ -442,8 +381,8 @@ class RigidFilter:
         if model.n_bodies:
             # R(q)^T tau, as quat.rotate_inverse computes it, without np.cross's axis handling.
             u = -q[:, 1:]
-            t = 2.0 * _cross(u, tau)
-            torque_body = tau + q[:, :1] * t + _cross(u, t)
+            t = 2.0 * cross(u, tau)
+            torque_body = tau + q[:, :1] * t + cross(u, t)
             g = right_jacobian_transpose(self._phi(), torque_body) / self.lengths[:, None]
             g[model.linear, 0] = 0.0
             out[self._slices[1]] = g
@@ -467,35 +406,6 @@ class RigidFilter:
 
     def get_global_number_of_atoms(self):
         return len(self._x)
-
-    def iterimages(self):
-        """The real atoms, for trajectories."""
-        return self.atoms.iterimages()
-
-    def get_cell(self):
-        return self.atoms.get_cell()
-
-    def get_pbc(self):
-        return self.atoms.get_pbc()
-
-    @property
-    def calc(self):
-        return self.atoms.calc
-
-    def get_calculator(self):
-        return self.atoms.calc
-
-    def get_chemical_symbols(self):
-        return self.atoms.get_chemical_symbols()
-
-    def has(self, name):
-        return self.atoms.has(name)
-
-    def __ase_optimizable__(self):
-        return _Optimizable(self)
-
-    def get_stress(self, *args, **kwargs):
-        return self.atoms.get_stress(*args, **kwargs)
 
 
 def _body_lengths(model):
