@@ -132,16 +132,25 @@ class RigidPrecon(Precon):
         return self.r_cut if self.r_cut is not None else 2.0 * self.r_NN
 
     def _candidates(self, view, centres):
-        """Pairs of centres within ``r_cut + skin`` (a Verlet list), listed again only when a
-        centre moved more than half the skin since (or the cell or the centres changed)."""
+        r"""Pairs of centres within ``r_cut + skin`` (a Verlet list), listed again only when
+        one within ``r_cut`` now might be missing from it.
+
+        Each centre, carried back to the listing's cell by its fractional coordinates, has
+        moved at most ``m`` and the cell has deformed by :math:`M = C_0^{-1} C` since
+        (:math:`\lVert M - 1\rVert_2 = e`): a pair listed neither way was at least
+        ``r_cut + skin`` apart and is now at least ``(r_cut + skin - 2m)(1 - e)``.
+        """
         atoms = view.atoms
         cell = atoms.cell.array
         listed = self._listed
         skin = SKIN * self.r_NN
-        if (listed is not None and len(listed[0]) == len(centres)
-                and np.array_equal(listed[4], cell)):
-            moved = np.sum((centres - listed[0]) ** 2, axis=1)
-            if not len(moved) or moved.max() < (0.5 * skin) ** 2:
+        if listed is not None and len(listed[0]) == len(centres):
+            back, strain = centres, 0.0
+            if not np.array_equal(listed[4], cell):  # a cell relaxation: periodic, full rank
+                back = np.linalg.solve(cell.T, centres.T).T @ listed[4]
+                strain = np.linalg.norm(np.linalg.solve(listed[4], cell) - np.eye(3), 2)
+            moved = np.sqrt(np.sum((back - listed[0]) ** 2, axis=1).max()) if len(back) else 0
+            if (self._cut() + skin - 2.0 * moved) * (1.0 - strain) > self._cut():
                 return listed
         points = Atoms(positions=centres, cell=cell, pbc=atoms.pbc)
         i, j, shifts = _pairs(points, self._cut() + skin)
@@ -156,10 +165,10 @@ class RigidPrecon(Precon):
             self.r_NN = _nearest_distance(Atoms(positions=centres, cell=atoms.cell,
                                                 pbc=atoms.pbc))
         self._candidates(view, centres)
-        self._assemble_at(centres, rows, mu, mu_rot, mu_c)
+        self._assemble_at(centres, atoms.cell.array, rows, mu, mu_rot, mu_c)
 
-    def _assemble_at(self, centres, rows, mu, mu_rot, mu_c):
-        _, first, second, shifts, cell = self._listed
+    def _assemble_at(self, centres, cell, rows, mu, mu_rot, mu_c):
+        _, first, second, shifts, _ = self._listed
         indptr, indices, weights, degree = kernels.pair_graph(
             np.ascontiguousarray(centres, dtype=float), cell, first, second, shifts,
             float(self._cut()), float(self.r_NN), self.A)
@@ -167,7 +176,7 @@ class RigidPrecon(Precon):
         self._uniform = mu * self.c_stab  # eigenvalue of the uniform translation (L 1 = 0)
         self._diag = (mu_rot * (degree[rows["rotation_centre"]] + self.c_stab), mu_c)
         self._layout = rows
-        self._built_at = centres.copy()
+        self._built_at, self._built_cell = centres.copy(), np.array(cell, dtype=float)
         self._P = None
 
     @property
@@ -278,7 +287,7 @@ class RigidPrecon(Precon):
         state = {"scales": np.array([np.nan if v is None else v
                                      for v in (self.mu, self.mu_rot, self.mu_c, self.r_NN)])}
         if self._built_at is not None and self._listed is not None:
-            state["built_at"] = self._built_at.copy()
+            state["built_at"], state["built_cell"] = self._built_at.copy(), self._built_cell
             state["listed_at"], state["listed_cell"] = self._listed[0], self._listed[4]
         return state
 
@@ -297,7 +306,8 @@ class RigidPrecon(Precon):
         i, j, shifts = _pairs(points, self._cut() + SKIN * self.r_NN)
         self._listed = (listed_at.copy(), i, j, np.ascontiguousarray(shifts, dtype=float),
                         cell.copy())
-        self._assemble_at(state["built_at"], rows, self.mu, self.mu_rot, self.mu_c)
+        self._assemble_at(state["built_at"], state["built_cell"], rows, self.mu, self.mu_rot,
+                          self.mu_c)
 
     # ------------------------------------------------------------ what the optimizers call
     def Pdot(self, x):
