@@ -678,17 +678,25 @@ def test_defaults_need_no_tuning_on_an_unrelaxed_cluster():
 
 
 def test_the_preconditioner_s_pairs_are_ase_s_neighbour_list():
-    """RigidPrecon lists the centres' pairs (each once, with its cell shift) with a k-d tree
-    where it can (no periodicity, or an orthorhombic cell twice the cut-off wide): the same
-    pairs and distances as ASE's neighbour list, which it uses elsewhere."""
+    """RigidPrecon lists the centres' pairs (each once, with its cell shift) with a compiled
+    cell list where it can (no periodicity, or a cell of any shape three cut-offs wide):
+    the same pairs and distances as ASE's neighbour list, which it uses elsewhere, for
+    centres inside the box or not."""
     from ase.neighborlist import neighbor_list
 
     from rigidmd.relax.precon import _pairs
     from rigidmd.systems import water_box
 
-    for atoms in (water_box(4), water_cluster(20), water_box(3), water_box(2)):
+    sheared = water_box(6)
+    sheared.set_cell(sheared.cell.array + [[0, 0, 0], [2.0, 0, 0], [1.0, -1.5, 0]],
+                     scale_atoms=True)
+    for atoms in (water_box(6), sheared, water_box(4), water_cluster(20), water_box(3),
+                  water_box(2)):
         centres = Atoms(positions=atoms.positions[::3], cell=atoms.cell, pbc=atoms.pbc)
         centres.positions[0, 0] = -1e-17  # wraps to the box's length in floating point
+        if centres.pbc.all():  # centres outside the box, as a relaxation leaves them
+            centres.positions[1::3] += centres.cell.array.sum(axis=0)
+            centres.positions[2::5] -= 2 * centres.cell.array[1]
         i, j, shifts = _pairs(centres, 5.6)
         vectors = centres.positions[j] - centres.positions[i] + shifts @ centres.cell.array
         d = np.linalg.norm(vectors, axis=1)

@@ -23,7 +23,8 @@ import numpy as np
 
 from rigidmd.core._numba import _jit
 
-__all__ = ["dot", "axpy", "pair_graph", "laplacian_product", "conjugate_gradient"]
+__all__ = ["dot", "axpy", "pair_graph", "cell_list_pairs", "laplacian_product",
+           "conjugate_gradient"]
 
 
 @_jit
@@ -109,6 +110,106 @@ def pair_graph(centres, cell, first, second, shifts, r_cut, r_nn, decay):
         for n in range(indptr[i], indptr[i + 1]):
             degree[i] += weights[n]
     return indptr, indices, weights, degree
+
+
+@_jit
+def cell_list_pairs(fractional, cell, nbin, periodic, r_list):
+    """Pairs of points closer than ``r_list``, each once, with their cell shifts: a cell list.
+
+    Parameters
+    ----------
+    fractional : numpy.ndarray, shape (m, 3)
+        The points in the cell's coordinates, in ``[0, 1)`` (``[0, 1]`` along an open axis).
+    cell : numpy.ndarray, shape (3, 3)
+        The cell's rows (Å; along an open axis, a box around the points).
+    nbin : numpy.ndarray of int, shape (3,)
+        Bins per axis, each at least ``r_list`` thick (the planes' spacing over ``nbin``);
+        at least 3 along a periodic axis (the 27 bins around a point distinct, one image
+        per pair).
+    periodic : numpy.ndarray of bool, shape (3,)
+    r_list : float
+        Å.
+
+    Returns
+    -------
+    first, second : numpy.ndarray of int, shape (p,)
+    shifts : numpy.ndarray, shape (p, 3)
+        ``(fractional[second] - fractional[first] + shifts) @ cell`` is the pair's vector.
+    """
+    m = fractional.shape[0]
+    flat = np.empty(m, np.int64)
+    bins = np.empty((m, 3), np.int64)
+    for i in range(m):
+        for a in range(3):
+            bins[i, a] = min(max(int(fractional[i, a] * nbin[a]), 0), nbin[a] - 1)
+        flat[i] = (bins[i, 0] * nbin[1] + bins[i, 1]) * nbin[2] + bins[i, 2]
+    order = np.argsort(flat, kind="mergesort")
+    start = np.zeros(nbin[0] * nbin[1] * nbin[2] + 1, np.int64)
+    for i in range(m):
+        start[flat[i] + 1] += 1
+    for c in range(len(start) - 1):
+        start[c + 1] += start[c]
+    capacity = 64 * m + 16
+    first = np.empty(capacity, np.int64)
+    second = np.empty(capacity, np.int64)
+    shifts = np.zeros((capacity, 3))
+    p = 0
+    r2 = r_list * r_list
+    target = np.empty(3, np.int64)
+    wrap = np.empty(3)
+    for i in range(m):
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                for dz in range(-1, 2):
+                    d = (dx, dy, dz)
+                    inside = True
+                    for a in range(3):
+                        c = bins[i, a] + d[a]
+                        wrap[a] = 0.0
+                        if c < 0 or c >= nbin[a]:
+                            if not periodic[a] or nbin[a] < 3:
+                                inside = False
+                            wrap[a] = -1.0 if c < 0 else 1.0
+                            c %= nbin[a]
+                        target[a] = c
+                    if not inside:
+                        continue
+                    b = (target[0] * nbin[1] + target[1]) * nbin[2] + target[2]
+                    for n in range(start[b], start[b + 1]):
+                        j = order[n]
+                        if j <= i:
+                            continue
+                        dist2 = 0.0
+                        for c in range(3):
+                            v = 0.0
+                            for a in range(3):
+                                v += (fractional[j, a] - fractional[i, a] + wrap[a]) * cell[a, c]
+                            dist2 += v * v
+                        if dist2 < r2:
+                            if p == capacity:
+                                capacity *= 2
+                                first = _grown(first, capacity)
+                                second = _grown(second, capacity)
+                                shifts = _grown2(shifts, capacity)
+                            first[p], second[p] = i, j
+                            for a in range(3):
+                                shifts[p, a] = wrap[a]
+                            p += 1
+    return first[:p].copy(), second[:p].copy(), shifts[:p].copy()
+
+
+@_jit
+def _grown(a, n):
+    out = np.empty(n, a.dtype)
+    out[:len(a)] = a
+    return out
+
+
+@_jit
+def _grown2(a, n):
+    out = np.zeros((n, a.shape[1]))
+    out[:len(a)] = a
+    return out
 
 
 @_jit
