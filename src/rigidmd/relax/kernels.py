@@ -139,6 +139,7 @@ def cell_list_pairs(fractional, cell, nbin, periodic, r_list):
     m = fractional.shape[0]
     flat = np.empty(m, np.int64)
     bins = np.empty((m, 3), np.int64)
+    x = fractional @ cell  # Cartesian, inside the cell
     for i in range(m):
         for a in range(3):
             bins[i, a] = min(max(int(fractional[i, a] * nbin[a]), 0), nbin[a] - 1)
@@ -149,52 +150,48 @@ def cell_list_pairs(fractional, cell, nbin, periodic, r_list):
         start[flat[i] + 1] += 1
     for c in range(len(start) - 1):
         start[c + 1] += start[c]
-    capacity = 64 * m + 16
+    capacity = 32 * m + 16
     first = np.empty(capacity, np.int64)
     second = np.empty(capacity, np.int64)
-    shifts = np.zeros((capacity, 3))
+    shifts = np.empty((capacity, 3))
     p = 0
     r2 = r_list * r_list
     target = np.empty(3, np.int64)
     wrap = np.empty(3)
+    offset = np.empty(3)
     for i in range(m):
-        for dx in range(-1, 2):
-            for dy in range(-1, 2):
-                for dz in range(-1, 2):
-                    d = (dx, dy, dz)
-                    inside = True
-                    for a in range(3):
-                        c = bins[i, a] + d[a]
-                        wrap[a] = 0.0
-                        if c < 0 or c >= nbin[a]:
-                            if not periodic[a] or nbin[a] < 3:
-                                inside = False
-                            wrap[a] = -1.0 if c < 0 else 1.0
-                            c %= nbin[a]
-                        target[a] = c
-                    if not inside:
-                        continue
-                    b = (target[0] * nbin[1] + target[1]) * nbin[2] + target[2]
-                    for n in range(start[b], start[b + 1]):
-                        j = order[n]
-                        if j <= i:
-                            continue
-                        dist2 = 0.0
-                        for c in range(3):
-                            v = 0.0
-                            for a in range(3):
-                                v += (fractional[j, a] - fractional[i, a] + wrap[a]) * cell[a, c]
-                            dist2 += v * v
-                        if dist2 < r2:
-                            if p == capacity:
-                                capacity *= 2
-                                first = _grown(first, capacity)
-                                second = _grown(second, capacity)
-                                shifts = _grown2(shifts, capacity)
-                            first[p], second[p] = i, j
-                            for a in range(3):
-                                shifts[p, a] = wrap[a]
-                            p += 1
+        for d in range(27):
+            inside = True
+            for a in range(3):
+                c = bins[i, a] + (d // 3 ** (2 - a)) % 3 - 1  # a = 0, 1, 2: d // 9, // 3, % 3
+                wrap[a] = 0.0
+                if c < 0 or c >= nbin[a]:
+                    if not periodic[a] or nbin[a] < 3:
+                        inside = False
+                    wrap[a] = -1.0 if c < 0 else 1.0
+                    c %= nbin[a]
+                target[a] = c
+            if not inside:
+                continue
+            for c in range(3):
+                offset[c] = wrap[0] * cell[0, c] + wrap[1] * cell[1, c] + wrap[2] * cell[2, c]
+            b = (target[0] * nbin[1] + target[1]) * nbin[2] + target[2]
+            for n in range(start[b], start[b + 1]):
+                j = order[n]
+                if j <= i:
+                    continue
+                v0 = x[j, 0] - x[i, 0] + offset[0]
+                v1 = x[j, 1] - x[i, 1] + offset[1]
+                v2 = x[j, 2] - x[i, 2] + offset[2]
+                if v0 * v0 + v1 * v1 + v2 * v2 < r2:
+                    if p == capacity:
+                        capacity *= 2
+                        first = _grown(first, capacity)
+                        second = _grown(second, capacity)
+                        shifts = _grown2(shifts, capacity)
+                    first[p], second[p] = i, j
+                    shifts[p, 0], shifts[p, 1], shifts[p, 2] = wrap[0], wrap[1], wrap[2]
+                    p += 1
     return first[:p].copy(), second[:p].copy(), shifts[:p].copy()
 
 

@@ -394,38 +394,46 @@ def _pairs(points, r_cut):
     """Pairs of points within ``r_cut``, each once, all periodic images: ``(i, j, shifts)``.
 
     The pair's vector is ``positions[j] - positions[i] + shifts @ cell`` (``shifts``
-    whole numbers, shape (p, 3)).  A compiled cell list
-    (:func:`rigidmd.relax.kernels.cell_list_pairs`, about 1 ms for 1728 centres where
-    scipy's k-d tree took 7 and ASE's neighbour list over 100) without periodicity or in a
-    cell, of any shape, periodic in all three directions with its planes at least
-    ``3 r_cut`` apart; else ASE's ``neighbor_list``.  Both O(n).
+    whole numbers, shape (p, 3)).  scipy's k-d tree without periodicity or in an
+    orthorhombic cell at least ``2 r_cut`` wide (5 ms for 1728 centres); a compiled cell
+    list (:func:`rigidmd.relax.kernels.cell_list_pairs`, 12 ms) in any other cell periodic
+    in all three directions with its planes at least ``3 r_cut`` apart (a sheared cell,
+    where ASE's neighbour list took over 100 ms); else ASE's ``neighbor_list``.  All O(n).
     """
+    from scipy.spatial import cKDTree
+
     m = len(points)
     if m < 2:
         return np.zeros(0, int), np.zeros(0, int), np.zeros((0, 3), int)
-    pbc, positions = points.pbc, points.positions
-    if not pbc.any():
-        low, extent = positions.min(axis=0), np.maximum(np.ptp(positions, axis=0), 1e-8)
-        cell, fractional = np.diag(extent), (positions - low) / extent
-        spacing = extent
-    elif pbc.all() and abs(np.linalg.det(points.cell.array)) > 0:
-        cell = points.cell.array
+    pbc, cell, positions = points.pbc, points.cell.array, points.positions
+    lengths = np.diag(cell)
+    if not pbc.any() or (pbc.all() and np.allclose(cell, np.diag(lengths))
+                         and np.all(lengths > 2 * r_cut)):
+        wrapped = positions
+        if pbc.any():
+            wrapped = np.mod(positions, lengths)
+            wrapped[wrapped >= lengths] = 0.0  # -1e-17 mod L rounds to L, outside the box
+        tree = cKDTree(wrapped, boxsize=lengths if pbc.any() else None)
+        pairs = tree.query_pairs(r_cut, output_type="ndarray")
+        i, j = pairs[:, 0].astype(int), pairs[:, 1].astype(int)
+        shifts = np.zeros((len(i), 3), int)
+        if pbc.any():  # the nearest image: the box is over twice the cut-off wide
+            shifts = -np.rint((positions[j] - positions[i]) / lengths).astype(int)
+        return i, j, shifts
+    nbin = np.zeros(3, np.int64)
+    if pbc.all() and abs(np.linalg.det(cell)) > 0:
         spacing = abs(np.linalg.det(cell)) / np.linalg.norm(
             np.cross(cell[[1, 2, 0]], cell[[2, 0, 1]]), axis=1)
-        fractional = np.linalg.solve(cell.T, positions.T).T
-    else:
-        spacing = np.zeros(3)
-    nbin = np.maximum(np.floor(spacing / r_cut), 1).astype(np.int64)
-    if pbc.any() and np.any(nbin < 3):
+        nbin = np.floor(spacing / r_cut).astype(np.int64)
+    if np.any(nbin < 3):
         i, j, shifts = neighbor_list("ijS", points, r_cut)
         once = (i < j) | ((i == j) & _positive(shifts))
         return i[once], j[once], shifts[once]
-    whole, inside = np.zeros_like(fractional), fractional
-    if pbc.any():
-        whole = np.floor(fractional)
-        inside = fractional - whole
-        over = inside >= 1.0  # -1e-17 - floor(-1e-17) rounds to 1
-        inside[over], whole[over] = 0.0, whole[over] + 1.0
+    fractional = np.linalg.solve(cell.T, positions.T).T
+    whole = np.floor(fractional)
+    inside = fractional - whole
+    over = inside >= 1.0  # -1e-17 - floor(-1e-17) rounds to 1
+    inside[over], whole[over] = 0.0, whole[over] + 1.0
     i, j, shifts = kernels.cell_list_pairs(np.ascontiguousarray(inside), np.array(cell, float),
                                            nbin, pbc.copy(), float(r_cut))
     # The shifts of the points folded into the cell, for the points as given.
