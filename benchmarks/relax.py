@@ -37,6 +37,8 @@ Run::
     python benchmarks/relax.py defaults 64 rows.txt  # systems up to 64 molecules
     python benchmarks/relax.py totals rows.txt     # sums over systems both routes finished
     python benchmarks/relax.py large 12            # 1728 waters, LAMMPS forces
+    python benchmarks/relax.py large 24 none 5     # 13,824 waters, 5 steps
+    python benchmarks/relax.py large 12 iso        # with the cell (iso, aniso, full)
     python benchmarks/relax.py cell                # cell relaxation, LAMMPS forces
     python benchmarks/relax.py                     # the perturbed-minimum study, in turn
     python benchmarks/relax.py box FixBondLengths  # one system (and route): rows to
@@ -334,8 +336,13 @@ def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000):
     SPC/E (``water_box``, 3.1 Å spacing), ``lj/cut/coul/long`` 9 Å with PPPM 1e-5 through
     :class:`rigidmd.lammps.LAMMPSCalculator`.  Time inside the calculator is measured around
     its ``calculate``; everything else (the filter's placement and reduction, the
-    preconditioner, the optimizer) is the optimizer's own.  Returns a table row.
+    preconditioner, the optimizer, the one-off start of numba and the neighbour searches) is
+    the optimizer's own, in wall-clock and in CPU time of the process (single-threaded: CPU
+    time is what the process itself spent, less sensitive to other jobs on a shared
+    machine).  Returns a table row; peak RSS (MiB) at the end.
     """
+    import resource
+
     from rigidmd.lammps import LAMMPSCalculator
     from rigidmd.water import water_model
 
@@ -344,25 +351,40 @@ def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000):
     atoms.set_initial_charges(water.charges(len(atoms) // water.sites))
     calc = LAMMPSCalculator(water.lammps_commands(9.0, "pppm", 1e-5, tail=True),
                             atom_types={"O": 1, "H": 2})
-    spent = [0.0, 0]
+    spent = [0.0, 0.0, 0]
     original = calc.calculate
 
     def calculate(*args, **kwargs):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         original(*args, **kwargs)
         spent[0] += time.perf_counter() - t
-        spent[1] += 1
+        spent[1] += time.process_time() - c
+        spent[2] += 1
 
     calc.calculate = calculate
     atoms.calc = calc
-    t0 = time.perf_counter()
-    result = relax(atoms, fmax=fmax, steps=steps, cell=cell)
-    total = time.perf_counter() - t0
+    first = []  # (cpu, cpu in the calculator) at the end of the first step
+
+    def after(step, energy, largest):
+        if step == 1:
+            first.append((time.process_time() - c0, spent[1]))
+
+    t0, c0 = time.perf_counter(), time.process_time()
+    result = relax(atoms, fmax=fmax, steps=steps, cell=cell, observers=(after,))
+    total, cpu = time.perf_counter() - t0, time.process_time() - c0
     n = len(atoms) // water.sites
-    own = total - spent[0]
-    return (f"| {n} {model} waters{', cell ' + cell if cell else ''} | {fmax} | {spent[1]} "
+    own, own_cpu = total - spent[0], cpu - spent[1]
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    # After the first step: without the one-off start (numba's, the neighbour searches, the
+    # preconditioner's estimate), per step in ms: own and in the calculator.
+    start_cpu, start_calc = first[0] if first else (cpu, spent[1])
+    later = max(result.steps - 1, 1)
+    per_step = (f"{1e3 * (own_cpu - start_cpu + start_calc) / later:.1f} / "
+                f"{1e3 * (spent[1] - start_calc) / later:.1f}")
+    return (f"| {n} {model} waters{', cell ' + cell if cell else ''} | {fmax} | {spent[2]} "
             f"| {result.steps} | {result.converged} | {result.energy / n:.6f} | {total:.1f} "
-            f"| {own:.1f} ({100 * own / total:.1f} %) |")
+            f"| {own:.1f} ({100 * own / total:.1f} %) | {cpu:.1f} "
+            f"| {own_cpu:.1f} ({100 * own_cpu / cpu:.1f} %) | {per_step} | {rss:.0f} |")
 
 
 def cell_rows(optimizers=("RigidLBFGS", "BFGS"), modes=("iso", "aniso", "full"), fmax=0.01):
@@ -409,9 +431,10 @@ def main():
     if args[:1] == ["cell"]:  # cell: cell relaxation with LAMMPS forces, rows to stdout
         cell_rows()
         return
-    if args[:1] == ["large"]:  # large [N_SIDE [CELL]]: optimizer's own time, LAMMPS forces
-        print(large(int(args[1]) if len(args) > 1 else 12,
-                    cell=args[2] if len(args) > 2 else False), flush=True)
+    if args[:1] == ["large"]:  # large [N_SIDE [CELL [STEPS]]]: own time, LAMMPS forces
+        cell = args[2] if len(args) > 2 and args[2] != "none" else False
+        print(large(int(args[1]) if len(args) > 1 else 12, cell=cell,
+                    steps=int(args[3]) if len(args) > 3 else 2000), flush=True)
         return
     if args[:1] == ["defaults"]:  # defaults [LARGEST [FILE]]: relax() against ASE's route
         largest = int(args[1]) if len(args) > 1 else 64

@@ -149,15 +149,19 @@ class RigidBodies:
         ``mult``).  Each connected component is a body; isolated atoms are
         point particles.
         """
-        from ase.neighborlist import build_neighbor_list, natural_cutoffs
+        from ase.data import covalent_radii
+        from scipy import sparse
         from scipy.sparse.csgraph import connected_components
 
-        if len(atoms) == 0:
+        n = len(atoms)
+        if n == 0:
             return cls(np.zeros(0, dtype=np.int64), rule="connectivity")
-        nl = build_neighbor_list(
-            atoms, cutoffs=natural_cutoffs(atoms, mult=mult), self_interaction=False
-        )
-        _, labels = connected_components(nl.get_connectivity_matrix(sparse=True))
+        # ASE's natural_cutoffs and NeighborList, whose skin (0.3 Å) is added to every radius:
+        # bonded below r_i + r_j + 0.6 Å.
+        radii = mult * covalent_radii[atoms.numbers] + 0.3
+        i, j = _close_pairs(atoms, radii)
+        graph = sparse.coo_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+        _, labels = connected_components(graph, directed=False)
         return cls(labels, rule="connectivity")
 
     def warn_merged(self, atoms, unique_formulas=False):
@@ -660,3 +664,32 @@ def check_bodies_fit(model, cell, pbc, when=""):
             f"its largest atom distance from its centre of mass), not less than half the "
             f"periodic cell's width across cell vector {k} ({width:.3f} Å): the minimum image "
             f"is ambiguous{'; ' + when if when else ''}")
+
+
+def _close_pairs(atoms, radii):
+    """Pairs ``(i, j)`` of atoms closer than ``radii[i] + radii[j]`` (minimum image).
+
+    A k-d tree without periodicity or in an orthorhombic periodic cell over
+    twice the largest sum wide (0.02 s for 5184 atoms, against 0.4 s for ASE's
+    ``NeighborList``), else ASE's ``neighbor_list``.
+    """
+    from ase.neighborlist import neighbor_list
+    from scipy.spatial import cKDTree
+
+    cell, pbc, reach = atoms.cell.array, atoms.pbc, 2.0 * float(np.max(radii))
+    lengths = np.diag(cell)
+    if pbc.any() and not (pbc.all() and np.allclose(cell, np.diag(lengths))
+                          and np.all(lengths > 2 * reach)):
+        return neighbor_list("ij", atoms, radii, self_interaction=False)
+    positions = atoms.positions
+    if pbc.any():
+        positions = np.mod(positions, lengths)
+        positions[positions >= lengths] = 0.0  # -1e-17 mod L rounds to L
+    tree = cKDTree(positions, boxsize=lengths if pbc.any() else None)
+    pairs = tree.query_pairs(reach, output_type="ndarray")
+    i, j = pairs[:, 0], pairs[:, 1]
+    delta = positions[j] - positions[i]
+    if pbc.any():
+        delta -= lengths * np.rint(delta / lengths)
+    close = np.sum(delta * delta, axis=1) < (radii[i] + radii[j]) ** 2
+    return i[close], j[close]

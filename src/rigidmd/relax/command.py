@@ -11,7 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
-from rigidmd.relax.structure import RelaxationStopped, continue_from, relax_structure
+from rigidmd.relax.structure import (
+    RelaxationStopped,
+    continue_from,
+    relax_structure,
+    state_path,
+)
 from rigidmd.run.runner import StopSignals
 
 __all__ = ["relax_only", "relax_for_export"]
@@ -68,6 +73,7 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     bodies = structure.resolve_bodies(atoms)
     directory = outputs.directory
     trajectory, log = directory / section.trajectory, directory / section.log
+    state = state_path(trajectory)
     source = structure.source if isinstance(structure.source, Path) else None
     own = source is not None and source.resolve() == trajectory.resolve()
     directory.mkdir(parents=True, exist_ok=True)
@@ -79,7 +85,7 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
             done = continue_from(atoms, trajectory)
             print(f"continuing the relaxation of {trajectory} after step {done}", file=stream)
         else:
-            existing = [p for p in (trajectory, log) if p.exists()]
+            existing = [p for p in (trajectory, log, state) if p.exists()]
             if own:
                 raise ConfigError(f"structure: {source} is this relaxation's own trajectory; "
                                   "continue it with --resume (or copy it elsewhere first)")

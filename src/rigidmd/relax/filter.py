@@ -42,6 +42,7 @@ rigidly with their body and the force on them enters its force and torque.
 """
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from ase.calculators.calculator import PropertyNotImplementedError
@@ -53,14 +54,12 @@ from rigidmd.core.checks import check_finite
 from rigidmd.core.dof import RigidBodyDOF
 from rigidmd.core.forces import ForceEvaluator
 from rigidmd.core.link import BodyLink
-from rigidmd.core.model import describe_atoms
+from rigidmd.core.model import BodyModel, describe_atoms
 from rigidmd.core.record import StepRecord
 from rigidmd.relax import cell as relaxcell
-
-try:  # ASE >= 3.24
-    from ase.filters import OptimizableFilter as _Optimizable
-except ImportError:  # pragma: no cover - ASE 3.23
-    from ase.optimize.optimize import OptimizableAtoms as _Optimizable
+from rigidmd.relax import state as relaxstate
+from rigidmd.relax.facade import AtomsFacade
+from rigidmd.relax.rotation import cross, right_jacobian_transpose, rotation_quaternion
 
 __all__ = ["RigidFilter", "relax", "Relaxation", "OPTIMIZERS", "optimizer_class", "ANCHOR_ANGLE",
            "rotation_quaternion", "right_jacobian_transpose"]
@@ -69,56 +68,7 @@ __all__ = ["RigidFilter", "relax", "Relaxation", "OPTIMIZERS", "optimizer_class"
 ANCHOR_ANGLE = 2.5
 
 
-def rotation_quaternion(phi):
-    r"""Unit quaternion of a rotation vector, :math:`\exp(\varphi)`.
-
-    :math:`(\cos\tfrac{\theta}2, \hat\varphi\sin\tfrac{\theta}2)`, :math:`\theta = |\varphi|`.
-
-    Parameters
-    ----------
-    phi : numpy.ndarray, shape (..., 3)
-        Rotation vectors (rad).
-
-    Returns
-    -------
-    numpy.ndarray, shape (..., 4)
-    """
-    angle = np.linalg.norm(phi, axis=-1, keepdims=True)
-    half = 0.5 * angle
-    # sin(θ/2)/θ, with its series below 1e-4 rad.
-    small = angle < 1e-4
-    factor = np.where(small, 0.5 - angle**2 / 48.0,
-                      np.sin(half) / np.where(small, 1.0, angle))
-    return np.concatenate([np.cos(half), factor * phi], axis=-1)
-
-
-def right_jacobian_transpose(phi, v):
-    r""":math:`J_r(\varphi)^\mathsf{T} v` for the rotation vector :math:`\varphi`.
-
-    :math:`\exp(\varphi + \delta) = \exp(\varphi)\exp(J_r(\varphi)\,\delta) + O(\delta^2)`,
-    :math:`J_r = 1 - a[\varphi]_\times + b[\varphi]_\times^2`, so
-    :math:`J_r^\mathsf{T} v = v + a\,\varphi\times v + b\,\varphi\times(\varphi\times v)`
-    with :math:`a = (1-\cos\theta)/\theta^2`, :math:`b = (\theta-\sin\theta)/\theta^3`,
-    :math:`\theta = |\varphi|` (series below 1e-3 rad).
-
-    Parameters
-    ----------
-    phi, v : numpy.ndarray, shape (n, 3)
-
-    Returns
-    -------
-    numpy.ndarray, shape (n, 3)
-    """
-    t = np.linalg.norm(phi, axis=-1, keepdims=True)
-    small = t < 1e-3
-    ts = np.where(small, 1.0, t)
-    a = np.where(small, 0.5 - t**2 / 24.0, (1.0 - np.cos(ts)) / ts**2)
-    b = np.where(small, 1.0 / 6.0 - t**2 / 120.0, (ts - np.sin(ts)) / ts**3)
-    c = np.cross(phi, v)
-    return v + a * c + b * np.cross(phi, c)
-
-
-class RigidFilter:
+class RigidFilter(AtomsFacade):
     r"""An :class:`ase.Atoms` seen by ASE's optimizers as rigid bodies (and a cell).
 
     Use it where an optimizer takes atoms (``BFGS(RigidFilter(atoms)).run(fmax=0.05)``).
@@ -187,13 +137,7 @@ class RigidFilter:
         self.scalar_pressure = float(scalar_pressure)
         self.cell_factor = float(cell_factor)
         self.reanchored = 0
-        d = model.body_coordinates
-        if model.n_bodies:
-            counts = np.diff(model.bounds)
-            self.lengths = np.sqrt(np.add.reduceat(np.sum(d * d, axis=1), model.starts)
-                                   / counts)
-        else:
-            self.lengths = np.zeros(0)
+        self.lengths = _body_lengths(model)
         self._q_ref = geometry.quaternions.copy()
         # The machinery of the dynamics: the body link places the atoms, the force evaluator
         # calls the calculator (energy, forces and with the cell the stress in one call) and
@@ -211,8 +155,12 @@ class RigidFilter:
         x[self._slices[0]] = geometry.com
         x[self._slices[2]] = atoms.positions[model.free]
         self._x = x
+        self._key = x.tobytes()  # of the coordinates, for the results below (set by _place)
+        t, r, f, c = (np.arange(len(x))[s] for s in self._slices)
+        self._rows = {"translation_rows": np.concatenate([t, f]), "rotation_rows": r,
+                      "rotation_centre": np.arange(len(r)), "cell_rows": c, "n_rows": len(x)}
         self._placed = None  # (positions array, r) last written, to notice outside moves
-        self._results = {}  # coordinates (bytes) -> (energy, generalized forces), at most 2
+        self._results = {}  # coordinates (bytes) -> {energy, free_energy, forces}, at most 2
         self.constraints = []
         self.info = atoms.info
 
@@ -247,6 +195,7 @@ class RigidFilter:
             self.atoms.set_cell(cell, scale_atoms=False)
             self._record.cell_changed()
         r = self._link.place(state, self._record.r)
+        self._key = self._x.tobytes()
         self._placed = (self.atoms.positions.copy(), r, q, D)
 
     def get_positions(self):
@@ -283,6 +232,7 @@ class RigidFilter:
             block = self._x[self._slices[1]]
             block[far] = 0.0
             self.reanchored += int(far.sum())
+            self._key = self._x.tobytes()
             self._results.clear()  # the coordinates of earlier results meant other references
 
     positions = property(get_positions, set_positions)
@@ -295,6 +245,47 @@ class RigidFilter:
         """
         self._x = np.asarray(x, dtype=float).reshape(self._x.shape).copy()
         self._place()
+
+    def get_state(self):
+        """What continues this view exactly (:func:`relax`'s ``state_file``): a dict of arrays.
+
+        The coordinates, the bodies' reference orientations and the reference
+        cell of the rows (the chart the optimizer's memory is written in), and
+        the energy and generalized forces at the coordinates when known.
+        """
+        state = {"x": self._x.copy(), "q_ref": self._q_ref.copy(), "cell0": self._cell0.copy(),
+                 "reanchored": np.array(self.reanchored), "n_atoms": np.array(len(self.atoms)),
+                 **{f"model.{name}": getattr(self.model, name) for name in BodyModel.STORED}}
+        for name, value in self._cached().items():
+            state[f"known.{name}"] = np.array(value)
+        return state
+
+    def set_state(self, state):
+        """Continue from :meth:`get_state` of a view of the same bodies; moves the atoms.
+
+        Raises
+        ------
+        ValueError
+            A state of other rows or bodies (nothing changes then).
+        """
+        x, q_ref = np.asarray(state["x"], dtype=float), np.asarray(state["q_ref"], dtype=float)
+        if x.shape != self._x.shape or q_ref.shape != self._q_ref.shape:
+            raise ValueError(f"RigidFilter.set_state: a state of {len(x)} rows and "
+                             f"{len(q_ref)} bodies, this view has {len(self._x)} and "
+                             f"{len(self._q_ref)}")
+        # The body frames the orientations refer to (measured again from other positions,
+        # a principal axis may come out flipped).
+        self.model.update_from(BodyModel(n_atoms=int(state["n_atoms"]), **{
+            name: np.asarray(state[f"model.{name}"]) for name in BodyModel.STORED}))
+        self.lengths = _body_lengths(self.model)
+        self._q_ref = q_ref.copy()
+        self._cell0 = np.asarray(state["cell0"], dtype=float).copy()
+        self.reanchored = int(state["reanchored"])
+        self._x = x.copy()
+        self._place()
+        self._results.clear()
+        self._remember(**{k[6:]: (v.copy() if v.ndim else float(v)) for k, v in state.items()
+                          if k.startswith("known.")})
 
     def rigid_rows(self):
         """Which rows are what, for a preconditioner (:class:`rigidmd.relax.precon.RigidPrecon`).
@@ -309,11 +300,7 @@ class RigidFilter:
             centre in ``centres``; ``cell_rows`` (0 or 3,); ``n_rows``.
         """
         _, _, _, D = self._current()
-        t, r, f, c = (np.arange(len(self._x))[s] for s in self._slices)
-        centres = self._x[np.concatenate([t, f])] @ D.T
-        return {"centres": centres, "translation_rows": np.concatenate([t, f]),
-                "rotation_rows": r, "rotation_centre": np.arange(len(r)),
-                "cell_rows": c, "n_rows": len(self._x)}
+        return {"centres": self._x[self._rows["translation_rows"]] @ D.T, **self._rows}
 
     def fixed_rows(self):
         """Rows that ``FixAtoms`` holds, as a boolean mask of shape (n,)."""
@@ -331,23 +318,27 @@ class RigidFilter:
 
     # ------------------------------------------------------------ energy and gradient
     def _cached(self):
-        """(energy, generalized forces) of the current coordinates if computed, else None."""
+        """What is known at the current coordinates (dict: ``energy``, ``free_energy``,
+        ``forces``), placing them first if needed."""
         self._current()
-        return self._results.get(self._x.tobytes())
+        return self._results.get(self._key, {})
 
-    def _remember(self, energy=None, forces=None):
-        key = self._x.tobytes()
-        old = self._results.get(key, (None, None))
+    def _remember(self, **known):
+        key = self._key
         if key not in self._results and len(self._results) >= 2:
             self._results.pop(next(iter(self._results)))
-        self._results[key] = (old[0] if energy is None else energy,
-                              old[1] if forces is None else forces)
+        self._results.setdefault(key, {}).update(known)
 
     def get_potential_energy(self, force_consistent=False, **kwargs):
-        """Potential energy (eV), plus :math:`pV` when the cell relaxes (the enthalpy)."""
-        cached = self._cached()
-        if cached is not None and cached[0] is not None and not force_consistent:
-            return cached[0]
+        """Potential energy (eV), plus :math:`pV` when the cell relaxes (the enthalpy).
+
+        ``force_consistent``: the free energy where the calculator has one
+        (ASE's optimizers ask for it), else the energy.
+        """
+        name = "free_energy" if force_consistent else "energy"
+        cached = self._cached().get(name)
+        if cached is not None:
+            return cached
         try:
             energy = self.atoms.get_potential_energy(force_consistent=force_consistent)
         except PropertyNotImplementedError:
@@ -356,18 +347,29 @@ class RigidFilter:
             energy = self.atoms.get_potential_energy()
         if self.mode is not None:
             energy += self.scalar_pressure * self.atoms.get_volume()
-        if not force_consistent:
-            self._remember(energy=float(energy))
+        self._remember(**{name: float(energy)})
         return float(energy)
 
     def get_forces(self, **kwargs):
         """Generalized forces, minus the gradient of the energy, shape (n, 3) (eV/Å)."""
-        cached = self._cached()
-        if cached is not None and cached[1] is not None:
-            return cached[1].copy()
+        cached = self._cached().get("forces")
+        if cached is not None:
+            return cached.copy()
         out = self._generalized_forces()
-        self._remember(forces=out.copy())
+        self._remember(forces=out.copy(), **self._energies())
         return out
+
+    def _energies(self):
+        """The energies the force call computed with the forces (no further call), as
+        :meth:`get_potential_energy` gives them: ``energy`` and ``free_energy``."""
+        calc = self.atoms.calc
+        results, done = getattr(calc, "results", None), getattr(calc, "atoms", None)
+        if (not isinstance(results, dict) or "energy" not in results or done is None
+                or not np.array_equal(done.positions, self.atoms.positions)):
+            return {}  # not ASE's record of this very call: asked for when needed
+        pv = self.scalar_pressure * self.atoms.get_volume() if self.mode is not None else 0.0
+        return {"energy": float(results["energy"]) + pv,
+                "free_energy": float(results.get("free_energy", results["energy"])) + pv}
 
     def _generalized_forces(self):
         _, _, q, D = self._current()
@@ -377,7 +379,10 @@ class RigidFilter:
         out = np.zeros_like(self._x)
         out[self._slices[0]] = F @ D
         if model.n_bodies:
-            torque_body = quat.rotate_inverse(q, tau)
+            # R(q)^T tau, as quat.rotate_inverse computes it, without np.cross's axis handling.
+            u = -q[:, 1:]
+            t = 2.0 * cross(u, tau)
+            torque_body = tau + q[:, :1] * t + cross(u, t)
             g = right_jacobian_transpose(self._phi(), torque_body) / self.lengths[:, None]
             g[model.linear, 0] = 0.0
             out[self._slices[1]] = g
@@ -402,34 +407,13 @@ class RigidFilter:
     def get_global_number_of_atoms(self):
         return len(self._x)
 
-    def iterimages(self):
-        """The real atoms, for trajectories."""
-        return self.atoms.iterimages()
 
-    def get_cell(self):
-        return self.atoms.get_cell()
-
-    def get_pbc(self):
-        return self.atoms.get_pbc()
-
-    @property
-    def calc(self):
-        return self.atoms.calc
-
-    def get_calculator(self):
-        return self.atoms.calc
-
-    def get_chemical_symbols(self):
-        return self.atoms.get_chemical_symbols()
-
-    def has(self, name):
-        return self.atoms.has(name)
-
-    def __ase_optimizable__(self):
-        return _Optimizable(self)
-
-    def get_stress(self, *args, **kwargs):
-        return self.atoms.get_stress(*args, **kwargs)
+def _body_lengths(model):
+    """Root-mean-square distance of each body's atoms from its centre (Å), shape (n_bodies,)."""
+    if not model.n_bodies:
+        return np.zeros(0)
+    d = model.body_coordinates
+    return np.sqrt(np.add.reduceat(np.sum(d * d, axis=1), model.starts) / np.diff(model.bounds))
 
 
 def _honoured_constraints(atoms, model):
@@ -529,7 +513,7 @@ def optimizer_class(name):
 
 def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", cell=False,
           scalar_pressure=0.0, trajectory=None, logfile=None, observers=(),
-          append_trajectory=False, **kwargs) -> Relaxation:
+          append_trajectory=False, state_file=None, resume=False, **kwargs) -> Relaxation:
     """Relax the rigid bodies of ``atoms`` (and the cell) in place with an ASE optimizer.
 
     Parameters
@@ -560,6 +544,15 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         the relaxation after the step's trajectory frame.
     append_trajectory : bool, default False
         Append to ``trajectory`` (continuing a relaxation) instead of replacing it.
+    state_file : str or pathlib.Path, optional
+        Where the relaxation's state is written when it stops before
+        converging, after a whole step (an observer raised, or ``steps`` were
+        taken): the view's chart and the optimizer's memory
+        (:mod:`rigidmd.relax.state`); removed when the relaxation converges.
+    resume : bool, default False
+        Continue from ``state_file``, written at ``atoms``' positions by this
+        optimizer: the steps are those the uninterrupted relaxation would have
+        taken (ValueError when it does not match the atoms).
     **kwargs
         Further optimizer arguments (``maxstep``, ...).  With ASE's BFGS,
         ``alpha`` (initial Hessian, eV/Å² times the identity in the rows of
@@ -580,12 +573,28 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         from rigidmd.relax.precon import RigidPrecon
 
         kwargs["precon"] = RigidPrecon()
+    saved = relaxstate.resumed_state(state_file, atoms, cls.__name__) if resume else None
     with cls(view, trajectory=trajectory, logfile=logfile, append_trajectory=append_trajectory,
              **kwargs) as opt:
-        for observer in observers:
-            opt.attach(_Report(observer, opt, view), interval=1)
-        converged = bool(opt.run(fmax=fmax, steps=int(steps)))
+        if saved is not None:
+            view.set_state(relaxstate.split(saved, "view"))
+            if hasattr(opt, "set_state"):
+                opt.set_state(relaxstate.split(saved, "opt"))
+        reports = [_Report(observer, opt, view) for observer in observers]
+        for report in reports:
+            opt.attach(report, interval=1)
+        try:
+            converged = bool(opt.run(fmax=fmax, steps=int(steps)))
+        except Exception:
+            if state_file is not None and any(report.raised for report in reports):
+                relaxstate.write_state(state_file, view, opt)  # after a whole step
+            raise
         nsteps = opt.get_number_of_steps()
+        if state_file is not None:
+            if converged:
+                Path(state_file).unlink(missing_ok=True)
+            else:
+                relaxstate.write_state(state_file, view, opt)
     left = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.0
     return Relaxation(converged, int(nsteps), float(atoms.get_potential_energy()), left)
 
@@ -595,8 +604,13 @@ class _Report:
 
     def __init__(self, observer, opt, view):
         self.observer, self.opt, self.view = observer, opt, view
+        self.raised = False  # the observer raised: the step and its frame are whole
 
     def __call__(self):
         forces = self.view.get_forces()
         fmax = float(np.sqrt(np.sum(forces * forces, axis=1).max())) if len(forces) else 0.0
-        self.observer(self.opt.nsteps, self.view.get_potential_energy(), fmax)
+        try:
+            self.observer(self.opt.nsteps, self.view.get_potential_energy(), fmax)
+        except BaseException:
+            self.raised = True
+            raise

@@ -12,14 +12,16 @@ Each step costs one force call.  A step that raises the energy is halved
 (from the last accepted point, at most :data:`MAX_HALVINGS` times) and the
 memory is cleared; every step is capped at ``maxstep`` (Å, the largest row,
 as ASE's ``LBFGS``).  Memory and time per step are O(n) (``memory`` pairs of
-vectors, a sparse preconditioner), and every sum is numpy's own pairwise sum
-rather than a BLAS dot product, so that the path does not depend on the
-number of BLAS threads.
+vectors, a sparse preconditioner solved once per step for both vectors it
+is applied to), and every sum is a compiled loop in a fixed order
+(:mod:`rigidmd.relax.kernels`) rather than a BLAS dot product, so that the
+path does not depend on the number of BLAS threads.
 """
 
 import numpy as np
 from ase.optimize.optimize import Optimizer
 
+from rigidmd.relax import kernels
 from rigidmd.relax.precon import RigidPrecon
 
 __all__ = ["RigidLBFGS", "MAX_HALVINGS"]
@@ -29,8 +31,8 @@ MAX_HALVINGS = 8
 
 
 def _dot(a, b):
-    """:math:`a \\cdot b` by numpy's pairwise sum (independent of BLAS threads)."""
-    return float(np.sum(a * b))
+    """:math:`a \\cdot b` in a fixed order (:func:`rigidmd.relax.kernels.dot`; no BLAS)."""
+    return float(kernels.dot(a, b))
 
 
 class RigidLBFGS(Optimizer):
@@ -86,11 +88,14 @@ class RigidLBFGS(Optimizer):
         d.update(maxstep=self.maxstep, memory=self.memory)
         return d
 
-    def _solve(self, q):
+    def _solve(self, *vectors):
+        """:math:`P^{-1} v` for each of ``vectors`` (one solve for all with a RigidPrecon)."""
         if self.precon is None:
-            return q.copy()
+            return [v.copy() for v in vectors]
         self.precon.make_precon(self._target)
-        return self.precon.solve(q)
+        if isinstance(self.precon, RigidPrecon):
+            return list(self.precon.solve(np.stack(vectors)))
+        return [self.precon.solve(v) for v in vectors]
 
     def step(self, forces=None):
         """One step: accept (or halve) the last one, update the memory, move."""
@@ -124,14 +129,15 @@ class RigidLBFGS(Optimizer):
         a = np.empty(len(self.s))
         for i in range(len(self.s) - 1, -1, -1):
             a[i] = self.rho[i] * _dot(self.s[i], q)
-            q -= a[i] * self.y[i]
-        z = self._solve(q)
+            kernels.axpy(-a[i], self.y[i], q)
         if self.s:
-            Hy = self._solve(self.y[-1])
+            z, Hy = self._solve(q, self.y[-1])
             z *= _dot(self.s[-1], self.y[-1]) / _dot(self.y[-1], Hy)
+        else:
+            (z,) = self._solve(q)
         for i in range(len(self.s)):
             b = self.rho[i] * _dot(self.y[i], z)
-            z += self.s[i] * (a[i] - b)
+            kernels.axpy(a[i] - b, self.s[i], z)
         dx = -z.reshape(-1, 3)
         longest = np.sqrt(np.sum(dx * dx, axis=1)).max() if len(dx) else 0.0
         if longest > self.maxstep:
@@ -139,6 +145,50 @@ class RigidLBFGS(Optimizer):
         self.x0, self.g0, self.e0 = x, g, e
         opt.set_x(x + dx.ravel())
         self.dump(self._state())
+
+    def get_state(self):
+        """Everything the next step depends on, as a dict of arrays (and the preconditioner's,
+        under ``precon.``): :func:`rigidmd.relax.filter.relax` writes it when a relaxation
+        stops early, so that a continued one takes the steps an uninterrupted one would."""
+        n = 3 * len(self._target) if self.x0 is None else len(self.x0)
+        state = {"s": np.array(self.s).reshape(-1, n), "y": np.array(self.y).reshape(-1, n),
+                 "rho": np.array(self.rho, dtype=float), "halvings": np.array(self.halvings),
+                 "anchored": np.array(self._anchored), "memory": np.array(self.memory),
+                 "maxstep": np.array(self.maxstep)}
+        if self.x0 is not None:
+            state.update(x0=self.x0, g0=self.g0, e0=np.array(self.e0))
+        if isinstance(self.precon, RigidPrecon):
+            state.update({f"precon.{k}": v for k, v in self.precon.get_state().items()})
+        return state
+
+    def set_state(self, state):
+        """Continue from :meth:`get_state` (on the view the state was taken from, restored).
+
+        Raises
+        ------
+        ValueError
+            A state of another memory length or step size, or of other rows.
+        """
+        for name in ("memory", "maxstep"):
+            if float(state[name]) != getattr(self, name):
+                raise ValueError(f"RigidLBFGS: the state was taken with {name}="
+                                 f"{state[name].item()!r}, this optimizer has "
+                                 f"{getattr(self, name)!r}")
+        n = 3 * len(self._target)
+        if state["s"].shape[1:] != (n,) or ("x0" in state and len(state["x0"]) != n):
+            raise ValueError(f"RigidLBFGS: the state holds vectors of {state['s'].shape[1]} "
+                             f"components, this view {n}")
+        self.s, self.y = [v.copy() for v in state["s"]], [v.copy() for v in state["y"]]
+        self.rho = [float(v) for v in state["rho"]]
+        self.halvings, self._anchored = int(state["halvings"]), int(state["anchored"])
+        self.x0 = self.g0 = self.e0 = None
+        if "x0" in state:
+            self.x0, self.g0 = state["x0"].copy(), state["g0"].copy()
+            self.e0 = float(state["e0"])
+        if isinstance(self.precon, RigidPrecon):
+            prefix = "precon."
+            self.precon.set_state({k[len(prefix):]: v for k, v in state.items()
+                                   if k.startswith(prefix)}, self._target)
 
     def _state(self):
         return (self.s, self.y, self.rho, self.x0, self.g0, self.e0, self.halvings)

@@ -12,8 +12,11 @@ output directory.  It is a product path as ``rigidmd run`` is:
   and one line saying how to continue (:class:`RelaxationStopped`); a second
   Ctrl-C stops at once, without a traceback.
 * **Resume**: ``rigidmd relax CONFIG --resume`` continues from the last frame
-  of the relaxation's trajectory, appending to it and to its log (the
-  optimizer's memory of earlier steps starts afresh).
+  of the relaxation's trajectory, appending to it and to its log, with the
+  optimizer's memory (:func:`state_path`, written when a relaxation stops
+  before converging): the continued relaxation takes the steps the
+  uninterrupted one would have taken.  Without that file (a relaxation
+  killed outright) the optimizer's memory starts afresh, and it says so.
 * **Nothing read is lost**: the structure is read before any output is
   touched; an earlier relaxation's outputs are replaced only with
   ``--overwrite``, and never when the structure *is* that trajectory.
@@ -31,7 +34,13 @@ import numpy as np
 from rigidmd.relax.filter import relax
 
 __all__ = ["relax_structure", "RelaxationNotConverged", "RelaxationStopped", "RelaxProgress",
-           "continue_from"]
+           "continue_from", "state_path"]
+
+
+def state_path(trajectory):
+    """Where a relaxation writing ``trajectory`` keeps its state when it stops early:
+    ``relax.traj`` -> ``relax.state.npz`` (:mod:`rigidmd.relax.state`)."""
+    return trajectory.with_suffix(".state.npz")
 
 
 class RelaxationNotConverged(RuntimeError):
@@ -171,6 +180,15 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     trajectory = directory / section.trajectory
     log = directory / section.log
     left = max(section.steps - done, 0)
+    state_file = state_path(trajectory)
+    exact = False
+    if resume:
+        exact, why = _can_continue_exactly(state_file, atoms, section.optimizer)
+        said = (f"continuing with the optimizer's memory ({state_file})" if exact
+                else f"the optimizer's memory starts afresh: {why}")
+        print(f"relax: {said}", file=stream)
+    elif state_file.exists():
+        state_file.unlink()
     report = RelaxProgress(section.steps, done, section.fmax, progress)
     observers = (report,) if stop is None else (report, lambda *_: stop.check())
     continuing = hint or "rigidmd relax CONFIG --resume"
@@ -181,7 +199,8 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
             result = relax(atoms, bodies, fmax=section.fmax, steps=left,
                            optimizer=section.optimizer, cell=section.cell,
                            scalar_pressure=section.pressure, trajectory=str(trajectory),
-                           logfile=logfile, append_trajectory=resume, observers=observers)
+                           logfile=logfile, append_trajectory=resume, observers=observers,
+                           state_file=state_file, resume=exact)
     except Exception as err:
         signum = getattr(err, "signum", None)  # the stop's StopRequest, after a whole step
         if stop is None or signum is None:
@@ -207,3 +226,17 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
           f"fmax {result.fmax:.3g} eV/Å, energy {result.energy:.6f} eV; wrote {trajectory} and "
           f"{log}", file=stream)
     return result
+
+
+def _can_continue_exactly(state_file, atoms, optimizer):
+    """``(True, "")`` when ``state_file`` holds the state of the last frame, else (False, why)."""
+    from rigidmd.relax.state import read_state, state_matches
+
+    try:
+        state = read_state(state_file)
+    except ValueError as err:
+        return False, str(err)
+    if state is None:
+        return False, f"no {state_file} (the relaxation was not stopped by a signal or its steps)"
+    differs = state_matches(state, atoms, optimizer)
+    return (False, f"{state_file}: {differs}") if differs else (True, "")

@@ -1,0 +1,105 @@
+"""The state of a relaxation that stopped early, for a continuation that takes the same steps.
+
+:func:`rigidmd.relax.filter.relax` writes it (``state_file``) when a
+relaxation stops before converging, after a whole step: an observer raised
+(a stop signal of ``rigidmd relax``) or the step limit was reached.  It holds
+the view's chart (:meth:`rigidmd.relax.filter.RigidFilter.get_state`: the
+coordinates, the bodies' reference orientations, the energy and forces
+already computed there) and the optimizer's memory where the optimizer has
+one to give (:meth:`rigidmd.relax.lbfgs.RigidLBFGS.get_state`: its curvature
+pairs, last point and the preconditioner's scales and matrix), with the
+atoms' positions it belongs to.  A continuation from it takes the steps the
+uninterrupted relaxation would have taken, bit for bit where the calculator
+gives the same forces for the same positions, with no force call more.
+
+The file is NumPy's ``.npz`` (float64 kept exactly), written to a temporary
+name and moved into place, so that a file of that name is always whole.
+"""
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["write_state", "read_state", "state_matches", "resumed_state"]
+
+
+def write_state(path, view, opt):
+    """Write the state of ``view`` (a RigidFilter) and ``opt`` (its optimizer) to ``path``."""
+    path = Path(path)
+    arrays = {f"view.{k}": v for k, v in view.get_state().items()}
+    if hasattr(opt, "get_state"):
+        arrays.update({f"opt.{k}": v for k, v in opt.get_state().items()})
+    arrays["optimizer"] = np.array(type(opt).__name__)
+    arrays["positions"] = view.atoms.positions.copy()
+    arrays["cell"] = view.atoms.cell.array.copy()
+    partial = path.with_name(path.name + ".partial")
+    with open(partial, "wb") as fd:
+        np.savez(fd, **arrays)
+    os.replace(partial, path)
+
+
+def read_state(path):
+    """The arrays of a state file (dict), or None when there is no file at ``path``.
+
+    Raises
+    ------
+    ValueError
+        A file that is not a whole state (named, with what went wrong).
+    """
+    path = Path(path)
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except Exception as err:  # numpy raises several kinds on a damaged file  # noqa: BLE001
+        raise ValueError(f"{path}: not a relaxation state ({type(err).__name__}: "
+                         f"{' '.join(str(err).split())})") from None
+    missing = {"optimizer", "positions", "cell", "view.x"} - set(arrays)
+    if missing:
+        raise ValueError(f"{path}: not a relaxation state (no {sorted(missing)[0]})")
+    return arrays
+
+
+def state_matches(state, atoms, optimizer):
+    """Whether ``state`` was taken at ``atoms``' positions and cell, by ``optimizer`` (a name).
+
+    Returns
+    -------
+    str or None
+        None when it matches, else what differs (for a message).
+    """
+    if str(state["optimizer"]) != optimizer:
+        return f"it was written by {state['optimizer']}, this relaxation uses {optimizer}"
+    if state["positions"].shape != atoms.positions.shape:
+        return (f"it holds {len(state['positions'])} atoms, the structure "
+                f"{len(atoms)}")
+    if not (np.array_equal(state["positions"], atoms.positions)
+            and np.array_equal(state["cell"], atoms.cell.array)):
+        return "its positions are not the last frame's (a later step was written after it)"
+    return None
+
+
+def split(state, prefix):
+    """The entries of ``state`` under ``prefix.``, without it."""
+    return {k[len(prefix) + 1:]: v for k, v in state.items() if k.startswith(prefix + ".")}
+
+
+def resumed_state(state_file, atoms, optimizer):
+    """The state ``relax(resume=True)`` continues from, checked against the atoms.
+
+    Raises
+    ------
+    ValueError
+        No ``state_file``, none at that path, or one that does not match.
+    """
+    if state_file is None:
+        raise ValueError("relax: resume=True needs the state_file to continue from")
+    saved = read_state(state_file)
+    if saved is None:
+        raise ValueError(f"relax: resume=True but {state_file} does not exist")
+    differs = state_matches(saved, atoms, optimizer)
+    if differs:
+        raise ValueError(f"relax: cannot continue from {state_file}: {differs}")
+    return saved
