@@ -427,7 +427,7 @@ def main():
         else:
             records = [json.loads(line) for name in args[1:]
                        for line in Path(name).read_text().splitlines() if line.strip()]
-            print("\n".join(relax_ase.table(records)))
+            print("\n".join(relax_ase.table(records) + [""] + relax_ase.compact(records)))
         return
     if args[:1] == ["cell"]:  # cell: cell relaxation with LAMMPS forces, rows to stdout
         cell_rows()

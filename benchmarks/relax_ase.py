@@ -331,6 +331,27 @@ def step_cost(side=8, seed=0, repeats=2):
 
 
 # ------------------------------------------------------------------------------------ tables
+def compact(records):
+    """One Markdown row per system: force calls at each fmax and energies at the smallest."""
+    by = {}
+    for r in records:
+        by.setdefault(r["system"], {})[r["route"]] = r
+    lines = ["| system | force calls to 0.05, relax / ASE | to 0.01 | E at 0.01, relax / ASE "
+             "(eV/molecule) |", "|---|---|---|---|"]
+    for system in sorted(by, key=lambda s: (parse_system(s)[0], parse_system(s)[1:])):
+        if set(by[system]) != {"relax", "ASE"}:
+            continue
+        cells = []
+        for fmax in ("0.05", "0.01"):
+            a, b = by[system]["relax"]["rows"][fmax], by[system]["ASE"]["rows"][fmax]
+            late = "" if b["converged"] else f" (stopped, fmax {b['fmax_reached']:.2f})"
+            cells.append(f"{a['calls']} / {b['calls']}{late}")
+        a, b = by[system]["relax"]["rows"]["0.01"], by[system]["ASE"]["rows"]["0.01"]
+        lines.append(f"| {system} | {cells[0]} | {cells[1]} "
+                     f"| {a['energy']:.4f} / {b['energy']:.4f} |")
+    return lines
+
+
 def table(records):
     """Markdown rows per system and fmax (both routes side by side) and totals."""
     by = {}
