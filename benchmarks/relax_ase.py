@@ -331,22 +331,28 @@ def step_cost(side=8, seed=0, repeats=2):
 
 
 # ------------------------------------------------------------------------------------ tables
-def compact(records):
-    """One Markdown row per system: force calls at each fmax and energies at the smallest."""
+def paired(records):
+    """``(system, {route: record})`` of the systems both routes ran, clusters first, by size;
+    the later record of a system and route counts."""
     by = {}
     for r in records:
         by.setdefault(r["system"], {})[r["route"]] = r
+    for system in sorted(by, key=lambda s: (parse_system(s)[0], parse_system(s)[1:])):
+        if set(by[system]) == {"relax", "ASE"}:
+            yield system, by[system]
+
+
+def compact(records):
+    """One Markdown row per system: force calls at each fmax and energies at the smallest."""
     lines = ["| system | force calls to 0.05, relax / ASE | to 0.01 | E at 0.01, relax / ASE "
              "(eV/molecule) |", "|---|---|---|---|"]
-    for system in sorted(by, key=lambda s: (parse_system(s)[0], parse_system(s)[1:])):
-        if set(by[system]) != {"relax", "ASE"}:
-            continue
+    for system, routes in paired(records):
         cells = []
         for fmax in ("0.05", "0.01"):
-            a, b = by[system]["relax"]["rows"][fmax], by[system]["ASE"]["rows"][fmax]
+            a, b = routes["relax"]["rows"][fmax], routes["ASE"]["rows"][fmax]
             late = "" if b["converged"] else f" (stopped, fmax {b['fmax_reached']:.2f})"
             cells.append(f"{a['calls']} / {b['calls']}{late}")
-        a, b = by[system]["relax"]["rows"]["0.01"], by[system]["ASE"]["rows"]["0.01"]
+        a, b = routes["relax"]["rows"]["0.01"], routes["ASE"]["rows"]["0.01"]
         lines.append(f"| {system} | {cells[0]} | {cells[1]} "
                      f"| {a['energy']:.4f} / {b['energy']:.4f} |")
     return lines
@@ -354,17 +360,11 @@ def compact(records):
 
 def table(records):
     """Markdown rows per system and fmax (both routes side by side) and totals."""
-    by = {}
-    for r in records:
-        by.setdefault(r["system"], {})[r["route"]] = r
     lines = ["| system | fmax (eV/Å) | force calls relax / ASE | ratio | converged relax / ASE "
              "| E relax / ASE (eV/molecule) | wall relax / ASE (s) |",
              "|---|---|---|---|---|---|---|"]
     sums = {}
-    for system in sorted(by, key=lambda s: (parse_system(s)[0], parse_system(s)[1:])):
-        routes = by[system]
-        if set(routes) != {"relax", "ASE"}:
-            continue
+    for system, routes in paired(records):
         for fmax in sorted(routes["relax"]["rows"], key=float, reverse=True):
             a, b = routes["relax"]["rows"][fmax], routes["ASE"]["rows"][fmax]
             lines.append(f"| {system} | {fmax} | {a['calls']} / {b['calls']} "
