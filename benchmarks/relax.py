@@ -28,14 +28,21 @@ defaults (:class:`rigidmd.relax.lbfgs.RigidLBFGS` with
 the atoms with ``FixBondLengths``, from structures as built (unrelaxed
 ``water_cluster`` of 8-64 molecules, seeds 0-2; ``water_box`` of 64-512,
 seeds 0-1), both to fmax 0.01 eV/Å, the 0.05 row read off the same run.
-``large`` times the default on SPC/E boxes with LAMMPS forces (the
-optimizer's own time: everything outside the calculator), ``cell`` relaxes
-the cell (iso, aniso, full) of TIP4P/2005 ice Ih and an SPC/E liquid.
+``compare`` (:mod:`relax_ase`) runs the same comparison per system with a cap
+on steps and time, clusters of 8-64 and boxes of 64-512 built whole, rows
+to a JSON-lines file; ``compare-table`` turns them into rows and totals,
+``step-cost`` times one step of ASE's route.  ``large`` times the default on
+SPC/E boxes with LAMMPS forces (the optimizer's own time: everything outside
+the calculator), ``cell`` relaxes the cell (iso, aniso, full) of TIP4P/2005
+ice Ih and an SPC/E liquid.
 
 Run::
 
     python benchmarks/relax.py defaults 64 rows.txt  # systems up to 64 molecules
     python benchmarks/relax.py totals rows.txt     # sums over systems both routes finished
+    python benchmarks/relax.py compare cluster32s0 box216s0 --out rows.jsonl --timeout 3000
+    python benchmarks/relax.py compare-table rows.jsonl  # rows and totals of compare
+    python benchmarks/relax.py step-cost 8         # one step of ASE's route, 512 waters
     python benchmarks/relax.py large 12            # 1728 waters, LAMMPS forces
     python benchmarks/relax.py large 24 none 5     # 13,824 waters, 5 steps
     python benchmarks/relax.py large 12 iso        # with the cell (iso, aniso, full)
@@ -261,7 +268,9 @@ def unrelaxed(kind, size, seed):
     """An unrelaxed structure as built (``water_cluster`` or ``water_box``) and its cut-off."""
     if kind == "cluster":
         return water_cluster(size, seed=seed), 20.0
-    return water_box(size, seed=seed), 6.0
+    # Whole molecules: ASE's TIP3P moves a molecule by its O-O minimum image and so reads
+    # a wrapped one (water_box's default) as a different, broken structure.
+    return water_box(size, seed=seed, whole=True), 6.0
 
 
 def run_defaults(route, start, rc, fmaxes, log=None, steps=5000):
@@ -428,6 +437,20 @@ def main():
     import sys
 
     args = sys.argv[1:]
+    if args[:1] in (["compare"], ["compare-table"], ["step-cost"]):  # relax_ase.py
+        import json
+
+        import relax_ase
+
+        if args[0] == "compare":
+            relax_ase.main(args[1:])
+        elif args[0] == "step-cost":
+            print(relax_ase.step_cost(int(args[1]) if len(args) > 1 else 8), flush=True)
+        else:
+            records = [json.loads(line) for name in args[1:]
+                       for line in Path(name).read_text().splitlines() if line.strip()]
+            print("\n".join(relax_ase.table(records) + [""] + relax_ase.compact(records)))
+        return
     if args[:1] == ["cell"]:  # cell: cell relaxation with LAMMPS forces, rows to stdout
         cell_rows()
         return
