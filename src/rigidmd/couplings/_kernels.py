@@ -218,6 +218,24 @@ def _crescale_forces(pressure, volume, pressure_au, kT, basis):
 
 
 @jit
+def _inverse(A, det):
+    """The inverse of a 3x3 matrix of determinant ``det``; of a diagonal one, ``1 / A_kk``
+    (what LAPACK's solve gives for it, bit for bit)."""
+    out = np.zeros((3, 3))
+    if A[0, 1] == 0.0 and A[0, 2] == 0.0 and A[1, 2] == 0.0 \
+            and A[1, 0] == 0.0 and A[2, 0] == 0.0 and A[2, 1] == 0.0:
+        for k in range(3):
+            out[k, k] = 1.0 / A[k, k]
+        return out
+    for i in range(3):
+        for j in range(3):
+            a, b = (j + 1) % 3, (j + 2) % 3
+            c, d = (i + 1) % 3, (i + 2) % 3
+            out[i, j] = (A[a, c] * A[b, d] - A[a, d] * A[b, c]) / det
+    return out
+
+
+@jit
 def crescale_move(pressure, volume, pressure_au, kT, beta, taup, dt, xi_lambda, xi_eta, basis):
     r"""Stochastic cell rescaling's move of one step (Bernetti & Bussi's "T" scheme).
 
@@ -246,7 +264,7 @@ def crescale_move(pressure, volume, pressure_au, kT, beta, taup, dt, xi_lambda, 
             for j in range(3):
                 strain[i, j] += step_eta[k] * basis[k, i, j]
     mu, _, det = symmetric_exp(strain, 1.0)
-    inverse = symmetric_exp(strain, -1.0)[0]
+    inverse = _inverse(mu, det)
     eta_f = 0.0
     eta_ff = 0.0
     for k in range(m):
