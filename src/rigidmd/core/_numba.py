@@ -344,28 +344,27 @@ def largest_angular_speed(q, p, inv_moments):
     return best, np.sqrt(best2) if best >= 0 else 0.0
 
 
+@_inline
+def _add_mass_outer(out, velocities, masses):
+    """``out += sum_i m_i v_i v_i^T`` over the rows, upper triangle only."""
+    for i in range(velocities.shape[0]):
+        m, v0, v1, v2 = masses[i], velocities[i, 0], velocities[i, 1], velocities[i, 2]
+        out[0, 0] += m * v0 * v0
+        out[0, 1] += m * v0 * v1
+        out[0, 2] += m * v0 * v2
+        out[1, 1] += m * v1 * v1
+        out[1, 2] += m * v1 * v2
+        out[2, 2] += m * v2 * v2
+
+
 @jit
 def kinetic_tensor(V, v, mass, free_masses):
     r""":func:`rigidmd.core.observables.kinetic_tensor_of` in one pass (eV, 3x3).
 
     :math:`\sum_b M_b V_b\otimes V_b + \sum_\mathrm{free} m\,v\otimes v`."""
     out = np.zeros((3, 3))
-    for b in range(V.shape[0]):
-        m, v0, v1, v2 = mass[b], V[b, 0], V[b, 1], V[b, 2]
-        out[0, 0] += m * v0 * v0
-        out[0, 1] += m * v0 * v1
-        out[0, 2] += m * v0 * v2
-        out[1, 1] += m * v1 * v1
-        out[1, 2] += m * v1 * v2
-        out[2, 2] += m * v2 * v2
-    for i in range(v.shape[0]):
-        m, v0, v1, v2 = free_masses[i], v[i, 0], v[i, 1], v[i, 2]
-        out[0, 0] += m * v0 * v0
-        out[0, 1] += m * v0 * v1
-        out[0, 2] += m * v0 * v2
-        out[1, 1] += m * v1 * v1
-        out[1, 2] += m * v1 * v2
-        out[2, 2] += m * v2 * v2
+    _add_mass_outer(out, V, mass)
+    _add_mass_outer(out, v, free_masses)
     out[1, 0], out[2, 0], out[2, 1] = out[0, 1], out[0, 2], out[1, 2]
     return out
 
