@@ -7,7 +7,7 @@ step: the scheme's compiled loops and the coupling parts.  Rows: ``RigidVerlet``
 (NVE), ``RigidNPT`` (Nosé–Hoover + MTK, iso) and ``RigidCRescale`` (Bussi +
 stochastic cell rescaling, every step), on the ``"numba"`` backend (the
 compiled coupling kernels, :mod:`rigidmd.couplings._kernels`) and on the
-``"numpy"`` backend (their NumPy references).  Time: best of ``--rounds``
+``"numpy"`` backend (their NumPy references).  CPU time (this process): best of ``--rounds``
 interleaved rounds of ``--steps`` steps.  Calls: Python function calls per step
 counted by ``cProfile`` over 100 steps (NumPy's ufuncs are not counted; each
 of its array functions is one or more calls).
@@ -99,9 +99,9 @@ def main():
             dyn.run(5)  # compilation and set-up out of the timing
         for _ in range(args.rounds):
             for key, dyn in runs.items():
-                start = time.perf_counter()
+                start = time.process_time()
                 dyn.run(args.steps)
-                times[key].append((time.perf_counter() - start) / args.steps)
+                times[key].append((time.process_time() - start) / args.steps)
         print(f"{waters} waters, {args.steps} steps, best of {args.rounds} interleaved rounds")
         print(f"{'run':>20} {'µs/step':>8} {'calls/step':>10}")
         for (kind, backend), dyn in runs.items():
