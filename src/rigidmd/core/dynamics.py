@@ -197,7 +197,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self.needs_energy = any(part.needs_energy for part in couplings)
         self.link = BodyLink(atoms, model, backend)
         self.state = self.link.initial_state(geometry)
-        self.record = StepRecord(self.state, model)
+        self.record = StepRecord(self.state, model, compiled=backend == "numba")
         self.sync = AtomsSync(self.link, self.state, self.record, rigid.body_ids, fixcom,
                               self.holds_momentum)
         self.sync.mark_atoms()
@@ -205,7 +205,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self.evaluator = ForceEvaluator(self.link, self.record,
                                         stress=any(part.needs_stress for part in couplings),
                                         cell_moves=mover is not None)
-        self.view = CouplingView(self.state, model, self.record, self.evaluator, 0, fixcom)
+        self.view = CouplingView(self.state, model, self.record, self.evaluator, 0, fixcom,
+                                 compiled=backend == "numba")
         #: The stress with the forces when an observer is due (``StressRecorder`` sets it).
         self.stress_on_observed_steps = False
         for part in couplings:

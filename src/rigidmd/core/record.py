@@ -16,6 +16,7 @@ energy and one stress (a test counts them).
 
 import numpy as np
 
+from rigidmd.core import _numba
 from rigidmd.core import observables as obs
 from rigidmd.core.model import BodyModel
 from rigidmd.core.state import RigidState
@@ -51,11 +52,16 @@ class StepRecord:
     cell_move : object or None
         What a barostat's drift query returned during this step (see
         :meth:`rigidmd.couplings.base.Coupling.drift_matrices`); None before the drift.
+    compiled : bool
+        The kinetic tensor and the rotational kinetic energy come from the compiled
+        loops of :mod:`rigidmd.core._numba` (the dynamics' ``"numba"`` backend), not from
+        :mod:`rigidmd.core.observables`.
     """
 
-    def __init__(self, state: RigidState, model: BodyModel):
+    def __init__(self, state: RigidState, model: BodyModel, compiled: bool = False):
         nb, nf = model.n_bodies, model.n_free
         self.state, self.model = state, model
+        self.compiled = bool(compiled)
         self.F, self.tau = np.zeros((nb, 3)), np.zeros((nb, 3))
         self.f = np.zeros((nf, 3))
         self.r = np.zeros((len(model.order), 3))
@@ -79,7 +85,11 @@ class StepRecord:
     def kinetic_tensor(self) -> np.ndarray:
         """Translational kinetic tensor (eV, 3x3; :func:`.observables.kinetic_tensor`)."""
         if self._kinetic is None:
-            self._kinetic = obs.kinetic_tensor(self.state, self.model)
+            if self.compiled:
+                s, m = self.state, self.model
+                self._kinetic = _numba.kinetic_tensor(s.V, s.v, m.mass, m.free_masses)
+            else:
+                self._kinetic = obs.kinetic_tensor(self.state, self.model)
         return self._kinetic
 
     @property
@@ -91,7 +101,11 @@ class StepRecord:
     def rotational_energy(self) -> float:
         """Rotational kinetic energy of the bodies (eV)."""
         if self._rotational is None:
-            self._rotational = obs.rotational_kinetic_energy(self.state, self.model)
+            if self.compiled:
+                s = self.state
+                self._rotational = _numba.rotational_energy(s.q, s.p, self.model.inv_moments)
+            else:
+                self._rotational = obs.rotational_kinetic_energy(self.state, self.model)
         return self._rotational
 
     # ------------------------------------------------------------ what changed

@@ -24,9 +24,11 @@ lower-triangular form, which rigidmd's own LAMMPS calculator handles).
 import numpy as np
 from ase import units
 
+from rigidmd.core import _numba
 from rigidmd.core import observables as obs
 from rigidmd.core.bodies import check_bodies_fit
 from rigidmd.core.dynamics import RigidDynamics
+from rigidmd.couplings import _kernels
 from rigidmd.couplings.base import (
     TEMPERATURE,
     Coupling,
@@ -169,9 +171,9 @@ class Barostat(Coupling):
         record = view.record
         return -obs.stress_tensor(record.virial, record.kinetic_tensor, record.volume)
 
-    def check_volume_change(self, A):
-        """Refuse a step that changes the volume by more than 10 %."""
-        ratio = abs(np.linalg.det(A))
+    def check_volume_change(self, A, det=None):
+        """Refuse a step that changes the volume by more than 10 % (``det``: of ``A``, known)."""
+        ratio = abs(np.linalg.det(A) if det is None else det)
         if not (abs(ratio - 1.0) <= MAX_VOLUME_CHANGE):
             raise BarostatError(
                 f"{self.kind} barostat: the volume would change by {100 * (ratio - 1):+.1f}% "
@@ -242,6 +244,7 @@ class MTKBarostat(Barostat):
         self.ploop = check_positive_integer("ploop", ploop)
         self.p_g = np.zeros((3, 3))
         self.chain = NoseHooverChain(COUPLE[self.couple], self.pdamp, self.pchain, self.ploop)
+        self._couple_code = _kernels.COUPLE_CODES[self.couple]
 
     def check_timestep(self, dt):
         # Below about 10 steps per period the barostat's oscillation is not resolved.
@@ -253,6 +256,7 @@ class MTKBarostat(Barostat):
         super().bind(view)
         #: :math:`N_f`, the centres of mass' and point particles' degrees of freedom.
         self.n_f = view.model.translational_dof
+        self.chain.compiled = view.compiled
 
     @property
     def W(self):
@@ -283,17 +287,47 @@ class MTKBarostat(Barostat):
         s.v[...] = s.v @ factor.T
         view.record.scale_translation(factor)
 
+    def _kick_compiled(self, view, h):
+        record = view.record
+        _kernels.mtk_kick(self.p_g, record.virial, record.kinetic_tensor, record.volume,
+                          self.pressure_au, self.n_f, h, self._couple_code)
+
+    def _thermostat_compiled(self, h):
+        chain, kT = self.chain, self.kT
+        _kernels.mtk_thermostat(self.p_g, chain.xi, chain.eta, chain.ndof,
+                                kT * chain.tdamp**2, kT, self.W, h, chain.tloop)
+
+    def _scale_momenta_compiled(self, view, h):
+        s = view.state
+        factor = _kernels.mtk_momentum_scale(self.p_g, self.W, self.n_f, h)
+        _kernels.scale_translation(s.data, len(s.X), len(s.x), factor)
+        view.record.scale_translation(factor)
+
     def first_half(self, view: CouplingView, h: float) -> None:
+        if view.compiled:
+            self._thermostat_compiled(h)
+            self._kick_compiled(view, h)
+            self._scale_momenta_compiled(view, h)
+            return
         self._thermostat(h)
         self._kick(view, h)
         self._scale_momenta(view, h)
 
     def second_half(self, view: CouplingView, h: float) -> None:
+        if view.compiled:
+            self._scale_momenta_compiled(view, h)
+            self._kick_compiled(view, h)
+            self._thermostat_compiled(h)
+            return
         self._scale_momenta(view, h)
         self._kick(view, h)
         self._thermostat(h)
 
     def drift_matrices(self, view: CouplingView, h: float) -> tuple:
+        if view.compiled:
+            A, B, det = _kernels.symmetric_exp(self.p_g / self.W, h)
+            self.check_volume_change(A, det)
+            return A, B, np.eye(3), None
         A, B = symmetric_exp(self.p_g / self.W, h)
         self.check_volume_change(A)
         return A, B, np.eye(3), None
@@ -453,6 +487,8 @@ class CRescaleBarostat(Barostat):
             return np.eye(3), h * np.eye(3), np.eye(3), None
         kT, dt = self.kT, self._span
         volume = record.volume
+        if view.compiled:
+            return self._move_compiled(view, volume, h)
         f_lambda, f_eta = self._forces(self.pressure_tensor(view), volume)
         d_lambda = 0.25 * kT * self.compressibility_au / self.taup
         d_eta = kT * self.compressibility_au / (3.0 * self.taup * volume)
@@ -477,15 +513,38 @@ class CRescaleBarostat(Barostat):
         note = (step_lambda, step_eta, d_lambda, d_eta, kinetic, first)
         return mu, 0.5 * h * (mu + inverse), inverse, note
 
+    def _move_compiled(self, view, volume, h):
+        """:meth:`drift_matrices` in one compiled call (:func:`._kernels.crescale_move`)."""
+        xi_lambda, xi_eta = self._noise
+        mu, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first = \
+            _kernels.crescale_move(self.pressure_tensor(view), volume, self.pressure_au, self.kT,
+                                   self.compressibility_au, self.taup, self._span, xi_lambda,
+                                   xi_eta, self.basis)
+        if det == 0.0:
+            raise BarostatError(f"{self.kind} barostat: the volume would collapse in one step; "
+                                "the step was undone (use a longer taup)")
+        self.check_volume_change(mu, det)
+        s, m = view.state, view.model
+        # The kinetic tensor of the velocities as the drift leaves them (S V, S = mu^-1).
+        kinetic = inverse @ _numba.kinetic_tensor(s.V, s.v, m.mass, m.free_masses) @ inverse.T
+        note = (step_lambda, step_eta, d_lambda, d_eta, kinetic, first)
+        return mu, 0.5 * h * (mu + inverse), inverse, note
+
     def second_half(self, view: CouplingView, h: float) -> None:
         record = view.record
         if record.cell_move is None:
             return
-        step_lambda, step_eta, d_lambda, d_eta, (V, v), first = record.cell_move
+        step_lambda, step_eta, d_lambda, d_eta, kinetic, first = record.cell_move
         kT, dt = self.kT, self._span
         volume = record.volume
+        if view.compiled:
+            self.work += first
+            self.work += _kernels.crescale_work(record.virial, kinetic, volume,
+                                                self.pressure_au, kT, dt, self.basis,
+                                                step_lambda, step_eta, d_lambda, d_eta)
+            return
         # The pressure right after the force call: the velocities as the drift left them.
-        kinetic = obs.kinetic_tensor_of(V, v, view.model)
+        kinetic = obs.kinetic_tensor_of(*kinetic, view.model)
         pressure = record.virial / volume + kinetic / volume
         f_lambda, f_eta = self._forces(pressure, volume)
         self.work += first

@@ -37,6 +37,7 @@ from rigidmd.core.forces import ForceEvaluator
 from rigidmd.core.model import BodyModel
 from rigidmd.core.record import StepRecord
 from rigidmd.core.state import RigidState
+from rigidmd.couplings import _kernels
 
 __all__ = ["Coupling", "CouplingView", "Parameter", "COUPLINGS", "register", "NotExportable",
            "LammpsFix", "NoseHooverChain", "check_rng", "rng_state", "set_rng_state",
@@ -144,6 +145,9 @@ class CouplingView:
         Steps completed before the one being taken.
     fixcom : bool
         The total momentum is held at zero (ASE's ``FixCom`` on the atoms).
+    compiled : bool
+        The parts run their compiled kernels (:mod:`rigidmd.couplings._kernels`; the
+        dynamics' ``"numba"`` backend) instead of their NumPy references.
     """
 
     state: RigidState
@@ -152,6 +156,7 @@ class CouplingView:
     evaluator: ForceEvaluator
     step: int = 0
     fixcom: bool = False
+    compiled: bool = False
 
 
 class Coupling:
@@ -347,12 +352,19 @@ class NoseHooverChain:
     tdamp : float
         Time constant (ASE time units).
     tchain, tloop : int
+
+    Attributes
+    ----------
+    compiled : bool
+        :meth:`propagate` runs :func:`rigidmd.couplings._kernels.chain_propagate`
+        (set by the part that owns the chain, from its view).
     """
 
     def __init__(self, ndof, tdamp, tchain, tloop):
         self.ndof, self.tdamp, self.tchain, self.tloop = ndof, tdamp, tchain, tloop
         self.xi = np.zeros(tchain)
         self.eta = np.zeros(tchain)
+        self.compiled = False
 
     def masses(self, kT):
         Q = np.full(self.tchain, kT * self.tdamp**2)
@@ -361,6 +373,9 @@ class NoseHooverChain:
 
     def propagate(self, K, kT, h):
         """Advance over ``h`` with the group's kinetic energy ``K``; returns its velocity scale."""
+        if self.compiled:
+            return _kernels.chain_propagate(self.xi, self.eta, self.ndof, kT * self.tdamp**2,
+                                            float(K), kT, h, self.tloop)
         if self.ndof == 0:
             return 1.0
         xi, eta, ndof, M = self.xi, self.eta, self.ndof, self.tchain

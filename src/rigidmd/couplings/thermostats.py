@@ -24,6 +24,7 @@ from ase import units
 
 from rigidmd.core import operators as ops
 from rigidmd.core.dynamics import RigidDynamics
+from rigidmd.couplings import _kernels
 from rigidmd.couplings.base import (
     TEMPERATURE,
     Coupling,
@@ -126,12 +127,17 @@ class Thermostat(Coupling):
             s.V[...] = U + translational * (s.V - U)
             s.v[...] = U + translational * (s.v - U)
             record.velocities_changed()
+            s.p *= rotational
+            return
+        if view.compiled:  # the three scalings in one pass over the state buffer
+            _kernels.scale_velocities(s.data, len(s.X), len(s.x), float(translational),
+                                      float(rotational))
         else:
             s.V *= translational
             s.v *= translational
-            record.scale_translation(translational)
-            record.scale_rotation(rotational)
-        s.p *= rotational
+            s.p *= rotational
+        record.scale_translation(translational)
+        record.scale_rotation(rotational)
 
     def fixcm_notes(self):
         """What the deck says about ``fixcm``, which LAMMPS's rigid thermostats do not have."""
@@ -416,6 +422,8 @@ class NoseHooverThermostat(Thermostat):
         super().bind(view)
         self.chains = tuple(NoseHooverChain(ndof, self.tdamp, self.tchain, self.tloop)
                             for ndof in (self.n_translational, view.model.rotational_dof))
+        for chain in self.chains:
+            chain.compiled = view.compiled
 
     def first_half(self, view: CouplingView, h: float) -> None:
         K_t, K_r = self.kinetic_energies(view)

@@ -28,6 +28,8 @@
 //     at least 10 and at most `poll` microseconds (default 500; 0: MPI's own blocking
 //     broadcast, which MPICH implements by polling, a core at 100 %), so a wait costs
 //     about twenty wake-ups and is over by at most a twentieth of it late;
+//   * the forces reach rank 0 in one gather of each rank's own atoms (ID and force: the
+//     N atoms once, whatever the number of ranks), which also counts them;
 //   * EXIT ends the run at the next step (LAMMPS then finishes normally).
 //
 // Messages (server -> engine): STATUS (answered READY, or HAVEDATA with forces pending),
@@ -106,7 +108,8 @@ class FixRigidmdIPI : public Fix {
   bool pending = false;          // positions received, forces not yet sent
   double info[11];               // request, flags, h (Bohr, row-major h = cell^T)
   double last[6];                // the box last set: lx ly lz xy xz yz (Å)
-  std::vector<double> positions, local, total;
+  std::vector<double> positions, local, total, gathered;
+  std::vector<int> counts, displs;  // rank 0's Gatherv layout
   std::string pe_id, press_id;
 
   void connect_socket();
@@ -170,11 +173,15 @@ FixRigidmdIPI::~FixRigidmdIPI()
 void FixRigidmdIPI::init()
 {
   natoms = atom->natoms;
-  if (natoms <= 0 || natoms > MAXSMALLINT / 3)
+  if (natoms <= 0 || natoms > MAXSMALLINT / 4)  // 4 numbers an atom in one gather
     error->all(FLERR, "Fix rigidmd/ipi: {} atoms cannot be sent", natoms);
   positions.resize(3 * natoms);
-  local.resize(3 * natoms);
-  if (comm->me == 0 && comm->nprocs > 1) total.resize(3 * natoms);
+  if (comm->nprocs == 1) local.resize(3 * natoms);
+  if (comm->me == 0 && comm->nprocs > 1) {
+    total.resize(3 * natoms);
+    counts.resize(comm->nprocs);
+    displs.resize(comm->nprocs);
+  }
   // Every step may have moved the atoms: check at every step, rebuild by the skin rule
   // (`check no` still rebuilds at every step).
   neighbor->every = 1;
@@ -426,13 +433,44 @@ void FixRigidmdIPI::final_integrate()
   const double to_force = bohr / hartree;
   double **f = atom->f;
   tagint *tag = atom->tag;
-  std::fill(local.begin(), local.end(), 0.0);
-  for (int i = 0; i < atom->nlocal; ++i)
-    for (int k = 0; k < 3; ++k) local[3 * (tag[i] - 1) + k] = f[i][k] * to_force;
+  const int nlocal = atom->nlocal;
   const double *forces = local.data();
-  if (comm->nprocs > 1) {
-    MPI_Reduce(local.data(), comm->me == 0 ? total.data() : nullptr, static_cast<int>(3 * natoms),
-               MPI_DOUBLE, MPI_SUM, 0, world);
+  if (comm->nprocs == 1) {  // every atom is here: in ID order, nothing to zero
+    for (int i = 0; i < nlocal; ++i)
+      for (int k = 0; k < 3; ++k) local[3 * (tag[i] - 1) + k] = f[i][k] * to_force;
+  } else {
+    // Each rank's own atoms (ID, force) gathered on rank 0: N atoms in all, whatever the
+    // number of ranks (a sum over full-size arrays moves and adds N per rank).
+    local.resize(4 * static_cast<size_t>(nlocal));
+    for (int i = 0; i < nlocal; ++i) {
+      local[4 * i] = static_cast<double>(tag[i]);
+      for (int k = 0; k < 3; ++k) local[4 * i + 1 + k] = f[i][k] * to_force;
+    }
+    int count = 4 * nlocal;
+    MPI_Gather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, world);
+    bigint received = 0;
+    if (comm->me == 0) {
+      for (int r = 0; r < comm->nprocs; ++r) {
+        displs[r] = static_cast<int>(received);
+        received += counts[r];
+      }
+      // Atoms move between sub-domains only when LAMMPS re-neighbours; one that jumped
+      // past a neighbouring sub-domain is lost there, and missing here.
+      if (received != 4 * natoms)
+        error->one(FLERR, "Fix rigidmd/ipi: LAMMPS lost {} atoms (an atom jumped further "
+                   "than a neighbouring sub-domain between two calls)",
+                   natoms - received / 4);
+      gathered.resize(static_cast<size_t>(received));
+    }
+    MPI_Gatherv(local.data(), count, MPI_DOUBLE, gathered.data(), counts.data(),
+                displs.data(), MPI_DOUBLE, 0, world);
+    if (comm->me == 0) {
+      for (bigint j = 0; j < natoms; ++j) {
+        const double *g = &gathered[4 * j];
+        const bigint t = static_cast<bigint>(g[0]) - 1;
+        for (int k = 0; k < 3; ++k) total[3 * t + k] = g[1 + k];
+      }
+    }
     forces = total.data();
   }
   double energy = 0.0, virial[9] = {0.0};
@@ -445,13 +483,6 @@ void FixRigidmdIPI::final_integrate()
     const double *p = press->vector;
     const double w[9] = {p[0], p[3], p[4], p[3], p[1], p[5], p[4], p[5], p[2]};
     for (int k = 0; k < 9; ++k) virial[k] = w[k] * scale;
-  }
-  if (neighbor->ago == 0 && comm->nprocs > 1) {  // atoms moved across sub-domains
-    bigint mine = atom->nlocal, all = 0;
-    MPI_Allreduce(&mine, &all, 1, MPI_LMP_BIGINT, MPI_SUM, world);
-    if (all != natoms)
-      error->all(FLERR, "Fix rigidmd/ipi: LAMMPS lost {} atoms (an atom jumped further than a "
-                 "neighbouring sub-domain between two calls)", natoms - all);
   }
   if (comm->me == 0) {
     while (true) {
@@ -469,6 +500,7 @@ void FixRigidmdIPI::final_integrate()
     std::string extra = "{\"neighbor_builds\": " + std::to_string(neighbor->ncalls) + "}";
     int32_t n = static_cast<int32_t>(natoms), length = static_cast<int32_t>(extra.size());
     std::vector<char> message(HEADER, ' ');
+    message.reserve(HEADER + 12 + 24 * natoms + sizeof(virial) + 4 + extra.size());
     memcpy(message.data(), "FORCEREADY", 10);
     auto append = [&message](const void *data, size_t len) {
       const char *c = static_cast<const char *>(data);
