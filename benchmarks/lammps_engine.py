@@ -70,7 +70,7 @@ from rigidmd.couplings.barostats import MTKBarostat
 from rigidmd.couplings.thermostats import NoseHooverThermostat
 from rigidmd.lammps import LAMMPSCalculator, export_lammps, run_rigid_reference, tip3p_charges
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
-from rigidmd.lammps.engine import LAMMPSEngine, lammps_executable
+from rigidmd.lammps.engine import LAMMPSEngine, lammps_executable, mpirun_executable
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMANDS = ["pair_style lj/cut/coul/long 9.0", "pair_coeff * * 0.0 1.0",
@@ -189,7 +189,7 @@ def native_parallel(atoms, steps, processes=1, threads=None):
             cmd += ["-sf", "omp", "-pk", "omp", str(threads)]
         env["OMP_NUM_THREADS"] = str(threads or 1)
         if processes > 1:
-            cmd = [str(Path(sys.executable).parent / "mpirun"), "-np", str(processes)] + cmd
+            cmd = [mpirun_executable(), "-np", str(processes)] + cmd
         subprocess.run(cmd, cwd=tmp, env=env, check=True)
         return log_timing((Path(tmp) / "log.lammps").read_text(), steps)
 
