@@ -1,0 +1,344 @@
+"""Rigid water under a trained ML potential (CHGNet 0.3.0): energy conservation and payoff.
+
+The same cluster of waters (CHGNet's own water geometry, from
+:func:`rigidmd.relax.relax_bodies`; rigid 300 K velocities from
+:func:`rigidmd.rigid_maxwell_boltzmann`) is run in NVE for ``--ps`` each
+
+* rigid, rigidmd's ``RigidVerlet`` (NO_SQUISH) at 0.25, 0.5, 1 and 2 fs;
+* rigid, ASE's route: ``FixBondLengths`` on O-H, O-H and H-H (RATTLE) with
+  ASE's ``VelocityVerlet``, from the same positions and velocities, same steps;
+* flexible, ASE's ``VelocityVerlet`` at 0.25 and 0.5 fs (every atom free,
+  Maxwell-Boltzmann at 300 K);
+
+with CHGNet in float32 (as it ships) and again in float64, and with a
+diagnostic variant of the model whose angle features are made smooth at
+180° (``smooth``, see :func:`smooth_angle_encoder`).  Per run: the
+conserved energy's peak-to-peak span over every step, its RMS about a
+straight-line fit, the fit's slope (drift), force calls per ps and, for
+rigidmd, its own time per step (wall time less the time in the force call).
+
+Then the model's smoothness: forces against central differences of the
+energy at a thermal configuration (float32 and float64), and the energy
+along a path that takes a water dimer's O-H...O through the straight line.
+
+Needs CHGNet and a CPU PyTorch, in their own environment (not the test
+extra)::
+
+    python -m venv --system-site-packages venv-chgnet
+    venv-chgnet/bin/pip install -e ".[chgnet]" torch==2.13.0
+    OMP_NUM_THREADS=1 venv-chgnet/bin/python benchmarks/ml_potential.py [--molecules 8] [--ps 0.2]
+
+Results are written to ``benchmarks/ml_potential.txt``.
+"""
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+from ase import units  # noqa: E402
+from ase.calculators.calculator import Calculator, all_changes  # noqa: E402
+from ase.calculators.tip3p import TIP3P  # noqa: E402
+from ase.constraints import FixBondLengths  # noqa: E402
+from ase.md.velocitydistribution import MaxwellBoltzmannDistribution, Stationary  # noqa: E402
+from ase.md.verlet import VelocityVerlet  # noqa: E402
+from chgnet.graph import converter as chgnet_converter  # noqa: E402
+from chgnet.model import CHGNet  # noqa: E402
+from chgnet.model import model as chgnet_model  # noqa: E402
+from pymatgen.core import Lattice, Structure  # noqa: E402
+
+from rigidmd import RigidVerlet, kinetic_energy, rigid_maxwell_boltzmann  # noqa: E402
+from rigidmd.relax import relax_bodies  # noqa: E402
+from rigidmd.systems import water_cluster  # noqa: E402
+
+torch.set_num_threads(1)
+DTYPES = {"float32": torch.float32, "float64": torch.float64}
+
+
+def smooth_angle_encoder(encoder, width=0.05):
+    r"""Replace CHGNet's angle features by ones smooth at 0 and 180° (diagnostic only).
+
+    CHGNet expands the angle :math:`\theta = \arccos(\hat b_i\cdot\hat b_j)`
+    between two bonds of an atom in :math:`\sin n\theta` and :math:`\cos n\theta`.
+    :math:`\sin\theta = \sqrt{1-c^2}` is a cone in the atoms' coordinates at
+    :math:`\theta = \pi`: the energy has a cusp, the force a jump, wherever
+    three atoms pass through a straight line (an O-H...O hydrogen bond does).
+    Here :math:`\theta` is replaced by :math:`\operatorname{atan2}(s^2/\sqrt{s^2+w^2},
+    c)` with :math:`s^2 = 1-c^2`, which differs from it only within about ``width``
+    rad of 0 and π and is smooth there.  A different model, used only to show
+    what the cusp does to the dynamics.
+    """
+    fourier = encoder.fourier_expansion
+
+    def forward(bond_i, bond_j):
+        cosine = torch.sum(bond_i * bond_j, dim=1)
+        s2 = torch.clamp(1 - cosine**2, min=0)
+        return fourier(torch.atan2(s2 / torch.sqrt(s2 + width**2), cosine))
+
+    encoder.forward = forward
+
+
+def load_chgnet(dtype="float32", smooth=False):
+    """CHGNet 0.3.0 (the weights in the wheel), in ``dtype``; see :class:`CHGNetCluster`."""
+    model = CHGNet.load(verbose=False)
+    if dtype == "float64":
+        model = model.to(torch.float64)
+        assemble = model.composition_model._assemble_graphs  # casts to float32 itself
+        model.composition_model._assemble_graphs = lambda graphs: assemble(graphs).double()
+    if smooth:
+        smooth_angle_encoder(model.angle_basis_expansion)
+    return model
+
+
+class CHGNetCluster(Calculator):
+    """CHGNet on a cluster: the atoms centred in a cubic box of ``box`` Å (CHGNet is periodic).
+
+    Energy and forces only (``task="ef"``; no stress, no magnetic moments).
+    CHGNet builds its graph in a module-level dtype (float32); it is set to
+    the model's own for each call, so float32 and float64 models can live in
+    one process.
+    """
+
+    implemented_properties = ["energy", "forces"]
+
+    def __init__(self, model, dtype="float32", box=30.0):
+        super().__init__()
+        self.model, self.dtype, self.box = model, dtype, box
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        dtype = DTYPES[self.dtype]
+        chgnet_converter.TORCH_DTYPE = chgnet_model.TORCH_DTYPE = dtype
+        default = torch.get_default_dtype()
+        torch.set_default_dtype(dtype)
+        try:
+            positions = self.atoms.positions - self.atoms.positions.mean(axis=0) + self.box / 2
+            structure = Structure(Lattice.cubic(self.box), self.atoms.get_chemical_symbols(),
+                                  positions, coords_are_cartesian=True)
+            graph = self.model.graph_converter(structure)
+            result = self.model.predict_graph(graph, task="ef")
+        finally:
+            torch.set_default_dtype(default)
+            chgnet_converter.TORCH_DTYPE = chgnet_model.TORCH_DTYPE = torch.float32
+        scale = len(self.atoms) if self.model.is_intensive else 1
+        self.results = {"energy": float(result["e"]) * scale,
+                        "forces": np.asarray(result["f"], dtype=float)}
+
+
+def start_state(n, seed=3):
+    """Waters in CHGNet's (float64) water geometry with rigid 300 K velocities."""
+    relaxed = relax_bodies(water_cluster(n, seed=seed),
+                           CHGNetCluster(load_chgnet("float64"), "float64"))
+    atoms = relaxed.atoms
+    rigid_maxwell_boltzmann(atoms, 300, rng=np.random.default_rng(7))
+    return atoms, relaxed.templates["OHH"]
+
+
+def water_pairs(n):
+    """O-H, O-H and H-H of every water (atoms O, H, H in order)."""
+    return [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]
+
+
+class Counted(Calculator):
+    """Forwards to another calculator; counts the calls and the seconds spent in them."""
+
+    implemented_properties = ["energy", "forces"]
+
+    def __init__(self, inner):
+        super().__init__()
+        self.inner = inner
+        self.calls, self.seconds = 0, 0.0
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        start = time.perf_counter()
+        copy = self.atoms.copy()
+        copy.calc = self.inner
+        self.results = {"energy": copy.get_potential_energy(), "forces": copy.get_forces()}
+        self.seconds += time.perf_counter() - start
+        self.calls += 1
+
+
+def run(start, route, dt_fs, ps, calculator):
+    """One NVE run from ``start`` with a fresh ``calculator()``; the conserved energy every step."""
+    atoms = start.copy()
+    atoms.calc = calc = Counted(calculator())
+    if route == "rigidmd":
+        dyn = RigidVerlet(atoms, dt_fs * units.fs)
+    else:
+        if route == "RATTLE":
+            atoms.set_constraint(FixBondLengths(water_pairs(len(atoms) // 3)))
+        else:  # flexible
+            MaxwellBoltzmannDistribution(atoms, temperature_K=300,
+                                         rng=np.random.default_rng(7))
+            Stationary(atoms)
+        dyn = VelocityVerlet(atoms, dt_fs * units.fs)
+    energies = [atoms.get_potential_energy() + kinetic_energy(atoms)]
+    dyn.attach(lambda: energies.append(atoms.get_potential_energy() + kinetic_energy(atoms)))
+    steps = int(round(ps * 1000 / dt_fs))
+    calls, inside = calc.calls, calc.seconds
+    begin = time.perf_counter()
+    dyn.run(steps)
+    wall = time.perf_counter() - begin
+    energies = np.array(energies)
+    t = np.arange(len(energies)) * dt_fs / 1000
+    fit = np.polyfit(t, energies, 1)
+    change = np.diff(energies)
+    return {"span": np.ptp(energies), "rms": np.std(energies - np.polyval(fit, t)),
+            "drift": fit[0], "step_rms": np.sqrt(np.mean(change**2)),
+            "step_corr": np.corrcoef(change[:-1], change[1:])[0, 1],
+            "calls_per_ps": (calc.calls - calls) / ps,
+            "own_ms": 1e3 * (wall - (calc.seconds - inside)) / steps,
+            "call_ms": 1e3 * (calc.seconds - inside) / (calc.calls - calls),
+            "energies": energies}
+
+
+RUNS = [("rigidmd", dt) for dt in (0.25, 0.5, 1.0, 2.0)] + \
+       [("RATTLE", dt) for dt in (0.25, 0.5, 1.0, 2.0)] + \
+       [("flexible", dt) for dt in (0.25, 0.5)]
+
+
+def warm_up(start):
+    """One rigid step on zero forces: numba's compilation out of every timing."""
+
+    class Zero(Calculator):
+        implemented_properties = ["energy", "forces"]
+
+        def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+            super().calculate(atoms, properties, system_changes)
+            self.results = {"energy": 0.0, "forces": np.zeros((len(self.atoms), 3))}
+
+    atoms = start.copy()
+    atoms.calc = Zero()
+    RigidVerlet(atoms, units.fs).run(2)
+
+
+def conservation(start, ps, lines, variants):
+    """Every run of every variant; a table row each, the results by (variant, route, step)."""
+    warm_up(start)
+    lines += ["| model | route | step (fs) | span (eV) | RMS (eV) | drift (eV/ps) | "
+              "per-step change, RMS (eV) | its step-to-step correlation | force calls / ps | "
+              "ms / call | rigidmd's own ms / step |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
+    results = {}
+    for name, calculator, routes in variants:
+        for route, dt in routes:
+            r = run(start, route, dt, ps, calculator)
+            own = f"{r['own_ms']:.2f}" if route == "rigidmd" else "-"
+            lines.append(f"| {name} | {route} | {dt:g} | {r['span']:.2e} | {r['rms']:.2e} | "
+                         f"{r['drift']:+.2e} | {r['step_rms']:.1e} | {r['step_corr']:+.2f} | "
+                         f"{r['calls_per_ps']:.0f} | {r['call_ms']:.1f} | {own} |")
+            print(lines[-1], flush=True)
+            results[(name, route, dt)] = r
+    return results
+
+
+def finite_differences(atoms, lines):
+    """Model forces against -dE/dx by central differences, every coordinate."""
+    lines += ["| model | h (Å) | max abs(F - F_fd) (eV/Å) | RMS (eV/Å) | max abs(F) (eV/Å) |",
+              "|---|---|---|---|---|"]
+    for dtype, h in (("float32", 1e-2), ("float32", 1e-3), ("float64", 1e-3),
+                     ("float64", 1e-4)):
+        calc = CHGNetCluster(load_chgnet(dtype), dtype)
+        a = atoms.copy()
+        a.calc = calc
+        forces = a.get_forces()
+        fd = np.zeros_like(forces)
+        for i in range(len(a)):
+            for k in range(3):
+                e = []
+                for sign in (1, -1):
+                    b = atoms.copy()
+                    b.calc = calc
+                    b.positions[i, k] += sign * h
+                    e.append(b.get_potential_energy())
+                fd[i, k] = -(e[0] - e[1]) / (2 * h)
+        err = forces - fd
+        lines.append(f"| {dtype} | {h:g} | {np.abs(err).max():.1e} | "
+                     f"{np.sqrt(np.mean(err**2)):.1e} | {np.abs(forces).max():.2f} |")
+        print(lines[-1], flush=True)
+
+
+def linear_dimer(water, r_hb=1.95):
+    """A water dimer whose donor O-H...O is straight; the acceptor's H away from it."""
+    donor = water.copy()
+    donor.positions -= donor.positions[0]
+    axis = donor.positions[1] / np.linalg.norm(donor.positions[1])
+    acceptor = water.copy()
+    acceptor.positions -= acceptor.positions[0]
+    bisector = acceptor.positions[1:].mean(axis=0)
+    acceptor.rotate(bisector, axis)  # acceptor's H point away, along the O-H...O line
+    acceptor.positions += donor.positions[1] + r_hb * axis
+    return donor + acceptor, axis
+
+
+def cusp(water, lines):
+    """Energy and force as the acceptor crosses the donor's O-H line."""
+    dimer, axis = linear_dimer(water)
+    side = np.cross(axis, [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)
+    offsets = np.linspace(-0.02, 0.02, 9)  # Å, about ±0.6° at 1.95 Å
+    lines += ["| model | acceptor offset (Å) | E - E(0) (meV) | dE/ds from forces (eV/Å) |",
+              "|---|---|---|---|"]
+    for name, dtype, smooth in (("float64", "float64", False),
+                                ("float64, smooth angles", "float64", True)):
+        calc = CHGNetCluster(load_chgnet(dtype, smooth), dtype)
+        rows = []
+        for s in offsets:
+            a = dimer.copy()
+            a.positions[3:] += s * side
+            a.calc = calc
+            rows.append((s, a.get_potential_energy(), -np.dot(a.get_forces()[3:].sum(0), side)))
+        e0 = rows[len(rows) // 2][1]
+        for s, e, slope in rows:
+            lines.append(f"| {name} | {s:+.3f} | {1e3 * (e - e0):+.3f} | {slope:+.4f} |")
+        print("\n".join(lines[-len(rows):]), flush=True)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--molecules", type=int, default=8)
+    p.add_argument("--ps", type=float, default=0.2)
+    p.add_argument("--quick", action="store_true",
+                   help="0.01 ps, float32, rigidmd and RATTLE at 1 and 2 fs only")
+    p.add_argument("--output", type=Path, default=Path(__file__).with_name("ml_potential.txt"))
+    args = p.parse_args(argv)
+    ps = 0.01 if args.quick else args.ps
+    start, water = start_state(args.molecules)
+    lines = [f"# {__doc__.splitlines()[0]}", "",
+             f"{args.molecules} waters, CHGNet geometry (O-H {water.get_distance(0, 1):.4f} Å, "
+             f"H-O-H {water.get_angle(1, 0, 2):.2f}°), rigid 300 K start "
+             f"(kinetic energy {kinetic_energy(start):.3f} eV), {ps:g} ps per run, one thread", ""]
+    def chgnet(dtype, smooth=False):
+        model = load_chgnet(dtype, smooth)
+        return lambda: CHGNetCluster(model, dtype)
+
+    rigid = [r for r in RUNS if r[0] != "flexible"]
+    if args.quick:
+        variants = [("float32", chgnet("float32"),
+                     [(route, dt) for route in ("rigidmd", "RATTLE") for dt in (1.0, 2.0)])]
+    else:
+        variants = [("float32", chgnet("float32"), RUNS),
+                    ("float64", chgnet("float64"), rigid),
+                    ("float64, smooth angles", chgnet("float64", smooth=True),
+                     [r for r in RUNS if r[0] == "rigidmd"]),
+                    ("TIP3P (control)", lambda: TIP3P(rc=40), rigid)]
+    results = conservation(start, ps, lines, variants)
+    if not args.quick:
+        lines += ["", "Forces against central differences of the energy, the start configuration"]
+        finite_differences(start, lines)
+        lines += ["", "A water dimer whose O-H...O crosses the straight line (s = 0); "
+                  "dE/ds = -(force on the acceptor) along s"]
+        cusp(water, lines)
+    text = "\n".join(lines) + "\n"
+    args.output.write_text(text)
+    print(text)
+    return results
+
+
+if __name__ == "__main__":
+    main()
