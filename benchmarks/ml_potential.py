@@ -10,16 +10,22 @@ The same cluster of waters (CHGNet's own water geometry, from
 * flexible, ASE's ``VelocityVerlet`` at 0.25 and 0.5 fs (every atom free,
   Maxwell-Boltzmann at 300 K);
 
-with CHGNet in float32 (as it ships) and again in float64, and with a
-diagnostic variant of the model whose angle features are made smooth at
-180° (``smooth``, see :func:`smooth_angle_encoder`).  Per run: the
-conserved energy's peak-to-peak span over every step, its RMS about a
-straight-line fit, the fit's slope (drift), force calls per ps and, for
-rigidmd, its own time per step (wall time less the time in the force call).
+with CHGNet in float32 (as it ships) and in float64, with a diagnostic
+variant of the model whose angle features are smooth at 180°
+(:func:`smooth_angle_encoder`), and with ASE's TIP3P as a smooth control.
+Per run: the conserved energy's peak-to-peak span over every step, its RMS
+about a straight-line fit, the fit's slope (drift), the RMS of its change
+over one step and that change's correlation with the next step's (near +1
+when the step resolves the forces' variation), the characteristic frequency
+of the waters' net forces and torques (:func:`force_frequency`), force calls
+per ps and, for rigidmd, its own time per step (wall time less the time in
+the force call).
 
 Then the model's smoothness: forces against central differences of the
-energy at a thermal configuration (float32 and float64), and the energy
-along a path that takes a water dimer's O-H...O through the straight line.
+energy at a thermal configuration (float32 and float64); the energy along a
+path that takes a water dimer's O-H...O through the straight line; the
+energy as one water turns rigidly by ±0.01 rad (CHGNet against TIP3P); and
+rigidmd over 10 fs at steps down to 1/32 fs.
 
 Needs CHGNet and a CPU PyTorch, in their own environment (not the test
 extra)::
@@ -50,6 +56,7 @@ from chgnet.graph import converter as chgnet_converter  # noqa: E402
 from chgnet.model import CHGNet  # noqa: E402
 from chgnet.model import model as chgnet_model  # noqa: E402
 from pymatgen.core import Lattice, Structure  # noqa: E402
+from scipy.spatial.transform import Rotation  # noqa: E402
 
 from rigidmd import RigidVerlet, kinetic_energy, rigid_maxwell_boltzmann  # noqa: E402
 from rigidmd.relax import relax_bodies  # noqa: E402
@@ -177,8 +184,14 @@ def run(start, route, dt_fs, ps, calculator):
                                          rng=np.random.default_rng(7))
             Stationary(atoms)
         dyn = VelocityVerlet(atoms, dt_fs * units.fs)
-    energies = [atoms.get_potential_energy() + kinetic_energy(atoms)]
-    dyn.attach(lambda: energies.append(atoms.get_potential_energy() + kinetic_energy(atoms)))
+    energies, generalized = [], []
+
+    def record():
+        energies.append(atoms.get_potential_energy() + kinetic_energy(atoms))
+        generalized.append(body_forces(atoms))
+
+    record()
+    dyn.attach(record)
     steps = int(round(ps * 1000 / dt_fs))
     calls, inside = calc.calls, calc.seconds
     begin = time.perf_counter()
@@ -188,13 +201,39 @@ def run(start, route, dt_fs, ps, calculator):
     t = np.arange(len(energies)) * dt_fs / 1000
     fit = np.polyfit(t, energies, 1)
     change = np.diff(energies)
+    force, torque = (force_frequency(np.array([g[i] for g in generalized]), dt_fs)
+                     for i in (0, 1))
     return {"span": np.ptp(energies), "rms": np.std(energies - np.polyval(fit, t)),
             "drift": fit[0], "step_rms": np.sqrt(np.mean(change**2)),
             "step_corr": np.corrcoef(change[:-1], change[1:])[0, 1],
+            "nu_force": force, "nu_torque": torque,
             "calls_per_ps": (calc.calls - calls) / ps,
             "own_ms": 1e3 * (wall - (calc.seconds - inside)) / steps,
             "call_ms": 1e3 * (calc.seconds - inside) / (calc.calls - calls),
             "energies": energies}
+
+
+def body_forces(atoms):
+    """Net force (eV/Å) and torque about the centre of mass (eV) of every water, (n, 3) each."""
+    x = atoms.positions.reshape(-1, 3, 3)
+    f = atoms.get_forces(apply_constraint=False).reshape(-1, 3, 3)
+    m = atoms.get_masses().reshape(-1, 3, 1)
+    centre = (m * x).sum(axis=1, keepdims=True) / m.sum(axis=1, keepdims=True)
+    return f.sum(axis=1), np.cross(x - centre, f).sum(axis=1)
+
+
+def force_frequency(series, dt_fs):
+    r"""Characteristic frequency of a force time series (cm⁻¹).
+
+    :math:`\nu = \frac{1}{2\pi c}\sqrt{\langle|\dot G|^2\rangle /
+    \langle|G - \bar G|^2\rangle}`, :math:`\dot G` by differences over one
+    step; for a harmonic force it is the oscillator's frequency.  Only
+    resolved where the step is short against it (0.25 fs: up to ~10⁴ cm⁻¹).
+    """
+    rate = np.diff(series, axis=0) / dt_fs
+    spread = series - series.mean(axis=0)
+    omega = np.sqrt(np.mean(rate**2) / np.mean(spread**2))  # rad / fs
+    return omega / (2 * np.pi * 2.99792458e-5)
 
 
 RUNS = [("rigidmd", dt) for dt in (0.25, 0.5, 1.0, 2.0)] + \
@@ -221,9 +260,10 @@ def conservation(start, ps, lines, variants):
     """Every run of every variant; a table row each, the results by (variant, route, step)."""
     warm_up(start)
     lines += ["| model | route | step (fs) | span (eV) | RMS (eV) | drift (eV/ps) | "
-              "per-step change, RMS (eV) | its step-to-step correlation | force calls / ps | "
-              "ms / call | rigidmd's own ms / step |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "per-step change, RMS (eV) | its step-to-step correlation | "
+              "ν(net force) (cm⁻¹) | ν(torque) (cm⁻¹) | force calls / ps | ms / call | "
+              "rigidmd's own ms / step |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     results = {}
     for name, calculator, routes in variants:
         for route, dt in routes:
@@ -231,6 +271,7 @@ def conservation(start, ps, lines, variants):
             own = f"{r['own_ms']:.2f}" if route == "rigidmd" else "-"
             lines.append(f"| {name} | {route} | {dt:g} | {r['span']:.2e} | {r['rms']:.2e} | "
                          f"{r['drift']:+.2e} | {r['step_rms']:.1e} | {r['step_corr']:+.2f} | "
+                         f"{r['nu_force']:.0f} | {r['nu_torque']:.0f} | "
                          f"{r['calls_per_ps']:.0f} | {r['call_ms']:.1f} | {own} |")
             print(lines[-1], flush=True)
             results[(name, route, dt)] = r
@@ -260,6 +301,59 @@ def finite_differences(atoms, lines):
         err = forces - fd
         lines.append(f"| {dtype} | {h:g} | {np.abs(err).max():.1e} | "
                      f"{np.sqrt(np.mean(err**2)):.1e} | {np.abs(forces).max():.2f} |")
+        print(lines[-1], flush=True)
+
+
+def rotation_scan(start, lines, molecules=(0, 5), half_width=0.01, points=41):
+    r"""Energy as one water of ``start`` turns rigidly about its centre of mass, CHGNet and TIP3P.
+
+    Its curvature :math:`d^2E/d\varphi^2` (eV/rad²) from the torques' differences,
+    for angles :math:`\varphi` of ±``half_width`` rad about one random axis;
+    and the largest mismatch between the energy's change and the trapezoid rule
+    on the torque (is the torque the energy's derivative?).
+    """
+    axis = np.random.default_rng(1).normal(size=3)
+    axis /= np.linalg.norm(axis)
+    angles = np.linspace(-half_width, half_width, points)
+    h = angles[1] - angles[0]
+    lines += ["| water | model | energy range (meV) | min and max of d²E/dφ² (eV/rad²) | "
+              "d²E/dφ² every 0.002 rad (eV/rad²) | worst trapezoid mismatch (eV) |",
+              "|---|---|---|---|---|---|"]
+    model = load_chgnet("float64")
+    for mol in molecules:
+        body = slice(3 * mol, 3 * mol + 3)
+        masses = start.get_masses()[body]
+        centre = masses @ start.positions[body] / masses.sum()
+        for name, calc in (("CHGNet float64", CHGNetCluster(model, "float64")),
+                           ("TIP3P", TIP3P(rc=40))):
+            energies, torques = [], []
+            for phi in angles:
+                a = start.copy()
+                a.positions[body] = centre + Rotation.from_rotvec(phi * axis).apply(
+                    start.positions[body] - centre)
+                a.calc = calc
+                energies.append(a.get_potential_energy())
+                arm = a.positions[body] - centre
+                torques.append(np.cross(arm, a.get_forces()[body]).sum(axis=0) @ axis)
+            energies, torques = np.array(energies), np.array(torques)
+            curvature = -np.diff(torques) / h
+            trapezoid = np.diff(energies) + 0.5 * (torques[1:] + torques[:-1]) * h
+            lines.append(f"| {mol} | {name} | {1e3 * np.ptp(energies):.3f} | "
+                         f"{curvature.min():+.3f}, {curvature.max():+.3f} | "
+                         + " ".join(f"{c:+.3f}" for c in curvature[::4]) + " | "
+                         f"{np.abs(trapezoid).max():.1e} |")
+            print(lines[-1], flush=True)
+
+
+def small_steps(start, lines, fs=10.0):
+    """rigidmd with CHGNet (float64) for ``fs`` femtoseconds at steps down to 1/32 fs."""
+    model = load_chgnet("float64")
+    lines += ["| step (fs) | span (eV) | per-step change, RMS (eV) | "
+              "its step-to-step correlation |", "|---|---|---|---|"]
+    for dt in (0.03125, 0.0625, 0.125, 0.25, 0.5):
+        r = run(start, "rigidmd", dt, fs / 1000, lambda: CHGNetCluster(model, "float64"))
+        lines.append(f"| {dt:g} | {r['span']:.2e} | {r['step_rms']:.2e} | "
+                     f"{r['step_corr']:+.2f} |")
         print(lines[-1], flush=True)
 
 
@@ -334,6 +428,11 @@ def main(argv=None):
         lines += ["", "A water dimer whose O-H...O crosses the straight line (s = 0); "
                   "dE/ds = -(force on the acceptor) along s"]
         cusp(water, lines)
+        lines += ["", "One water turned rigidly by ±0.01 rad about its centre of mass "
+                  "(the rest of the start configuration fixed)"]
+        rotation_scan(start, lines)
+        lines += ["", "rigidmd, CHGNet float64, 10 fs from the same start at small steps"]
+        small_steps(start, lines)
     text = "\n".join(lines) + "\n"
     args.output.write_text(text)
     print(text)
