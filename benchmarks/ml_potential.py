@@ -236,11 +236,6 @@ def force_frequency(series, dt_fs):
     return omega / (2 * np.pi * 2.99792458e-5)
 
 
-RUNS = [("rigidmd", dt) for dt in (0.25, 0.5, 1.0, 2.0)] + \
-       [("RATTLE", dt) for dt in (0.25, 0.5, 1.0, 2.0)] + \
-       [("flexible", dt) for dt in (0.25, 0.5)]
-
-
 def warm_up(start):
     """One rigid step on zero forces: numba's compilation out of every timing."""
 
@@ -393,10 +388,41 @@ def cusp(water, lines):
         print("\n".join(lines[-len(rows):]), flush=True)
 
 
+#: Model variants by name: (label in the table, dtype or None for TIP3P, smooth angles).
+VARIANTS = {"float32": ("float32", "float32", False), "float64": ("float64", "float64", False),
+            "smooth": ("float64, smooth angles", "float64", True),
+            "tip3p": ("TIP3P (control)", None, False)}
+#: Every run of the default invocation, as variant/route.
+ALL_RUNS = ("float32/rigidmd", "float32/RATTLE", "float32/flexible", "float64/rigidmd",
+            "smooth/rigidmd", "tip3p/rigidmd", "tip3p/RATTLE")
+
+
+def model_variants(tokens, quick):
+    """``(label, calculator factory, [(route, step)])`` for ``variant/route`` tokens."""
+    steps = (1.0, 2.0) if quick else (0.25, 0.5, 1.0, 2.0)
+    variants = []
+    for name in dict.fromkeys(token.split("/")[0] for token in tokens):
+        label, dtype, smooth = VARIANTS[name]
+        if dtype is None:
+            calculator = lambda: TIP3P(rc=40)  # noqa: E731
+        else:
+            model = load_chgnet(dtype, smooth)
+            calculator = lambda model=model, dtype=dtype: CHGNetCluster(model, dtype)  # noqa: E731
+        routes = [(route, dt) for token in tokens if token.split("/")[0] == name
+                  for route in [token.split("/")[1]]
+                  for dt in (steps[:2] if route == "flexible" else steps)]
+        variants.append((label, calculator, routes))
+    return variants
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--molecules", type=int, default=8)
     p.add_argument("--ps", type=float, default=0.2)
+    p.add_argument("--runs", nargs="*", default=list(ALL_RUNS), choices=ALL_RUNS,
+                   help="which variant/route runs (default: all)")
+    p.add_argument("--no-smoothness", action="store_true",
+                   help="leave out the smoothness checks after the runs")
     p.add_argument("--quick", action="store_true",
                    help="0.01 ps, float32, rigidmd and RATTLE at 1 and 2 fs only")
     p.add_argument("--output", type=Path, default=Path(__file__).with_name("ml_potential.txt"))
@@ -407,22 +433,9 @@ def main(argv=None):
              f"{args.molecules} waters, CHGNet geometry (O-H {water.get_distance(0, 1):.4f} Å, "
              f"H-O-H {water.get_angle(1, 0, 2):.2f}°), rigid 300 K start "
              f"(kinetic energy {kinetic_energy(start):.3f} eV), {ps:g} ps per run, one thread", ""]
-    def chgnet(dtype, smooth=False):
-        model = load_chgnet(dtype, smooth)
-        return lambda: CHGNetCluster(model, dtype)
-
-    rigid = [r for r in RUNS if r[0] != "flexible"]
-    if args.quick:
-        variants = [("float32", chgnet("float32"),
-                     [(route, dt) for route in ("rigidmd", "RATTLE") for dt in (1.0, 2.0)])]
-    else:
-        variants = [("float32", chgnet("float32"), RUNS),
-                    ("float64", chgnet("float64"), rigid),
-                    ("float64, smooth angles", chgnet("float64", smooth=True),
-                     [r for r in RUNS if r[0] == "rigidmd"]),
-                    ("TIP3P (control)", lambda: TIP3P(rc=40), rigid)]
-    results = conservation(start, ps, lines, variants)
-    if not args.quick:
+    runs = ["float32/rigidmd", "float32/RATTLE"] if args.quick else args.runs
+    results = conservation(start, ps, lines, model_variants(runs, args.quick)) if runs else {}
+    if not (args.quick or args.no_smoothness):
         lines += ["", "Forces against central differences of the energy, the start configuration"]
         finite_differences(start, lines)
         lines += ["", "A water dimer whose O-H...O crosses the straight line (s = 0); "
