@@ -21,13 +21,13 @@ vectors, solved one at a time to 1e-6.
 
 import numpy as np
 
-from rigidmd.core._numba import _jit
+from rigidmd.core._numba import jit
 
 __all__ = ["dot", "axpy", "pair_graph", "cell_list_pairs", "laplacian_product",
            "conjugate_gradient"]
 
 
-@_jit
+@jit
 def dot(a, b):
     """:math:`a \\cdot b` of two flat float arrays of equal length, four partial sums."""
     n = a.shape[0]
@@ -43,14 +43,14 @@ def dot(a, b):
     return (s0 + s1) + (s2 + s3)
 
 
-@_jit
+@jit
 def axpy(alpha, x, y):
     """``y += alpha * x`` in place, flat float arrays (no temporary)."""
     for i in range(x.shape[0]):
         y[i] += alpha * x[i]
 
 
-@_jit
+@jit
 def pair_graph(centres, cell, first, second, shifts, r_cut, r_nn, decay):
     r"""The weighted graph of the pairs of ``centres`` closer than ``r_cut``, as CSR rows.
 
@@ -112,7 +112,7 @@ def pair_graph(centres, cell, first, second, shifts, r_cut, r_nn, decay):
     return indptr, indices, weights, degree
 
 
-@_jit
+@jit
 def cell_list_pairs(fractional, cell, nbin, periodic, r_list):
     """Pairs of points closer than ``r_list``, each once, with their cell shifts: a cell list.
 
@@ -195,21 +195,21 @@ def cell_list_pairs(fractional, cell, nbin, periodic, r_list):
     return first[:p].copy(), second[:p].copy(), shifts[:p].copy()
 
 
-@_jit
+@jit
 def _grown(a, n):
     out = np.empty(n, a.dtype)
     out[:len(a)] = a
     return out
 
 
-@_jit
+@jit
 def _grown2(a, n):
     out = np.zeros((n, a.shape[1]))
     out[:len(a)] = a
     return out
 
 
-@_jit
+@jit
 def laplacian_product(indptr, indices, weights, diagonal, x, out):
     """``out = A x`` for :math:`A = \\mathrm{diag}(d) - W`, ``x`` and ``out`` of shape (m, k).
 
@@ -253,7 +253,7 @@ def laplacian_product(indptr, indices, weights, diagonal, x, out):
             out[i, c] = a
 
 
-@_jit
+@jit
 def _precondition(r, inverse, mean_free, z):
     m, k = r.shape
     for c in range(k):
@@ -267,7 +267,7 @@ def _precondition(r, inverse, mean_free, z):
                 z[i, c] -= mean
 
 
-@_jit
+@jit
 def _column_dots(a, b, out):
     m, k = a.shape
     for c in range(k):
@@ -277,7 +277,7 @@ def _column_dots(a, b, out):
             out[c] += a[i, c] * b[i, c]
 
 
-@_jit
+@jit
 def conjugate_gradient(indptr, indices, weights, diagonal, b, tol, maxiter, mean_free):
     r"""Solve :math:`A x = b` column by column, :math:`A = \mathrm{diag}(d) - W` (CSR ``W``).
 
