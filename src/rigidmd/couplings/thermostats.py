@@ -20,6 +20,8 @@ thermostatted dynamics conserves: total energy minus the energy the
 thermostat put in (Langevin, Bussi), or plus the chains' energy (Nosé–Hoover).
 """
 
+import warnings
+
 import numpy as np
 from ase import units
 
@@ -103,6 +105,26 @@ class Thermostat(Coupling):
         #: keeps the total momentum).
         self.n_translational = max(n - 3, 0) if self.holds_momentum else n
 
+    #: Whether :meth:`check_net_force` has warned (once per thermostat).
+    warned = False
+
+    def check_net_force(self, record) -> None:
+        """Warn once if the forces do not conserve the momentum that ``fixcm=None`` keeps.
+
+        A wall or an external field makes the centre of mass a thermal degree of
+        freedom: keeping the momentum then holds the rest at the target and leaves
+        it out of the count.  Pair forces cancel to roundoff and PPPM/PME to about
+        1e-5 of a force per atom; the threshold is 1e-3 of the summed magnitudes.
+        """
+        net = float(np.linalg.norm(record.F.sum(axis=0) + record.f.sum(axis=0)))
+        if net > 1e-3 * float(np.abs(record.F).sum() + np.abs(record.f).sum()):
+            self.warned = True
+            warnings.warn(
+                f"{self.kind} thermostat: it keeps the total momentum (fixcm=True, the "
+                f"default) but the forces do not conserve it (net force {net:.3g} eV/Å): "
+                "with a wall or an external field the centre of mass is a thermal degree "
+                "of freedom; pass fixcm=False", stacklevel=2)
+
     def centre_velocity(self, view: CouplingView) -> np.ndarray:
         """:math:`U = P / M` (Å / ASE time), shape (3,); zero unless the momentum is kept."""
         s, m = view.state, view.model
@@ -128,6 +150,8 @@ class Thermostat(Coupling):
         m, record = view.model, view.record
         if not self.holds_momentum:
             return record.translational_energy, record.rotational_energy
+        if self.fixcm_option is None and not self.warned:
+            self.check_net_force(record)
         U = self.centre_velocity(view)
         K_cm = 0.5 * (m.mass.sum() + m.free_masses.sum()) * float(U @ U)
         return record.translational_energy - K_cm, record.rotational_energy
@@ -253,6 +277,8 @@ class LangevinThermostat(_Stochastic):
 
     def first_half(self, view: CouplingView, h: float) -> None:
         s, m, kT, rng, record = view.state, view.model, self.kT, self.rng, view.record
+        if self.holds_momentum and self.fixcm_option is None and not self.warned:
+            self.check_net_force(record)
         before = record.translational_energy + record.rotational_energy
         U = self.centre_velocity(view)
         c = np.exp(-self.friction * h)
@@ -521,8 +547,10 @@ class RigidLangevin(_Thermostatted):
         :math:`\gamma`, per ASE time unit (``0.01 / ase.units.fs`` is 0.01 fs⁻¹),
         as in ASE's ``Langevin``.  ``friction * timestep`` must not exceed 0.5.
     rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
-    fixcm : bool, default True
-        Keep the total momentum (no drift of the whole system), as ASE's ``Langevin``.
+    fixcm : bool or None, default None
+        Keep the total momentum (no drift of the whole system), as ASE's ``Langevin``;
+        None is True, with a warning at the first step if the forces do not conserve the
+        momentum (a wall, an external field: pass False there).
     **kwargs
         ``bodies``, ``integrator``, ``integrator_options``, ``trajectory``,
         ``logfile``, ``loginterval``, ``backend`` as for
@@ -530,7 +558,7 @@ class RigidLangevin(_Thermostatted):
     """
 
     def __init__(self, atoms, timestep, temperature_K=None, friction=None, *, rng=None,
-                 fixcm=True, **kwargs):
+                 fixcm=None, **kwargs):
         _required("RigidLangevin", temperature_K=temperature_K, friction=friction)
         super().__init__(atoms, timestep,
                          LangevinThermostat(temperature_K, friction, rng, fixcm), **kwargs)
@@ -560,12 +588,14 @@ class RigidBussi(_Thermostatted):
     taut : float
         Relaxation time (ASE time units), as in ASE's ``Bussi``.
     rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
-    fixcm : bool, default True
+    fixcm : bool or None, default None
         Keep the total momentum (no drift of the whole system) and count 3 fewer
-        degrees of freedom.  With False the thermostat acts on the centre of
-        mass too; from a zero total momentum (which the forces and the rescaling
-        keep zero) the system then samples :math:`T\cdot 6N/(6N-3)` for N rigid
-        molecules (+0.7 K at 298 K and 216 waters), as LAMMPS's ``fix rigid/nvt``.
+        degrees of freedom; None is True, with a warning at the first step if the
+        forces do not conserve the momentum (a wall, an external field: pass False
+        there).  With False the thermostat acts on the centre of mass too; from a
+        zero total momentum (which the forces and the rescaling keep zero) the
+        system then samples :math:`T\cdot 6N/(6N-3)` for N rigid molecules
+        (+0.7 K at 298 K and 216 waters), as LAMMPS's ``fix rigid/nvt``.
     **kwargs
         As for :class:`~rigidmd.core.dynamics.RigidDynamics`.
 
@@ -575,7 +605,7 @@ class RigidBussi(_Thermostatted):
     """
 
     def __init__(self, atoms, timestep, temperature_K=None, taut=None, *, rng=None,
-                 fixcm=True, **kwargs):
+                 fixcm=None, **kwargs):
         _required("RigidBussi", temperature_K=temperature_K, taut=taut)
         super().__init__(atoms, timestep, BussiThermostat(temperature_K, taut, rng, fixcm),
                          **kwargs)
@@ -605,9 +635,10 @@ class RigidNoseHoover(_Thermostatted):
         Chain length.
     tloop : int, default 1
         Sub-steps of each half-step chain update.
-    fixcm : bool, default True
+    fixcm : bool or None, default None
         Keep the total momentum (no drift of the whole system) and count 3 fewer
-        degrees of freedom (see :class:`RigidBussi`; False acts on all
+        degrees of freedom; None is True, with a warning if the forces do not
+        conserve the momentum (see :class:`RigidBussi`; False acts on all
         :math:`6N`, as LAMMPS's ``fix rigid/nvt``).
     **kwargs
         As for :class:`~rigidmd.core.dynamics.RigidDynamics`.
@@ -620,7 +651,7 @@ class RigidNoseHoover(_Thermostatted):
     """
 
     def __init__(self, atoms, timestep, temperature_K=None, tdamp=None, tchain=3, tloop=1,
-                 *, fixcm=True, **kwargs):
+                 *, fixcm=None, **kwargs):
         _required("RigidNoseHoover", temperature_K=temperature_K, tdamp=tdamp)
         super().__init__(atoms, timestep,
                          NoseHooverThermostat(temperature_K, tdamp, tchain, tloop, fixcm),
