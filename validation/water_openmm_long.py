@@ -32,9 +32,10 @@ single-threaded runs fills a machine for a known time.
   is held, else 3N), T_rot (3N), the configurational temperatures of
   translation and rotation (``water_openmm_nve.configurational_sums`` on
   every frame, OpenMM's force field for both codes), and D_PBC from the
-  centres of mass (MSD slope over 10–40 ps lags, 50 ps segments, the
-  system's own drift removed).  Errors: standard errors over 10 ps blocks
-  (U, T) or 50 ps segments (D, T_conf by jackknife over 10 ps blocks).
+  centres of mass (MSD slope over 3–10 ps lags in 20 ps segments, the
+  system's own drift removed; runs of a few minutes are 20–30 ps long).
+  Errors: standard errors over 5 ps blocks (U, T) or 20 ps segments (D);
+  T_conf by jackknife over 5 ps blocks.
   Langevin friction slows diffusion: D here compares the codes under the
   same friction, it is not the NVE value.
 
@@ -70,7 +71,7 @@ from water_openmm_nve import KB_KJ, body_kinetic_energies, configurational_sums 
 TEMPERATURE_K = 298.0
 CUTOFF = 9.0  # Å, every model here (one box, one set-up for both codes)
 KE_FS, U_OMM_FS, FRAME_FS = 10.0, 50.0, 1000.0
-BLOCK_PS, SEGMENT_PS, MSD_FIT_PS = 10.0, 50.0, (10.0, 40.0)
+BLOCK_PS, SEGMENT_PS, MSD_FIT_PS = 5.0, 20.0, (3.0, 10.0)
 
 
 # --------------------------------------------------------------------------- runs
