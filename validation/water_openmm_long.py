@@ -66,7 +66,12 @@ import numpy as np  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from water_openmm_nve import KB_KJ, body_kinetic_energies, configurational_sums  # noqa: E402
+from water_openmm_nve import (  # noqa: E402
+    KB_KJ,
+    body_kinetic_energies,
+    configurational_sums,
+    write_results,
+)
 
 TEMPERATURE_K = 298.0
 CUTOFF = 9.0  # Å, every model here (one box, one set-up for both codes)
@@ -144,6 +149,39 @@ def rigidmd_atoms(state, model):
     return atoms
 
 
+def drive(rec, args, deadline, advance, observe):
+    """Make up to ``--skip-ps`` unrecorded, then record until ``deadline``.
+
+    ``advance(n)`` makes n steps; ``observe(i, frame)`` records sample ``i`` (every
+    :data:`KE_FS`) and, when ``frame``, returns the whole molecules' positions (Å).
+    """
+    ke = max(int(round(KE_FS / args.dt_fs)), 1)
+    frame_every = int(round(FRAME_FS / KE_FS))
+    skip_deadline = T0 + args.skip_frac * (deadline - T0)
+    skip_steps = int(round(args.skip_ps * 1000 / args.dt_fs))
+    t_start = time.perf_counter()
+    done = 0
+    while done < skip_steps and time.perf_counter() < skip_deadline:
+        advance(10 * ke)
+        done += 10 * ke
+    rec.meta.update(skip_ps=done * args.dt_fs / 1000,
+                    setup_s=t_start - T0, skip_s=time.perf_counter() - t_start)
+    t_rec = time.perf_counter()
+    i = 0
+    while True:
+        x = observe(i, i % frame_every == 0)
+        if x is not None:
+            rec.frame(x)
+            rec.maybe_save()
+        if time.perf_counter() > deadline:
+            break
+        advance(ke)
+        i += 1
+    steps = i * ke
+    rec.meta.update(steps=steps, ps=steps * args.dt_fs / 1000,
+                    ms_per_step=1000 * (time.perf_counter() - t_rec) / max(steps, 1))
+
+
 def run_rigidmd(args, state, model, deadline, rec):
     """Run rigidmd until ``deadline`` (perf_counter seconds), recording into ``rec``."""
     from ase import units
@@ -162,35 +200,16 @@ def run_rigidmd(args, state, model, deadline, rec):
                          taut=args.tau_ps * 1000 * units.fs, rng=rng, fixcm=bool(args.fixcm))
     else:
         raise SystemExit(f"rigidmd has no thermostat {args.thermo!r} here")
-    ke = max(int(round(KE_FS / args.dt_fs)), 1)
-    frame_every = int(round(FRAME_FS / KE_FS))
-    skip_deadline = T0 + args.skip_frac * (deadline - T0)
-    skip_steps = int(round(args.skip_ps * 1000 / args.dt_fs))
-    t_start = time.perf_counter()
-    done = 0
-    while done < skip_steps and time.perf_counter() < skip_deadline:
-        dyn.run(ke)
-        done += ke
-    rec.meta.update(skip_ps=done * args.dt_fs / 1000,
-                    setup_s=t_start - T0, skip_s=time.perf_counter() - t_start)
-    t_rec = time.perf_counter()
-    i = 0
-    while True:
+
+    def observe(i, frame):
         rec.rec["K_tr"].append(dyn.get_translational_kinetic_energy() / kj)
         rec.rec["K_rot"].append(dyn.get_rotational_kinetic_energy() / kj)
         rec.rec["U"].append(atoms.get_potential_energy() / kj)
         rec.rec["U_t_ps"].append(i * KE_FS / 1000)
-        if i % frame_every == 0:
-            rec.frame(whole(atoms.positions, atoms.cell.array, model.sites))
-            rec.maybe_save()
-        if time.perf_counter() > deadline:
-            break
-        dyn.run(ke)
-        i += 1
-    steps = i * ke
-    rec.meta.update(steps=steps, ps=steps * args.dt_fs / 1000,
-                    ms_per_step=1000 * (time.perf_counter() - t_rec) / max(steps, 1),
-                    conserved_kj_per_mol=dyn.get_conserved_energy() / kj)
+        return whole(atoms.positions, atoms.cell.array, model.sites) if frame else None
+
+    drive(rec, args, deadline, dyn.run, observe)
+    rec.meta.update(conserved_kj_per_mol=dyn.get_conserved_energy() / kj)
 
 
 def openmm_system(state, model):
@@ -268,22 +287,10 @@ def run_openmm(args, state, model, deadline, rec):
     v[mm] = state["momenta"][mm] / masses[mm, None] * to_nm_ps
     context.setVelocities(v)
     context.applyVelocityConstraints(1e-10)
-    ke = max(int(round(KE_FS / args.dt_fs)), 1)
     u_every = int(round(U_OMM_FS / KE_FS))
-    frame_every = int(round(FRAME_FS / KE_FS))
-    skip_deadline = T0 + args.skip_frac * (deadline - T0)
-    skip_steps = int(round(args.skip_ps * 1000 / args.dt_fs))
-    t_start = time.perf_counter()
-    done = 0
-    while done < skip_steps and time.perf_counter() < skip_deadline:
-        integrator.step(ke * 10)
-        done += ke * 10
-    rec.meta.update(skip_ps=done * args.dt_fs / 1000,
-                    setup_s=t_start - T0, skip_s=time.perf_counter() - t_start)
-    t_rec = time.perf_counter()
     cell = state["cell"] / 10
-    i = 0
-    while True:
+
+    def observe(i, frame):
         want_u = i % u_every == 0
         st = context.getState(getPositions=True, getVelocities=True, getEnergy=want_u)
         x = st.getPositions(asNumpy=True).value_in_unit(unit.nanometer)
@@ -294,16 +301,9 @@ def run_openmm(args, state, model, deadline, rec):
         if want_u:
             rec.rec["U"].append(st.getPotentialEnergy().value_in_unit(unit.kilojoule_per_mole))
             rec.rec["U_t_ps"].append(i * KE_FS / 1000)
-        if i % frame_every == 0:
-            rec.frame(whole(x, cell, model.sites) * 10)
-            rec.maybe_save()
-        if time.perf_counter() > deadline:
-            break
-        integrator.step(ke)
-        i += 1
-    steps = i * ke
-    rec.meta.update(steps=steps, ps=steps * args.dt_fs / 1000,
-                    ms_per_step=1000 * (time.perf_counter() - t_rec) / max(steps, 1))
+        return whole(x, cell, model.sites) * 10 if frame else None
+
+    drive(rec, args, deadline, integrator.step, observe)
 
 
 # --------------------------------------------------------------------------- starts
@@ -484,12 +484,7 @@ def report(paths, outdir, name):
                      "offset_sd": [r["offset_sd"] for r in runs]})
     results = {"temperature_K": TEMPERATURE_K, "block_ps": BLOCK_PS, "segment_ps": SEGMENT_PS,
                "msd_fit_ps": MSD_FIT_PS, "groups": rows}
-    stem = Path(outdir) / name
-    stem.with_suffix(".json").write_text(json.dumps(results, indent=1) + "\n")
-    text = table(results)
-    stem.with_suffix(".txt").write_text(text + "\n")
-    print(text)
-    return results
+    return write_results(results, Path(outdir) / name, table(results))
 
 
 def table(results):

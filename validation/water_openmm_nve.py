@@ -510,9 +510,12 @@ def report(stems, outdir, name):
     cache = next(Path(outdir).glob("water_openmm_nve.start*.npz"), None)
     cell = np.load(cache)["cell"] if cache is not None else None
     results["divergence"] = divergences(tracks, cell) if cell is not None else {}
-    stem = Path(outdir) / name
+    return write_results(results, Path(outdir) / name, table(results))
+
+
+def write_results(results, stem, text):
+    """``<stem>.json`` (every number) and ``<stem>.txt`` (``text``, also printed)."""
     stem.with_suffix(".json").write_text(json.dumps(results, indent=1) + "\n")
-    text = table(results)
     stem.with_suffix(".txt").write_text(text + "\n")
     print(text)
     return results
@@ -630,11 +633,7 @@ def main(argv=None):
                   f"U {r['U_per_molecule'][0]:.4f} ({seconds:.0f} s)", flush=True)
             (stem.with_suffix(".json")).write_text(json.dumps(results, indent=1) + "\n")
     results["divergence"] = divergences(tracks, state["cell"])
-    (stem.with_suffix(".json")).write_text(json.dumps(results, indent=1) + "\n")
-    text = table(results)
-    stem.with_suffix(".txt").write_text(text + "\n")
-    print(text)
-    return results
+    return write_results(results, stem, table(results))
 
 
 if __name__ == "__main__":
