@@ -70,6 +70,7 @@ from water_openmm_nve import (  # noqa: E402
     KB_KJ,
     body_kinetic_energies,
     configurational_sums,
+    openmm_context,
     write_results,
 )
 
@@ -256,10 +257,8 @@ def openmm_system(state, model):
 def run_openmm(args, state, model, deadline, rec):
     """Run OpenMM until ``deadline`` (perf_counter seconds), recording into ``rec``."""
     import openmm
-    from ase import units
     from openmm import unit
 
-    to_nm_ps = units.fs * 100.0
     system = openmm_system(state, model)
     dt = args.dt_fs * 1e-3
     gamma = 1.0 / args.tau_ps
@@ -276,15 +275,7 @@ def run_openmm(args, state, model, deadline, rec):
         integrator = openmm.VerletIntegrator(dt)
     else:
         raise SystemExit(f"OpenMM has no thermostat {args.thermo!r} here")
-    context = openmm.Context(system, integrator, openmm.Platform.getPlatformByName("CPU"),
-                             {"Threads": "1"})
-    masses = np.array([system.getParticleMass(i).value_in_unit(unit.dalton)
-                       for i in range(system.getNumParticles())])
-    context.setPositions(state["positions"] / 10)
-    context.computeVirtualSites()
-    v = np.zeros_like(state["positions"])
-    mm = masses > 0
-    v[mm] = state["momenta"][mm] / masses[mm, None] * to_nm_ps
+    context, masses, v = openmm_context(system, integrator, state)
     context.setVelocities(v)
     context.applyVelocityConstraints(1e-10)
     u_every = int(round(U_OMM_FS / KE_FS))
