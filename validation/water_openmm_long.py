@@ -169,18 +169,20 @@ def drive(rec, args, deadline, advance, observe):
                     setup_s=t_start - T0, skip_s=time.perf_counter() - t_start)
     t_rec = time.perf_counter()
     i = 0
-    while True:
-        x = observe(i, i % frame_every == 0)
-        if x is not None:
-            rec.frame(x)
-            rec.maybe_save()
-        if time.perf_counter() > deadline:
-            break
-        advance(ke)
-        i += 1
-    steps = i * ke
-    rec.meta.update(steps=steps, ps=steps * args.dt_fs / 1000,
-                    ms_per_step=1000 * (time.perf_counter() - t_rec) / max(steps, 1))
+    try:
+        while True:
+            x = observe(i, i % frame_every == 0)
+            if x is not None:
+                rec.frame(x)
+                rec.maybe_save()
+            if time.perf_counter() > deadline:
+                break
+            advance(ke)
+            i += 1
+    finally:  # also when a signal stops the run: the samples recorded so far
+        steps = i * ke
+        rec.meta.update(steps=steps, ps=steps * args.dt_fs / 1000,
+                        ms_per_step=1000 * (time.perf_counter() - t_rec) / max(steps, 1))
 
 
 def run_rigidmd(args, state, model, deadline, rec):
@@ -414,7 +416,7 @@ def analyse_run(path, contexts):
     frame_ps = meta["frame_fs"] / 1000
     seg_d = [msd_diffusion(com[i:i + step], frame_ps) for i in range(0, len(com) - step + 1,
                                                                        step)]
-    return {"meta": meta, "ps": meta["ps"],
+    return {"meta": meta, "ps": len(data["K_tr"]) * meta["ke_fs"] / 1000,
             "T_tr": _blocks(2 * data["K_tr"] / ((3 * n - (3 if held else 0)) * KB_KJ), per_ke),
             "T_rot": _blocks(2 * data["K_rot"] / (3 * n * KB_KJ), per_ke),
             "U": _blocks(u - offset, per_u), "U_frames": _blocks(sums[:, 0] / n, per_frame),
