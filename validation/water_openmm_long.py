@@ -524,14 +524,20 @@ def run_main(args):
         raise SystemExit(f"signal {signum}")
 
     signal.signal(signal.SIGTERM, stop)
+    stopped = None
     try:
         (run_rigidmd if args.code == "rigidmd" else run_openmm)(args, state, model, deadline,
                                                                  rec)
+    except (SystemExit, KeyboardInterrupt) as why:
+        stopped = str(why) or "interrupted"
     finally:
         rec.save(final=True)
     m = rec.meta
     print(f"{args.out.name}: {m.get('ps', 0):.1f} ps recorded after {m.get('skip_ps', 0):.1f} "
-          f"ps, {m.get('ms_per_step', 0):.2f} ms/step", flush=True)
+          f"ps, {m.get('ms_per_step', 0):.2f} ms/step"
+          + (f"; stopped ({stopped}), what it had is written" if stopped else ""), flush=True)
+    if stopped:
+        raise SystemExit(1)
 
 
 def parse(argv=None):
