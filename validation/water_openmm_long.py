@@ -34,8 +34,9 @@ single-threaded runs fills a machine for a known time.
   every frame, OpenMM's force field for both codes), and D_PBC from the
   centres of mass (MSD slope over 3–10 ps lags in 20 ps segments, the
   system's own drift removed; runs of a few minutes are 20–30 ps long).
-  Errors: standard errors over 5 ps blocks (U, T) or 20 ps segments (D);
-  T_conf by jackknife over 5 ps blocks.
+  The statistical unit is a run, or a 20 ps piece of a longer one (⟨U⟩
+  stays correlated over tens of ps): means weighted by length with their
+  standard errors; T_conf by jackknife over the pieces.
   Langevin friction slows diffusion: D here compares the codes under the
   same friction, it is not the NVE value.
 
@@ -77,7 +78,12 @@ from water_openmm_nve import (  # noqa: E402
 TEMPERATURE_K = 298.0
 CUTOFF = 9.0  # Å, every model here (one box, one set-up for both codes)
 KE_FS, U_OMM_FS, FRAME_FS = 10.0, 50.0, 1000.0
-BLOCK_PS, SEGMENT_PS, MSD_FIT_PS = 5.0, 20.0, (3.0, 10.0)
+#: The statistical unit: a run, or pieces of at least this long of a longer one.  ⟨U⟩'s block
+#: error was still growing at 15 ps blocks in one 75 ps run (1 ps: 0.044, 5 ps: 0.081, 15 ps:
+#: 0.117 kJ/mol), so blocks of a few ps understate it; runs from different seeds are
+#: independent.
+PIECE_PS = 20.0
+MSD_FIT_PS = (3.0, 10.0)  # ps of lag for D: runs of a few minutes are 13-30 ps long
 
 
 # --------------------------------------------------------------------------- runs
@@ -354,12 +360,15 @@ def make_starts(eq_ps):
 
 
 # --------------------------------------------------------------------------- analysis
-def _blocks(series, per_block):
-    """Means of consecutive blocks of ``per_block`` samples (a last partial block dropped)."""
+def _pieces(series, sample_ps):
+    """``series`` (one sample every ``sample_ps``) in max(1, length // PIECE_PS) parts."""
     series = np.asarray(series, dtype=float)
-    per_block = max(int(per_block), 1)
-    k = len(series) // per_block
-    return series[:k * per_block].reshape(k, per_block).mean(axis=1)
+    return np.array_split(series, max(1, int(len(series) * sample_ps // PIECE_PS)))
+
+
+def _piece_means(series, sample_ps):
+    """(mean, samples) of each piece, shape (pieces, 2)."""
+    return np.array([(p.mean(), len(p)) for p in _pieces(series, sample_ps) if len(p)])
 
 
 def msd_diffusion(com, frame_ps, fit=MSD_FIT_PS):
@@ -375,7 +384,7 @@ def msd_diffusion(com, frame_ps, fit=MSD_FIT_PS):
 
 
 def analyse_run(path, contexts):
-    """Per-block series of one run (see the module docstring)."""
+    """Per-piece values of one run (see the module docstring)."""
     import openmm
 
     from rigidmd.water import water_model
@@ -396,13 +405,18 @@ def analyse_run(path, contexts):
     full[:, :, :3] = frames
     if sites == 4:
         full[:, :, 3] = frames[:, :, 0]  # M: placed by OpenMM
-    rng = np.random.default_rng(0)
-    sums = np.array([configurational_sums(contexts[model.name], f.reshape(-1, 3) / 10,
-                                          masses, rng, sites) for f in full])
+    # Nine force calls a frame: kept beside the run (``<file>.conf.npy``) and extended when
+    # the run has grown.
+    cache = Path(str(path) + ".conf.npy")
+    done = np.load(cache) if cache.exists() else np.zeros((0, 5))
+    rng = np.random.default_rng(len(done))
+    new = [configurational_sums(contexts[model.name], f.reshape(-1, 3) / 10, masses, rng,
+                                sites) for f in full[len(done):]]
+    sums = np.concatenate([done, np.array(new).reshape(-1, 5)])[:len(full)]
+    if new:
+        np.save(cache, sums)
     held = meta["code"] == "rigidmd" and (meta["thermo"] == "langevin" or meta["fixcm"])
-    per_ke = int(round(BLOCK_PS * 1000 / meta["ke_fs"]))
-    per_u = int(round(BLOCK_PS * 1000 / meta["u_fs"]))
-    per_frame = int(round(BLOCK_PS * 1000 / meta["frame_fs"]))
+    ke_ps, u_ps, frame_ps = (meta[k] / 1000 for k in ("ke_fs", "u_fs", "frame_fs"))
     u = np.asarray(data["U"]) / n
     offset = offset_sd = 0.0
     if meta["code"] == "rigidmd":  # LAMMPS's energy holds the constant intramolecular part
@@ -412,28 +426,37 @@ def analyse_run(path, contexts):
         offset, offset_sd = float(np.mean(gap)), float(np.std(gap))
     m3 = masses.reshape(-1, sites)[0, :3]
     com = np.einsum("s,fbsk->fbk", m3, frames) / m3.sum()
-    step = int(round(SEGMENT_PS * 1000 / meta["frame_fs"]))
-    frame_ps = meta["frame_fs"] / 1000
-    seg_d = [msd_diffusion(com[i:i + step], frame_ps) for i in range(0, len(com) - step + 1,
-                                                                       step)]
-    return {"meta": meta, "ps": len(data["K_tr"]) * meta["ke_fs"] / 1000,
-            "T_tr": _blocks(2 * data["K_tr"] / ((3 * n - (3 if held else 0)) * KB_KJ), per_ke),
-            "T_rot": _blocks(2 * data["K_rot"] / (3 * n * KB_KJ), per_ke),
-            "U": _blocks(u - offset, per_u), "U_frames": _blocks(sums[:, 0] / n, per_frame),
-            "conf": np.array([_blocks(sums[:, k], per_frame) for k in (1, 2, 3, 4)]),
-            "D_segments": np.array(seg_d), "D_run": msd_diffusion(com, frame_ps),
+    pieces = _pieces(np.arange(len(com)), frame_ps)
+    d = [(msd_diffusion(com[int(p[0]):int(p[-1]) + 1], frame_ps), len(p)) for p in pieces
+         if len(p)]
+    return {"meta": meta, "ps": len(data["K_tr"]) * ke_ps,
+            "T_tr": _piece_means(2 * data["K_tr"] / ((3 * n - (3 if held else 0)) * KB_KJ),
+                                 ke_ps),
+            "T_rot": _piece_means(2 * data["K_rot"] / (3 * n * KB_KJ), ke_ps),
+            "U": _piece_means(u - offset, u_ps), "U_frames": _piece_means(sums[:, 0] / n,
+                                                                         frame_ps),
+            "conf": np.array([[p.sum() for p in _pieces(sums[:, k], frame_ps)]
+                              for k in (1, 2, 3, 4)]),
+            "D": np.array([x for x in d if np.isfinite(x[0])]).reshape(-1, 2),
+            "D_run": msd_diffusion(com, frame_ps),
             "offset": offset, "offset_sd": offset_sd, "dof_tr": 3 * n - (3 if held else 0)}
 
 
-def _mean(blocks):
-    blocks = np.asarray(blocks, dtype=float)
-    if len(blocks) < 2:
-        return [float(blocks.mean()) if len(blocks) else float("nan"), float("nan")]
-    return [float(blocks.mean()), float(blocks.std(ddof=1) / np.sqrt(len(blocks)))]
+def _mean(pieces):
+    """Mean of piece means weighted by their samples, and its standard error."""
+    pieces = np.asarray(pieces, dtype=float).reshape(-1, 2)
+    if len(pieces) == 0:
+        return [float("nan"), float("nan")]
+    x, w = pieces[:, 0], pieces[:, 1]
+    mean = float(np.sum(w * x) / w.sum())
+    if len(x) < 2:
+        return [mean, float("nan")]
+    k = len(x)
+    return [mean, float(np.sqrt(np.sum(w**2 * (x - mean) ** 2) * k / (k - 1)) / w.sum())]
 
 
 def _ratio(num, den):
-    """Σnum/Σden (K) with a jackknife error over blocks."""
+    """Σnum/Σden (K) with a jackknife error over pieces."""
     num, den = np.asarray(num), np.asarray(den)
     value = num.sum() / den.sum() / KB_KJ
     k = len(num)
@@ -459,7 +482,7 @@ def report(paths, outdir, name):
     for key in sorted(groups, key=lambda k: (k[0], k[4], k[2], k[1])):
         runs = groups[key]
         cat = {k: np.concatenate([r[k] for r in runs]) for k in ("T_tr", "T_rot", "U",
-                                                                  "U_frames", "D_segments")}
+                                                                  "U_frames", "D")}
         conf = np.concatenate([r["conf"] for r in runs], axis=1)
         d_runs = [r["D_run"] for r in runs]
         rows.append({"model": key[0], "code": key[1], "thermo": key[2], "tau_ps": key[3],
@@ -470,13 +493,13 @@ def report(paths, outdir, name):
                      "T_tr": _mean(cat["T_tr"]), "T_rot": _mean(cat["T_rot"]),
                      "Tconf_tr": _ratio(conf[0], conf[1]),
                      "Tconf_rot": _ratio(conf[2], conf[3]),
-                     "D_pbc": _mean(cat["D_segments"][np.isfinite(cat["D_segments"])]),
+                     "D_pbc": _mean(cat["D"]),
                      "D_runs": d_runs, "dof_tr": runs[0]["dof_tr"],
                      "ms_per_step": [r["meta"].get("ms_per_step") for r in runs],
                      "offsets": [r["offset"] for r in runs],
                      "offset_sd": [r["offset_sd"] for r in runs]})
-    results = {"temperature_K": TEMPERATURE_K, "block_ps": BLOCK_PS, "segment_ps": SEGMENT_PS,
-               "msd_fit_ps": MSD_FIT_PS, "groups": rows}
+    results = {"temperature_K": TEMPERATURE_K, "piece_ps": PIECE_PS, "msd_fit_ps": MSD_FIT_PS,
+               "groups": rows}
     return write_results(results, Path(outdir) / name, table(results))
 
 
@@ -485,8 +508,8 @@ def table(results):
         return f"{v[0]:.{digits}f} ± {v[1]:.{digits}f}"
 
     lines = [f"216 waters, one cell (0.9953 g/cm³ of TIP4P-Ew), 9 Å, LJ tail, PPPM/PME 1e-5, "
-             f"{TEMPERATURE_K:g} K; mean ± standard error over {BLOCK_PS:g} ps blocks "
-             f"(D: {SEGMENT_PS:g} ps segments, MSD fit {MSD_FIT_PS[0]:g}-{MSD_FIT_PS[1]:g} ps)",
+             f"{TEMPERATURE_K:g} K; mean ± standard error over runs and {PIECE_PS:g} ps "
+             f"pieces of longer ones (D: MSD fit {MSD_FIT_PS[0]:g}-{MSD_FIT_PS[1]:g} ps)",
              "U: kJ/mol per molecule (rigidmd's LAMMPS energy moved onto OpenMM's scale); "
              "U_frames: OpenMM's energy of the 1 ps frames; T in K (T_tr: dof column); "
              "D_PBC in 1e-5 cm²/s under the thermostat's friction",
@@ -578,8 +601,8 @@ def parse(argv=None):
 def main(argv=None):
     args = parse(argv)
     if args.quick:
-        global FRAME_FS, BLOCK_PS
-        FRAME_FS, BLOCK_PS = 100.0, 0.2  # series this short: frames every 0.1 ps
+        global FRAME_FS, PIECE_PS, MSD_FIT_PS
+        FRAME_FS, PIECE_PS, MSD_FIT_PS = 100.0, 0.2, (0.2, 0.4)  # series of a few ps
         args.outdir.mkdir(parents=True, exist_ok=True)
         files = []
         for code, thermo in (("rigidmd", "langevin"), ("openmm", "middle")):
