@@ -38,6 +38,8 @@ CHECKED_ELSEWHERE = (
      "runs its --quick form"),
     ("validation/water_openmm_nve.py", "an hour and more on 2 cores; "
      "tests/test_water_openmm.py runs its --quick form and a 27-water tracking check"),
+    ("validation/water_openmm_long.py", "each run as long as its --budget-s; "
+     "tests/test_water_openmm.py runs its --quick form"),
     ("examples/mace_water.py --quick", "tests/test_ml_potential.py runs it where mace-torch "
      "is installed (the ml extra, not the test extra)"),
     ("benchmarks/", "benchmarks measure speed or physics for minutes to hours; each is run "

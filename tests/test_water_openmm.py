@@ -209,3 +209,31 @@ def test_rigidmd_and_openmm_track_each_other_from_one_state(tmp_path):
     d05, d1 = (result["divergence"][k][10] for k in ("0.5", "1"))
     assert d05 < 1e-4
     assert d1 / d05 > 2.2
+
+
+@pytest.mark.slow
+def test_long_run_pipeline(tmp_path):
+    """``validation/water_openmm_long.py --quick``: a rigidmd (RigidLangevin) and an OpenMM
+    (LangevinMiddleIntegrator) run of 216 TIP4P-Ew waters, each stopped by a 10 s budget,
+    and their report (U, kinetic and configurational temperatures)."""
+    import json
+
+    script = benchmark_module("water_openmm_long")
+    result = script.main(["--quick", "--outdir", str(tmp_path)])
+    stored = json.loads((tmp_path / "water_openmm_long_quick.json").read_text())
+    assert stored["groups"] == json.loads(json.dumps(result["groups"]))
+    groups = {g["code"]: g for g in result["groups"]}
+    assert set(groups) == {"rigidmd", "openmm"}
+    assert groups["rigidmd"]["dof_tr"] == 3 * 216 - 3  # fixcm: the momentum is held
+    assert groups["openmm"]["dof_tr"] == 3 * 216  # Langevin noise moves the momentum
+    for g in groups.values():
+        assert g["ps"] > 0
+        # The start is liquid TIP4P-Ew at 298 K: U within 1 kJ/mol of -46.4, and the
+        # configurational temperatures of its first frames within 60 K of 298 K.
+        assert abs(g["U_frames"][0] + 46.4) < 1.0
+        for key in ("Tconf_tr", "Tconf_rot"):
+            assert abs(g[key][0] - 298) < 60, (key, g[key])
+    # rigidmd's LAMMPS energy holds a constant intramolecular Coulomb part; moved onto
+    # OpenMM's scale its frames agree with OpenMM's energy to PPPM against PME at 1e-5.
+    assert all(sd < 0.01 for sd in groups["rigidmd"]["offset_sd"])
+    assert abs(groups["rigidmd"]["U"][0] + 46.4) < 1.0

@@ -343,6 +343,24 @@ def openmm_system(state):
     return system
 
 
+def openmm_context(system, integrator, state):
+    """A one-thread CPU context at ``state``'s positions: (context, masses in amu, the
+    state's velocities in nm/ps, zero on massless sites)."""
+    import openmm
+    from openmm import unit
+
+    _, to_nm_ps = _units()
+    context = openmm.Context(system, integrator, openmm.Platform.getPlatformByName("CPU"),
+                             {"Threads": "1"})
+    masses = np.array([system.getParticleMass(i).value_in_unit(unit.dalton)
+                       for i in range(system.getNumParticles())])
+    context.setPositions(state["positions"] / 10)
+    context.computeVirtualSites()
+    v = np.zeros_like(state["positions"])
+    v[masses > 0] = state["momenta"][masses > 0] / masses[masses > 0, None] * to_nm_ps
+    return context, masses, v
+
+
 def run_openmm(state, dt_fs, ps, ensemble, tau_ps, track_ps, seed):
     """OpenMM from ``state``: the same series as :func:`run_rigidmd` (no own accounting)."""
     import openmm
@@ -357,14 +375,7 @@ def run_openmm(state, dt_fs, ps, ensemble, tau_ps, track_ps, seed):
     if ensemble == "langevin":  # velocities half a step off: kinetic columns not on-step
         integrator = openmm.LangevinMiddleIntegrator(TEMPERATURE_K, 1 / tau_ps, dt_fs * 1e-3)
         integrator.setRandomNumberSeed(seed)
-    context = openmm.Context(system, integrator, openmm.Platform.getPlatformByName("CPU"),
-                             {"Threads": "1"})
-    masses = np.array([system.getParticleMass(i).value_in_unit(unit.dalton)
-                       for i in range(system.getNumParticles())])
-    context.setPositions(state["positions"] / 10)
-    context.computeVirtualSites()
-    v = np.zeros_like(state["positions"])
-    v[masses > 0] = state["momenta"][masses > 0] / masses[masses > 0, None] * to_nm_ps
+    context, masses, v = openmm_context(system, integrator, state)
     rec = {"K_tr": [], "K_rot": [], "E": [], "frames": [], "O": []}
     ke_every, frame_every = _steps(dt_fs, KE_FS), _steps(dt_fs, FRAME_FS)
     track_steps = int(round(track_ps * 1000 / dt_fs))
@@ -510,9 +521,12 @@ def report(stems, outdir, name):
     cache = next(Path(outdir).glob("water_openmm_nve.start*.npz"), None)
     cell = np.load(cache)["cell"] if cache is not None else None
     results["divergence"] = divergences(tracks, cell) if cell is not None else {}
-    stem = Path(outdir) / name
+    return write_results(results, Path(outdir) / name, table(results))
+
+
+def write_results(results, stem, text):
+    """``<stem>.json`` (every number) and ``<stem>.txt`` (``text``, also printed)."""
     stem.with_suffix(".json").write_text(json.dumps(results, indent=1) + "\n")
-    text = table(results)
     stem.with_suffix(".txt").write_text(text + "\n")
     print(text)
     return results
@@ -630,11 +644,7 @@ def main(argv=None):
                   f"U {r['U_per_molecule'][0]:.4f} ({seconds:.0f} s)", flush=True)
             (stem.with_suffix(".json")).write_text(json.dumps(results, indent=1) + "\n")
     results["divergence"] = divergences(tracks, state["cell"])
-    (stem.with_suffix(".json")).write_text(json.dumps(results, indent=1) + "\n")
-    text = table(results)
-    stem.with_suffix(".txt").write_text(text + "\n")
-    print(text)
-    return results
+    return write_results(results, stem, table(results))
 
 
 if __name__ == "__main__":

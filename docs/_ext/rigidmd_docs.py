@@ -251,6 +251,8 @@ def configuration_reference():
                 if p.quantity == "seed":
                     allowed = "integer ≥ 0 (absent: a fresh random seed)"
                 default = "" if p.default is None else f"`{p.default}`"
+                if p.name == "fixcm":  # None: resolved by the dynamics
+                    default = "`true` (`false` with a barostat)"
                 add(f"| `{p.field}` | {p.quantity} | {unit} | "
                     f"{'yes' if p.required else 'no'} | {default} | {allowed} |\n")
             add("\n")

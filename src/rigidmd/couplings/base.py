@@ -422,7 +422,10 @@ class NoseHooverChain:
 
 
 def check_composition(couplings, fixcom: bool):
-    """Refuse what no dynamics can compose; returns the part that moves the cell, or None."""
+    """Refuse what no dynamics can compose; returns the part that moves the cell, or None.
+
+    Resolves a thermostat's ``fixcm=None``: True, or False when a part moves the cell.
+    """
     for part in couplings:
         if not isinstance(part, Coupling):
             raise TypeError(f"couplings must be coupling parts (rigidmd.couplings.base), "
@@ -431,9 +434,12 @@ def check_composition(couplings, fixcom: bool):
     if len(movers) > 1:
         raise ValueError(f"two parts move the cell ({movers[0].kind}, {movers[1].kind}); "
                          "use one barostat")
-    if movers and any(part.fixcm for part in couplings):
+    if movers and any(getattr(part, "fixcm_option", part.fixcm) for part in couplings):
         raise ValueError("thermostat fixcm=True with a barostat: the barostat's equations "
                          "count the centre of mass's degrees of freedom; use fixcm=False")
+    for part in couplings:  # a thermostat's fixcm=None: keep the momentum unless a barostat
+        if getattr(part, "fixcm_option", False) is None:
+            part.fixcm = not movers
     if movers and fixcom:
         raise ValueError("ase.constraints.FixCom with a barostat: the barostat's equations "
                          "count the centre of mass's degrees of freedom; remove FixCom")

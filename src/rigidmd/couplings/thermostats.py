@@ -7,7 +7,8 @@ angular momenta about the axes with a moment, point particles) for half a
 step before and after the deterministic step.  Temperatures count degrees of
 freedom as ASE does: no centre-of-mass correction unless the total momentum
 is kept (``fixcm=True`` or ASE's ``FixCom``), which removes 3, as LAMMPS
-always does (``6N - 3`` for N rigid waters).
+always does (``6N - 3`` for N rigid waters).  ``fixcm`` defaults to True
+unless a barostat moves the cell (see :class:`Thermostat`).
 
 :class:`RigidLangevin`, :class:`RigidBussi` and :class:`RigidNoseHoover` take
 the arguments of ASE's ``Langevin`` (``friction``), ``Bussi`` (``taut``) and
@@ -18,6 +19,8 @@ one thermostat part.  ``get_conserved_energy()`` returns the energy that the
 thermostatted dynamics conserves: total energy minus the energy the
 thermostat put in (Langevin, Bussi), or plus the chains' energy (Nosé–Hoover).
 """
+
+import warnings
 
 import numpy as np
 from ase import units
@@ -64,13 +67,26 @@ class Thermostat(Coupling):
     degrees of freedom, as ASE's ``Langevin(fixcm=True)`` does.  Long
     thermostatted runs then do not drift as a whole (a drift adds to a
     measured diffusion coefficient).
+
+    ``fixcm=None`` (the default of the parts) becomes True when the dynamics
+    is composed, or False if a barostat moves the cell (the barostats'
+    equations count the centre of mass; an explicit ``fixcm=True`` with a
+    barostat is refused).  Without it a global thermostat (Bussi,
+    Nosé–Hoover) rescales the total momentum with every other velocity; the
+    forces conserve it, so a zero momentum stays zero and the kinetic energy
+    of :math:`N_f` degrees of freedom lands on :math:`N_f - 3`: the system
+    then samples :math:`T N_f / (N_f - 3)`, 0.23 % above the target for 216
+    rigid waters and 1.9 % for 27.
     """
 
     section = "thermostat"
 
-    def __init__(self, temperature_K, fixcm=False):
+    def __init__(self, temperature_K, fixcm=None):
         self.temperature_K = check_temperature(temperature_K)
-        self.fixcm = check_flag("fixcm", fixcm)
+        #: What was asked: True, False or None (True unless a barostat moves the cell).
+        self.fixcm_option = None if fixcm is None else check_flag("fixcm", fixcm)
+        #: Whether the total momentum is kept; None until a dynamics resolves the option.
+        self.fixcm = self.fixcm_option
 
     @property
     def kT(self):
@@ -89,6 +105,32 @@ class Thermostat(Coupling):
         #: Translational degrees of freedom the thermostat acts on (3 fewer when it
         #: keeps the total momentum).
         self.n_translational = max(n - 3, 0) if self.holds_momentum else n
+
+    #: Whether :meth:`check_net_force` has warned (once per thermostat).
+    warned = False
+    #: Calls of :meth:`check_net_force`; it looks at every 8th (8 µs of NumPy for 216
+    #: bodies, a wall's contact lasts many steps).
+    net_force_calls = 0
+
+    def check_net_force(self, record) -> None:
+        """Warn once if the forces do not conserve the momentum that ``fixcm=None`` keeps.
+
+        A wall or an external field makes the centre of mass a thermal degree of
+        freedom: keeping the momentum then holds the rest at the target and leaves
+        it out of the count.  Pair forces cancel to roundoff and PPPM/PME to about
+        1e-5 of a force per atom; the threshold is 1e-3 of the summed magnitudes.
+        """
+        self.net_force_calls += 1
+        if self.net_force_calls % 8 != 1:
+            return
+        net = float(np.linalg.norm(record.F.sum(axis=0) + record.f.sum(axis=0)))
+        if net > 1e-3 * float(np.abs(record.F).sum() + np.abs(record.f).sum()):
+            self.warned = True
+            warnings.warn(
+                f"{self.kind} thermostat: it keeps the total momentum (fixcm=True, the "
+                f"default) but the forces do not conserve it (net force {net:.3g} eV/Å): "
+                "with a wall or an external field the centre of mass is a thermal degree "
+                "of freedom; pass fixcm=False", stacklevel=2)
 
     def centre_velocity(self, view: CouplingView) -> np.ndarray:
         """:math:`U = P / M` (Å / ASE time), shape (3,); zero unless the momentum is kept."""
@@ -115,6 +157,8 @@ class Thermostat(Coupling):
         m, record = view.model, view.record
         if not self.holds_momentum:
             return record.translational_energy, record.rotational_energy
+        if self.fixcm_option is None and not self.warned:
+            self.check_net_force(record)
         U = self.centre_velocity(view)
         K_cm = 0.5 * (m.mass.sum() + m.free_masses.sum()) * float(U @ U)
         return record.translational_energy - K_cm, record.rotational_energy
@@ -141,9 +185,10 @@ class Thermostat(Coupling):
 
     def fixcm_notes(self):
         """What the deck says about ``fixcm``, which LAMMPS's rigid thermostats do not have."""
-        if not self.fixcm:
+        if self.fixcm is False:
             return ()
-        return (f"rigidmd's {self.kind} thermostat keeps the total momentum (fixcm=True); "
+        when = "(fixcm=True)" if self.fixcm else "unless a barostat moves the cell (fixcm=None)"
+        return (f"rigidmd's {self.kind} thermostat keeps the total momentum {when}; "
                 "LAMMPS's rigid thermostat acts on it too, so statistics differ by 3 "
                 "degrees of freedom",)
 
@@ -154,7 +199,7 @@ class Thermostat(Coupling):
 class _Stochastic(Thermostat):
     """A thermostat that draws random numbers and keeps count of the energy it adds."""
 
-    def __init__(self, temperature_K, rng=None, fixcm=False):
+    def __init__(self, temperature_K, rng=None, fixcm=None):
         super().__init__(temperature_K, fixcm)
         self.rng = check_rng(rng)
         #: Energy the thermostat has put into the system so far (eV).
@@ -196,15 +241,16 @@ class LangevinThermostat(_Stochastic):
         :math:`\gamma`, per ASE time unit (``0.01 / ase.units.fs`` is 0.01 fs⁻¹),
         as in ASE's ``Langevin``.  ``friction * timestep`` must not exceed 0.5.
     rng : numpy.random.Generator, optional
-    fixcm : bool, default True
-        Keep the total momentum (see :class:`Thermostat`), as ASE's ``Langevin``.
+    fixcm : bool or None, default None
+        Keep the total momentum (see :class:`Thermostat`), as ASE's ``Langevin``;
+        None: True unless a barostat moves the cell.
     """
 
     kind = "langevin"
     parameters = (TEMPERATURE, Parameter("friction", "friction", "rate", example="0.01 1/fs"),
-                  SEED, fixcm_parameter(True))
+                  SEED, fixcm_parameter(None))
 
-    def __init__(self, temperature_K, friction, rng=None, fixcm=True):
+    def __init__(self, temperature_K, friction, rng=None, fixcm=None):
         super().__init__(temperature_K, rng, fixcm)
         self.friction = self._check_friction(friction)
 
@@ -243,6 +289,8 @@ class LangevinThermostat(_Stochastic):
 
     def first_half(self, view: CouplingView, h: float) -> None:
         s, m, kT, rng, record = view.state, view.model, self.kT, self.rng, view.record
+        if self.holds_momentum and self.fixcm_option is None and not self.warned:
+            self.check_net_force(record)
         before = record.translational_energy + record.rotational_energy
         U = self.centre_velocity(view)
         c = np.exp(-self.friction * h)
@@ -317,8 +365,9 @@ class BussiThermostat(_Stochastic):
     taut : float
         Relaxation time (ASE time units), as in ASE's ``Bussi``.
     rng : numpy.random.Generator, optional
-    fixcm : bool, default False
-        Keep the total momentum (see :class:`Thermostat`).
+    fixcm : bool or None, default None
+        Keep the total momentum (see :class:`Thermostat`); None: True unless a
+        barostat moves the cell.
 
     References
     ----------
@@ -327,9 +376,9 @@ class BussiThermostat(_Stochastic):
 
     kind = "bussi"
     parameters = (TEMPERATURE, Parameter("taut", "taut", "time", example="100 fs"), SEED,
-                  fixcm_parameter(False))
+                  fixcm_parameter(None))
 
-    def __init__(self, temperature_K, taut, rng=None, fixcm=False):
+    def __init__(self, temperature_K, taut, rng=None, fixcm=None):
         super().__init__(temperature_K, rng, fixcm)
         self.taut = check_time("taut", taut)
 
@@ -374,8 +423,9 @@ class NoseHooverThermostat(Thermostat):
         Chain length.
     tloop : int, default 1
         Sub-steps of each half-step chain update.
-    fixcm : bool, default False
-        Keep the total momentum (see :class:`Thermostat`).
+    fixcm : bool or None, default None
+        Keep the total momentum (see :class:`Thermostat`); None: True unless a
+        barostat moves the cell.
 
     References
     ----------
@@ -388,9 +438,9 @@ class NoseHooverThermostat(Thermostat):
     parameters = (TEMPERATURE, Parameter("tdamp", "tdamp", "time", example="100 fs"),
                   Parameter("tchain", "tchain", "integer", required=False, default=3),
                   Parameter("tloop", "tloop", "integer", required=False, default=1),
-                  fixcm_parameter(False))
+                  fixcm_parameter(None))
 
-    def __init__(self, temperature_K, tdamp, tchain=3, tloop=1, fixcm=False):
+    def __init__(self, temperature_K, tdamp, tchain=3, tloop=1, fixcm=None):
         super().__init__(temperature_K, fixcm)
         self._check_positive(self.temperature_K)
         self.tdamp = check_time("tdamp", tdamp)
@@ -511,8 +561,10 @@ class RigidLangevin(_Thermostatted):
         :math:`\gamma`, per ASE time unit (``0.01 / ase.units.fs`` is 0.01 fs⁻¹),
         as in ASE's ``Langevin``.  ``friction * timestep`` must not exceed 0.5.
     rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
-    fixcm : bool, default True
-        Keep the total momentum (no drift of the whole system), as ASE's ``Langevin``.
+    fixcm : bool or None, default None
+        Keep the total momentum (no drift of the whole system), as ASE's ``Langevin``;
+        None is True, with a warning at the first step if the forces do not conserve the
+        momentum (a wall, an external field: pass False there).
     **kwargs
         ``bodies``, ``integrator``, ``integrator_options``, ``trajectory``,
         ``logfile``, ``loginterval``, ``backend`` as for
@@ -520,7 +572,7 @@ class RigidLangevin(_Thermostatted):
     """
 
     def __init__(self, atoms, timestep, temperature_K=None, friction=None, *, rng=None,
-                 fixcm=True, **kwargs):
+                 fixcm=None, **kwargs):
         _required("RigidLangevin", temperature_K=temperature_K, friction=friction)
         super().__init__(atoms, timestep,
                          LangevinThermostat(temperature_K, friction, rng, fixcm), **kwargs)
@@ -550,8 +602,14 @@ class RigidBussi(_Thermostatted):
     taut : float
         Relaxation time (ASE time units), as in ASE's ``Bussi``.
     rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
-    fixcm : bool, default False
-        Keep the total momentum (no drift of the whole system).
+    fixcm : bool or None, default None
+        Keep the total momentum (no drift of the whole system) and count 3 fewer
+        degrees of freedom; None is True, with a warning at the first step if the
+        forces do not conserve the momentum (a wall, an external field: pass False
+        there).  With False the thermostat acts on the centre of mass too; from a
+        zero total momentum (which the forces and the rescaling keep zero) the
+        system then samples :math:`T\cdot 6N/(6N-3)` for N rigid molecules
+        (+0.7 K at 298 K and 216 waters), as LAMMPS's ``fix rigid/nvt``.
     **kwargs
         As for :class:`~rigidmd.core.dynamics.RigidDynamics`.
 
@@ -561,7 +619,7 @@ class RigidBussi(_Thermostatted):
     """
 
     def __init__(self, atoms, timestep, temperature_K=None, taut=None, *, rng=None,
-                 fixcm=False, **kwargs):
+                 fixcm=None, **kwargs):
         _required("RigidBussi", temperature_K=temperature_K, taut=taut)
         super().__init__(atoms, timestep, BussiThermostat(temperature_K, taut, rng, fixcm),
                          **kwargs)
@@ -591,8 +649,11 @@ class RigidNoseHoover(_Thermostatted):
         Chain length.
     tloop : int, default 1
         Sub-steps of each half-step chain update.
-    fixcm : bool, default False
-        Keep the total momentum (no drift of the whole system).
+    fixcm : bool or None, default None
+        Keep the total momentum (no drift of the whole system) and count 3 fewer
+        degrees of freedom; None is True, with a warning if the forces do not
+        conserve the momentum (see :class:`RigidBussi`; False acts on all
+        :math:`6N`, as LAMMPS's ``fix rigid/nvt``).
     **kwargs
         As for :class:`~rigidmd.core.dynamics.RigidDynamics`.
 
@@ -604,7 +665,7 @@ class RigidNoseHoover(_Thermostatted):
     """
 
     def __init__(self, atoms, timestep, temperature_K=None, tdamp=None, tchain=3, tloop=1,
-                 *, fixcm=False, **kwargs):
+                 *, fixcm=None, **kwargs):
         _required("RigidNoseHoover", temperature_K=temperature_K, tdamp=tdamp)
         super().__init__(atoms, timestep,
                          NoseHooverThermostat(temperature_K, tdamp, tchain, tloop, fixcm),

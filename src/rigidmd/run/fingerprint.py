@@ -127,6 +127,11 @@ def earlier_release_differences(config, checkpoint):
     stored = {COUPLINGS[entry["parameters"]["kind"]].section: _plain(entry["parameters"])
               for entry in meta["couplings"] if entry["parameters"]["kind"] in COUPLINGS}
     current = {part.section: _plain(part.todict()) for part in config.coupling.parts()}
+    for section, parameters in current.items():
+        # fixcm left to its default: the run continues with the value it stored
+        if parameters.get("fixcm", False) is None:
+            del parameters["fixcm"]
+            stored.get(section, {}).pop("fixcm", None)
     differing += [section for section in ("thermostat", "barostat")
                   if stored.get(section) != current.get(section)]
     return differing
