@@ -24,12 +24,14 @@ centres of mass, point particles and cell moved); the evaluator never keeps it.
 
 import numpy as np
 from ase import Atoms
-from ase.calculators.calculator import PropertyNotImplementedError
+from ase.calculators.calculator import BaseCalculator, PropertyNotImplementedError
+from ase.stress import voigt_6_to_full_3x3_stress
 
 from rigidmd.core import _numba
 from rigidmd.core import observables as obs
 from rigidmd.core import operators as ops
 from rigidmd.core.bodies import check_bodies_fit
+from rigidmd.core.dof import RigidBodyDOF
 from rigidmd.core.link import BodyLink
 from rigidmd.core.record import StepRecord
 from rigidmd.core.state import RigidState
@@ -41,7 +43,7 @@ class NonFiniteForceError(ValueError):
     """The calculator returned a force, energy or stress that is NaN or infinite."""
 
 
-def calculate_together(calc, atoms: Atoms, names) -> None:
+def calculate_together(calc, atoms: Atoms, names) -> bool:
     """Have an ASE calculator compute several properties in one call.
 
     What :meth:`ase.calculators.calculator.BaseCalculator.get_property` does
@@ -50,9 +52,15 @@ def calculate_together(calc, atoms: Atoms, names) -> None:
     twice (and LAMMPS, for one, would evaluate the forces twice).
     Calculators without ASE's ``calculate``/``check_state`` are left alone
     (their properties are then asked one by one).
+
+    Returns
+    -------
+    bool
+        True when ``calc.results`` now hold the properties of ``atoms`` as
+        they are (False: the calculator was left alone).
     """
     if not (hasattr(calc, "calculate") and hasattr(calc, "check_state")):
-        return
+        return False
     names = [name for name in names if name in getattr(calc, "implemented_properties", names)]
     changes = calc.check_state(atoms)
     if changes:
@@ -63,6 +71,23 @@ def calculate_together(calc, atoms: Atoms, names) -> None:
         if getattr(calc, "use_cache", True):
             calc.atoms = atoms.copy()
         calc.calculate(atoms, missing, changes)
+    return True
+
+
+def _reads_results(calc, atoms: Atoms) -> bool:
+    """Whether ``atoms.get_forces``/``get_stress`` would only copy ``calc.results``.
+
+    True for a calculator that keeps ASE's own ``get_property``, ``get_forces``
+    and ``get_stress`` on atoms with no constraint but rigidmd's own
+    :class:`~rigidmd.core.dof.RigidBodyDOF` (which changes neither forces nor
+    stress): the results just computed can then be read without the further
+    ``check_state`` comparisons of the positions that those getters make.
+    """
+    kind = type(calc)
+    return (all(type(c) is RigidBodyDOF for c in atoms.constraints)
+            and getattr(kind, "get_property", None) is BaseCalculator.get_property
+            and getattr(kind, "get_forces", None) is BaseCalculator.get_forces
+            and getattr(kind, "get_stress", None) is BaseCalculator.get_stress)
 
 
 class ForceEvaluator:
@@ -152,15 +177,21 @@ class ForceEvaluator:
             atoms.set_cell(state.cell)
             record.cell_changed()
         together = self.stress or self._energy or self._stress
+        results = None  # the calculator's results, when they are known to be this call's
         if together:
             wanted = ["forces"]
             if self.stress or (self._stress and atoms.pbc.all()):
                 wanted.append("stress")  # a barostat, or an observer (a stress recorder)
             if self._energy:
                 wanted.append("energy")  # a logger will ask: one calculator call, not two
-            if len(wanted) > 1:
-                calculate_together(atoms.calc, atoms, wanted)
-        forces = np.asarray(atoms.get_forces(md=True), dtype=float)
+            calc = atoms.calc
+            if (len(wanted) > 1 and calculate_together(calc, atoms, wanted)
+                    and _reads_results(calc, atoms) and "forces" in calc.results):
+                results = calc.results
+        if results is not None:  # what atoms.get_forces would copy, without its checks
+            forces = np.array(results["forces"], dtype=float)
+        else:
+            forces = np.asarray(atoms.get_forces(md=True), dtype=float)
         if forces.shape != self._shape:
             raise ValueError(f"calculator returned forces of shape {forces.shape}, "
                              f"expected {(len(atoms), 3)}")
@@ -177,7 +208,12 @@ class ForceEvaluator:
                     f"after step {self.step}; the atoms are left at step {self.step}")
             record.energy = float(energy)
         if self.stress:
-            record.virial = self.molecular_virial(forces)
+            stress = None
+            if results is not None and "stress" in results:
+                stress = np.asarray(results["stress"], dtype=float)
+                if stress.shape == (6,):
+                    stress = voigt_6_to_full_3x3_stress(stress)
+            record.virial = self.molecular_virial(forces, stress)
         return forces
 
     def check_forces(self, forces: np.ndarray) -> None:
@@ -189,16 +225,22 @@ class ForceEvaluator:
                 f"calculator returned non-finite forces on atom(s) {bad[:10].tolist()} "
                 f"after step {self.step}; the atoms are left at step {self.step}")
 
-    def molecular_virial(self, forces: np.ndarray) -> np.ndarray:
-        r"""The molecular virial (eV, 3x3) at the atoms as placed: atomic less intramolecular."""
+    def molecular_virial(self, forces: np.ndarray,
+                         stress: np.ndarray | None = None) -> np.ndarray:
+        r"""The molecular virial (eV, 3x3) at the atoms as placed: atomic less intramolecular.
+
+        ``stress`` (eV/Å³, 3x3) is the calculator's stress of these positions when the
+        caller already has it; otherwise it is asked through ``atoms.get_stress``.
+        """
         atoms = self.atoms
-        try:
-            stress = atoms.get_stress(voigt=False, include_ideal_gas=False)
-        except PropertyNotImplementedError:
-            raise PropertyNotImplementedError(
-                f"the calculator {type(atoms.calc).__name__} provides no stress, so the "
-                "pressure is unknown; use a calculator with stress (e.g. "
-                "rigidmd.lammps.LAMMPSCalculator)") from None
+        if stress is None:
+            try:
+                stress = atoms.get_stress(voigt=False, include_ideal_gas=False)
+            except PropertyNotImplementedError:
+                raise PropertyNotImplementedError(
+                    f"the calculator {type(atoms.calc).__name__} provides no stress, so the "
+                    "pressure is unknown; use a calculator with stress (e.g. "
+                    "rigidmd.lammps.LAMMPSCalculator)") from None
         stress = np.asarray(stress, dtype=float)
         if not np.isfinite(stress.sum()):
             raise NonFiniteForceError(f"calculator returned a non-finite stress "
