@@ -487,6 +487,28 @@ def test_one_npt_step_evaluates_everything_once(monkeypatch, backend):
                       "rotational_kinetic_energy": 1}
 
 
+def test_reading_the_call_s_results_directly_changes_no_bit():
+    """The evaluator reads forces and stress from the one call's results; a calculator that
+    overrides ASE's getters takes the old route through ``atoms.get_forces``/``get_stress``.
+    Both must give the same MTK trajectory to the last bit."""
+    from ase.calculators.calculator import BaseCalculator
+
+    def trajectory(getters_overridden):
+        atoms = dimer_fluid(n_side=4, rc=7.0)
+        if getters_overridden:
+            class Overriding(type(atoms.calc)):
+                def get_forces(self, atoms=None):
+                    return BaseCalculator.get_forces(self, atoms)
+
+            atoms.calc.__class__ = Overriding
+        dyn = npt(atoms, "mtk")
+        dyn.run(20)
+        return atoms.get_positions(), atoms.get_momenta(), atoms.cell.array.copy()
+
+    for direct, routed in zip(trajectory(False), trajectory(True), strict=True):
+        np.testing.assert_array_equal(direct, routed)
+
+
 def test_trial_energy_of_a_cell_and_restore_without_a_call():
     """The seam a Monte Carlo barostat uses: the energy of a trial cell in one call, and a
     rejection that puts atoms and calculator back without another call."""

@@ -191,6 +191,9 @@ class Coupling:
     needs_energy: ClassVar[bool] = False
     #: Whether the part keeps the total momentum (a thermostat's ``fixcm``).
     fixcm: bool = False
+    #: The ``fixcm`` asked for; None: :func:`check_composition` decides (True unless a
+    #: barostat moves the cell).
+    fixcm_option: bool | None = False
     #: Names of the columns the part adds to the MD log (values from :meth:`log_values`).
     log_columns: ClassVar[tuple] = ()
 
@@ -434,11 +437,11 @@ def check_composition(couplings, fixcom: bool):
     if len(movers) > 1:
         raise ValueError(f"two parts move the cell ({movers[0].kind}, {movers[1].kind}); "
                          "use one barostat")
-    if movers and any(getattr(part, "fixcm_option", part.fixcm) for part in couplings):
+    if movers and any(part.fixcm_option for part in couplings):
         raise ValueError("thermostat fixcm=True with a barostat: the barostat's equations "
                          "count the centre of mass's degrees of freedom; use fixcm=False")
     for part in couplings:  # a thermostat's fixcm=None: keep the momentum unless a barostat
-        if getattr(part, "fixcm_option", False) is None:
+        if part.fixcm_option is None:
             part.fixcm = not movers
     if movers and fixcom:
         raise ValueError("ase.constraints.FixCom with a barostat: the barostat's equations "
