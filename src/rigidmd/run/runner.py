@@ -174,17 +174,15 @@ class Run:
     def _relax(self, atoms, bodies, start, continuing):
         """The ``relax:`` section on ``atoms``, then velocities for the relaxed bodies.
 
-        A relaxation that stops (a signal) or falls short of ``relax.steps``
-        leaves a checkpoint of the run's start (``start``, a dynamics of its
-        unrelaxed atoms) at step 0 that records it: ``--resume`` then continues
-        the relaxation from the last frame of its trajectory, and the MD after it.
+        The checkpoint of the run's start (``start``, a dynamics of its
+        unrelaxed atoms) at step 0 that records the relaxation is written before
+        it begins, so a relaxation that stops (a signal), falls short of
+        ``relax.steps``, fails or is killed outright (SIGKILL, a node lost) can
+        be continued: ``--resume`` continues it from the last frame of its
+        trajectory, and the MD after it.  The MD's own step-0 checkpoint
+        replaces it.
         """
-        from rigidmd.relax.structure import (
-            RelaxationNotConverged,
-            RelaxationStopped,
-            continue_from,
-            relax_structure,
-        )
+        from rigidmd.relax.structure import continue_from, relax_structure
 
         section, directory = self.config.relax, self.outputs.directory
         done = 0
@@ -192,12 +190,10 @@ class Run:
             done = continue_from(atoms, directory / section.trajectory)
             print(f"continuing the relaxation of {directory / section.trajectory} after step "
                   f"{done}", file=self.stream)
-        try:
-            relax_structure(atoms, bodies, section, directory, self.stream, resume=continuing,
-                            done=done, hint=self._resume_hint(), stop=StopSignals())
-        except (RelaxationStopped, RelaxationNotConverged):
+        else:
             self.checkpoints.write(start, relaxation=str(section.trajectory))
-            raise
+        relax_structure(atoms, bodies, section, directory, self.stream, resume=continuing,
+                        done=done, hint=self._resume_hint(), stop=StopSignals())
         self._draw_velocities(atoms, bodies)
 
     def _resumed_dynamics(self):
@@ -208,7 +204,12 @@ class Run:
         checkpoint = self.checkpoints.read_for_resume()
         if checkpoint.nsteps == 0 and checkpoint.extra.get("relaxation") and \
                 self.config.relax is not None:
-            # Stopped while relaxing: the relaxation goes on, then the MD.
+            # Stopped while relaxing: the relaxation goes on, then the MD; killed before
+            # its first frame, the run starts again.
+            if not _holds_a_frame(out.directory / self.config.relax.trajectory):
+                print(f"the relaxation had written no frame of {self.config.relax.trajectory}: "
+                      "starting the run again", file=self.stream)
+                return self._new_dynamics(replace=True)
             return self._new_dynamics(relaxation=True)
         if checkpoint.nsteps == 0:
             # Killed before its first interval checkpoint: the step-0 checkpoint holds the
@@ -365,3 +366,14 @@ class Run:
                       "continues from it (cutting back the outputs written after it)",
                       file=self.stream)
         return status, interrupted
+
+
+def _holds_a_frame(trajectory):
+    """Whether the ASE trajectory file ``trajectory`` exists and holds a whole frame."""
+    from ase.io.trajectory import Trajectory
+
+    try:
+        with Trajectory(trajectory) as frames:
+            return len(frames) > 0
+    except Exception:  # missing, empty or cut before its first frame  # noqa: BLE001
+        return False
