@@ -6,6 +6,7 @@ bodies and point particles), at 250 K, held by a spherical wall.  Statistical er
 from block averages (see ``block_error``); bounds are 4 standard errors.
 """
 
+import warnings
 from functools import cache
 
 import numpy as np
@@ -62,7 +63,7 @@ def make(system):
 
 
 @cache
-def sample(name, system):
+def sampled(name, system):
     """Kinetic energies (translational, rotational, free atoms) and conserved energy."""
     atoms = make(system)
     if name == "nve":
@@ -91,6 +92,18 @@ def sample(name, system):
     dyn.attach(record, interval=EVERY)
     dyn.run(PRODUCTION)
     return dyn, np.array(rows)
+
+
+def sample(name, system):
+    """:func:`sampled`, checking what it warns: Langevin keeps the momentum (fixcm=True,
+    its default as in ASE's) against the wall, and a warning says so; nothing else."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = sampled(name, system)
+    said = [str(w.message) for w in caught]
+    expected = "but the forces do not conserve it" if name == "langevin" else None
+    assert all(expected and expected in message for message in said), said
+    return result
 
 
 def block_error(values, statistic=np.mean):
