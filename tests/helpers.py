@@ -48,6 +48,7 @@ def water_box_27(temperature_K=None):
                                 rng=np.random.default_rng(3))
     return atoms
 
+
 # Coulomb constant in eV Å / e².
 KE = units.Hartree * units.Bohr
 
@@ -490,7 +491,6 @@ def sample(kind, pressure_bar=None, scale=1.0, steps=12000):
     return np.array(rows)
 
 
-
 def processes_named(name):
     """PIDs of running processes whose executable is ``name`` (zombies excluded)."""
     found = []
@@ -614,6 +614,8 @@ def start_by_hand(engine, directory):
     thread = threading.Thread(target=start)
     thread.start()
     return thread, started
+
+
 def finish(proc):
     stdout, stderr = proc.communicate(timeout=600)
     return proc.returncode, stdout, stderr
@@ -649,8 +651,6 @@ def run_here(path, monkeypatch, capsys, *args):
 def messages(err):
     """stderr without the progress lines."""
     return [line for line in err.splitlines() if not line.startswith("[")]
-
-
 
 
 def file_bytes(path):

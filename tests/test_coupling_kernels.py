@@ -219,6 +219,7 @@ def test_crescale_move_and_bookkeeping_are_the_reference(couple, argon):
     baro.first_half(dyn.view, h)  # draws this step's noise
     noise = baro._noise
     # The move, then (with the force call's virial as it stands) the second half.
+
     def move_and_book(view):
         baro._noise = noise
         dyn.record.cell_move = None

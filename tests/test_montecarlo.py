@@ -98,6 +98,7 @@ def test_proposals_move_what_they_say():
         np.testing.assert_array_equal(np.delete(new, k, axis=1), np.delete(cell, k, axis=1))
         assert np.linalg.det(new) == pytest.approx(volume * np.exp(-0.02), rel=1e-14)
     # tri: the lengths (as aniso) and the reduced tilts t1 = bx/ax, t2 = cx/ax, t3 = cy/by.
+
     def tilts(h):
         return np.array([h[1, 0] / h[0, 0], h[2, 0] / h[0, 0], h[2, 1] / h[1, 1]])
 

@@ -122,7 +122,6 @@ def changed_properties(old: Atoms, atoms: Atoms, tol: float = 1e-15):
     return changes
 
 
-
 #: A body turning more than this per step (rad) means the step is too large.  Measured on
 #: 27 TIP3P waters at 300 K over 1 ps: the largest |omega| dt is 0.07, 0.14, 0.25 and
 #: 0.33 rad at 1, 2, 4 and 6 fs.

@@ -62,6 +62,7 @@ from rigidmd.couplings.base import CouplingView, check_composition, export_parts
 __all__ = ["RigidDynamics", "RigidVerlet", "RigidBodyDOF", "NonFiniteForceError",
            "check_timestep"]
 
+
 class RigidDynamics(RigidObservables, MolecularDynamics):
     r"""Rigid-body molecular dynamics: an integrator scheme and optional coupling parts.
 
