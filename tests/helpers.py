@@ -28,6 +28,18 @@ DATA = Path(__file__).with_name("data")
 PPPM_27 = ["pair_style lj/cut/coul/long 4.5", "pair_coeff * * 0.0 1.0",
            "pair_coeff O O 0.0065956819 3.15061", "kspace_style pppm 1e-5"]
 
+#: A ``rigidmd run``/``rigidmd relax`` configuration with a ``relax:`` section (STEPS: its
+#: steps): 6 waters of a cluster, TIP3P, 20 MD steps after the relaxation.
+RELAX_CONFIG = """
+structure: {builtin: water_cluster, n_molecules: 6, seed: 2}
+calculator: {name: tip3p, options: {rc: 40.0}}
+velocities: {temperature: 50 K, seed: 1}
+timestep: 1 fs
+steps: 20
+outputs: {directory: out, trajectory: md.traj, log: md.log, interval: 10}
+relax: {fmax: 0.01, steps: STEPS, optimizer: FIRE}
+"""
+
 
 def water_box_27(temperature_K=None):
     """The stored periodic box of 27 waters (``data/water_box_27.traj``), TIP3P charges.

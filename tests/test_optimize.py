@@ -6,7 +6,14 @@ from ase import Atoms, units
 from ase.calculators.tip3p import TIP3P
 from ase.calculators.tip4p import TIP4P
 from ase.constraints import FixAtoms, FixBondLengths, FixCom
-from helpers import CoulombLJ, ZeroStress, dimer_fluid, water_dimer, water_parameters
+from helpers import (
+    RELAX_CONFIG,
+    CoulombLJ,
+    ZeroStress,
+    dimer_fluid,
+    water_dimer,
+    water_parameters,
+)
 
 from rigidmd.relax.filter import RigidFilter, relax
 from rigidmd.systems import water_cluster
@@ -250,17 +257,6 @@ def rigidmd(*args, cwd):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     return subprocess.run([sys.executable, "-m", "rigidmd.run.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, env=env, timeout=600)
-
-
-RELAX_CONFIG = """
-structure: {builtin: water_cluster, n_molecules: 6, seed: 2}
-calculator: {name: tip3p, options: {rc: 40.0}}
-velocities: {temperature: 50 K, seed: 1}
-timestep: 1 fs
-steps: 20
-outputs: {directory: out, trajectory: md.traj, log: md.log, interval: 10}
-relax: {fmax: 0.01, steps: STEPS, optimizer: FIRE}
-"""
 
 
 def test_relax_command_and_relax_section_before_md(tmp_path):

@@ -11,21 +11,14 @@ its trajectory, then runs the MD.  Before, the run left ``relax.traj`` and
 import numpy as np
 from ase.calculators.tip3p import TIP3P
 from ase.io import read
-from helpers import finish, start, start_cli_run, wait_for_lines
+from helpers import RELAX_CONFIG, finish, start, start_cli_run, wait_for_lines
 
 from rigidmd.relax.filter import RigidFilter
 
 # 64 waters to fmax 2e-5 eV/Å: about 370 FIRE steps (2-3 s here), so the kill after 20
 # lines of the relaxation's log lands in it, and what is left takes a few seconds.
-CONFIG = """
-structure: {builtin: water_cluster, n_molecules: 64, seed: 2}
-calculator: {name: tip3p, options: {rc: 40.0}}
-velocities: {temperature: 50 K, seed: 1}
-timestep: 1 fs
-steps: 20
-outputs: {directory: out, trajectory: md.traj, log: md.log, interval: 10}
-relax: {fmax: 0.00002, steps: 5000, optimizer: FIRE}
-"""
+CONFIG = RELAX_CONFIG.replace("n_molecules: 6", "n_molecules: 64").replace(
+    "fmax: 0.01, steps: STEPS", "fmax: 0.00002, steps: 5000")
 
 
 def test_a_run_killed_while_relaxing_resumes_the_relaxation(tmp_path):
