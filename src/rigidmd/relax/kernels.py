@@ -24,7 +24,7 @@ import numpy as np
 from rigidmd.core._numba import jit
 
 __all__ = ["dot", "axpy", "pair_graph", "cell_list_pairs", "laplacian_product",
-           "conjugate_gradient"]
+           "conjugate_gradient", "orientations", "body_gradient"]
 
 
 @jit
@@ -364,3 +364,130 @@ def conjugate_gradient(indptr, indices, weights, diagonal, b, tol, maxiter, mean
             for c in range(k):
                 p[i, c] = z[i, c] + beta[c] * p[i, c]
     return x, iterations
+
+
+# ---------------------------------------------------------------- the filter's rows, fused
+@jit
+def orientations(q_ref, x, lengths, linear, q):
+    r"""``q = q_ref ⊗ exp(φ)`` with :math:`\varphi_b = x_b/\ell_b` (0 about a linear body's axis).
+
+    The arithmetic of :meth:`rigidmd.relax.filter.RigidFilter`'s NumPy route
+    (:func:`rigidmd.relax.rotation.rotation_quaternion` and
+    :func:`rigidmd.core.quaternion.multiply`), term for term, in one loop over bodies.
+
+    Parameters
+    ----------
+    q_ref : numpy.ndarray, shape (n, 4)
+    x : numpy.ndarray, shape (n, 3)
+        The rotation rows :math:`\ell_b\varphi_b` (Å).
+    lengths : numpy.ndarray, shape (n,)
+        :math:`\ell_b` (Å).
+    linear : numpy.ndarray of bool, shape (n,)
+    q : numpy.ndarray, shape (n, 4)
+        Filled.
+    """
+    for b in range(q_ref.shape[0]):
+        p0, p1, p2 = _phi(x, lengths, linear, b)
+        angle = np.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+        half = 0.5 * angle
+        if angle < 1e-4:  # sin(θ/2)/θ by its series
+            factor = 0.5 - angle * angle / 48.0
+        else:
+            factor = np.sin(half) / angle
+        rw, rx, ry, rz = np.cos(half), factor * p0, factor * p1, factor * p2
+        qw, qx, qy, qz = q_ref[b, 0], q_ref[b, 1], q_ref[b, 2], q_ref[b, 3]
+        q[b, 0] = qw * rw - qx * rx - qy * ry - qz * rz
+        q[b, 1] = qw * rx + qx * rw + qy * rz - qz * ry
+        q[b, 2] = qw * ry - qx * rz + qy * rw + qz * rx
+        q[b, 3] = qw * rz + qx * ry - qy * rx + qz * rw
+
+
+@jit
+def _phi(x, lengths, linear, b):
+    length = lengths[b]
+    return (0.0 if linear[b] else x[b, 0] / length), x[b, 1] / length, x[b, 2] / length
+
+
+@jit
+def body_gradient(forces, r, order, bounds, q, x, lengths, linear, fixed, F, tau, g):
+    r"""Body forces, lab torques and the rotation rows' gradient, in one loop over bodies.
+
+    :math:`F_b = \sum_{i\in b} f_i`, :math:`\tau_b = \sum_{i\in b} r_i\times f_i`
+    (summed as NumPy's ``add.reduceat`` sums a short segment: the first term plus
+    the sum of the rest, :func:`rigidmd.core.operators.reduce_forces`), and
+    :math:`g_b = J_r(\varphi_b)^\mathsf{T} R(q_b)^\mathsf{T}\tau_b/\ell_b`
+    (:func:`rigidmd.relax.rotation.right_jacobian_transpose`, 0 about a linear
+    body's axis), 0 for a fixed body (its force and torque are kept).
+
+    Parameters
+    ----------
+    forces : numpy.ndarray, shape (n_atoms, 3)
+        eV/Å, in atom order.
+    r : numpy.ndarray, shape (n_body_atoms, 3)
+        Lab displacements from the centres (Å), in ``order``.
+    order, bounds : numpy.ndarray of int
+        As in :class:`rigidmd.core.model.BodyModel`.
+    q : numpy.ndarray, shape (n, 4)
+        The orientations ``r`` was placed with.
+    x, lengths, linear :
+        As for :func:`orientations`.
+    fixed : numpy.ndarray of bool, shape (n,)
+    F, tau, g : numpy.ndarray, shape (n, 3)
+        Filled: eV/Å, eV (lab frame), eV/Å.
+    """
+    for b in range(q.shape[0]):
+        start, end = bounds[b], bounds[b + 1]
+        i = order[start]
+        f0, f1, f2 = forces[i, 0], forces[i, 1], forces[i, 2]
+        t0 = r[start, 1] * f2 - r[start, 2] * f1
+        t1 = r[start, 2] * f0 - r[start, 0] * f2
+        t2 = r[start, 0] * f1 - r[start, 1] * f0
+        if end - start > 1:
+            i = order[start + 1]
+            a0, a1, a2 = forces[i, 0], forces[i, 1], forces[i, 2]
+            s0 = r[start + 1, 1] * a2 - r[start + 1, 2] * a1
+            s1 = r[start + 1, 2] * a0 - r[start + 1, 0] * a2
+            s2 = r[start + 1, 0] * a1 - r[start + 1, 1] * a0
+            for j in range(start + 2, end):
+                i = order[j]
+                c0, c1, c2 = forces[i, 0], forces[i, 1], forces[i, 2]
+                a0 += c0
+                a1 += c1
+                a2 += c2
+                s0 += r[j, 1] * c2 - r[j, 2] * c1
+                s1 += r[j, 2] * c0 - r[j, 0] * c2
+                s2 += r[j, 0] * c1 - r[j, 1] * c0
+            f0, f1, f2 = f0 + a0, f1 + a1, f2 + a2
+            t0, t1, t2 = t0 + s0, t1 + s1, t2 + s2
+        F[b, 0], F[b, 1], F[b, 2] = f0, f1, f2
+        tau[b, 0], tau[b, 1], tau[b, 2] = t0, t1, t2
+        if fixed[b]:
+            g[b, 0] = g[b, 1] = g[b, 2] = 0.0
+            continue
+        # R(q)^T tau = tau + w t + u x t, t = 2 u x tau, u = -(x, y, z) of q.
+        w, u0, u1, u2 = q[b, 0], -q[b, 1], -q[b, 2], -q[b, 3]
+        c0 = 2.0 * (u1 * t2 - u2 * t1)
+        c1 = 2.0 * (u2 * t0 - u0 * t2)
+        c2 = 2.0 * (u0 * t1 - u1 * t0)
+        v0 = t0 + w * c0 + (u1 * c2 - u2 * c1)
+        v1 = t1 + w * c1 + (u2 * c0 - u0 * c2)
+        v2 = t2 + w * c2 + (u0 * c1 - u1 * c0)
+        # J_r(phi)^T v = v + a phi x v + b phi x (phi x v).
+        p0, p1, p2 = _phi(x, lengths, linear, b)
+        angle = np.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+        if angle < 1e-3:
+            ca = 0.5 - angle * angle / 24.0
+            cb = 1.0 / 6.0 - angle * angle / 120.0
+        else:
+            ca = (1.0 - np.cos(angle)) / (angle * angle)
+            cb = (angle - np.sin(angle)) / (angle * angle * angle)
+        d0 = p1 * v2 - p2 * v1
+        d1 = p2 * v0 - p0 * v2
+        d2 = p0 * v1 - p1 * v0
+        e0 = p1 * d2 - p2 * d1
+        e1 = p2 * d0 - p0 * d2
+        e2 = p0 * d1 - p1 * d0
+        length = lengths[b]
+        g[b, 0] = 0.0 if linear[b] else (v0 + ca * d0 + cb * e0) / length
+        g[b, 1] = (v1 + ca * d1 + cb * e1) / length
+        g[b, 2] = (v2 + ca * d2 + cb * e2) / length
