@@ -113,13 +113,19 @@ def pair_graph(centres, cell, first, second, shifts, r_cut, r_nn, decay):
 
 
 @jit
-def cell_list_pairs(fractional, cell, nbin, periodic, r_list):
+def cell_list_pairs(fractional, whole, cell, nbin, periodic, r_list):
     """Pairs of points closer than ``r_list``, each once, with their cell shifts: a cell list.
+
+    The points are sorted by bin; each bin is paired with itself and with 13 of
+    its 26 neighbours (the other 13 pair with it from their side), so every pair
+    of bins, and so every pair of points, is visited once, over contiguous runs.
 
     Parameters
     ----------
     fractional : numpy.ndarray, shape (m, 3)
         The points in the cell's coordinates, in ``[0, 1)`` (``[0, 1]`` along an open axis).
+    whole : numpy.ndarray, shape (m, 3)
+        Whole numbers: the points as given are at ``(fractional + whole) @ cell``.
     cell : numpy.ndarray, shape (3, 3)
         The cell's rows (Å; along an open axis, a box around the points).
     nbin : numpy.ndarray of int, shape (3,)
@@ -134,79 +140,72 @@ def cell_list_pairs(fractional, cell, nbin, periodic, r_list):
     -------
     first, second : numpy.ndarray of int, shape (p,)
     shifts : numpy.ndarray, shape (p, 3)
-        ``(fractional[second] - fractional[first] + shifts) @ cell`` is the pair's vector.
+        Whole numbers: ``(fractional[second] + whole[second] - fractional[first]
+        - whole[first] + shifts) @ cell`` is the pair's vector.
     """
     m = fractional.shape[0]
+    n0, n1, n2 = nbin[0], nbin[1], nbin[2]
     flat = np.empty(m, np.int64)
-    bins = np.empty((m, 3), np.int64)
-    x = fractional @ cell  # Cartesian, inside the cell
     for i in range(m):
-        for a in range(3):
-            bins[i, a] = min(max(int(fractional[i, a] * nbin[a]), 0), nbin[a] - 1)
-        flat[i] = (bins[i, 0] * nbin[1] + bins[i, 1]) * nbin[2] + bins[i, 2]
+        b0 = min(max(int(fractional[i, 0] * n0), 0), n0 - 1)
+        b1 = min(max(int(fractional[i, 1] * n1), 0), n1 - 1)
+        b2 = min(max(int(fractional[i, 2] * n2), 0), n2 - 1)
+        flat[i] = (b0 * n1 + b1) * n2 + b2
     order = np.argsort(flat, kind="mergesort")
-    start = np.zeros(nbin[0] * nbin[1] * nbin[2] + 1, np.int64)
+    start = np.zeros(n0 * n1 * n2 + 1, np.int64)
     for i in range(m):
         start[flat[i] + 1] += 1
     for c in range(len(start) - 1):
         start[c + 1] += start[c]
-    capacity = 32 * m + 16
-    first = np.empty(capacity, np.int64)
-    second = np.empty(capacity, np.int64)
-    shifts = np.empty((capacity, 3))
+    x = np.empty((m, 3))  # Cartesian, inside the cell, sorted by bin
+    for n in range(m):
+        i = order[n]
+        for c in range(3):
+            x[n, c] = (fractional[i, 0] * cell[0, c] + fractional[i, 1] * cell[1, c]
+                       + fractional[i, 2] * cell[2, c])
+    # Counted first, then written: no growing arrays in the loop.
+    p = _bin_pairs(x, order, whole, start, nbin, periodic, cell, r_list * r_list, None, None,
+                   None)
+    first, second = np.empty(p, np.int64), np.empty(p, np.int64)
+    shifts = np.empty((p, 3))
+    _bin_pairs(x, order, whole, start, nbin, periodic, cell, r_list * r_list, first, second,
+               shifts)
+    return first, second, shifts
+
+
+@jit
+def _bin_pairs(x, order, whole, start, nbin, periodic, cell, r2, first, second, shifts):
+    """The pairs of :func:`cell_list_pairs` written to ``first, second, shifts`` (or, with
+    None, only counted); returns how many."""
+    n0, n1, n2 = nbin[0], nbin[1], nbin[2]
     p = 0
-    r2 = r_list * r_list
-    target = np.empty(3, np.int64)
-    wrap = np.empty(3)
-    offset = np.empty(3)
-    for i in range(m):
-        for d in range(27):
-            inside = True
-            for a in range(3):
-                c = bins[i, a] + (d // 3 ** (2 - a)) % 3 - 1  # a = 0, 1, 2: d // 9, // 3, % 3
-                wrap[a] = 0.0
-                if c < 0 or c >= nbin[a]:
-                    if not periodic[a] or nbin[a] < 3:
-                        inside = False
-                    wrap[a] = -1.0 if c < 0 else 1.0
-                    c %= nbin[a]
-                target[a] = c
-            if not inside:
+    for home in range(n0 * n1 * n2):
+        h0, h1, h2 = home // (n1 * n2), (home // n2) % n1, home % n2
+        for d in range(13, 27):  # (0, 0, 0), then the 13 offsets after it in (d0, d1, d2) order
+            t0, t1, t2 = h0 + d // 9 - 1, h1 + (d // 3) % 3 - 1, h2 + d % 3 - 1
+            w0 = -1.0 if t0 < 0 else (1.0 if t0 >= n0 else 0.0)
+            w1 = -1.0 if t1 < 0 else (1.0 if t1 >= n1 else 0.0)
+            w2 = -1.0 if t2 < 0 else (1.0 if t2 >= n2 else 0.0)
+            if ((w0 != 0.0 and not periodic[0]) or (w1 != 0.0 and not periodic[1])
+                    or (w2 != 0.0 and not periodic[2])):
                 continue
-            for c in range(3):
-                offset[c] = wrap[0] * cell[0, c] + wrap[1] * cell[1, c] + wrap[2] * cell[2, c]
-            b = (target[0] * nbin[1] + target[1]) * nbin[2] + target[2]
-            for n in range(start[b], start[b + 1]):
-                j = order[n]
-                if j <= i:
-                    continue
-                v0 = x[j, 0] - x[i, 0] + offset[0]
-                v1 = x[j, 1] - x[i, 1] + offset[1]
-                v2 = x[j, 2] - x[i, 2] + offset[2]
-                if v0 * v0 + v1 * v1 + v2 * v2 < r2:
-                    if p == capacity:
-                        capacity *= 2
-                        first = _grown(first, capacity)
-                        second = _grown(second, capacity)
-                        shifts = _grown2(shifts, capacity)
-                    first[p], second[p] = i, j
-                    shifts[p, 0], shifts[p, 1], shifts[p, 2] = wrap[0], wrap[1], wrap[2]
-                    p += 1
-    return first[:p].copy(), second[:p].copy(), shifts[:p].copy()
-
-
-@jit
-def _grown(a, n):
-    out = np.empty(n, a.dtype)
-    out[:len(a)] = a
-    return out
-
-
-@jit
-def _grown2(a, n):
-    out = np.zeros((n, a.shape[1]))
-    out[:len(a)] = a
-    return out
+            target = ((t0 % n0) * n1 + t1 % n1) * n2 + t2 % n2
+            o0 = w0 * cell[0, 0] + w1 * cell[1, 0] + w2 * cell[2, 0]
+            o1 = w0 * cell[0, 1] + w1 * cell[1, 1] + w2 * cell[2, 1]
+            o2 = w0 * cell[0, 2] + w1 * cell[1, 2] + w2 * cell[2, 2]
+            for a in range(start[home], start[home + 1]):
+                a0, a1, a2 = x[a, 0] - o0, x[a, 1] - o1, x[a, 2] - o2
+                for b in range(a + 1 if d == 13 else start[target], start[target + 1]):
+                    v0, v1, v2 = x[b, 0] - a0, x[b, 1] - a1, x[b, 2] - a2
+                    if v0 * v0 + v1 * v1 + v2 * v2 < r2:
+                        if first is not None:
+                            i, j = order[a], order[b]
+                            first[p], second[p] = i, j
+                            shifts[p, 0] = w0 + whole[i, 0] - whole[j, 0]
+                            shifts[p, 1] = w1 + whole[i, 1] - whole[j, 1]
+                            shifts[p, 2] = w2 + whole[i, 2] - whole[j, 2]
+                        p += 1
+    return p
 
 
 @jit
