@@ -104,7 +104,7 @@ def test_the_default_relaxation_does_not_depend_on_the_number_of_blas_threads():
 
 
 def test_the_preconditioner_s_solve_is_the_inverse_and_the_same_in_any_batch():
-    """RigidPrecon.solve is P⁻¹ to its conjugate gradients' tolerance (1e-3 relative residual)
+    """RigidPrecon.solve is P⁻¹ to its conjugate gradients' tolerance (CG_TOLERANCE, relative)
     on a 64-water box, and solving two vectors together gives, bit for bit, what solving
     each alone gives (each column's sums run over the rows in order)."""
     from rigidmd.relax.filter import RigidFilter

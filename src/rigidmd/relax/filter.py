@@ -228,8 +228,9 @@ class RigidFilter(AtomsFacade):
     def _reanchor(self):
         if not self.model.n_bodies:
             return
-        far = np.linalg.norm(self._phi(), axis=1) > ANCHOR_ANGLE
-        if np.any(far):
+        if kernels.largest_angle(self._x[self._slices[1]], self.lengths,
+                                 self.model.linear) > ANCHOR_ANGLE:
+            far = np.linalg.norm(self._phi(), axis=1) > ANCHOR_ANGLE
             q = self._current()[2]
             self._q_ref[far] = q[far]
             block = self._x[self._slices[1]]

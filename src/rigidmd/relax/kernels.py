@@ -24,7 +24,7 @@ import numpy as np
 from rigidmd.core._numba import jit
 
 __all__ = ["dot", "axpy", "pair_graph", "cell_list_pairs", "laplacian_product",
-           "conjugate_gradient", "orientations", "body_gradient"]
+           "conjugate_gradient", "orientations", "body_gradient", "largest_angle"]
 
 
 @jit
@@ -399,6 +399,17 @@ def orientations(q_ref, x, lengths, linear, q):
         q[b, 1] = qw * rx + qx * rw + qy * rz - qz * ry
         q[b, 2] = qw * ry - qx * rz + qy * rw + qz * rx
         q[b, 3] = qw * rz + qx * ry - qy * rx + qz * rw
+
+
+@jit
+def largest_angle(x, lengths, linear):
+    """The largest :math:`|\\varphi_b|` (rad) of the rotation rows ``x`` (see :func:`orientations`;
+    0 without bodies)."""
+    largest = 0.0
+    for b in range(x.shape[0]):
+        p0, p1, p2 = _phi(x, lengths, linear, b)
+        largest = max(largest, np.sqrt(p0 * p0 + p1 * p1 + p2 * p2))
+    return largest
 
 
 @jit
