@@ -209,13 +209,17 @@ def _bin_pairs(x, order, whole, start, nbin, periodic, cell, r2, first, second, 
 
 
 @jit
-def laplacian_product(indptr, indices, weights, diagonal, x, out):
+def laplacian_product(indptr, indices, weights, diagonal, x, out, ncol=-1):
     """``out = A x`` for :math:`A = \\mathrm{diag}(d) - W`, ``x`` and ``out`` of shape (m, k).
 
     Six or three columns at a time, summed in registers (one pass over ``W`` for the two
     vectors of :class:`rigidmd.relax.lbfgs.RigidLBFGS`'s step, whose components they are).
+    Only the first ``ncol`` columns when ``ncol >= 0`` (the others are left as they are);
+    each column's arithmetic is the same in any block.
     """
     m, k = x.shape
+    if ncol >= 0:
+        k = ncol
     c0 = 0
     while k - c0 >= 6:
         for i in range(m):
@@ -267,8 +271,10 @@ def _precondition(r, inverse, mean_free, z):
 
 
 @jit
-def _column_dots(a, b, out):
+def _column_dots(a, b, out, ncol=-1):
     m, k = a.shape
+    if ncol >= 0:
+        k = ncol
     for c in range(k):
         out[c] = 0.0
     for i in range(m):
@@ -291,7 +297,10 @@ def conjugate_gradient(indptr, indices, weights, diagonal, b, tol, maxiter, mean
     diagonal : numpy.ndarray, shape (m,)
         ``d``, with :math:`d_i > \sum_j W_{ij}` (positive definite).
     b : numpy.ndarray, shape (m, k)
-    tol : float
+    tol : numpy.ndarray, shape (k,)
+        Each column's relative residual.  Columns whose residual is reached stop
+        changing, and once every column after the first ``j`` has, the products and
+        updates run over the first ``j`` only.
     maxiter : int
     mean_free : bool
         ``b`` has zero column means and ``A`` keeps that subspace (a graph
@@ -323,44 +332,45 @@ def conjugate_gradient(indptr, indices, weights, diagonal, b, tol, maxiter, mean
     _column_dots(r, r, rr)
     _column_dots(b, b, target)
     for c in range(k):
-        target[c] = tol * np.sqrt(target[c])
+        target[c] = tol[c] * np.sqrt(target[c])
     active = np.empty(k, np.bool_)
     iterations = 0
     for _ in range(maxiter):
-        any_active = False
+        kk = 0  # the columns up to the last one still active
         for c in range(k):
             active[c] = np.sqrt(rr[c]) > target[c]
-            any_active = any_active or active[c]
-        if not any_active:
+            if active[c]:
+                kk = c + 1
+        if kk == 0:
             break
         iterations += 1
-        laplacian_product(indptr, indices, weights, diagonal, p, ap)
-        _column_dots(p, ap, pap)
-        for c in range(k):
+        laplacian_product(indptr, indices, weights, diagonal, p, ap, kk)
+        _column_dots(p, ap, pap, kk)
+        for c in range(kk):
             alpha[c] = rz[c] / pap[c] if active[c] and pap[c] > 0 else 0.0
             total[c] = 0.0
         # x += alpha p, r -= alpha A p, z = D^-1 r (and its column sums): one pass.
         for i in range(m):
-            for c in range(k):
+            for c in range(kk):
                 x[i, c] += alpha[c] * p[i, c]
                 r[i, c] -= alpha[c] * ap[i, c]
                 z[i, c] = r[i, c] * inverse[i]
                 total[c] += z[i, c]
-        for c in range(k):
+        for c in range(kk):
             total[c] = total[c] / m if mean_free else 0.0
             beta[c] = 0.0  # rz_new, then beta
             rr[c] = 0.0
         for i in range(m):
-            for c in range(k):
+            for c in range(kk):
                 z[i, c] -= total[c]
                 beta[c] += r[i, c] * z[i, c]
                 rr[c] += r[i, c] * r[i, c]
-        for c in range(k):
+        for c in range(kk):
             rz_new = beta[c]
             beta[c] = rz_new / rz[c] if active[c] and rz[c] > 0 else 0.0
             rz[c] = rz_new
         for i in range(m):
-            for c in range(k):
+            for c in range(kk):
                 p[i, c] = z[i, c] + beta[c] * p[i, c]
     return x, iterations
 

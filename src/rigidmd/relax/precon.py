@@ -360,11 +360,12 @@ class RigidPrecon(Precon):
         y[rows["cell_rows"]] = x[rows["cell_rows"]] * mu_c
         return y.ravel()
 
-    def solve(self, x):
+    def solve(self, x, tolerances=None):
         """:math:`P^{-1} x` for ``x`` of shape (3 n,), or for each row of ``x`` of shape (k, 3 n).
 
         The translation block by conjugate gradients (:func:`rigidmd.relax.kernels.
         conjugate_gradient`, all right-hand sides at once), the rest diagonal.
+        ``tolerances`` (k,): each row's relative residual (None: :data:`CG_TOLERANCE`).
         """
         rows = self._layout
         x = np.asarray(x, dtype=float)
@@ -379,7 +380,9 @@ class RigidPrecon(Precon):
             # the iterations: 23 against 29 without it, 1728 waters, a random right side).
             b = np.ascontiguousarray(x3[:, t, :].transpose(1, 0, 2).reshape(m, 3 * k))
             mean = b.mean(axis=0)
-            solved, _ = kernels.conjugate_gradient(*self._graph, b - mean, CG_TOLERANCE,
+            tol = np.repeat([CG_TOLERANCE if t is None else float(t)
+                             for t in (tolerances or [None] * k)], 3)
+            solved, _ = kernels.conjugate_gradient(*self._graph, b - mean, tol,
                                                    MAX_ITERATIONS, True)
             solved += mean / self._uniform
             y[:, t, :] = solved.reshape(m, k, 3).transpose(1, 0, 2)
