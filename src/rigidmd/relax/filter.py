@@ -184,9 +184,11 @@ class RigidFilter(AtomsFacade):
         """Write positions (and cell) of the coordinates into the atoms, through the body link."""
         model, D, state = self.model, self._deformation(), self._state
         q = self._orientations()
-        state.X = self._x[self._slices[0]] @ D.T
+        fixed_cell = self.mode is None  # D is the identity: no product
+        X, x = self._x[self._slices[0]], self._x[self._slices[2]]
+        state.X = X if fixed_cell else X @ D.T  # copied into the state's own buffer
         state.q = q
-        state.x = self._x[self._slices[2]] @ D.T
+        state.x = x if fixed_cell else x @ D.T
         if self.mode is not None:
             cell = self._cell0 @ D.T
             check_bodies_fit(model, cell, self.atoms.pbc,
@@ -304,7 +306,8 @@ class RigidFilter(AtomsFacade):
             centre in ``centres``; ``cell_rows`` (0 or 3,); ``n_rows``.
         """
         _, _, _, D = self._current()
-        return {"centres": self._x[self._rows["translation_rows"]] @ D.T, **self._rows}
+        centres = self._x[self._rows["translation_rows"]]
+        return {"centres": centres if self.mode is None else centres @ D.T, **self._rows}
 
     def fixed_rows(self):
         """Rows that ``FixAtoms`` holds, as a boolean mask of shape (n,)."""
@@ -387,9 +390,10 @@ class RigidFilter(AtomsFacade):
                               self.lengths, model.linear, self._fixed_bodies, F, tau, g)
         record.F, record.tau, record.f = F, tau, forces[model.free]
         out = np.empty_like(self._x)
-        out[self._slices[0]] = F @ D
+        fixed_cell = self.mode is None  # D is the identity: no product
+        out[self._slices[0]] = F if fixed_cell else F @ D
         out[self._slices[1]] = g
-        out[self._slices[2]] = record.f @ D
+        out[self._slices[2]] = record.f if fixed_cell else record.f @ D
         out[self._slices[0]][self._fixed_bodies] = 0.0
         out[self._slices[2]][self._fixed_free] = 0.0
         if self.mode is not None:
