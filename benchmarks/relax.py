@@ -344,11 +344,24 @@ def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000):
 
     SPC/E (``water_box``, 3.1 Å spacing), ``lj/cut/coul/long`` 9 Å with PPPM 1e-5 through
     :class:`rigidmd.lammps.LAMMPSCalculator`.  Time inside the calculator is measured around
-    its ``calculate``; everything else (the filter's placement and reduction, the
-    preconditioner, the optimizer, the one-off start of numba and the neighbour searches) is
-    the optimizer's own, in wall-clock and in CPU time of the process (single-threaded: CPU
-    time is what the process itself spent, less sensitive to other jobs on a shared
-    machine).  Returns a table row; peak RSS (MiB) at the end.
+    its ``calculate``; everything else in ``relax()`` (the filter's placement and reduction,
+    the preconditioner, the optimizer, ASE's loop) is the optimizer's own, in CPU time of the
+    process (single-threaded: what the process itself spent, less sensitive to other jobs
+    on a shared machine) and in wall-clock time.  Returns ``(row, breakdown)``: a table row
+    and the lines that split both into
+
+    - before ``relax()``: the process's CPU from its start (the interpreter, the imports of
+      numpy, ASE, numba, LAMMPS and rigidmd, building the box), not in any share below;
+    - numba's start, measured apart just before ``relax()`` (the first call of any
+      compiled function in a process loads numba's typing and lowering registries, about
+      0.13 s; rigidmd's dynamics pay it as well, once per process);
+    - one-off, in the first step: the optimizer's own (the loading of the compiled
+      kernels from numba's cache, the filter's set-up, the preconditioner's scale
+      estimate, nearest-neighbour distance and first pair list) and LAMMPS's first call
+      (its instance, the box plugin, the first PPPM set-up, one evaluation);
+    - per step after the first: own and LAMMPS (ms), and the own share of their sum;
+    - the whole ``relax()`` call: own of total, one-offs included, without and with
+      numba's start.
     """
     import resource
 
@@ -360,7 +373,7 @@ def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000):
     atoms.set_initial_charges(water.charges(len(atoms) // water.sites))
     calc = LAMMPSCalculator(water.lammps_commands(9.0, "pppm", 1e-5, tail=True),
                             atom_types={"O": 1, "H": 2})
-    spent = [0.0, 0.0, 0]
+    spent = [0.0, 0.0, 0, 0.0]  # wall, CPU, calls, CPU of the first call
     original = calc.calculate
 
     def calculate(*args, **kwargs):
@@ -369,31 +382,59 @@ def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000):
         spent[0] += time.perf_counter() - t
         spent[1] += time.process_time() - c
         spent[2] += 1
+        if spent[2] == 1:
+            spent[3] = spent[1]
 
     calc.calculate = calculate
     atoms.calc = calc
-    first = []  # (cpu, cpu in the calculator) at the end of the first step
+    first = []  # (CPU, CPU in the calculator) at the end of the first step
 
     def after(step, energy, largest):
         if step == 1:
             first.append((time.process_time() - c0, spent[1]))
 
+    from rigidmd.relax import kernels
+
+    c_start = time.process_time()
+    kernels.dot(np.ones(4), np.ones(4))  # numba's start (a kernel from its cache)
+    numba_start = time.process_time() - c_start
     t0, c0 = time.perf_counter(), time.process_time()
     result = relax(atoms, fmax=fmax, steps=steps, cell=cell, observers=(after,))
     total, cpu = time.perf_counter() - t0, time.process_time() - c0
     n = len(atoms) // water.sites
     own, own_cpu = total - spent[0], cpu - spent[1]
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    # After the first step: without the one-off start (numba's, the neighbour searches, the
-    # preconditioner's estimate), per step in ms: own and in the calculator.
     start_cpu, start_calc = first[0] if first else (cpu, spent[1])
+    once = start_cpu - start_calc  # own CPU of the first step
     later = max(result.steps - 1, 1)
-    per_step = (f"{1e3 * (own_cpu - start_cpu + start_calc) / later:.1f} / "
-                f"{1e3 * (spent[1] - start_calc) / later:.1f}")
-    return (f"| {n} {model} waters{', cell ' + cell if cell else ''} | {fmax} | {spent[2]} "
-            f"| {result.steps} | {result.converged} | {result.energy / n:.6f} | {total:.1f} "
-            f"| {own:.1f} ({100 * own / total:.1f} %) | {cpu:.1f} "
-            f"| {own_cpu:.1f} ({100 * own_cpu / cpu:.1f} %) | {per_step} | {rss:.0f} |")
+    per_own, per_calc = (own_cpu - once) / later, (spent[1] - start_calc) / later
+    row = (f"| {n} {model} waters{', cell ' + cell if cell else ''} | {fmax} | {spent[2]} "
+           f"| {result.steps} | {result.converged} | {result.energy / n:.6f} | {total:.1f} "
+           f"| {own:.1f} ({100 * own / total:.1f} %) | {cpu:.1f} "
+           f"| {own_cpu:.2f} ({100 * own_cpu / cpu:.1f} %) | {once:.2f} / {spent[3]:.2f} "
+           f"| {1e3 * per_own:.2f} / {1e3 * per_calc:.1f} "
+           f"({100 * per_own / (per_own + per_calc):.1f} %) | {rss:.0f} |")
+    load = " ".join(f"{x:.2f}" for x in __import__("os").getloadavg())
+    breakdown = [
+        f"before relax(): {c_start:.2f} s CPU (interpreter, imports, the box; in no share); "
+        f"numba's start {numba_start:.3f} s CPU",
+        f"one-off, first step: own {once:.3f} s CPU (the cached kernels' loading, the "
+        f"filter's set-up, the preconditioner's estimate and first pairs); LAMMPS's first "
+        f"call {spent[3]:.3f} s CPU (instance, box plugin, PPPM set-up, one evaluation)",
+        f"per step after the first ({later} steps): own {1e3 * per_own:.2f} ms, LAMMPS "
+        f"{1e3 * per_calc:.2f} ms CPU: own {100 * per_own / (per_own + per_calc):.1f} %",
+        f"whole relax(): own {own_cpu:.3f} of {cpu:.3f} s CPU ({100 * own_cpu / cpu:.1f} %), "
+        f"{own:.3f} of {total:.3f} s wall ({100 * own / total:.1f} %); with numba's start "
+        f"counted as own: {100 * (own_cpu + numba_start) / (cpu + numba_start):.1f} % of CPU; "
+        f"load average {load}",
+    ]
+    return row, breakdown
+
+
+#: Columns of :func:`large`'s row.
+LARGE_HEADER = ("| system | fmax | force calls | steps | converged | E/molecule (eV) | wall (s) "
+                "| own wall (s, %) | CPU (s) | own CPU (s, %) | one-off own / LAMMPS first call "
+                "(s CPU) | per step own / LAMMPS (ms CPU, own %) | peak RSS (MiB) |")
 
 
 def cell_rows(optimizers=("RigidLBFGS", "BFGS"), modes=("iso", "aniso", "full"), fmax=0.01):
@@ -456,8 +497,9 @@ def main():
         return
     if args[:1] == ["large"]:  # large [N_SIDE [CELL [STEPS]]]: own time, LAMMPS forces
         cell = args[2] if len(args) > 2 and args[2] != "none" else False
-        print(large(int(args[1]) if len(args) > 1 else 12, cell=cell,
-                    steps=int(args[3]) if len(args) > 3 else 2000), flush=True)
+        row, breakdown = large(int(args[1]) if len(args) > 1 else 12, cell=cell,
+                               steps=int(args[3]) if len(args) > 3 else 2000)
+        print(LARGE_HEADER, row, *breakdown, sep="\n", flush=True)
         return
     if args[:1] == ["defaults"]:  # defaults [LARGEST [FILE]]: relax() against ASE's route
         largest = int(args[1]) if len(args) > 1 else 64

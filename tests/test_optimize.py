@@ -724,10 +724,11 @@ def test_defaults_need_no_tuning_on_an_unrelaxed_cluster():
 
 
 def test_the_preconditioner_s_pairs_are_ase_s_neighbour_list():
-    """RigidPrecon lists the centres' pairs (each once, with its cell shift) with a k-d tree
-    (no periodicity, or an orthorhombic cell twice the cut-off wide) or a compiled cell list
-    (a sheared cell three cut-offs wide): the same pairs and distances as ASE's neighbour
-    list, which it uses elsewhere, for centres inside the box or not."""
+    """RigidPrecon lists the centres' pairs (each once, with its cell shift) with a compiled
+    cell list (a periodic cell three cut-offs wide, orthorhombic or sheared: water_box(6)
+    and its sheared copy) or a k-d tree (no periodicity, or an orthorhombic cell two to
+    three cut-offs wide: the cluster, water_box(4)): the same pairs and distances as ASE's
+    neighbour list, which it uses elsewhere, for centres inside the box or not."""
     from ase.neighborlist import neighbor_list
 
     from rigidmd.relax.precon import _pairs

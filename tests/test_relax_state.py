@@ -104,10 +104,13 @@ def test_the_default_relaxation_does_not_depend_on_the_number_of_blas_threads():
 
 
 def test_the_preconditioner_s_solve_is_the_inverse_and_the_same_in_any_batch():
-    """RigidPrecon.solve is P⁻¹ to its conjugate gradients' tolerance (1e-3 relative residual)
+    """RigidPrecon.solve is P⁻¹ to its conjugate gradients' tolerance (CG_TOLERANCE, relative)
     on a 64-water box, and solving two vectors together gives, bit for bit, what solving
-    each alone gives (each column's sums run over the rows in order)."""
+    each alone gives (each column's sums run over the rows in order), also with a tolerance
+    per vector (RigidLBFGS solves P⁻¹y only for the scalar yᵀP⁻¹y, to SCALE_TOLERANCE: the
+    other vector's solution is the one it gets alone, and each meets its own residual)."""
     from rigidmd.relax.filter import RigidFilter
+    from rigidmd.relax.lbfgs import SCALE_TOLERANCE
     from rigidmd.relax.precon import CG_TOLERANCE, RigidPrecon
     from rigidmd.systems import water_box
 
@@ -125,3 +128,9 @@ def test_the_preconditioner_s_solve_is_the_inverse_and_the_same_in_any_batch():
         residual = np.linalg.norm(P @ together[k] - b[k]) / np.linalg.norm(b[k])
         assert residual < 2 * CG_TOLERANCE  # the translation block's residual, the rest exact
         np.testing.assert_allclose(precon.Pdot(together[k]), P @ together[k], atol=1e-12)
+    each = precon.solve(b, (None, SCALE_TOLERANCE))
+    np.testing.assert_array_equal(each[0], together[0])
+    np.testing.assert_array_equal(each[1], precon.solve(b[1:], (SCALE_TOLERANCE,))[0])
+    assert not np.array_equal(each[1], together[1])  # the looser one stopped earlier
+    residual = np.linalg.norm(P @ each[1] - b[1]) / np.linalg.norm(b[1])
+    assert CG_TOLERANCE < residual < 2 * SCALE_TOLERANCE

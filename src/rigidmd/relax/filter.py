@@ -48,7 +48,6 @@ import numpy as np
 from ase.calculators.calculator import PropertyNotImplementedError
 
 from rigidmd.core import observables as obs
-from rigidmd.core import quaternion as quat
 from rigidmd.core.bodies import RigidBodies, check_bodies_fit
 from rigidmd.core.checks import check_finite
 from rigidmd.core.dof import RigidBodyDOF
@@ -57,9 +56,10 @@ from rigidmd.core.link import BodyLink
 from rigidmd.core.model import BodyModel, describe_atoms
 from rigidmd.core.record import StepRecord
 from rigidmd.relax import cell as relaxcell
+from rigidmd.relax import kernels
 from rigidmd.relax import state as relaxstate
 from rigidmd.relax.facade import AtomsFacade
-from rigidmd.relax.rotation import cross, right_jacobian_transpose, rotation_quaternion
+from rigidmd.relax.rotation import right_jacobian_transpose, rotation_quaternion
 
 __all__ = ["RigidFilter", "relax", "Relaxation", "OPTIMIZERS", "optimizer_class", "ANCHOR_ANGLE",
            "rotation_quaternion", "right_jacobian_transpose"]
@@ -175,15 +175,20 @@ class RigidFilter(AtomsFacade):
         return np.where(self.model.linear[:, None] & (np.arange(3) == 0), 0.0, phi)
 
     def _orientations(self):
-        return quat.multiply(self._q_ref, rotation_quaternion(self._phi()))
+        q = np.empty_like(self._q_ref)
+        kernels.orientations(self._q_ref, self._x[self._slices[1]], self.lengths,
+                             self.model.linear, q)
+        return q
 
     def _place(self):
         """Write positions (and cell) of the coordinates into the atoms, through the body link."""
         model, D, state = self.model, self._deformation(), self._state
         q = self._orientations()
-        state.X = self._x[self._slices[0]] @ D.T
+        fixed_cell = self.mode is None  # D is the identity: no product
+        X, x = self._x[self._slices[0]], self._x[self._slices[2]]
+        state.X = X if fixed_cell else X @ D.T  # copied into the state's own buffer
         state.q = q
-        state.x = self._x[self._slices[2]] @ D.T
+        state.x = x if fixed_cell else x @ D.T
         if self.mode is not None:
             cell = self._cell0 @ D.T
             check_bodies_fit(model, cell, self.atoms.pbc,
@@ -194,7 +199,7 @@ class RigidFilter(AtomsFacade):
             state.cell = cell
             self.atoms.set_cell(cell, scale_atoms=False)
             self._record.cell_changed()
-        r = self._link.place(state, self._record.r)
+        r = self._record.r = self._link.place(state, self._record.r)
         self._key = self._x.tobytes()
         self._placed = (self.atoms.positions.copy(), r, q, D)
 
@@ -225,8 +230,9 @@ class RigidFilter(AtomsFacade):
     def _reanchor(self):
         if not self.model.n_bodies:
             return
-        far = np.linalg.norm(self._phi(), axis=1) > ANCHOR_ANGLE
-        if np.any(far):
+        if kernels.largest_angle(self._x[self._slices[1]], self.lengths,
+                                 self.model.linear) > ANCHOR_ANGLE:
+            far = np.linalg.norm(self._phi(), axis=1) > ANCHOR_ANGLE
             q = self._current()[2]
             self._q_ref[far] = q[far]
             block = self._x[self._slices[1]]
@@ -300,7 +306,8 @@ class RigidFilter(AtomsFacade):
             centre in ``centres``; ``cell_rows`` (0 or 3,); ``n_rows``.
         """
         _, _, _, D = self._current()
-        return {"centres": self._x[self._rows["translation_rows"]] @ D.T, **self._rows}
+        centres = self._x[self._rows["translation_rows"]]
+        return {"centres": centres if self.mode is None else centres @ D.T, **self._rows}
 
     def fixed_rows(self):
         """Rows that ``FixAtoms`` holds, as a boolean mask of shape (n,)."""
@@ -372,26 +379,23 @@ class RigidFilter(AtomsFacade):
                 "free_energy": float(results.get("free_energy", results["energy"])) + pv}
 
     def _generalized_forces(self):
-        _, _, q, D = self._current()
+        _, r, q, D = self._current()  # the atoms are placed: r is the record's
         model, record = self.model, self._record
-        self._evaluator.evaluate(self._state)  # the dynamics' force call and reduction
-        F, tau = record.F, record.tau
-        out = np.zeros_like(self._x)
-        out[self._slices[0]] = F @ D
-        if model.n_bodies:
-            # R(q)^T tau, as quat.rotate_inverse computes it, without np.cross's axis handling.
-            u = -q[:, 1:]
-            t = 2.0 * cross(u, tau)
-            torque_body = tau + q[:, :1] * t + cross(u, t)
-            g = right_jacobian_transpose(self._phi(), torque_body) / self.lengths[:, None]
-            g[model.linear, 0] = 0.0
-            out[self._slices[1]] = g
-        out[self._slices[2]] = record.f @ D
-        for rows, mask in ((self._slices[0], self._fixed_bodies),
-                           (self._slices[1], self._fixed_bodies),
-                           (self._slices[2], self._fixed_free)):
-            block = out[rows]
-            block[mask] = 0.0
+        # The dynamics' force call (ForceEvaluator), then its reduction to the bodies fused
+        # with the rotation rows' gradient (rigidmd.relax.kernels.body_gradient).
+        forces = self._evaluator.calculator_forces(self._state)
+        nb = model.n_bodies
+        F, tau, g = np.empty((nb, 3)), np.empty((nb, 3)), np.empty((nb, 3))
+        kernels.body_gradient(forces, r, model.order, model.bounds, q, self._x[self._slices[1]],
+                              self.lengths, model.linear, self._fixed_bodies, F, tau, g)
+        record.F, record.tau, record.f = F, tau, forces[model.free]
+        out = np.empty_like(self._x)
+        fixed_cell = self.mode is None  # D is the identity: no product
+        out[self._slices[0]] = F if fixed_cell else F @ D
+        out[self._slices[1]] = g
+        out[self._slices[2]] = record.f if fixed_cell else record.f @ D
+        out[self._slices[0]][self._fixed_bodies] = 0.0
+        out[self._slices[2]][self._fixed_free] = 0.0
         if self.mode is not None:
             # The barostats' molecular virial (symmetric) and its antisymmetric part, half
             # the bodies' total torque: the full virial of a deformation at fixed orientations.

@@ -53,12 +53,17 @@ from rigidmd.relax import kernels
 __all__ = ["RigidPrecon", "MU_FLOOR", "CG_TOLERANCE", "SKIN", "MAX_ITERATIONS"]
 
 #: Relative residual at which conjugate gradients stop: a preconditioner need not be
-#: exact.  Measured over 8-, 16- and 24-water clusters (3 seeds each) to fmax 0.05 / 0.01:
-#: 254 / 444 force calls at 1e-3, 264 / 440 at 1e-6 and 262 / 440 at 1e-2 (an earlier
-#: session: the same at 1e-6 as at 1e-10); 13 iterations at 1728 waters against 22 at 1e-6.
-CG_TOLERANCE = 1e-3
+#: exact.  Measured with relax()'s defaults over 21 unrelaxed systems (water_cluster of 8,
+#: 16, 24, 32 and 64 molecules, seeds 0-2; water_box of 64, 125 and 216, seeds 0-1; ASE's
+#: TIP3P), force calls to fmax 0.05 / 0.01 eV/Å summed: 968 / 1882 at 1e-2, 993 / 1851 at
+#: 1e-3, and 952-1028 / 1734-1898 over 9e-4, 2e-3, 5e-3 and 2e-2 (the spread of one path's
+#: bit-level changes: a relaxation of 1728 waters took 225 or 255 steps after a change of
+#: one unit in the last place of one coefficient); mean energies within 3e-4 eV/molecule
+#: of each other.  6 iterations a step at 1728 waters against 11 at 1e-3 (0.65 against
+#: 1.1 ms CPU for the step's two vectors).
+CG_TOLERANCE = 1e-2
 
-#: Conjugate-gradient iterations at most per solve (a bound, never reached: 23 at 1728 waters).
+#: Conjugate-gradient iterations at most per solve (a bound, never reached: 8 at 1728 waters).
 MAX_ITERATIONS = 10000
 
 #: Skin of the candidate pairs' list, in units of ``r_NN``: pairs within ``r_cut + SKIN r_NN``
@@ -178,6 +183,8 @@ class RigidPrecon(Precon):
         self._uniform = mu * self.c_stab  # eigenvalue of the uniform translation (L 1 = 0)
         self._diag = (mu_rot * (degree[rows["rotation_centre"]] + self.c_stab), mu_c)
         self._layout = rows
+        self._index = tuple(_as_slice(rows[key]) for key in
+                            ("translation_rows", "rotation_rows", "cell_rows"))
         self._built_at, self._built_cell = centres.copy(), np.array(cell, dtype=float)
         self._P = None
 
@@ -353,31 +360,35 @@ class RigidPrecon(Precon):
         y[rows["cell_rows"]] = x[rows["cell_rows"]] * mu_c
         return y.ravel()
 
-    def solve(self, x):
+    def solve(self, x, tolerances=None):
         """:math:`P^{-1} x` for ``x`` of shape (3 n,), or for each row of ``x`` of shape (k, 3 n).
 
         The translation block by conjugate gradients (:func:`rigidmd.relax.kernels.
         conjugate_gradient`, all right-hand sides at once), the rest diagonal.
+        ``tolerances`` (k,): each row's relative residual (None: :data:`CG_TOLERANCE`).
         """
         rows = self._layout
         x = np.asarray(x, dtype=float)
         k = 1 if x.ndim == 1 else len(x)
         x3 = x.reshape(k, -1, 3)
         y = np.empty_like(x3)
-        t = rows["translation_rows"]
-        if len(t):
+        t, r, c = self._index  # slices where the rows are contiguous (views, not copies)
+        m = len(rows["translation_rows"])
+        if m:
             # The uniform translation is an eigenvector, (L + c) 1 = c 1: solved exactly,
             # and conjugate gradients work on the rest (its smallest eigenvalue, c mu, set
             # the iterations: 23 against 29 without it, 1728 waters, a random right side).
-            b = np.ascontiguousarray(x3[:, t, :].transpose(1, 0, 2).reshape(len(t), 3 * k))
+            b = np.ascontiguousarray(x3[:, t, :].transpose(1, 0, 2).reshape(m, 3 * k))
             mean = b.mean(axis=0)
-            solved, _ = kernels.conjugate_gradient(*self._graph, b - mean, CG_TOLERANCE,
+            tol = np.repeat([CG_TOLERANCE if t is None else float(t)
+                             for t in (tolerances or [None] * k)], 3)
+            solved, _ = kernels.conjugate_gradient(*self._graph, b - mean, tol,
                                                    MAX_ITERATIONS, True)
             solved += mean / self._uniform
-            y[:, t, :] = solved.reshape(len(t), k, 3).transpose(1, 0, 2)
+            y[:, t, :] = solved.reshape(m, k, 3).transpose(1, 0, 2)
         rot, mu_c = self._diag
-        y[:, rows["rotation_rows"]] = x3[:, rows["rotation_rows"]] / rot[:, None]
-        y[:, rows["cell_rows"]] = x3[:, rows["cell_rows"]] / mu_c
+        y[:, r] = x3[:, r] / rot[:, None]
+        y[:, c] = x3[:, c] / mu_c
         return y.reshape(x.shape)
 
     def copy(self):
@@ -388,6 +399,13 @@ class RigidPrecon(Precon):
     def asarray(self):
         """:math:`P` as a dense array (for tests; O(n²))."""
         return self.P.toarray()
+
+
+def _as_slice(index):
+    """``index`` (whole numbers) as a slice when it is a contiguous increasing run, else as is."""
+    if len(index) and np.array_equal(index, np.arange(index[0], index[0] + len(index))):
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
 
 
 def _nearest_distance(points):
@@ -422,11 +440,13 @@ def _pairs(points, r_cut):
     """Pairs of points within ``r_cut``, each once, all periodic images: ``(i, j, shifts)``.
 
     The pair's vector is ``positions[j] - positions[i] + shifts @ cell`` (``shifts``
-    whole numbers, shape (p, 3)).  scipy's k-d tree without periodicity or in an
-    orthorhombic cell at least ``2 r_cut`` wide (5 ms for 1728 centres); a compiled cell
-    list (:func:`rigidmd.relax.kernels.cell_list_pairs`, 12 ms) in any other cell periodic
-    in all three directions with its planes at least ``3 r_cut`` apart (a sheared cell,
-    where ASE's neighbour list took over 100 ms); else ASE's ``neighbor_list``.  All O(n).
+    whole numbers, shape (p, 3)).  A compiled cell list
+    (:func:`rigidmd.relax.kernels.cell_list_pairs`; 2.4 ms CPU for 1728 centres of
+    water, 50,262 pairs within 7.5 Å, against 7.0 ms for scipy's k-d tree and its
+    shifts) in a cell periodic in all three directions with its planes at least
+    ``3 r_cut`` apart, of any shape (ASE's neighbour list took over 100 ms in a sheared
+    one); scipy's k-d tree without periodicity or in an orthorhombic cell at least
+    ``2 r_cut`` wide; else ASE's ``neighbor_list``.  All O(n).
     """
     from scipy.spatial import cKDTree
 
@@ -435,8 +455,13 @@ def _pairs(points, r_cut):
         return np.zeros(0, int), np.zeros(0, int), np.zeros((0, 3), int)
     pbc, cell, positions = points.pbc, points.cell.array, points.positions
     lengths = np.diag(cell)
-    if not pbc.any() or (pbc.all() and np.allclose(cell, np.diag(lengths))
-                         and np.all(lengths > 2 * r_cut)):
+    nbin = np.zeros(3, np.int64)
+    if pbc.all() and abs(np.linalg.det(cell)) > 0:
+        spacing = abs(np.linalg.det(cell)) / np.linalg.norm(
+            np.cross(cell[[1, 2, 0]], cell[[2, 0, 1]]), axis=1)
+        nbin = np.floor(spacing / r_cut).astype(np.int64)
+    if np.any(nbin < 3) and (not pbc.any() or (
+            pbc.all() and np.allclose(cell, np.diag(lengths)) and np.all(lengths > 2 * r_cut))):
         wrapped = positions
         if pbc.any():
             wrapped = np.mod(positions, lengths)
@@ -448,11 +473,6 @@ def _pairs(points, r_cut):
         if pbc.any():  # the nearest image: the box is over twice the cut-off wide
             shifts = -np.rint((positions[j] - positions[i]) / lengths).astype(int)
         return i, j, shifts
-    nbin = np.zeros(3, np.int64)
-    if pbc.all() and abs(np.linalg.det(cell)) > 0:
-        spacing = abs(np.linalg.det(cell)) / np.linalg.norm(
-            np.cross(cell[[1, 2, 0]], cell[[2, 0, 1]]), axis=1)
-        nbin = np.floor(spacing / r_cut).astype(np.int64)
     if np.any(nbin < 3):
         i, j, shifts = neighbor_list("ijS", points, r_cut)
         once = (i < j) | ((i == j) & _positive(shifts))
@@ -462,10 +482,9 @@ def _pairs(points, r_cut):
     inside = fractional - whole
     over = inside >= 1.0  # -1e-17 - floor(-1e-17) rounds to 1
     inside[over], whole[over] = 0.0, whole[over] + 1.0
-    i, j, shifts = kernels.cell_list_pairs(np.ascontiguousarray(inside), np.array(cell, float),
-                                           nbin, pbc.copy(), float(r_cut))
-    # The shifts of the points folded into the cell, for the points as given.
-    return i, j, (shifts + whole[i] - whole[j]).astype(int)
+    # The shifts for the points as given (whole numbers, as floats).
+    return kernels.cell_list_pairs(np.ascontiguousarray(inside), whole, np.array(cell, float),
+                                   nbin, pbc.copy(), float(r_cut))
 
 
 def _positive(shifts):

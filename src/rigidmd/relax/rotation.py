@@ -54,7 +54,7 @@ def right_jacobian_transpose(phi, v):
     small = t < 1e-3
     ts = np.where(small, 1.0, t)
     a = np.where(small, 0.5 - t**2 / 24.0, (1.0 - np.cos(ts)) / ts**2)
-    b = np.where(small, 1.0 / 6.0 - t**2 / 120.0, (ts - np.sin(ts)) / ts**3)
+    b = np.where(small, 1.0 / 6.0 - t**2 / 120.0, (ts - np.sin(ts)) / (ts * ts * ts))
     c = cross(phi, v)
     return v + a * c + b * cross(phi, c)
 
