@@ -274,7 +274,8 @@ class LAMMPSEngine(IPICalculator):
     Needs a periodic cell (the engine sets LAMMPS's box from it).  With
     ``fix rigidmd/ipi`` a call computes what it is asked for (forces always);
     with ``fix ipi`` energy, forces and stress.  :attr:`neighbor_builds`
-    counts LAMMPS's neighbour-list builds (``fix rigidmd/ipi`` only).  The
+    counts LAMMPS's neighbour-list builds, :attr:`broadcast_us` what the
+    waiting ranks' naps cost a call (``fix rigidmd/ipi`` only).  The
     k-space parameters are those LAMMPS chooses for the first cell, fixed
     (:attr:`kspace_parameters`) and kept by every later engine of this object.
     """
@@ -347,18 +348,34 @@ class LAMMPSEngine(IPICalculator):
                 f"fix rmd_ipi all rigidmd/ipi {address} bohr {units.Bohr!r} hartree "
                 f"{units.Hartree!r} poll {self.poll_us}"]
 
+    def _extra(self, name):
+        """A number of the ``extra`` string ``fix rigidmd/ipi`` sent with the last forces."""
+        import json
+
+        try:
+            return json.loads(self.engine_extra)[name]
+        except (ValueError, KeyError, TypeError):
+            return None
+
     @property
     def neighbor_builds(self):
         """LAMMPS's neighbour-list builds so far in the current engine (None: unknown).
 
         Sent by ``fix rigidmd/ipi`` with every call's forces (its ``extra`` string).
         """
-        import json
+        builds = self._extra("neighbor_builds")
+        return None if builds is None else int(builds)
 
-        try:
-            return int(json.loads(self.engine_extra)["neighbor_builds"])
-        except (ValueError, KeyError, TypeError):
-            return None
+    @property
+    def broadcast_us(self):
+        """Mean microseconds per call that the engine's rank 0 waited, in the current
+        engine, for the other ranks to take the positions (None: one rank, or unknown).
+
+        The other ranks' wake-up from their naps (see ``poll_us``) and the transfer:
+        what the naps cost each call (``fix rigidmd/ipi`` only).
+        """
+        waited = self._extra("broadcast_us")
+        return None if waited is None else float(waited)
 
     def write_input(self, atoms, directory):
         """Write ``engine.data`` and ``in.engine`` for ``atoms`` to ``directory``.
