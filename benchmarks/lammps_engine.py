@@ -80,6 +80,8 @@ STEPS = {216: 200, 1728: 40, 13824: 10}
 NPT_PARTS = [NoseHooverThermostat(298, 100 * units.fs),
              MTKBarostat(298, 1.01325 * units.bar, 1000 * units.fs)]
 TICK = os.sysconf("SC_CLK_TCK")
+#: ``{ranks: [broadcast_us of each engine run]}`` (see :func:`engine_run`).
+BROADCAST_US = {}
 
 
 def water_box(replicas):
@@ -187,11 +189,18 @@ def dynamics(a, kind):
 
 
 def engine_run(atoms, kind, steps, **options):
-    """rigidmd with LAMMPSEngine (LAMMPS in its own process)."""
+    """rigidmd with LAMMPSEngine (LAMMPS in its own process).
+
+    On several ranks, the engine's ``broadcast_us`` (rank 0's wait per call for the
+    other ranks to wake) is kept in :data:`BROADCAST_US`.
+    """
     a = atoms.copy()
     with LAMMPSEngine(COMMANDS, **options) as calc:
         a.calc = calc
-        return timed(a, kind, steps, engine=calc)
+        times = timed(a, kind, steps, engine=calc)
+        if calc.broadcast_us is not None:
+            BROADCAST_US.setdefault(options.get("processes", 1), []).append(calc.broadcast_us)
+        return times
 
 
 def calc_run(atoms, kind, steps, **options):
@@ -463,7 +472,11 @@ def main():
         lines += [""] + table(f"1728 waters, two cores (ratios to native on the same 2 ranks, "
                               f"or threads; {load()})", results, "native NVE, 2 MPI ranks",
                               "LAMMPS force time, 2 ranks", ratios)
-        print("\n".join(lines[-len(results) - 2:]), flush=True)
+        waits = BROADCAST_US.get(2, [])
+        if waits:
+            lines.append(f"{'engine rank 0 waited for rank 1 (broadcast_us)':>42} "
+                         f"{np.median(waits):8.1f} us a call, median of {len(waits)} runs")
+        print("\n".join(lines[-len(results) - 2 - bool(waits):]), flush=True)
     if "scaling" in args.tables:
         at_start = load()
         context = {"host": platform.node(), "cores": os.cpu_count(),

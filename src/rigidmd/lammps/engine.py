@@ -265,9 +265,11 @@ class LAMMPSEngine(IPICalculator):
         temporary directory, removed by :meth:`close` unless the engine failed).
     poll_us : int, default 500
         With ``fix rigidmd/ipi``: the longest nap (microseconds) of a rank
-        other than 0 waiting for the next call (it naps a twentieth of the last
-        wait, at least 10 µs); 0 leaves the wait to MPI (MPICH then keeps a
-        core busy while rigidmd integrates).
+        other than 0 waiting for the next call (it naps to three quarters of
+        the wait it expects, the shortest of the last four, then a fortieth of
+        it at a time, at least 10 µs; :attr:`broadcast_us` says what that
+        costs a call); 0 leaves the wait to MPI (MPICH then keeps a core busy
+        while rigidmd integrates).
 
     Notes
     -----
