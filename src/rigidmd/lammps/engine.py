@@ -44,7 +44,8 @@ Numbers (``fix ipi``)
     cell vectors): ``fix ipi`` folds an atom back by one box length only, so
     atoms a few boxes out (a restart from unwrapped positions) gave another
     energy surface; a running LAMMPS keeps its own images against its
-    neighbour list.  The cell is sent in the basis with
+    neighbour list.  (``fix rigidmd/ipi`` takes positions in any image: it
+    writes each atom in the image nearest to LAMMPS's own.)  The cell is sent in the basis with
     LAMMPS's tilt limits (:func:`reduce_tilt`: the same lattice); when that
     basis flips, where native LAMMPS re-neighbours, a new engine is started.
 
@@ -323,6 +324,7 @@ class LAMMPSEngine(IPICalculator):
         self._signature = None
         self._flips = None
         self._reference = None  # (energy, forces) of the in-process probe at the first call
+        self._cell_parts = {}  # {name: (cell bytes, what _kept computed for that cell)}
 
     # ------------------------------------------------------------ the input
     def _choose_fix(self):
@@ -517,10 +519,27 @@ class LAMMPSEngine(IPICalculator):
                 f"started in {ours} ({started}) and has written no log there; look for the "
                 "log where the engine that connected runs")
 
+    def _kept(self, name, cell, compute):
+        """``compute(cell)``, kept for the last ``cell`` of each ``name`` (a constant-volume
+        run computes its frame and reduced cell once)."""
+        key = cell.tobytes()
+        kept = self._cell_parts.get(name)
+        if kept is None or kept[0] != key:
+            value = compute(cell)
+            for part in value if isinstance(value, tuple) else (value,):
+                if isinstance(part, np.ndarray):
+                    part.flags.writeable = False  # handed out again: nobody may change it
+            kept = self._cell_parts[name] = (key, value)
+        return kept[1]
+
     def frame(self, cell):
-        return lower_triangular(cell)[0]
+        return self._kept("frame", cell, lambda c: lower_triangular(c)[0])
 
     def engine_positions(self, cell, positions):
+        if self._choose_fix() == "rigidmd/ipi":
+            # fix rigidmd/ipi writes each atom in the image nearest to LAMMPS's own copy
+            # of it, whatever image it is sent in (tests/test_lammps_engine_fix.py).
+            return positions
         # fix ipi folds an atom back by one box length at most (LAMMPS's Domain::pbc), and
         # only on a running engine does it image atoms against its neighbour list: atoms
         # farther out would be binned and imaged wrongly.  Every atom goes into the cell
@@ -545,7 +564,7 @@ class LAMMPSEngine(IPICalculator):
         # LAMMPS keeps tilts within half a box length (its minimum image and ghost atoms
         # assume it); a barostat's cell may go further: the same lattice, reduced.
         # The rotated cell's upper triangle is roundoff (1e-16): LAMMPS's frame has none.
-        return np.tril(reduce_tilt(cell)[0])
+        return self._kept("engine_cell", cell, lambda c: np.tril(reduce_tilt(c)[0]))
 
     def origin(self, cell):
         if self._choose_fix() == "rigidmd/ipi":
@@ -593,7 +612,8 @@ class LAMMPSEngine(IPICalculator):
                              f"{target.pbc.tolist()}); use LAMMPSCalculator for a cluster")
         signature = (len(target), target.numbers.tobytes(),
                      target.get_initial_charges().tobytes())
-        cell, flips = reduce_tilt(lower_triangular(target.cell.array)[1])
+        cell, flips = self._kept("lattice", target.cell.array,
+                                 lambda c: reduce_tilt(lower_triangular(c)[1]))
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
         if self.connected and (signature != self._signature or flips != self._flips
                                or tilted and not self._engine_triclinic):
