@@ -269,8 +269,10 @@ class IPICalculator(Calculator):
         if not self._handshaken:
             self._handshake(deadline)
         bohr, n = self.bohr, len(positions)
-        message = self._posdata(cell, n, tally)
-        # the positions written into the message in Bohr (no temporary array, no copies)
+        key = (cell.tobytes(), n, tally)  # a constant cell: the same message, refilled
+        if self._message is None or self._message[0] != key:
+            self._message = (key, _posdata_message(cell, n, bohr, tally))
+        message = self._message[1]  # the positions written into it in Bohr, no copies:
         np.divide(positions, bohr, out=np.frombuffer(
             message, np.float64, 3 * n, len(message) - 24 * n - MSGLEN).reshape(n, 3))
         self._send(message)
@@ -292,25 +294,6 @@ class IPICalculator(Calculator):
         self.engine_extra = bytes(self._recv(extra, deadline, "forces")) if extra else b""
         hartree = self.hartree
         return energy * hartree, forces * (hartree / bohr), virial * hartree
-
-    def _posdata(self, cell, n, tally):
-        """The ``POSDATA`` message for ``cell`` and ``n`` atoms, positions left to fill
-        (the last ``24 n`` bytes before the ``GETFORCE`` header).
-
-        Kept for the last cell: a step at constant volume builds no new cell part (the
-        cell, its inverse, in Bohr) and no new buffer.
-        """
-        key = (cell.tobytes(), n, tally)
-        if self._message is None or self._message[0] != key:
-            h = cell.T / self.bohr
-            ih = np.linalg.inv(h) if np.linalg.det(cell) else np.zeros((3, 3))
-            head = b"".join((tally, word("POSDATA"),
-                             np.ascontiguousarray(h, np.float64).tobytes(),
-                             np.ascontiguousarray(ih, np.float64).tobytes(),
-                             np.array([n], np.int32).tobytes()))
-            message = bytearray(head) + bytearray(24 * n) + word("GETFORCE")
-            self._message = (key, message)
-        return self._message[1]
 
     # ------------------------------------------------------------ ASE
     def check_state(self, atoms, tol=1e-15):
@@ -352,8 +335,7 @@ class IPICalculator(Calculator):
             # finished, so the engine cannot be asked again.  The next call starts anew.
             self._shutdown(keep_files=False)
             raise
-        if want_stress:
-            virial = symmetric_virial(virial)
+        virial = symmetric_virial(virial) if want_stress else virial
         if rotation is not None:
             forces = forces @ rotation.T
             virial = rotation @ virial @ rotation.T
@@ -398,6 +380,23 @@ class IPICalculator(Calculator):
             self.close()
         except Exception:  # noqa: BLE001 - nothing to report to at interpreter exit
             pass
+
+
+def _posdata_message(cell, n, bohr, tally=b""):
+    """A ``POSDATA`` message (``tally`` before it, ``GETFORCE`` after it) for ``cell`` (Å,
+    rows a, b, c) and ``n`` atoms, the positions left zero: the ``24 n`` bytes before the
+    last 12, to be filled in Bohr.
+
+    Returns
+    -------
+    bytearray
+    """
+    h = cell.T / bohr
+    ih = np.linalg.inv(h) if np.linalg.det(cell) else np.zeros((3, 3))
+    head = b"".join((tally, word("POSDATA"), np.ascontiguousarray(h, np.float64).tobytes(),
+                     np.ascontiguousarray(ih, np.float64).tobytes(),
+                     np.array([n], np.int32).tobytes()))
+    return bytearray(head) + bytearray(24 * n) + word("GETFORCE")
 
 
 def symmetric_virial(virial):

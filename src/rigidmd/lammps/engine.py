@@ -230,10 +230,59 @@ def engine_plugin():
         return None
 
 
-def _positive(name, value):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"LAMMPSEngine: {name} must be a positive whole number, got {value!r}")
+def _positive(name, value, least=1):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+        what = "a positive whole number" if least == 1 else f"a whole number >= {least}"
+        raise ValueError(f"LAMMPSEngine: {name} must be {what}, got {value!r}")
     return int(value)
+
+
+def _extra_number(extra, name):
+    """The number ``name`` in an engine's ``extra`` string (JSON), or None."""
+    import json
+
+    try:
+        return json.loads(extra)[name]
+    except (ValueError, KeyError, TypeError):
+        return None
+
+
+class _PerCell:
+    """``compute(cell)``, kept for the last cell (a constant-volume run computes it once);
+    the arrays it returns are made read-only, since they are handed out again."""
+
+    def __init__(self, compute):
+        self.compute, self.key, self.value = compute, None, None
+
+    def __call__(self, cell):
+        key = cell.tobytes()
+        if key != self.key:
+            value = self.compute(cell)
+            for part in value if isinstance(value, tuple) else (value,):
+                if isinstance(part, np.ndarray):
+                    part.flags.writeable = False
+            self.key, self.value = key, value
+        return self.value
+
+
+def _engine_input(commands, options, kspace_parameters, fix, triclinic_box):
+    """The lines of ``in.engine``: box and data file, neighbour settings, interactions,
+    the k-space parameters, the engine's fix (``fix``: its lines) and the long run.
+
+    ``triclinic_box``: turn an orthogonal box of the data file triclinic.
+    """
+    lines = ["units metal", "atom_style full", "atom_modify map array",
+             "boundary p p p", "read_data engine.data"]
+    if triclinic_box:
+        lines.append("change_box all triclinic")
+    lines += [f"neighbor {options['skin']:.17g} bin", "neigh_modify every 1 delay 0 check yes"]
+    if options["exclude_intramolecular"]:
+        lines.append("neigh_modify exclude molecule/intra all")
+    lines += commands
+    if kspace_parameters is not None:
+        lines.append(kspace_parameters)
+    return lines + ["thermo_style custom step pe", "thermo_modify norm no lost error flush yes",
+                    "thermo 0", *fix, f"run {_RUN_STEPS}"]
 
 
 class LAMMPSEngine(IPICalculator):
@@ -305,11 +354,7 @@ class LAMMPSEngine(IPICalculator):
         self.triclinic = triclinic
         self.launch_engine = bool(launch)
         self.workdir = None if workdir is None else Path(workdir)
-        if isinstance(poll_us, bool) or not isinstance(poll_us, (int, np.integer)) \
-                or poll_us < 0:
-            raise ValueError(f"LAMMPSEngine: poll_us must be a whole number >= 0, got "
-                             f"{poll_us!r}")
-        self.poll_us = int(poll_us)
+        self.poll_us = _positive("poll_us", poll_us, least=0)
         #: The engine's fix: ``"rigidmd/ipi"`` or ``"ipi"`` (None before the first input).
         self.engine_fix = None
         self._library = None
@@ -324,7 +369,9 @@ class LAMMPSEngine(IPICalculator):
         self._signature = None
         self._flips = None
         self._reference = None  # (energy, forces) of the in-process probe at the first call
-        self._cell_parts = {}  # {name: (cell bytes, what _kept computed for that cell)}
+        self._frame = _PerCell(lambda c: lower_triangular(c)[0])
+        self._engine_cell = _PerCell(lambda c: np.tril(reduce_tilt(c)[0]))
+        self._lattice = _PerCell(lambda c: reduce_tilt(lower_triangular(c)[1]))
 
     # ------------------------------------------------------------ the input
     def _choose_fix(self):
@@ -352,33 +399,18 @@ class LAMMPSEngine(IPICalculator):
                 f"fix rmd_ipi all rigidmd/ipi {address} bohr {units.Bohr!r} hartree "
                 f"{units.Hartree!r} poll {self.poll_us}"]
 
-    def _extra(self, name):
-        """A number of the ``extra`` string ``fix rigidmd/ipi`` sent with the last forces."""
-        import json
-
-        try:
-            return json.loads(self.engine_extra)[name]
-        except (ValueError, KeyError, TypeError):
-            return None
-
     @property
     def neighbor_builds(self):
-        """LAMMPS's neighbour-list builds so far in the current engine (None: unknown).
-
-        Sent by ``fix rigidmd/ipi`` with every call's forces (its ``extra`` string).
-        """
-        builds = self._extra("neighbor_builds")
+        """LAMMPS's neighbour-list builds so far in the current engine (None: unknown;
+        sent by ``fix rigidmd/ipi`` with every call's forces, its ``extra`` string)."""
+        builds = _extra_number(self.engine_extra, "neighbor_builds")
         return None if builds is None else int(builds)
 
     @property
     def broadcast_us(self):
-        """Mean microseconds per call that the engine's rank 0 waited, in the current
-        engine, for the other ranks to take the positions (None: one rank, or unknown).
-
-        The other ranks' wake-up from their naps (see ``poll_us``) and the transfer:
-        what the naps cost each call (``fix rigidmd/ipi`` only).
-        """
-        waited = self._extra("broadcast_us")
+        """Rank 0's mean wait per call (µs), in the current engine, for the other ranks to
+        take the positions: what their naps cost (None: one rank, or ``fix ipi``)."""
+        waited = _extra_number(self.engine_extra, "broadcast_us")
         return None if waited is None else float(waited)
 
     def write_input(self, atoms, directory):
@@ -408,19 +440,8 @@ class LAMMPSEngine(IPICalculator):
             del probe
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
         self._engine_triclinic = bool(self.triclinic) or tilted
-        opts = self.calculator_options
-        lines = ["units metal", "atom_style full", "atom_modify map array",
-                 "boundary p p p", "read_data engine.data"]
-        if self._engine_triclinic and not tilted:
-            lines.append("change_box all triclinic")
-        lines += [f"neighbor {opts['skin']:.17g} bin", "neigh_modify every 1 delay 0 check yes"]
-        if opts["exclude_intramolecular"]:
-            lines.append("neigh_modify exclude molecule/intra all")
-        lines += self.commands
-        if self.kspace_parameters is not None:
-            lines.append(self.kspace_parameters)
-        lines += ["thermo_style custom step pe", "thermo_modify norm no lost error flush yes",
-                  "thermo 0", *self._fix_ipi(), f"run {_RUN_STEPS}"]
+        lines = _engine_input(self.commands, self.calculator_options, self.kspace_parameters,
+                             self._fix_ipi(), self._engine_triclinic and not tilted)
         path = directory / "in.engine"
         path.write_text("\n".join(lines) + "\n")
         return path
@@ -519,21 +540,8 @@ class LAMMPSEngine(IPICalculator):
                 f"started in {ours} ({started}) and has written no log there; look for the "
                 "log where the engine that connected runs")
 
-    def _kept(self, name, cell, compute):
-        """``compute(cell)``, kept for the last ``cell`` of each ``name`` (a constant-volume
-        run computes its frame and reduced cell once)."""
-        key = cell.tobytes()
-        kept = self._cell_parts.get(name)
-        if kept is None or kept[0] != key:
-            value = compute(cell)
-            for part in value if isinstance(value, tuple) else (value,):
-                if isinstance(part, np.ndarray):
-                    part.flags.writeable = False  # handed out again: nobody may change it
-            kept = self._cell_parts[name] = (key, value)
-        return kept[1]
-
     def frame(self, cell):
-        return self._kept("frame", cell, lambda c: lower_triangular(c)[0])
+        return self._frame(cell)
 
     def engine_positions(self, cell, positions):
         if self._choose_fix() == "rigidmd/ipi":
@@ -564,7 +572,7 @@ class LAMMPSEngine(IPICalculator):
         # LAMMPS keeps tilts within half a box length (its minimum image and ghost atoms
         # assume it); a barostat's cell may go further: the same lattice, reduced.
         # The rotated cell's upper triangle is roundoff (1e-16): LAMMPS's frame has none.
-        return self._kept("engine_cell", cell, lambda c: np.tril(reduce_tilt(c)[0]))
+        return self._engine_cell(cell)
 
     def origin(self, cell):
         if self._choose_fix() == "rigidmd/ipi":
@@ -612,8 +620,7 @@ class LAMMPSEngine(IPICalculator):
                              f"{target.pbc.tolist()}); use LAMMPSCalculator for a cluster")
         signature = (len(target), target.numbers.tobytes(),
                      target.get_initial_charges().tobytes())
-        cell, flips = self._kept("lattice", target.cell.array,
-                                 lambda c: reduce_tilt(lower_triangular(c)[1]))
+        cell, flips = self._lattice(target.cell.array)
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
         if self.connected and (signature != self._signature or flips != self._flips
                                or tilted and not self._engine_triclinic):

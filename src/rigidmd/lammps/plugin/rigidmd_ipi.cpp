@@ -30,9 +30,10 @@
 //     fortieth of it, or of the wait so far when longer, at least 10 and at most `poll`
 //     microseconds (default 500; 0: MPI's own blocking broadcast, which MPICH implements
 //     by polling, a core at 100 %); the thread's timer slack is 1 ns while it waits
-//     (Linux's default 50 us made a 45 us nap last 115 us).  A wait costs 10 to 15
-//     wake-ups and is over at most a fortieth of it late; rank 0 counts how long it
-//     then waits in the positions' broadcast for the others (`broadcast_us` below);
+//     (Linux's default 50 us made a 50 us nap last 123 us here; 1 ns: 65 us).  A wait
+//     costs 10 to 15 wake-ups and is over at most a fortieth of it late; rank 0 counts
+//     how long it then waits in the positions' broadcast for the others (`broadcast_us`
+//     below); no rank waits inside a blocking MPI call (see finish);
 //   * the forces reach rank 0 in one gather of each rank's own atoms (ID and force: the
 //     N atoms once, whatever the number of ranks), which also counts them;
 //   * EXIT ends the run at the next step (LAMMPS then finishes normally).
