@@ -260,7 +260,7 @@ class IPICalculator(Calculator):
         self._handshaken = True
 
     def _exchange(self, cell, positions, tally=b""):
-        """Energy (eV), forces (eV/Å) and virial (eV) for positions in the engine's frame.
+        """Energy (eV), forces (eV/Å) and virial (eV, as sent) at positions in the engine's frame.
 
         ``tally``: what goes before ``POSDATA`` (a ``RMDTALLY`` message, or nothing).
         """
