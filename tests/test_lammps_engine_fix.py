@@ -193,6 +193,23 @@ def test_waiting_ranks_do_not_spin():
 
 
 @pytest.mark.parametrize("processes", [1, 2])
+def test_rank_zero_says_how_long_the_others_took_to_join(processes):
+    """``broadcast_us``: rank 0's mean wait per call for the other ranks to take the
+    positions (their wake-up from the naps); none on one rank."""
+    atoms = water_box_27()
+    with LAMMPSEngine(PPPM_27, processes=processes) as engine:
+        atoms.calc = engine
+        for _ in range(5):
+            atoms.positions += 0.001
+            atoms.get_forces()
+        waited = engine.broadcast_us
+    if processes == 1:
+        assert waited is None
+    else:
+        assert 0.0 < waited < 1e6, waited
+
+
+@pytest.mark.parametrize("processes", [1, 2])
 def test_an_engine_started_by_hand_over_tcp(tmp_path, processes):
     """As on a second node: launch=False writes the input, someone starts
     ``[mpirun -np 2] lmp -in in.engine`` there, it connects to our port; results equal

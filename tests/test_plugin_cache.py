@@ -270,3 +270,18 @@ def test_a_library_others_may_write_is_rebuilt(built, monkeypatch):
     builds = counting_builds(monkeypatch)
     assert boxplugin._build() == built and len(builds) == 1
     assert built.stat().st_mode & 0o022 == 0
+
+
+def test_an_edited_engine_fix_gets_a_new_library(monkeypatch, tmp_path):
+    """The cache key hashes both sources: an edit of ``rigidmd_ipi.cpp`` (the engine's fix)
+    names another library, which is built, never the old one loaded."""
+    copies = []
+    for source in boxplugin.SOURCES:
+        copies.append(tmp_path / source.name)
+        copies[-1].write_bytes(source.read_bytes())
+    monkeypatch.setattr(boxplugin, "SOURCES", tuple(copies))
+    files = boxplugin._lammps_files()
+    before = boxplugin._key(*files)
+    engine = next(c for c in copies if c.name == "rigidmd_ipi.cpp")
+    engine.write_text(engine.read_text() + "\n// edited\n")
+    assert boxplugin._key(*files) != before

@@ -100,6 +100,7 @@ class IPICalculator(Calculator):
         self._peer_pid = None   # its process (Unix socket), when the system says
         self._peer_folder = None  # that process's working folder, when the system says
         self._verified = False  # its first answer was checked (check_first_answer)
+        self._message = None    # (cell, n, tally) and the POSDATA message made for them
 
     # ------------------------------------------------------------ hooks
     @property
@@ -225,7 +226,7 @@ class IPICalculator(Calculator):
 
     def _send(self, *parts):
         try:
-            self._conn.sendall(b"".join(parts))
+            self._conn.sendall(parts[0] if len(parts) == 1 else b"".join(parts))
         except OSError as err:
             self._closed(f" ({err.strerror})")
 
@@ -242,7 +243,7 @@ class IPICalculator(Calculator):
             if n == 0:
                 self._closed("")
             got += n
-        return bytes(buf)
+        return buf  # a bytearray (not copied again: 124 kB a call at 1728 waters)
 
     def _header(self, deadline, what):
         return self._recv(MSGLEN, deadline, what).decode("ascii", "replace").strip()
@@ -259,7 +260,7 @@ class IPICalculator(Calculator):
         self._handshaken = True
 
     def _exchange(self, cell, positions, tally=b""):
-        """Energy (eV), forces (eV/Å) and virial (eV) for positions in the engine's frame.
+        """Energy (eV), forces (eV/Å) and virial (eV, as sent) at positions in the engine's frame.
 
         ``tally``: what goes before ``POSDATA`` (a ``RMDTALLY`` message, or nothing).
         """
@@ -268,13 +269,13 @@ class IPICalculator(Calculator):
         if not self._handshaken:
             self._handshake(deadline)
         bohr, n = self.bohr, len(positions)
-        h = cell.T / bohr
-        ih = np.linalg.inv(h) if np.linalg.det(cell) else np.zeros((3, 3))
-        self._send(tally, word("POSDATA"), np.ascontiguousarray(h, np.float64).tobytes(),
-                   np.ascontiguousarray(ih, np.float64).tobytes(),
-                   np.array([n], np.int32).tobytes(),
-                   np.ascontiguousarray(positions / bohr, np.float64).tobytes(),
-                   word("GETFORCE"))
+        key = (cell.tobytes(), n, tally)  # a constant cell: the same message, refilled
+        if self._message is None or self._message[0] != key:
+            self._message = (key, _posdata_message(cell, n, bohr, tally))
+        message = self._message[1]  # the positions written into it in Bohr, no copies:
+        np.divide(positions, bohr, out=np.frombuffer(
+            message, np.float64, 3 * n, len(message) - 24 * n - MSGLEN).reshape(n, 3))
+        self._send(message)
         while True:
             header = self._header(deadline, "forces")
             if header != "HAVEDATA":  # an engine may still answer a poll
@@ -290,9 +291,9 @@ class IPICalculator(Calculator):
         forces = np.frombuffer(body, np.float64, 3 * n).reshape(n, 3)
         virial = np.frombuffer(body, np.float64, 9, 24 * n).reshape(3, 3)
         extra = int(np.frombuffer(body, np.int32, 1, 24 * n + 72)[0])
-        self.engine_extra = self._recv(extra, deadline, "forces") if extra else b""
+        self.engine_extra = bytes(self._recv(extra, deadline, "forces")) if extra else b""
         hartree = self.hartree
-        return energy * hartree, forces * (hartree / bohr), symmetric_virial(virial) * hartree
+        return energy * hartree, forces * (hartree / bohr), virial * hartree
 
     # ------------------------------------------------------------ ASE
     def check_state(self, atoms, tol=1e-15):
@@ -334,6 +335,7 @@ class IPICalculator(Calculator):
             # finished, so the engine cannot be asked again.  The next call starts anew.
             self._shutdown(keep_files=False)
             raise
+        virial = symmetric_virial(virial) if want_stress else virial
         if rotation is not None:
             forces = forces @ rotation.T
             virial = rotation @ virial @ rotation.T
@@ -342,7 +344,7 @@ class IPICalculator(Calculator):
             if why is not None:
                 self._fail(f"is not this calculator's engine: {why}")
             self._verified = True
-        results = {"forces": forces.copy()}
+        results = {"forces": forces}  # a new array (the exchange scaled what it read)
         if want_energy:
             results.update(energy=energy, free_energy=energy)
         if want_stress:
@@ -380,6 +382,23 @@ class IPICalculator(Calculator):
             pass
 
 
+def _posdata_message(cell, n, bohr, tally=b""):
+    """A ``POSDATA`` message (``tally`` before it, ``GETFORCE`` after it) for ``cell`` (Å,
+    rows a, b, c) and ``n`` atoms, the positions left zero: the ``24 n`` bytes before the
+    last 12, to be filled in Bohr.
+
+    Returns
+    -------
+    bytearray
+    """
+    h = cell.T / bohr
+    ih = np.linalg.inv(h) if np.linalg.det(cell) else np.zeros((3, 3))
+    head = b"".join((tally, word("POSDATA"), np.ascontiguousarray(h, np.float64).tobytes(),
+                     np.ascontiguousarray(ih, np.float64).tobytes(),
+                     np.array([n], np.int32).tobytes()))
+    return bytearray(head) + bytearray(24 * n) + word("GETFORCE")
+
+
 def symmetric_virial(virial):
     """The symmetric virial from what an engine sent (see :mod:`rigidmd.ipi`).
 
@@ -393,10 +412,17 @@ def symmetric_virial(virial):
         The upper triangle mirrored when the lower one is all zero (LAMMPS's
         ``fix ipi``), the lower one when the upper is, else ``(W + W.T) / 2``.
     """
-    lower = virial[np.tril_indices(3, -1)]
-    upper = virial[np.triu_indices(3, 1)]
-    if not np.any(lower):
-        return np.triu(virial) + np.triu(virial, 1).T
-    if not np.any(upper):
-        return np.tril(virial) + np.tril(virial, -1).T
-    return 0.5 * (virial + virial.T)
+    full = np.array(virial, dtype=float)
+    lower, upper = full[_LOWER], full[_UPPER]
+    if not lower.any():
+        full[_LOWER] = upper
+    elif not upper.any():
+        full[_UPPER] = lower
+    else:
+        full = 0.5 * (full + full.T)
+    return full
+
+
+# The off-diagonal elements below and above the diagonal, in mirrored order (yx zx zy, xy xz yz).
+_LOWER = (np.array([1, 2, 2]), np.array([0, 0, 1]))
+_UPPER = (np.array([0, 0, 1]), np.array([1, 2, 2]))

@@ -44,7 +44,8 @@ Numbers (``fix ipi``)
     cell vectors): ``fix ipi`` folds an atom back by one box length only, so
     atoms a few boxes out (a restart from unwrapped positions) gave another
     energy surface; a running LAMMPS keeps its own images against its
-    neighbour list.  The cell is sent in the basis with
+    neighbour list.  (``fix rigidmd/ipi`` takes positions in any image: it
+    writes each atom in the image nearest to LAMMPS's own.)  The cell is sent in the basis with
     LAMMPS's tilt limits (:func:`reduce_tilt`: the same lattice); when that
     basis flips, where native LAMMPS re-neighbours, a new engine is started.
 
@@ -229,10 +230,59 @@ def engine_plugin():
         return None
 
 
-def _positive(name, value):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"LAMMPSEngine: {name} must be a positive whole number, got {value!r}")
+def _positive(name, value, least=1):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+        what = "a positive whole number" if least == 1 else f"a whole number >= {least}"
+        raise ValueError(f"LAMMPSEngine: {name} must be {what}, got {value!r}")
     return int(value)
+
+
+def _extra_number(extra, name):
+    """The number ``name`` in an engine's ``extra`` string (JSON), or None."""
+    import json
+
+    try:
+        return json.loads(extra)[name]
+    except (ValueError, KeyError, TypeError):
+        return None
+
+
+class _PerCell:
+    """``compute(cell)``, kept for the last cell (a constant-volume run computes it once);
+    the arrays it returns are made read-only, since they are handed out again."""
+
+    def __init__(self, compute):
+        self.compute, self.key, self.value = compute, None, None
+
+    def __call__(self, cell):
+        key = cell.tobytes()
+        if key != self.key:
+            value = self.compute(cell)
+            for part in value if isinstance(value, tuple) else (value,):
+                if isinstance(part, np.ndarray):
+                    part.flags.writeable = False
+            self.key, self.value = key, value
+        return self.value
+
+
+def _engine_input(commands, options, kspace_parameters, fix, triclinic_box):
+    """The lines of ``in.engine``: box and data file, neighbour settings, interactions,
+    the k-space parameters, the engine's fix (``fix``: its lines) and the long run.
+
+    ``triclinic_box``: turn an orthogonal box of the data file triclinic.
+    """
+    lines = ["units metal", "atom_style full", "atom_modify map array",
+             "boundary p p p", "read_data engine.data"]
+    if triclinic_box:
+        lines.append("change_box all triclinic")
+    lines += [f"neighbor {options['skin']:.17g} bin", "neigh_modify every 1 delay 0 check yes"]
+    if options["exclude_intramolecular"]:
+        lines.append("neigh_modify exclude molecule/intra all")
+    lines += commands
+    if kspace_parameters is not None:
+        lines.append(kspace_parameters)
+    return lines + ["thermo_style custom step pe", "thermo_modify norm no lost error flush yes",
+                    "thermo 0", *fix, f"run {_RUN_STEPS}"]
 
 
 class LAMMPSEngine(IPICalculator):
@@ -265,16 +315,19 @@ class LAMMPSEngine(IPICalculator):
         temporary directory, removed by :meth:`close` unless the engine failed).
     poll_us : int, default 500
         With ``fix rigidmd/ipi``: the longest nap (microseconds) of a rank
-        other than 0 waiting for the next call (it naps a twentieth of the last
-        wait, at least 10 µs); 0 leaves the wait to MPI (MPICH then keeps a
-        core busy while rigidmd integrates).
+        other than 0 waiting for the next call (it naps to three quarters of
+        the wait it expects, the shortest of the last four, then a fortieth of
+        it at a time, at least 10 µs; :attr:`broadcast_us` says what that
+        costs a call); 0 leaves the wait to MPI (MPICH then keeps a core busy
+        while rigidmd integrates).
 
     Notes
     -----
     Needs a periodic cell (the engine sets LAMMPS's box from it).  With
     ``fix rigidmd/ipi`` a call computes what it is asked for (forces always);
     with ``fix ipi`` energy, forces and stress.  :attr:`neighbor_builds`
-    counts LAMMPS's neighbour-list builds (``fix rigidmd/ipi`` only).  The
+    counts LAMMPS's neighbour-list builds, :attr:`broadcast_us` what the
+    waiting ranks' naps cost a call (``fix rigidmd/ipi`` only).  The
     k-space parameters are those LAMMPS chooses for the first cell, fixed
     (:attr:`kspace_parameters`) and kept by every later engine of this object.
     """
@@ -301,11 +354,7 @@ class LAMMPSEngine(IPICalculator):
         self.triclinic = triclinic
         self.launch_engine = bool(launch)
         self.workdir = None if workdir is None else Path(workdir)
-        if isinstance(poll_us, bool) or not isinstance(poll_us, (int, np.integer)) \
-                or poll_us < 0:
-            raise ValueError(f"LAMMPSEngine: poll_us must be a whole number >= 0, got "
-                             f"{poll_us!r}")
-        self.poll_us = int(poll_us)
+        self.poll_us = _positive("poll_us", poll_us, least=0)
         #: The engine's fix: ``"rigidmd/ipi"`` or ``"ipi"`` (None before the first input).
         self.engine_fix = None
         self._library = None
@@ -320,6 +369,9 @@ class LAMMPSEngine(IPICalculator):
         self._signature = None
         self._flips = None
         self._reference = None  # (energy, forces) of the in-process probe at the first call
+        self._frame = _PerCell(lambda c: lower_triangular(c)[0])
+        self._engine_cell = _PerCell(lambda c: np.tril(reduce_tilt(c)[0]))
+        self._lattice = _PerCell(lambda c: reduce_tilt(lower_triangular(c)[1]))
 
     # ------------------------------------------------------------ the input
     def _choose_fix(self):
@@ -349,16 +401,17 @@ class LAMMPSEngine(IPICalculator):
 
     @property
     def neighbor_builds(self):
-        """LAMMPS's neighbour-list builds so far in the current engine (None: unknown).
+        """LAMMPS's neighbour-list builds so far in the current engine (None: unknown;
+        sent by ``fix rigidmd/ipi`` with every call's forces, its ``extra`` string)."""
+        builds = _extra_number(self.engine_extra, "neighbor_builds")
+        return None if builds is None else int(builds)
 
-        Sent by ``fix rigidmd/ipi`` with every call's forces (its ``extra`` string).
-        """
-        import json
-
-        try:
-            return int(json.loads(self.engine_extra)["neighbor_builds"])
-        except (ValueError, KeyError, TypeError):
-            return None
+    @property
+    def broadcast_us(self):
+        """Rank 0's mean wait per call (µs), in the current engine, for the other ranks to
+        take the positions: what their naps cost (None: one rank, or ``fix ipi``)."""
+        waited = _extra_number(self.engine_extra, "broadcast_us")
+        return None if waited is None else float(waited)
 
     def write_input(self, atoms, directory):
         """Write ``engine.data`` and ``in.engine`` for ``atoms`` to ``directory``.
@@ -387,19 +440,8 @@ class LAMMPSEngine(IPICalculator):
             del probe
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
         self._engine_triclinic = bool(self.triclinic) or tilted
-        opts = self.calculator_options
-        lines = ["units metal", "atom_style full", "atom_modify map array",
-                 "boundary p p p", "read_data engine.data"]
-        if self._engine_triclinic and not tilted:
-            lines.append("change_box all triclinic")
-        lines += [f"neighbor {opts['skin']:.17g} bin", "neigh_modify every 1 delay 0 check yes"]
-        if opts["exclude_intramolecular"]:
-            lines.append("neigh_modify exclude molecule/intra all")
-        lines += self.commands
-        if self.kspace_parameters is not None:
-            lines.append(self.kspace_parameters)
-        lines += ["thermo_style custom step pe", "thermo_modify norm no lost error flush yes",
-                  "thermo 0", *self._fix_ipi(), f"run {_RUN_STEPS}"]
+        lines = _engine_input(self.commands, self.calculator_options, self.kspace_parameters,
+                             self._fix_ipi(), self._engine_triclinic and not tilted)
         path = directory / "in.engine"
         path.write_text("\n".join(lines) + "\n")
         return path
@@ -499,9 +541,13 @@ class LAMMPSEngine(IPICalculator):
                 "log where the engine that connected runs")
 
     def frame(self, cell):
-        return lower_triangular(cell)[0]
+        return self._frame(cell)
 
     def engine_positions(self, cell, positions):
+        if self._choose_fix() == "rigidmd/ipi":
+            # fix rigidmd/ipi writes each atom in the image nearest to LAMMPS's own copy
+            # of it, whatever image it is sent in (tests/test_lammps_engine_fix.py).
+            return positions
         # fix ipi folds an atom back by one box length at most (LAMMPS's Domain::pbc), and
         # only on a running engine does it image atoms against its neighbour list: atoms
         # farther out would be binned and imaged wrongly.  Every atom goes into the cell
@@ -526,7 +572,7 @@ class LAMMPSEngine(IPICalculator):
         # LAMMPS keeps tilts within half a box length (its minimum image and ghost atoms
         # assume it); a barostat's cell may go further: the same lattice, reduced.
         # The rotated cell's upper triangle is roundoff (1e-16): LAMMPS's frame has none.
-        return np.tril(reduce_tilt(cell)[0])
+        return self._engine_cell(cell)
 
     def origin(self, cell):
         if self._choose_fix() == "rigidmd/ipi":
@@ -574,7 +620,7 @@ class LAMMPSEngine(IPICalculator):
                              f"{target.pbc.tolist()}); use LAMMPSCalculator for a cluster")
         signature = (len(target), target.numbers.tobytes(),
                      target.get_initial_charges().tobytes())
-        cell, flips = reduce_tilt(lower_triangular(target.cell.array)[1])
+        cell, flips = self._lattice(target.cell.array)
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
         if self.connected and (signature != self._signature or flips != self._flips
                                or tilted and not self._engine_triclinic):

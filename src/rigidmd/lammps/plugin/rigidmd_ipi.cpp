@@ -24,10 +24,16 @@
 //     (`bohr`, `hartree`, default ASE's CODATA 2014 values), so the numbers come back to
 //     roundoff;
 //   * ranks other than 0 wait for the next request without spinning: a non-blocking
-//     broadcast tested after naps of a twentieth of the last wait (the server's step),
-//     at least 10 and at most `poll` microseconds (default 500; 0: MPI's own blocking
-//     broadcast, which MPICH implements by polling, a core at 100 %), so a wait costs
-//     about twenty wake-ups and is over by at most a twentieth of it late;
+//     broadcast, tested (three times: MPICH completes it only at a later test than the
+//     one that finds its data) after each nap: one nap to three quarters of the wait
+//     expected (the shortest of the last four: the server's step), then naps of a
+//     fortieth of it, or of the wait so far when longer, at least 10 and at most `poll`
+//     microseconds (default 500; 0: MPI's own blocking broadcast, which MPICH implements
+//     by polling, a core at 100 %); the thread's timer slack is 1 ns while it waits
+//     (Linux's default 50 us made a 50 us nap last 123 us here; 1 ns: 65 us).  A wait
+//     costs 10 to 15 wake-ups and is over at most a fortieth of it late; rank 0 counts
+//     how long it then waits in the positions' broadcast for the others (`broadcast_us`
+//     below); no rank waits inside a blocking MPI call (see finish);
 //   * the forces reach rank 0 in one gather of each rank's own atoms (ID and force: the
 //     N atoms once, whatever the number of ranks), which also counts them;
 //   * EXIT ends the run at the next step (LAMMPS then finishes normally).
@@ -37,7 +43,9 @@
 // POSDATA only: bit 0 the energy, bit 1 the virial; without it both are tallied, as a
 // standard i-PI server expects), POSDATA (h, h^-1, N, positions; atomic units), GETFORCE
 // (answered FORCEREADY, energy, N, forces, virial, then an extra string, here
-// {"neighbor_builds": N}, LAMMPS's count of neighbour-list builds), EXIT.
+// {"neighbor_builds": N, "broadcast_us": T}: LAMMPS's count of neighbour-list builds, and
+// the mean microseconds per call rank 0 waited in the positions' broadcast, the other
+// ranks' wake-up and the transfer; null on one rank), EXIT.
 
 #include "atom.h"
 #include "comm.h"
@@ -66,9 +74,13 @@
 #include <vector>
 
 #include <netdb.h>
+#include <sched.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <sys/socket.h>
+#ifdef __linux__
+#include <sys/prctl.h>
+#endif
 #include <sys/un.h>
 #include <unistd.h>
 
@@ -100,7 +112,11 @@ class FixRigidmdIPI : public Fix {
   double bohr = 0.5291772105638411;     // Å (ASE's units.Bohr)
   double hartree = 27.211386024367243;  // eV (ASE's units.Hartree)
   long poll_us = 500;            // longest nap of a waiting rank (microseconds)
-  double last_wait = 0.0;        // seconds the last wait for the server took
+  static constexpr int WAITS = 4;
+  double last_waits[WAITS] = {0.0, 0.0, 0.0, 0.0};  // seconds the last waits took
+  long waits = 0;                // waits so far (last_waits is a ring)
+  double broadcast_seconds = 0.0;  // rank 0's time in the positions' broadcasts
+  long broadcasts = 0;             // and their number
   int sock = -1;
   bigint natoms = 0;
   int flags = ENERGY | VIRIAL;   // what to tally at the step under way
@@ -266,33 +282,66 @@ void FixRigidmdIPI::write_header(const char *word)
   write_all(padded, HEADER);
 }
 
+// Complete `request` without holding a core another process needs: tests, and
+// sched_yield() between them.  (Rank 0 spinning inside MPI_Bcast while it waited for
+// rank 1 kept rank 1, woken from its nap on the same core, off it until the scheduler's
+// next tick: 4 to 32 ms late on 4 of 22 calls in each of three runs here, two cores at
+// load 0.4; with finish, one or two of 22 calls 1.3 to 5.1 ms late.)
+static void finish(MPI_Request &request)
+{
+  int done = 0;
+  while (true) {
+    MPI_Test(&request, &done, MPI_STATUS_IGNORE);
+    if (done) return;
+    sched_yield();
+  }
+}
+
 // Broadcast from rank 0.  `patient`: the other ranks wait for a server that may take
-// long (the integrator's step), testing a non-blocking broadcast every poll_us instead
-// of spinning inside MPI (a blocking and a non-blocking collective may not be mixed, so
-// every rank uses the same call).
+// long (the integrator's step), testing a non-blocking broadcast between naps instead of
+// spinning inside MPI; otherwise every rank tests and yields (finish).  With poll 0,
+// MPI's own blocking broadcast.  (A blocking and a non-blocking collective may not be
+// mixed, so every rank uses the same call.)
 void FixRigidmdIPI::share(void *data, int count, MPI_Datatype type, bool patient)
 {
   if (comm->nprocs == 1) return;
-  if (!patient || poll_us <= 0) {
+  if (poll_us <= 0) {
     MPI_Bcast(data, count, type, 0, world);
     return;
   }
   MPI_Request pending_request;
   MPI_Ibcast(data, count, type, 0, world, &pending_request);
-  if (comm->me == 0) {
-    MPI_Wait(&pending_request, MPI_STATUS_IGNORE);
+  if (!patient || comm->me == 0) {
+    finish(pending_request);
     return;
   }
-  long nap_us = std::min(poll_us, std::max(10L, static_cast<long>(last_wait * 5e4)));
-  struct timespec nap = {nap_us / 1000000, (nap_us % 1000000) * 1000};
+  // The wait to expect: the shortest of the last few (one long wait, the server writing a
+  // file, does not make the next naps long).
+  const double expected = *std::min_element(last_waits, last_waits + WAITS);
+#ifdef __linux__
+  const int slack = prctl(PR_GET_TIMERSLACK, 0, 0, 0, 0);  // restored after the wait
+  if (slack > 1) prctl(PR_SET_TIMERSLACK, 1UL, 0, 0, 0);
+#endif
   const double start = MPI_Wtime();
   int done = 0;
   while (true) {
-    MPI_Test(&pending_request, &done, MPI_STATUS_IGNORE);
+    for (int test = 0; test < 3 && !done; ++test)
+      MPI_Test(&pending_request, &done, MPI_STATUS_IGNORE);
     if (done) break;
-    nanosleep(&nap, nullptr);
+    // One nap to three quarters of the expected wait, then naps of a fortieth of it (or
+    // of the wait so far, when longer): 10 to 15 wake-ups, at most a fortieth late.
+    const double waited = MPI_Wtime() - start;
+    double nap = waited < 0.75 * expected ? 0.75 * expected - waited
+                                          : std::max(expected, waited) / 40.0;
+    nap = std::min(1e-6 * static_cast<double>(poll_us), std::max(1e-5, nap));
+    const long nanoseconds = static_cast<long>(nap * 1e9);
+    struct timespec pause = {nanoseconds / 1000000000L, nanoseconds % 1000000000L};
+    nanosleep(&pause, nullptr);
   }
-  last_wait = MPI_Wtime() - start;
+  last_waits[waits++ % WAITS] = MPI_Wtime() - start;
+#ifdef __linux__
+  if (slack > 1) prctl(PR_SET_TIMERSLACK, static_cast<unsigned long>(slack), 0, 0, 0);
+#endif
 }
 
 // Wait for the server's next request: positions (and which tallies), or EXIT.
@@ -337,8 +386,13 @@ void FixRigidmdIPI::receive()
   share(info, 11, MPI_DOUBLE, true);
   request = static_cast<int>(info[0]);
   flags = static_cast<int>(info[1]);
-  if (request == POSITIONS) share(positions.data(), static_cast<int>(3 * natoms), MPI_DOUBLE,
-                                  false);
+  if (request != POSITIONS) return;
+  const double start = MPI_Wtime();
+  share(positions.data(), static_cast<int>(3 * natoms), MPI_DOUBLE, false);
+  if (comm->me == 0 && comm->nprocs > 1) {
+    broadcast_seconds += MPI_Wtime() - start;
+    ++broadcasts;
+  }
 }
 
 // The energy and the virial are tallied on the next step only if asked for (LAMMPS
@@ -497,7 +551,10 @@ void FixRigidmdIPI::final_integrate()
         error->one(FLERR, "Fix rigidmd/ipi: unexpected message '{}' from the server", header);
       }
     }
-    std::string extra = "{\"neighbor_builds\": " + std::to_string(neighbor->ncalls) + "}";
+    std::string waited = broadcasts ? std::to_string(1e6 * broadcast_seconds / broadcasts)
+                                    : std::string("null");
+    std::string extra = "{\"neighbor_builds\": " + std::to_string(neighbor->ncalls) +
+                        ", \"broadcast_us\": " + waited + "}";
     int32_t n = static_cast<int32_t>(natoms), length = static_cast<int32_t>(extra.size());
     std::vector<char> message(HEADER, ' ');
     message.reserve(HEADER + 12 + 24 * natoms + sizeof(virial) + 4 + extra.size());
