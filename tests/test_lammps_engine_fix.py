@@ -6,6 +6,7 @@ The liquid is ``tests/data/water_box_27.traj`` (27 TIP3P waters, 9.3 Å box) wit
 ``lj/cut/coul/long 4.5`` and PPPM at 1e-5 (``PPPM_27``).
 """
 
+import os
 import time
 import warnings
 
@@ -192,12 +193,33 @@ def test_waiting_ranks_do_not_spin():
     assert napping < 0.5 * spinning, (napping, spinning)
 
 
+@pytest.mark.parametrize("processes, threads, launch, cores, expected", [
+    (2, None, True, 2, 0), (16, None, True, 16, 0), (15, None, True, 16, 500),
+    (4, 2, True, 8, 0), (4, 2, True, 12, 500), (2, None, False, 2, 500)])
+def test_ranks_that_take_every_core_wait_in_mpi(monkeypatch, tmp_path, processes, threads,
+                                                launch, cores, expected):
+    """The default ``poll_us``: the naps only where the engine leaves a core to spare (16
+    napping ranks on 16 cores made a step 13-16x native's, MPI's own wait 1.1x); an
+    engine started elsewhere naps (its host's cores are not known).  The choice reaches
+    the fix's input; a given ``poll_us`` is kept."""
+    from rigidmd.lammps.engine import default_poll_us
+
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: set(range(cores)))
+    assert default_poll_us(processes, threads, launch) == expected
+    engine = LAMMPSEngine(PPPM_27, processes=processes, threads=threads, launch=launch)
+    assert engine.poll_us == expected
+    engine.write_input(water_box_27(), tmp_path)
+    assert engine.engine_fix == "rigidmd/ipi"
+    assert f" poll {expected}\n" in (tmp_path / "in.engine").read_text()
+    assert LAMMPSEngine(PPPM_27, processes=processes, poll_us=250).poll_us == 250
+
+
 @pytest.mark.parametrize("processes", [1, 2])
 def test_rank_zero_says_how_long_the_others_took_to_join(processes):
     """``broadcast_us``: rank 0's mean wait per call for the other ranks to take the
     positions (their wake-up from the naps); none on one rank."""
     atoms = water_box_27()
-    with LAMMPSEngine(PPPM_27, processes=processes) as engine:
+    with LAMMPSEngine(PPPM_27, processes=processes, poll_us=500) as engine:
         atoms.calc = engine
         for _ in range(5):
             atoms.positions += 0.001

@@ -91,7 +91,7 @@ from rigidmd.lammps.calculator import LAMMPSCalculator, lower_triangular
 from rigidmd.lammps.library import check_atom_types, flatten, mpich_prefix
 
 __all__ = ["LAMMPSEngine", "LAMMPS_IPI_BOHR", "LAMMPS_IPI_HARTREE", "answer_mismatch",
-           "lammps_executable", "reduce_tilt", "wrap_into_cell"]
+           "default_poll_us", "lammps_executable", "reduce_tilt", "wrap_into_cell"]
 
 #: Bohr (Å) in LAMMPS's ``fix ipi`` (``posconv`` for ``units metal``).
 LAMMPS_IPI_BOHR = 0.52917721
@@ -230,6 +230,43 @@ def engine_plugin():
         return None
 
 
+def default_poll_us(processes, threads=None, launch=True) -> int:
+    """``LAMMPSEngine``'s ``poll_us`` when none is given: how the waiting ranks wait.
+
+    MPI's own wait (0) when the engine is started here and its ranks times
+    threads take every core this process may use (its CPU affinity), else
+    naps of at most 500 µs.  Measured (``benchmarks/lammps_engine.py``; NVE,
+    TIP3P + PPPM, wall time per step against native LAMMPS on as many ranks,
+    docs/performance.md): with 16 ranks on 16 cores the naps made a step
+    12.8-16.4× native's at 216 waters and 3.3-5.2× at 1728, MPI's wait
+    1.10× and 1.11-1.19×; with 2 ranks on 2 cores (1728 waters, five rounds)
+    the naps' median was 1.25×, MPI's wait 0.99×.  With a core to spare (15
+    ranks on 16 cores and fewer) the two ran alike, and the naps leave an
+    idle engine's cores free (0.03-0.04 s of CPU per second and rank against
+    a whole core).  An engine started elsewhere (``launch=False``) gets the
+    naps: the cores of its host are not known here.
+
+    Parameters
+    ----------
+    processes : int
+        MPI ranks.
+    threads : int, optional
+        OpenMP threads per rank (None: one).
+    launch : bool
+        Whether the engine runs on this machine.
+
+    Returns
+    -------
+    int
+        Microseconds: 0 or 500.
+    """
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # not on Linux
+        cores = os.cpu_count() or 1
+    return 0 if launch and processes * (threads or 1) >= cores else 500
+
+
 def _positive(name, value, least=1):
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
         what = "a positive whole number" if least == 1 else f"a whole number >= {least}"
@@ -313,13 +350,15 @@ class LAMMPSEngine(IPICalculator):
     workdir : path, optional
         Where the input, data file and LAMMPS's log go (default: a new
         temporary directory, removed by :meth:`close` unless the engine failed).
-    poll_us : int, default 500
+    poll_us : int, optional
         With ``fix rigidmd/ipi``: the longest nap (microseconds) of a rank
         other than 0 waiting for the next call (it naps to three quarters of
         the wait it expects, the shortest of the last four, then a fortieth of
         it at a time, at least 10 µs; :attr:`broadcast_us` says what that
         costs a call); 0 leaves the wait to MPI (MPICH then keeps a core busy
-        while rigidmd integrates).
+        while rigidmd integrates).  Default (:func:`default_poll_us`): 0 when
+        the engine's ranks and threads take every core this process may use,
+        else 500.
 
     Notes
     -----
@@ -336,7 +375,7 @@ class LAMMPSEngine(IPICalculator):
                  molecule_ids=None, exclude_intramolecular=True, ase_constants=False,
                  skin=2.0, triclinic=None, launch=True, unixsocket=None, port=None,
                  host="localhost", timeout=120.0, connect_timeout=None, workdir=None,
-                 poll_us=500, **kwargs):
+                 poll_us=None, **kwargs):
         super().__init__(unixsocket, port=port, host=host, timeout=timeout,
                          connect_timeout=connect_timeout, bohr=LAMMPS_IPI_BOHR,
                          hartree=LAMMPS_IPI_HARTREE, **kwargs)
@@ -354,7 +393,8 @@ class LAMMPSEngine(IPICalculator):
         self.triclinic = triclinic
         self.launch_engine = bool(launch)
         self.workdir = None if workdir is None else Path(workdir)
-        self.poll_us = _positive("poll_us", poll_us, least=0)
+        self.poll_us = default_poll_us(self.processes, self.threads, self.launch_engine) \
+            if poll_us is None else _positive("poll_us", poll_us, least=0)
         #: The engine's fix: ``"rigidmd/ipi"`` or ``"ipi"`` (None before the first input).
         self.engine_fix = None
         self._library = None
