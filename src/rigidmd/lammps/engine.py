@@ -448,8 +448,9 @@ class LAMMPSEngine(IPICalculator):
 
     @property
     def broadcast_us(self):
-        """Rank 0's mean wait per call (µs), in the current engine, for the other ranks to
-        take the positions: what their naps cost (None: one rank, or ``fix ipi``)."""
+        """Rank 0's mean time per call (µs), in the current engine, in the positions'
+        broadcast: how long the other ranks took to join it from their naps, or from MPI's
+        own wait with ``poll_us=0`` (None: one rank, or ``fix ipi``)."""
         waited = _extra_number(self.engine_extra, "broadcast_us")
         return None if waited is None else float(waited)
 
