@@ -245,8 +245,10 @@ def test_an_engine_set_up_for_another_system_is_refused(tmp_path, monkeypatch, f
         monkeypatch.setattr("rigidmd.lammps.engine.engine_plugin", lambda: None)
     name = f"rigidmd-other-{os.getpid()}"
     atoms = water_box_27()
-    engine = LAMMPSEngine(PPPM_27, launch=False, unixsocket=name, workdir=tmp_path / "ours",
-                          timeout=30, connect_timeout=60)
+    # Ours on two ranks: the message says how it is started (it said "lmp -in in.engine"
+    # whatever the ranks); the intruder runs on one.
+    engine = LAMMPSEngine(PPPM_27, processes=2, launch=False, unixsocket=name,
+                          workdir=tmp_path / "ours", timeout=30, connect_timeout=60)
     other = LAMMPSEngine(PPPM_27, launch=False, unixsocket=name, workdir=tmp_path / "other")
     other.write_input(atoms[:57], tmp_path / "other")
     cmd, env = other.command_line()
@@ -270,8 +272,8 @@ def test_an_engine_set_up_for_another_system_is_refused(tmp_path, monkeypatch, f
         message = str(err.value)
         assert message.endswith(f"; it is not the engine this calculator waits for, which is "
                                 f"started in {tmp_path / 'ours'} (cd {tmp_path / 'ours'} && "
-                                f"lmp -in in.engine); the log of the one that connected is "
-                                f"in {tmp_path / 'other'}"), message
+                                f"mpirun -np 2 lmp -in in.engine); the log of the one that "
+                                f"connected is in {tmp_path / 'other'}"), message
         assert "log.lammps" not in message
     finally:
         engine.close()

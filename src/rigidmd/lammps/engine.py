@@ -267,6 +267,16 @@ def default_poll_us(processes, threads=None, launch=True) -> int:
     return 0 if launch and processes * (threads or 1) >= cores else 500
 
 
+def _start_hint(processes, threads):
+    """How an engine of ``processes`` ranks and ``threads`` threads is started, in short
+    (``[mpirun -np N] lmp -in in.engine [-sf omp -pk omp T]``; no ``-log``, so that a
+    message about another engine does not point at this one's log)."""
+    run = "lmp -in in.engine"
+    if threads is not None:
+        run += f" -sf omp -pk omp {threads}"
+    return f"mpirun -np {processes} {run}" if processes > 1 else run
+
+
 def _positive(name, value, least=1):
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
         what = "a positive whole number" if least == 1 else f"a whole number >= {least}"
@@ -573,7 +583,7 @@ class LAMMPSEngine(IPICalculator):
         if not self.connected:
             return (f"; no engine has been started in {ours} ({self.log} does not exist): "
                     f"cd {ours} && {' '.join(self.command_line()[0])}")
-        started = f"cd {ours} && lmp -in in.engine"
+        started = f"cd {ours} && {_start_hint(self.processes, self.threads)}"
         if folder is not None:
             return (f"; it is not the engine this calculator waits for, which is started in "
                     f"{ours} ({started}); the log of the one that connected is in {folder}")
