@@ -62,3 +62,19 @@ def test_a_run_killed_before_its_first_relaxed_frame_starts_again(tmp_path):
     assert status == 0, err
     assert "the relaxation had written no frame of relax.traj: starting the run again" in said
     assert len(read(out / "md.traj", ":")) == 3
+
+
+def test_a_damaged_relaxation_trajectory_is_named_and_kept(tmp_path):
+    """--resume after a kill with a trajectory that cannot be read: one line naming it, and
+    nothing is replaced (the run does not start again over the relaxation's outputs)."""
+    out = tmp_path / "out"
+    proc = start_cli_run(tmp_path, CONFIG)
+    wait_for_lines(out / "relax.log", 1, proc)
+    proc.kill()
+    proc.wait(timeout=60)
+    (out / "relax.traj").write_bytes(b"not a trajectory")
+    status, _, err = finish(start(tmp_path, "--resume"))
+    assert status == 2 and f"cannot read {out / 'relax.traj'}" in err, err
+    assert (out / "relax.traj").read_bytes() == b"not a trajectory"
+    assert (out / "checkpoint.npz").exists() and not (out / "md.traj").exists()
+

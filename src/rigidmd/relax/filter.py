@@ -553,6 +553,8 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         converging, after a whole step (an observer raised, or ``steps`` were
         taken): the view's chart and the optimizer's memory
         (:mod:`rigidmd.relax.state`); removed when the relaxation converges.
+        Only for an optimizer that gives its memory
+        (:func:`rigidmd.relax.state.keeps_memory`; ASE's keep theirs).
     resume : bool, default False
         Continue from ``state_file``, written at ``atoms``' positions by this
         optimizer: the steps are those the uninterrupted relaxation would have
@@ -577,7 +579,9 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         from rigidmd.relax.precon import RigidPrecon
 
         kwargs["precon"] = RigidPrecon()
-    saved = relaxstate.resumed_state(state_file, atoms, cls.__name__) if resume else None
+    saved = relaxstate.resumed_state(state_file, atoms, cls) if resume else None
+    if not relaxstate.keeps_memory(cls):
+        state_file = None  # nothing a continuation could take the same steps from
     with cls(view, trajectory=trajectory, logfile=logfile, append_trajectory=append_trajectory,
              **kwargs) as opt:
         if saved is not None:

@@ -21,7 +21,17 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["write_state", "read_state", "state_matches", "resumed_state"]
+__all__ = ["keeps_memory", "write_state", "read_state", "state_matches", "resumed_state"]
+
+
+def keeps_memory(optimizer) -> bool:
+    """Whether ``optimizer`` (an ASE optimizer class) gives and takes its memory
+    (``get_state``/``set_state``, as :class:`rigidmd.relax.lbfgs.RigidLBFGS`): only then
+    does a continuation take the uninterrupted relaxation's steps.  ASE's own optimizers
+    (FIRE, BFGS, LBFGS, ...) keep theirs to themselves: a continuation starts them afresh.
+    """
+    return callable(getattr(optimizer, "get_state", None)) and \
+        callable(getattr(optimizer, "set_state", None))
 
 
 def write_state(path, view, opt):
@@ -63,13 +73,15 @@ def read_state(path):
 
 
 def state_matches(state, atoms, optimizer):
-    """Whether ``state`` was taken at ``atoms``' positions and cell, by ``optimizer`` (a name).
+    """Whether ``state`` was taken at ``atoms``' positions and cell, by ``optimizer`` (a
+    class or its name).
 
     Returns
     -------
     str or None
         None when it matches, else what differs (for a message).
     """
+    optimizer = optimizer if isinstance(optimizer, str) else optimizer.__name__
     if str(state["optimizer"]) != optimizer:
         return f"it was written by {state['optimizer']}, this relaxation uses {optimizer}"
     if state["positions"].shape != atoms.positions.shape:
@@ -87,15 +99,21 @@ def split(state, prefix):
 
 
 def resumed_state(state_file, atoms, optimizer):
-    """The state ``relax(resume=True)`` continues from, checked against the atoms.
+    """The state ``relax(resume=True)`` continues from, checked against the atoms and the
+    ``optimizer`` class.
 
     Raises
     ------
     ValueError
-        No ``state_file``, none at that path, or one that does not match.
+        No ``state_file``, an optimizer without a memory to continue
+        (:func:`keeps_memory`), no file at that path, or one that does not match.
     """
     if state_file is None:
         raise ValueError("relax: resume=True needs the state_file to continue from")
+    if not keeps_memory(optimizer):
+        raise ValueError(f"relax: resume=True continues an optimizer's memory, and "
+                         f"{optimizer.__name__} keeps none that can be saved (continue from "
+                         "the last frame without resume)")
     saved = read_state(state_file)
     if saved is None:
         raise ValueError(f"relax: resume=True but {state_file} does not exist")

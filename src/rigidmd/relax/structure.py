@@ -230,8 +230,11 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
 
 def _can_continue_exactly(state_file, atoms, optimizer):
     """``(True, "")`` when ``state_file`` holds the state of the last frame, else (False, why)."""
-    from rigidmd.relax.state import read_state, state_matches
+    from rigidmd.relax.filter import optimizer_class
+    from rigidmd.relax.state import keeps_memory, read_state, state_matches
 
+    if not keeps_memory(optimizer_class(optimizer)):
+        return False, f"{optimizer} keeps no memory that can be saved"
     try:
         state = read_state(state_file)
     except ValueError as err:

@@ -369,11 +369,15 @@ class Run:
 
 
 def _holds_a_frame(trajectory):
-    """Whether the ASE trajectory file ``trajectory`` exists and holds a whole frame."""
+    """False when the ASE trajectory file ``trajectory`` is missing, empty, or whole with no
+    frame (killed before its first); else True: a damaged file is left to
+    :func:`rigidmd.relax.structure.continue_from`, which names it, and nothing is replaced."""
     from ase.io.trajectory import Trajectory
 
+    if not trajectory.is_file() or trajectory.stat().st_size == 0:
+        return False
     try:
         with Trajectory(trajectory) as frames:
             return len(frames) > 0
-    except Exception:  # missing, empty or cut before its first frame  # noqa: BLE001
-        return False
+    except Exception:  # ASE raises many kinds on a damaged file  # noqa: BLE001
+        return True
