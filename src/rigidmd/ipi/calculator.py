@@ -269,7 +269,7 @@ class IPICalculator(Calculator):
         if not self._handshaken:
             self._handshake(deadline)
         bohr, n = self.bohr, len(positions)
-        key = (cell.tobytes(), n, tally)  # a constant cell: the same message, refilled
+        key = (cell.tobytes(), n, tally, bohr)  # a constant cell: the same message, refilled
         if self._message is None or self._message[0] != key:
             self._message = (key, _posdata_message(cell, n, bohr, tally))
         message = self._message[1]  # the positions written into it in Bohr, no copies:

@@ -12,14 +12,15 @@ atoms' positions it belongs to.  A continuation from it takes the steps the
 uninterrupted relaxation would have taken, bit for bit where the calculator
 gives the same forces for the same positions, with no force call more.
 
-The file is NumPy's ``.npz`` (float64 kept exactly), written to a temporary
-name and moved into place, so that a file of that name is always whole.
+The file is NumPy's ``.npz`` (float64 kept exactly), written as checkpoints are
+(:func:`rigidmd.core.checkpoint.atomic_write`), so that a file of that name is always whole.
 """
 
-import os
 from pathlib import Path
 
 import numpy as np
+
+from rigidmd.core.checkpoint import atomic_write
 
 __all__ = ["keeps_memory", "write_state", "read_state", "state_matches", "resumed_state"]
 
@@ -43,10 +44,7 @@ def write_state(path, view, opt):
     arrays["optimizer"] = np.array(type(opt).__name__)
     arrays["positions"] = view.atoms.positions.copy()
     arrays["cell"] = view.atoms.cell.array.copy()
-    partial = path.with_name(path.name + ".partial")
-    with open(partial, "wb") as fd:
-        np.savez(fd, **arrays)
-    os.replace(partial, path)
+    atomic_write(path, lambda fh: np.savez(fh, **arrays))
 
 
 def read_state(path):
