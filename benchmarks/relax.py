@@ -70,13 +70,18 @@ from rigidmd.systems import random_quaternions, water_box, water_cluster
 
 
 class CountingTIP3P(TIP3P):
-    """ASE's TIP3P, counting its evaluations."""
+    """ASE's TIP3P counting its evaluations and the seconds spent in them."""
 
-    calls = 0
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.calls = 0
+        self.seconds = 0.0
 
     def calculate(self, *args, **kwargs):
-        CountingTIP3P.calls += 1
+        t = time.perf_counter()
         super().calculate(*args, **kwargs)
+        self.seconds += time.perf_counter() - t
+        self.calls += 1
 
 
 def perturbed(atoms, seed, shift=0.1, angle=0.1):
@@ -106,13 +111,16 @@ class Recorder:
     BFGS's steps do not depend on ``fmax`` (it is only the stopping test), so
     the state at the first test passed for ``fmax`` is where a run with that
     ``fmax`` stops.  The norms are read off the optimizer's own convergence
-    test (no extra calculator or projection call).
+    test (no extra calculator or projection call) into :attr:`norms`; each test
+    writes a line to ``log`` (``label``, step, force calls, energy divided by
+    ``per``, the norm, seconds).  The calculator is a :class:`CountingTIP3P`.
     """
 
-    def __init__(self, opt, atoms, fmaxes, log=None):
-        self.opt, self.atoms, self.log = opt, atoms, log
+    def __init__(self, opt, atoms, fmaxes, log=None, label="", per=1):
+        self.opt, self.atoms, self.log, self.label, self.per = opt, atoms, log, label, per
         self.todo = sorted(fmaxes, reverse=True)
         self.found = {}
+        self.norms = [np.inf]
         self.t0 = time.perf_counter()
         optimizable = opt.optimizable
         original = optimizable.converged
@@ -125,14 +133,24 @@ class Recorder:
         optimizable.converged = converged
 
     def record(self, norm):
+        self.norms.append(norm)
         energy = self.atoms.get_potential_energy()
         wall = time.perf_counter() - self.t0
+        calls = self.atoms.calc.calls
         if self.log is not None:
-            print(f"{self.opt.nsteps:5d} {CountingTIP3P.calls:5d} {energy:.8f} {norm:.5f} "
-                  f"{wall:.1f}", file=self.log, flush=True)
+            print(f"{self.label}{self.opt.nsteps:5d} {calls:5d} {energy / self.per:.8f} "
+                  f"{norm:.5f} {wall:.1f}", file=self.log, flush=True)
         while self.todo and norm < self.todo[0]:
-            self.found[self.todo.pop(0)] = (CountingTIP3P.calls, self.opt.nsteps, True,
-                                            energy, wall)
+            self.found[self.todo.pop(0)] = (calls, self.opt.nsteps, True, energy, wall)
+
+    def not_reached(self):
+        """The end's values for each ``fmax`` not reached (``converged`` False)."""
+        for fmax in self.todo:
+            self.found[fmax] = (self.atoms.calc.calls, self.opt.nsteps, False,
+                                self.atoms.get_potential_energy(),
+                                time.perf_counter() - self.t0)
+        self.todo = []
+        return self.found
 
 
 def run_route(route, start, rc, fmaxes, log=None, steps=5000, **bfgs):
@@ -147,15 +165,18 @@ def run_route(route, start, rc, fmaxes, log=None, steps=5000, **bfgs):
     else:
         fix_water_bonds(atoms)
         target = atoms
-    CountingTIP3P.calls = 0
     return recorded(BFGS(target, logfile=None, **bfgs), atoms, fmaxes, log, steps)
 
 
-def fix_water_bonds(atoms):
-    """ASE's rigid water: ``FixBondLengths`` on the three distances of every molecule."""
-    n = len(atoms) // 3
-    atoms.set_constraint(FixBondLengths(
-        [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]))
+def water_pairs(n):
+    """O-H1, O-H2 and H1-H2 of ``n`` waters ordered O H H, molecule by molecule."""
+    return [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]
+
+
+def fix_water_bonds(atoms, constraint=FixBondLengths):
+    """ASE's rigid water: ``FixBondLengths`` (or ``constraint``, a class of its arguments)
+    on the three distances of every molecule."""
+    atoms.set_constraint(constraint(water_pairs(len(atoms) // 3)))
 
 
 def recorded(opt, atoms, fmaxes, log, steps):
@@ -164,10 +185,7 @@ def recorded(opt, atoms, fmaxes, log, steps):
     with opt:
         recorder = Recorder(opt, atoms, fmaxes, log)
         opt.run(fmax=min(fmaxes), steps=steps)
-    for fmax in recorder.todo:  # not reached within steps
-        recorder.found[fmax] = (CountingTIP3P.calls, opt.nsteps, False,
-                                atoms.get_potential_energy(), time.perf_counter() - recorder.t0)
-    return recorder.found
+    return recorder.not_reached()
 
 
 ROUTES = ("RigidFilter", "FixBondLengths")
@@ -273,23 +291,27 @@ def unrelaxed(kind, size, seed):
     return water_box(size, seed=seed, whole=True), 6.0
 
 
-def run_defaults(route, start, rc, fmaxes, log=None, steps=5000):
-    """``{fmax: (calls, steps, converged, energy, wall)}``: ``relax()`` with its defaults
-    (``"relax"``) or ASE's BFGS with defaults on the atoms with ``FixBondLengths``
-    (``"ASE"``), one run to the smallest ``fmax`` (the steps of either do not depend on it).
-    ``wall`` is the run's time; ``optimizer`` time is reported by :func:`defaults_rows`."""
-    atoms = start.copy()
-    atoms.calc = CountingTIP3P(rc=rc)
-    CountingTIP3P.calls = 0
+def default_optimizer(route, atoms, constraint=FixBondLengths):
+    """What users get without tuning: ``relax()``'s optimizer with its defaults
+    (``"relax"``: RigidLBFGS with RigidPrecon on RigidFilter) or ASE's BFGS with defaults
+    on the atoms with ``FixBondLengths`` (``"ASE"``; ``constraint`` its class)."""
     if route == "relax":
         from rigidmd.relax.lbfgs import RigidLBFGS
 
-        target = RigidFilter(atoms)
-        opt = RigidLBFGS(target, logfile=None)
-    else:
-        fix_water_bonds(atoms)
-        opt = BFGS(atoms, logfile=None)
-    return recorded(opt, atoms, fmaxes, log, steps)
+        return RigidLBFGS(RigidFilter(atoms), logfile=None)
+    if route == "ASE":
+        fix_water_bonds(atoms, constraint)
+        return BFGS(atoms, logfile=None)
+    raise ValueError(f"route {route!r}: relax or ASE")
+
+
+def run_defaults(route, start, rc, fmaxes, log=None, steps=5000):
+    """``{fmax: (calls, steps, converged, energy, wall)}`` of :func:`default_optimizer`'s
+    ``route``, one run to the smallest ``fmax`` (the steps of either do not depend on it).
+    ``wall`` is the run's time; ``optimizer`` time is reported by :func:`defaults_rows`."""
+    atoms = start.copy()
+    atoms.calc = CountingTIP3P(rc=rc)
+    return recorded(default_optimizer(route, atoms), atoms, fmaxes, log, steps)
 
 
 #: (kind, size, seed), smallest first: clusters of 8-64 molecules, boxes of 64-512.
