@@ -520,24 +520,6 @@ def processes_named(name):
     return found
 
 
-def children_of(pid):
-    """All descendants of ``pid`` (by /proc's parent links)."""
-    parents = {}
-    for p in os.listdir("/proc"):
-        if p.isdigit():
-            try:
-                with open(f"/proc/{p}/stat") as f:
-                    stat = f.read()
-            except OSError:
-                continue
-            parents[int(p)] = int(stat[stat.rindex(")") + 2:].split()[1])
-    found, frontier = [], [pid]
-    while frontier:
-        frontier = [p for p, parent in parents.items() if parent in frontier]
-        found += frontier
-    return found
-
-
 # ---------------------------------------------------------------------------------------
 # ``rigidmd run`` projects: 8 TIP3P waters (ASE's TIP3P, deterministic), 2 fs steps, run as a
 # subprocess (start, finish) or in this process (run_here).
@@ -583,19 +565,6 @@ def start_cli_run(path, config, *args):
     path.mkdir(exist_ok=True)
     (path / "run.yaml").write_text(config)
     return start(path, *args)
-
-
-def cpu_seconds(pids):
-    """CPU seconds (user + system) the processes ``pids`` have used so far."""
-    ticks = 0
-    for pid in pids:
-        try:
-            with open(f"/proc/{pid}/stat") as f:
-                fields = f.read().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        ticks += int(fields[11]) + int(fields[12])
-    return ticks / os.sysconf("SC_CLK_TCK")
 
 
 def free_port():

@@ -14,14 +14,13 @@ import numpy as np
 import pytest
 from helpers import (
     PPPM_27,
-    children_of,
-    cpu_seconds,
     free_port,
     processes_named,
     start_by_hand,
     water_box_27,
 )
 
+from rigidmd.ipi.processes import cpu_seconds, descendants
 from rigidmd.lammps import LAMMPSCalculator, boxplugin
 from rigidmd.lammps import engine as engine_module
 from rigidmd.lammps.engine import LAMMPSEngine
@@ -175,7 +174,7 @@ def idle_rank_cpu(poll_us):
         for _ in range(10):
             atoms.positions += 0.001
             atoms.get_forces()
-        ranks = [p for p in children_of(engine.pid) if p in processes_named("lmp")]
+        ranks = [p for p in descendants(engine.pid) if p in processes_named("lmp")]
         assert len(ranks) == 2
         before = cpu_seconds(ranks)
         time.sleep(1.0)
@@ -257,4 +256,4 @@ def test_an_engine_started_by_hand_over_tcp(tmp_path, processes):
     text = (tmp_path / "log.lammps").read_text()
     assert f"fix rmd_ipi all rigidmd/ipi localhost {port}" in text
     assert "Loop time of" in text
-    assert not [p for p in children_of(started[0].pid) if p in processes_named("lmp")]
+    assert not [p for p in descendants(started[0].pid) if p in processes_named("lmp")]
