@@ -41,6 +41,22 @@ relax: {fmax: 0.01, steps: STEPS, optimizer: FIRE}
 """
 
 
+def tip3p_calls(monkeypatch):
+    """Count every evaluation of ASE's TIP3P (any instance: one a configuration builds too).
+
+    Returns the list that grows by one item per evaluation (``len`` is the count; ``clear``
+    starts again).
+    """
+    calls, original = [], TIP3P.calculate
+
+    def calculate(self, *args, **kwargs):
+        calls.append(1)
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(TIP3P, "calculate", calculate)
+    return calls
+
+
 def water_box_27(temperature_K=None):
     """The stored periodic box of 27 waters (``data/water_box_27.traj``), TIP3P charges.
 
