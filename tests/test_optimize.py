@@ -492,6 +492,26 @@ def signal_at_call(monkeypatch, n, *signums):
 signal_at_call.original = RigidFilter.get_forces
 
 
+def test_rigidmd_relax_says_how_to_continue_as_a_command_a_shell_runs(tmp_path, monkeypatch):
+    """The continue hint of rigidmd relax is rigidmd run's (one source): the output directory
+    absolute and quoted for a shell, and --trust repeated when it was given (it was
+    ``rigidmd relax CONFIG --outdir DIR --resume`` unquoted, without --trust)."""
+    import io
+    import shlex
+    import signal
+
+    from rigidmd.relax.command import relax_only
+
+    raw = relax_config(tmp_path)
+    raw["outputs"]["directory"] = "my out"
+    signal_at_call(monkeypatch, 2, signal.SIGTERM)
+    out = io.StringIO()
+    assert relax_only(raw, out, trust=True, config_path="relax.yaml") == 143
+    hint = out.getvalue().strip().splitlines()[-1].rpartition("continue with: ")[2]
+    assert shlex.split(hint) == ["rigidmd", "relax", "relax.yaml", "--trust", "--outdir",
+                                 str((tmp_path / "my out").resolve()), "--resume"]
+
+
 @pytest.mark.parametrize("signums, status, said", [
     (("SIGTERM",), 143, "stopped by SIGTERM"), (("SIGINT",), 130, "stopped by SIGINT"),
     (("SIGINT", "SIGINT"), 130, "interrupted at once (second Ctrl-C)")])
