@@ -13,10 +13,8 @@ many right-hand sides are solved together.  Measured (CPU time, 1728
 centres of SPC/E water, 27 pairs per row): a product with the matrix in
 41 µs for three columns and 58 µs for six, against 90 µs for scipy's CSR
 product of three; the conjugate gradients of one step of
-:class:`~rigidmd.relax.lbfgs.RigidLBFGS` (six columns, 13 iterations) in
-about 1.1 ms, where the NumPy loop around scipy's product that this replaces
-took 6.8 ms (wall time, a quieter machine) for each of the step's two
-vectors, solved one at a time to 1e-6.
+:class:`~rigidmd.relax.lbfgs.RigidLBFGS` (six columns, 6.3 iterations) in
+0.64-0.67 ms (``benchmarks/relax.txt``, the conjugate gradients' tolerances).
 """
 
 import numpy as np

@@ -56,15 +56,18 @@ __all__ = ["RigidPrecon", "MU_FLOOR", "CG_TOLERANCE", "SKIN", "MAX_ITERATIONS"]
 #: Relative residual at which conjugate gradients stop: a preconditioner need not be
 #: exact.  Measured with relax()'s defaults over 21 unrelaxed systems (water_cluster of 8,
 #: 16, 24, 32 and 64 molecules, seeds 0-2; water_box of 64, 125 and 216, seeds 0-1; ASE's
-#: TIP3P), force calls to fmax 0.05 / 0.01 eV/Å summed: 968 / 1882 at 1e-2, 993 / 1851 at
-#: 1e-3, and 952-1028 / 1734-1898 over 9e-4, 2e-3, 5e-3 and 2e-2 (the spread of one path's
-#: bit-level changes: a relaxation of 1728 waters took 225 or 255 steps after a change of
-#: one unit in the last place of one coefficient); mean energies within 3e-4 eV/molecule
-#: of each other.  6 iterations a step at 1728 waters against 11 at 1e-3 (0.65 against
-#: 1.1 ms CPU for the step's two vectors).
+#: TIP3P), the scale's solve to the same tolerance, force calls to fmax 0.05 / 0.01 eV/Å
+#: summed: 968 / 1882 at 1e-2, 993 / 1851 at 1e-3, and 952-1028 / 1734-1898 over 9e-4,
+#: 2e-3, 5e-3 and 2e-2 (the spread of one path's bit-level changes: a relaxation of 1728
+#: waters took 225 or 255 steps after a change of one unit in the last place of one
+#: coefficient); mean energies within 5e-4 eV/molecule of each other.  At 1728 waters 6.3
+#: iterations a solve against 11.3 at 1e-3 (0.69-0.74 against 1.10-1.16 ms CPU a step for
+#: the step's two vectors).  All in ``benchmarks/relax.txt`` (``relax.py tolerances``,
+#: ``relax.py large 12 none 2000 CG:SCALE``).
 CG_TOLERANCE = 1e-2
 
-#: Conjugate-gradient iterations at most per solve (a bound, never reached: 8 at 1728 waters).
+#: Conjugate-gradient iterations at most per solve (a bound, never reached: at most 7 a
+#: solve at 1728 waters with the defaults, 12 at a tolerance of 1e-3).
 MAX_ITERATIONS = 10000
 
 #: Skin of the candidate pairs' list, in units of ``r_NN``: pairs within ``r_cut + SKIN r_NN``
