@@ -68,6 +68,7 @@ from ase.io import read
 from rigidmd import RigidBodies, RigidCRescale, RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.couplings.barostats import MTKBarostat
 from rigidmd.couplings.thermostats import NoseHooverThermostat
+from rigidmd.ipi.processes import cpu_seconds, descendants
 from rigidmd.lammps import LAMMPSCalculator, export_lammps, run_rigid_reference, tip3p_charges
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
 from rigidmd.lammps.engine import LAMMPSEngine, lammps_executable, mpirun_executable
@@ -79,7 +80,6 @@ EXCLUDE = ["neigh_modify exclude molecule/intra all"]
 STEPS = {216: 200, 1728: 40, 13824: 10}
 NPT_PARTS = [NoseHooverThermostat(298, 100 * units.fs),
              MTKBarostat(298, 1.01325 * units.bar, 1000 * units.fs)]
-TICK = os.sysconf("SC_CLK_TCK")
 #: ``{ranks: [broadcast_us of each engine run]}`` (see :func:`engine_run`).
 BROADCAST_US = {}
 
@@ -120,35 +120,6 @@ def native(atoms, steps, fix="rigid/nve/small", couplings=()):
         return log_timing((Path(tmp) / "log.lammps").read_text(), steps)
 
 
-def proc_cpu(pids):
-    """CPU seconds (user + system) used so far by the processes ``pids``."""
-    total = 0
-    for pid in pids:
-        try:
-            with open(f"/proc/{pid}/stat") as f:
-                fields = f.read().rsplit(")", 1)[1].split()
-            total += int(fields[11]) + int(fields[12])
-        except OSError:
-            pass
-    return total / TICK
-
-
-def descendants(pid):
-    parents = {}
-    for p in os.listdir("/proc"):
-        if p.isdigit():
-            try:
-                with open(f"/proc/{p}/stat") as f:
-                    parents[int(p)] = int(f.read().rsplit(")", 1)[1].split()[1])
-            except OSError:
-                pass
-    found, frontier = [], [pid]
-    while frontier:
-        frontier = [p for p, parent in parents.items() if parent in frontier]
-        found += frontier
-    return found
-
-
 def timed(atoms, kind, steps, engine=None):
     """(wall, CPU) per step of ``steps`` steps of ``kind`` from the start of ``atoms``.
 
@@ -170,10 +141,10 @@ def timed(atoms, kind, steps, engine=None):
     if kind != "nve":
         atoms.get_stress()  # the barostat's first step asks for both: one call, cached
     others = [] if engine is None else descendants(engine.pid)
-    wall, cpu, other = time.perf_counter(), time.process_time(), proc_cpu(others)
+    wall, cpu, other = time.perf_counter(), time.process_time(), cpu_seconds(others)
     dyn.run(steps)
     wall = time.perf_counter() - wall
-    cpu = time.process_time() - cpu + proc_cpu(others) - other
+    cpu = time.process_time() - cpu + cpu_seconds(others) - other
     return wall / steps, cpu / steps
 
 

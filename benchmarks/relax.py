@@ -46,6 +46,8 @@ Run::
     python benchmarks/relax.py large 12            # 1728 waters, LAMMPS forces
     python benchmarks/relax.py large 24 none 5     # 13,824 waters, 5 steps
     python benchmarks/relax.py large 12 iso        # with the cell (iso, aniso, full)
+    python benchmarks/relax.py large 12 none 2000 1e-3:none  # other CG tolerances
+    python benchmarks/relax.py tolerances 1e-2:3e-2 1e-2:none  # force calls, 21 systems
     python benchmarks/relax.py cell                # cell relaxation, LAMMPS forces
     python benchmarks/relax.py                     # the perturbed-minimum study, in turn
     python benchmarks/relax.py box FixBondLengths  # one system (and route): rows to
@@ -70,13 +72,18 @@ from rigidmd.systems import random_quaternions, water_box, water_cluster
 
 
 class CountingTIP3P(TIP3P):
-    """ASE's TIP3P, counting its evaluations."""
+    """ASE's TIP3P counting its evaluations and the seconds spent in them."""
 
-    calls = 0
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.calls = 0
+        self.seconds = 0.0
 
     def calculate(self, *args, **kwargs):
-        CountingTIP3P.calls += 1
+        t = time.perf_counter()
         super().calculate(*args, **kwargs)
+        self.seconds += time.perf_counter() - t
+        self.calls += 1
 
 
 def perturbed(atoms, seed, shift=0.1, angle=0.1):
@@ -106,13 +113,16 @@ class Recorder:
     BFGS's steps do not depend on ``fmax`` (it is only the stopping test), so
     the state at the first test passed for ``fmax`` is where a run with that
     ``fmax`` stops.  The norms are read off the optimizer's own convergence
-    test (no extra calculator or projection call).
+    test (no extra calculator or projection call) into :attr:`norms`; each test
+    writes a line to ``log`` (``label``, step, force calls, energy divided by
+    ``per``, the norm, seconds).  The calculator is a :class:`CountingTIP3P`.
     """
 
-    def __init__(self, opt, atoms, fmaxes, log=None):
-        self.opt, self.atoms, self.log = opt, atoms, log
+    def __init__(self, opt, atoms, fmaxes, log=None, label="", per=1):
+        self.opt, self.atoms, self.log, self.label, self.per = opt, atoms, log, label, per
         self.todo = sorted(fmaxes, reverse=True)
         self.found = {}
+        self.norms = [np.inf]
         self.t0 = time.perf_counter()
         optimizable = opt.optimizable
         original = optimizable.converged
@@ -125,14 +135,24 @@ class Recorder:
         optimizable.converged = converged
 
     def record(self, norm):
+        self.norms.append(norm)
         energy = self.atoms.get_potential_energy()
         wall = time.perf_counter() - self.t0
+        calls = self.atoms.calc.calls
         if self.log is not None:
-            print(f"{self.opt.nsteps:5d} {CountingTIP3P.calls:5d} {energy:.8f} {norm:.5f} "
-                  f"{wall:.1f}", file=self.log, flush=True)
+            print(f"{self.label}{self.opt.nsteps:5d} {calls:5d} {energy / self.per:.8f} "
+                  f"{norm:.5f} {wall:.1f}", file=self.log, flush=True)
         while self.todo and norm < self.todo[0]:
-            self.found[self.todo.pop(0)] = (CountingTIP3P.calls, self.opt.nsteps, True,
-                                            energy, wall)
+            self.found[self.todo.pop(0)] = (calls, self.opt.nsteps, True, energy, wall)
+
+    def not_reached(self):
+        """The end's values for each ``fmax`` not reached (``converged`` False)."""
+        for fmax in self.todo:
+            self.found[fmax] = (self.atoms.calc.calls, self.opt.nsteps, False,
+                                self.atoms.get_potential_energy(),
+                                time.perf_counter() - self.t0)
+        self.todo = []
+        return self.found
 
 
 def run_route(route, start, rc, fmaxes, log=None, steps=5000, **bfgs):
@@ -147,15 +167,18 @@ def run_route(route, start, rc, fmaxes, log=None, steps=5000, **bfgs):
     else:
         fix_water_bonds(atoms)
         target = atoms
-    CountingTIP3P.calls = 0
     return recorded(BFGS(target, logfile=None, **bfgs), atoms, fmaxes, log, steps)
 
 
-def fix_water_bonds(atoms):
-    """ASE's rigid water: ``FixBondLengths`` on the three distances of every molecule."""
-    n = len(atoms) // 3
-    atoms.set_constraint(FixBondLengths(
-        [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]))
+def water_pairs(n):
+    """O-H1, O-H2 and H1-H2 of ``n`` waters ordered O H H, molecule by molecule."""
+    return [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]
+
+
+def fix_water_bonds(atoms, constraint=FixBondLengths):
+    """ASE's rigid water: ``FixBondLengths`` (or ``constraint``, a class of its arguments)
+    on the three distances of every molecule."""
+    atoms.set_constraint(constraint(water_pairs(len(atoms) // 3)))
 
 
 def recorded(opt, atoms, fmaxes, log, steps):
@@ -164,10 +187,7 @@ def recorded(opt, atoms, fmaxes, log, steps):
     with opt:
         recorder = Recorder(opt, atoms, fmaxes, log)
         opt.run(fmax=min(fmaxes), steps=steps)
-    for fmax in recorder.todo:  # not reached within steps
-        recorder.found[fmax] = (CountingTIP3P.calls, opt.nsteps, False,
-                                atoms.get_potential_energy(), time.perf_counter() - recorder.t0)
-    return recorder.found
+    return recorder.not_reached()
 
 
 ROUTES = ("RigidFilter", "FixBondLengths")
@@ -273,23 +293,27 @@ def unrelaxed(kind, size, seed):
     return water_box(size, seed=seed, whole=True), 6.0
 
 
-def run_defaults(route, start, rc, fmaxes, log=None, steps=5000):
-    """``{fmax: (calls, steps, converged, energy, wall)}``: ``relax()`` with its defaults
-    (``"relax"``) or ASE's BFGS with defaults on the atoms with ``FixBondLengths``
-    (``"ASE"``), one run to the smallest ``fmax`` (the steps of either do not depend on it).
-    ``wall`` is the run's time; ``optimizer`` time is reported by :func:`defaults_rows`."""
-    atoms = start.copy()
-    atoms.calc = CountingTIP3P(rc=rc)
-    CountingTIP3P.calls = 0
+def default_optimizer(route, atoms, constraint=FixBondLengths):
+    """What users get without tuning: ``relax()``'s optimizer with its defaults
+    (``"relax"``: RigidLBFGS with RigidPrecon on RigidFilter) or ASE's BFGS with defaults
+    on the atoms with ``FixBondLengths`` (``"ASE"``; ``constraint`` its class)."""
     if route == "relax":
         from rigidmd.relax.lbfgs import RigidLBFGS
 
-        target = RigidFilter(atoms)
-        opt = RigidLBFGS(target, logfile=None)
-    else:
-        fix_water_bonds(atoms)
-        opt = BFGS(atoms, logfile=None)
-    return recorded(opt, atoms, fmaxes, log, steps)
+        return RigidLBFGS(RigidFilter(atoms), logfile=None)
+    if route == "ASE":
+        fix_water_bonds(atoms, constraint)
+        return BFGS(atoms, logfile=None)
+    raise ValueError(f"route {route!r}: relax or ASE")
+
+
+def run_defaults(route, start, rc, fmaxes, log=None, steps=5000):
+    """``{fmax: (calls, steps, converged, energy, wall)}`` of :func:`default_optimizer`'s
+    ``route``, one run to the smallest ``fmax`` (the steps of either do not depend on it).
+    ``wall`` is the run's time; ``optimizer`` time is reported by :func:`defaults_rows`."""
+    atoms = start.copy()
+    atoms.calc = CountingTIP3P(rc=rc)
+    return recorded(default_optimizer(route, atoms), atoms, fmaxes, log, steps)
 
 
 #: (kind, size, seed), smallest first: clusters of 8-64 molecules, boxes of 64-512.
@@ -319,6 +343,37 @@ def defaults_rows(largest=64, routes=("relax", "ASE"), fmaxes=(0.05, 0.01), out=
     return rows
 
 
+def tolerance_sweep(settings, largest=216):
+    """Force calls of ``relax()``'s defaults to fmax 0.05 and 0.01 eV/Å summed over
+    :data:`DEFAULT_SYSTEMS` up to ``largest`` molecules, for each ``(CG_TOLERANCE,
+    SCALE_TOLERANCE)`` of ``settings`` (``None``: the scale's solve to ``CG_TOLERANCE``),
+    and the mean energy per molecule at 0.01: one line each."""
+    from rigidmd.relax import lbfgs, precon
+
+    saved = precon.CG_TOLERANCE, lbfgs.SCALE_TOLERANCE
+    out = []
+    try:
+        for cg, scale in settings:
+            precon.CG_TOLERANCE, lbfgs.SCALE_TOLERANCE = cg, scale
+            calls, energy, k = {0.05: 0, 0.01: 0}, 0.0, 0
+            for kind, size, seed in DEFAULT_SYSTEMS:
+                start, rc = unrelaxed(kind, size, seed)
+                n = len(start) // 3
+                if n > largest:
+                    continue
+                found = run_defaults("relax", start, rc, (0.05, 0.01))
+                for fmax in calls:
+                    calls[fmax] += found[fmax][0]
+                energy += found[0.01][3] / n
+                k += 1
+            out.append(f"| {cg:g} | {scale} | {k} | {calls[0.05]} / {calls[0.01]} "
+                       f"| {energy / k:.6f} |")
+            print(out[-1], flush=True)
+    finally:
+        precon.CG_TOLERANCE, lbfgs.SCALE_TOLERANCE = saved
+    return out
+
+
 def totals(lines):
     """Sum of force calls and mean energy per molecule per (fmax, route) over systems that
     both routes finished: ``{fmax: {route: (calls, mean energy)}}``."""
@@ -339,7 +394,7 @@ def totals(lines):
             for fmax, r in out.items()}
 
 
-def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000):
+def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000, tolerances=None):
     """``relax()`` defaults on ``n_side**3`` waters with LAMMPS forces: the optimizer's own time.
 
     SPC/E (``water_box``, 3.1 Å spacing), ``lj/cut/coul/long`` 9 Å with PPPM 1e-5 through
@@ -361,7 +416,13 @@ def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000):
       (its instance, the box plugin, the first PPPM set-up, one evaluation);
     - per step after the first: own and LAMMPS (ms), and the own share of their sum;
     - the whole ``relax()`` call: own of total, one-offs included, without and with
-      numba's start.
+      numba's start;
+    - the preconditioner's conjugate gradients (:func:`rigidmd.relax.kernels.conjugate_gradient`,
+      part of own): solves, iterations per solve, CPU per step.
+
+    ``tolerances``: ``(CG_TOLERANCE, SCALE_TOLERANCE)`` for this run instead of
+    :data:`rigidmd.relax.precon.CG_TOLERANCE` and :data:`rigidmd.relax.lbfgs.SCALE_TOLERANCE`
+    (``None`` for the second: the scale's solve to ``CG_TOLERANCE`` as well).
     """
     import resource
 
@@ -393,8 +454,22 @@ def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000):
         if step == 1:
             first.append((time.process_time() - c0, spent[1]))
 
-    from rigidmd.relax import kernels
+    from rigidmd.relax import kernels, lbfgs, precon
 
+    if tolerances is not None:
+        precon.CG_TOLERANCE, lbfgs.SCALE_TOLERANCE = tolerances
+    solver, solves = kernels.conjugate_gradient, [0, 0, 0.0, 0]  # solves, iterations, CPU, most
+
+    def conjugate_gradient(*args):
+        c = time.process_time()
+        x, iterations = solver(*args)
+        solves[0] += 1
+        solves[1] += iterations
+        solves[2] += time.process_time() - c
+        solves[3] = max(solves[3], iterations)
+        return x, iterations
+
+    kernels.conjugate_gradient = conjugate_gradient
     c_start = time.process_time()
     kernels.dot(np.ones(4), np.ones(4))  # numba's start (a kernel from its cache)
     numba_start = time.process_time() - c_start
@@ -427,6 +502,10 @@ def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000):
         f"{own:.3f} of {total:.3f} s wall ({100 * own / total:.1f} %); with numba's start "
         f"counted as own: {100 * (own_cpu + numba_start) / (cpu + numba_start):.1f} % of CPU; "
         f"load average {load}",
+        f"conjugate gradients (CG_TOLERANCE {precon.CG_TOLERANCE:g}, SCALE_TOLERANCE "
+        f"{lbfgs.SCALE_TOLERANCE}): {solves[0]} solves in {result.steps} steps, "
+        f"{solves[1] / max(solves[0], 1):.1f} iterations a solve (at most {solves[3]}), "
+        f"{1e3 * solves[2] / max(result.steps, 1):.2f} ms CPU a step",
     ]
     return row, breakdown
 
@@ -495,10 +574,21 @@ def main():
     if args[:1] == ["cell"]:  # cell: cell relaxation with LAMMPS forces, rows to stdout
         cell_rows()
         return
-    if args[:1] == ["large"]:  # large [N_SIDE [CELL [STEPS]]]: own time, LAMMPS forces
+    if args[:1] == ["tolerances"]:  # tolerances CG:SCALE ...: force calls over 21 systems
+        print("| CG_TOLERANCE | SCALE_TOLERANCE | systems | force calls to 0.05 / 0.01 "
+              "| mean E at 0.01 (eV/molecule) |\n|---|---|---|---|---|", flush=True)
+        tolerance_sweep([(float(cg), None if scale == "none" else float(scale))
+                         for cg, scale in (a.split(":") for a in args[1:])])
+        return
+    if args[:1] == ["large"]:  # large [N_SIDE [CELL [STEPS [CG:SCALE]]]]: own time, LAMMPS
         cell = args[2] if len(args) > 2 and args[2] != "none" else False
+        tolerances = None
+        if len(args) > 4:
+            cg, scale = args[4].split(":")
+            tolerances = (float(cg), None if scale == "none" else float(scale))
         row, breakdown = large(int(args[1]) if len(args) > 1 else 12, cell=cell,
-                               steps=int(args[3]) if len(args) > 3 else 2000)
+                               steps=int(args[3]) if len(args) > 3 else 2000,
+                               tolerances=tolerances)
         print(LARGE_HEADER, row, *breakdown, sep="\n", flush=True)
         return
     if args[:1] == ["defaults"]:  # defaults [LARGEST [FILE]]: relax() against ASE's route

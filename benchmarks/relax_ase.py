@@ -51,27 +51,11 @@ from ase.calculators.tip3p import TIP3P
 from ase.constraints import FixBondLengths
 from ase.geometry import find_mic
 from ase.optimize import BFGS
+from relax import CountingTIP3P, Recorder, default_optimizer, unrelaxed, water_pairs
 
-from rigidmd.relax.filter import RigidFilter
-from rigidmd.relax.lbfgs import RigidLBFGS
-from rigidmd.systems import water_box, water_cluster
+from rigidmd.systems import water_box
 
 FMAXES = (0.05, 0.01)
-
-
-class Counting(TIP3P):
-    """ASE's TIP3P counting its evaluations and the seconds spent in them."""
-
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.calls = 0
-        self.seconds = 0.0
-
-    def calculate(self, *args, **kwargs):
-        t = time.perf_counter()
-        super().calculate(*args, **kwargs)
-        self.seconds += time.perf_counter() - t
-        self.calls += 1
 
 
 class WaterBondLengths(FixBondLengths):
@@ -154,11 +138,6 @@ class WaterBondLengths(FixBondLengths):
         self._sweeps(atoms, update)
 
 
-def water_pairs(n):
-    """O-H1, O-H2 and H1-H2 of ``n`` waters ordered O H H, molecule by molecule."""
-    return [(3 * i + a, 3 * i + b) for i in range(n) for a, b in ((0, 1), (0, 2), (1, 2))]
-
-
 # ------------------------------------------------------------------------------------ systems
 def parse_system(name):
     """``"cluster32s0"`` -> ("cluster", 32, 0); ``"box216s1"`` -> ("box", 216, 1)."""
@@ -168,14 +147,14 @@ def parse_system(name):
 
 
 def build(name):
-    """The structure as built and its TIP3P cut-off (Å)."""
+    """The structure as built and its TIP3P cut-off (Å) (:func:`relax.unrelaxed`)."""
     kind, n, seed = parse_system(name)
     if kind == "cluster":
-        return water_cluster(n, seed=seed), 20.0
+        return unrelaxed(kind, n, seed)
     side = round(n ** (1 / 3))
     if side**3 != n:
         raise ValueError(f"{name}: a box holds a cube number of waters")
-    return water_box(side, seed=seed, whole=True), 6.0
+    return unrelaxed(kind, side, seed)
 
 
 def bond_error(atoms, pairs, lengths):
@@ -199,59 +178,37 @@ def run(name, route, fmaxes=FMAXES, max_steps=5000, timeout=None, log=None, own=
     start, rc = build(name)
     n = len(start) // 3
     atoms = start.copy()
-    calc = atoms.calc = Counting(rc=rc)
+    calc = atoms.calc = CountingTIP3P(rc=rc)
     pairs = water_pairs(n)
     lengths = find_mic(start.positions[np.asarray(pairs)[:, 0]]
                        - start.positions[np.asarray(pairs)[:, 1]], start.cell, start.pbc)[1]
-    if route == "relax":
-        target = RigidFilter(atoms)
-        opt = RigidLBFGS(target, logfile=None)
-    elif route == "ASE":
-        atoms.set_constraint((FixBondLengths if own else WaterBondLengths)(pairs))
-        target = atoms
-        opt = BFGS(atoms, logfile=None)
-    else:
-        raise ValueError(f"route {route!r}: relax or ASE")
-    todo = sorted(fmaxes, reverse=True)
-    rows = {}
-    t0, c0 = time.perf_counter(), time.process_time()
+    opt = default_optimizer(route, atoms, FixBondLengths if own else WaterBondLengths)
+    c0 = time.process_time()
     reason = "max-steps"
     logfh = open(log, "a") if log else None
-    norms = [np.inf]
-    optimizable = opt.optimizable
-    original = optimizable.converged
-
-    def converged_test(gradient, fmax):  # the optimizer's own norm, no extra call
-        norms.append(float(optimizable.gradient_norm(gradient)))
-        return original(gradient, fmax)
-
-    optimizable.converged = converged_test
     try:
         with opt:
+            recorder = Recorder(opt, atoms, fmaxes, logfh, label=f"{name} {route} ", per=n)
             for converged in opt.irun(fmax=min(fmaxes), steps=max_steps):
-                norm = norms[-1]
-                energy = atoms.get_potential_energy()
-                wall = time.perf_counter() - t0
-                if logfh:
-                    print(f"{name} {route} {opt.nsteps} {calc.calls} {energy / n:.8f} "
-                          f"{norm:.5f} {wall:.1f}", file=logfh, flush=True)
-                while todo and norm < todo[0]:
-                    rows[todo.pop(0)] = dict(calls=calc.calls, steps=opt.nsteps,
-                                             converged=True, energy=energy / n, wall=wall)
                 if converged:
                     reason = "converged"
                     break
-                if timeout is not None and wall > timeout:
+                if timeout is not None and time.perf_counter() - recorder.t0 > timeout:
                     reason = "timeout"
                     break
     finally:
         if logfh:
             logfh.close()
-    wall = time.perf_counter() - t0
+    wall = time.perf_counter() - recorder.t0
     energy = atoms.get_potential_energy()
-    for fmax in todo:  # not reached
-        rows[fmax] = dict(calls=calc.calls, steps=opt.nsteps, converged=False,
-                          energy=energy / n, wall=wall, fmax_reached=norms[-1])
+    reached = set(recorder.found)
+    rows = {}
+    for fmax, (calls, steps, converged, e, seconds) in recorder.not_reached().items():
+        rows[fmax] = dict(calls=calls, steps=steps, converged=converged, energy=e / n,
+                          wall=seconds)
+        if fmax not in reached:
+            rows[fmax].update(wall=wall, fmax_reached=recorder.norms[-1])
+    norms = recorder.norms
     check = atoms.copy()
     check.set_constraint()
     check.calc = TIP3P(rc=rc)

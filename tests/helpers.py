@@ -41,6 +41,22 @@ relax: {fmax: 0.01, steps: STEPS, optimizer: FIRE}
 """
 
 
+def tip3p_calls(monkeypatch):
+    """Count every evaluation of ASE's TIP3P (any instance: one a configuration builds too).
+
+    Returns the list that grows by one item per evaluation (``len`` is the count; ``clear``
+    starts again).
+    """
+    calls, original = [], TIP3P.calculate
+
+    def calculate(self, *args, **kwargs):
+        calls.append(1)
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(TIP3P, "calculate", calculate)
+    return calls
+
+
 def water_box_27(temperature_K=None):
     """The stored periodic box of 27 waters (``data/water_box_27.traj``), TIP3P charges.
 
@@ -520,24 +536,6 @@ def processes_named(name):
     return found
 
 
-def children_of(pid):
-    """All descendants of ``pid`` (by /proc's parent links)."""
-    parents = {}
-    for p in os.listdir("/proc"):
-        if p.isdigit():
-            try:
-                with open(f"/proc/{p}/stat") as f:
-                    stat = f.read()
-            except OSError:
-                continue
-            parents[int(p)] = int(stat[stat.rindex(")") + 2:].split()[1])
-    found, frontier = [], [pid]
-    while frontier:
-        frontier = [p for p, parent in parents.items() if parent in frontier]
-        found += frontier
-    return found
-
-
 # ---------------------------------------------------------------------------------------
 # ``rigidmd run`` projects: 8 TIP3P waters (ASE's TIP3P, deterministic), 2 fs steps, run as a
 # subprocess (start, finish) or in this process (run_here).
@@ -583,19 +581,6 @@ def start_cli_run(path, config, *args):
     path.mkdir(exist_ok=True)
     (path / "run.yaml").write_text(config)
     return start(path, *args)
-
-
-def cpu_seconds(pids):
-    """CPU seconds (user + system) the processes ``pids`` have used so far."""
-    ticks = 0
-    for pid in pids:
-        try:
-            with open(f"/proc/{pid}/stat") as f:
-                fields = f.read().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        ticks += int(fields[11]) + int(fields[12])
-    return ticks / os.sysconf("SC_CLK_TCK")
 
 
 def free_port():

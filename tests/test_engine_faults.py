@@ -18,11 +18,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ase import Atoms
-from helpers import PPPM_27, children_of, processes_named, start_cli_run, water_box_27
+from helpers import PPPM_27, processes_named, start_cli_run, water_box_27
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rigidmd.ipi import EngineError, IPICalculator
+from rigidmd.ipi.processes import descendants
 from rigidmd.lammps import LAMMPSCalculator
 from rigidmd.lammps.engine import LAMMPSEngine, lammps_executable
 from rigidmd.run.runner import StopRequest, StopSignals
@@ -36,7 +37,7 @@ def our_lmp():
 
 
 def descendants_named(ancestor, name):
-    return [pid for pid in children_of(ancestor) if pid in processes_named(name)]
+    return [pid for pid in descendants(ancestor) if pid in processes_named(name)]
 
 
 SHARED = set()  # lmp of the module's shared engine

@@ -17,10 +17,11 @@ import numpy as np
 import pytest
 from ase import units
 from ase.io import read
-from helpers import DATA, PPPM_27, children_of, processes_named, start_cli_run, water_box_27
+from helpers import DATA, PPPM_27, processes_named, start_cli_run, water_box_27
 
 from rigidmd import RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.ipi import EngineError, IPICalculator
+from rigidmd.ipi.processes import descendants
 from rigidmd.lammps import LAMMPSCalculator
 from rigidmd.lammps.engine import LAMMPSEngine
 
@@ -147,7 +148,7 @@ def test_a_dead_engine_raises_naming_its_log_and_the_step_is_undone():
     dyn = RigidVerlet(atoms, units.fs, bodies="tags")
     dyn.run(2)
     before = atoms.positions.copy(), atoms.get_momenta().copy()
-    lmp = [p for p in children_of(os.getpid()) if p in processes_named("lmp")]
+    lmp = [p for p in descendants(os.getpid()) if p in processes_named("lmp")]
     assert len(lmp) == 1
     os.kill(lmp[0], signal.SIGKILL)
     start = time.monotonic()
@@ -168,7 +169,7 @@ def test_a_hung_engine_raises_within_the_timeout():
     with LAMMPSEngine(PPPM_27, timeout=2, connect_timeout=60) as engine:
         atoms.calc = engine
         atoms.get_potential_energy()
-        lmp = [p for p in children_of(os.getpid()) if p in processes_named("lmp")]
+        lmp = [p for p in descendants(os.getpid()) if p in processes_named("lmp")]
         os.kill(lmp[0], signal.SIGSTOP)
         atoms.positions[0] += 0.01
         start = time.monotonic()
@@ -198,7 +199,7 @@ def test_sigkill_of_its_python_leaves_no_engine(tmp_path, processes):
                             stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline().strip() == "ready"
-        engine = children_of(proc.pid)
+        engine = descendants(proc.pid)
         ranks = [p for p in engine if p in processes_named("lmp")]
         assert len(ranks) == processes
         for rank in ranks:  # busy ranks: they would never notice the socket closing
@@ -330,7 +331,7 @@ def test_rigidmd_run_with_an_engine_stops_on_sigterm_and_resumes(tmp_path):
     while not (log.exists() and len(log.read_text().splitlines()) > 3):
         assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
         time.sleep(0.05)
-    engine = [p for p in children_of(proc.pid) if p in processes_named("lmp")]
+    engine = [p for p in descendants(proc.pid) if p in processes_named("lmp")]
     assert len(engine) == 2
     proc.send_signal(signal.SIGTERM)
     stdout, stderr = proc.communicate(timeout=120)

@@ -14,14 +14,13 @@ import numpy as np
 import pytest
 from helpers import (
     PPPM_27,
-    children_of,
-    cpu_seconds,
     free_port,
     processes_named,
     start_by_hand,
     water_box_27,
 )
 
+from rigidmd.ipi.processes import cpu_seconds, descendants
 from rigidmd.lammps import LAMMPSCalculator, boxplugin
 from rigidmd.lammps import engine as engine_module
 from rigidmd.lammps.engine import LAMMPSEngine
@@ -175,7 +174,7 @@ def idle_rank_cpu(poll_us):
         for _ in range(10):
             atoms.positions += 0.001
             atoms.get_forces()
-        ranks = [p for p in children_of(engine.pid) if p in processes_named("lmp")]
+        ranks = [p for p in descendants(engine.pid) if p in processes_named("lmp")]
         assert len(ranks) == 2
         before = cpu_seconds(ranks)
         time.sleep(1.0)
@@ -217,7 +216,12 @@ def test_ranks_that_take_every_core_wait_in_mpi(monkeypatch, tmp_path, processes
 @pytest.mark.parametrize("processes", [1, 2])
 def test_rank_zero_says_how_long_the_others_took_to_join(processes):
     """``broadcast_us``: rank 0's mean wait per call for the other ranks to take the
-    positions (their wake-up from the naps); none on one rank."""
+    positions (their wake-up from the naps); none on one rank.  Measured (two ranks, 5 calls,
+    2 cores): 0.9-1.5 µs in 31 engines on a quiet machine and beside three busy loops;
+    1.0-2.4 µs in 35 of 36 and 13 µs in one at load 9 (three such runs side by side with four
+    matrix products).  The bound, half the longest nap (poll_us 500 µs), is exceeded by ranks
+    that sleep a whole nap past rank 0's arrival in three calls of five (100 µs each call);
+    it is 19 times the worst measured, for a loaded CI machine."""
     atoms = water_box_27()
     with LAMMPSEngine(PPPM_27, processes=processes, poll_us=500) as engine:
         atoms.calc = engine
@@ -228,7 +232,7 @@ def test_rank_zero_says_how_long_the_others_took_to_join(processes):
     if processes == 1:
         assert waited is None
     else:
-        assert 0.0 < waited < 1e6, waited
+        assert 0.0 < waited < 250.0, waited
 
 
 @pytest.mark.parametrize("processes", [1, 2])
@@ -257,4 +261,4 @@ def test_an_engine_started_by_hand_over_tcp(tmp_path, processes):
     text = (tmp_path / "log.lammps").read_text()
     assert f"fix rmd_ipi all rigidmd/ipi localhost {port}" in text
     assert "Loop time of" in text
-    assert not [p for p in children_of(started[0].pid) if p in processes_named("lmp")]
+    assert not [p for p in descendants(started[0].pid) if p in processes_named("lmp")]

@@ -9,40 +9,33 @@ import sys
 import numpy as np
 import pytest
 from ase.calculators.tip3p import TIP3P
+from helpers import tip3p_calls
 
 from rigidmd.relax.filter import relax
 from rigidmd.systems import water_cluster
 
 
-class CountingTIP3P(TIP3P):
-    calls = 0
-
-    def calculate(self, *args, **kwargs):
-        type(self).calls += 1
-        super().calculate(*args, **kwargs)
-
-
-def test_a_relaxation_out_of_steps_continues_as_if_never_stopped(tmp_path):
+def test_a_relaxation_out_of_steps_continues_as_if_never_stopped(tmp_path, monkeypatch):
     """relax(steps=k, state_file=...) then relax(resume=True): the same minimum, bit for bit,
     in the same steps and force calls as one relaxation (before the state file the
     continuation started a fresh memory and took another path: measured 63 force calls in
     all and -6.5159 eV against 59 calls and -6.5097 eV in one relaxation)."""
+    counted = tip3p_calls(monkeypatch)
     atoms = water_cluster(16, seed=0)
-    atoms.calc = CountingTIP3P(rc=20.0)
-    CountingTIP3P.calls = 0
+    atoms.calc = TIP3P(rc=20.0)
     whole = relax(atoms, fmax=0.01)
     assert whole.converged
-    reference, calls = atoms.positions.copy(), CountingTIP3P.calls
+    reference, calls = atoms.positions.copy(), len(counted)
 
     state = tmp_path / "relax.state.npz"
     atoms = water_cluster(16, seed=0)
-    atoms.calc = CountingTIP3P(rc=20.0)
-    CountingTIP3P.calls = 0
+    atoms.calc = TIP3P(rc=20.0)
+    counted.clear()
     first = relax(atoms, fmax=0.01, steps=9, state_file=state)
     assert not first.converged and state.exists()
     second = relax(atoms, fmax=0.01, state_file=state, resume=True)
     assert second.converged and not state.exists()  # removed once converged
-    assert first.steps + second.steps == whole.steps and CountingTIP3P.calls == calls
+    assert first.steps + second.steps == whole.steps and len(counted) == calls
     np.testing.assert_array_equal(atoms.positions, reference)
 
 

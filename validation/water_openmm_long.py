@@ -68,15 +68,19 @@ import numpy as np  # noqa: E402
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from water_openmm_nve import (  # noqa: E402
+    CUTOFF,  # every model here (one box, one set-up for both codes)
     KB_KJ,
+    TEMPERATURE_K,
     body_kinetic_energies,
     configurational_sums,
     openmm_context,
+    state_at_rest,
+    state_atoms,
+    whole,
     write_results,
 )
+from water_openmm_nve import openmm_system as tip4p_openmm_system  # noqa: E402
 
-TEMPERATURE_K = 298.0
-CUTOFF = 9.0  # Å, every model here (one box, one set-up for both codes)
 KE_FS, U_OMM_FS, FRAME_FS = 10.0, 50.0, 1000.0
 #: The statistical unit: a run, or pieces of at least this long of a longer one.  ⟨U⟩'s block
 #: error was still growing at 15 ps blocks in one 75 ps run (1 ps: 0.044, 5 ps: 0.081, 15 ps:
@@ -87,15 +91,6 @@ MSD_FIT_PS = (3.0, 10.0)  # ps of lag for D: runs of a few minutes are 13-30 ps 
 
 
 # --------------------------------------------------------------------------- runs
-def whole(x, cell, sites):
-    """Molecules made whole around their O (orthorhombic cell), same shape as x."""
-    x = x.reshape(-1, sites, 3)
-    box = np.diag(cell)
-    d = x - x[:, :1]
-    d -= box * np.round(d / box)
-    return (x[:, :1] + d).reshape(-1, 3)
-
-
 def start_file(model_name):
     """The start state of ``model_name`` (see :func:`make_starts`)."""
     if model_name == "tip4pew":
@@ -137,22 +132,11 @@ class Recorder:
 
 
 def rigidmd_atoms(state, model):
-    """``state``'s atoms with masses, momenta, charges, one tag per molecule (the bodies) and
-    LAMMPS's forces (``lj/cut/coul/long``, PPPM 1e-5, the tail correction)."""
-    from ase import Atoms
-
-    from rigidmd.lammps import LAMMPSCalculator
-
-    n = len(state["numbers"]) // model.sites
-    atoms = Atoms(numbers=state["numbers"], positions=state["positions"], cell=state["cell"],
-                  pbc=True)
-    atoms.set_masses(np.tile(model.masses(), n))
-    atoms.set_momenta(state["momenta"])
-    atoms.set_initial_charges(model.charges(n))
+    """``state``'s atoms (:func:`water_openmm_nve.state_atoms`: LAMMPS's ``lj/cut/coul/long``,
+    PPPM 1e-5, the tail correction) with one tag per molecule (the bodies)."""
+    atoms = state_atoms(state, model, CUTOFF)
+    n = len(atoms) // model.sites
     atoms.set_tags(np.repeat(np.arange(1, n + 1), model.sites))  # one body per molecule
-    types = {"O": 1, "H": 2} if model.sites == 3 else {"O": 1, "H": 2, "X": 3}
-    atoms.calc = LAMMPSCalculator(model.lammps_commands(CUTOFF, "pppm", 1e-5, tail=True),
-                                  atom_types=types)
     return atoms
 
 
@@ -225,9 +209,7 @@ def openmm_system(state, model):
     """OpenMM's system of ``state`` (rigidmd's masses); TIP4P/2005 re-parametrised from
     OpenMM's TIP4P-Ew file (charges, Lennard-Jones, the M site's weights)."""
     import openmm
-    from ase import Atoms
 
-    from rigidmd.openmm import water_system
     from rigidmd.water import water_model
 
     n = len(state["numbers"]) // model.sites
@@ -237,10 +219,8 @@ def openmm_system(state, model):
         x = positions.reshape(n, 4, 3)
         b = x[:, 1] + x[:, 2] - 2 * x[:, 0]
         x[:, 3] = x[:, 0] + base.d_om * b / np.linalg.norm(b, axis=1)[:, None]
-    atoms = Atoms(numbers=state["numbers"], positions=positions, cell=state["cell"], pbc=True)
-    atoms.set_masses(np.tile(base.masses(), n))
-    system = water_system(atoms, base, CUTOFF, tail=True, parameters="rigidmd",
-                          error_tolerance=1e-5)[1]
+    system = tip4p_openmm_system(dict(state, positions=positions), base, CUTOFF,
+                                 parameters="rigidmd")
     masses = np.tile(model.masses(), n)
     for i, m in enumerate(masses):
         system.setParticleMass(i, float(m))
@@ -350,12 +330,7 @@ def make_starts(eq_ps):
         atoms = rigidmd_atoms(rebuild(source, ew, model), model)
         RigidBussi(atoms, 2 * units.fs, temperature_K=TEMPERATURE_K, taut=100 * units.fs,
                    rng=np.random.default_rng(7), fixcm=True).run(int(round(eq_ps * 500)))
-        p = atoms.get_momenta()
-        masses = atoms.get_masses()
-        p -= masses[:, None] * (p.sum(axis=0) / masses.sum())
-        np.savez(start_file(name), positions=whole(atoms.positions, atoms.cell.array,
-                                                    model.sites),
-                 momenta=p, cell=atoms.cell.array.copy(), numbers=atoms.numbers.copy())
+        np.savez(start_file(name), **state_at_rest(atoms, model.sites))
         print(f"{start_file(name).name}: {eq_ps:g} ps", flush=True)
 
 

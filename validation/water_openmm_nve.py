@@ -123,20 +123,49 @@ def _units():
 KSPACE = {"solver": "pppm", "accuracy": 1e-5}
 
 
-def _calculator(model, cutoff):
+def lammps_calculator(model, cutoff):
+    """LAMMPS's forces for ``model``: ``lj/cut/coul/long`` at ``cutoff`` (Å), the tail
+    correction, :data:`KSPACE`."""
     from rigidmd.lammps import LAMMPSCalculator
 
+    types = {"O": 1, "H": 2} if model.sites == 3 else {"O": 1, "H": 2, "X": 3}
     return LAMMPSCalculator(model.lammps_commands(cutoff, KSPACE["solver"],
                                                   KSPACE["accuracy"], tail=True),
-                            atom_types={"O": 1, "H": 2, "X": 3})
+                            atom_types=types)
 
 
-def _whole(atoms, sites):
-    from ase.geometry import find_mic
-
-    x = atoms.positions.reshape(-1, sites, 3)
-    d = find_mic((x - x[:, :1]).reshape(-1, 3), atoms.cell)[0].reshape(x.shape)
+def whole(x, cell, sites):
+    """Molecules made whole around their O (orthorhombic cell), same shape as x."""
+    x = x.reshape(-1, sites, 3)
+    box = np.diag(cell)
+    d = x - x[:, :1]
+    d -= box * np.round(d / box)
     return (x[:, :1] + d).reshape(-1, 3)
+
+
+def state_atoms(state, model, cutoff):
+    """``state``'s atoms with ``model``'s masses and charges, its momenta and
+    :func:`lammps_calculator`'s forces."""
+    from ase import Atoms
+
+    n = len(state["numbers"]) // model.sites
+    atoms = Atoms(numbers=state["numbers"], positions=state["positions"], cell=state["cell"],
+                  pbc=True)
+    atoms.set_masses(np.tile(model.masses(), n))
+    atoms.set_momenta(state["momenta"])
+    atoms.set_initial_charges(model.charges(n))
+    atoms.calc = lammps_calculator(model, cutoff)
+    return atoms
+
+
+def state_at_rest(atoms, sites):
+    """``atoms`` as a state: whole molecules (Å), momenta (ASE) with the total set to zero,
+    cell and numbers."""
+    p = atoms.get_momenta()
+    masses = atoms.get_masses()
+    p -= masses[:, None] * (p.sum(axis=0) / masses.sum())
+    return {"positions": whole(atoms.positions, atoms.cell.array, sites), "momenta": p,
+            "cell": atoms.cell.array.copy(), "numbers": atoms.numbers.copy()}
 
 
 def equilibrated_state(n_side, seed, eq_ps, cache=None):
@@ -168,17 +197,13 @@ def equilibrated_state(n_side, seed, eq_ps, cache=None):
     atoms.set_cell(np.eye(3) * edge)
     cutoff = min(CUTOFF, 0.49 * edge)
     atoms.set_initial_charges(model.charges(n))
-    atoms.calc = _calculator(model, cutoff)
+    atoms.calc = lammps_calculator(model, cutoff)
     rng = np.random.default_rng(seed)
     RigidLangevin(atoms, 0.5 * units.fs, temperature_K=TEMPERATURE_K, friction=0.05 / units.fs,
                   rng=rng).run(400 if eq_ps >= 1 else 100)
     RigidBussi(atoms, 2.0 * units.fs, temperature_K=TEMPERATURE_K, taut=100 * units.fs,
                rng=rng, fixcm=True).run(max(int(round(eq_ps * 500)), 1))
-    p = atoms.get_momenta()
-    masses = atoms.get_masses()
-    p -= masses[:, None] * (p.sum(axis=0) / masses.sum())
-    state = {"positions": _whole(atoms, model.sites), "momenta": p,
-             "cell": atoms.cell.array.copy(), "numbers": atoms.numbers.copy()}
+    state = state_at_rest(atoms, model.sites)
     if cache is not None:
         np.savez(cache, n_side=n_side, seed=seed, eq_ps=eq_ps, **state)
     return state
@@ -270,20 +295,13 @@ def _steps(dt_fs, every_fs):
 def run_rigidmd(state, dt_fs, ps, ensemble, tau_ps, track_ps, seed):
     """rigidmd from ``state``: series of kinetic energies (kJ/mol), frames (nm), O tracks."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    from ase import Atoms
-
     from rigidmd import RigidBussi, RigidVerlet
     from rigidmd.water import water_model
 
     units, _ = _units()
     kj = units.kJ / units.mol
     model = water_model(MODEL)
-    atoms = Atoms(numbers=state["numbers"], positions=state["positions"],
-                  cell=state["cell"], pbc=True)
-    atoms.set_masses(np.tile(model.masses(), len(atoms) // model.sites))
-    atoms.set_momenta(state["momenta"])
-    atoms.set_initial_charges(model.charges(len(atoms) // model.sites))
-    atoms.calc = _calculator(model, min(CUTOFF, 0.49 * atoms.cell.lengths().min()))
+    atoms = state_atoms(state, model, min(CUTOFF, 0.49 * np.diag(state["cell"]).min()))
     dt = dt_fs * units.fs
     if ensemble == "nve":
         dyn = RigidVerlet(atoms, dt)
@@ -314,7 +332,7 @@ def run_rigidmd(state, dt_fs, ps, ensemble, tau_ps, track_ps, seed):
             rec["K_rot_atoms"].append(kr / kj)
             rec["E"].append(dyn.get_conserved_energy() / kj)
         if s % frame_every == 0:
-            rec["frames"].append(_whole(atoms, 4) / 10)
+            rec["frames"].append(whole(atoms.positions, atoms.cell.array, 4) / 10)
         if s <= track_steps and s % ke_every == 0:
             rec["O"].append(atoms.positions[::4].copy())
 
@@ -324,21 +342,24 @@ def run_rigidmd(state, dt_fs, ps, ensemble, tau_ps, track_ps, seed):
     return rec, time.perf_counter() - t0
 
 
-def openmm_system(state):
+def openmm_system(state, model=None, cutoff=None, **options):
+    """OpenMM's system of ``state`` (:func:`rigidmd.openmm.water_system`, ``model`` TIP4P-Ew
+    by default, ``cutoff`` Å, the tail correction, :data:`KSPACE`'s accuracy, ``options``
+    passed on) with rigidmd's masses (the file's differ by 3e-5, 5e-5)."""
     from ase import Atoms
 
     from rigidmd.openmm import water_system
     from rigidmd.water import water_model
 
-    model = water_model(MODEL)
+    model = model or water_model(MODEL)
     atoms = Atoms(numbers=state["numbers"], positions=state["positions"], cell=state["cell"],
                   pbc=True)
     masses = np.tile(model.masses(), len(atoms) // model.sites)
     atoms.set_masses(masses)
-    cutoff = min(CUTOFF, 0.49 * atoms.cell.lengths().min())
+    cutoff = cutoff or min(CUTOFF, 0.49 * atoms.cell.lengths().min())
     system = water_system(atoms, model, cutoff, tail=True,
-                          error_tolerance=KSPACE["accuracy"])[1]
-    for i, m in enumerate(masses):  # rigidmd's masses (the file's differ by 3e-5, 5e-5)
+                          error_tolerance=KSPACE["accuracy"], **options)[1]
+    for i, m in enumerate(masses):
         system.setParticleMass(i, float(m))
     return system
 

@@ -10,7 +10,8 @@ import re
 
 from ase import units
 
-__all__ = ["ConfigError", "parse_quantity", "mapping", "key_name", "whole_number", "UNIT_TABLES",
+__all__ = ["ConfigError", "parse_quantity", "mapping", "key_name", "whole_number", "parse_address",
+           "UNIT_TABLES",
            "TIME_UNITS", "RATE_UNITS", "TEMPERATURE_UNITS", "PRESSURE_UNITS",
            "COMPRESSIBILITY_UNITS"]
 
@@ -95,3 +96,27 @@ def whole_number(field, value, minimum=0):
     if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
         raise ConfigError(f"{field}: expected a whole number >= {minimum}, got {value!r}")
     return value
+
+
+def parse_address(field, address):
+    """``unix:NAME`` or ``HOST:PORT`` as IPICalculator keywords, else a ConfigError.
+
+    Parameters
+    ----------
+    field : str
+        The configuration field, e.g. ``"calculator.address"``.
+    address : str
+
+    Returns
+    -------
+    dict
+        ``{"unixsocket": NAME}`` or ``{"host": HOST, "port": PORT}`` (``PORT`` 1025-65535).
+    """
+    text = str(address)
+    if text.startswith("unix:") and len(text) > 5:
+        return {"unixsocket": text[5:]}
+    host, _, port = text.rpartition(":")
+    if host and port.isdigit() and 1024 < int(port) < 65536:
+        return {"host": host, "port": int(port)}
+    raise ConfigError(f"{field}: expected unix:NAME or HOST:PORT (port 1025-65535), "
+                      f"got {address!r}")

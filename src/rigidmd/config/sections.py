@@ -30,6 +30,7 @@ from rigidmd.config.quantities import (
     TIME_UNITS,
     ConfigError,
     mapping,
+    parse_address,
     parse_quantity,
     whole_number,
 )
@@ -375,7 +376,7 @@ class CalculatorSection:
         if address is not None:
             if calc["name"] not in ("lammps", "ipi"):
                 raise ConfigError("calculator.address: goes with name: lammps or ipi")
-            _address(address)
+            parse_address("calculator.address", address)
             if processes is not None:
                 raise ConfigError("calculator.processes: an engine started elsewhere (address) "
                                   "chooses its own processes; give one or the other")
@@ -407,7 +408,8 @@ class CalculatorSection:
             if self.name == "ipi":
                 from rigidmd.ipi import IPICalculator
 
-                return IPICalculator(**_address(self.address), **self.options)
+                return IPICalculator(**parse_address("calculator.address", self.address),
+                                     **self.options)
             calc_class = self.calculator_class or calculator_class(self.name, self.options,
                                                                    trust=True)
             return calc_class(**self.options)
@@ -467,22 +469,11 @@ class CalculatorSection:
         from rigidmd.lammps.engine import LAMMPSEngine
 
         where = {} if self.address is None else dict(
-            _address(self.address), launch=False, workdir=engine_directory)
+            parse_address("calculator.address", self.address), launch=False,
+            workdir=engine_directory)
         return LAMMPSEngine(self.commands, atom_types=self.atom_types or None,
                             processes=self.processes or 1, threads=self.threads,
                             **where, **self.options)
-
-
-def _address(address):
-    """``unix:NAME`` or ``HOST:PORT`` as IPICalculator keywords, else a ConfigError."""
-    text = str(address)
-    if text.startswith("unix:") and len(text) > 5:
-        return {"unixsocket": text[5:]}
-    host, _, port = text.rpartition(":")
-    if host and port.isdigit() and 1024 < int(port) < 65536:
-        return {"host": host, "port": int(port)}
-    raise ConfigError(f"calculator.address: expected unix:NAME or HOST:PORT (port 1025-65535), "
-                      f"got {address!r}")
 
 
 def _check_output_paths(directory, files):

@@ -54,7 +54,7 @@ import ipaddress
 import math
 from pathlib import PurePath
 
-from rigidmd.config.quantities import ConfigError
+from rigidmd.config.quantities import ConfigError, parse_address
 
 __all__ = ["SAFE_LAMMPS_COMMANDS", "ALLOWED_CALCULATORS", "GivenOnCommandLine",
            "check_lammps_commands", "check_calculator", "check_output_paths",
@@ -191,7 +191,8 @@ def check_listen_address(where, address):
     where : str
         The configuration field, e.g. ``"calculator.address"``.
     address : str
-        ``unix:NAME`` or ``HOST:PORT`` (the form is checked elsewhere).
+        ``unix:NAME`` or ``HOST:PORT`` (read by
+        :func:`rigidmd.config.quantities.parse_address`).
 
     Notes
     -----
@@ -199,10 +200,10 @@ def check_listen_address(where, address):
     ``::1``) are reachable from this machine only.  Any other host, a name
     included (it may resolve to any interface), needs ``--trust``.
     """
-    text = str(address)
-    if text.startswith("unix:"):
+    parsed = parse_address(where, address)
+    if "unixsocket" in parsed:
         return
-    host = text.rpartition(":")[0].strip("[]")
+    host = parsed["host"].strip("[]")
     if host.lower() == "localhost":
         return
     try:
@@ -211,8 +212,8 @@ def check_listen_address(where, address):
     except ValueError:
         pass  # a host name, or "" (every interface)
     shown = repr(host) if host else "'' (every interface)"
-    raise ConfigError(f"{where}: {text!r} listens on {shown}, which other machines can reach "
-                      f"(an engine connecting there is sent the run's positions and its "
+    raise ConfigError(f"{where}: {str(address)!r} listens on {shown}, which other machines "
+                      f"can reach (an engine connecting there is sent the run's positions and its "
                       f"forces are used); without --trust a configuration may listen only on "
                       f"a Unix socket (unix:NAME) or loopback (localhost:PORT, 127.0.0.1:PORT); "
                       f"{TRUST_HINT}")

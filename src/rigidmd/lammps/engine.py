@@ -86,6 +86,7 @@ from ase import units
 from ase.calculators.calculator import all_changes
 
 from rigidmd.ipi import IPICalculator
+from rigidmd.ipi.processes import descends_from as _descends_from
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
 from rigidmd.lammps.calculator import LAMMPSCalculator, lower_triangular
 from rigidmd.lammps.library import check_atom_types, flatten, mpich_prefix
@@ -192,22 +193,6 @@ def answer_mismatch(energy, forces, ref_energy, ref_forces):
         return (f"its forces differ from LAMMPS's in this process on {bad.size} of "
                 f"{len(forces)} atoms (first: atom {bad[0]}){extra}")
     return None
-
-
-def _descends_from(pid, ancestor):
-    """Whether process ``pid`` is ``ancestor`` or one of its descendants (Linux's /proc)."""
-    seen = 0
-    while pid > 1 and seen < 64:
-        if pid == ancestor:
-            return True
-        try:
-            with open(f"/proc/{pid}/stat") as f:
-                stat = f.read()
-        except OSError:
-            return False
-        pid = int(stat[stat.rindex(")") + 2:].split()[1])
-        seen += 1
-    return pid == ancestor
 
 
 def engine_plugin():

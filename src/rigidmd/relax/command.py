@@ -17,13 +17,10 @@ from rigidmd.relax.structure import (
     relax_structure,
     state_path,
 )
+from rigidmd.run.fingerprint import resume_command
 from rigidmd.run.runner import StopSignals
 
 __all__ = ["relax_only", "relax_for_export"]
-
-
-def _hint(directory, config_path):
-    return f"rigidmd relax {config_path or 'CONFIG'} --outdir {directory} --resume"
 
 
 def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None):
@@ -82,8 +79,7 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     try:
         done = 0
         if mode == "resume":
-            done = continue_from(atoms, trajectory)
-            print(f"continuing the relaxation of {trajectory} after step {done}", file=stream)
+            done = continue_from(atoms, trajectory, stream)
         else:
             existing = [p for p in (trajectory, log, state) if p.exists()]
             if own:
@@ -97,8 +93,9 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
         atoms.calc = calculator.build(atoms)
         try:
             relax_structure(atoms, bodies, section, directory, stream, resume=mode == "resume",
-                            done=done, hint=_hint(directory, config_path),
-                            stop=StopSignals())
+                            done=done, stop=StopSignals(), hint=resume_command(
+                                config_path or "CONFIG", directory,
+                                ["--trust"] if trust else [], command="relax"))
         except RelaxationStopped as stopped:
             return stopped.status
         finally:

@@ -13,10 +13,8 @@ many right-hand sides are solved together.  Measured (CPU time, 1728
 centres of SPC/E water, 27 pairs per row): a product with the matrix in
 41 µs for three columns and 58 µs for six, against 90 µs for scipy's CSR
 product of three; the conjugate gradients of one step of
-:class:`~rigidmd.relax.lbfgs.RigidLBFGS` (six columns, 13 iterations) in
-about 1.1 ms, where the NumPy loop around scipy's product that this replaces
-took 6.8 ms (wall time, a quieter machine) for each of the step's two
-vectors, solved one at a time to 1e-6.
+:class:`~rigidmd.relax.lbfgs.RigidLBFGS` (six columns, 6.3 iterations) in
+0.64-0.67 ms (``benchmarks/relax.txt``, the conjugate gradients' tolerances).
 """
 
 import numpy as np
@@ -443,7 +441,10 @@ def body_gradient(forces, r, order, bounds, q, x, lengths, linear, fixed, F, tau
     the sum of the rest, :func:`rigidmd.core.operators.reduce_forces`), and
     :math:`g_b = J_r(\varphi_b)^\mathsf{T} R(q_b)^\mathsf{T}\tau_b/\ell_b`
     (:func:`rigidmd.relax.rotation.right_jacobian_transpose`, 0 about a linear
-    body's axis), 0 for a fixed body (its force and torque are kept).
+    body's axis), 0 for a fixed body (its force and torque are kept).  The dynamics' fused
+    kick (:func:`rigidmd.core._numba.second_half`) sums a body's atoms in order instead; the
+    relaxation keeps NumPy's order, as its path follows the last bit (water_box(6), TIP3P
+    6 Å, fmax 0.01: -113.3369475 eV in NumPy's order, -113.3369788 eV in order).
 
     Parameters
     ----------

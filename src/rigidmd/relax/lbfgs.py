@@ -33,10 +33,10 @@ MAX_HALVINGS = 8
 #: :math:`y^\mathsf{T}P^{-1}y` of the scale :math:`\gamma_k` (the error of a quadratic form
 #: falls faster than the residual: 5e-4 relative at 3e-2 in 3 iterations, as at 1e-2 in 6,
 #: 6e-2 at 1e-1 in 1; 1728 waters).  Once it is reached, the conjugate gradients go on
-#: with the other vector's three columns only (0.68 against 0.79 ms a step at 1728
-#: waters).  Force calls of relax()'s defaults to fmax 0.05 / 0.01 eV/Å summed over the 21
-#: systems of :data:`rigidmd.relax.precon.CG_TOLERANCE`: 979 / 1824 at 3e-2, 968 / 1882 at
-#: 1e-2 (that is, at CG_TOLERANCE), 966 / 1914 at 1e-1.
+#: with the other vector's three columns only (0.64-0.67 against 0.69-0.74 ms CPU a step
+#: at 1728 waters).  Force calls of relax()'s defaults to fmax 0.05 / 0.01 eV/Å summed over
+#: the 21 systems of :data:`rigidmd.relax.precon.CG_TOLERANCE`: 979 / 1824 at 3e-2, 968 /
+#: 1882 at 1e-2 (that is, at CG_TOLERANCE), 966 / 1914 at 1e-1 (``benchmarks/relax.txt``).
 SCALE_TOLERANCE = 3e-2
 
 

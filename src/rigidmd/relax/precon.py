@@ -48,6 +48,7 @@ from ase.neighborlist import neighbor_list
 from ase.optimize.precon.precon import Precon
 from scipy import sparse
 
+from rigidmd.core.neighbours import tree_nearest, tree_pairs
 from rigidmd.relax import kernels
 
 __all__ = ["RigidPrecon", "MU_FLOOR", "CG_TOLERANCE", "SKIN", "MAX_ITERATIONS"]
@@ -55,15 +56,18 @@ __all__ = ["RigidPrecon", "MU_FLOOR", "CG_TOLERANCE", "SKIN", "MAX_ITERATIONS"]
 #: Relative residual at which conjugate gradients stop: a preconditioner need not be
 #: exact.  Measured with relax()'s defaults over 21 unrelaxed systems (water_cluster of 8,
 #: 16, 24, 32 and 64 molecules, seeds 0-2; water_box of 64, 125 and 216, seeds 0-1; ASE's
-#: TIP3P), force calls to fmax 0.05 / 0.01 eV/Å summed: 968 / 1882 at 1e-2, 993 / 1851 at
-#: 1e-3, and 952-1028 / 1734-1898 over 9e-4, 2e-3, 5e-3 and 2e-2 (the spread of one path's
-#: bit-level changes: a relaxation of 1728 waters took 225 or 255 steps after a change of
-#: one unit in the last place of one coefficient); mean energies within 3e-4 eV/molecule
-#: of each other.  6 iterations a step at 1728 waters against 11 at 1e-3 (0.65 against
-#: 1.1 ms CPU for the step's two vectors).
+#: TIP3P), the scale's solve to the same tolerance, force calls to fmax 0.05 / 0.01 eV/Å
+#: summed: 968 / 1882 at 1e-2, 993 / 1851 at 1e-3, and 952-1028 / 1734-1898 over 9e-4,
+#: 2e-3, 5e-3 and 2e-2 (the spread of one path's bit-level changes: a relaxation of 1728
+#: waters took 225 or 255 steps after a change of one unit in the last place of one
+#: coefficient); mean energies within 5e-4 eV/molecule of each other.  At 1728 waters 6.3
+#: iterations a solve against 11.3 at 1e-3 (0.69-0.74 against 1.10-1.16 ms CPU a step for
+#: the step's two vectors).  All in ``benchmarks/relax.txt`` (``relax.py tolerances``,
+#: ``relax.py large 12 none 2000 CG:SCALE``).
 CG_TOLERANCE = 1e-2
 
-#: Conjugate-gradient iterations at most per solve (a bound, never reached: 8 at 1728 waters).
+#: Conjugate-gradient iterations at most per solve (a bound, never reached: at most 7 a
+#: solve at 1728 waters with the defaults, 12 at a tolerance of 1e-3).
 MAX_ITERATIONS = 10000
 
 #: Skin of the candidate pairs' list, in units of ``r_NN``: pairs within ``r_cut + SKIN r_NN``
@@ -410,21 +414,12 @@ def _as_slice(index):
 
 def _nearest_distance(points):
     """Median over points of the distance to the nearest other one (Å)."""
-    from scipy.spatial import cKDTree
-
     m = len(points)
     if m < 2:
         return 1.0
-    pbc, cell = points.pbc, points.cell.array
-    lengths = np.diag(cell)
-    if not pbc.any() or (pbc.all() and np.allclose(cell, np.diag(lengths))):
-        # A k-d tree (0.01 s for 1728 centres, against 0.3 s for ASE's neighbour list).
-        positions = points.positions
-        if pbc.any():
-            positions = np.mod(positions, lengths)
-            positions[positions >= lengths] = 0.0  # -1e-17 mod L rounds to L
-        tree = cKDTree(positions, boxsize=lengths if pbc.any() else None)
-        return float(np.median(tree.query(positions, k=2)[0][:, 1]))
+    nearest = tree_nearest(points.positions, points.cell.array, points.pbc)
+    if nearest is not None:
+        return float(np.median(nearest))
     radius = 3.0
     while True:
         i, d = neighbor_list("id", points, radius)
@@ -445,35 +440,23 @@ def _pairs(points, r_cut):
     water, 50,262 pairs within 7.5 Å, against 7.0 ms for scipy's k-d tree and its
     shifts) in a cell periodic in all three directions with its planes at least
     ``3 r_cut`` apart, of any shape (ASE's neighbour list took over 100 ms in a sheared
-    one); scipy's k-d tree without periodicity or in an orthorhombic cell at least
-    ``2 r_cut`` wide; else ASE's ``neighbor_list``.  All O(n).
+    one); scipy's k-d tree (:func:`rigidmd.core.neighbours.tree_pairs`) without
+    periodicity or in an orthorhombic cell at least ``2 r_cut`` wide; else ASE's
+    ``neighbor_list``.  All O(n).
     """
-    from scipy.spatial import cKDTree
-
     m = len(points)
     if m < 2:
         return np.zeros(0, int), np.zeros(0, int), np.zeros((0, 3), int)
     pbc, cell, positions = points.pbc, points.cell.array, points.positions
-    lengths = np.diag(cell)
     nbin = np.zeros(3, np.int64)
     if pbc.all() and abs(np.linalg.det(cell)) > 0:
         spacing = abs(np.linalg.det(cell)) / np.linalg.norm(
             np.cross(cell[[1, 2, 0]], cell[[2, 0, 1]]), axis=1)
         nbin = np.floor(spacing / r_cut).astype(np.int64)
-    if np.any(nbin < 3) and (not pbc.any() or (
-            pbc.all() and np.allclose(cell, np.diag(lengths)) and np.all(lengths > 2 * r_cut))):
-        wrapped = positions
-        if pbc.any():
-            wrapped = np.mod(positions, lengths)
-            wrapped[wrapped >= lengths] = 0.0  # -1e-17 mod L rounds to L, outside the box
-        tree = cKDTree(wrapped, boxsize=lengths if pbc.any() else None)
-        pairs = tree.query_pairs(r_cut, output_type="ndarray")
-        i, j = pairs[:, 0].astype(int), pairs[:, 1].astype(int)
-        shifts = np.zeros((len(i), 3), int)
-        if pbc.any():  # the nearest image: the box is over twice the cut-off wide
-            shifts = -np.rint((positions[j] - positions[i]) / lengths).astype(int)
-        return i, j, shifts
     if np.any(nbin < 3):
+        found = tree_pairs(positions, cell, pbc, r_cut)
+        if found is not None:
+            return found
         i, j, shifts = neighbor_list("ijS", points, r_cut)
         once = (i < j) | ((i == j) & _positive(shifts))
         return i[once], j[once], shifts[once]

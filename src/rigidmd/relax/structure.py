@@ -90,7 +90,7 @@ class RelaxProgress:
             self.stream.flush()
 
 
-def continue_from(atoms, trajectory):
+def continue_from(atoms, trajectory, stream=None):
     """Put the last frame of a relaxation's ``trajectory`` into ``atoms``; steps it holds.
 
     Parameters
@@ -98,6 +98,8 @@ def continue_from(atoms, trajectory):
     atoms : ase.Atoms
         The configuration's structure (its atoms, bodies and calculator are kept).
     trajectory : pathlib.Path
+    stream : file-like, optional
+        Told which relaxation continues after which step.
 
     Returns
     -------
@@ -131,6 +133,9 @@ def continue_from(atoms, trajectory):
                           f"{len(atoms)} ({atoms.get_chemical_formula()}); not its relaxation")
     atoms.set_cell(last.cell, scale_atoms=False)
     atoms.positions = last.positions
+    if stream is not None:
+        print(f"continuing the relaxation of {trajectory} after step {len(frames) - 1}",
+              file=stream)
     return len(frames) - 1
 
 

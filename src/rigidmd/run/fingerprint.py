@@ -21,7 +21,7 @@ from rigidmd.couplings.base import COUPLINGS
 __all__ = ["fingerprint", "differing_fields", "earlier_release_differences", "resume_command"]
 
 
-def resume_command(config_path=None, directory=None, flags=()):
+def resume_command(config_path=None, directory=None, flags=(), command="run"):
     """The ``rigidmd run ... --resume`` command that continues a run, quoted for a shell.
 
     Parameters
@@ -34,8 +34,10 @@ def resume_command(config_path=None, directory=None, flags=()):
     flags : sequence of str
         The other command-line flags that defined the run (``--structure``,
         ``--timestep``, ...), repeated as given.
+    command : {"run", "relax"}
+        The subcommand: ``rigidmd relax ... --resume`` continues a relaxation alike.
     """
-    words = ["rigidmd", "run"] + ([str(config_path)] if config_path else []) + list(flags)
+    words = ["rigidmd", command] + ([str(config_path)] if config_path else []) + list(flags)
     if directory is not None:
         words += ["--outdir", str(Path(directory).resolve())]
     return shlex.join(words + ["--resume"])

@@ -1,0 +1,311 @@
+"""``rigidmd relax`` and a configuration's ``relax:`` section as product paths: the command,
+its errors, signals, --resume, and export-lammps from the relaxed structure."""
+
+import numpy as np
+import pytest
+from ase.calculators.tip3p import TIP3P
+from helpers import RELAX_CONFIG, tip3p_calls
+
+from rigidmd.relax.filter import RigidFilter
+from rigidmd.systems import water_cluster
+
+
+def rigidmd(*args, cwd):
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.run([sys.executable, "-m", "rigidmd.run.cli", *map(str, args)], cwd=cwd,
+                          capture_output=True, text=True, env=env, timeout=600)
+
+
+def test_relax_command_and_relax_section_before_md(tmp_path):
+    from ase.io import read
+
+    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "2000"))
+    result = rigidmd("relax", "relax.yaml", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "relaxed RigidBodies(n_bodies=6" in result.stdout
+    frames = read(tmp_path / "out" / "relax.traj", ":")
+    last = frames[-1]
+    last.calc = TIP3P(rc=40.0)
+    generalized = RigidFilter(last, bodies="tags").get_forces()  # frames carry bodies in tags
+    assert np.linalg.norm(generalized, axis=1).max() < 0.01
+    assert "FIRE:" in (tmp_path / "out" / "relax.log").read_text()
+    assert not (tmp_path / "out" / "md.traj").exists()
+    # rigidmd run: relaxes, then MD from the relaxed structure.
+    result = rigidmd("run", "relax.yaml", "--overwrite", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    md = read(tmp_path / "out" / "md.traj", ":")
+    assert np.abs(md[0].positions - last.positions).max() < 1e-9
+    assert md[0].get_kinetic_energy() > 0
+
+
+def test_relaxation_short_of_its_steps_is_one_line_and_keeps_the_structure(tmp_path):
+    from ase.io import read
+
+    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "3"))
+    result = rigidmd("run", "relax.yaml", cwd=tmp_path)
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()  # progress lines, then one line for the stop
+    assert "did not reach fmax 0.01 eV/Å in 3 steps" in lines[-1] and "Traceback" not in \
+        result.stderr
+    assert lines[-1].endswith("raise relax.steps and continue with: rigidmd run relax.yaml "
+                              "--resume")  # the relaxation, then the MD
+    assert all(line.startswith("relax step ") for line in lines[:-1])
+    assert len(read(tmp_path / "out" / "relax.traj", ":")) == 4  # start and 3 steps
+    assert not (tmp_path / "out" / "md.traj").exists()
+
+
+@pytest.mark.parametrize("relax_section, message", [
+    ("{fmax: -1}", "relax.fmax: must be positive"),
+    ("{optimizer: Newton}", "relax.optimizer: 'Newton' is not one of"),
+    ("{cell: cubic}", "relax.cell: expected false, true or one of"),
+    ("{pressure: 1 bar}", "relax.pressure: a target pressure needs relax.cell"),
+    ("{cell: iso}", "cell='iso' needs a cell periodic in all three directions"),
+    ("{tol: 1}", "relax.tol: unknown key"),
+])
+def test_relax_section_errors_are_one_line(tmp_path, relax_section, message):
+    text = RELAX_CONFIG.replace("{fmax: 0.01, steps: STEPS, optimizer: FIRE}", relax_section)
+    (tmp_path / "relax.yaml").write_text(text)
+    result = rigidmd("relax", "relax.yaml", cwd=tmp_path)
+    assert result.returncode == 2
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert message in result.stderr
+
+
+def test_relax_section_refuses_a_restart_before_touching_the_outputs(tmp_path):
+    from ase.io import write
+
+    write(tmp_path / "start.traj", water_cluster(6, seed=2))
+    text = RELAX_CONFIG.replace("STEPS", "10") + "restart: start.traj\n"
+    (tmp_path / "relax.yaml").write_text(text)
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "md.traj").write_text("earlier run")
+    result = rigidmd("run", "relax.yaml", "--overwrite", cwd=tmp_path)
+    assert result.returncode == 2
+    assert "relax: a restart continues a run's dynamics" in result.stderr
+    assert (tmp_path / "out" / "md.traj").read_text() == "earlier run"
+
+
+# ---------------------------------------------------------------- rigidmd relax as a product path
+def relax_config(tmp_path, steps=2000, structure="{builtin: water_cluster, n_molecules: 6, "
+                 "seed: 2}"):
+    text = RELAX_CONFIG.replace("STEPS", str(steps)).replace(
+        "{builtin: water_cluster, n_molecules: 6, seed: 2}", structure).replace(
+        ", optimizer: FIRE", "")
+    path = tmp_path / "relax.yaml"
+    path.write_text(text)
+    from rigidmd.config import load_config
+
+    return load_config(path)
+
+
+def signal_at_call(monkeypatch, n, *signums):
+    """Send ``signums`` to this process at the ``n``-th generalized force call."""
+    import os
+
+    original, calls = signal_at_call.original, []
+
+    def get_forces(self, **kwargs):
+        calls.append(1)
+        if len(calls) == n:
+            for signum in signums:
+                os.kill(os.getpid(), signum)
+        return original(self, **kwargs)
+
+    monkeypatch.setattr(RigidFilter, "get_forces", get_forces)
+
+
+signal_at_call.original = RigidFilter.get_forces
+
+
+def test_rigidmd_relax_says_how_to_continue_as_a_command_a_shell_runs(tmp_path, monkeypatch):
+    """The continue hint of rigidmd relax is rigidmd run's (one source): the output directory
+    absolute and quoted for a shell, and --trust repeated when it was given (it was
+    ``rigidmd relax CONFIG --outdir DIR --resume`` unquoted, without --trust)."""
+    import io
+    import shlex
+    import signal
+
+    from rigidmd.relax.command import relax_only
+
+    raw = relax_config(tmp_path)
+    raw["outputs"]["directory"] = "my out"
+    signal_at_call(monkeypatch, 2, signal.SIGTERM)
+    out = io.StringIO()
+    assert relax_only(raw, out, trust=True, config_path="relax.yaml") == 143
+    hint = out.getvalue().strip().splitlines()[-1].rpartition("continue with: ")[2]
+    assert shlex.split(hint) == ["rigidmd", "relax", "relax.yaml", "--trust", "--outdir",
+                                 str((tmp_path / "my out").resolve()), "--resume"]
+
+
+@pytest.mark.parametrize("signums, status, said", [
+    (("SIGTERM",), 143, "stopped by SIGTERM"), (("SIGINT",), 130, "stopped by SIGINT"),
+    (("SIGINT", "SIGINT"), 130, "interrupted at once (second Ctrl-C)")])
+def test_a_signal_stops_rigidmd_relax_after_a_step_and_resume_finishes(
+        tmp_path, monkeypatch, signums, status, said):
+    """Issue 34 item 9: the stop finishes the step and its frame, says how to continue and
+    exits 143/130 (a second Ctrl-C too, without a traceback); --resume continues from the
+    last frame, appending.  Issue 36: after a stop signal it continues with the optimizer's
+    memory (relax.state.npz), taking the steps of the uninterrupted relaxation: the same
+    frames bit for bit and the same force calls in all; after a second Ctrl-C (no whole
+    step, no state) it says that the memory starts afresh and reaches a minimum."""
+    import io
+    import signal
+
+    from ase.io import read
+
+    from rigidmd.relax.command import relax_only
+
+    raw = relax_config(tmp_path)
+    reference = tmp_path / "reference"
+    reference.mkdir()
+    calls = tip3p_calls(monkeypatch)
+    assert relax_only(relax_config(reference), io.StringIO()) == 0
+    uninterrupted, uninterrupted_calls = read(reference / "out" / "relax.traj", ":"), len(calls)
+    assert not (reference / "out" / "relax.state.npz").exists()  # removed once converged
+    calls.clear()
+
+    signal_at_call(monkeypatch, 12, *(getattr(signal, name) for name in signums))
+    out = io.StringIO()
+    assert relax_only(raw, out, config_path="relax.yaml") == status
+    message = out.getvalue().strip().splitlines()[-1]
+    assert said in message
+    assert message.endswith(f"continue with: rigidmd relax relax.yaml --outdir "
+                            f"{tmp_path / 'out'} --resume")
+    frames = read(tmp_path / "out" / "relax.traj", ":")
+    assert 2 <= len(frames) < len(uninterrupted)  # the start, and at least one step
+    from rigidmd.run.outputs import LOCK_NAME
+
+    assert not (tmp_path / "out" / LOCK_NAME).exists()
+    once = len(signums) == 1  # a whole step: the state is written
+    assert (tmp_path / "out" / "relax.state.npz").exists() == once
+    monkeypatch.setattr(RigidFilter, "get_forces", signal_at_call.original)
+    out = io.StringIO()
+    assert relax_only(raw, out, mode="resume") == 0
+    calls_in_all = len(calls)  # both parts of the relaxation
+    assert f"after step {len(frames) - 1}" in out.getvalue()
+    resumed = read(tmp_path / "out" / "relax.traj", ":")
+    for a, b in zip(frames, resumed[:len(frames)], strict=True):  # appended, nothing rewritten
+        np.testing.assert_array_equal(a.positions, b.positions)
+    if once:
+        assert "continuing with the optimizer's memory" in out.getvalue()
+        assert len(resumed) == len(uninterrupted) and calls_in_all == uninterrupted_calls
+        for a, b in zip(uninterrupted, resumed, strict=True):
+            np.testing.assert_array_equal(a.positions, b.positions)
+    last = resumed[-1]
+    last.calc = TIP3P(rc=40.0)
+    assert np.linalg.norm(RigidFilter(last, bodies="tags").get_forces(), axis=1).max() < 0.01
+    if not once:
+        assert "the optimizer's memory starts afresh: no " in out.getvalue()
+        # A fresh memory need not follow the uninterrupted path (measured: -2.07150 eV
+        # against -2.07111 eV, two minima of the 6-water cluster); it goes downhill.
+        stopped_at = frames[-1]
+        stopped_at.calc = TIP3P(rc=40.0)
+        assert last.get_potential_energy() < stopped_at.get_potential_energy()
+
+
+@pytest.mark.parametrize("signame, status", [("SIGTERM", 143), ("SIGINT", 130)])
+def test_a_run_stopped_while_relaxing_resumes_the_relaxation_then_the_md(
+        tmp_path, monkeypatch, capsys, signame, status):
+    """``rigidmd run`` with a relax: section, stopped during its relaxation, said to start
+    again with --overwrite (relaxing again from the structure).  Now it says the exact
+    --resume command, which continues the relaxation from its last frame (appending to
+    its trajectory) and then runs the MD from the relaxed structure."""
+    import shlex
+    import signal
+
+    from ase.io import read
+
+    from rigidmd.run.cli import main
+
+    config = tmp_path / "relax.yaml"
+    config.write_text(RELAX_CONFIG.replace("STEPS", "2000").replace(", optimizer: FIRE", ""))
+    out = tmp_path / "out"
+    signal_at_call(monkeypatch, 12, getattr(signal, signame))
+    assert main(["run", str(config)]) == status
+    said = capsys.readouterr().out.strip().splitlines()[-1]
+    assert said.startswith(f"relax: stopped by {signame}; the structure reached is the last "
+                           f"frame of {out / 'relax.traj'}; continue with: rigidmd run "), said
+    hint = said.split("continue with: ")[1]
+    assert "--resume" in hint and "--overwrite" not in hint
+    frames = read(out / "relax.traj", ":")
+    assert 2 <= len(frames) < 30 and not (out / "md.traj").exists()
+    stopped = (out / "relax.traj").read_bytes()
+    # A plain run again is refused, and replaces nothing.
+    assert main(["run", str(config)]) == 2
+    assert "already holds relax.traj, relax.log, checkpoint.npz" in capsys.readouterr().err
+    assert (out / "relax.traj").read_bytes() == stopped
+    monkeypatch.undo()
+    assert main(shlex.split(hint)[1:]) == 0
+    said = capsys.readouterr().out
+    assert f"continuing the relaxation of {out / 'relax.traj'} after step {len(frames) - 1}" \
+        in said
+    resumed = read(out / "relax.traj", ":")
+    for a, b in zip(frames, resumed[:len(frames)], strict=True):  # appended, nothing rewritten
+        np.testing.assert_array_equal(a.positions, b.positions)
+    last = resumed[-1]
+    last.calc = TIP3P(rc=40.0)
+    assert np.linalg.norm(RigidFilter(last, bodies="tags").get_forces(), axis=1).max() < 0.01
+    md = read(out / "md.traj", ":")
+    assert len(md) == 3  # steps 0, 10 and 20
+    np.testing.assert_allclose(md[0].positions, last.positions, rtol=0, atol=1e-9)
+    assert md[0].get_kinetic_energy() > 0  # velocities drawn for the relaxed bodies
+
+
+def test_rigidmd_relax_never_deletes_its_input(tmp_path):
+    """Issue 34 item 8: continuing from the relaxation's own relax.traj as a structure deleted
+    it before the first frame; now that is refused (naming --resume) and the file is kept,
+    an earlier relaxation is replaced only with --overwrite, and --resume continues it."""
+    import io
+
+    from ase.io import read
+
+    from rigidmd.config.quantities import ConfigError
+    from rigidmd.relax.command import relax_only
+    from rigidmd.relax.structure import RelaxationNotConverged
+    from rigidmd.run.outputs import OutputError
+
+    with pytest.raises(RelaxationNotConverged, match="raise relax.steps and continue with"):
+        relax_only(relax_config(tmp_path, steps=5), io.StringIO())
+    traj = tmp_path / "out" / "relax.traj"
+    before = traj.read_bytes()
+    stopped = read(traj, ":")
+    own = relax_config(tmp_path, structure="out/relax.traj")
+    for mode in ("new", "overwrite"):
+        with pytest.raises(ConfigError, match="is this relaxation's own trajectory; continue "
+                                              "it with --resume"):
+            relax_only(own, io.StringIO(), mode=mode)
+        assert traj.read_bytes() == before
+    with pytest.raises(OutputError, match="holds an earlier relaxation; continue it with "
+                                          "--resume or replace it with --overwrite"):
+        relax_only(relax_config(tmp_path), io.StringIO())
+    assert traj.read_bytes() == before
+    assert relax_only(own, io.StringIO(), mode="resume") == 0
+    resumed = read(traj, ":")
+    assert len(stopped) == 6 and len(resumed) > 6
+    for a, b in zip(stopped, resumed[:6], strict=True):  # earlier frames kept, new appended
+        np.testing.assert_array_equal(a.positions, b.positions)
+
+
+def test_export_lammps_starts_from_the_relaxed_structure(tmp_path):
+    """Issue 34 item 5: the deck started from the unrelaxed structure; with a relax: section
+    export-lammps relaxes as rigidmd run does and writes the relaxed positions."""
+    from ase.io import read
+
+    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "2000"))
+    result = rigidmd("export-lammps", "relax.yaml", "deck", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "relaxed RigidBodies(n_bodies=6" in result.stdout
+    relaxed = read(tmp_path / "deck" / "relax.traj")
+    lines = (tmp_path / "deck" / "data.rigidmd").read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("Atoms")) + 2
+    rows = [line.split() for line in lines[start:start + len(relaxed)]]
+    order = np.array([int(row[0]) for row in rows]) - 1
+    positions = np.array([[float(v) for v in row[4:7]] for row in rows])[np.argsort(order)]
+    # The data file's positions carry 8 decimals or more (measured gap 5e-9 Å).
+    assert np.abs(positions - relaxed.positions).max() < 1e-6
+    unrelaxed = water_cluster(6, seed=2).positions
+    assert np.abs(positions - unrelaxed).max() > 0.05
