@@ -19,7 +19,7 @@ AVAILABLE = numba is not None
 
 __all__ = ["AVAILABLE", "resolve_backend", "jit", "pack_model", "first_half", "second_half",
            "place", "momenta", "largest_angular_speed", "kinetic_tensor", "rotational_energy",
-           "intramolecular_virial", "smallest_width"]
+           "intramolecular_virial", "molecular_virial_voigt", "smallest_width"]
 
 
 def resolve_backend(backend=None):
@@ -407,6 +407,21 @@ def intramolecular_virial(r, forces, order):
     for a in range(3):
         for c in range(3):
             out[a, c] = 0.5 * (w[a, c] + w[c, a])
+    return out
+
+
+@jit
+def molecular_virial_voigt(stress, volume, r, forces, order):
+    r""":func:`rigidmd.core.observables.molecular_virial` from a stress in Voigt order
+    (``xx yy zz yz xz xy``, eV/Å³): :math:`-V\sigma - \mathrm{sym}(R)` (eV, 3x3), the
+    same arithmetic as ``-volume * voigt_6_to_full_3x3_stress(stress) -
+    intramolecular_virial(r, forces, order)``."""
+    w = intramolecular_virial(r, forces, order)
+    full = ((0, 5, 4), (5, 1, 3), (4, 3, 2))
+    out = np.empty((3, 3))
+    for a in range(3):
+        for c in range(3):
+            out[a, c] = -volume * stress[full[a][c]] - w[a, c]
     return out
 
 

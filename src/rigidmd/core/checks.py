@@ -4,6 +4,7 @@ Each raises one ``ValueError`` (or ``TypeError``) naming the atom, the cell
 vector or the parameter at fault.
 """
 
+import copy
 import warnings
 
 import numpy as np
@@ -86,6 +87,37 @@ def quick_check_state(calc, atoms: Atoms, tol: float, ase_check_state):
         return ase_check_state(atoms, tol)
     changes = changed_properties(calc.atoms, atoms, tol)
     return ase_check_state(atoms, tol) if changes is None else changes
+
+
+def copy_atoms(atoms: Atoms, previous: Atoms | None = None) -> Atoms:
+    """``atoms.copy()``, written into ``previous`` (an earlier such copy) when it fits.
+
+    What a calculator keeps of the atoms it computed (``calc.atoms``, compared by
+    ``check_state``) at every call.  ``Atoms.copy`` builds a new object (0.013 ms
+    on 648 atoms here, 0.03 ms inside a 216-water step, a tenth of rigidmd's own
+    share of it); ``previous`` of the same class, size and arrays (names, shapes,
+    dtypes) gets the arrays, cell, pbc, cell displacement, info and constraints
+    instead.  Only a calculator's own copy, which nobody else holds, may be given.
+
+    Returns
+    -------
+    ase.Atoms
+        ``previous`` rewritten, or a new copy.
+    """
+    if previous is None or type(previous) is not type(atoms):
+        return atoms.copy()
+    old, new = previous.arrays, atoms.arrays
+    if old.keys() != new.keys() or any(old[name].shape != a.shape or old[name].dtype != a.dtype
+                                       for name, a in new.items()):
+        return atoms.copy()
+    for name, a in new.items():
+        np.copyto(old[name], a)
+    np.copyto(previous.cell.array, atoms.cell.array)
+    np.copyto(previous.pbc, atoms.pbc)
+    previous.set_celldisp(atoms.get_celldisp())
+    previous.info = dict(atoms.info)
+    previous.constraints = copy.deepcopy(atoms.constraints)
+    return previous
 
 
 def changed_properties(old: Atoms, atoms: Atoms, tol: float = 1e-15):

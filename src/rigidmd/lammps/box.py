@@ -84,6 +84,7 @@ class LammpsBox:
         self.triclinic = triclinic
         self.plugin = None  # loaded when first needed
         self.fix = False
+        self._lammps_cell = None  # LAMMPS's box as last read (None: to be read)
 
     def change(self, cell, commands, kspace_parameters):
         """Give LAMMPS a new cell, in the same instance with the same k-space parameters.
@@ -128,6 +129,7 @@ class LammpsBox:
             # KSpace::setup() now; the next step re-neighbours if the box moved enough.
             edges = [lammps_cell[0, 0], lammps_cell[1, 1], lammps_cell[2, 2],
                      lammps_cell[1, 0], lammps_cell[2, 0], lammps_cell[2, 1]]
+            self._lammps_cell = None
             self.execute(["rigidmd_box " + " ".join(f"{v:.17g}" for v in edges)])
             self.rotation = rotation
             self.cell = cell.copy()
@@ -151,6 +153,7 @@ class LammpsBox:
         if self.triclinic:
             box += (f" xy final {lammps_cell[1, 0]:.17g} xz final {lammps_cell[2, 0]:.17g} "
                     f"yz final {lammps_cell[2, 1]:.17g}")
+        self._lammps_cell = None
         self.execute(setup + [box + " units box"])
         self.rotation = rotation
         self.cell = cell.copy()
@@ -167,7 +170,15 @@ class LammpsBox:
         return self.plugin is True
 
     def lammps_cell(self):
-        """The box LAMMPS has (Å, lower triangular, in LAMMPS's frame), shape (3, 3)."""
-        boxlo, boxhi, xy, yz, xz, _, _ = self.lmp.extract_box()
-        lengths = np.array(boxhi) - np.array(boxlo)
-        return np.array([[lengths[0], 0, 0], [xy, lengths[1], 0], [xz, yz, lengths[2]]])
+        """The box LAMMPS has (Å, lower triangular, in LAMMPS's frame), shape (3, 3).
+
+        Read from LAMMPS once per box (the box changes only through :meth:`change`);
+        the array returned is shared: do not modify it.
+        """
+        if self._lammps_cell is None:
+            boxlo, boxhi, xy, yz, xz, _, _ = self.lmp.extract_box()
+            lengths = np.array(boxhi) - np.array(boxlo)
+            cell = np.array([[lengths[0], 0, 0], [xy, lengths[1], 0], [xz, yz, lengths[2]]])
+            cell.flags.writeable = False
+            self._lammps_cell = cell
+        return self._lammps_cell
