@@ -274,6 +274,40 @@ def test_check_state_finds_what_ases_comparison_finds(monkeypatch):
     assert [mine for mine, _ in found[:4]] == [[], ["positions"], [], ["cell"]]
 
 
+def test_the_calculators_copy_of_the_atoms_is_a_copy():
+    """copy_atoms (the calculator's calc.atoms, rewritten in place when it fits) holds what
+    Atoms.copy holds: arrays, cell, pbc, info and constraints equal and not shared; a copy
+    that no longer fits (an array added, another size) is made anew, and the calculator's
+    copy stays its own through a dynamics (its check_state finds no change after a call)."""
+    from rigidmd.core.checks import copy_atoms
+    from rigidmd.core.dof import RigidBodyDOF
+
+    atoms = water_box_27()
+    atoms.info["note"] = "x"
+    atoms.set_constraint(RigidBodyDOF(6, np.repeat(np.arange(1, 28), 3)))
+    previous = atoms.copy()
+    atoms.positions += 0.3
+    atoms.set_cell(atoms.cell * 1.01, scale_atoms=False)
+    copied = copy_atoms(atoms, previous)
+    assert copied is previous
+    for name, array in atoms.arrays.items():
+        np.testing.assert_array_equal(copied.arrays[name], array)
+        assert not np.shares_memory(copied.arrays[name], array)
+    np.testing.assert_array_equal(copied.cell.array, atoms.cell.array)
+    assert copied.info == atoms.info and copied.info is not atoms.info
+    (dof,) = copied.constraints
+    assert dof is not atoms.constraints[0] and dof.removed_dof == 6
+    np.testing.assert_array_equal(dof.body_ids, atoms.constraints[0].body_ids)
+    assert not np.shares_memory(dof.body_ids, atoms.constraints[0].body_ids)
+    atoms.set_initial_magnetic_moments(np.ones(len(atoms)))  # another array: a new copy
+    assert copy_atoms(atoms, previous) is not previous
+    assert copy_atoms(atoms[:-3], previous) is not previous  # another size
+    atoms = water_box_27()
+    atoms.calc = LAMMPSCalculator(PPPM_27)
+    RigidVerlet(atoms, units.fs, bodies="tags").run(2)
+    assert atoms.calc.atoms is not atoms and atoms.calc.check_state(atoms) == []
+
+
 def test_atoms_sorted_by_lammps_at_every_step_keep_their_forces():
     """LAMMPS re-orders its atoms when it sorts them (by default every 1000 steps) and the
     calculator maps them by ID after every step; ``atom_modify sort 1 1.0`` sorts at every
