@@ -25,7 +25,8 @@ def lower_triangular(cell):
         None when the cell is lower triangular already.
     lammps_cell : numpy.ndarray, shape (3, 3)
     """
-    if abs(cell[0, 1]) + abs(cell[0, 2]) + abs(cell[1, 2]) == 0 and np.all(np.diag(cell) > 0):
+    (xx, xy, xz), (_, yy, yz), (_, _, zz) = cell.tolist()  # (floats: a barostat's every step)
+    if xy == 0 and xz == 0 and yz == 0 and xx > 0 and yy > 0 and zz > 0:
         return None, cell
     if np.linalg.det(cell) <= 0:
         raise ValueError("LAMMPSCalculator: the cell is left-handed (negative determinant); "
@@ -127,10 +128,10 @@ class LammpsBox:
         if self.fix and (self.triclinic or not tilted):
             # LAMMPS's barostat path (see rigidmd.lammps.boxplugin): the new box and
             # KSpace::setup() now; the next step re-neighbours if the box moved enough.
-            edges = [lammps_cell[0, 0], lammps_cell[1, 1], lammps_cell[2, 2],
-                     lammps_cell[1, 0], lammps_cell[2, 0], lammps_cell[2, 1]]
+            (lx, _, _), (xy, ly, _), (xz, yz, lz) = lammps_cell.tolist()
             self._lammps_cell = None
-            self.execute(["rigidmd_box " + " ".join(f"{v:.17g}" for v in edges)])
+            self.execute([f"rigidmd_box {lx:.17g} {ly:.17g} {lz:.17g} {xy:.17g} {xz:.17g} "
+                          f"{yz:.17g}"])
             self.rotation = rotation
             self.cell = cell.copy()
             return False
