@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 from ase import units
 from helpers import PPPM_27, water_box_27, waters
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from rigidmd import RigidBodies, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.lammps import (
@@ -272,6 +274,35 @@ def test_check_state_finds_what_ases_comparison_finds(monkeypatch):
     a.pop()
     assert changed_properties(calc.atoms, a, 1e-15) is None
     assert [mine for mine, _ in found[:4]] == [[], ["positions"], [], ["cell"]]
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 12),
+       edit=st.sampled_from(["same", "roundoff", "moved", "inf", "nan", "inf both"]))
+def test_the_compiled_comparison_is_numpys(seed, n, edit):
+    """changed_properties' compiled test of a float array (rigidmd.core._numba.equal_or_close)
+    says what NumPy's ``array_equal(a, b) or all(|a - b| <= tol (1 + |b|))`` says: for equal
+    arrays, changes below and above the tolerance, infinities and NaNs (in one array or
+    in both)."""
+    from rigidmd.core import _numba
+
+    rng = np.random.default_rng(seed)
+    a = rng.normal(scale=10.0, size=n)
+    b = a.copy()
+    k = rng.integers(n)
+    if edit == "roundoff":
+        b[k] *= 1 + 2e-16
+    elif edit == "moved":
+        b[k] += 1e-3
+    elif edit in ("inf", "nan"):
+        b[k] = np.inf if edit == "inf" else np.nan
+    elif edit == "inf both":
+        a[k] = b[k] = np.inf
+        b[rng.integers(n)] *= 1 + 2e-16
+    tol = 1e-15
+    with np.errstate(invalid="ignore"):  # inf - inf
+        numpy = bool(np.array_equal(a, b) or np.all(np.abs(a - b) <= tol * (1 + np.abs(b))))
+    assert _numba.equal_or_close(a, b, tol) == numpy
 
 
 def test_the_calculators_copy_of_the_atoms_is_a_copy():

@@ -19,7 +19,8 @@ AVAILABLE = numba is not None
 
 __all__ = ["AVAILABLE", "resolve_backend", "jit", "pack_model", "first_half", "second_half",
            "place", "momenta", "largest_angular_speed", "kinetic_tensor", "rotational_energy",
-           "intramolecular_virial", "molecular_virial_voigt", "smallest_width"]
+           "intramolecular_virial", "molecular_virial_voigt", "smallest_width",
+           "equal_or_close"]
 
 
 def resolve_backend(backend=None):
@@ -423,6 +424,25 @@ def molecular_virial_voigt(stress, volume, r, forces, order):
         for c in range(3):
             out[a, c] = -volume * stress[full[a][c]] - w[a, c]
     return out
+
+
+@jit
+def equal_or_close(a, b, tol):
+    """Whether 1-d float arrays ``a`` and ``b`` are all equal or all within ``tol`` absolute
+    plus ``tol`` relative to ``b`` (:func:`rigidmd.core.checks.changed_properties`' test:
+    ``array_equal(a, b) or all(abs(a - b) <= tol * (1 + abs(b)))``), stopping at the first
+    element that is neither."""
+    equal, close = True, True
+    for i in range(a.shape[0]):
+        x, y = a[i], b[i]
+        within = abs(x - y) <= tol * (1.0 + abs(y))
+        if x != y:
+            equal = False
+            if not within:
+                return False
+        elif not within:  # equal but infinite: not close by the formula
+            close = False
+    return equal or close
 
 
 @jit

@@ -11,6 +11,7 @@ import numpy as np
 from ase import Atoms, units
 from ase.constraints import FixCom
 
+from rigidmd.core import _numba
 from rigidmd.core.dof import RigidBodyDOF, kinetic_energy
 
 __all__ = ["check_finite", "check_massless_momenta", "check_timestep", "check_constraints",
@@ -148,6 +149,11 @@ def changed_properties(old: Atoms, atoms: Atoms, tol: float = 1e-15):
     for name, a, b in pairs:
         if a.shape != b.shape:
             changes.append(name)
+        elif a.dtype == b.dtype == np.float64 and _numba.AVAILABLE:
+            # One compiled pass, stopping at the first change (the positions at every
+            # call: 28 us for the NumPy test of all arrays inside a 216-water step).
+            if not _numba.equal_or_close(a.reshape(-1), b.reshape(-1), tol):
+                changes.append(name)
         elif not np.array_equal(a, b) and not (
                 a.dtype != bool and np.all(np.abs(a - b) <= tol * (1 + np.abs(b)))):
             changes.append(name)
