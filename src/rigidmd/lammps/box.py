@@ -86,6 +86,7 @@ class LammpsBox:
         self.plugin = None  # loaded when first needed
         self.fix = False
         self._lammps_cell = None  # LAMMPS's box as last read (None: to be read)
+        self._boxlo = None  # LAMMPS's lower box corner (read at the first rigidmd_box)
 
     def change(self, cell, commands, kspace_parameters):
         """Give LAMMPS a new cell, in the same instance with the same k-space parameters.
@@ -129,9 +130,19 @@ class LammpsBox:
             # LAMMPS's barostat path (see rigidmd.lammps.boxplugin): the new box and
             # KSpace::setup() now; the next step re-neighbours if the box moved enough.
             (lx, _, _), (xy, ly, _), (xz, yz, lz) = lammps_cell.tolist()
+            if self._boxlo is None:
+                self._boxlo = self.lmp.extract_box()[0]
             self._lammps_cell = None
             self.execute([f"rigidmd_box {lx:.17g} {ly:.17g} {lz:.17g} {xy:.17g} {xz:.17g} "
                           f"{yz:.17g}"])
+            # The box LAMMPS now has, as lammps_cell would read it (the plugin sets
+            # boxhi = boxlo + length from the 17 digits, which give the same double):
+            # reading it back costs 20 us inside a step, a barostat's every step.
+            x0, y0, z0 = self._boxlo
+            cell = np.array([[(x0 + lx) - x0, 0.0, 0.0], [xy, (y0 + ly) - y0, 0.0],
+                             [xz, yz, (z0 + lz) - z0]])
+            cell.flags.writeable = False
+            self._lammps_cell = cell
             self.rotation = rotation
             self.cell = cell.copy()
             return False
