@@ -11,6 +11,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from ase.stress import voigt_6_to_full_3x3_stress
 from helpers import argon_crystal, dimer_fluid, npt
 
 from rigidmd.core import _numba
@@ -109,6 +110,12 @@ def test_state_scalings_and_sums_are_the_references():
     w = r.T @ forces[order]
     np.testing.assert_allclose(_numba.intramolecular_virial(r, forces, order), 0.5 * (w + w.T),
                                rtol=RTOL, atol=1e-14)
+    # ... and the molecular virial from a Voigt stress: the 3x3 formula's arithmetic.
+    stress = rng.normal(size=6)
+    np.testing.assert_array_equal(
+        _numba.molecular_virial_voigt(stress, 812.5, r, forces, order),
+        -812.5 * voigt_6_to_full_3x3_stress(stress)
+        - _numba.intramolecular_virial(r, forces, order))
     for pbc in ([True] * 3, [True, False, True], [False] * 3):
         widths = np.where(pbc, cell_widths(state.cell), np.inf)
         assert _numba.smallest_width(state.cell, np.array(pbc)) == pytest.approx(

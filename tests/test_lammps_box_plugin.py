@@ -108,6 +108,13 @@ def test_cell_changes_equal_a_fresh_lammps_with_the_same_kspace_parameters(comma
                                    atol=1e-9 * np.abs(stress).max(), err_msg=label)
         boxes = [c for c in commands if c.startswith("rigidmd_box ")]
         setups = [c for c in commands if c.startswith(("change_box", "run 0 pre yes"))]
+        # (white box) the box the calculator keeps instead of reading it back is LAMMPS's
+        box = atoms.calc._instance.box
+        lo, hi, xy, yz, xz, _, _ = box.lmp.extract_box()
+        lengths = np.array(hi) - np.array(lo)
+        np.testing.assert_array_equal(box.lammps_cell(), [[lengths[0], 0, 0],
+                                                          [xy, lengths[1], 0],
+                                                          [xz, yz, lengths[2]]], label)
         if k == 0:  # the first new cell: a set-up takes the plugin's fix in
             assert "fix rmd_box all rigidmd/box" in commands and not boxes, commands
             assert "run 0 pre yes post no" in setups

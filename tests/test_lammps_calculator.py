@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 from ase import units
 from helpers import PPPM_27, water_box_27, waters
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from rigidmd import RigidBodies, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.lammps import (
@@ -272,6 +274,69 @@ def test_check_state_finds_what_ases_comparison_finds(monkeypatch):
     a.pop()
     assert changed_properties(calc.atoms, a, 1e-15) is None
     assert [mine for mine, _ in found[:4]] == [[], ["positions"], [], ["cell"]]
+
+
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 12),
+       edit=st.sampled_from(["same", "roundoff", "moved", "inf", "nan", "inf both"]))
+def test_the_compiled_comparison_is_numpys(seed, n, edit):
+    """changed_properties' compiled test of a float array (rigidmd.core._numba.equal_or_close)
+    says what NumPy's ``array_equal(a, b) or all(|a - b| <= tol (1 + |b|))`` says: for equal
+    arrays, changes below and above the tolerance, infinities and NaNs (in one array or
+    in both)."""
+    from rigidmd.core import _numba
+
+    rng = np.random.default_rng(seed)
+    a = rng.normal(scale=10.0, size=n)
+    b = a.copy()
+    k = rng.integers(n)
+    if edit == "roundoff":
+        b[k] *= 1 + 2e-16
+    elif edit == "moved":
+        b[k] += 1e-3
+    elif edit in ("inf", "nan"):
+        b[k] = np.inf if edit == "inf" else np.nan
+    elif edit == "inf both":
+        a[k] = b[k] = np.inf
+        b[rng.integers(n)] *= 1 + 2e-16
+    tol = 1e-15
+    with np.errstate(invalid="ignore"):  # inf - inf
+        numpy = bool(np.array_equal(a, b) or np.all(np.abs(a - b) <= tol * (1 + np.abs(b))))
+    assert _numba.equal_or_close(a, b, tol) == numpy
+
+
+def test_the_calculators_copy_of_the_atoms_is_a_copy():
+    """copy_atoms (the calculator's calc.atoms, rewritten in place when it fits) holds what
+    Atoms.copy holds: arrays, cell, pbc, info and constraints equal and not shared; a copy
+    that no longer fits (an array added, another size) is made anew, and the calculator's
+    copy stays its own through a dynamics (its check_state finds no change after a call)."""
+    from rigidmd.core.checks import copy_atoms
+    from rigidmd.core.dof import RigidBodyDOF
+
+    atoms = water_box_27()
+    atoms.info["note"] = "x"
+    atoms.set_constraint(RigidBodyDOF(6, np.repeat(np.arange(1, 28), 3)))
+    previous = atoms.copy()
+    atoms.positions += 0.3
+    atoms.set_cell(atoms.cell * 1.01, scale_atoms=False)
+    copied = copy_atoms(atoms, previous)
+    assert copied is previous
+    for name, array in atoms.arrays.items():
+        np.testing.assert_array_equal(copied.arrays[name], array)
+        assert not np.shares_memory(copied.arrays[name], array)
+    np.testing.assert_array_equal(copied.cell.array, atoms.cell.array)
+    assert copied.info == atoms.info and copied.info is not atoms.info
+    (dof,) = copied.constraints
+    assert dof is not atoms.constraints[0] and dof.removed_dof == 6
+    np.testing.assert_array_equal(dof.body_ids, atoms.constraints[0].body_ids)
+    assert not np.shares_memory(dof.body_ids, atoms.constraints[0].body_ids)
+    atoms.set_initial_magnetic_moments(np.ones(len(atoms)))  # another array: a new copy
+    assert copy_atoms(atoms, previous) is not previous
+    assert copy_atoms(atoms[:-3], previous) is not previous  # another size
+    atoms = water_box_27()
+    atoms.calc = LAMMPSCalculator(PPPM_27)
+    RigidVerlet(atoms, units.fs, bodies="tags").run(2)
+    assert atoms.calc.atoms is not atoms and atoms.calc.check_state(atoms) == []
 
 
 def test_atoms_sorted_by_lammps_at_every_step_keep_their_forces():

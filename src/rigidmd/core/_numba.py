@@ -19,7 +19,8 @@ AVAILABLE = numba is not None
 
 __all__ = ["AVAILABLE", "resolve_backend", "jit", "pack_model", "first_half", "second_half",
            "place", "momenta", "largest_angular_speed", "kinetic_tensor", "rotational_energy",
-           "intramolecular_virial", "smallest_width"]
+           "intramolecular_virial", "molecular_virial_voigt", "smallest_width",
+           "equal_or_close"]
 
 
 def resolve_backend(backend=None):
@@ -408,6 +409,40 @@ def intramolecular_virial(r, forces, order):
         for c in range(3):
             out[a, c] = 0.5 * (w[a, c] + w[c, a])
     return out
+
+
+@jit
+def molecular_virial_voigt(stress, volume, r, forces, order):
+    r""":func:`rigidmd.core.observables.molecular_virial` from a stress in Voigt order
+    (``xx yy zz yz xz xy``, eV/Å³): :math:`-V\sigma - \mathrm{sym}(R)` (eV, 3x3), the
+    same arithmetic as ``-volume * voigt_6_to_full_3x3_stress(stress) -
+    intramolecular_virial(r, forces, order)``."""
+    w = intramolecular_virial(r, forces, order)
+    full = ((0, 5, 4), (5, 1, 3), (4, 3, 2))
+    out = np.empty((3, 3))
+    for a in range(3):
+        for c in range(3):
+            out[a, c] = -volume * stress[full[a][c]] - w[a, c]
+    return out
+
+
+@jit
+def equal_or_close(a, b, tol):
+    """Whether 1-d float arrays ``a`` and ``b`` are all equal or all within ``tol`` absolute
+    plus ``tol`` relative to ``b`` (:func:`rigidmd.core.checks.changed_properties`' test:
+    ``array_equal(a, b) or all(abs(a - b) <= tol * (1 + abs(b)))``), stopping at the first
+    element that is neither."""
+    equal, close = True, True
+    for i in range(a.shape[0]):
+        x, y = a[i], b[i]
+        within = abs(x - y) <= tol * (1.0 + abs(y))
+        if x != y:
+            equal = False
+            if not within:
+                return False
+        elif not within:  # equal but infinite: not close by the formula
+            close = False
+    return equal or close
 
 
 @jit

@@ -4,12 +4,14 @@ Each raises one ``ValueError`` (or ``TypeError``) naming the atom, the cell
 vector or the parameter at fault.
 """
 
+import copy
 import warnings
 
 import numpy as np
 from ase import Atoms, units
 from ase.constraints import FixCom
 
+from rigidmd.core import _numba
 from rigidmd.core.dof import RigidBodyDOF, kinetic_energy
 
 __all__ = ["check_finite", "check_massless_momenta", "check_timestep", "check_constraints",
@@ -88,6 +90,37 @@ def quick_check_state(calc, atoms: Atoms, tol: float, ase_check_state):
     return ase_check_state(atoms, tol) if changes is None else changes
 
 
+def copy_atoms(atoms: Atoms, previous: Atoms | None = None) -> Atoms:
+    """``atoms.copy()``, written into ``previous`` (an earlier such copy) when it fits.
+
+    What a calculator keeps of the atoms it computed (``calc.atoms``, compared by
+    ``check_state``) at every call.  ``Atoms.copy`` builds a new object (0.013 ms
+    on 648 atoms here, 0.03 ms inside a 216-water step, a tenth of rigidmd's own
+    share of it); ``previous`` of the same class, size and arrays (names, shapes,
+    dtypes) gets the arrays, cell, pbc, cell displacement, info and constraints
+    instead.  Only a calculator's own copy, which nobody else holds, may be given.
+
+    Returns
+    -------
+    ase.Atoms
+        ``previous`` rewritten, or a new copy.
+    """
+    if previous is None or type(previous) is not type(atoms):
+        return atoms.copy()
+    old, new = previous.arrays, atoms.arrays
+    if old.keys() != new.keys() or any(old[name].shape != a.shape or old[name].dtype != a.dtype
+                                       for name, a in new.items()):
+        return atoms.copy()
+    for name, a in new.items():
+        np.copyto(old[name], a)
+    np.copyto(previous.cell.array, atoms.cell.array)
+    np.copyto(previous.pbc, atoms.pbc)
+    previous.set_celldisp(atoms.get_celldisp())
+    previous.info = dict(atoms.info)
+    previous.constraints = copy.deepcopy(atoms.constraints)
+    return previous
+
+
 def changed_properties(old: Atoms, atoms: Atoms, tol: float = 1e-15):
     """ASE's ``compare_atoms`` for atoms of the same size and arrays, in a few array operations.
 
@@ -116,6 +149,11 @@ def changed_properties(old: Atoms, atoms: Atoms, tol: float = 1e-15):
     for name, a, b in pairs:
         if a.shape != b.shape:
             changes.append(name)
+        elif a.dtype == b.dtype == np.float64 and _numba.AVAILABLE:
+            # One compiled pass, stopping at the first change (the positions at every
+            # call: 28 us for the NumPy test of all arrays inside a 216-water step).
+            if not _numba.equal_or_close(a.reshape(-1), b.reshape(-1), tol):
+                changes.append(name)
         elif not np.array_equal(a, b) and not (
                 a.dtype != bool and np.all(np.abs(a - b) <= tol * (1 + np.abs(b)))):
             changes.append(name)

@@ -208,11 +208,7 @@ class ForceEvaluator:
                     f"after step {self.step}; the atoms are left at step {self.step}")
             record.energy = float(energy)
         if self.stress:
-            stress = None
-            if results is not None and "stress" in results:
-                stress = np.asarray(results["stress"], dtype=float)
-                if stress.shape == (6,):
-                    stress = voigt_6_to_full_3x3_stress(stress)
+            stress = None if results is None else results.get("stress")
             record.virial = self.molecular_virial(forces, stress)
         return forces
 
@@ -229,8 +225,9 @@ class ForceEvaluator:
                          stress: np.ndarray | None = None) -> np.ndarray:
         r"""The molecular virial (eV, 3x3) at the atoms as placed: atomic less intramolecular.
 
-        ``stress`` (eV/Å³, 3x3) is the calculator's stress of these positions when the
-        caller already has it; otherwise it is asked through ``atoms.get_stress``.
+        ``stress`` (eV/Å³, 3x3 or ASE's Voigt order) is the calculator's stress of these
+        positions when the caller already has it; otherwise it is asked through
+        ``atoms.get_stress``.
         """
         atoms = self.atoms
         if stress is None:
@@ -245,6 +242,11 @@ class ForceEvaluator:
         if not np.isfinite(stress.sum()):
             raise NonFiniteForceError(f"calculator returned a non-finite stress "
                                       f"{stress.tolist()} after step {self.step}")
+        if self.link.compiled and stress.shape == (6,):
+            return _numba.molecular_virial_voigt(stress, self.record.volume, self.record.r,
+                                                 forces, self.model.order)
+        if stress.shape == (6,):
+            stress = voigt_6_to_full_3x3_stress(stress)
         if self.link.compiled:
             return (-self.record.volume * stress
                     - _numba.intramolecular_virial(self.record.r, forces, self.model.order))

@@ -22,6 +22,8 @@ import ctypes
 
 import numpy as np
 
+from rigidmd.lammps import kernels
+
 __all__ = ["AtomArrays"]
 
 _TWO_D = ("x", "f", "v")
@@ -81,17 +83,31 @@ class AtomArrays:
 
     def images(self) -> np.ndarray:
         """LAMMPS's image flags of its atoms (in its order), unpacked, shape (nlocal, 3)."""
-        img = self.view("image").astype(np.int64)
-        bits, bits2, mask, offset = self._bits
-        out = np.empty((self.nlocal, 3), dtype=np.int64)
-        np.bitwise_and(img, mask, out=out[:, 0])
-        np.bitwise_and(img >> bits, mask, out=out[:, 1])
-        np.right_shift(img, bits2, out=out[:, 2])
-        out -= offset
-        return out
+        return kernels.unpack_images(self.view("image"), self._bits)
 
     def pack_images(self, image) -> np.ndarray:
         """Image flags, shape (n, 3) of int, packed as LAMMPS packs them."""
-        bits, bits2, mask, offset = self._bits
-        packed = (np.asarray(image, dtype=np.int64) + offset) & mask
-        return packed[:, 0] | (packed[:, 1] << bits) | (packed[:, 2] << bits2)
+        return kernels.pack_images(image, self._bits)
+
+    def write_positions(self, positions: np.ndarray, cell: np.ndarray) -> None:
+        """Write ``positions`` (ASE order, LAMMPS's frame, Å) into LAMMPS, in its images.
+
+        Each atom goes in LAMMPS's own image of it (so only real motion counts
+        against the neighbour skin); when an atom would be more than half a box
+        outside the box in that image (a new box without a set-up, or atoms
+        given in another image: a restart from unwrapped positions), all atoms
+        are shifted by whole vectors of ``cell`` (LAMMPS's box, lower triangular)
+        and their image flags with them: LAMMPS wraps by one box only, and would
+        lose such atoms.  See :func:`rigidmd.lammps.kernels.write_positions`.
+        """
+        kernels.write_positions(positions, self.order(), self.view("image"), self._bits,
+                                cell, self.view("x"))
+
+    def read_forces(self, out: np.ndarray) -> None:
+        """LAMMPS's forces into ``out`` (n, 3) in the ASE order; :meth:`order` read anew.
+
+        LAMMPS may have sorted or exchanged its atoms during the step.
+        """
+        if self._order is None:
+            self._order = np.empty(self.nlocal, dtype=np.int64)
+        kernels.read_forces(self.view("f"), self.view("id"), self._order, out)

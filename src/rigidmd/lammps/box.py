@@ -25,7 +25,8 @@ def lower_triangular(cell):
         None when the cell is lower triangular already.
     lammps_cell : numpy.ndarray, shape (3, 3)
     """
-    if abs(cell[0, 1]) + abs(cell[0, 2]) + abs(cell[1, 2]) == 0 and np.all(np.diag(cell) > 0):
+    (xx, xy, xz), (_, yy, yz), (_, _, zz) = cell.tolist()  # (floats: a barostat's every step)
+    if xy == 0 and xz == 0 and yz == 0 and xx > 0 and yy > 0 and zz > 0:
         return None, cell
     if np.linalg.det(cell) <= 0:
         raise ValueError("LAMMPSCalculator: the cell is left-handed (negative determinant); "
@@ -84,6 +85,8 @@ class LammpsBox:
         self.triclinic = triclinic
         self.plugin = None  # loaded when first needed
         self.fix = False
+        self._lammps_cell = None  # LAMMPS's box as last read (None: to be read)
+        self._boxlo = None  # LAMMPS's lower box corner (read at the first rigidmd_box)
 
     def change(self, cell, commands, kspace_parameters):
         """Give LAMMPS a new cell, in the same instance with the same k-space parameters.
@@ -126,9 +129,20 @@ class LammpsBox:
         if self.fix and (self.triclinic or not tilted):
             # LAMMPS's barostat path (see rigidmd.lammps.boxplugin): the new box and
             # KSpace::setup() now; the next step re-neighbours if the box moved enough.
-            edges = [lammps_cell[0, 0], lammps_cell[1, 1], lammps_cell[2, 2],
-                     lammps_cell[1, 0], lammps_cell[2, 0], lammps_cell[2, 1]]
-            self.execute(["rigidmd_box " + " ".join(f"{v:.17g}" for v in edges)])
+            (lx, _, _), (xy, ly, _), (xz, yz, lz) = lammps_cell.tolist()
+            if self._boxlo is None:
+                self._boxlo = self.lmp.extract_box()[0]
+            self._lammps_cell = None
+            self.execute([f"rigidmd_box {lx:.17g} {ly:.17g} {lz:.17g} {xy:.17g} {xz:.17g} "
+                          f"{yz:.17g}"])
+            # The box LAMMPS now has, as lammps_cell would read it (the plugin sets
+            # boxhi = boxlo + length from the 17 digits, which give the same double):
+            # reading it back costs 20 us inside a step, a barostat's every step.
+            x0, y0, z0 = self._boxlo
+            cell = np.array([[(x0 + lx) - x0, 0.0, 0.0], [xy, (y0 + ly) - y0, 0.0],
+                             [xz, yz, (z0 + lz) - z0]])
+            cell.flags.writeable = False
+            self._lammps_cell = cell
             self.rotation = rotation
             self.cell = cell.copy()
             return False
@@ -151,6 +165,7 @@ class LammpsBox:
         if self.triclinic:
             box += (f" xy final {lammps_cell[1, 0]:.17g} xz final {lammps_cell[2, 0]:.17g} "
                     f"yz final {lammps_cell[2, 1]:.17g}")
+        self._lammps_cell = None
         self.execute(setup + [box + " units box"])
         self.rotation = rotation
         self.cell = cell.copy()
@@ -167,7 +182,15 @@ class LammpsBox:
         return self.plugin is True
 
     def lammps_cell(self):
-        """The box LAMMPS has (Å, lower triangular, in LAMMPS's frame), shape (3, 3)."""
-        boxlo, boxhi, xy, yz, xz, _, _ = self.lmp.extract_box()
-        lengths = np.array(boxhi) - np.array(boxlo)
-        return np.array([[lengths[0], 0, 0], [xy, lengths[1], 0], [xz, yz, lengths[2]]])
+        """The box LAMMPS has (Å, lower triangular, in LAMMPS's frame), shape (3, 3).
+
+        Read from LAMMPS once per box (the box changes only through :meth:`change`);
+        the array returned is shared: do not modify it.
+        """
+        if self._lammps_cell is None:
+            boxlo, boxhi, xy, yz, xz, _, _ = self.lmp.extract_box()
+            lengths = np.array(boxhi) - np.array(boxlo)
+            cell = np.array([[lengths[0], 0, 0], [xy, lengths[1], 0], [xz, yz, lengths[2]]])
+            cell.flags.writeable = False
+            self._lammps_cell = cell
+        return self._lammps_cell

@@ -48,8 +48,9 @@ from pathlib import Path
 
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
+from ase.stress import voigt_6_to_full_3x3_stress
 
-from rigidmd.core.checks import check_finite, quick_check_state
+from rigidmd.core.checks import check_finite, copy_atoms, quick_check_state
 from rigidmd.lammps.box import lower_triangular
 from rigidmd.lammps.instance import LammpsInstance, chosen_kspace
 from rigidmd.lammps.library import (
@@ -65,6 +66,8 @@ from rigidmd.lammps.topology import lammps_molecule_ids, lammps_types, molecules
 __all__ = ["LAMMPSCalculator", "lower_triangular"]
 
 _COULOMB = ("coul", "kspace_style", "tip4p")
+#: LAMMPS's pressure components (xx yy zz xy xz yz) in ASE's Voigt order (xx yy zz yz xz xy).
+_ASE_VOIGT = [0, 1, 2, 5, 4, 3]
 
 
 def _threads(threads):
@@ -131,6 +134,7 @@ class LAMMPSCalculator(Calculator):
     implemented_properties = ["energy", "free_energy", "forces", "stress"]
     _instance = None          # the LammpsInstance (rigidmd.lammps.instance), box and all
     _grouping_checked = None  # the bodies and molecules last found to agree
+    _copy = None              # this calculator's own copy of the atoms (see copy_atoms)
 
     def __init__(self, commands, *, atom_types=None, molecule_ids=None,
                  exclude_intramolecular=True, ase_constants=False, skin=2.0, cmdargs=None,
@@ -289,18 +293,18 @@ class LAMMPSCalculator(Calculator):
 
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         if atoms is not None:  # ASE's Calculator.calculate, without its directory check
-            self.atoms = atoms.copy()
+            self.atoms = self._copy = copy_atoms(atoms, self._copy)
         atoms = self.atoms
         # NaN or infinite coordinates hang LAMMPS (deaf to Ctrl-C): refused first.
         check_finite(atoms.positions, "position", "Å", "given to LAMMPSCalculator")
         if atoms.pbc.any():
             check_finite(atoms.cell.array, "cell", "Å", "given to LAMMPSCalculator")
-        self._check(atoms)
         molecules, source, self._grouping_checked = molecules_of(
             atoms, self.molecule_ids, self._grouping_checked)
         signature = self._signature_of(atoms, None if source is None else molecules)
         instance = self._instance
         if instance is None or signature != instance.signature:
+            self._check(atoms)  # (what it checks is in the signature: once per instance)
             instance = self._start(atoms, molecules, signature)
         elif atoms.pbc.all() and not np.array_equal(atoms.cell.array, instance.box.cell):
             # (see rigidmd.lammps.box: the box plugin, or change_box and a set-up)
@@ -309,30 +313,24 @@ class LAMMPSCalculator(Calculator):
         lmp, arrays, box, setup_needed = (instance.lmp, instance.arrays, instance.box,
                                           instance.setup_needed)
         rotation = box.rotation
-        # LAMMPS's order as the last step left it (anew after a set-up run, which sorts)
-        positions = (atoms.positions if rotation is None else atoms.positions @ rotation)[
-            arrays.order(setup_needed)]
+        positions = atoms.positions if rotation is None else atoms.positions @ rotation
         if atoms.pbc.all() and setup_needed:
             # A new cell (a set-up follows anyway): every atom into the box, with image
             # flags to match.  LAMMPS's change_box re-mapped the previous positions into
             # the new box, and their images need not suit these after a large change.
+            # LAMMPS's order anew: the set-up run sorted its atoms.
+            positions = positions[arrays.order(refresh=True)]
             cell = box.lammps_cell()
             image = np.floor(np.linalg.solve(cell.T, positions.T).T)
             positions -= image @ cell
             arrays.view("image")[:] = arrays.pack_images(image)
+            arrays.view("x")[:] = positions
         elif atoms.pbc.all():
-            # LAMMPS's own image of each atom: only real motion counts against the skin.
-            cell, image = box.lammps_cell(), arrays.images()
-            positions -= image @ cell
-            # An atom more than a box out (a new box without a set-up, or atoms given in
-            # another image: a restart from unwrapped positions) would be lost: LAMMPS
-            # wraps by one box.  Such atoms are shifted by whole cell vectors first.
-            frac = positions @ np.linalg.inv(cell)  # 40 us on 5184 atoms (solve: 400 us)
-            if np.any(frac < -0.5) or np.any(frac >= 1.5):
-                shift = np.floor(frac)
-                positions -= shift @ cell
-                arrays.view("image")[:] = arrays.pack_images(image + shift)
-        arrays.view("x")[:] = positions
+            # LAMMPS's own image of each atom: only real motion counts against the skin
+            # (atoms more than half a box out are shifted by whole cell vectors first).
+            arrays.write_positions(positions, box.lammps_cell())
+        else:
+            arrays.view("x")[:] = positions[arrays.order(setup_needed)]
         # Energy and virial are tallied only on steps asked for (as native thermo steps).
         want_energy = bool({"energy", "free_energy"} & set(properties))
         want_stress = "stress" in properties and atoms.pbc.all()
@@ -354,21 +352,23 @@ class LAMMPSCalculator(Calculator):
             raise LammpsError(f"LAMMPSCalculator: LAMMPS lost {len(atoms) - nlocal} of "
                               f"{len(atoms)} atoms (an atom moved far out of the box)")
         forces = np.empty((len(atoms), 3))  # LAMMPS may have sorted its atoms: IDs anew
-        forces[arrays.order(refresh=True)] = arrays.view("f")
+        arrays.read_forces(forces)
         if rotation is not None:
             forces = forces @ rotation.T
         results = {"forces": forces}
         if want_energy:
-            energy = float(lmp.numpy.extract_compute("rmd_pe", 0, 0))
+            energy = float(lmp.extract_compute("rmd_pe", 0, 0))
             results.update(energy=energy, free_energy=energy)
         if want_stress:
-            xx, yy, zz, xy, xz, yz = np.asarray(lmp.numpy.extract_compute(
-                "rmd_pressure", 0, 1), dtype=float)[:6]
-            pressure = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]) / instance.nktv2p
-            if rotation is not None:
-                pressure = rotation @ pressure @ rotation.T
-            stress = -pressure  # σ = -W/V, and LAMMPS's virial pressure is W/V
-            results["stress"] = stress[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
+            # LAMMPS's xx yy zz xy xz yz; σ = -W/V, and LAMMPS's virial pressure is W/V
+            # (LAMMPS's pointer read as six floats: its NumPy wrapper costs 3 times more)
+            pressure = np.array(lmp.extract_compute("rmd_pressure", 0, 1)[:6])[_ASE_VOIGT]
+            if rotation is None:
+                results["stress"] = -(pressure / instance.nktv2p)
+            else:
+                stress = -(rotation @ voigt_6_to_full_3x3_stress(pressure / instance.nktv2p)
+                           @ rotation.T)
+                results["stress"] = stress[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
         if moved:
             self.results = results
         else:
