@@ -100,7 +100,8 @@ class BodyLink:
                            m.atom_masses, r, momenta)
         else:
             momenta[m.order] = m.atom_masses[:, None] * ops.atom_velocities(state, r, m)
-        momenta[m.free] = m.free_masses[:, None] * state.v
+        if m.n_free:
+            momenta[m.free] = m.free_masses[:, None] * state.v
 
     def largest_angular_speed(self, state: RigidState) -> tuple[int, float]:
         """The body turning fastest and its :math:`|\\omega|` (rad / ASE time), on the backend.

@@ -14,7 +14,7 @@ import numpy as np
 from ase import units
 from ase.calculators.calculator import Calculator, PropertyNotImplementedError, all_changes
 
-from rigidmd.core.checks import quick_check_state
+from rigidmd.core.checks import copy_atoms, quick_check_state
 from rigidmd.ipi.connection import (
     MSGLEN,
     EngineError,
@@ -66,6 +66,8 @@ class IPICalculator(Calculator):
     :class:`EngineError`; the connection is dropped, and the next call waits
     for a new engine (subclasses start one).
     """
+
+    _copy = None  # this calculator's own copy of the atoms (see copy_atoms)
 
     implemented_properties = ["energy", "free_energy", "forces", "stress"]
 
@@ -302,7 +304,8 @@ class IPICalculator(Calculator):
         return quick_check_state(self, atoms, tol, super().check_state)
 
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
-        super().calculate(atoms, properties, system_changes)
+        if atoms is not None:  # ASE's Calculator.calculate, without its directory check
+            self.atoms = self._copy = copy_atoms(atoms, self._copy)
         atoms = self.atoms
         periodic = bool(atoms.pbc.any())
         if "stress" in properties and not periodic:
