@@ -19,7 +19,7 @@ AVAILABLE = numba is not None
 
 __all__ = ["AVAILABLE", "resolve_backend", "jit", "pack_model", "first_half", "second_half",
            "place", "momenta", "largest_angular_speed", "kinetic_tensor", "rotational_energy",
-           "intramolecular_virial", "smallest_width"]
+           "intramolecular_virial", "net_force", "smallest_width"]
 
 
 def resolve_backend(backend=None):
@@ -383,6 +383,21 @@ def rotational_energy(q, p, inv_moments):
         total += l0 * l0 * inv_moments[b, 0] + l1 * l1 * inv_moments[b, 1] \
             + l2 * l2 * inv_moments[b, 2]
     return 0.5 * total
+
+
+@jit
+def net_force(F, f):
+    r""":math:`|\sum F + \sum f|` and :math:`\sum |F_{ik}| + \sum |f_{ik}|` (eV/Å): the net
+    force of bodies and point particles and the size of the forces, in one pass."""
+    s0 = s1 = s2 = size = 0.0
+    for forces in (F, f):
+        for i in range(forces.shape[0]):
+            a, b, c = forces[i, 0], forces[i, 1], forces[i, 2]
+            s0 += a
+            s1 += b
+            s2 += c
+            size += abs(a) + abs(b) + abs(c)
+    return np.sqrt(s0 * s0 + s1 * s1 + s2 * s2), size
 
 
 @jit

@@ -9,7 +9,6 @@ kernel                             reference
 :func:`chain_propagate`            :meth:`rigidmd.couplings.base.NoseHooverChain.propagate`
 :func:`symmetric_exp`              :func:`rigidmd.couplings.barostats.symmetric_exp`
 :func:`mtk_kick`                   ``MTKBarostat`` kick of :math:`p_g` by the pressure
-:func:`mtk_thermostat`             ``MTKBarostat``'s chain on the cell momentum
 :func:`mtk_momentum_scale`         ``MTKBarostat``'s :math:`e^{-\kappa h}` (the friction)
 :func:`scale_translation`          :math:`V \leftarrow V F^\mathsf{T}` and the same of ``v``
 :func:`scale_velocities`           :meth:`rigidmd.couplings.thermostats.Thermostat.scale`
@@ -31,9 +30,8 @@ import numpy as np
 
 from rigidmd.core._numba import jit
 
-__all__ = ["COUPLE_CODES", "chain_propagate", "symmetric_exp", "mtk_kick", "mtk_thermostat",
-           "mtk_momentum_scale", "scale_translation", "scale_velocities", "crescale_move",
-           "crescale_work"]
+__all__ = ["COUPLE_CODES", "chain_propagate", "symmetric_exp", "mtk_kick", "mtk_momentum_scale",
+           "scale_translation", "scale_velocities", "crescale_move", "crescale_work"]
 
 #: ``couple`` as the kernels take it.
 COUPLE_CODES = {"iso": 0, "aniso": 1, "tri": 2}
@@ -158,20 +156,6 @@ def mtk_kick(p_g, virial, kinetic, volume, pressure_au, n_f, h, couple):
 
 
 @jit
-def mtk_thermostat(p_g, xi, eta, ndof, unit_mass, kT, W, h, tloop):
-    r"""The barostat's own chain over ``h``, driven by :math:`\mathrm{Tr}(p_g^2)/2W`;
-    :math:`p_g` scaled in place."""
-    K = 0.0
-    for a in range(3):
-        for c in range(3):
-            K += p_g[a, c] ** 2
-    scale = chain_propagate(xi, eta, ndof, unit_mass, K / (2 * W), kT, h, tloop)
-    for a in range(3):
-        for c in range(3):
-            p_g[a, c] *= scale
-
-
-@jit
 def mtk_momentum_scale(p_g, W, n_f, h):
     r""":math:`e^{-\kappa h}` with :math:`\kappa = (p_g + \mathrm{Tr}(p_g)/N_f)/W` (3x3)."""
     trace = p_g[0, 0] + p_g[1, 1] + p_g[2, 2]
@@ -236,16 +220,24 @@ def _inverse(A, det):
 
 
 @jit
-def crescale_move(pressure, volume, pressure_au, kT, beta, taup, dt, xi_lambda, xi_eta, basis):
+def crescale_move(virial, kinetic, volume, pressure_au, kT, beta, taup, dt, xi_lambda, xi_eta,
+                  basis, h):
     r"""Stochastic cell rescaling's move of one step (Bernetti & Bussi's "T" scheme).
 
-    Returns ``(mu, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first)``:
-    the cell strain :math:`\mu` and its inverse, :math:`\det\mu`, the steps of
-    :math:`\lambda = \sqrt V` and of the shape components, the two
-    mobilities and the bookkeeping of the first half; ``mu`` is None-free:
-    a collapsing volume gives ``det = 0`` and ``step_lambda / sqrt(V) <= -1``
+    The pressure is :math:`(\mathsf W + \mathsf K)/V` of the molecular ``virial``
+    and the kinetic tensor ``kinetic`` (eV) at the ``volume``.  Returns
+    ``(mu, B, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first, moved)``:
+    the cell strain :math:`\mu`, the drift's :math:`B = \tfrac h2(\mu + \mu^{-1})`,
+    :math:`\mu^{-1}`, :math:`\det\mu`, the steps of :math:`\lambda = \sqrt V` and of
+    the shape components, the two mobilities, the bookkeeping of the first half and
+    the kinetic tensor of the velocities as the drift leaves them,
+    :math:`\mu^{-1}\mathsf K\mu^{-\mathsf T}`.  A collapsing volume gives ``det = 0``
     (the caller refuses it).
     """
+    pressure = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            pressure[i, j] = (virial[i, j] + kinetic[i, j]) / volume
     f_lambda, f_eta = _crescale_forces(pressure, volume, pressure_au, kT, basis)
     d_lambda = 0.25 * kT * beta / taup
     d_eta = kT * beta / (3.0 * taup * volume)
@@ -257,7 +249,8 @@ def crescale_move(pressure, volume, pressure_au, kT, beta, taup, dt, xi_lambda, 
         step_eta[k] = d_eta / kT * f_eta[k] * dt + np.sqrt(2.0 * d_eta * dt) * xi_eta[k]
     identity = np.eye(3)
     if not step_lambda / lam > -1.0:
-        return identity, identity, 0.0, step_lambda, step_eta, d_lambda, d_eta, 0.0
+        return (identity, identity, identity, 0.0, step_lambda, step_eta, d_lambda, d_eta, 0.0,
+                identity)
     strain = (2.0 / 3.0) * np.log1p(step_lambda / lam) * identity
     for k in range(m):
         for i in range(3):
@@ -273,7 +266,16 @@ def crescale_move(pressure, volume, pressure_au, kT, beta, taup, dt, xi_lambda, 
     first = (0.5 * step_lambda * f_lambda
              - 0.25 * d_lambda / kT * dt * f_lambda**2 + 0.5 * kT * np.log(volume)
              + 0.5 * eta_f - 0.25 * d_eta / kT * dt * eta_ff)
-    return mu, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first
+    B = 0.5 * h * (mu + inverse)
+    moved = np.zeros((3, 3))
+    for i in range(3):
+        for j in range(3):
+            total = 0.0
+            for a in range(3):
+                for b in range(3):
+                    total += inverse[i, a] * kinetic[a, b] * inverse[j, b]
+            moved[i, j] = total
+    return mu, B, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first, moved
 
 
 @jit
