@@ -19,7 +19,8 @@ AVAILABLE = numba is not None
 
 __all__ = ["AVAILABLE", "resolve_backend", "jit", "pack_model", "first_half", "second_half",
            "place", "momenta", "largest_angular_speed", "kinetic_tensor", "rotational_energy",
-           "intramolecular_virial", "net_force", "smallest_width"]
+           "intramolecular_virial", "net_force", "congruence",
+           "smallest_width"]
 
 
 def resolve_backend(backend=None):
@@ -383,6 +384,21 @@ def rotational_energy(q, p, inv_moments):
         total += l0 * l0 * inv_moments[b, 0] + l1 * l1 * inv_moments[b, 1] \
             + l2 * l2 * inv_moments[b, 2]
     return 0.5 * total
+
+
+@jit
+def congruence(F, K):
+    r""":math:`F K F^\mathsf{T}` of 3x3 matrices: a kinetic tensor after :math:`V \leftarrow FV`."""
+    out = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            total = 0.0
+            for a in range(3):
+                row = F[i, a]
+                for b in range(3):
+                    total += row * K[a, b] * F[j, b]
+            out[i, j] = total
+    return out
 
 
 @jit

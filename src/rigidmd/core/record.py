@@ -133,7 +133,8 @@ class StepRecord:
         if K is None:
             return
         if isinstance(factor, np.ndarray) and factor.ndim == 2:
-            self._kinetic = factor @ K @ factor.T
+            self._kinetic = (_numba.congruence(factor, K) if self.compiled
+                             else factor @ K @ factor.T)
         else:
             self._kinetic = K * float(factor) ** 2
 

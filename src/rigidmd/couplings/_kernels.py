@@ -7,11 +7,14 @@ compiled call on the state buffer and a few 3x3 matrices:
 kernel                             reference
 =================================  ===================================================
 :func:`chain_propagate`            :meth:`rigidmd.couplings.base.NoseHooverChain.propagate`
+:func:`chain_scale`                :meth:`rigidmd.couplings.base.NoseHooverChain.act_on`
 :func:`symmetric_exp`              :func:`rigidmd.couplings.barostats.symmetric_exp`
 :func:`mtk_kick`                   ``MTKBarostat`` kick of :math:`p_g` by the pressure
 :func:`mtk_momentum_scale`         ``MTKBarostat``'s :math:`e^{-\kappa h}` (the friction)
 :func:`scale_translation`          :math:`V \leftarrow V F^\mathsf{T}` and the same of ``v``
-:func:`scale_velocities`           :meth:`rigidmd.couplings.thermostats.Thermostat.scale`
+:func:`mtk_friction`               ``MTKBarostat``'s friction, applied
+:func:`scale_velocities`           :meth:`rigidmd.couplings.base.Thermostat.scale`
+:func:`nose_hoover_scale`          ``NoseHooverThermostat``'s chains and scaling
 :func:`crescale_move`              ``CRescaleBarostat.drift_matrices``' arithmetic
 :func:`crescale_work`              ``CRescaleBarostat.second_half``'s bookkeeping
 =================================  ===================================================
@@ -30,8 +33,9 @@ import numpy as np
 
 from rigidmd.core._numba import jit
 
-__all__ = ["COUPLE_CODES", "chain_propagate", "symmetric_exp", "mtk_kick", "mtk_momentum_scale",
-           "scale_translation", "scale_velocities", "crescale_move", "crescale_work"]
+__all__ = ["COUPLE_CODES", "chain_propagate", "chain_scale", "symmetric_exp", "mtk_kick",
+           "mtk_momentum_scale", "mtk_friction", "scale_translation", "scale_velocities",
+           "nose_hoover_scale", "crescale_move", "crescale_work"]
 
 #: ``couple`` as the kernels take it.
 COUPLE_CODES = {"iso": 0, "aniso": 1, "tri": 2}
@@ -78,6 +82,18 @@ def chain_propagate(xi, eta, ndof, unit_mass, K, kT, h, tloop):
                 * damp
         xi[M - 1] += 0.5 * delta * _chain_force(M - 1, K2, xi, ndof, kT, Q0, Q)
     return scale
+
+
+@jit
+def chain_scale(p, mass, xi, eta, ndof, unit_mass, kT, h, tloop):
+    r""":func:`chain_propagate` driven by the kinetic energy :math:`\sum p^2/2m` of a flat
+    momentum ``p`` (mass ``mass``), which it scales in place."""
+    K = 0.0
+    for k in range(p.shape[0]):
+        K += p[k] * p[k]
+    scale = chain_propagate(xi, eta, ndof, unit_mass, K / (2 * mass), kT, h, tloop)
+    for k in range(p.shape[0]):
+        p[k] *= scale
 
 
 @jit
@@ -178,6 +194,14 @@ def scale_translation(data, n, nf, F):
 
 
 @jit
+def mtk_friction(data, n, nf, p_g, W, n_f, h):
+    r""":func:`mtk_momentum_scale` applied by :func:`scale_translation`; returns the factor."""
+    F = mtk_momentum_scale(p_g, W, n_f, h)
+    scale_translation(data, n, nf, F)
+    return F
+
+
+@jit
 def scale_velocities(data, n, nf, translational, rotational):
     """``V, v`` times ``translational`` and ``p`` times ``rotational`` in the state buffer."""
     for k in range(3 * n, 6 * n):
@@ -186,6 +210,18 @@ def scale_velocities(data, n, nf, translational, rotational):
         data[k] *= rotational
     for k in range(14 * n + 3 * nf, 14 * n + 6 * nf):
         data[k] *= translational
+
+
+@jit
+def nose_hoover_scale(data, n, nf, xi_t, eta_t, ndof_t, xi_r, eta_r, ndof_r, unit_mass, K_t,
+                      K_r, kT, h, tloop):
+    """Both chains of a Nosé–Hoover thermostat over ``h`` (:func:`chain_propagate`, the
+    translational then the rotational) and their scalings (:func:`scale_velocities`);
+    returns the two scales."""
+    translational = chain_propagate(xi_t, eta_t, ndof_t, unit_mass, K_t, kT, h, tloop)
+    rotational = chain_propagate(xi_r, eta_r, ndof_r, unit_mass, K_r, kT, h, tloop)
+    scale_velocities(data, n, nf, translational, rotational)
+    return translational, rotational
 
 
 @jit

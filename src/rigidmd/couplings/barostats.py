@@ -278,7 +278,7 @@ class MTKBarostat(Barostat):
     # NumPy reference beside it.
     def _thermostat(self, view, h):
         """The barostat's own chain over ``h``, driven by the cell's kinetic energy."""
-        self.p_g *= self.chain.propagate(self.cell_kinetic_energy(), self.kT, h, view.compiled)
+        self.chain.act_on(self.p_g, self.W, self.kT, h, view.compiled)
 
     def _kick(self, view, h):
         """:math:`p_g \\mathrel{+}= h\\,G` with the pressure at the current state."""
@@ -295,8 +295,8 @@ class MTKBarostat(Barostat):
         """The friction: :math:`V \\leftarrow e^{-\\kappa h} V`, and of the point particles."""
         s = view.state
         if view.compiled:
-            factor = _kernels.mtk_momentum_scale(self.p_g, self.W, self.n_f, h)
-            _kernels.scale_translation(s.data, len(s.X), len(s.x), factor)
+            factor = _kernels.mtk_friction(s.data, len(s.X), len(s.x), self.p_g, self.W,
+                                           self.n_f, h)
         else:
             factor, _ = symmetric_exp(-self._kappa(), h)
             s.V[...] = s.V @ factor.T

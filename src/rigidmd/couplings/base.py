@@ -419,6 +419,19 @@ class NoseHooverChain:
             xi[M - 1] += 0.5 * delta * force(M - 1, K2)
         return scale
 
+    def act_on(self, p, mass, kT, h, compiled=False):
+        r"""Advance over ``h`` on a momentum of kinetic energy :math:`\sum p^2 / 2m`; scale it.
+
+        ``p`` (any shape, changed in place) is the momentum the chain acts on,
+        ``mass`` its mass (a barostat's cell momentum :math:`p_g` and mass :math:`W`).
+        """
+        flat = p.reshape(-1)
+        if compiled:
+            _kernels.chain_scale(flat, mass, self.xi, self.eta, self.ndof, kT * self.tdamp**2,
+                                 kT, h, self.tloop)
+            return
+        p *= self.propagate(float(flat @ flat) / (2 * mass), kT, h)
+
     def energy(self, kT):
         if self.ndof == 0:
             return 0.0
