@@ -14,12 +14,17 @@ one calculator call, one volume, one kinetic tensor, one rotational kinetic
 energy and one stress (a test counts them).
 """
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from rigidmd.core import _numba
 from rigidmd.core import observables as obs
 from rigidmd.core.model import BodyModel
 from rigidmd.core.state import RigidState
+
+if TYPE_CHECKING:
+    from rigidmd.core.link import BodyLink
 
 __all__ = ["StepRecord"]
 
@@ -56,7 +61,7 @@ class StepRecord:
         The body link whose backend the record's sums follow (None: NumPy).
     """
 
-    def __init__(self, state: RigidState, model: BodyModel, link=None):
+    def __init__(self, state: RigidState, model: BodyModel, link: "BodyLink | None" = None):
         nb, nf = model.n_bodies, model.n_free
         self.state, self.model, self.link = state, model, link
         self.F, self.tau = np.zeros((nb, 3)), np.zeros((nb, 3))

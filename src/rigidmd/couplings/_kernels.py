@@ -13,7 +13,7 @@ kernel                             reference
 :func:`mtk_momentum_scale`         ``MTKBarostat``'s :math:`e^{-\kappa h}` (the friction)
 :func:`scale_translation`          :math:`V \leftarrow V F^\mathsf{T}` and the same of ``v``
 :func:`mtk_friction`               ``MTKBarostat``'s friction, applied
-:func:`scale_velocities`           :meth:`rigidmd.couplings.base.Thermostat.scale`
+:func:`scale_velocities`           :meth:`rigidmd.couplings.thermostats.Thermostat.scale`
 :func:`nose_hoover_scale`          ``NoseHooverThermostat``'s chains and scaling
 :func:`crescale_move`              ``CRescaleBarostat.drift_matrices``' arithmetic
 :func:`crescale_work`              ``CRescaleBarostat.second_half``'s bookkeeping

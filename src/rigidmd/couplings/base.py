@@ -469,8 +469,8 @@ class Thermostat(Coupling):
     thermostatted runs then do not drift as a whole (a drift adds to a
     measured diffusion coefficient).
 
-    ``fixcm=None`` (the default of the parts) becomes True when the dynamics
-    is composed, or False if a barostat moves the cell (the barostats'
+    ``fixcm=None`` (the default of the parts) becomes True when the part is
+    bound to a dynamics, or False if a barostat moves the cell (the barostats'
     equations count the centre of mass; an explicit ``fixcm=True`` with a
     barostat is refused).  Without it a global thermostat (Bussi,
     Nosé–Hoover) rescales the total momentum with every other velocity; the
@@ -486,7 +486,7 @@ class Thermostat(Coupling):
         self.temperature_K = check_temperature(temperature_K)
         #: What was asked: True, False or None (True unless a barostat moves the cell).
         self.fixcm_option = None if fixcm is None else check_flag("fixcm", fixcm)
-        #: Whether the total momentum is kept; None until a dynamics resolves the option.
+        #: Whether the total momentum is kept; None until :meth:`bind` resolves the option.
         self.fixcm = self.fixcm_option
 
     @property
