@@ -438,7 +438,7 @@ class RigidLangevin(_Thermostatted):
     rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
     fixcm : bool or None, default None
         Keep the total momentum (no drift of the whole system), as ASE's ``Langevin``;
-        None is True, with a warning at the first step if the forces do not conserve the
+        None is True, with a warning at the first step whose forces do not conserve the
         momentum (a wall, an external field: pass False there).
     **kwargs
         ``bodies``, ``integrator``, ``integrator_options``, ``trajectory``,
@@ -479,7 +479,7 @@ class RigidBussi(_Thermostatted):
     rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
     fixcm : bool or None, default None
         Keep the total momentum (no drift of the whole system) and count 3 fewer
-        degrees of freedom; None is True, with a warning at the first step if the
+        degrees of freedom; None is True, with a warning at the first step whose
         forces do not conserve the momentum (a wall, an external field: pass False
         there).  With False the thermostat acts on the centre of mass too; from a
         zero total momentum (which the forces and the rescaling keep zero) the
