@@ -12,7 +12,7 @@ interleaved rounds of ``--steps`` steps.  Calls: Python function calls per step
 counted by ``cProfile`` over 100 steps (NumPy's ufuncs are not counted; each
 of its array functions is one or more calls).  Parts: the coupling parts' own share of a
 step (their half steps, the drift's matrices and the variables saved for the rollback),
-timed by wrapping each of those methods with ``time.perf_counter`` (wall time, best of 5
+timed by wrapping each of those methods with ``time.perf_counter`` (wall time, best of 9
 more runs of 100 steps; the wrappers add about 0.1 µs a call).
 
 Run ``python benchmarks/barostat_step.py`` (about a minute), ``--waters 216 1728``.
@@ -77,7 +77,7 @@ def dynamics(atoms, kind, backend):
                          **options)
 
 
-def parts_per_step(dyn, steps=100, rounds=5):
+def parts_per_step(dyn, steps=100, rounds=9):
     """Wall time per step (µs) inside the coupling parts' methods: best of wrapped runs."""
     spent, depth = [0.0], [0]  # a second half that calls the first half counts once
     clock = time.perf_counter
