@@ -86,14 +86,16 @@ def chain_propagate(xi, eta, ndof, unit_mass, K, kT, h, tloop):
 
 @jit
 def chain_scale(p, mass, xi, eta, ndof, unit_mass, kT, h, tloop):
-    r""":func:`chain_propagate` driven by the kinetic energy :math:`\sum p^2/2m` of a flat
-    momentum ``p`` (mass ``mass``), which it scales in place."""
+    r""":func:`chain_propagate` driven by the kinetic energy :math:`\sum p^2/2m` of a
+    momentum ``p`` (2-D, mass ``mass``), which it scales in place."""
     K = 0.0
-    for k in range(p.shape[0]):
-        K += p[k] * p[k]
+    for i in range(p.shape[0]):
+        for j in range(p.shape[1]):
+            K += p[i, j] * p[i, j]
     scale = chain_propagate(xi, eta, ndof, unit_mass, K / (2 * mass), kT, h, tloop)
-    for k in range(p.shape[0]):
-        p[k] *= scale
+    for i in range(p.shape[0]):
+        for j in range(p.shape[1]):
+            p[i, j] *= scale
 
 
 @jit

@@ -422,14 +422,14 @@ class NoseHooverChain:
     def act_on(self, p, mass, kT, h, compiled=False):
         r"""Advance over ``h`` on a momentum of kinetic energy :math:`\sum p^2 / 2m`; scale it.
 
-        ``p`` (any shape, changed in place) is the momentum the chain acts on,
-        ``mass`` its mass (a barostat's cell momentum :math:`p_g` and mass :math:`W`).
+        ``p`` (2-D, changed in place) is the momentum the chain acts on, ``mass`` its
+        mass (a barostat's cell momentum :math:`p_g` and mass :math:`W`).
         """
-        flat = p.reshape(-1)
         if compiled:
-            _kernels.chain_scale(flat, mass, self.xi, self.eta, self.ndof, kT * self.tdamp**2,
+            _kernels.chain_scale(p, mass, self.xi, self.eta, self.ndof, kT * self.tdamp**2,
                                  kT, h, self.tloop)
             return
+        flat = p.ravel()
         p *= self.propagate(float(flat @ flat) / (2 * mass), kT, h)
 
     def energy(self, kT):
