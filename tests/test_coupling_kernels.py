@@ -7,8 +7,6 @@ the kernels sum in another order (and take ``exp``/``expm1`` from another
 library) than NumPy does.
 """
 
-import dataclasses
-
 import numpy as np
 import pytest
 from ase.stress import voigt_6_to_full_3x3_stress
@@ -53,9 +51,9 @@ def test_chain_propagate_is_the_reference(tchain, tloop, ndof):
     chains = [NoseHooverChain(ndof, 50.0, tchain, tloop) for _ in range(2)]
     chains[0].xi[:] = rng.normal(size=tchain) * 1e-2  # away from the zero start
     chains[1].set_state(chains[0].get_state())
-    chains[1].compiled = True
     for K in (0.3, 0.05, 1.2):
-        scales = [chain.propagate(K, 0.025, 0.5) for chain in chains]
+        scales = [chain.propagate(K, 0.025, 0.5, compiled) for chain, compiled
+                  in zip(chains, (False, True), strict=True)]
         assert scales[1] == pytest.approx(scales[0], rel=RTOL, abs=0)
         np.testing.assert_allclose(chains[1].xi, chains[0].xi, rtol=RTOL, atol=1e-300)
         np.testing.assert_allclose(chains[1].eta, chains[0].eta, rtol=RTOL, atol=1e-300)
@@ -142,12 +140,9 @@ def both(dyn, part, action):
         start.copy_into(dyn.state)
         part.set_state(variables)
         dyn.record.velocities_changed()
-        dyn.record.compiled = compiled
-        view = dataclasses.replace(dyn.view, compiled=compiled)
-        for chain in getattr(part, "chains", ()) + ((part.chain,) if hasattr(part, "chain")
-                                                    else ()):
-            chain.compiled = compiled
-        out = action(view)
+        dyn.link.compiled = compiled  # the one backend flag: record, view and parts follow
+        assert dyn.view.compiled is compiled and dyn.record.compiled is compiled
+        out = action(dyn.view)
         results.append((dyn.state.copy(), part.get_state(), out))
     return results
 
@@ -183,12 +178,9 @@ def test_mtk_half_steps_are_the_reference(couple, argon):
         baro.p_g[...] = np.diag(np.diag(baro.p_g))
     h = 0.5 * dyn.dt
     operators = {
-        "thermostat": lambda view: (baro._thermostat_compiled(h) if view.compiled
-                                    else baro._thermostat(h)),
-        "kick": lambda view: (baro._kick_compiled(view, h) if view.compiled
-                              else baro._kick(view, h)),
-        "friction": lambda view: (baro._scale_momenta_compiled(view, h) if view.compiled
-                                  else baro._scale_momenta(view, h)),
+        "thermostat": lambda view: baro._thermostat(view, h),
+        "kick": lambda view: baro._kick(view, h),
+        "friction": lambda view: baro._scale_momenta(view, h),
         "first half": lambda view: baro.first_half(view, h),
         "second half": lambda view: baro.second_half(view, h),
         "drift": lambda view: baro.drift_matrices(view, h),

@@ -449,15 +449,30 @@ def test_crescale_at_0_K_is_one_clear_error():
         npt(atoms, "crescale", temperature_K=0)
 
 
+# Kinetic tensors summed per step: MTK's and Nosé–Hoover's (fixcm, which the record
+# follows through the scaling about the centre of mass) one, after the scheme; C-rescale's
+# two: the drift's (of the kicked velocities, for the pressure that moves the cell) and the
+# one after the scheme (its compiled drift summed a third, the drift's again).
+SUMS = {"mtk": 1, "crescale": 2, "nose_hoover": 1}
+
+
+@pytest.mark.parametrize("kind", SUMS)
 @pytest.mark.parametrize("backend", ["numpy", "numba"])
-def test_one_npt_step_evaluates_everything_once(monkeypatch, backend):
+def test_one_npt_step_evaluates_everything_once(monkeypatch, backend, kind):
     """Nosé–Hoover + MTK: one calculator call, one stress, one volume, one kinetic tensor and
     one rotational kinetic energy per step (the per-step record), on both backends (the
-    compiled record sums with :mod:`rigidmd.core._numba`'s loops)."""
+    compiled record sums with :mod:`rigidmd.core._numba`'s loops); Bussi + C-rescale and a
+    Nosé–Hoover thermostat keeping the total momentum likewise (see ``SUMS``)."""
+    from rigidmd import RigidNoseHoover
     from rigidmd.core import _numba, observables
 
     atoms = dimer_fluid(n_side=4, rc=7.0)
-    dyn = npt(atoms, "mtk", backend=backend)
+    if kind == "nose_hoover":
+        dyn = RigidNoseHoover(atoms, 5 * units.fs, 80.0, 100 * units.fs, bodies="tags",
+                              backend=backend)
+        assert dyn.thermostat.fixcm
+    else:
+        dyn = npt(atoms, kind, backend=backend)
     dyn.run(3)
     counts = {}
 
@@ -488,8 +503,11 @@ def test_one_npt_step_evaluates_everything_once(monkeypatch, backend):
     monkeypatch.setattr(calc, "get_stress", counting("get_stress", calc.get_stress))
     next(steps)
     assert dyn.nsteps == 4
-    assert counts == {"calculator": 1, "stress": 1, "volume": 1, "kinetic_tensor": 1,
-                      "rotational_kinetic_energy": 1}
+    expected = {"calculator": 1, "stress": 1, "volume": 1, "kinetic_tensor": SUMS[kind],
+                "rotational_kinetic_energy": 1}
+    if kind == "nose_hoover":  # no cell: no stress, no volume
+        del expected["stress"], expected["volume"]
+    assert counts == expected
 
 
 def test_reading_the_call_s_results_directly_changes_no_bit():

@@ -286,13 +286,21 @@ def test_fixcm_is_refused_with_a_barostat():
 
 def test_fixcm_defaults_to_true_unless_a_barostat_moves_the_cell():
     """A thermostat part's fixcm=None becomes True in a dynamics without a barostat and
-    False with one (whose equations count the centre of mass); explicit values stay."""
+    False with one (whose equations count the centre of mass); explicit values stay.
+    What was given stays apart from what a dynamics made of it: checking a composition
+    changes no part, and ``todict`` (trajectories, checkpoints) gives the value as given,
+    so a resumed run resolves it as its own composition says."""
+    from rigidmd.couplings.base import check_composition
+
     atoms = water_box(2)
     atoms.calc = CoulombLJ()
     alone = BussiThermostat(300, 100 * units.fs)
     assert alone.fixcm is None and alone.todict()["fixcm"] is None
+    check_composition([alone], False)
+    assert alone.fixcm is None  # a check changes nothing
     RigidDynamics(atoms, units.fs, bodies="mol-id", couplings=[alone])
-    assert alone.fixcm is True and alone.todict()["fixcm"] is True
+    assert alone.fixcm is True and alone.fixcm_option is None
+    assert alone.todict()["fixcm"] is None
     from helpers import dimer_fluid
 
     for part in (BussiThermostat(80, 100 * units.fs),
@@ -326,12 +334,68 @@ def test_default_fixcm_warns_when_the_forces_do_not_conserve_the_momentum(name):
     with pytest.warns(UserWarning, match="forces do not conserve it") as caught:
         dyn.run(3)
     assert len([w for w in caught if "fixcm=False" in str(w.message)]) == 1
+    message = next(str(w.message) for w in caught if "fixcm=False" in str(w.message))
+    # The default is None (True without a barostat), not True; no FixCom to name here.
+    assert "fixcm=None, the default" in message and "fixcm=True, the default" not in message
+    assert "FixCom" not in message
     for fixcm in (True, False):
         dyn = cls(pushed(), units.fs, temperature_K=T, bodies="mol-id", fixcm=fixcm,
                   **kwargs)
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             dyn.run(3)
+
+
+def test_default_fixcm_with_fixcom_says_to_remove_fixcom():
+    """With ASE's FixCom on the atoms the momentum is held whatever fixcm says, so the
+    warning of the default fixcm must name FixCom, not only advise fixcm=False (which
+    alone changes nothing there)."""
+    from ase.constraints import FixCom
+
+    atoms = water_cluster(8, seed=3)
+    atoms.calc = CoulombLJ(wall=(atoms.get_center_of_mass() + [2.0, 0, 0], 2.0))
+    rigid_maxwell_boltzmann(atoms, T, bodies="mol-id", rng=np.random.default_rng(1))
+    atoms.set_constraint(FixCom())
+    dyn = RigidBussi(atoms, units.fs, temperature_K=T, taut=50 * units.fs, bodies="mol-id",
+                     rng=np.random.default_rng(4))
+    with pytest.warns(UserWarning, match="forces do not conserve it") as caught:
+        dyn.run(3)
+    messages = [str(w.message) for w in caught if "conserve" in str(w.message)]
+    assert len(messages) == 1
+    assert "remove FixCom" in messages[0] and "fixcm=False" in messages[0]
+
+
+class Gusted(CoulombLJ):
+    """CoulombLJ plus a uniform field of 0.5 eV/Å on every atom during force calls
+    ``first`` to ``last`` (counted from 0): forces that do not conserve the momentum for a
+    moment, as a short contact with a wall."""
+
+    def __init__(self, first, last):
+        super().__init__()
+        self.calls, self.first, self.last = 0, first, last
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=()):
+        super().calculate(atoms, properties, system_changes)
+        if self.first <= self.calls <= self.last:
+            self.results["forces"] = self.results["forces"] + [0.5, 0.0, 0.0]
+        self.calls += 1
+
+
+@pytest.mark.parametrize("name", THERMOSTATS)
+def test_the_net_force_is_looked_at_every_step(name):
+    """The default fixcm's guard looks at the forces of every step's call, once per step.
+    It counted its own calls (two per step) and looked at every 8th, so forces that pushed
+    for the calls of steps 2 and 3 only were never seen."""
+    cls, kwargs = THERMOSTATS[name]
+    if cls is not RigidNoseHoover:
+        kwargs = kwargs | {"rng": np.random.default_rng(4)}
+    atoms = water_cluster(8, seed=3)
+    rigid_maxwell_boltzmann(atoms, T, bodies="mol-id", rng=np.random.default_rng(1))
+    atoms.calc = Gusted(2, 3)  # call 0 at the start, call k in step k
+    dyn = cls(atoms, units.fs, temperature_K=T, bodies="mol-id", **kwargs)
+    with pytest.warns(UserWarning, match="at step 2") as caught:
+        dyn.run(8)
+    assert len([w for w in caught if "conserve" in str(w.message)]) == 1
 
 
 @pytest.mark.parametrize("name", THERMOSTATS)

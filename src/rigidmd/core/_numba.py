@@ -19,8 +19,8 @@ AVAILABLE = numba is not None
 
 __all__ = ["AVAILABLE", "resolve_backend", "jit", "pack_model", "first_half", "second_half",
            "place", "momenta", "largest_angular_speed", "kinetic_tensor", "rotational_energy",
-           "intramolecular_virial", "molecular_virial_voigt", "smallest_width",
-           "equal_or_close"]
+           "intramolecular_virial", "molecular_virial_voigt", "net_force", "congruence",
+           "smallest_width", "equal_or_close"]
 
 
 def resolve_backend(backend=None):
@@ -384,6 +384,36 @@ def rotational_energy(q, p, inv_moments):
         total += l0 * l0 * inv_moments[b, 0] + l1 * l1 * inv_moments[b, 1] \
             + l2 * l2 * inv_moments[b, 2]
     return 0.5 * total
+
+
+@jit
+def congruence(F, K):
+    r""":math:`F K F^\mathsf{T}` of 3x3 matrices: a kinetic tensor after :math:`V \leftarrow FV`."""
+    out = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            total = 0.0
+            for a in range(3):
+                row = F[i, a]
+                for b in range(3):
+                    total += row * K[a, b] * F[j, b]
+            out[i, j] = total
+    return out
+
+
+@jit
+def net_force(F, f):
+    r""":math:`|\sum F + \sum f|` and :math:`\sum |F_{ik}| + \sum |f_{ik}|` (eV/Å): the net
+    force of bodies and point particles and the size of the forces, in one pass."""
+    s0 = s1 = s2 = size = 0.0
+    for forces in (F, f):
+        for i in range(forces.shape[0]):
+            a, b, c = forces[i, 0], forces[i, 1], forces[i, 2]
+            s0 += a
+            s1 += b
+            s2 += c
+            size += abs(a) + abs(b) + abs(c)
+    return np.sqrt(s0 * s0 + s1 * s1 + s2 * s2), size
 
 
 @jit

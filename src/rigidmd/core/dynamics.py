@@ -193,25 +193,25 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self.model = model
         self.couplings = couplings
         self.fixcom = fixcom
-        #: Whether the total momentum is held (FixCom, or a thermostat's fixcm).
-        self.holds_momentum = fixcom or any(part.fixcm for part in couplings)
         self.needs_energy = any(part.needs_energy for part in couplings)
         self.link = BodyLink(atoms, model, backend)
         self.state = self.link.initial_state(geometry)
-        self.record = StepRecord(self.state, model, compiled=backend == "numba")
-        self.sync = AtomsSync(self.link, self.state, self.record, rigid.body_ids, fixcom,
-                              self.holds_momentum)
-        self.sync.mark_atoms()
-        store_bodies_in_tags(atoms, rigid.body_ids)
+        self.record = StepRecord(self.state, model, self.link)
         self.evaluator = ForceEvaluator(self.link, self.record,
                                         stress=any(part.needs_stress for part in couplings),
                                         cell_moves=mover is not None)
         self.view = CouplingView(self.state, model, self.record, self.evaluator, 0, fixcom,
-                                 compiled=backend == "numba")
+                                 cell_moves=mover is not None)
         #: The stress with the forces when an observer is due (``StressRecorder`` sets it).
         self.stress_on_observed_steps = False
         for part in couplings:
             part.bind(self.view)
+        #: Whether the total momentum is held (FixCom, or a thermostat's fixcm).
+        self.holds_momentum = fixcom or any(part.fixcm for part in couplings)
+        self.sync = AtomsSync(self.link, self.state, self.record, rigid.body_ids, fixcom,
+                              self.holds_momentum)
+        self.sync.mark_atoms()
+        store_bodies_in_tags(atoms, rigid.body_ids)
         context = StepContext(
             self.state, model, self.record, self.evaluator,
             positions=atoms.arrays["positions"], momenta=atoms.arrays["momenta"],

@@ -14,12 +14,17 @@ one calculator call, one volume, one kinetic tensor, one rotational kinetic
 energy and one stress (a test counts them).
 """
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from rigidmd.core import _numba
 from rigidmd.core import observables as obs
 from rigidmd.core.model import BodyModel
 from rigidmd.core.state import RigidState
+
+if TYPE_CHECKING:
+    from rigidmd.core.link import BodyLink
 
 __all__ = ["StepRecord"]
 
@@ -52,16 +57,13 @@ class StepRecord:
     cell_move : object or None
         What a barostat's drift query returned during this step (see
         :meth:`rigidmd.couplings.base.Coupling.drift_matrices`); None before the drift.
-    compiled : bool
-        The kinetic tensor and the rotational kinetic energy come from the compiled
-        loops of :mod:`rigidmd.core._numba` (the dynamics' ``"numba"`` backend), not from
-        :mod:`rigidmd.core.observables`.
+    link : rigidmd.core.link.BodyLink or None
+        The body link whose backend the record's sums follow (None: NumPy).
     """
 
-    def __init__(self, state: RigidState, model: BodyModel, compiled: bool = False):
+    def __init__(self, state: RigidState, model: BodyModel, link: "BodyLink | None" = None):
         nb, nf = model.n_bodies, model.n_free
-        self.state, self.model = state, model
-        self.compiled = bool(compiled)
+        self.state, self.model, self.link = state, model, link
         self.F, self.tau = np.zeros((nb, 3)), np.zeros((nb, 3))
         self.f = np.zeros((nf, 3))
         self.r = np.zeros((len(model.order), 3))
@@ -72,6 +74,12 @@ class StepRecord:
         self._volume = None
         self._kinetic = None
         self._rotational = None
+
+    @property
+    def compiled(self) -> bool:
+        """The sums run the compiled loops of :mod:`rigidmd.core._numba`: the link's backend
+        (``link.compiled``; the dynamics' ``"numba"``), not :mod:`rigidmd.core.observables`."""
+        return self.link is not None and self.link.compiled
 
     # ------------------------------------------------------------ derived, once
     @property
@@ -95,7 +103,8 @@ class StepRecord:
     @property
     def translational_energy(self) -> float:
         """Kinetic energy of the centres of mass and point particles (eV)."""
-        return 0.5 * float(np.trace(self.kinetic_tensor))
+        K = self.kinetic_tensor
+        return 0.5 * float(K[0, 0] + K[1, 1] + K[2, 2])  # the trace, summed in its order
 
     @property
     def rotational_energy(self) -> float:
@@ -122,20 +131,49 @@ class StepRecord:
         """Every translational velocity was multiplied by ``factor`` (a number or a 3x3 matrix).
 
         A matrix acts on each velocity as :math:`V \\leftarrow F V`; the kinetic
-        tensor becomes :math:`F K F^\\mathsf{T}` without a new sum over bodies.
+        tensor becomes :math:`F K F^\\mathsf{T}` (a number: :math:`s^2 K`) without a
+        new sum over bodies.
         """
-        if self._kinetic is None:
+        K = self._kinetic
+        if K is None:
             return
-        factor = np.asarray(factor, dtype=float)
-        if factor.ndim == 0:
-            self._kinetic = self._kinetic * float(factor) ** 2
+        if isinstance(factor, np.ndarray) and factor.ndim == 2:
+            self._kinetic = (_numba.congruence(factor, K) if self.compiled
+                             else factor @ K @ factor.T)
         else:
-            self._kinetic = factor @ self._kinetic @ factor.T
+            self._kinetic = K * float(factor) ** 2
+
+    def scale_translation_about(self, factor: float, centre: np.ndarray, mass: float) -> None:
+        r"""Every translational velocity became :math:`U + s\,(V - U)`, :math:`U = P/M`.
+
+        With :math:`\sum m (V - U) = 0` the kinetic tensor becomes
+        :math:`M\,U\otimes U + s^2 (K - M\,U\otimes U)`: the centre of mass's part
+        kept, the rest scaled, without a new sum over bodies.  ``centre`` is
+        :math:`U` (Å / ASE time, shape (3,)), ``mass`` :math:`M` (amu), the total.
+        """
+        K = self._kinetic
+        if K is None:
+            return
+        K_cm = mass * np.multiply.outer(centre, centre)
+        self._kinetic = K_cm + float(factor) ** 2 * (K - K_cm)
 
     def scale_rotation(self, factor: float) -> None:
         """Every angular momentum was multiplied by ``factor``."""
         if self._rotational is not None:
             self._rotational = self._rotational * float(factor) ** 2
+
+    def net_force(self) -> tuple[float, float]:
+        """``(|sum of the forces|, sum of their magnitudes)`` of the last force call (eV/Å).
+
+        Body forces and point-particle forces together: zero for forces that
+        conserve the momentum, to roundoff.  One pass over the forces, on the
+        link's backend.
+        """
+        if self.compiled:
+            net, size = _numba.net_force(self.F, self.f)
+            return float(net), float(size)
+        net = float(np.linalg.norm(self.F.sum(axis=0) + self.f.sum(axis=0)))
+        return net, float(np.abs(self.F).sum() + np.abs(self.f).sum())
 
     # ------------------------------------------------------------ rollback and checkpoints
     def get_state(self) -> dict:

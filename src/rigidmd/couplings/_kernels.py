@@ -7,12 +7,14 @@ compiled call on the state buffer and a few 3x3 matrices:
 kernel                             reference
 =================================  ===================================================
 :func:`chain_propagate`            :meth:`rigidmd.couplings.base.NoseHooverChain.propagate`
+:func:`chain_scale`                :meth:`rigidmd.couplings.base.NoseHooverChain.act_on`
 :func:`symmetric_exp`              :func:`rigidmd.couplings.barostats.symmetric_exp`
 :func:`mtk_kick`                   ``MTKBarostat`` kick of :math:`p_g` by the pressure
-:func:`mtk_thermostat`             ``MTKBarostat``'s chain on the cell momentum
 :func:`mtk_momentum_scale`         ``MTKBarostat``'s :math:`e^{-\kappa h}` (the friction)
 :func:`scale_translation`          :math:`V \leftarrow V F^\mathsf{T}` and the same of ``v``
+:func:`mtk_friction`               ``MTKBarostat``'s friction, applied
 :func:`scale_velocities`           :meth:`rigidmd.couplings.thermostats.Thermostat.scale`
+:func:`nose_hoover_scale`          ``NoseHooverThermostat``'s chains and scaling
 :func:`crescale_move`              ``CRescaleBarostat.drift_matrices``' arithmetic
 :func:`crescale_work`              ``CRescaleBarostat.second_half``'s bookkeeping
 =================================  ===================================================
@@ -31,9 +33,9 @@ import numpy as np
 
 from rigidmd.core._numba import jit
 
-__all__ = ["COUPLE_CODES", "chain_propagate", "symmetric_exp", "mtk_kick", "mtk_thermostat",
-           "mtk_momentum_scale", "scale_translation", "scale_velocities", "crescale_move",
-           "crescale_work"]
+__all__ = ["COUPLE_CODES", "chain_propagate", "chain_scale", "symmetric_exp", "mtk_kick",
+           "mtk_momentum_scale", "mtk_friction", "scale_translation", "scale_velocities",
+           "nose_hoover_scale", "crescale_move", "crescale_work"]
 
 #: ``couple`` as the kernels take it.
 COUPLE_CODES = {"iso": 0, "aniso": 1, "tri": 2}
@@ -80,6 +82,20 @@ def chain_propagate(xi, eta, ndof, unit_mass, K, kT, h, tloop):
                 * damp
         xi[M - 1] += 0.5 * delta * _chain_force(M - 1, K2, xi, ndof, kT, Q0, Q)
     return scale
+
+
+@jit
+def chain_scale(p, mass, xi, eta, ndof, unit_mass, kT, h, tloop):
+    r""":func:`chain_propagate` driven by the kinetic energy :math:`\sum p^2/2m` of a
+    momentum ``p`` (2-D, mass ``mass``), which it scales in place."""
+    K = 0.0
+    for i in range(p.shape[0]):
+        for j in range(p.shape[1]):
+            K += p[i, j] * p[i, j]
+    scale = chain_propagate(xi, eta, ndof, unit_mass, K / (2 * mass), kT, h, tloop)
+    for i in range(p.shape[0]):
+        for j in range(p.shape[1]):
+            p[i, j] *= scale
 
 
 @jit
@@ -158,20 +174,6 @@ def mtk_kick(p_g, virial, kinetic, volume, pressure_au, n_f, h, couple):
 
 
 @jit
-def mtk_thermostat(p_g, xi, eta, ndof, unit_mass, kT, W, h, tloop):
-    r"""The barostat's own chain over ``h``, driven by :math:`\mathrm{Tr}(p_g^2)/2W`;
-    :math:`p_g` scaled in place."""
-    K = 0.0
-    for a in range(3):
-        for c in range(3):
-            K += p_g[a, c] ** 2
-    scale = chain_propagate(xi, eta, ndof, unit_mass, K / (2 * W), kT, h, tloop)
-    for a in range(3):
-        for c in range(3):
-            p_g[a, c] *= scale
-
-
-@jit
 def mtk_momentum_scale(p_g, W, n_f, h):
     r""":math:`e^{-\kappa h}` with :math:`\kappa = (p_g + \mathrm{Tr}(p_g)/N_f)/W` (3x3)."""
     trace = p_g[0, 0] + p_g[1, 1] + p_g[2, 2]
@@ -194,6 +196,14 @@ def scale_translation(data, n, nf, F):
 
 
 @jit
+def mtk_friction(data, n, nf, p_g, W, n_f, h):
+    r""":func:`mtk_momentum_scale` applied by :func:`scale_translation`; returns the factor."""
+    F = mtk_momentum_scale(p_g, W, n_f, h)
+    scale_translation(data, n, nf, F)
+    return F
+
+
+@jit
 def scale_velocities(data, n, nf, translational, rotational):
     """``V, v`` times ``translational`` and ``p`` times ``rotational`` in the state buffer."""
     for k in range(3 * n, 6 * n):
@@ -202,6 +212,18 @@ def scale_velocities(data, n, nf, translational, rotational):
         data[k] *= rotational
     for k in range(14 * n + 3 * nf, 14 * n + 6 * nf):
         data[k] *= translational
+
+
+@jit
+def nose_hoover_scale(data, n, nf, xi_t, eta_t, ndof_t, xi_r, eta_r, ndof_r, unit_mass, K_t,
+                      K_r, kT, h, tloop):
+    """Both chains of a Nosé–Hoover thermostat over ``h`` (:func:`chain_propagate`, the
+    translational then the rotational) and their scalings (:func:`scale_velocities`);
+    returns the two scales."""
+    translational = chain_propagate(xi_t, eta_t, ndof_t, unit_mass, K_t, kT, h, tloop)
+    rotational = chain_propagate(xi_r, eta_r, ndof_r, unit_mass, K_r, kT, h, tloop)
+    scale_velocities(data, n, nf, translational, rotational)
+    return translational, rotational
 
 
 @jit
@@ -236,16 +258,24 @@ def _inverse(A, det):
 
 
 @jit
-def crescale_move(pressure, volume, pressure_au, kT, beta, taup, dt, xi_lambda, xi_eta, basis):
+def crescale_move(virial, kinetic, volume, pressure_au, kT, beta, taup, dt, xi_lambda, xi_eta,
+                  basis, h):
     r"""Stochastic cell rescaling's move of one step (Bernetti & Bussi's "T" scheme).
 
-    Returns ``(mu, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first)``:
-    the cell strain :math:`\mu` and its inverse, :math:`\det\mu`, the steps of
-    :math:`\lambda = \sqrt V` and of the shape components, the two
-    mobilities and the bookkeeping of the first half; ``mu`` is None-free:
-    a collapsing volume gives ``det = 0`` and ``step_lambda / sqrt(V) <= -1``
+    The pressure is :math:`(\mathsf W + \mathsf K)/V` of the molecular ``virial``
+    and the kinetic tensor ``kinetic`` (eV) at the ``volume``.  Returns
+    ``(mu, B, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first, moved)``:
+    the cell strain :math:`\mu`, the drift's :math:`B = \tfrac h2(\mu + \mu^{-1})`,
+    :math:`\mu^{-1}`, :math:`\det\mu`, the steps of :math:`\lambda = \sqrt V` and of
+    the shape components, the two mobilities, the bookkeeping of the first half and
+    the kinetic tensor of the velocities as the drift leaves them,
+    :math:`\mu^{-1}\mathsf K\mu^{-\mathsf T}`.  A collapsing volume gives ``det = 0``
     (the caller refuses it).
     """
+    pressure = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            pressure[i, j] = (virial[i, j] + kinetic[i, j]) / volume
     f_lambda, f_eta = _crescale_forces(pressure, volume, pressure_au, kT, basis)
     d_lambda = 0.25 * kT * beta / taup
     d_eta = kT * beta / (3.0 * taup * volume)
@@ -257,7 +287,8 @@ def crescale_move(pressure, volume, pressure_au, kT, beta, taup, dt, xi_lambda, 
         step_eta[k] = d_eta / kT * f_eta[k] * dt + np.sqrt(2.0 * d_eta * dt) * xi_eta[k]
     identity = np.eye(3)
     if not step_lambda / lam > -1.0:
-        return identity, identity, 0.0, step_lambda, step_eta, d_lambda, d_eta, 0.0
+        return (identity, identity, identity, 0.0, step_lambda, step_eta, d_lambda, d_eta, 0.0,
+                identity)
     strain = (2.0 / 3.0) * np.log1p(step_lambda / lam) * identity
     for k in range(m):
         for i in range(3):
@@ -273,7 +304,16 @@ def crescale_move(pressure, volume, pressure_au, kT, beta, taup, dt, xi_lambda, 
     first = (0.5 * step_lambda * f_lambda
              - 0.25 * d_lambda / kT * dt * f_lambda**2 + 0.5 * kT * np.log(volume)
              + 0.5 * eta_f - 0.25 * d_eta / kT * dt * eta_ff)
-    return mu, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first
+    B = 0.5 * h * (mu + inverse)
+    moved = np.zeros((3, 3))
+    for i in range(3):
+        for j in range(3):
+            total = 0.0
+            for a in range(3):
+                for b in range(3):
+                    total += inverse[i, a] * kinetic[a, b] * inverse[j, b]
+            moved[i, j] = total
+    return mu, B, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first, moved
 
 
 @jit

@@ -24,7 +24,6 @@ lower-triangular form, which rigidmd's own LAMMPS calculator handles).
 import numpy as np
 from ase import units
 
-from rigidmd.core import _numba
 from rigidmd.core import observables as obs
 from rigidmd.core.bodies import check_bodies_fit
 from rigidmd.core.dynamics import RigidDynamics
@@ -55,6 +54,10 @@ COUPLE = {"iso": 1, "aniso": 3, "tri": 6}
 
 #: Largest relative volume change accepted in one step.
 MAX_VOLUME_CHANGE = 0.1
+
+#: The drift's velocity map ``S`` of a barostat that does not scale in the drift (read-only).
+_IDENTITY = np.eye(3)
+_IDENTITY.flags.writeable = False
 
 
 class BarostatError(ValueError):
@@ -256,7 +259,6 @@ class MTKBarostat(Barostat):
         super().bind(view)
         #: :math:`N_f`, the centres of mass' and point particles' degrees of freedom.
         self.n_f = view.model.translational_dof
-        self.chain.compiled = view.compiled
 
     @property
     def W(self):
@@ -264,73 +266,60 @@ class MTKBarostat(Barostat):
         return (self.n_f / 3 + 1) * self.kT * self.pdamp**2
 
     def cell_kinetic_energy(self):
-        return float(np.sum(self.p_g**2) / (2 * self.W))
+        r""":math:`\mathrm{Tr}(p_g^2)/2W` (eV)."""
+        p = self.p_g.ravel()
+        return float(p @ p) / (2 * self.W)
 
     def _kappa(self):
         """Friction tensor of the translational momenta, (p_g + Tr(p_g)/N_f) / W."""
         return (self.p_g + np.trace(self.p_g) / self.n_f * np.eye(3)) / self.W
 
+    # Each operator runs its kernel (:mod:`._kernels`) on the compiled backend, else the
+    # NumPy reference beside it.
+    def _thermostat(self, view, h):
+        """The barostat's own chain over ``h``, driven by the cell's kinetic energy."""
+        self.chain.act_on(self.p_g, self.W, self.kT, h, view.compiled)
+
     def _kick(self, view, h):
         """:math:`p_g \\mathrel{+}= h\\,G` with the pressure at the current state."""
         record = view.record
+        if view.compiled:
+            _kernels.mtk_kick(self.p_g, record.virial, record.kinetic_tensor, record.volume,
+                              self.pressure_au, self.n_f, h, self._couple_code)
+            return
         kinetic = 2.0 * record.translational_energy / self.n_f
         G = record.volume * (self.pressure_tensor(view) - self.pressure_au * np.eye(3))
         self.p_g += h * project(G + kinetic * np.eye(3), self.couple)
 
-    def _thermostat(self, h):
-        self.p_g *= self.chain.propagate(self.cell_kinetic_energy(), self.kT, h)
-
     def _scale_momenta(self, view, h):
+        """The friction: :math:`V \\leftarrow e^{-\\kappa h} V`, and of the point particles."""
         s = view.state
-        factor, _ = symmetric_exp(-self._kappa(), h)
-        s.V[...] = s.V @ factor.T
-        s.v[...] = s.v @ factor.T
-        view.record.scale_translation(factor)
-
-    def _kick_compiled(self, view, h):
-        record = view.record
-        _kernels.mtk_kick(self.p_g, record.virial, record.kinetic_tensor, record.volume,
-                          self.pressure_au, self.n_f, h, self._couple_code)
-
-    def _thermostat_compiled(self, h):
-        chain, kT = self.chain, self.kT
-        _kernels.mtk_thermostat(self.p_g, chain.xi, chain.eta, chain.ndof,
-                                kT * chain.tdamp**2, kT, self.W, h, chain.tloop)
-
-    def _scale_momenta_compiled(self, view, h):
-        s = view.state
-        factor = _kernels.mtk_momentum_scale(self.p_g, self.W, self.n_f, h)
-        _kernels.scale_translation(s.data, len(s.X), len(s.x), factor)
+        if view.compiled:
+            factor = _kernels.mtk_friction(s.data, len(s.X), len(s.x), self.p_g, self.W,
+                                           self.n_f, h)
+        else:
+            factor, _ = symmetric_exp(-self._kappa(), h)
+            s.V[...] = s.V @ factor.T
+            s.v[...] = s.v @ factor.T
         view.record.scale_translation(factor)
 
     def first_half(self, view: CouplingView, h: float) -> None:
-        if view.compiled:
-            self._thermostat_compiled(h)
-            self._kick_compiled(view, h)
-            self._scale_momenta_compiled(view, h)
-            return
-        self._thermostat(h)
+        self._thermostat(view, h)
         self._kick(view, h)
         self._scale_momenta(view, h)
 
     def second_half(self, view: CouplingView, h: float) -> None:
-        if view.compiled:
-            self._scale_momenta_compiled(view, h)
-            self._kick_compiled(view, h)
-            self._thermostat_compiled(h)
-            return
         self._scale_momenta(view, h)
         self._kick(view, h)
-        self._thermostat(h)
+        self._thermostat(view, h)
 
     def drift_matrices(self, view: CouplingView, h: float) -> tuple:
         if view.compiled:
             A, B, det = _kernels.symmetric_exp(self.p_g / self.W, h)
-            self.check_volume_change(A, det)
-            return A, B, np.eye(3), None
-        A, B = symmetric_exp(self.p_g / self.W, h)
-        self.check_volume_change(A)
-        return A, B, np.eye(3), None
+        else:
+            (A, B), det = symmetric_exp(self.p_g / self.W, h), None
+        self.check_volume_change(A, det)
+        return A, B, _IDENTITY, None
 
     def energy(self, view: CouplingView) -> float:
         return (self.cell_kinetic_energy() + self.pressure_au * view.record.volume
@@ -484,7 +473,7 @@ class CRescaleBarostat(Barostat):
         """The cell's move in the step's first drift, from this step's noise; changes nothing."""
         record = view.record
         if record.cell_move is not None or self._noise is None:  # moved already, or not now
-            return np.eye(3), h * np.eye(3), np.eye(3), None
+            return _IDENTITY, h * _IDENTITY, _IDENTITY, None
         kT, dt = self.kT, self._span
         volume = record.volume
         if view.compiled:
@@ -516,19 +505,19 @@ class CRescaleBarostat(Barostat):
     def _move_compiled(self, view, volume, h):
         """:meth:`drift_matrices` in one compiled call (:func:`._kernels.crescale_move`)."""
         xi_lambda, xi_eta = self._noise
-        mu, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first = \
-            _kernels.crescale_move(self.pressure_tensor(view), volume, self.pressure_au, self.kT,
-                                   self.compressibility_au, self.taup, self._span, xi_lambda,
-                                   xi_eta, self.basis)
+        record = view.record
+        # The kinetic tensor is the record's (one sum per step; the kernel also gives it
+        # as the drift leaves the velocities, S V with S = mu^-1).
+        mu, B, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first, kinetic = \
+            _kernels.crescale_move(record.virial, record.kinetic_tensor, volume,
+                                   self.pressure_au, self.kT, self.compressibility_au,
+                                   self.taup, self._span, xi_lambda, xi_eta, self.basis, h)
         if det == 0.0:
             raise BarostatError(f"{self.kind} barostat: the volume would collapse in one step; "
                                 "the step was undone (use a longer taup)")
         self.check_volume_change(mu, det)
-        s, m = view.state, view.model
-        # The kinetic tensor of the velocities as the drift leaves them (S V, S = mu^-1).
-        kinetic = inverse @ _numba.kinetic_tensor(s.V, s.v, m.mass, m.free_masses) @ inverse.T
         note = (step_lambda, step_eta, d_lambda, d_eta, kinetic, first)
-        return mu, 0.5 * h * (mu + inverse), inverse, note
+        return mu, B, inverse, note
 
     def second_half(self, view: CouplingView, h: float) -> None:
         record = view.record

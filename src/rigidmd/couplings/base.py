@@ -20,6 +20,11 @@ evaluator and the step number).  The parts themselves live beside the
 classes users construct: :mod:`rigidmd.couplings.thermostats`,
 :mod:`rigidmd.couplings.barostats` and :mod:`rigidmd.couplings.montecarlo`.
 
+:class:`Thermostat` is what the thermostats share (the target temperature,
+``fixcm`` and the total momentum, the kinetic energies they act on and their
+scaling, which the record follows); :class:`NoseHooverChain` is the chain the
+Nosé–Hoover thermostat and the MTK barostat share.
+
 :data:`COUPLINGS` maps each kind's name (``"langevin"``, ``"bussi"``,
 ``"nose_hoover"``, ``"monte_carlo"``, ...) to its class; the class's
 :attr:`Coupling.parameters` say which parameters it takes, with which units, so
@@ -27,11 +32,12 @@ that the configuration checker, the command line and the LAMMPS export all read
 one registry.
 """
 
+import warnings
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
-from ase import Atoms
+from ase import Atoms, units
 
 from rigidmd.core.forces import ForceEvaluator
 from rigidmd.core.model import BodyModel
@@ -40,7 +46,8 @@ from rigidmd.core.state import RigidState
 from rigidmd.couplings import _kernels
 
 __all__ = ["Coupling", "CouplingView", "Parameter", "COUPLINGS", "register", "NotExportable",
-           "LammpsFix", "NoseHooverChain", "check_rng", "rng_state", "set_rng_state",
+           "LammpsFix", "NoseHooverChain", "NET_FORCE_FLOOR", "check_rng", "rng_state",
+           "set_rng_state",
            "rng_kind", "new_rng", "check_composition", "export_parts",
            "check_temperature", "check_time", "check_flag", "check_positive_integer",
            "TEMPERATURE"]
@@ -145,9 +152,8 @@ class CouplingView:
         Steps completed before the one being taken.
     fixcom : bool
         The total momentum is held at zero (ASE's ``FixCom`` on the atoms).
-    compiled : bool
-        The parts run their compiled kernels (:mod:`rigidmd.couplings._kernels`; the
-        dynamics' ``"numba"`` backend) instead of their NumPy references.
+    cell_moves : bool
+        A part of the dynamics moves the cell (a barostat).
     """
 
     state: RigidState
@@ -156,7 +162,13 @@ class CouplingView:
     evaluator: ForceEvaluator
     step: int = 0
     fixcom: bool = False
-    compiled: bool = False
+    cell_moves: bool = False
+
+    @property
+    def compiled(self) -> bool:
+        """The parts run their compiled kernels (:mod:`rigidmd.couplings._kernels`), not
+        their NumPy references: the backend of the record's link (the dynamics' ``"numba"``)."""
+        return self.record.compiled
 
 
 class Coupling:
@@ -189,10 +201,10 @@ class Coupling:
     #: Whether the part reads the potential energy (``view.record.energy``) at every step,
     #: so that every force call asks the calculator for it (a Monte Carlo move's old energy).
     needs_energy: ClassVar[bool] = False
-    #: Whether the part keeps the total momentum (a thermostat's ``fixcm``).
+    #: Whether the part keeps the total momentum (a thermostat's ``fixcm``, resolved by
+    #: :meth:`bind`).
     fixcm: bool = False
-    #: The ``fixcm`` asked for; None: :func:`check_composition` decides (True unless a
-    #: barostat moves the cell).
+    #: The ``fixcm`` asked for; None: True unless a barostat moves the cell (:meth:`bind`).
     fixcm_option: bool | None = False
     #: Names of the columns the part adds to the MD log (values from :meth:`log_values`).
     log_columns: ClassVar[tuple] = ()
@@ -356,27 +368,25 @@ class NoseHooverChain:
         Time constant (ASE time units).
     tchain, tloop : int
 
-    Attributes
-    ----------
-    compiled : bool
-        :meth:`propagate` runs :func:`rigidmd.couplings._kernels.chain_propagate`
-        (set by the part that owns the chain, from its view).
     """
 
     def __init__(self, ndof, tdamp, tchain, tloop):
         self.ndof, self.tdamp, self.tchain, self.tloop = ndof, tdamp, tchain, tloop
         self.xi = np.zeros(tchain)
         self.eta = np.zeros(tchain)
-        self.compiled = False
 
     def masses(self, kT):
         Q = np.full(self.tchain, kT * self.tdamp**2)
         Q[0] *= self.ndof
         return Q
 
-    def propagate(self, K, kT, h):
-        """Advance over ``h`` with the group's kinetic energy ``K``; returns its velocity scale."""
-        if self.compiled:
+    def propagate(self, K, kT, h, compiled=False):
+        """Advance over ``h`` with the group's kinetic energy ``K``; returns its velocity scale.
+
+        ``compiled``: run :func:`rigidmd.couplings._kernels.chain_propagate` (the
+        caller's ``view.compiled``) instead of the NumPy reference below.
+        """
+        if compiled:
             return _kernels.chain_propagate(self.xi, self.eta, self.ndof, kT * self.tdamp**2,
                                             float(K), kT, h, self.tloop)
         if self.ndof == 0:
@@ -409,6 +419,19 @@ class NoseHooverChain:
             xi[M - 1] += 0.5 * delta * force(M - 1, K2)
         return scale
 
+    def act_on(self, p, mass, kT, h, compiled=False):
+        r"""Advance over ``h`` on a momentum of kinetic energy :math:`\sum p^2 / 2m`; scale it.
+
+        ``p`` (2-D, changed in place) is the momentum the chain acts on, ``mass`` its
+        mass (a barostat's cell momentum :math:`p_g` and mass :math:`W`).
+        """
+        if compiled:
+            _kernels.chain_scale(p, mass, self.xi, self.eta, self.ndof, kT * self.tdamp**2,
+                                 kT, h, self.tloop)
+            return
+        flat = p.ravel()
+        p *= self.propagate(float(flat @ flat) / (2 * mass), kT, h)
+
     def energy(self, kT):
         if self.ndof == 0:
             return 0.0
@@ -424,10 +447,183 @@ class NoseHooverChain:
         self.eta[...] = state["eta"]
 
 
+#: Net force (eV/Å) below which the forces count as conserving the momentum whatever
+#: their size: on a 216-water box it moves the centre 1.2 Å and does 1.2e-6 eV of work in
+#: a nanosecond (kT is 0.026 eV), while roundoff sums to ~1e-17 (measured: 8 LJ dimers with
+#: no pair in range, which the relative bound alone warned about).
+NET_FORCE_FLOOR = 1e-6
+
+
+def fixcm_parameter(default):
+    return Parameter("fixcm", "fixcm", "flag", required=False, default=default)
+
+
+class Thermostat(Coupling):
+    r"""Shared parts of the thermostats: the target temperature and kinetic energies.
+
+    With ``fixcm`` the thermostat leaves the total momentum
+    :math:`P = \sum_b M_b V_b + \sum_{free} m v` (and so the centre of mass's
+    motion) as it finds it: it acts on the velocities relative to the centre
+    of mass velocity :math:`U = P / M` and on :math:`N_f - 3` translational
+    degrees of freedom, as ASE's ``Langevin(fixcm=True)`` does.  Long
+    thermostatted runs then do not drift as a whole (a drift adds to a
+    measured diffusion coefficient).
+
+    ``fixcm=None`` (the default of the parts) becomes True when the part is
+    bound to a dynamics, or False if a barostat moves the cell (the barostats'
+    equations count the centre of mass; an explicit ``fixcm=True`` with a
+    barostat is refused).  Without it a global thermostat (Bussi,
+    Nosé–Hoover) rescales the total momentum with every other velocity; the
+    forces conserve it, so a zero momentum stays zero and the kinetic energy
+    of :math:`N_f` degrees of freedom lands on :math:`N_f - 3`: the system
+    then samples :math:`T N_f / (N_f - 3)`, 0.23 % above the target for 216
+    rigid waters and 1.9 % for 27.
+    """
+
+    section = "thermostat"
+
+    def __init__(self, temperature_K, fixcm=None):
+        self.temperature_K = check_temperature(temperature_K)
+        #: What was asked: True, False or None (True unless a barostat moves the cell).
+        self.fixcm_option = None if fixcm is None else check_flag("fixcm", fixcm)
+        #: Whether the total momentum is kept; None until :meth:`bind` resolves the option.
+        self.fixcm = self.fixcm_option
+
+    @property
+    def kT(self):
+        """:math:`k_B T` (eV)."""
+        return units.kB * self.temperature_K
+
+    def set_temperature(self, temperature_K):
+        """Change the target temperature (K), as ASE's thermostats do."""
+        self.temperature_K = check_temperature(temperature_K)
+
+    def bind(self, view: CouplingView) -> None:
+        super().bind(view)
+        #: Whether the thermostat keeps the total momentum: ``fixcm``, or for None
+        #: whether no part moves the cell.
+        self.fixcm = not view.cell_moves if self.fixcm_option is None else self.fixcm_option
+        #: The total momentum is kept: by ``fixcm`` or by ASE's ``FixCom`` on the atoms.
+        self.holds_momentum = self.fixcm or view.fixcom
+        n = view.model.translational_dof
+        #: Translational degrees of freedom the thermostat acts on (3 fewer when it
+        #: keeps the total momentum).
+        self.n_translational = max(n - 3, 0) if self.holds_momentum else n
+        #: Whether :meth:`second_half` looks at the net force: the momentum is kept by
+        #: the default (``fixcm=None``), which a wall or a field makes wrong.
+        self.watches_net_force = self.fixcm_option is None and self.fixcm
+
+    #: Whether :meth:`check_net_force` has warned (once per thermostat).
+    warned = False
+    watches_net_force = False
+
+    def check_net_force(self, view: CouplingView) -> None:
+        """Warn once if the forces do not conserve the momentum that ``fixcm=None`` keeps.
+
+        A wall or an external field makes the centre of mass a thermal degree of
+        freedom: keeping the momentum then holds the rest at the target and leaves
+        it out of the count.  Pair forces cancel to roundoff and PPPM/PME to about
+        1e-5 of a force per atom; the threshold is 1e-3 of the summed magnitudes, and
+        at least :data:`NET_FORCE_FLOOR` (forces that are all roundoff, no pair in
+        range, sum to ~1e-17 eV/Å, which no relative bound tells from a field).
+        Called once per step, on the forces of the step's (last) force call.
+        """
+        net, size = view.record.net_force()
+        if net <= max(NET_FORCE_FLOOR, 1e-3 * size):
+            return
+        self.warned = True
+        if view.fixcom:  # ASE's FixCom holds it too: fixcm=False alone changes nothing
+            advice = ("ASE's FixCom on the atoms and the thermostat's default fixcm=None "
+                      "both keep it; remove FixCom from atoms.constraints and pass "
+                      "fixcm=False")
+        else:
+            advice = "pass fixcm=False"
+        warnings.warn(
+            f"{self.kind} thermostat: the total momentum is kept (fixcm=None, the default, "
+            f"keeps it when no barostat moves the cell) but the forces do not conserve it "
+            f"(net force {net:.3g} eV/Å at step {view.step + 1}): with a wall or an "
+            f"external field the centre of mass is a thermal degree of freedom; {advice}",
+            stacklevel=2)
+
+    def second_half(self, view: CouplingView, h: float) -> None:
+        """The first half's action; once per step, the net-force check of the default fixcm."""
+        if self.watches_net_force and not self.warned:
+            self.check_net_force(view)
+        self.first_half(view, h)
+
+    def centre(self, view: CouplingView) -> tuple[np.ndarray, float]:
+        """:math:`U = P / M` (Å / ASE time, shape (3,)) and the total mass :math:`M` (amu)."""
+        s, m = view.state, view.model
+        M = m.mass.sum() + m.free_masses.sum()
+        return (m.mass @ s.V + m.free_masses @ s.v) / M, M
+
+    def centre_velocity(self, view: CouplingView) -> np.ndarray:
+        """:math:`U = P / M` (Å / ASE time), shape (3,); zero unless the momentum is kept."""
+        return self.centre(view)[0] if self.holds_momentum else np.zeros(3)
+
+    def set_centre_velocity(self, view: CouplingView, U: np.ndarray) -> None:
+        """Shift all translational velocities so that :math:`P/M` is ``U`` again."""
+        if self.holds_momentum:
+            shift = U - self.centre_velocity(view)
+            s = view.state
+            s.V += shift
+            s.v += shift
+
+    def kinetic_energies(self, view: CouplingView) -> tuple[float, float]:
+        """(translational, rotational) kinetic energy the thermostat acts on (eV).
+
+        When the momentum is kept the translational part is that relative
+        to the centre of mass.
+        """
+        record = view.record
+        if not self.holds_momentum:
+            return record.translational_energy, record.rotational_energy
+        U, M = self.centre(view)
+        return record.translational_energy - 0.5 * M * float(U @ U), record.rotational_energy
+
+    def scale(self, view: CouplingView, translational: float, rotational: float) -> None:
+        """Multiply translational velocities (relative to U) and angular momenta.
+
+        The record's kinetic sums follow the scaling (no new sum over bodies).
+        """
+        s, record = view.state, view.record
+        if self.holds_momentum:
+            U, M = self.centre(view)
+            s.V[...] = U + translational * (s.V - U)
+            s.v[...] = U + translational * (s.v - U)
+            s.p *= rotational
+            record.scale_translation_about(translational, U, M)
+        elif view.compiled:  # the three scalings in one pass over the state buffer
+            _kernels.scale_velocities(s.data, len(s.X), len(s.x), float(translational),
+                                      float(rotational))
+            record.scale_translation(translational)
+        else:
+            s.V *= translational
+            s.v *= translational
+            s.p *= rotational
+            record.scale_translation(translational)
+        record.scale_rotation(rotational)
+
+    def fixcm_notes(self):
+        """What the deck says about ``fixcm``, which LAMMPS's rigid thermostats do not have."""
+        if self.fixcm is False:
+            return ()
+        when = "(fixcm=True)" if self.fixcm else "unless a barostat moves the cell (fixcm=None)"
+        return (f"rigidmd's {self.kind} thermostat keeps the total momentum {when}; "
+                "LAMMPS's rigid thermostat acts on it too, so statistics differ by 3 "
+                "degrees of freedom",)
+
+    def todict(self):
+        """The parameters as given: ``fixcm`` None stays None (a dynamics resolves it)."""
+        return {"kind": self.kind, "temperature_K": self.temperature_K,
+                "fixcm": self.fixcm_option}
+
+
 def check_composition(couplings, fixcom: bool):
     """Refuse what no dynamics can compose; returns the part that moves the cell, or None.
 
-    Resolves a thermostat's ``fixcm=None``: True, or False when a part moves the cell.
+    Changes nothing: a thermostat's ``fixcm=None`` is resolved when it is bound
+    (True, or False when a part moves the cell).
     """
     for part in couplings:
         if not isinstance(part, Coupling):
@@ -440,9 +636,6 @@ def check_composition(couplings, fixcom: bool):
     if movers and any(part.fixcm_option for part in couplings):
         raise ValueError("thermostat fixcm=True with a barostat: the barostat's equations "
                          "count the centre of mass's degrees of freedom; use fixcm=False")
-    for part in couplings:  # a thermostat's fixcm=None: keep the momentum unless a barostat
-        if part.fixcm_option is None:
-            part.fixcm = not movers
     if movers and fixcom:
         raise ValueError("ase.constraints.FixCom with a barostat: the barostat's equations "
                          "count the centre of mass's degrees of freedom; remove FixCom")

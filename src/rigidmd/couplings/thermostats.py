@@ -20,7 +20,7 @@ thermostatted dynamics conserves: total energy minus the energy the
 thermostat put in (Langevin, Bussi), or plus the chains' energy (Nosé–Hoover).
 """
 
-import warnings
+import math
 
 import numpy as np
 from ase import units
@@ -30,17 +30,17 @@ from rigidmd.core.dynamics import RigidDynamics
 from rigidmd.couplings import _kernels
 from rigidmd.couplings.base import (
     TEMPERATURE,
-    Coupling,
     CouplingView,
     LammpsFix,
     NoseHooverChain,
     NotExportable,
     Parameter,
-    check_flag,
+    Thermostat,
     check_positive_integer,
     check_rng,
     check_temperature,
     check_time,
+    fixcm_parameter,
     register,
     rng_state,
     set_rng_state,
@@ -51,159 +51,6 @@ __all__ = ["RigidLangevin", "RigidBussi", "RigidNoseHoover", "Thermostat",
 
 
 SEED = Parameter("rng", "seed", "seed", required=False)
-
-#: Net force (eV/Å) below which the forces count as conserving the momentum whatever
-#: their size: on a 216-water box it moves the centre 1.2 Å and does 1.2e-6 eV of work in
-#: a nanosecond (kT is 0.026 eV), while roundoff sums to ~1e-17 (measured: 8 LJ dimers with
-#: no pair in range, which the relative bound alone warned about).
-NET_FORCE_FLOOR = 1e-6
-
-
-def fixcm_parameter(default):
-    return Parameter("fixcm", "fixcm", "flag", required=False, default=default)
-
-
-class Thermostat(Coupling):
-    r"""Shared parts of the thermostats: the target temperature and kinetic energies.
-
-    With ``fixcm`` the thermostat leaves the total momentum
-    :math:`P = \sum_b M_b V_b + \sum_{free} m v` (and so the centre of mass's
-    motion) as it finds it: it acts on the velocities relative to the centre
-    of mass velocity :math:`U = P / M` and on :math:`N_f - 3` translational
-    degrees of freedom, as ASE's ``Langevin(fixcm=True)`` does.  Long
-    thermostatted runs then do not drift as a whole (a drift adds to a
-    measured diffusion coefficient).
-
-    ``fixcm=None`` (the default of the parts) becomes True when the dynamics
-    is composed, or False if a barostat moves the cell (the barostats'
-    equations count the centre of mass; an explicit ``fixcm=True`` with a
-    barostat is refused).  Without it a global thermostat (Bussi,
-    Nosé–Hoover) rescales the total momentum with every other velocity; the
-    forces conserve it, so a zero momentum stays zero and the kinetic energy
-    of :math:`N_f` degrees of freedom lands on :math:`N_f - 3`: the system
-    then samples :math:`T N_f / (N_f - 3)`, 0.23 % above the target for 216
-    rigid waters and 1.9 % for 27.
-    """
-
-    section = "thermostat"
-
-    def __init__(self, temperature_K, fixcm=None):
-        self.temperature_K = check_temperature(temperature_K)
-        #: What was asked: True, False or None (True unless a barostat moves the cell).
-        self.fixcm_option = None if fixcm is None else check_flag("fixcm", fixcm)
-        #: Whether the total momentum is kept; None until a dynamics resolves the option.
-        self.fixcm = self.fixcm_option
-
-    @property
-    def kT(self):
-        """:math:`k_B T` (eV)."""
-        return units.kB * self.temperature_K
-
-    def set_temperature(self, temperature_K):
-        """Change the target temperature (K), as ASE's thermostats do."""
-        self.temperature_K = check_temperature(temperature_K)
-
-    def bind(self, view: CouplingView) -> None:
-        super().bind(view)
-        #: The total momentum is kept: by ``fixcm`` or by ASE's ``FixCom`` on the atoms.
-        self.holds_momentum = self.fixcm or view.fixcom
-        n = view.model.translational_dof
-        #: Translational degrees of freedom the thermostat acts on (3 fewer when it
-        #: keeps the total momentum).
-        self.n_translational = max(n - 3, 0) if self.holds_momentum else n
-
-    #: Whether :meth:`check_net_force` has warned (once per thermostat).
-    warned = False
-    #: Calls of :meth:`check_net_force`; it looks at every 8th (8 µs of NumPy for 216
-    #: bodies, a wall's contact lasts many steps).
-    net_force_calls = 0
-
-    def check_net_force(self, record) -> None:
-        """Warn once if the forces do not conserve the momentum that ``fixcm=None`` keeps.
-
-        A wall or an external field makes the centre of mass a thermal degree of
-        freedom: keeping the momentum then holds the rest at the target and leaves
-        it out of the count.  Pair forces cancel to roundoff and PPPM/PME to about
-        1e-5 of a force per atom; the threshold is 1e-3 of the summed magnitudes, and
-        at least :data:`NET_FORCE_FLOOR` (forces that are all roundoff, no pair in
-        range, sum to ~1e-17 eV/Å, which no relative bound tells from a field).
-        """
-        self.net_force_calls += 1
-        if self.net_force_calls % 8 != 1:
-            return
-        net = float(np.linalg.norm(record.F.sum(axis=0) + record.f.sum(axis=0)))
-        if net > max(NET_FORCE_FLOOR,
-                     1e-3 * float(np.abs(record.F).sum() + np.abs(record.f).sum())):
-            self.warned = True
-            warnings.warn(
-                f"{self.kind} thermostat: it keeps the total momentum (fixcm=True, the "
-                f"default) but the forces do not conserve it (net force {net:.3g} eV/Å): "
-                "with a wall or an external field the centre of mass is a thermal degree "
-                "of freedom; pass fixcm=False", stacklevel=2)
-
-    def centre_velocity(self, view: CouplingView) -> np.ndarray:
-        """:math:`U = P / M` (Å / ASE time), shape (3,); zero unless the momentum is kept."""
-        s, m = view.state, view.model
-        if not self.holds_momentum:
-            return np.zeros(3)
-        P = m.mass @ s.V + m.free_masses @ s.v
-        return P / (m.mass.sum() + m.free_masses.sum())
-
-    def set_centre_velocity(self, view: CouplingView, U: np.ndarray) -> None:
-        """Shift all translational velocities so that :math:`P/M` is ``U`` again."""
-        if self.holds_momentum:
-            shift = U - self.centre_velocity(view)
-            s = view.state
-            s.V += shift
-            s.v += shift
-
-    def kinetic_energies(self, view: CouplingView) -> tuple[float, float]:
-        """(translational, rotational) kinetic energy the thermostat acts on (eV).
-
-        When the momentum is kept the translational part is that relative
-        to the centre of mass.
-        """
-        m, record = view.model, view.record
-        if not self.holds_momentum:
-            return record.translational_energy, record.rotational_energy
-        if self.fixcm_option is None and not self.warned:
-            self.check_net_force(record)
-        U = self.centre_velocity(view)
-        K_cm = 0.5 * (m.mass.sum() + m.free_masses.sum()) * float(U @ U)
-        return record.translational_energy - K_cm, record.rotational_energy
-
-    def scale(self, view: CouplingView, translational: float, rotational: float) -> None:
-        """Multiply translational velocities (relative to U) and angular momenta."""
-        s, record = view.state, view.record
-        if self.holds_momentum:
-            U = self.centre_velocity(view)
-            s.V[...] = U + translational * (s.V - U)
-            s.v[...] = U + translational * (s.v - U)
-            record.velocities_changed()
-            s.p *= rotational
-            return
-        if view.compiled:  # the three scalings in one pass over the state buffer
-            _kernels.scale_velocities(s.data, len(s.X), len(s.x), float(translational),
-                                      float(rotational))
-        else:
-            s.V *= translational
-            s.v *= translational
-            s.p *= rotational
-        record.scale_translation(translational)
-        record.scale_rotation(rotational)
-
-    def fixcm_notes(self):
-        """What the deck says about ``fixcm``, which LAMMPS's rigid thermostats do not have."""
-        if self.fixcm is False:
-            return ()
-        when = "(fixcm=True)" if self.fixcm else "unless a barostat moves the cell (fixcm=None)"
-        return (f"rigidmd's {self.kind} thermostat keeps the total momentum {when}; "
-                "LAMMPS's rigid thermostat acts on it too, so statistics differ by 3 "
-                "degrees of freedom",)
-
-    def todict(self):
-        return {"kind": self.kind, "temperature_K": self.temperature_K, "fixcm": self.fixcm}
-
 
 class _Stochastic(Thermostat):
     """A thermostat that draws random numbers and keeps count of the energy it adds."""
@@ -298,8 +145,6 @@ class LangevinThermostat(_Stochastic):
 
     def first_half(self, view: CouplingView, h: float) -> None:
         s, m, kT, rng, record = view.state, view.model, self.kT, self.rng, view.record
-        if self.holds_momentum and self.fixcm_option is None and not self.warned:
-            self.check_net_force(record)
         before = record.translational_energy + record.rotational_energy
         U = self.centre_velocity(view)
         c = np.exp(-self.friction * h)
@@ -348,12 +193,18 @@ def bussi_kinetic_energy(K, K_target, ndof, c, rng):
     sign : float
         Sign of the rescaling factor.
     """
-    r1 = rng.standard_normal()
-    rest = 2.0 * rng.standard_gamma(0.5 * (ndof - 1)) if ndof > 1 else 0.0
+    # Python floats and math.sqrt: NumPy's numbers to the bit (sqrt is correctly rounded
+    # in both), without a NumPy scalar operation per number.
+    r1 = float(rng.standard_normal())
+    rest = 2.0 * float(rng.standard_gamma(0.5 * (ndof - 1))) if ndof > 1 else 0.0
     ratio = K_target / ndof
     new = (c * K + (1.0 - c) * ratio * (r1 * r1 + rest)
-           + 2.0 * r1 * np.sqrt(c * (1.0 - c) * K * ratio))
-    sign = np.sign(r1 + np.sqrt(c * K / ((1.0 - c) * ratio))) if c < 1 else 1.0
+           + 2.0 * r1 * math.sqrt(c * (1.0 - c) * K * ratio))
+    if c < 1:
+        x = r1 + math.sqrt(c * K / ((1.0 - c) * ratio))
+        sign = 1.0 if x > 0 else -1.0 if x < 0 else 0.0
+    else:
+        sign = 1.0
     return new, sign
 
 
@@ -391,17 +242,23 @@ class BussiThermostat(_Stochastic):
         super().__init__(temperature_K, rng, fixcm)
         self.taut = check_time("taut", taut)
 
+    _decay = (None, None, 1.0)  # (h, taut, exp(-h / taut)) of the last half step
+
     def first_half(self, view: CouplingView, h: float) -> None:
-        c = np.exp(-h / self.taut)
+        h_last, taut, c = self._decay
+        if h != h_last or taut != self.taut:
+            c = float(np.exp(-h / self.taut))
+            self._decay = (h, self.taut, c)
         factors = []
+        kT = self.kT
         for K, ndof in zip(self.kinetic_energies(view),
                            (self.n_translational, view.model.rotational_dof), strict=True):
             if ndof == 0 or K <= 0:
                 factors.append(1.0)
                 continue
-            new, sign = bussi_kinetic_energy(K, 0.5 * ndof * self.kT, ndof, c, self.rng)
+            new, sign = bussi_kinetic_energy(K, 0.5 * ndof * kT, ndof, c, self.rng)
             self.work += new - K
-            factors.append(sign * np.sqrt(new / K))
+            factors.append(sign * math.sqrt(max(new, 0.0) / K))  # new < 0: roundoff of 0
         self.scale(view, *factors)
 
     def lammps_fix(self, time_unit, seed=12345):
@@ -481,14 +338,23 @@ class NoseHooverThermostat(Thermostat):
         super().bind(view)
         self.chains = tuple(NoseHooverChain(ndof, self.tdamp, self.tchain, self.tloop)
                             for ndof in (self.n_translational, view.model.rotational_dof))
-        for chain in self.chains:
-            chain.compiled = view.compiled
 
     def first_half(self, view: CouplingView, h: float) -> None:
         K_t, K_r = self.kinetic_energies(view)
         translation, rotation = self.chains
-        self.scale(view, translation.propagate(K_t, self.kT, h),
-                   rotation.propagate(K_r, self.kT, h))
+        kT = self.kT
+        if view.compiled and not self.holds_momentum:  # chains and scaling in one call
+            s, record = view.state, view.record
+            factors = _kernels.nose_hoover_scale(
+                s.data, len(s.X), len(s.x), translation.xi, translation.eta, translation.ndof,
+                rotation.xi, rotation.eta, rotation.ndof, kT * self.tdamp**2, K_t, K_r, kT, h,
+                self.tloop)
+            record.scale_translation(factors[0])
+            record.scale_rotation(factors[1])
+            return
+        compiled = view.compiled
+        self.scale(view, translation.propagate(K_t, kT, h, compiled),
+                   rotation.propagate(K_r, kT, h, compiled))
 
     def energy(self, view: CouplingView | None = None) -> float:
         """Energy of the two chains (eV)."""
@@ -572,7 +438,7 @@ class RigidLangevin(_Thermostatted):
     rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
     fixcm : bool or None, default None
         Keep the total momentum (no drift of the whole system), as ASE's ``Langevin``;
-        None is True, with a warning at the first step if the forces do not conserve the
+        None is True, with a warning at the first step whose forces do not conserve the
         momentum (a wall, an external field: pass False there).
     **kwargs
         ``bodies``, ``integrator``, ``integrator_options``, ``trajectory``,
@@ -613,7 +479,7 @@ class RigidBussi(_Thermostatted):
     rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
     fixcm : bool or None, default None
         Keep the total momentum (no drift of the whole system) and count 3 fewer
-        degrees of freedom; None is True, with a warning at the first step if the
+        degrees of freedom; None is True, with a warning at the first step whose
         forces do not conserve the momentum (a wall, an external field: pass False
         there).  With False the thermostat acts on the centre of mass too; from a
         zero total momentum (which the forces and the rescaling keep zero) the
