@@ -67,8 +67,6 @@ class IPICalculator(Calculator):
     for a new engine (subclasses start one).
     """
 
-    _copy = None  # this calculator's own copy of the atoms (see copy_atoms)
-
     implemented_properties = ["energy", "free_energy", "forces", "stress"]
 
     def __init__(self, unixsocket=None, *, port=None, host="localhost", timeout=120.0,
@@ -87,15 +85,14 @@ class IPICalculator(Calculator):
         self.port = None if port is None else int(port)
         self.host = host
         self.timeout = float(timeout)
-        self.connect_timeout = self.timeout if connect_timeout is None else float(
-            connect_timeout)
+        self.connect_timeout = self.timeout if connect_timeout is None else float(connect_timeout)
         self.bohr = float(bohr)
         self.hartree = float(hartree)
         self.tally_requests = bool(tally_requests)
         #: The ``extra`` string the engine sent with its last forces (bytes).
         self.engine_extra = b""
-        self._server = None
-        self._conn = None
+        self._server = self._conn = None
+        self._copy = None       # the atoms of the last call (copy_atoms writes into it)
         self._handshaken = False
         self._bound = None      # (device, inode) of the socket file this calculator bound
         self._peer = None       # the connected engine, in words
