@@ -125,6 +125,31 @@ def test_cell_changes_equal_a_fresh_lammps_with_the_same_kspace_parameters(comma
             assert "rigidmd_tally rmd_pressure" in " ".join(commands), (label, commands)
 
 
+def test_a_rotated_cell_that_stays_sends_no_new_box(commands):
+    """A cell that is not lower triangular (rotated into LAMMPS's frame at every cell):
+    after it changed through the plugin, calls at the same cell send LAMMPS nothing but the
+    step (the calculator compares the atoms' cell with the one it gave LAMMPS, in the
+    atoms' frame).  A regression kept LAMMPS's box there instead: every call at an unchanged
+    rotated cell re-sent the box and re-set PPPM (0.97 against 0.55 ms a call, 27 waters)."""
+    from ase.build import rotate
+
+    atoms = water_box_27()
+    rotate(atoms, [1, 0, 0], [np.cos(0.3), np.sin(0.3), 0], [0, 0, 1], [0, 0, 1],
+           rotate_cell=True)
+    assert atoms.cell.array[0, 1] != 0  # not lower triangular
+    atoms.calc = LAMMPSCalculator(PPPM_27)
+    atoms.get_forces()
+    for scale in (1.02, 1.01):  # the first change takes the plugin in, the second uses it
+        atoms.set_cell(atoms.cell * scale, scale_atoms=True)
+        atoms.get_forces()
+    assert any(c.startswith("rigidmd_box ") for c in commands)
+    del commands[:]
+    for _ in range(3):
+        atoms.positions += 0.001
+        atoms.get_forces()
+    assert not [c for c in commands if c.startswith(("rigidmd_box", "change_box"))], commands
+
+
 def test_without_the_plugin_a_cell_change_runs_a_set_up_with_the_same_numbers(
         monkeypatch, tmp_path, commands):
     """The fallback (no compiler, a failed build or load): ``change_box`` and a set-up

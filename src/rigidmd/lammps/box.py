@@ -139,10 +139,10 @@ class LammpsBox:
             # boxhi = boxlo + length from the 17 digits, which give the same double):
             # reading it back costs 20 us inside a step, a barostat's every step.
             x0, y0, z0 = self._boxlo
-            cell = np.array([[(x0 + lx) - x0, 0.0, 0.0], [xy, (y0 + ly) - y0, 0.0],
-                             [xz, yz, (z0 + lz) - z0]])
-            cell.flags.writeable = False
-            self._lammps_cell = cell
+            box = np.array([[(x0 + lx) - x0, 0.0, 0.0], [xy, (y0 + ly) - y0, 0.0],
+                            [xz, yz, (z0 + lz) - z0]])
+            box.flags.writeable = False
+            self._lammps_cell = box
             self.rotation = rotation
             self.cell = cell.copy()
             return False
