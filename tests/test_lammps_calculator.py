@@ -237,7 +237,8 @@ def test_npt_conserved_energy_with_pppm_and_a_moving_cell():
 def test_check_state_finds_what_ases_comparison_finds(monkeypatch):
     """The calculator's own check_state (a faster comparison) against ASE's compare_atoms:
     the same changes for moved atoms (by 1e-3 Å and by roundoff below the 1e-15
-    tolerance), a new cell, pbc, charges, elements, a new array and fewer atoms."""
+    tolerance), a new cell, pbc, charges, elements, a new array, an atom moved to an
+    infinity and fewer atoms."""
     import ase.calculators.calculator as ase_calculator
     from ase.calculators.calculator import compare_atoms
 
@@ -262,6 +263,7 @@ def test_check_state_finds_what_ases_comparison_finds(monkeypatch):
              lambda a: a.set_initial_charges(-a.get_initial_charges()),
              lambda a: a.numbers.__setitem__(0, 8 if a.numbers[0] != 8 else 1),
              lambda a: a.set_initial_magnetic_moments(np.ones(len(a))),
+             lambda a: a.positions.__setitem__((3, 1), np.inf),  # (stale forces before)
              lambda a: a.pop()]
     found = [changed(edit) for edit in edits]
     for mine, ases in found:
@@ -278,12 +280,14 @@ def test_check_state_finds_what_ases_comparison_finds(monkeypatch):
 
 @settings(max_examples=200, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 12),
-       edit=st.sampled_from(["same", "roundoff", "moved", "inf", "nan", "inf both"]))
+       edit=st.sampled_from(["same", "roundoff", "moved", "inf", "-inf", "nan", "inf both",
+                             "inf both, roundoff"]))
 def test_the_compiled_comparison_is_numpys(seed, n, edit):
     """changed_properties' compiled test of a float array (rigidmd.core._numba.equal_or_close)
-    says what NumPy's ``array_equal(a, b) or all(|a - b| <= tol (1 + |b|))`` says: for equal
-    arrays, changes below and above the tolerance, infinities and NaNs (in one array or
-    in both)."""
+    says what ``numpy.allclose(a, b, rtol=tol, atol=tol)`` says (and the NumPy path, which
+    asks it): for equal arrays, changes below and above the tolerance, an atom moved to an
+    infinity (a change: the same forces were returned before), NaNs, and infinities in both
+    arrays with roundoff elsewhere."""
     from rigidmd.core import _numba
 
     rng = np.random.default_rng(seed)
@@ -294,15 +298,17 @@ def test_the_compiled_comparison_is_numpys(seed, n, edit):
         b[k] *= 1 + 2e-16
     elif edit == "moved":
         b[k] += 1e-3
-    elif edit in ("inf", "nan"):
-        b[k] = np.inf if edit == "inf" else np.nan
-    elif edit == "inf both":
+    elif edit in ("inf", "-inf", "nan"):
+        b[k] = {"inf": np.inf, "-inf": -np.inf, "nan": np.nan}[edit]
+    elif edit.startswith("inf both"):
         a[k] = b[k] = np.inf
-        b[rng.integers(n)] *= 1 + 2e-16
+        if edit.endswith("roundoff"):
+            b[rng.integers(n)] *= 1 + 2e-16
     tol = 1e-15
-    with np.errstate(invalid="ignore"):  # inf - inf
-        numpy = bool(np.array_equal(a, b) or np.all(np.abs(a - b) <= tol * (1 + np.abs(b))))
-    assert _numba.equal_or_close(a, b, tol) == numpy
+    expected = bool(np.allclose(a, b, rtol=tol, atol=tol))
+    assert _numba.equal_or_close(a, b, tol) == expected
+    if edit in ("moved", "inf", "-inf", "nan"):
+        assert not expected
 
 
 def test_the_calculators_copy_of_the_atoms_is_a_copy():
@@ -319,12 +325,17 @@ def test_the_calculators_copy_of_the_atoms_is_a_copy():
     previous = atoms.copy()
     atoms.positions += 0.3
     atoms.set_cell(atoms.cell * 1.01, scale_atoms=False)
+    atoms.set_pbc([True, False, True])
+    atoms.set_celldisp([0.5, -0.25, 1.0])
     copied = copy_atoms(atoms, previous)
     assert copied is previous
     for name, array in atoms.arrays.items():
         np.testing.assert_array_equal(copied.arrays[name], array)
         assert not np.shares_memory(copied.arrays[name], array)
     np.testing.assert_array_equal(copied.cell.array, atoms.cell.array)
+    np.testing.assert_array_equal(copied.pbc, atoms.pbc)
+    np.testing.assert_array_equal(copied.get_celldisp(), atoms.get_celldisp())
+    assert not np.shares_memory(copied.pbc, atoms.pbc)
     assert copied.info == atoms.info and copied.info is not atoms.info
     (dof,) = copied.constraints
     assert dof is not atoms.constraints[0] and dof.removed_dof == 6

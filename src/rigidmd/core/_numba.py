@@ -458,21 +458,17 @@ def molecular_virial_voigt(stress, volume, r, forces, order):
 
 @jit
 def equal_or_close(a, b, tol):
-    """Whether 1-d float arrays ``a`` and ``b`` are all equal or all within ``tol`` absolute
-    plus ``tol`` relative to ``b`` (:func:`rigidmd.core.checks.changed_properties`' test:
-    ``array_equal(a, b) or all(abs(a - b) <= tol * (1 + abs(b)))``), stopping at the first
-    element that is neither."""
-    equal, close = True, True
+    """Whether 1-d float arrays ``a`` and ``b`` are close everywhere, as
+    ``numpy.allclose(a, b, rtol=tol, atol=tol)`` finds them: each pair equal, or both
+    finite and within ``tol`` absolute plus ``tol`` relative to ``b`` (an infinity is
+    close only to itself, a NaN to nothing); stops at the first pair that is not
+    (:func:`rigidmd.core.checks.changed_properties`)."""
     for i in range(a.shape[0]):
         x, y = a[i], b[i]
-        within = abs(x - y) <= tol * (1.0 + abs(y))
-        if x != y:
-            equal = False
-            if not within:
-                return False
-        elif not within:  # equal but infinite: not close by the formula
-            close = False
-    return equal or close
+        if x != y and not (abs(x - y) <= tol * (1.0 + abs(y))
+                           and np.isfinite(x) and np.isfinite(y)):
+            return False
+    return True
 
 
 @jit

@@ -130,8 +130,11 @@ def changed_properties(old: Atoms, atoms: Atoms, tol: float = 1e-15):
     old, atoms : ase.Atoms
         The atoms of the last calculation and the atoms asked about.
     tol : float
-        Each of ASE's ``all_changes`` counts as changed unless every element is
-        within ``tol`` absolute plus ``tol`` relative (as ``numpy.allclose``).
+        Each of ASE's ``all_changes`` counts as changed unless its arrays are equal
+        or ``numpy.allclose(old, new, rtol=tol, atol=tol)`` (an infinity is close only
+        to itself).  ASE 3.29's ``compare_atoms`` takes ``tol`` as an absolute
+        tolerance alone: a change under ``tol`` relative (a rounding of a coordinate)
+        counts as a change there and not here.
 
     Returns
     -------
@@ -155,8 +158,7 @@ def changed_properties(old: Atoms, atoms: Atoms, tol: float = 1e-15):
             # call: 28 us for the NumPy test of all arrays inside a 216-water step).
             if not _numba.equal_or_close(a.reshape(-1), b.reshape(-1), tol):
                 changes.append(name)
-        elif not np.array_equal(a, b) and not (
-                a.dtype != bool and np.all(np.abs(a - b) <= tol * (1 + np.abs(b)))):
+        elif not np.array_equal(a, b) and (a.dtype == bool or not np.allclose(a, b, tol, tol)):
             changes.append(name)
     return changes
 

@@ -57,7 +57,7 @@ class RigidBodyDOF:
     def __deepcopy__(self, memo):
         # Every calculator call deep-copies the constraints (ASE's Atoms.copy of the
         # atoms it keeps): 4 us through copy's generic reduction, 1 us this way.
-        return RigidBodyDOF(self.removed_dof, self.body_ids)
+        return type(self)(self.removed_dof, self.body_ids)
 
     def __repr__(self):
         return f"RigidBodyDOF(removed_dof={self.removed_dof})"
