@@ -208,7 +208,7 @@ def test_charges_and_types_are_checked(tmp_path, field, value, message):
 
 
 @pytest.mark.parametrize("name", ["ipi", "lammps"])
-@pytest.mark.parametrize("host", ["0.0.0.0", "10.1.2.3", "node7.cluster", "::"])
+@pytest.mark.parametrize("host", ["0.0.0.0", "10.1.2.3", "node7.cluster"])
 def test_a_socket_other_machines_can_reach_needs_trust(tmp_path, name, host):
     """``address: 0.0.0.0:PORT`` opened a port any machine could connect to (and be sent
     the run's positions, and have its forces used) without --trust.  Only a Unix socket
@@ -218,6 +218,18 @@ def test_a_socket_other_machines_can_reach_needs_trust(tmp_path, name, host):
         calc["commands"] = LJ
     message = refused(config(tmp_path, calculator=calc), "calculator.address")
     assert "other machines can reach" in message
+    nothing_written(tmp_path)
+
+
+@pytest.mark.parametrize("address", ["[::1]:31415", "::1:31415", ":::31415"])
+def test_an_ipv6_address_is_refused_with_why(tmp_path, address):
+    """The i-PI socket listens on IPv4 (rigidmd.ipi.connection.open_server): an IPv6
+    address passed the checks (``[::1]`` even as loopback) and then failed to open
+    ("Name or service not known", "Address family for hostname not supported")."""
+    raw = config(tmp_path, calculator={"name": "ipi", "address": address})
+    for trust in (False, True):
+        with pytest.raises(ConfigError, match=r"^calculator\.address: .*IPv6.*IPv4"):
+            check_config(raw, trust=trust)
     nothing_written(tmp_path)
 
 

@@ -116,6 +116,9 @@ def parse_address(field, address):
     if text.startswith("unix:") and len(text) > 5:
         return {"unixsocket": text[5:]}
     host, _, port = text.rpartition(":")
+    if ":" in host or host.startswith("["):  # the socket is IPv4 (ipi.connection)
+        raise ConfigError(f"{field}: {address!r} is an IPv6 address; the i-PI socket "
+                          "listens on IPv4: give an IPv4 address or a host name")
     if host and port.isdigit() and 1024 < int(port) < 65536:
         return {"host": host, "port": int(port)}
     raise ConfigError(f"{field}: expected unix:NAME or HOST:PORT (port 1025-65535), "
