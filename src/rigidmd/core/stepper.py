@@ -74,8 +74,10 @@ class Stepper:
         ctx.evaluator.begin_step(step, energy, stress)
         backup = self._backup
         np.copyto(backup.data, state.data)  # state.copy_into(backup), without a call
-        saved = record.backup(copy=self.kernel is None)
         couplings = self.couplings
+        # The fused kernel writes the record's forces in place after the force call;
+        # a coupling's second half may still fail after it (a warning turned error).
+        saved = record.backup(copy=self.kernel is None or bool(couplings))
         coupled = [part.get_state() for part in couplings] if couplings else ()
         try:
             record.cell_move = None
