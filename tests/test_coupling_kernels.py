@@ -142,7 +142,7 @@ def both(dyn, part, action):
         dyn.record.velocities_changed()
         dyn.link.compiled = compiled  # the one backend flag: record, view and parts follow
         assert dyn.view.compiled is compiled and dyn.record.compiled is compiled
-        dyn.record.kinetic_tensor  # summed now: a scaling in the action must update it
+        assert dyn.record.kinetic_tensor is not None  # summed now: a scaling must update it
         out = action(dyn.view)
         results.append((dyn.state.copy(), part.get_state(), out))
     return results
