@@ -6,8 +6,9 @@ atoms, the molecular virial and the potential energy when they were asked
 for); the volume and the kinetic quantities are computed on first request
 and kept until the state they depend on changes.  Coupling parts read the
 record instead of asking again, and tell it how they changed the velocities
-(:meth:`StepRecord.scale_translation`, :meth:`StepRecord.scale_rotation`) so
-that a known scaling updates the kinetic tensor instead of recomputing it.
+(:meth:`StepRecord.scale_translation`, :meth:`StepRecord.scale_translation_about`,
+:meth:`StepRecord.scale_rotation`) so that a known scaling updates the kinetic
+tensor and the rotational energy instead of recomputing them.
 
 Over one step with a Nosé–Hoover thermostat and the MTK barostat this gives
 one calculator call, one volume, one kinetic tensor, one rotational kinetic

@@ -31,7 +31,7 @@ of ``n`` bodies, then ``x, v`` of ``nf`` point particles, then the cell.
 
 import numpy as np
 
-from rigidmd.core._numba import jit
+from rigidmd.core._numba import congruence, jit
 
 __all__ = ["COUPLE_CODES", "chain_propagate", "chain_scale", "symmetric_exp", "mtk_kick",
            "mtk_momentum_scale", "mtk_friction", "scale_translation", "scale_velocities",
@@ -305,14 +305,7 @@ def crescale_move(virial, kinetic, volume, pressure_au, kT, beta, taup, dt, xi_l
              - 0.25 * d_lambda / kT * dt * f_lambda**2 + 0.5 * kT * np.log(volume)
              + 0.5 * eta_f - 0.25 * d_eta / kT * dt * eta_ff)
     B = 0.5 * h * (mu + inverse)
-    moved = np.zeros((3, 3))
-    for i in range(3):
-        for j in range(3):
-            total = 0.0
-            for a in range(3):
-                for b in range(3):
-                    total += inverse[i, a] * kinetic[a, b] * inverse[j, b]
-            moved[i, j] = total
+    moved = congruence(inverse, kinetic)
     return mu, B, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first, moved
 
 
