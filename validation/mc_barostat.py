@@ -36,6 +36,7 @@ from ase import units
 from ase.calculators.calculator import Calculator, all_changes
 
 from rigidmd import RigidBussi, RigidCRescale, RigidLangevin, RigidMCBarostat
+from rigidmd.ipi import processes
 from rigidmd.lammps import LAMMPSCalculator, LAMMPSEngine
 from rigidmd.systems import water_box
 from rigidmd.water import water_model
@@ -54,19 +55,7 @@ def lammps(engine=False):
 
 def cpu_seconds():
     """CPU time (s) of this process and all its descendants (an engine's ``lmp``), from /proc."""
-    stats = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        with contextlib.suppress(OSError):
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-            stats[int(stat.parent.name)] = (int(fields[1]), int(fields[11]) + int(fields[12]))
-    family = {os.getpid()}
-    for _ in range(len(stats)):  # until no new descendant is found
-        new = {pid for pid, (ppid, _) in stats.items() if ppid in family} - family
-        if not new:
-            break
-        family |= new
-    total = sum(stats[pid][1] for pid in family - {os.getpid()})
-    return time.process_time() + total / os.sysconf("SC_CLK_TCK")
+    return time.process_time() + processes.cpu_seconds(processes.descendants(os.getpid()))
 
 
 class HiddenStress(Calculator):
