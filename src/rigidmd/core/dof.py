@@ -56,7 +56,8 @@ class RigidBodyDOF:
 
     def __deepcopy__(self, memo):
         # Every calculator call deep-copies the constraints (ASE's Atoms.copy of the
-        # atoms it keeps): 4 us through copy's generic reduction, 1 us this way.
+        # atoms it keeps): 3.9 us through copy's generic reduction, 1.5 us this way
+        # (the list of one RigidBodyDOF for 216 bodies).
         return type(self)(self.removed_dof, self.body_ids)
 
     def __repr__(self):

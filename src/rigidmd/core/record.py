@@ -205,9 +205,10 @@ class StepRecord:
     def backup(self, copy: bool = True) -> tuple:
         """A token for :meth:`restore` within one step.
 
-        ``copy=False`` keeps references only: enough when the step replaces
-        the force arrays rather than writing into them (the fused kernel
-        writes them only after the force call succeeded).
+        ``copy=False`` keeps references only: enough when nothing that can fail
+        comes after the arrays are written (the fused kernel writes them in place
+        after the force call succeeded; a coupling part's second half comes after
+        that, so the stepper copies when there are couplings).
         """
         if copy:
             return (self.F.copy(), self.tau.copy(), self.f.copy(), self.virial, self.energy,

@@ -132,7 +132,6 @@ class LammpsBox:
             (lx, _, _), (xy, ly, _), (xz, yz, lz) = lammps_cell.tolist()
             if self._boxlo is None:
                 self._boxlo = self.lmp.extract_box()[0]
-            self._lammps_cell = None
             self.execute([f"rigidmd_box {lx:.17g} {ly:.17g} {lz:.17g} {xy:.17g} {xz:.17g} "
                           f"{yz:.17g}"])
             # The box LAMMPS now has, as lammps_cell would read it (the plugin sets
