@@ -91,11 +91,14 @@ json.dump({"energy": result.energy, "steps": result.steps,
 
 
 def test_the_default_relaxation_does_not_depend_on_the_number_of_blas_threads():
-    """Issue 36: the same start reaches the same minimum with 1 and 2 BLAS/OpenMP threads,
-    each set as a user sets them (environment variables read when numpy starts), in separate
-    processes: the default's sums are compiled loops in a fixed order and its solves sparse,
-    so the path is the same bit for bit (64-water box, measured identical energies and
-    positions, -32.4638 eV in 38 steps)."""
+    """Issue 36: the same start reaches the same minimum with 1 and 2 BLAS/OpenMP/numba
+    threads, each set as a user sets them (environment variables read when numpy starts), in
+    separate processes: the default's sums are compiled loops in a fixed order and its solves
+    sparse, so the path is the same bit for bit (64-water box, measured identical energies and
+    positions, -32.4638 eV in 38 steps).  What it guards: a threaded reduction (a numba
+    ``prange``, an OpenMP kernel) entering the path.  Not BLAS's own dot products: at a few
+    hundred components OpenBLAS does not split them (a review put ``np.dot`` back in the
+    two-loop recursion and this test still passed)."""
     results = []
     for threads in ("1", "2"):
         env = {**os.environ, **{name: threads for name in (
@@ -132,11 +135,13 @@ def test_the_preconditioner_s_solve_is_the_inverse_and_the_same_in_any_batch():
         np.testing.assert_array_equal(together[k], precon.solve(b[k]))
         P = precon.asarray()
         residual = np.linalg.norm(P @ together[k] - b[k]) / np.linalg.norm(b[k])
-        assert residual < 2 * CG_TOLERANCE  # the translation block's residual, the rest exact
+        # The translation block's conjugate gradients stop at CG_TOLERANCE of its right-hand
+        # side, the other blocks are exact: measured 2.5e-3 to 2.8e-3 (three boxes, seeds 0-2)
+        assert residual < CG_TOLERANCE
         np.testing.assert_allclose(precon.Pdot(together[k]), P @ together[k], atol=1e-12)
     each = precon.solve(b, (None, SCALE_TOLERANCE))
     np.testing.assert_array_equal(each[0], together[0])
     np.testing.assert_array_equal(each[1], precon.solve(b[1:], (SCALE_TOLERANCE,))[0])
     assert not np.array_equal(each[1], together[1])  # the looser one stopped earlier
     residual = np.linalg.norm(P @ each[1] - b[1]) / np.linalg.norm(b[1])
-    assert CG_TOLERANCE < residual < 2 * SCALE_TOLERANCE
+    assert CG_TOLERANCE < residual < SCALE_TOLERANCE  # measured 1.2e-2 to 1.4e-2 (seeds 0-2)

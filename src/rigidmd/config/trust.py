@@ -40,9 +40,10 @@ wrote or has read.  What is allowed without it:
   the user's own choice and may be anywhere.
 * sockets listened on (:func:`check_listen_address`): ``calculator.address``
   of ``ipi`` and of ``lammps`` (an engine started elsewhere) is a Unix socket
-  (``unix:NAME``) or a loopback address (``localhost``, ``127.x.x.x``,
-  ``::1``).  Any other host (``0.0.0.0``, a host name, an interface's
-  address) opens a port other machines can reach, and whatever connects
+  (``unix:NAME``) or a loopback address (``localhost``, ``127.x.x.x``; the
+  socket is IPv4: IPv6 addresses are refused).  Any other host (``0.0.0.0``,
+  a host name, an interface's address) opens a port other machines can
+  reach, and whatever connects
   there is sent the run's positions and cell and its forces are used.
 
 Reading (``structure``, ``restart``, an integrator's ``.yaml``) is not
@@ -196,14 +197,15 @@ def check_listen_address(where, address):
 
     Notes
     -----
-    A Unix socket, ``localhost`` and loopback addresses (``127.0.0.0/8``,
-    ``::1``) are reachable from this machine only.  Any other host, a name
-    included (it may resolve to any interface), needs ``--trust``.
+    A Unix socket, ``localhost`` and loopback addresses (``127.0.0.0/8``) are
+    reachable from this machine only (IPv6 addresses are refused by the parser).
+    Any other host, a name included (it may resolve to any interface), needs
+    ``--trust``.
     """
     parsed = parse_address(where, address)
     if "unixsocket" in parsed:
         return
-    host = parsed["host"].strip("[]")
+    host = parsed["host"]
     if host.lower() == "localhost":
         return
     try:
