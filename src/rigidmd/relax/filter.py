@@ -369,14 +369,12 @@ class RigidFilter(AtomsFacade):
     def _energies(self):
         """The energies the force call computed with the forces (no further call), as
         :meth:`get_potential_energy` gives them: ``energy`` and ``free_energy``."""
-        calc = self.atoms.calc
-        results, done = getattr(calc, "results", None), getattr(calc, "atoms", None)
-        if (not isinstance(results, dict) or "energy" not in results or done is None
-                or not np.array_equal(done.positions, self.atoms.positions)):
-            return {}  # not ASE's record of this very call: asked for when needed
+        if not self._evaluator.energy_known:  # (checked finite by the force evaluator)
+            return {}  # the calculator gave none with the forces: asked for when needed
+        energy = self._record.energy
+        free = float(self.atoms.calc.results.get("free_energy", energy))
         pv = self.scalar_pressure * self.atoms.get_volume() if self.mode is not None else 0.0
-        return {"energy": float(results["energy"]) + pv,
-                "free_energy": float(results.get("free_energy", results["energy"])) + pv}
+        return {"energy": energy + pv, "free_energy": free + pv}
 
     def _generalized_forces(self):
         _, r, q, D = self._current()  # the atoms are placed: r is the record's

@@ -23,6 +23,7 @@ from ase.optimize.optimize import Optimizer
 
 from rigidmd.relax import kernels
 from rigidmd.relax.precon import RigidPrecon
+from rigidmd.relax.state import split
 
 __all__ = ["RigidLBFGS", "MAX_HALVINGS", "SCALE_TOLERANCE"]
 
@@ -198,9 +199,7 @@ class RigidLBFGS(Optimizer):
             self.x0, self.g0 = state["x0"].copy(), state["g0"].copy()
             self.e0 = float(state["e0"])
         if isinstance(self.precon, RigidPrecon):
-            prefix = "precon."
-            self.precon.set_state({k[len(prefix):]: v for k, v in state.items()
-                                   if k.startswith(prefix)}, self._target)
+            self.precon.set_state(split(state, "precon"), self._target)
 
     def log(self, *args, **kwargs):
         """ASE's log line, when there is a log (ASE's own writes to ``os.devnull`` without
