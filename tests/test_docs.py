@@ -15,6 +15,7 @@ The site itself is built with ``-W`` by ``.ci/run``.
 import importlib
 import importlib.util
 import pkgutil
+import re
 import sys
 from pathlib import Path
 
@@ -113,3 +114,36 @@ def test_every_example_has_a_page():
     for script in scripts:
         assert f"{script.stem}\n" in index, script.name
         assert script.name in rigidmd_docs.example_page(script)
+
+
+#: The longest a page a user reads may be, in words (code included): a page that says what to
+#: do and why, with measurement history on the performance and validation pages.
+MAX_WORDS = 2000
+#: Internal work items a user page must not speak of: the work's issue numbers and releases
+#: that were never made.
+INTERNAL = re.compile(r"\b(issues? #?\d+|this release|(the )?previous release|the release "
+                      r"before|the last release)\b", re.IGNORECASE)
+#: Pages another change rewrites (their internal items go with that rewrite); nothing else.
+INTERNAL_PENDING = {"guide/thermostats.md"}
+
+
+def user_pages():
+    """Every page a user reads: not the developer pages, the changelog or generated pages."""
+    generated = {f"examples/{script.stem}.md" for script in rigidmd_docs.example_scripts()}
+    return [page for page in pages()
+            if not page.startswith(("developer/", "api/")) and page != "changelog.md"
+            and page not in generated]
+
+
+def test_no_user_page_is_too_long():
+    long = {page: len((DOCS / page).read_text().split()) for page in user_pages()}
+    long = {page: words for page, words in long.items() if words > MAX_WORDS}
+    assert not long, f"pages over {MAX_WORDS} words (split them by concept): {long}"
+
+
+def test_no_user_page_mentions_internal_work():
+    found = [f"{page}:{number}: {line.strip()}"
+             for page in user_pages() if page not in INTERNAL_PENDING
+             for number, line in enumerate((DOCS / page).read_text().splitlines(), 1)
+             if INTERNAL.search(line)]
+    assert not found, "internal work items in user pages:\n" + "\n".join(found)
