@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from codeblocks import blocks, run_page, shell_lines
+from codeblocks import blocks, outputs_match, run_page, shell_lines
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -147,3 +147,27 @@ def test_no_user_page_mentions_internal_work():
              for number, line in enumerate((DOCS / page).read_text().splitlines(), 1)
              if INTERNAL.search(line)]
     assert not found, "internal work items in user pages:\n" + "\n".join(found)
+
+
+def test_a_stated_output_is_compared_with_what_the_sample_prints(tmp_path):
+    """An ``output`` block after a sample is checked: a wrong statement fails the page."""
+    page = ("```python\nprint(False, True, 53)\n```\n\n```output\n{}\n```\n\n"
+            "```python\nprint(2 + 2)\n```\n")
+    run_page(page.format("False True 53"), tmp_path)
+    with pytest.raises(AssertionError, match="printed 'False True 53', stated 'False True 57'"):
+        run_page(page.format("False True 57"), tmp_path)
+
+
+def test_stated_outputs_match_tokens_and_tolerances():
+    assert outputs_match("162 298±100\n", "162 273\n") == (True, "")
+    assert not outputs_match("162 298±100", "162 909")[0]
+    assert not outputs_match("162 298±100", "162 K")[0]
+    assert not outputs_match("a b", "a b\nc")[0]
+    assert not outputs_match("0.95", "0.953")[0]
+
+
+def test_the_samples_that_state_their_output_are_checked():
+    """The pages whose printed numbers a reader could take for a bug state them as checked."""
+    for page in ("guide/relaxation-optimizer.md", "guide/water-models.md"):
+        langs = [lang for lang, _ in blocks((DOCS / page).read_text())]
+        assert "output" in langs, page
