@@ -171,3 +171,19 @@ def test_the_samples_that_state_their_output_are_checked():
     for page in ("guide/relaxation-optimizer.md", "guide/water-models.md"):
         langs = [lang for lang, _ in blocks((DOCS / page).read_text())]
         assert "output" in langs, page
+
+
+@pytest.mark.slow
+def test_the_figures_are_drawn_from_committed_data_and_shown(tmp_path):
+    """Every figure script draws its PNG, the same bytes twice, and a page shows it."""
+    scripts = rigidmd_docs.figure_scripts()
+    assert len(scripts) >= 12
+    first = rigidmd_docs.write_figures(tmp_path / "a")
+    second = rigidmd_docs.write_figures(tmp_path / "b")
+    assert [p.name for p in first] == [p.name for p in second] == [
+        f"{s.stem}.png" for s in scripts]
+    for a, b in zip(first, second, strict=True):
+        assert a.read_bytes() == b.read_bytes(), a.name
+    shown = "".join((DOCS / page).read_text() for page in pages())
+    for script in scripts:
+        assert f"/_generated/figures/{script.stem}.png" in shown, script.name
