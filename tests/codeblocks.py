@@ -8,6 +8,10 @@ under ``docs/``).  The blocks of one page run in order in one scratch directory:
 * ``yaml`` blocks whose first line is ``# file: NAME`` are written to NAME
   before the blocks after them run (other ``yaml`` blocks are fragments, not run);
 * ``bash`` blocks line by line (comments after ``#`` are shell comments);
+* an ``output`` block right after a ``python`` block is what that block prints: the
+  test compares them line by line, token by token (:func:`outputs_match`); a number
+  written ``A±T`` matches any printed number within ``T`` of ``A`` (for what varies
+  from machine to machine or run to run), every other token must be printed as written;
 * other blocks (``text``, MyST directives such as ``{eval-rst}``) are not run.
 
 Some bash lines are not run here, and :data:`CHECKED_ELSEWHERE` says where they
@@ -74,11 +78,52 @@ def shell_lines(body):
         yield command, skipped
 
 
+#: The line a page's script prints after each ``python`` block, to cut its output apart.
+BLOCK_END = "<<<end of a docs block>>>"
+TOLERANCE = re.compile(r"^([-+]?\d+(?:\.\d*)?(?:e[-+]?\d+)?)±(\d+(?:\.\d*)?(?:e[-+]?\d+)?)$")
+
+
+def outputs_match(expected, printed):
+    """Whether ``printed`` is what an ``output`` block says, and if not, the first difference.
+
+    Lines are compared one by one (trailing spaces and blank lines at either end aside),
+    each split on whitespace; an expected token ``A±T`` matches a number within ``T`` of
+    ``A``; any other token must be printed exactly.  Returns ``(ok, why)``.
+    """
+    want = expected.strip("\n").splitlines()
+    got = printed.strip("\n").splitlines()
+    if len(want) != len(got):
+        return False, f"{len(got)} lines printed, {len(want)} stated:\n{printed}"
+    for number, (w, g) in enumerate(zip(want, got, strict=True), 1):
+        wt, gt = w.split(), g.split()
+        if len(wt) != len(gt):
+            return False, f"line {number}: printed {g!r}, stated {w!r}"
+        for a, b in zip(wt, gt, strict=True):
+            match = TOLERANCE.match(a)
+            if match:
+                try:
+                    value = float(b)
+                except ValueError:
+                    return False, f"line {number}: printed {b!r} where a number {a} is stated"
+                if abs(value - float(match.group(1))) > float(match.group(2)):
+                    return False, f"line {number}: printed {b}, stated {a}"
+            elif a != b:
+                return False, f"line {number}: printed {g!r}, stated {w!r}"
+    return True, ""
+
+
 def run_page(text, cwd, timeout=900):
     """Run a page's blocks in ``cwd``; returns the commands and blocks that ran."""
     env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg")
-    python, ran = [], []
+    python, outputs, ran = [], {}, []
+    previous = None
     for lang, body in blocks(text):
+        if lang == "output":
+            assert previous == "python", "an output block follows no python block"
+            outputs[len(python) - 1] = body
+            previous = lang
+            continue
+        previous = lang
         if lang == "yaml" and body.startswith("# file: "):
             name = body.splitlines()[0].split()[2]
             (cwd / name).write_text(body)
@@ -88,8 +133,8 @@ def run_page(text, cwd, timeout=900):
         elif lang == "bash":
             # Python blocks before a shell block run first (the shell may read their files).
             if python:
-                run_python(python, cwd, env, timeout)
-                python = []
+                run_python(python, cwd, env, timeout, outputs)
+                python, outputs = [], {}
             for command, skipped in shell_lines(body):
                 if skipped:
                     continue
@@ -106,13 +151,19 @@ def run_page(text, cwd, timeout=900):
                 assert result.returncode == 0, (command, result.stderr[-3000:])
                 ran.append(command)
     if python:
-        run_python(python, cwd, env, timeout)
+        run_python(python, cwd, env, timeout, outputs)
     return ran
 
 
-def run_python(sources, cwd, env, timeout):
-    script = "\n\n".join(sources)
+def run_python(sources, cwd, env, timeout, outputs=None):
+    """Run python blocks as one script; check each stated output (``{index: text}``)."""
+    outputs = outputs or {}
+    script = "".join(f"{source}\n\nprint({BLOCK_END!r}, flush=True)\n\n" for source in sources)
     (cwd / "page_blocks.py").write_text(script)
     result = subprocess.run([sys.executable, "page_blocks.py"], cwd=cwd, capture_output=True,
                             text=True, env=env, timeout=timeout)
     assert result.returncode == 0, result.stderr[-3000:]
+    printed = result.stdout.split(BLOCK_END + "\n")
+    for index, expected in outputs.items():
+        ok, why = outputs_match(expected, printed[index])
+        assert ok, f"python block {index + 1} of the page: {why}"

@@ -15,11 +15,12 @@ The site itself is built with ``-W`` by ``.ci/run``.
 import importlib
 import importlib.util
 import pkgutil
+import re
 import sys
 from pathlib import Path
 
 import pytest
-from codeblocks import blocks, run_page, shell_lines
+from codeblocks import blocks, outputs_match, run_page, shell_lines
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -113,3 +114,77 @@ def test_every_example_has_a_page():
     for script in scripts:
         assert f"{script.stem}\n" in index, script.name
         assert script.name in rigidmd_docs.example_page(script)
+
+
+#: The longest a page a user reads may be, in words (code included): a page that says what to
+#: do and why, with measurement history on the performance and validation pages.
+MAX_WORDS = 2000
+#: Internal work items a user page must not speak of: the work's issue numbers and releases
+#: that were never made.
+INTERNAL = re.compile(r"\b(issues? #?\d+|(the|this|that) issue('s)?|this release|(the )?previous "
+                      r"release|the release before|the last release|the review('s)?|this branch|"
+                      r"the merged (code|release))\b", re.IGNORECASE)
+#: Pages another change rewrites (their internal items go with that rewrite); nothing else.
+INTERNAL_PENDING = {"guide/thermostats.md"}
+
+
+def user_pages():
+    """Every page a user reads: not the developer pages, the changelog or generated pages."""
+    generated = {f"examples/{script.stem}.md" for script in rigidmd_docs.example_scripts()}
+    return [page for page in pages()
+            if not page.startswith(("developer/", "api/")) and page != "changelog.md"
+            and page not in generated]
+
+
+def test_no_user_page_is_too_long():
+    long = {page: len((DOCS / page).read_text().split()) for page in user_pages()}
+    long = {page: words for page, words in long.items() if words > MAX_WORDS}
+    assert not long, f"pages over {MAX_WORDS} words (split them by concept): {long}"
+
+
+def test_no_user_page_mentions_internal_work():
+    found = [f"{page}:{number}: {line.strip()}"
+             for page in user_pages() if page not in INTERNAL_PENDING
+             for number, line in enumerate((DOCS / page).read_text().splitlines(), 1)
+             if INTERNAL.search(line)]
+    assert not found, "internal work items in user pages:\n" + "\n".join(found)
+
+
+def test_a_stated_output_is_compared_with_what_the_sample_prints(tmp_path):
+    """An ``output`` block after a sample is checked: a wrong statement fails the page."""
+    page = ("```python\nprint(False, True, 53)\n```\n\n```output\n{}\n```\n\n"
+            "```python\nprint(2 + 2)\n```\n")
+    run_page(page.format("False True 53"), tmp_path)
+    with pytest.raises(AssertionError, match="printed 'False True 53', stated 'False True 57'"):
+        run_page(page.format("False True 57"), tmp_path)
+
+
+def test_stated_outputs_match_tokens_and_tolerances():
+    assert outputs_match("162 298±100\n", "162 273\n") == (True, "")
+    assert not outputs_match("162 298±100", "162 909")[0]
+    assert not outputs_match("162 298±100", "162 K")[0]
+    assert not outputs_match("a b", "a b\nc")[0]
+    assert not outputs_match("0.95", "0.953")[0]
+
+
+def test_the_samples_that_state_their_output_are_checked():
+    """The pages whose printed numbers a reader could take for a bug state them as checked."""
+    for page in ("guide/relaxation-optimizer.md", "guide/water-models.md"):
+        langs = [lang for lang, _ in blocks((DOCS / page).read_text())]
+        assert "output" in langs, page
+
+
+@pytest.mark.slow
+def test_the_figures_are_drawn_from_committed_data_and_shown(tmp_path):
+    """Every figure script draws its PNG, the same bytes twice, and a page shows it."""
+    scripts = rigidmd_docs.figure_scripts()
+    assert len(scripts) >= 12
+    first = rigidmd_docs.write_figures(tmp_path / "a")
+    second = rigidmd_docs.write_figures(tmp_path / "b")
+    assert [p.name for p in first] == [p.name for p in second] == [
+        f"{s.stem}.png" for s in scripts]
+    for a, b in zip(first, second, strict=True):
+        assert a.read_bytes() == b.read_bytes(), a.name
+    shown = "".join((DOCS / page).read_text() for page in pages())
+    for script in scripts:
+        assert f"/_generated/figures/{script.stem}.png" in shown, script.name

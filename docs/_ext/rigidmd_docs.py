@@ -20,6 +20,7 @@ import importlib
 import importlib.util
 import inspect
 import re
+import sys
 from pathlib import Path
 
 DOCS = Path(__file__).resolve().parents[1]
@@ -345,10 +346,50 @@ def write_examples(outdir=DOCS / "examples"):
         write_if_changed(Path(outdir) / f"{script.stem}.md", example_page(script))
 
 
+# -------------------------------------------------------------------- figures
+
+FIGURES = DOCS / "figures"
+
+
+def figure_scripts():
+    """The scripts that draw the site's figures: ``docs/figures/*.py`` but ``_common``."""
+    return sorted(p for p in FIGURES.glob("*.py") if not p.name.startswith("_"))
+
+
+def write_figures(outdir=DOCS / "_generated" / "figures"):
+    """Draw every figure from committed data into ``outdir`` (``NAME.png`` per script).
+
+    A figure is drawn again only when its script, ``_common.py`` or a data file it may read
+    is newer than the PNG; the scripts read files, they run no simulation.
+    """
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    if str(FIGURES) not in sys.path:
+        sys.path.insert(0, str(FIGURES))
+    inputs = [FIGURES / "_common.py", *(FIGURES / "data").glob("*"),
+              *(ROOT / "benchmarks").glob("*.txt"), *(ROOT / "benchmarks").glob("*.jsonl"),
+              *(ROOT / "validation").glob("*.txt"), *(ROOT / "validation").glob("*.json"),
+              *(ROOT / "examples" / "output").glob("*.txt")]
+    newest_input = max(p.stat().st_mtime for p in inputs)
+    drawn = []
+    for script in figure_scripts():
+        target = outdir / f"{script.stem}.png"
+        if (target.is_file()
+                and target.stat().st_mtime >= max(newest_input, script.stat().st_mtime)):
+            continue
+        spec = importlib.util.spec_from_file_location(f"rigidmd_figure_{script.stem}", script)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        module.draw(target)
+        drawn.append(target)
+    return drawn
+
+
 def generate(app=None):
     write_configuration()
     write_api()
     write_examples()
+    write_figures()
 
 
 def setup(app):
