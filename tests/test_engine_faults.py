@@ -336,6 +336,29 @@ def test_an_engine_that_fails_at_set_up_leaves_no_temporary_folder(tmp_path, mon
     assert not list(tmp_path.glob("rigidmd-lammps-*"))
 
 
+def test_a_non_finite_position_or_cell_on_a_running_engine_is_refused_before_sending():
+    """Before: a NaN position sent to a running engine killed it ("Out of range atoms");
+    now refused here, as in-process, with the engine still running and answering."""
+    atoms = water_box_27()
+    with LAMMPSEngine(PPPM_27) as engine:
+        atoms.calc = engine
+        energy = atoms.get_potential_energy()
+        pid = engine.pid
+        bad = atoms.copy()
+        bad.positions[5, 1] = np.nan
+        with pytest.raises(ValueError, match=r"atom 5 has a non-finite position \[.*nan.*\] "
+                                             r"\(Å\) given to LAMMPSEngine"):
+            engine.get_forces(bad)
+        bad = atoms.copy()
+        bad.cell[2, 2] = np.inf
+        with pytest.raises(ValueError, match="cell vector 2 has a non-finite cell .* given to "
+                                             "LAMMPSEngine"):
+            engine.get_forces(bad)
+        assert engine.pid == pid  # the same engine, alive
+        assert engine.get_potential_energy(atoms.copy()) == energy
+    assert not our_lmp()
+
+
 # ------------------------------------------------------------ signals while waiting
 def test_a_stop_signal_ends_the_wait_for_an_engine_at_once(tmp_path, monkeypatch):
     """Under a run's StopSignals a SIGTERM ended the wait only at the engine timeout

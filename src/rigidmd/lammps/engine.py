@@ -85,6 +85,7 @@ import numpy as np
 from ase import units
 from ase.calculators.calculator import all_changes
 
+from rigidmd.core.checks import check_finite
 from rigidmd.ipi import IPICalculator
 from rigidmd.ipi.processes import descends_from as _descends_from
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
@@ -654,6 +655,10 @@ class LAMMPSEngine(IPICalculator):
         if not target.pbc.all():
             raise ValueError(f"LAMMPSEngine: needs a periodic cell in all directions (pbc "
                              f"{target.pbc.tolist()}); use LAMMPSCalculator for a cluster")
+        # A NaN or infinity kills a running engine ("Out of range atoms"): refused here first,
+        # as LAMMPSCalculator refuses it.
+        check_finite(target.positions, "position", "Å", "given to LAMMPSEngine")
+        check_finite(target.cell.array, "cell", "Å", "given to LAMMPSEngine")
         signature = (len(target), target.numbers.tobytes(),
                      target.get_initial_charges().tobytes())
         cell, flips = self._lattice(target.cell.array)
