@@ -246,11 +246,29 @@ def default_poll_us(processes, threads=None, launch=True) -> int:
     int
         Microseconds: 0 or 500.
     """
+    return 0 if launch and processes * (threads or 1) >= usable_cores() else 500
+
+
+def usable_cores() -> int:
+    """The cores this process may use (its CPU affinity; elsewhere than Linux, all)."""
     try:
-        cores = len(os.sched_getaffinity(0))
+        return len(os.sched_getaffinity(0))
     except (AttributeError, OSError):  # not on Linux
-        cores = os.cpu_count() or 1
-    return 0 if launch and processes * (threads or 1) >= cores else 500
+        return os.cpu_count() or 1
+
+
+def oversubscription(processes, threads=None):
+    """One line saying that ``processes`` ranks of ``threads`` threads need more cores than
+    this process may use, or None.  Measured: more ranks than cores ran 30 to 60 times
+    slower (MPICH's waiting ranks poll, and LAMMPS's ranks wait for each other)."""
+    threads = threads or 1
+    cores = usable_cores()
+    if processes * threads <= cores:
+        return None
+    return (f"LAMMPSEngine: {processes} MPI ranks x {threads} thread"
+            f"{'s' if threads > 1 else ''} need {processes * threads} cores; this process may "
+            f"use {cores} (its CPU affinity): the engine runs many times slower (30-60x "
+            f"measured); use processes * threads <= {cores}")
 
 
 def _start_hint(processes, threads):
@@ -510,6 +528,8 @@ class LAMMPSEngine(IPICalculator):
             raise
         self.log = workdir / "log.lammps"
         cmd, env = self.command_line()
+        if self.launch_engine and (why := oversubscription(self.processes, self.threads)):
+            warnings.warn(why, stacklevel=2)
         if not self.launch_engine:
             print(f"LAMMPSEngine: waiting for an engine: cd {workdir} && {' '.join(cmd)}",
                   file=sys.stderr, flush=True)
