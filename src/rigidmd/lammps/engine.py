@@ -88,6 +88,7 @@ from ase.calculators.calculator import all_changes
 from rigidmd.core.checks import check_finite
 from rigidmd.ipi import IPICalculator
 from rigidmd.ipi.processes import descends_from as _descends_from
+from rigidmd.lammps.box import reduce_tilt
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
 from rigidmd.lammps.calculator import LAMMPSCalculator, lower_triangular
 from rigidmd.lammps.library import check_atom_types, flatten, mpich_prefix
@@ -126,31 +127,6 @@ def mpirun_executable() -> str:
     if found is None:
         raise FileNotFoundError("LAMMPSEngine: processes > 1 needs mpirun (pip install mpich)")
     return found
-
-
-def reduce_tilt(cell):
-    """The same lattice with LAMMPS's tilt limits: ``|xy|, |xz| <= lx/2``, ``|yz| <= ly/2``.
-
-    Parameters
-    ----------
-    cell : numpy.ndarray, shape (3, 3)
-        Lower triangular (LAMMPS's frame), rows a, b, c.
-
-    Returns
-    -------
-    reduced : numpy.ndarray, shape (3, 3)
-        ``b - kxy a`` and ``c - kyz b - kxz a`` for the nearest whole numbers.
-    flips : tuple of int
-        ``(kxy, kxz, kyz)``.
-    """
-    reduced = np.array(cell, dtype=float)
-    kyz = int(np.rint(reduced[2, 1] / reduced[1, 1]))
-    reduced[2] -= kyz * reduced[1]
-    kxz = int(np.rint(reduced[2, 0] / reduced[0, 0]))
-    reduced[2] -= kxz * reduced[0]
-    kxy = int(np.rint(reduced[1, 0] / reduced[0, 0]))
-    reduced[1] -= kxy * reduced[0]
-    return reduced, (kxy, kxz, kyz)
 
 
 def wrap_into_cell(cell, positions):
