@@ -75,7 +75,8 @@ def test_atoms_far_outside_the_cell_on_a_new_and_a_running_engine():
     """fix ipi folds an atom back by one box only: a new engine given atoms several boxes
     out computed another energy surface (27 waters: -159.05 eV against -156.23 eV), a
     running one died ("Atoms have moved too far apart"), and the in-process calculator
-    lost them ("LAMMPS lost 81 of 81 atoms").  Also after a tilt flip (a new engine)."""
+    lost them ("LAMMPS lost 81 of 81 atoms").  Also after a tilt past half a box (a new,
+    triclinic engine, its basis reduced)."""
     rng = np.random.default_rng(0)
     atoms = far_out(water_box_27(), rng)
     with LAMMPSEngine(PPPM_27) as engine:
@@ -91,7 +92,7 @@ def test_atoms_far_outside_the_cell_on_a_new_and_a_running_engine():
         atoms.positions = water_box_27().positions
         compare(atoms, reference, *BOUNDS)
         assert engine.pid == first  # one engine throughout
-        # a tilt past half a box: the basis flips, a new engine starts, atoms far out
+        # a tilt past half a box (a new engine: the box was orthogonal), atoms far out
         cell = atoms.cell.array.copy()
         cell[1, 0] = 0.7 * cell[0, 0]
         atoms.set_cell(cell, scale_atoms=True)

@@ -47,7 +47,9 @@ Numbers (``fix ipi``)
     neighbour list.  (``fix rigidmd/ipi`` takes positions in any image: it
     writes each atom in the image nearest to LAMMPS's own.)  The cell is sent in the basis with
     LAMMPS's tilt limits (:func:`reduce_tilt`: the same lattice); when that
-    basis flips, where native LAMMPS re-neighbours, a new engine is started.
+    basis flips, where native LAMMPS re-neighbours, ``fix rigidmd/ipi``
+    re-maps the atoms and re-neighbours in the running engine (on up to two
+    ranks; on more, and with ``fix ipi``, a new engine is started).
 
 Life cycle
     The engine starts at the first force call, and stops with :meth:`close`,
@@ -659,12 +661,17 @@ class LAMMPSEngine(IPICalculator):
                      target.get_initial_charges().tobytes())
         cell, flips = self._lattice(target.cell.array)
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
-        if self.connected and (signature != self._signature or flips != self._flips
+        # A flip of the reduced basis: fix rigidmd/ipi re-maps the atoms and re-neighbours
+        # (as native LAMMPS), on at most 2 ranks (see plugin/rigidmd_ipi.cpp); fix ipi cannot.
+        restart_at_flip = self.engine_fix != "rigidmd/ipi" or self.processes > 2
+        if self.connected and (signature != self._signature
+                               or flips != self._flips and restart_at_flip
                                or tilted and not self._engine_triclinic):
-            # Other atoms; a tilted cell in an orthogonal box; or a flip of the basis
-            # (native LAMMPS re-neighbours there; fix ipi cannot): a new engine.
+            # Other atoms; a tilted cell in an orthogonal box; or a flip: a new engine.
             self.close()
             if tilted:
                 self.triclinic = True
+        elif self.connected:
+            self._flips = flips
         self._signature = signature
         super().calculate(atoms, properties, system_changes)
