@@ -64,7 +64,7 @@ def reduce_tilt(cell):
     return reduced, (kxy, kxz, kyz)
 
 
-def lammps_box(cell):
+def lammps_box(cell: np.ndarray) -> tuple[np.ndarray | None, np.ndarray, tuple[int, int, int]]:
     """The box LAMMPS is given for the atoms' ``cell``: its frame and its reduced basis.
 
     LAMMPS takes a box in any basis of a lattice, but its results depend on the basis (PPPM's

@@ -235,18 +235,19 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
-def oversubscription(processes, threads=None):
-    """One line saying that ``processes`` ranks of ``threads`` threads need more cores than
-    this process may use, or None.  Measured: more ranks than cores ran 30 to 60 times
-    slower (MPICH's waiting ranks poll, and LAMMPS's ranks wait for each other)."""
+def warn_oversubscription(processes: int, threads: int | None = None) -> None:
+    """Warn (one line) when ``processes`` ranks of ``threads`` threads need more cores than
+    this process may use.  Measured: more ranks than cores ran 30 to 60 times slower
+    (MPICH's waiting ranks poll, and LAMMPS's ranks wait for each other)."""
     threads = threads or 1
     cores = usable_cores()
     if processes * threads <= cores:
-        return None
-    return (f"LAMMPSEngine: {processes} MPI ranks x {threads} thread"
-            f"{'s' if threads > 1 else ''} need {processes * threads} cores; this process may "
-            f"use {cores} (its CPU affinity): the engine runs many times slower (30-60x "
-            f"measured); use processes * threads <= {cores}")
+        return
+    warnings.warn(f"LAMMPSEngine: {processes} MPI ranks x {threads} thread"
+                  f"{'s' if threads > 1 else ''} need {processes * threads} cores; this "
+                  f"process may use {cores} (its CPU affinity): the engine runs many times "
+                  f"slower (30-60x measured); use processes * threads <= {cores}",
+                  stacklevel=3)
 
 
 def _start_hint(processes, threads):
@@ -274,6 +275,18 @@ def _extra_number(extra, name):
         return json.loads(extra)[name]
     except (ValueError, KeyError, TypeError):
         return None
+
+
+def _checked_signature(atoms):
+    """What makes ``atoms`` another system for an engine, once they are checked: a periodic
+    cell, and finite positions and cell (a NaN or infinity killed a running engine with
+    "Out of range atoms": refused here first, as LAMMPSCalculator refuses it)."""
+    if not atoms.pbc.all():
+        raise ValueError(f"LAMMPSEngine: needs a periodic cell in all directions (pbc "
+                         f"{atoms.pbc.tolist()}); use LAMMPSCalculator for a cluster")
+    check_finite(atoms.positions, "position", "Å", "given to LAMMPSEngine")
+    check_finite(atoms.cell.array, "cell", "Å", "given to LAMMPSEngine")
+    return len(atoms), atoms.numbers.tobytes(), atoms.get_initial_charges().tobytes()
 
 
 class _PerCell:
@@ -506,8 +519,8 @@ class LAMMPSEngine(IPICalculator):
             raise
         self.log = workdir / "log.lammps"
         cmd, env = self.command_line()
-        if self.launch_engine and (why := oversubscription(self.processes, self.threads)):
-            warnings.warn(why, stacklevel=2)
+        if self.launch_engine:
+            warn_oversubscription(self.processes, self.threads)
         if not self.launch_engine:
             print(f"LAMMPSEngine: waiting for an engine: cd {workdir} && {' '.join(cmd)}",
                   file=sys.stderr, flush=True)
@@ -650,19 +663,10 @@ class LAMMPSEngine(IPICalculator):
     # ------------------------------------------------------------ ASE
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         target = atoms if atoms is not None else self.atoms
-        if not target.pbc.all():
-            raise ValueError(f"LAMMPSEngine: needs a periodic cell in all directions (pbc "
-                             f"{target.pbc.tolist()}); use LAMMPSCalculator for a cluster")
-        # A NaN or infinity kills a running engine ("Out of range atoms"): refused here first,
-        # as LAMMPSCalculator refuses it.
-        check_finite(target.positions, "position", "Å", "given to LAMMPSEngine")
-        check_finite(target.cell.array, "cell", "Å", "given to LAMMPSEngine")
-        signature = (len(target), target.numbers.tobytes(),
-                     target.get_initial_charges().tobytes())
+        signature = _checked_signature(target)
         cell, flips = self._lattice(target.cell.array)
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
-        # A flip of the reduced basis: fix rigidmd/ipi re-maps the atoms and re-neighbours
-        # (as native LAMMPS), on at most 2 ranks (see plugin/rigidmd_ipi.cpp); fix ipi cannot.
+        # (at a flip fix rigidmd/ipi re-maps the atoms on up to 2 ranks; fix ipi cannot)
         restart_at_flip = self.engine_fix != "rigidmd/ipi" or self.processes > 2
         if self.connected and (signature != self._signature
                                or flips != self._flips and restart_at_flip
@@ -671,7 +675,5 @@ class LAMMPSEngine(IPICalculator):
             self.close()
             if tilted:
                 self.triclinic = True
-        elif self.connected:
-            self._flips = flips
         self._signature = signature
         super().calculate(atoms, properties, system_changes)
