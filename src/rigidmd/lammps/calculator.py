@@ -380,8 +380,9 @@ class LAMMPSCalculator(Calculator):
     def write_data(self, atoms, path):
         """Write ``atoms`` as this calculator gives them to LAMMPS to a data file.
 
-        Types, masses, charges, molecule IDs, the box in LAMMPS's frame (see
-        :func:`lower_triangular`) and image flags, by LAMMPS's ``write_data``
+        Types, masses, charges, molecule IDs, the box in LAMMPS's frame and its
+        reduced basis (see :func:`rigidmd.lammps.box.lammps_box`) and image flags,
+        by LAMMPS's ``write_data``
         (``nocoeff``), after one force call (which also fixes
         :attr:`kspace_parameters`).  An engine in another process reads it
         (:class:`rigidmd.lammps.engine.LAMMPSEngine`).
