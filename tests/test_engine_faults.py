@@ -75,7 +75,8 @@ def test_atoms_far_outside_the_cell_on_a_new_and_a_running_engine():
     """fix ipi folds an atom back by one box only: a new engine given atoms several boxes
     out computed another energy surface (27 waters: -159.05 eV against -156.23 eV), a
     running one died ("Atoms have moved too far apart"), and the in-process calculator
-    lost them ("LAMMPS lost 81 of 81 atoms").  Also after a tilt flip (a new engine)."""
+    lost them ("LAMMPS lost 81 of 81 atoms").  Also after a tilt past half a box (a new,
+    triclinic engine, its basis reduced)."""
     rng = np.random.default_rng(0)
     atoms = far_out(water_box_27(), rng)
     with LAMMPSEngine(PPPM_27) as engine:
@@ -91,7 +92,7 @@ def test_atoms_far_outside_the_cell_on_a_new_and_a_running_engine():
         atoms.positions = water_box_27().positions
         compare(atoms, reference, *BOUNDS)
         assert engine.pid == first  # one engine throughout
-        # a tilt past half a box: the basis flips, a new engine starts, atoms far out
+        # a tilt past half a box (a new engine: the box was orthogonal), atoms far out
         cell = atoms.cell.array.copy()
         cell[1, 0] = 0.7 * cell[0, 0]
         atoms.set_cell(cell, scale_atoms=True)
@@ -334,6 +335,43 @@ def test_an_engine_that_fails_at_set_up_leaves_no_temporary_folder(tmp_path, mon
         engine.get_potential_energy(water_box_27())
     engine.close()
     assert not list(tmp_path.glob("rigidmd-lammps-*"))
+
+
+def test_a_non_finite_position_or_cell_on_a_running_engine_is_refused_before_sending():
+    """Before: a NaN position sent to a running engine killed it ("Out of range atoms");
+    now refused here, as in-process, with the engine still running and answering."""
+    atoms = water_box_27()
+    with LAMMPSEngine(PPPM_27) as engine:
+        atoms.calc = engine
+        energy = atoms.get_potential_energy()
+        pid = engine.pid
+        bad = atoms.copy()
+        bad.positions[5, 1] = np.nan
+        with pytest.raises(ValueError, match=r"atom 5 has a non-finite position \[.*nan.*\] "
+                                             r"\(Å\) given to LAMMPSEngine"):
+            engine.get_forces(bad)
+        bad = atoms.copy()
+        bad.cell[2, 2] = np.inf
+        with pytest.raises(ValueError, match="cell vector 2 has a non-finite cell .* given to "
+                                             "LAMMPSEngine"):
+            engine.get_forces(bad)
+        assert engine.pid == pid  # the same engine, alive
+        assert engine.get_potential_energy(atoms.copy()) == energy
+    assert not our_lmp()
+
+
+def test_more_engine_ranks_than_cores_is_said_at_start(monkeypatch):
+    """Before: 2 ranks on 1 core (or more ranks than cores) ran 30-60 times slower with no
+    word; now one warning at the engine's start names the ranks, threads and cores."""
+    import rigidmd.lammps.engine as lammps_engine
+
+    monkeypatch.setattr(lammps_engine.os, "sched_getaffinity", lambda pid: {0})
+    with LAMMPSEngine(PPPM_27, processes=2) as engine:
+        with pytest.warns(UserWarning, match=r"^LAMMPSEngine: 2 MPI ranks x 1 thread need 2 "
+                                             r"cores; this process may use 1 \(its CPU "
+                                             r"affinity\)"):
+            engine.get_potential_energy(water_box_27())
+    assert not our_lmp()
 
 
 # ------------------------------------------------------------ signals while waiting

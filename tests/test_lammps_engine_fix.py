@@ -262,3 +262,30 @@ def test_an_engine_started_by_hand_over_tcp(tmp_path, processes):
     assert f"fix rmd_ipi all rigidmd/ipi localhost {port}" in text
     assert "Loop time of" in text
     assert not [p for p in descendants(started[0].pid) if p in processes_named("lmp")]
+
+
+@pytest.mark.parametrize("processes", [1, 2])
+def test_a_flip_of_the_basis_keeps_the_engine(processes):
+    """A cell sheared through several flips of its reduced basis (b from 0.3 to 2.7 box
+    lengths and back to -1.6, c with it): the engine re-maps its atoms and re-neighbours,
+    as native LAMMPS at a flip, and each call equals the in-process calculator (which
+    reduces the basis alike).  Before: every flip started a new engine (a Monte Carlo
+    barostat with couple tri: 15 engines in 150 steps)."""
+    atoms = water_box_27()
+    lengths, length = atoms.cell.lengths(), atoms.cell.array[0, 0]
+    with LAMMPSEngine(PPPM_27, processes=processes, triclinic=True) as engine:
+        atoms.calc = engine
+        atoms.get_potential_energy()
+        first = engine.pid
+        reference = atoms.copy()
+        reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
+        # (the last: a flip with the atoms where they were, no motion to trigger LAMMPS's
+        # neighbour check)
+        for shear, scale in ((0.3, True), (0.6, True), (1.4, True), (2.7, True),
+                             (0.45, True), (-0.55, True), (-1.6, True), (-1.45, False)):
+            cell = np.diag(lengths)
+            cell[1, 0], cell[2, 0], cell[2, 1] = shear * length, 0.3 * shear * length, \
+                -0.7 * shear * length
+            atoms.set_cell(cell, scale_atoms=scale)
+            assert_equal_to_in_process(atoms, reference)
+            assert engine.pid == first, shear

@@ -20,6 +20,7 @@ import rigidmd.lammps.calculator as lammps_calculator
 from rigidmd import RigidBodies, RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.core.checkpoint import save_checkpoint
 from rigidmd.lammps import LAMMPSCalculator
+from rigidmd.lammps.engine import reduce_tilt
 from rigidmd.run.restart import load_checkpoint
 from rigidmd.systems import water_box
 from rigidmd.water import water_model
@@ -127,6 +128,72 @@ def test_any_cell_change_equals_a_fresh_lammps_with_the_same_kspace_parameters(m
         np.testing.assert_allclose(atoms.get_stress(), stress, rtol=0,
                                    atol=1e-9 * np.abs(stress).max())
     assert count() == 5 + 1  # the fresh ones, and one for atoms
+
+
+@pytest.mark.parametrize("boxes", [2, 5, 25])
+def test_a_large_tilt_gives_the_numbers_of_the_same_lattice_in_its_reduced_basis(boxes):
+    """The lattice of the orthogonal box given with b = (boxes L, L, 0): before the fix LAMMPS
+    took that basis as it was, and PPPM's mesh followed it, so the energy was off by 0.088 eV
+    at 2 L, 3.2 eV at 5 L and 6.9 eV at 25 L; now the basis is reduced first (as the engine
+    does), and energy, forces and stress (turned back to the user's frame) equal those of
+    the orthogonal box, which is the reduced basis.  Measured: equal to the last bit; turned
+    into another frame, forces and stress 7e-14, 1.4e-13 and 6e-13 relative to the largest
+    (2, 5 and 25 L: the turn's roundoff grows with the tilt), energy 7e-16.  Bounds: 1e-13
+    (the engine's), turned 1e-11."""
+    atoms = water_box_27()
+    atoms.calc = LAMMPSCalculator(PPPM_27)
+    energy, forces, stress = (atoms.get_potential_energy(), atoms.get_forces(),
+                              atoms.get_stress())
+    parameters = atoms.calc.kspace_parameters
+    length = atoms.cell.array[0, 0]
+    turn = np.linalg.qr(np.random.default_rng(7).normal(size=(3, 3)))[0]
+    turn *= np.sign(np.linalg.det(turn))
+    for rotation in (None, turn):
+        cell = atoms.cell.array.copy()
+        cell[1, 0] = boxes * length
+        sheared = atoms.copy()  # the same positions, the same lattice
+        sheared.set_cell(cell if rotation is None else cell @ rotation.T)
+        if rotation is not None:
+            sheared.positions = sheared.positions @ rotation.T
+        sheared.calc = LAMMPSCalculator(PPPM_27, kspace_parameters=parameters)
+        assert sheared.get_potential_energy() == pytest.approx(energy, rel=1e-13, abs=0)
+        back, bound = (np.eye(3), 1e-13) if rotation is None else (rotation, 1e-11)
+        np.testing.assert_allclose(sheared.get_forces() @ back, forces, rtol=0,
+                                   atol=bound * np.abs(forces).max())
+        full = back.T @ sheared.get_stress(voigt=False) @ back
+        np.testing.assert_allclose(full, atoms.get_stress(voigt=False), rtol=0,
+                                   atol=bound * np.abs(stress).max())
+
+
+def test_a_cell_sheared_through_several_flips_in_one_instance_equals_its_reduced_basis():
+    """One instance follows a shear of b from 0.3 L to 2.7 L and back to -1.6 L (the
+    reduced basis flips at each half box): each call equals a fresh LAMMPS given the
+    reduced basis of the same lattice (the positions scaled with the cell).  Measured
+    (relative; forces and stress to the largest component): energy 1.9e-16, forces 2e-16,
+    stress 2.6e-15; bounds 1e-13."""
+    atoms = water_box_27()
+    atoms.calc = LAMMPSCalculator(PPPM_27)
+    atoms.get_potential_energy()
+    parameters = atoms.calc.kspace_parameters
+    length, lengths = atoms.cell.array[0, 0], atoms.cell.lengths()
+    for shear in (0.3, 0.6, 1.4, 2.7, 0.45, -0.55, -1.6):
+        cell = np.diag(lengths)
+        cell[1, 0], cell[2, 0], cell[2, 1] = shear * length, 0.3 * shear * length, \
+            -0.7 * shear * length
+        atoms.set_cell(cell, scale_atoms=True)
+        reduced = atoms.copy()
+        reduced.set_cell(reduce_tilt(cell)[0])
+        tilts = reduced.cell.array[[1, 2, 2], [0, 0, 1]]
+        assert np.abs(tilts).max() <= 0.5 * length + 1e-12
+        reduced.calc = LAMMPSCalculator(PPPM_27, kspace_parameters=parameters)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # (LAMMPS: "Triclinic box skew is large")
+            energy, forces, stress = (reduced.get_potential_energy(), reduced.get_forces(),
+                                      reduced.get_stress())
+            got = atoms.get_potential_energy(), atoms.get_forces(), atoms.get_stress()
+        assert got[0] == pytest.approx(energy, rel=1e-13, abs=0), shear
+        np.testing.assert_allclose(got[1], forces, rtol=0, atol=1e-13 * np.abs(forces).max())
+        np.testing.assert_allclose(got[2], stress, rtol=0, atol=1e-13 * np.abs(stress).max())
 
 
 def test_an_npt_run_continues_with_the_kspace_parameters_it_had(tmp_path):

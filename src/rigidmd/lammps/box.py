@@ -13,7 +13,7 @@ import numpy as np
 
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, box_plugin, warn_fallback
 
-__all__ = ["LammpsBox", "lower_triangular", "region_command"]
+__all__ = ["LammpsBox", "lammps_box", "lower_triangular", "reduce_tilt", "region_command"]
 
 
 def lower_triangular(cell):
@@ -37,6 +37,56 @@ def lower_triangular(cell):
     lammps_cell = R.T
     lammps_cell[np.abs(lammps_cell) < 1e-14 * np.abs(lammps_cell).max()] = 0.0
     return Q, lammps_cell
+
+
+def reduce_tilt(cell):
+    """The same lattice with LAMMPS's tilt limits: ``|xy|, |xz| <= lx/2``, ``|yz| <= ly/2``.
+
+    Parameters
+    ----------
+    cell : numpy.ndarray, shape (3, 3)
+        Lower triangular (LAMMPS's frame), rows a, b, c.
+
+    Returns
+    -------
+    reduced : numpy.ndarray, shape (3, 3)
+        ``b - kxy a`` and ``c - kyz b - kxz a`` for the nearest whole numbers.
+    flips : tuple of int
+        ``(kxy, kxz, kyz)``.
+    """
+    reduced = np.array(cell, dtype=float)
+    kyz = int(np.rint(reduced[2, 1] / reduced[1, 1]))
+    reduced[2] -= kyz * reduced[1]
+    kxz = int(np.rint(reduced[2, 0] / reduced[0, 0]))
+    reduced[2] -= kxz * reduced[0]
+    kxy = int(np.rint(reduced[1, 0] / reduced[0, 0]))
+    reduced[1] -= kxy * reduced[0]
+    return reduced, (kxy, kxz, kyz)
+
+
+def lammps_box(cell: np.ndarray) -> tuple[np.ndarray | None, np.ndarray, tuple[int, int, int]]:
+    """The box LAMMPS is given for the atoms' ``cell``: its frame and its reduced basis.
+
+    LAMMPS takes a box in any basis of a lattice, but its results depend on the basis (PPPM's
+    mesh follows the box edges; its minimum image and ghost atoms assume tilts within half a
+    box length): 27 waters with b = (2 L, L, 0) were 0.088 eV off the same lattice given
+    with b = (0, L, 0).  The basis is reduced (:func:`reduce_tilt`), as the engine reduces it.
+
+    Returns
+    -------
+    rotation : numpy.ndarray, shape (3, 3) or None
+        ``Q`` of :func:`lower_triangular`.
+    cell : numpy.ndarray, shape (3, 3)
+        The reduced lower-triangular cell (Å, LAMMPS's frame).
+    flips : tuple of int
+        The whole box lengths taken off the tilts, as :func:`reduce_tilt` returns them.
+    """
+    rotation, cell = lower_triangular(cell)
+    if abs(cell[1, 0]) <= 0.5 * cell[0, 0] and abs(cell[2, 0]) <= 0.5 * cell[0, 0] \
+            and abs(cell[2, 1]) <= 0.5 * cell[1, 1]:
+        return rotation, cell, (0, 0, 0)  # (the usual case: nothing to reduce)
+    reduced, flips = reduce_tilt(cell)
+    return rotation, reduced, flips
 
 
 def region_command(cell):
@@ -77,12 +127,13 @@ class LammpsBox:
         Whether ``fix rigidmd/box`` is declared (at the first new cell).
     """
 
-    def __init__(self, lmp, execute, cell, rotation, triclinic):
+    def __init__(self, lmp, execute, cell, rotation, triclinic, flips=(0, 0, 0)):
         self.lmp = lmp
         self.execute = execute
         self.cell = cell.copy()
         self.rotation = rotation
         self.triclinic = triclinic
+        self.flips = flips  # the reduction of the cell's basis (see lammps_box)
         self.plugin = None  # loaded when first needed
         self.fix = False
         self._lammps_cell = None  # LAMMPS's box as last read (None: to be read)
@@ -107,8 +158,11 @@ class LammpsBox:
         triclinic once; LAMMPS then needs its ``kspace_style`` again, given with the
         same ``commands`` and the pinned ``kspace_parameters`` (see
         :attr:`rigidmd.lammps.LAMMPSCalculator.kspace_parameters`).  LAMMPS takes any
-        tilt (a large one only runs less efficiently): the cell is never flipped or
-        re-mapped.
+        tilt, but its results depend on the basis (PPPM's mesh follows it): the
+        cell's basis is reduced (:func:`lammps_box`), and when the reduced basis
+        flips (a tilt past half a box length), ``change_box`` and a set-up run
+        re-map the atoms and their neighbours, as native LAMMPS re-neighbours at
+        a flip.
 
         Parameters
         ----------
@@ -124,9 +178,12 @@ class LammpsBox:
         bool
             Whether the next step must run a set-up (``change_box`` was used).
         """
-        rotation, lammps_cell = lower_triangular(cell)
+        rotation, lammps_cell, flips = lammps_box(cell)
         tilted = bool(lammps_cell[1, 0] or lammps_cell[2, 0] or lammps_cell[2, 1])
-        if self.fix and (self.triclinic or not tilted):
+        # A flip of the reduced basis moves LAMMPS's periodic images of the ghost atoms
+        # (native LAMMPS re-neighbours there): the set-up path below.
+        flipped, self.flips = flips != self.flips, flips
+        if self.fix and (self.triclinic or not tilted) and not flipped:
             # LAMMPS's barostat path (see rigidmd.lammps.boxplugin): the new box and
             # KSpace::setup() now; the next step re-neighbours if the box moved enough.
             (lx, _, _), (xy, ly, _), (xz, yz, lz) = lammps_cell.tolist()

@@ -294,6 +294,9 @@ def _build():
             failures.append(str(err))
         except OSError as err:
             failures.append(f"{directory}: {err.strerror or err}")
+    # Why a cached library (each failure so far is one's) was not used: said with any
+    # failure of the build that follows.
+    cached = f"; the cached one was refused: {failures[0]}" if failures else ""
     compiler = None
     for directory in directories:
         try:
@@ -308,13 +311,14 @@ def _build():
         try:
             compiler = compiler or _compiler()
         except BoxPluginUnavailable as err:  # none: say so, and why no build could be used
-            cached = f"; the cached one cannot be used: {failures[0]}" if failures else ""
             raise BoxPluginUnavailable(f"{err}{cached}") from None
         try:
             _compile(compiler, includes, directory / name)
         except OSError as err:  # a cache that cannot be written: the next one
             failures.append(f"{directory}: {err.strerror or err}")
             continue
+        except BoxPluginUnavailable as err:  # the build failed: and why it was needed
+            raise BoxPluginUnavailable(f"{err}{cached}") from None
         reason = _verified(directory / name)
         if reason is None:
             return directory / name

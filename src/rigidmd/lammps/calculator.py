@@ -27,9 +27,12 @@ Either way the k-space parameters of the first cell are kept
 equal those of a fresh LAMMPS at that cell given those parameters.  The
 instance stays whatever the cell does: cells that are not in LAMMPS's
 lower-triangular form are rotated into it anew at each cell
-(positions, forces and stress rotated back), and an orthogonal box that gets
-tilted becomes triclinic once.  A change in the number or kind of atoms,
-their charges or their molecules builds a new instance.
+(positions, forces and stress rotated back), the basis is reduced to LAMMPS's
+tilt limits (the same lattice; PPPM's mesh follows the basis, so a tilt of
+several box lengths otherwise gave other numbers; a flip of the reduced basis
+runs one set-up), and an orthogonal box that gets tilted becomes triclinic
+once.  A change in the number or kind of atoms, their charges or their
+molecules builds a new instance.
 
 Molecules (for ``neigh_modify exclude molecule/intra all``) are the bodies of
 the rigid dynamics the atoms are in (a ``mol-id`` array, tags or
@@ -377,8 +380,9 @@ class LAMMPSCalculator(Calculator):
     def write_data(self, atoms, path):
         """Write ``atoms`` as this calculator gives them to LAMMPS to a data file.
 
-        Types, masses, charges, molecule IDs, the box in LAMMPS's frame (see
-        :func:`lower_triangular`) and image flags, by LAMMPS's ``write_data``
+        Types, masses, charges, molecule IDs, the box in LAMMPS's frame and its
+        reduced basis (see :func:`rigidmd.lammps.box.lammps_box`) and image flags,
+        by LAMMPS's ``write_data``
         (``nocoeff``), after one force call (which also fixes
         :attr:`kspace_parameters`).  An engine in another process reads it
         (:class:`rigidmd.lammps.engine.LAMMPSEngine`).

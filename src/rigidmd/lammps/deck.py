@@ -13,7 +13,13 @@ from ase import Atoms, units
 from rigidmd.lammps.data import LammpsData, check_body_ids, write_data
 from rigidmd.lammps.library import flatten
 
-__all__ = ["setup_commands", "integration_commands", "coupling_fix", "export_lammps", "number"]
+__all__ = ["setup_commands", "integration_commands", "coupling_fix", "export_lammps", "number",
+           "pressure_commands"]
+
+#: LAMMPS's ``metal`` constants (``force->nktv2p``: eV/Å³ to bar; ``force->mvv2e``:
+#: amu Å²/ps² to eV), as LAMMPS's own ``press`` uses them.
+METAL_NKTV2P = 1.6021765e6
+METAL_MVV2E = 1.0364269e-4
 
 
 def number(x):
@@ -31,6 +37,66 @@ def setup_commands(data: LammpsData, pair_commands: Iterable[str]) -> list[str]:
         f"boundary {data.boundary}",
         f'read_data "{data.path}"',
         *flatten(pair_commands),
+    ]
+
+
+def pressure_commands(pair_commands: Iterable[str] = ()) -> list[str]:
+    """The deck's ``v_press_mol`` (rigidmd's pressure, bar) and what ``press`` includes.
+
+    rigidmd's pressure is the molecular one: (2 K_com + tr W_mol) / 3V, the centres of
+    mass' kinetic energy and the molecular virial (the atomic virial less the sum of
+    d_i . f_i over each body's atoms about its centre of mass; a
+    free atom is a body of its own).  LAMMPS's thermo ``press`` is the atomic pressure with
+    ``fix rigid``'s constraint virial, which ``fix rigid`` computes from the velocity change
+    over a step: at step 0 it is incomplete (27 waters: +10.5 bar against rigidmd's -2096.3
+    bar), later it differs from rigidmd's step by step by tens of bar.  ``v_press_mol``
+    computes the molecular pressure in LAMMPS, at every thermo step (step 0 included):
+    equal to rigidmd's to 3e-8 relative (LAMMPS's ``metal`` constants against ASE's).
+
+    Parameters
+    ----------
+    pair_commands : iterable of str
+        The deck's interaction commands (for the note on LAMMPS's warning about
+        excluded pairs with a k-space solver).
+
+    Returns
+    -------
+    list of str
+        Comment lines, computes and the ``press_mol`` variable (thermo: ``v_press_mol``).
+    """
+    commands = flatten(pair_commands)
+    notes = [
+        "# Pressure (bar).  LAMMPS's thermo `press` is the atomic pressure: 2 KE of every",
+        "# atom (translation and rotation) + the atomic virial (pair and k-space) + fix",
+        "# rigid's constraint virial, over 3V.  fix rigid computes its constraint virial from",
+        "# the velocity change over a step, so `press` at step 0 is incomplete; later it",
+        "# differs from rigidmd's step by step (by tens of bar on liquid water).",
+        "# v_press_mol is rigidmd's pressure at every step, step 0 included: the molecular",
+        "# pressure, 2 KE of the centres of mass + the molecular virial (the atomic one less",
+        "# sum d_i.f_i over each molecule's atoms about its centre of mass), over 3V.",
+    ]
+    words = {c.split()[0] for c in commands if c.split()}
+    if "kspace_style" in words and any("exclude" in c.split() for c in commands):
+        notes += [
+            "# LAMMPS warns \"Neighbor exclusions used with KSpace solver may give inconsistent",
+            "# Coulombic energies\": the excluded intramolecular pairs keep their k-space part,",
+            "# a constant of a rigid molecule, as in rigidmd's LAMMPS calculator (expected).",
+        ]
+    spread = "c_rmd_spread"
+    dvir = "+".join(f"(c_rmd_xu[{k}]-{spread}[{k}])*f{a}" for k, a in zip((1, 2, 3), "xyz",
+                                                                           strict=True))
+    return notes + [
+        "compute rmd_chunk all chunk/atom molecule",
+        "compute rmd_com all com/chunk rmd_chunk",
+        "compute rmd_vcm all vcm/chunk rmd_chunk",
+        "compute rmd_spread all chunk/spread/atom rmd_chunk c_rmd_com[*] c_rmd_vcm[*]",
+        "compute rmd_xu all property/atom xu yu zu",
+        f"variable rmd_dvir atom {dvir}",
+        f"variable rmd_kcom atom mass*({spread}[4]^2+{spread}[5]^2+{spread}[6]^2)",
+        "compute rmd_sums all reduce sum v_rmd_dvir v_rmd_kcom",
+        "compute rmd_pvir all pressure NULL pair kspace",
+        f"variable press_mol equal c_rmd_pvir+(c_rmd_sums[2]*{METAL_MVV2E!r}"
+        f"-c_rmd_sums[1])/(3*vol)*{METAL_NKTV2P!r}",
     ]
 
 
@@ -212,14 +278,18 @@ def export_lammps(
     # A relative path, so the directory can be moved to another machine.
     data = replace(data, path=Path("data.rigidmd"))
     thermo = "step time temp pe ke etotal"
+    periodic = data.boundary == "p p p"
     if style.body_style in ("npt", "nph"):
-        thermo += " vol press density"
+        thermo += " vol press v_press_mol density"
+    elif periodic:
+        thermo += " press v_press_mol"
     cmds = [
         "# LAMMPS input written by rigidmd: the same bodies, interactions and",
         "# integrator as the rigidmd run (metal units: eV, Å, ps).",
         *setup_commands(data, pair_commands),
         *integration_commands(data, body_ids, timestep, f"rigid/{style.body_style}/small",
                               couplings, seed),
+        *(pressure_commands(pair_commands) if periodic else []),
         f"thermo_style custom {thermo}",
         "thermo_modify norm no",
         f"thermo {int(thermo_every)}",

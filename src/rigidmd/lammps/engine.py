@@ -47,7 +47,9 @@ Numbers (``fix ipi``)
     neighbour list.  (``fix rigidmd/ipi`` takes positions in any image: it
     writes each atom in the image nearest to LAMMPS's own.)  The cell is sent in the basis with
     LAMMPS's tilt limits (:func:`reduce_tilt`: the same lattice); when that
-    basis flips, where native LAMMPS re-neighbours, a new engine is started.
+    basis flips, where native LAMMPS re-neighbours, ``fix rigidmd/ipi``
+    re-maps the atoms and re-neighbours in the running engine (on up to two
+    ranks; on more, and with ``fix ipi``, a new engine is started).
 
 Life cycle
     The engine starts at the first force call, and stops with :meth:`close`,
@@ -85,8 +87,10 @@ import numpy as np
 from ase import units
 from ase.calculators.calculator import all_changes
 
+from rigidmd.core.checks import check_finite
 from rigidmd.ipi import IPICalculator
 from rigidmd.ipi.processes import descends_from as _descends_from
+from rigidmd.lammps.box import reduce_tilt
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
 from rigidmd.lammps.calculator import LAMMPSCalculator, lower_triangular
 from rigidmd.lammps.library import check_atom_types, flatten, mpich_prefix
@@ -125,31 +129,6 @@ def mpirun_executable() -> str:
     if found is None:
         raise FileNotFoundError("LAMMPSEngine: processes > 1 needs mpirun (pip install mpich)")
     return found
-
-
-def reduce_tilt(cell):
-    """The same lattice with LAMMPS's tilt limits: ``|xy|, |xz| <= lx/2``, ``|yz| <= ly/2``.
-
-    Parameters
-    ----------
-    cell : numpy.ndarray, shape (3, 3)
-        Lower triangular (LAMMPS's frame), rows a, b, c.
-
-    Returns
-    -------
-    reduced : numpy.ndarray, shape (3, 3)
-        ``b - kxy a`` and ``c - kyz b - kxz a`` for the nearest whole numbers.
-    flips : tuple of int
-        ``(kxy, kxz, kyz)``.
-    """
-    reduced = np.array(cell, dtype=float)
-    kyz = int(np.rint(reduced[2, 1] / reduced[1, 1]))
-    reduced[2] -= kyz * reduced[1]
-    kxz = int(np.rint(reduced[2, 0] / reduced[0, 0]))
-    reduced[2] -= kxz * reduced[0]
-    kxy = int(np.rint(reduced[1, 0] / reduced[0, 0]))
-    reduced[1] -= kxy * reduced[0]
-    return reduced, (kxy, kxz, kyz)
 
 
 def wrap_into_cell(cell, positions):
@@ -245,11 +224,30 @@ def default_poll_us(processes, threads=None, launch=True) -> int:
     int
         Microseconds: 0 or 500.
     """
+    return 0 if launch and processes * (threads or 1) >= usable_cores() else 500
+
+
+def usable_cores() -> int:
+    """The cores this process may use (its CPU affinity; elsewhere than Linux, all)."""
     try:
-        cores = len(os.sched_getaffinity(0))
+        return len(os.sched_getaffinity(0))
     except (AttributeError, OSError):  # not on Linux
-        cores = os.cpu_count() or 1
-    return 0 if launch and processes * (threads or 1) >= cores else 500
+        return os.cpu_count() or 1
+
+
+def warn_oversubscription(processes: int, threads: int | None = None) -> None:
+    """Warn (one line) when ``processes`` ranks of ``threads`` threads need more cores than
+    this process may use.  Measured: more ranks than cores ran 30 to 60 times slower
+    (MPICH's waiting ranks poll, and LAMMPS's ranks wait for each other)."""
+    threads = threads or 1
+    cores = usable_cores()
+    if processes * threads <= cores:
+        return
+    warnings.warn(f"LAMMPSEngine: {processes} MPI ranks x {threads} thread"
+                  f"{'s' if threads > 1 else ''} need {processes * threads} cores; this "
+                  f"process may use {cores} (its CPU affinity): the engine runs many times "
+                  f"slower (30-60x measured); use processes * threads <= {cores}",
+                  stacklevel=3)
 
 
 def _start_hint(processes, threads):
@@ -277,6 +275,18 @@ def _extra_number(extra, name):
         return json.loads(extra)[name]
     except (ValueError, KeyError, TypeError):
         return None
+
+
+def _checked_signature(atoms):
+    """What makes ``atoms`` another system for an engine, once they are checked: a periodic
+    cell, and finite positions and cell (a NaN or infinity killed a running engine with
+    "Out of range atoms": refused here first, as LAMMPSCalculator refuses it)."""
+    if not atoms.pbc.all():
+        raise ValueError(f"LAMMPSEngine: needs a periodic cell in all directions (pbc "
+                         f"{atoms.pbc.tolist()}); use LAMMPSCalculator for a cluster")
+    check_finite(atoms.positions, "position", "Å", "given to LAMMPSEngine")
+    check_finite(atoms.cell.array, "cell", "Å", "given to LAMMPSEngine")
+    return len(atoms), atoms.numbers.tobytes(), atoms.get_initial_charges().tobytes()
 
 
 class _PerCell:
@@ -509,6 +519,8 @@ class LAMMPSEngine(IPICalculator):
             raise
         self.log = workdir / "log.lammps"
         cmd, env = self.command_line()
+        if self.launch_engine:
+            warn_oversubscription(self.processes, self.threads)
         if not self.launch_engine:
             print(f"LAMMPSEngine: waiting for an engine: cd {workdir} && {' '.join(cmd)}",
                   file=sys.stderr, flush=True)
@@ -651,17 +663,15 @@ class LAMMPSEngine(IPICalculator):
     # ------------------------------------------------------------ ASE
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         target = atoms if atoms is not None else self.atoms
-        if not target.pbc.all():
-            raise ValueError(f"LAMMPSEngine: needs a periodic cell in all directions (pbc "
-                             f"{target.pbc.tolist()}); use LAMMPSCalculator for a cluster")
-        signature = (len(target), target.numbers.tobytes(),
-                     target.get_initial_charges().tobytes())
+        signature = _checked_signature(target)
         cell, flips = self._lattice(target.cell.array)
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
-        if self.connected and (signature != self._signature or flips != self._flips
+        # (at a flip fix rigidmd/ipi re-maps the atoms on up to 2 ranks; fix ipi cannot)
+        restart_at_flip = self.engine_fix != "rigidmd/ipi" or self.processes > 2
+        if self.connected and (signature != self._signature
+                               or flips != self._flips and restart_at_flip
                                or tilted and not self._engine_triclinic):
-            # Other atoms; a tilted cell in an orthogonal box; or a flip of the basis
-            # (native LAMMPS re-neighbours there; fix ipi cannot): a new engine.
+            # Other atoms; a tilted cell in an orthogonal box; or a flip: a new engine.
             self.close()
             if tilted:
                 self.triclinic = True

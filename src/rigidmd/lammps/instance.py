@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from rigidmd.lammps.atomarrays import AtomArrays
-from rigidmd.lammps.box import LammpsBox, lower_triangular, region_command
+from rigidmd.lammps.box import LammpsBox, lammps_box, region_command
 from rigidmd.lammps.library import LAMMPS_METAL_QQR2E, LammpsError, charge_factor
 
 __all__ = ["LammpsInstance", "chosen_kspace"]
@@ -124,11 +124,11 @@ class LammpsInstance:
                     f"boundary {'p p p' if periodic else 's s s'}"]
             self.execute(cmds)
             if periodic:
-                rotation, cell = lower_triangular(atoms.cell.array)
+                rotation, cell, flips = lammps_box(atoms.cell.array)
                 triclinic = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
                 region = region_command(cell)
             else:
-                rotation, cell = None, None
+                rotation, cell, flips = None, None, (0, 0, 0)
                 lo, hi = atoms.positions.min(axis=0) - 1.0, atoms.positions.max(axis=0) + 1.0
                 triclinic = False
                 bounds = " ".join(f"{a:.17g} {b:.17g}" for a, b in zip(lo, hi, strict=True))
@@ -170,7 +170,7 @@ class LammpsInstance:
                 raise LammpsError("LAMMPSCalculator: unexpected LAMMPS Coulomb constant")
             if kspace_parameters is not None:
                 self.execute([kspace_parameters])
-            self.box = LammpsBox(lmp, self.execute, atoms.cell.array, rotation, triclinic)
+            self.box = LammpsBox(lmp, self.execute, atoms.cell.array, rotation, triclinic, flips)
             # One set-up with a log: LAMMPS's warnings, and the k-space parameters it chose.
             self.execute(["run 0 pre yes post no", "log none"])
             self.setup_log = log.read_text()

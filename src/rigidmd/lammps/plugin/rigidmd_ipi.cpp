@@ -99,10 +99,11 @@ class FixRigidmdIPI : public Fix {
  public:
   FixRigidmdIPI(LAMMPS *lmp, int narg, char **arg);
   ~FixRigidmdIPI() override;
-  int setmask() override { return INITIAL_INTEGRATE | FINAL_INTEGRATE; }
+  int setmask() override { return INITIAL_INTEGRATE | PRE_EXCHANGE | FINAL_INTEGRATE; }
   void init() override;
   void setup(int) override;
   void initial_integrate(int) override;
+  void pre_exchange() override;
   void final_integrate() override;
 
  private:
@@ -124,6 +125,7 @@ class FixRigidmdIPI : public Fix {
   bool pending = false;          // positions received, forces not yet sent
   double info[11];               // request, flags, h (Bohr, row-major h = cell^T)
   double last[6];                // the box last set: lx ly lz xy xz yz (Å)
+  bool flipped = false;          // the box's basis flipped at this step (see set_box)
   std::vector<double> positions, local, total, gathered;
   std::vector<int> counts, displs;  // rank 0's Gatherv layout
   std::string pe_id, press_id;
@@ -172,6 +174,8 @@ FixRigidmdIPI::FixRigidmdIPI(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
     error->all(FLERR, "Fix rigidmd/ipi: port {} is not in 1025-65535", port);
   if (!inet && address.size() > 90) error->all(FLERR, "Fix rigidmd/ipi: socket name too long");
   box_change = BOX_CHANGE_SIZE | BOX_CHANGE_SHAPE;
+  force_reneighbor = 1;  // at a flip of the box's basis (set_box)
+  next_reneighbor = -1;
   pe_id = std::string(id) + "_pe";
   press_id = std::string(id) + "_virial";
   modify->add_compute(pe_id + " all pe");
@@ -429,6 +433,22 @@ void FixRigidmdIPI::set_box(const double *h)
       error->all(FLERR, "Fix rigidmd/ipi: box lengths must be positive and finite");
   if (!domain->triclinic && (box[3] != 0.0 || box[4] != 0.0 || box[5] != 0.0))
     error->all(FLERR, "Fix rigidmd/ipi: a tilted cell for an orthogonal box");
+  // A flip: the server reduces the cell's basis to LAMMPS's tilt limits, so a tilt through
+  // half a box length comes back about a box length away (the same lattice in another
+  // basis).  LAMMPS's ghost atoms are images in the old basis: as at fix npt's flip, every
+  // atom is remapped into the new box (pre_exchange) and the neighbours are built anew at
+  // this step.  Atoms then move between sub-domains as far as the box's width, and LAMMPS's
+  // exchange passes them one neighbouring sub-domain on only: at most 2 ranks along x and y.
+  if (domain->triclinic && std::isfinite(last[0]) &&
+      (std::fabs(box[3] - last[3]) > 0.5 * box[0] || std::fabs(box[4] - last[4]) > 0.5 * box[0]
+       || std::fabs(box[5] - last[5]) > 0.5 * box[1])) {
+    if (comm->procgrid[0] > 2 || comm->procgrid[1] > 2)
+      error->all(FLERR, "Fix rigidmd/ipi: a flip of the cell's basis on {}x{}x{} ranks (at most "
+                 "2 along x and y can re-map the atoms)", comm->procgrid[0], comm->procgrid[1],
+                 comm->procgrid[2]);
+    flipped = true;
+    next_reneighbor = update->ntimestep;
+  }
   for (int k = 0; k < 3; ++k) domain->boxhi[k] = domain->boxlo[k] + box[k];
   if (domain->triclinic) {
     domain->xy = box[3];
@@ -479,6 +499,18 @@ void FixRigidmdIPI::initial_integrate(int)
     x[i][1] = r[1];
     x[i][2] = r[2];
   }
+}
+
+// On the re-neighbouring step of a flip (set_box), before LAMMPS wraps and exchanges the
+// atoms: each atom into the new box (by whole new cell vectors; LAMMPS's own wrap moves an
+// atom by one box at most).
+void FixRigidmdIPI::pre_exchange()
+{
+  if (!flipped) return;
+  flipped = false;
+  double **x = atom->x;
+  imageint *image = atom->image;
+  for (int i = 0; i < atom->nlocal; ++i) domain->remap(x[i], image[i]);
 }
 
 void FixRigidmdIPI::final_integrate()
