@@ -383,3 +383,22 @@ def test_four_site_water_run_and_export(tmp_path, monkeypatch):
     assert result.returncode == 2
     assert result.stderr.startswith("rigidmd: error: calculator.water_model.name: tip4p2005: "
                                     "molecule 0 (atoms 0-3) is not in this model's geometry")
+
+
+def test_version(capsys):
+    """``rigidmd --version`` did not exist (argparse said "the following arguments are
+    required: command"); it prints the version, with ASE's, NumPy's and Python's for a bug
+    report, and exits 0."""
+    import platform
+
+    import ase
+
+    import rigidmd
+    from rigidmd.run.cli import main
+
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    assert capsys.readouterr().out.strip() == (
+        f"rigidmd {rigidmd.__version__} (ASE {ase.__version__}, NumPy {np.__version__}, "
+        f"Python {platform.python_version()})")
