@@ -1,6 +1,7 @@
 """What a run tells its user: progress on stderr, what it is, and a summary at the end.
 
-* :class:`Progress`: a progress bar on a terminal, a line every 1 % or 30 s otherwise.
+* :class:`Progress`: a progress bar on a terminal, otherwise a line each tenth of the run
+  (at most one a minute).
 * :func:`observables`: the row recorded every ``outputs.interval`` steps for the summary.
 * :func:`describe` and :func:`summary`: the run in words, before and after the steps.
 """
@@ -28,32 +29,60 @@ def time_left(steps, rate):
 
 
 class Progress:
-    """A progress line on stderr: in place on a terminal, else every 1 % or 30 s."""
+    """A progress line on stderr: in place on a terminal, else a line each tenth of the run.
+
+    The speed and the time left are measured from the steps after the first
+    report (the first steps include numba's compilation, seconds for steps of
+    milliseconds) and shown once :attr:`TIMED_STEPS` of them have been timed;
+    until then the speed reads ``--``.  Off a terminal (a batch job's log) a
+    line is written when a tenth of the run's steps has passed since the last,
+    but never two within :attr:`MIN_INTERVAL_S` (a line due sooner waits for
+    it), and always at the last step: a short run writes one line, a long one
+    ten.  The MD log holds every ``outputs.interval``.
+    """
 
     modifies_atoms = False
+
+    #: Steps after the first report that must have been timed before a speed is shown.
+    TIMED_STEPS = 10
+    #: Off a terminal: the least time between two lines (s), and the share of steps between.
+    MIN_INTERVAL_S = 60.0
+    SHARE = 0.1
 
     def __init__(self, dyn, total, stream=None, width=30):
         self.dyn, self.total, self.width = dyn, max(int(total), 1), width
         self.stream = sys.stderr if stream is None else stream
         self.start_step = dyn.nsteps
-        self.t0 = self.last = time.perf_counter()
+        self.last = time.perf_counter()
+        self.timed_from = None  # (steps done, time) at the first report after a step
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
-        self.next_report = 0.01
+        self.next_report = self.SHARE
+
+    def _rate(self, done, now):
+        """Steps per second since the first report after a step; None until enough are timed."""
+        if self.timed_from is None:
+            if done > 0:
+                self.timed_from = (done, now)
+            return None
+        steps, since = done - self.timed_from[0], now - self.timed_from[1]
+        return steps / since if steps >= self.TIMED_STEPS and since > 0 else None
 
     def __call__(self):
         done = self.dyn.nsteps - self.start_step
         fraction = done / self.total
         now = time.perf_counter()
-        rate = done / (now - self.t0) if now > self.t0 else 0.0
+        rate = self._rate(done, now)
         bar = "#" * int(self.width * fraction)
+        speed = f"{rate:8.1f}" if rate is not None else f"{'--':>8}"
         line = (f"[{bar:<{self.width}}] {done:>{len(str(self.total))}}/{self.total} steps "
-                f"{rate:8.1f} steps/s  T {temperature(self.dyn.atoms):7.1f} K"
-                f"{time_left(self.total - done, rate)}")
+                f"{speed} steps/s  T {temperature(self.dyn.atoms):7.1f} K"
+                f"{time_left(self.total - done, rate or 0.0)}")
         if self.tty:
             self.stream.write("\r" + line + ("\n" if done >= self.total else ""))
-        elif fraction + 1e-12 >= self.next_report or done >= self.total or now - self.last > 30:
+        elif done >= self.total or (fraction + 1e-12 >= self.next_report
+                                    and now - self.last >= self.MIN_INTERVAL_S):
             self.stream.write(line + "\n")
-            self.next_report = np.floor(fraction * 100 + 1) / 100
+            self.next_report = (np.floor(fraction / self.SHARE + 1e-9) + 1) * self.SHARE
             self.last = now
         self.stream.flush()
 
