@@ -111,17 +111,37 @@ def describe(dyn):
     return ", ".join(parts) or "NVE"
 
 
-def summary(dyn, rows, elapsed, stream):
-    """Steps, speed, temperature, energy drift and (NPT) mean pressure, volume, density."""
+def summary(dyn, rows, elapsed, stream, steps=None, resumed_at=0):
+    """Steps, speed, temperature, energy drift and (NPT) mean pressure, volume, density.
+
+    Parameters
+    ----------
+    dyn : rigidmd.RigidDynamics
+    rows : list of tuple
+        :func:`observables` of the steps run now.
+    elapsed : float
+        Seconds the steps took.
+    stream : file
+    steps : list of int, optional
+        The step of each row; the summary names the steps its statistics cover.
+    resumed_at : int, default 0
+        The step a ``--resume`` continued from: the statistics then cover only
+        the part run since, and say so.
+    """
     label = "conserved energy" if dyn.couplings else "total energy"
-    print(f"{dyn.nsteps} steps ({elapsed:.1f} s for this run); "
-          f"T = {temperature(dyn.atoms):.1f} K ({dyn.degrees_of_freedom} degrees of "
-          "freedom)", file=stream)
+    done = (f"{dyn.nsteps - resumed_at} since --resume at step {resumed_at}, {elapsed:.1f} s"
+            if resumed_at else f"{elapsed:.1f} s for this run")
+    print(f"{dyn.nsteps} steps ({done}); T = {temperature(dyn.atoms):.1f} K "
+          f"({dyn.degrees_of_freedom} degrees of freedom)", file=stream)
     for part in dyn.couplings:  # a part that reports on itself (the Monte Carlo barostat)
         report = getattr(part, "report", None)
         if callable(report):
             print(report(), file=stream)
     if len(rows) >= 3:
+        if steps:
+            span = f"statistics over steps {steps[0]}-{steps[-1]}"
+            print(f"{span} only: the part run since --resume at step {resumed_at}" if resumed_at
+                  else f"{span} (the run from its start)", file=stream)
         data = np.array(rows)
         t_ps, e = data[:, 0] / TIME_UNITS["ps"], data[:, 1]
         drift = np.polyfit(t_ps, e, 1)[0]
@@ -133,4 +153,3 @@ def summary(dyn, rows, elapsed, stream):
             print(f"{mean_p}V = {volume.mean():.1f} Å³, "
                   f"density = {density.mean():.4f} g/cm³ (final {density[-1]:.4f})",
                   file=stream)
-
