@@ -113,3 +113,49 @@ def test_every_example_has_a_page():
     for script in scripts:
         assert f"{script.stem}\n" in index, script.name
         assert script.name in rigidmd_docs.example_page(script)
+
+
+#: Prefixes the command puts before a message (``rigidmd.run.cli``) and Python before a warning.
+MESSAGE_PREFIXES = ("rigidmd: error: ", "rigidmd: run stopped: ", "UserWarning: ")
+
+
+def message_templates():
+    """Every string the package can print, as written in its source: an f-string's values
+    replaced by ``\\0``, adjacent literals joined (as Python joins them)."""
+    import ast
+
+    templates = []
+    for path in (ROOT / "src" / "rigidmd").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.JoinedStr):
+                templates.append("".join(part.value if isinstance(part, ast.Constant) else "\0"
+                                         for part in node.values))
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+                templates.append(node.value)
+    return templates
+
+
+def quoted_messages(page="faq.md"):
+    """The messages a page quotes: every line of its ``text`` blocks."""
+    return [line.strip() for lang, body in blocks((DOCS / page).read_text())
+            if lang == "text" for line in body.splitlines() if line.strip()]
+
+
+def test_every_message_the_faq_quotes_is_printed_by_the_code():
+    """The FAQ quotes messages as users see them, ``…`` for what the program fills in; each
+    must still be one string of the source (a changed message fails here, naming the quote),
+    with the command's prefixes before it."""
+    import re
+
+    templates = message_templates()
+    cli = (ROOT / "src" / "rigidmd" / "run" / "cli.py").read_text()
+    quotes = quoted_messages()
+    assert len(quotes) >= 15, quotes
+    for quote in quotes:
+        text = quote
+        for prefix in MESSAGE_PREFIXES:
+            if text.startswith(prefix):
+                assert prefix == "UserWarning: " or f'f"{prefix}{{' in cli, prefix
+                text = text[len(prefix):]
+        pattern = re.compile(".*?".join(re.escape(part) for part in text.split("…")), re.S)
+        assert any(pattern.search(template) for template in templates), quote
