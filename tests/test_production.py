@@ -481,3 +481,24 @@ def test_a_failure_during_the_run_exits_1_not_2(tmp_path, monkeypatch, capsys):
     assert messages(stderr) == [
         "rigidmd: run stopped: the cell collapsed (at step 25); the last checkpoint is intact "
         "(step 20): continue with rigidmd run run.yaml --resume"]
+
+
+def test_the_summary_says_which_steps_its_statistics_cover(tmp_path, monkeypatch, capsys):
+    """After --resume the summary's drift, max |E - E0| and means were of the resumed part
+    only, and it did not say so (nor which steps).  Now the summary names the steps its
+    statistics cover: from the run's start, or only the part since --resume, and which."""
+    path = short_project(tmp_path, steps=50)
+    status, stdout, stderr = run_here(path, monkeypatch, capsys, "--steps", 20)
+    assert status == 0, stderr
+    lines = stdout.splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith("20 steps"))
+    assert lines[first + 1] == "statistics over steps 0-20 (the run from its start)"
+    assert lines[first + 2].startswith("total energy: drift ")
+    status, stdout, stderr = run_here(path, monkeypatch, capsys, "--resume")
+    assert status == 0, stderr
+    lines = stdout.splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith("50 steps"))
+    assert lines[first].startswith("50 steps (30 since --resume at step 20, ")
+    assert lines[first + 1] == ("statistics over steps 30-50 only: the part run since "
+                                "--resume at step 20")
+    assert lines[first + 2].startswith("total energy: drift ")

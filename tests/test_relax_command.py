@@ -309,3 +309,28 @@ def test_export_lammps_starts_from_the_relaxed_structure(tmp_path):
     assert np.abs(positions - relaxed.positions).max() < 1e-6
     unrelaxed = water_cluster(6, seed=2).positions
     assert np.abs(positions - unrelaxed).max() > 0.05
+
+
+def test_relax_log_continues_its_step_count_on_resume(tmp_path):
+    """``rigidmd relax --resume`` appended to relax.log a second header and steps counted
+    from 0 again (the initial point logged twice); now the log reads as one relaxation: one
+    header, the steps 0, 1, 2, ... each once, the last equal to the trajectory's frames less
+    one, and the summary counts the steps of both parts."""
+    import io
+
+    from ase.io import read
+
+    from rigidmd.relax.command import relax_only
+    from rigidmd.relax.structure import RelaxationNotConverged
+
+    with pytest.raises(RelaxationNotConverged):
+        relax_only(relax_config(tmp_path, steps=5), io.StringIO())
+    out = io.StringIO()
+    assert relax_only(relax_config(tmp_path, steps=2000), out, mode="resume") == 0
+    lines = (tmp_path / "out" / "relax.log").read_text().splitlines()
+    headers = [line for line in lines if "Step" in line]
+    steps = [int(line.split()[1]) for line in lines if "Step" not in line]
+    assert len(headers) == 1
+    frames = read(tmp_path / "out" / "relax.traj", ":")
+    assert steps == list(range(len(frames))), steps
+    assert f"in {len(frames) - 1} steps" in out.getvalue()

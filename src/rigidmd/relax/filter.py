@@ -515,7 +515,8 @@ def optimizer_class(name):
 
 def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", cell=False,
           scalar_pressure=0.0, trajectory=None, logfile=None, observers=(),
-          append_trajectory=False, state_file=None, resume=False, **kwargs) -> Relaxation:
+          append_trajectory=False, state_file=None, resume=False, first_step=0,
+          **kwargs) -> Relaxation:
     """Relax the rigid bodies of ``atoms`` (and the cell) in place with an ASE optimizer.
 
     Parameters
@@ -557,6 +558,10 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         Continue from ``state_file``, written at ``atoms``' positions by this
         optimizer: the steps are those the uninterrupted relaxation would have
         taken (ValueError when it does not match the atoms).
+    first_step : int, default 0
+        Steps an earlier part of this relaxation took (a continued one): the
+        log numbers its steps from there, with no second header and no second
+        line for the starting point, which the earlier part logged last.
     **kwargs
         Further optimizer arguments (``maxstep``, ...).  With ASE's BFGS,
         ``alpha`` (initial Hessian, eV/Å² times the identity in the rows of
@@ -571,6 +576,8 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         raise ValueError(f"relax: fmax={fmax!r} eV/Å must be positive")
     if int(steps) != steps or steps < 0:
         raise ValueError(f"relax: steps={steps!r} must be a whole number >= 0")
+    if int(first_step) != first_step or first_step < 0:
+        raise ValueError(f"relax: first_step={first_step!r} must be a whole number >= 0")
     cls = optimizer_class(optimizer)
     view = RigidFilter(atoms, bodies, cell=cell, scalar_pressure=scalar_pressure)
     if cls.__name__ in PRECONDITIONED and "precon" not in kwargs:
@@ -582,11 +589,12 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         state_file = None  # nothing a continuation could take the same steps from
     with cls(view, trajectory=trajectory, logfile=logfile, append_trajectory=append_trajectory,
              **kwargs) as opt:
+        opt.nsteps = int(first_step)  # ASE's log numbers steps by it (header and start at 0)
         if saved is not None:
             view.set_state(relaxstate.split(saved, "view"))
             if hasattr(opt, "set_state"):
                 opt.set_state(relaxstate.split(saved, "opt"))
-        reports = [_Report(observer, opt, view) for observer in observers]
+        reports = [_Report(observer, opt, view, int(first_step)) for observer in observers]
         for report in reports:
             opt.attach(report, interval=1)
         try:
@@ -595,7 +603,7 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
             if state_file is not None and any(report.raised for report in reports):
                 relaxstate.write_state(state_file, view, opt)  # after a whole step
             raise
-        nsteps = opt.get_number_of_steps()
+        nsteps = opt.get_number_of_steps() - int(first_step)
         if state_file is not None:
             if converged:
                 Path(state_file).unlink(missing_ok=True)
@@ -608,15 +616,16 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
 class _Report:
     """``observer(step, energy, fmax)`` of the optimizer's current point (cached: no call)."""
 
-    def __init__(self, observer, opt, view):
+    def __init__(self, observer, opt, view, first_step=0):
         self.observer, self.opt, self.view = observer, opt, view
+        self.first_step = first_step
         self.raised = False  # the observer raised: the step and its frame are whole
 
     def __call__(self):
         forces = self.view.get_forces()
         fmax = float(np.sqrt(np.sum(forces * forces, axis=1).max())) if len(forces) else 0.0
         try:
-            self.observer(self.opt.nsteps, self.view.get_potential_energy(), fmax)
+            self.observer(self.opt.nsteps - self.first_step, self.view.get_potential_energy(), fmax)
         except BaseException:
             self.raised = True
             raise

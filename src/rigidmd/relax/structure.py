@@ -205,7 +205,8 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
                            optimizer=section.optimizer, cell=section.cell,
                            scalar_pressure=section.pressure, trajectory=str(trajectory),
                            logfile=logfile, append_trajectory=resume, observers=observers,
-                           state_file=state_file, resume=exact)
+                           state_file=state_file, resume=exact,
+                           first_step=done if resume else 0)
     except Exception as err:
         signum = getattr(err, "signum", None)  # the stop's StopRequest, after a whole step
         if stop is None or signum is None:

@@ -5,6 +5,7 @@
 ``rigidmd relax CONFIG.yaml``         relax its rigid bodies (and cell) only
 ``rigidmd plot LOG``                  energies and temperature of an MD log, to PNG
 ``rigidmd export-lammps CONFIG DIR``  the same run as a LAMMPS data file and deck
+``rigidmd --version``                 the version (with ASE's, NumPy's and Python's)
 
 See :mod:`rigidmd.config` for the configuration format and
 :mod:`rigidmd.run.runner` for outputs, checkpoints and signals.  A mistake in the
@@ -148,9 +149,22 @@ DEMO_NOTE = ("rigidmd demo: 32 rigid TIP3P waters, built on a lattice and not re
              "configuration for rigidmd run).")
 
 
+def _version():
+    """``rigidmd 0.1.0 (ASE 3.29.0, NumPy 2.4.6, Python 3.11.9)``: what a bug report needs."""
+    import platform
+
+    import ase
+
+    from rigidmd import __version__
+
+    return (f"rigidmd {__version__} (ASE {ase.__version__}, NumPy {np.__version__}, "
+            f"Python {platform.python_version()})")
+
+
 def _parser():
     description = __doc__.splitlines()[0].replace("``", "")  # no reStructuredText in --help
     parser = argparse.ArgumentParser(prog="rigidmd", description=description)
+    parser.add_argument("--version", action="version", version=_version())
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="run the built-in TIP3P water cluster demo")
     demo.add_argument("--steps", type=int, help="number of steps (default 2000)")

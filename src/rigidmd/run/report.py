@@ -1,6 +1,7 @@
 """What a run tells its user: progress on stderr, what it is, and a summary at the end.
 
-* :class:`Progress`: a progress bar on a terminal, a line every 1 % or 30 s otherwise.
+* :class:`Progress`: a progress bar on a terminal, otherwise a line each tenth of the run
+  (at most one a minute).
 * :func:`observables`: the row recorded every ``outputs.interval`` steps for the summary.
 * :func:`describe` and :func:`summary`: the run in words, before and after the steps.
 """
@@ -28,32 +29,60 @@ def time_left(steps, rate):
 
 
 class Progress:
-    """A progress line on stderr: in place on a terminal, else every 1 % or 30 s."""
+    """A progress line on stderr: in place on a terminal, else a line each tenth of the run.
+
+    The speed and the time left are measured from the steps after the first
+    report (the first steps include numba's compilation, seconds for steps of
+    milliseconds) and shown once :attr:`TIMED_STEPS` of them have been timed;
+    until then the speed reads ``--``.  Off a terminal (a batch job's log) a
+    line is written when a tenth of the run's steps has passed since the last,
+    but never two within :attr:`MIN_INTERVAL_S` (a line due sooner waits for
+    it), and always at the last step: a short run writes one line, a long one
+    ten.  The MD log holds every ``outputs.interval``.
+    """
 
     modifies_atoms = False
+
+    #: Steps after the first report that must have been timed before a speed is shown.
+    TIMED_STEPS = 10
+    #: Off a terminal: the least time between two lines (s), and the share of steps between.
+    MIN_INTERVAL_S = 60.0
+    SHARE = 0.1
 
     def __init__(self, dyn, total, stream=None, width=30):
         self.dyn, self.total, self.width = dyn, max(int(total), 1), width
         self.stream = sys.stderr if stream is None else stream
         self.start_step = dyn.nsteps
-        self.t0 = self.last = time.perf_counter()
+        self.last = time.perf_counter()
+        self.timed_from = None  # (steps done, time) at the first report after a step
         self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
-        self.next_report = 0.01
+        self.next_report = self.SHARE
+
+    def _rate(self, done, now):
+        """Steps per second since the first report after a step; None until enough are timed."""
+        if self.timed_from is None:
+            if done > 0:
+                self.timed_from = (done, now)
+            return None
+        steps, since = done - self.timed_from[0], now - self.timed_from[1]
+        return steps / since if steps >= self.TIMED_STEPS and since > 0 else None
 
     def __call__(self):
         done = self.dyn.nsteps - self.start_step
         fraction = done / self.total
         now = time.perf_counter()
-        rate = done / (now - self.t0) if now > self.t0 else 0.0
+        rate = self._rate(done, now)
         bar = "#" * int(self.width * fraction)
+        speed = f"{rate:8.1f}" if rate is not None else f"{'--':>8}"
         line = (f"[{bar:<{self.width}}] {done:>{len(str(self.total))}}/{self.total} steps "
-                f"{rate:8.1f} steps/s  T {temperature(self.dyn.atoms):7.1f} K"
-                f"{time_left(self.total - done, rate)}")
+                f"{speed} steps/s  T {temperature(self.dyn.atoms):7.1f} K"
+                f"{time_left(self.total - done, rate or 0.0)}")
         if self.tty:
             self.stream.write("\r" + line + ("\n" if done >= self.total else ""))
-        elif fraction + 1e-12 >= self.next_report or done >= self.total or now - self.last > 30:
+        elif done >= self.total or (fraction + 1e-12 >= self.next_report
+                                    and now - self.last >= self.MIN_INTERVAL_S):
             self.stream.write(line + "\n")
-            self.next_report = np.floor(fraction * 100 + 1) / 100
+            self.next_report = (np.floor(fraction / self.SHARE + 1e-9) + 1) * self.SHARE
             self.last = now
         self.stream.flush()
 
@@ -82,17 +111,37 @@ def describe(dyn):
     return ", ".join(parts) or "NVE"
 
 
-def summary(dyn, rows, elapsed, stream):
-    """Steps, speed, temperature, energy drift and (NPT) mean pressure, volume, density."""
+def summary(dyn, rows, elapsed, stream, steps=None, resumed_at=0):
+    """Steps, speed, temperature, energy drift and (NPT) mean pressure, volume, density.
+
+    Parameters
+    ----------
+    dyn : rigidmd.RigidDynamics
+    rows : list of tuple
+        :func:`observables` of the steps run now.
+    elapsed : float
+        Seconds the steps took.
+    stream : file
+    steps : list of int, optional
+        The step of each row; the summary names the steps its statistics cover.
+    resumed_at : int, default 0
+        The step a ``--resume`` continued from: the statistics then cover only
+        the part run since, and say so.
+    """
     label = "conserved energy" if dyn.couplings else "total energy"
-    print(f"{dyn.nsteps} steps ({elapsed:.1f} s for this run); "
-          f"T = {temperature(dyn.atoms):.1f} K ({dyn.degrees_of_freedom} degrees of "
-          "freedom)", file=stream)
+    done = (f"{dyn.nsteps - resumed_at} since --resume at step {resumed_at}, {elapsed:.1f} s"
+            if resumed_at else f"{elapsed:.1f} s for this run")
+    print(f"{dyn.nsteps} steps ({done}); T = {temperature(dyn.atoms):.1f} K "
+          f"({dyn.degrees_of_freedom} degrees of freedom)", file=stream)
     for part in dyn.couplings:  # a part that reports on itself (the Monte Carlo barostat)
         report = getattr(part, "report", None)
         if callable(report):
             print(report(), file=stream)
     if len(rows) >= 3:
+        if steps:
+            span = f"statistics over steps {steps[0]}-{steps[-1]}"
+            print(f"{span} only: the part run since --resume at step {resumed_at}" if resumed_at
+                  else f"{span} (the run from its start)", file=stream)
         data = np.array(rows)
         t_ps, e = data[:, 0] / TIME_UNITS["ps"], data[:, 1]
         drift = np.polyfit(t_ps, e, 1)[0]
@@ -104,4 +153,3 @@ def summary(dyn, rows, elapsed, stream):
             print(f"{mean_p}V = {volume.mean():.1f} Å³, "
                   f"density = {density.mean():.4f} g/cm³ (final {density[-1]:.4f})",
                   file=stream)
-

@@ -279,8 +279,9 @@ class Run:
                   file=self.stream)
             return 0
         self.files.name_outputs(dyn)
-        rows = []
-        dyn.attach(lambda: rows.append(observables(dyn)), interval=out.interval)
+        rows, steps = [], []
+        dyn.attach(lambda: (rows.append(observables(dyn)), steps.append(dyn.nsteps)),
+                   interval=out.interval)
         writer = None
         if out.mdanalysis is not None:
             from rigidmd.mdanalysis import MDAWriter
@@ -293,16 +294,16 @@ class Run:
         print(f"{dyn.bodies} with {dyn.scheme.name} integrator, {describe(dyn)}, "
               f"steps {dyn.nsteps + 1}-{total} of {config.run.timestep / TIME_UNITS['fs']:g} fs",
               file=self.stream)
-        t0 = time.perf_counter()
+        t0, resumed_at = time.perf_counter(), dyn.nsteps
         status, at_once = self._steps(dyn, remaining, writer)
         # The steps are over: a signal now is noted, not obeyed, until the run has written
         # everything (a KeyboardInterrupt inside the checkpoint's write would lose it).
         stop.shielded = True
         if at_once:
             return status  # a second Ctrl-C stopped the steps at once
-        return self._finish(dyn, status, stop, rows, t0)
+        return self._finish(dyn, status, stop, (rows, steps, resumed_at), t0)
 
-    def _finish(self, dyn, status, stop, rows, t0):
+    def _finish(self, dyn, status, stop, statistics, t0):
         """The final checkpoint, the summary and the plot; the exit status."""
         out = self.outputs
         try:
@@ -317,7 +318,8 @@ class Run:
         if status:
             print(f"checkpoint {out.checkpoint} written; continue with: {self._resume_hint()}",
                   file=self.stream)
-        summary(dyn, rows, time.perf_counter() - t0, self.stream)
+        rows, steps, resumed_at = statistics
+        summary(dyn, rows, time.perf_counter() - t0, self.stream, steps, resumed_at)
         if out.plot is not None and out.log is not None and not status:
             from rigidmd.run.logplot import plot_log
 
