@@ -247,3 +247,65 @@ def test_not_a_rigid_dynamics():
     atoms.calc = TIP3P()
     with pytest.raises(TypeError, match="rigidmd dynamics"):
         ConfigurationalTemperature(VelocityVerlet(atoms, 1 * units.fs))
+
+
+# ------------------------------------------------------------ the run's diagnostics: section
+RUN = """
+structure: {builtin: water_cluster, n_molecules: 6, seed: 2}
+calculator: {name: tip3p, options: {rc: 40.0}}
+velocities: {temperature: 300 K, seed: 1}
+thermostat: {kind: langevin, temperature: 300 K, friction: 0.01 1/fs, seed: 3}
+timestep: 1 fs
+steps: 40
+outputs: {directory: DIR, trajectory: md.traj, interval: 10}
+"""
+
+
+def _run(tmp_path, name, extra=""):
+    from rigidmd.run import cli
+
+    config = tmp_path / f"{name}.yaml"
+    config.write_text(RUN.replace("DIR", name) + extra)
+    return cli.main(["run", str(config)])
+
+
+def test_a_run_with_the_diagnostic_reports_it_and_runs_the_same(tmp_path, capsys):
+    """``diagnostics: configurational_temperature`` in a configuration: the summary says the
+    estimates and their cost, and the trajectory is the one without it, bit for bit."""
+    from ase.io import read
+
+    assert _run(tmp_path, "plain") == 0
+    plain = capsys.readouterr().out
+    assert "configurational temperature" not in plain
+    extra = "diagnostics: {configurational_temperature: {interval: 10, probes: 2, seed: 4}}\n"
+    assert _run(tmp_path, "observed", extra) == 0
+    out = capsys.readouterr().out
+    line = next(line for line in out.splitlines() if line.startswith("configurational"))
+    assert "translational" in line and "rotational" in line
+    assert "(5 samples, 20 extra force calls)" in line  # steps 0, 10, ..., 40: 4 calls each
+    a, b = read(tmp_path / "plain" / "md.traj", ":"), read(tmp_path / "observed" / "md.traj", ":")
+    assert len(a) == len(b) == 5
+    for x, y in zip(a, b, strict=True):
+        assert np.array_equal(x.positions, y.positions)
+        assert np.array_equal(x.get_momenta(), y.get_momenta())
+
+
+@pytest.mark.parametrize("extra, message", [
+    ("diagnostics: {configurational_temperature: {probes: 4}}",
+     "diagnostics.configurational_temperature.interval: missing"),
+    ("diagnostics: {configurational_temperature: {interval: 0}}",
+     "diagnostics.configurational_temperature.interval: expected a whole number >= 1"),
+    ("diagnostics: {configurational_temperature: {interval: 10, probes: 0}}",
+     "diagnostics.configurational_temperature.probes: expected a whole number >= 1"),
+    ("diagnostics: {configurational_temperature: {interval: 10, eps: 1}}",
+     "diagnostics.configurational_temperature.eps: unknown key"),
+    ("diagnostics: {tconf: {interval: 10}}", "diagnostics.tconf: unknown key"),
+    ("diagnostics: [1]", "diagnostics: expected a mapping"),
+])
+def test_diagnostics_mistakes_are_one_line(tmp_path, capsys, extra, message):
+    assert _run(tmp_path, "bad", extra + "\n") == 2
+    err = capsys.readouterr().err
+    assert err == f"rigidmd: error: {err.split('error: ')[1]}"
+    assert err.startswith(f"rigidmd: error: {message}"), err
+    assert err.count("\n") == 1
+    assert not (tmp_path / "bad").exists()  # refused before anything was written

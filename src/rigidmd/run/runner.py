@@ -91,6 +91,7 @@ class Run:
         self.outputs = config.outputs
         self.files = RunFiles(self.outputs, mode, self.stream, config.relax)
         self.checkpoints = RunCheckpoints(config, self.files, self.stream)
+        self.diagnostics = []  # attached with the outputs (config.diagnostics)
 
     @property
     def fingerprint(self):
@@ -289,6 +290,8 @@ class Run:
             dyn.attach(NamedOutput(writer, out.mdanalysis), interval=out.interval)
         dyn.attach(Progress(dyn, remaining), interval=max(1, remaining // 1000))
         dyn.attach(lambda: self.checkpoints.write(dyn, writer), interval=out.checkpoint_interval)
+        # The diagnostics (configurational temperature): they report in the summary.
+        self.diagnostics = config.diagnostics.attach(dyn) if config.diagnostics else []
         dyn.attach(stop.check, interval=1)  # last: after every output of the step
         print(f"{dyn.bodies} with {dyn.scheme.name} integrator, {describe(dyn)}, "
               f"steps {dyn.nsteps + 1}-{total} of {config.run.timestep / TIME_UNITS['fs']:g} fs",
@@ -318,6 +321,8 @@ class Run:
             print(f"checkpoint {out.checkpoint} written; continue with: {self._resume_hint()}",
                   file=self.stream)
         summary(dyn, rows, time.perf_counter() - t0, self.stream)
+        for diagnostic in self.diagnostics:
+            print(diagnostic.report(), file=self.stream)
         if out.plot is not None and out.log is not None and not status:
             from rigidmd.run.logplot import plot_log
 
