@@ -219,3 +219,37 @@ def test_a_stopped_estimate_continues_to_the_same_runs(tmp_path, capsys):
     whole = json.loads((tmp_path / "whole" / "out" / "bias.json").read_text())
     for a, b in zip(resumed["legs_record"], whole["legs_record"], strict=True):
         assert a["samples"] == b["samples"]
+
+
+def test_a_failed_step_keeps_the_samples_and_resume_takes_them_again(tmp_path, monkeypatch):
+    """A step that fails (non-finite forces) in the second run: the error goes up (the
+    command prints it in one line, status 1), bias.json keeps the first run and what the
+    second had sampled; --resume runs the second again from its start (no checkpoint was
+    written) and samples it once, with no step twice."""
+    import io
+
+    from rigidmd import NonFiniteForceError
+
+    config = trap_config(tmp_path, timestep="4 fs")
+    original, calls = Trap.calculate, []
+
+    def failing(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        calls.append(1)
+        if len(calls) == 500:  # in the second run (the first makes about 360 calls)
+            self.results["forces"][0, 0] = np.nan
+
+    monkeypatch.setattr(Trap, "calculate", failing)
+    kwargs = dict(production_ps=1.0, equilibrate_ps=0.2, progress=io.StringIO(),
+                  stream=io.StringIO())
+    with pytest.raises(NonFiniteForceError):
+        estimate_bias(config, tmp_path / "out", **kwargs)
+    saved = json.loads((tmp_path / "out" / "bias.json").read_text())
+    first, second = saved["legs_record"]
+    assert first["done"] and not second["done"] and second["samples"]["step"]
+    monkeypatch.setattr(Trap, "calculate", original)
+    result = estimate_bias(config, tmp_path / "out", resume=True, **kwargs)
+    assert result["complete"]
+    steps = result["legs_record"][1]["samples"]["step"]
+    assert steps == sorted(set(steps)) and len(steps) == len(first["samples"]["step"])
+    assert result["legs_record"][0]["samples"] == first["samples"]

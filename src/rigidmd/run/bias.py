@@ -118,6 +118,12 @@ class BiasLeg:
         self.dof = None if saved["dof"] is None else tuple(saved["dof"])
         self.bodies = saved["bodies"]
 
+    def trim(self, step):
+        """Forget the samples after ``step`` (the run continues from its checkpoint there)."""
+        keep = [i for i, s in enumerate(self.samples["step"]) if s <= step]
+        self.samples = {key: [value[i] for i in keep] for key, value in self.samples.items()}
+        self.tconf_sums = [t for t in self.tconf_sums if t[4] <= step]
+
     # ------------------------------------------------------------ the estimates
     def temperatures(self, dyn_dof, blocks):
         """⟨U⟩ (eV, total) and the temperatures (K) with block errors."""
@@ -231,6 +237,8 @@ def _run_leg(config, leg, directory, stop, progress, probes, seed):
     checkpoint = directory / f"leg-{leg.name.replace('/', '-')}.npz"
     dyn = _dynamics(config, leg, checkpoint, directory / "engine")
     own = None  # the configurational temperature's calculator (as rigidmd run gives it)
+    # Samples taken after the checkpoint (a failure, a second Ctrl-C) are taken again.
+    leg.trim(dyn.nsteps)
     try:
         leg.dof = (dyn.translational_dof - (3 if dyn.holds_momentum else 0),
                    dyn.rotational_dof)
@@ -323,21 +331,33 @@ def estimate_bias(config, directory, *, production_ps=10.0, equilibrate_ps=2.0,
     directory.mkdir(parents=True, exist_ok=True)
     status = 0
     t0 = time.perf_counter()
+    def record_now(status):
+        result = _estimate(legs, blocks, config)
+        result.update(status=status, arguments=arguments, fingerprint=prints,
+                      legs_record=[leg.todict() for leg in legs],
+                      elapsed_s=time.perf_counter() - t0)
+        _write(directory, result)
+        return result
+
     with StopSignals() as stop:
-        for leg in legs:
-            if leg.done:
-                continue
-            print(f"run at {leg.name} = {leg.dt / TIME_UNITS['fs']:g} fs: {leg.total} steps "
-                  f"({leg.equilibrate} to equilibrate)", file=stream)
-            signum = _run_leg(config, leg, directory, stop, progress, probes, seed)
-            if signum is not None:
-                status = EXIT_STATUS[signum]
-                break
-    result = _estimate(legs, blocks, config)
-    result.update(status=status, arguments=arguments, fingerprint=prints,
-                  legs_record=[leg.todict() for leg in legs],
-                  elapsed_s=time.perf_counter() - t0)
-    _write(directory, result)
+        try:
+            for leg in legs:
+                if leg.done:
+                    continue
+                print(f"run at {leg.name} = {leg.dt / TIME_UNITS['fs']:g} fs: {leg.total} "
+                      f"steps ({leg.equilibrate} to equilibrate)", file=stream)
+                signum = _run_leg(config, leg, directory, stop, progress, probes, seed)
+                if signum is not None:
+                    status = EXIT_STATUS[signum]
+                    break
+        except BaseException:
+            # A failed step, a second Ctrl-C: what was sampled is kept (a --resume takes the
+            # run from its last checkpoint, or from its start, and samples again after it).
+            stop.shielded = True
+            record_now(1)
+            raise
+        stop.shielded = True  # the record is written whole
+        result = record_now(status)
     print(result["text"], file=stream)
     if status:
         print(f"stopped by a signal: {record} and the run's checkpoint hold what was done; "
