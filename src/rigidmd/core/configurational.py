@@ -3,9 +3,9 @@ r"""Configurational temperatures of rigid bodies, translational and rotational.
 The kinetic temperature says how fast the bodies move; the configurational
 temperature says at which temperature their *positions* were sampled, from
 the forces alone.  At a finite time step the two part (the step's error), so
-comparing them measures it.  For rigid bodies (Chialvo, Cummings & Evans,
-1993; the rotational estimator is what Davidchack, Ouldridge & Tretyakov use
-to test their quaternion Langevin schemes),
+comparing them measures it.  For rigid bodies (Chialvo, Cummings & Evans;
+the rotational estimator is what Davidchack, Ouldridge & Tretyakov use to
+test their quaternion Langevin schemes),
 
 .. math::
     k_B T^\mathrm{conf}_\mathrm{tr} = \frac{\langle \sum_b |F_b|^2\rangle}
@@ -37,17 +37,19 @@ to ε = 1e-3): the central difference's bias grows as :math:`\epsilon^2`:
 1.1e-3 (translation) and 9e-5 (rotation) at ε = 5e-3 Å and rad, 1.1e-2 and
 1.4e-3 at 2e-2, 6e-2 and 8e-3 at 5e-2; rounding takes over below 1e-4 (3e-4
 and 2e-5 at 1e-4).  The defaults, 2e-3 Å and 5e-3 rad, keep both below 2e-4
-(0.06 K at 300 K).  What dominates a sample's noise is the probes' own
+(0.06 K at 300 K; at 2e-3 Å by the ε² scaling).  What dominates a sample's noise is the probes' own
 variance (the off-diagonal second derivatives, which average to zero): one
 probe's value scatters by 13 % (translation) and 9 % (rotation) of the mean
 for 64 waters, independently of ε; it falls as one over the number of probes
 and samples, like any other fluctuation.
 
 :class:`ConfigurationalTemperature` is the observer a dynamics runs
-periodically (``dyn.attach(tconf, interval=100)``).  It never disturbs the
+periodically (``dyn.attach(tconf, interval=100)``).  It does not disturb the
 trajectory: the displaced configurations are evaluated on a copy of the
 Atoms, and the calculator's results (and cached atoms) are put back after
-each sample, so the run with and without it is the same bit for bit.
+each sample, so the run with and without it is the same bit for bit; an
+engine with state of its own (LAMMPS) needs a calculator of its own for that
+(the ``calculator`` argument).
 """
 
 import numpy as np
