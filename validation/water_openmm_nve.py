@@ -248,10 +248,13 @@ def configurational_sums(context, positions_nm, masses, rng, sites=4):
     :math:`\sum|\tau|^2`, :math:`\sum\mathcal L^2U` (rotation), OpenMM's units (kJ/mol, nm).
 
     ``positions_nm``: whole molecules, (n_atoms, 3); M is placed by OpenMM.
-    :data:`PROBES` Hutchinson vectors (see the module docstring).
+    :data:`PROBES` Hutchinson vectors (see the module docstring), estimated by
+    :func:`rigidmd.core.configurational.hutchinson_laplacians` (the package's estimator).
     """
     from openmm import unit
     from scipy.spatial.transform import Rotation
+
+    from rigidmd.core.configurational import hutchinson_laplacians
 
     massive = masses > 0
 
@@ -268,22 +271,17 @@ def configurational_sums(context, positions_nm, masses, rng, sites=4):
                 fb.sum(axis=1), np.cross(xb - X[:, None], fb).sum(axis=1))
 
     u, F, tau = generalised(positions_nm)
-    n = len(F)
     xb, X = _bodies(positions_nm, masses, sites)
     r = xb - X[:, None]
-    lap_t = lap_r = 0.0
-    for _ in range(PROBES):
-        wt = rng.choice((-1.0, 1.0), size=(n, 3))
-        wr = rng.choice((-1.0, 1.0), size=(n, 3))
-        out = []
-        for sign in (1.0, -1.0):
-            rot = Rotation.from_rotvec(sign * EPS_RAD * wr)
-            r_new = np.stack([rot.apply(r[:, s]) for s in range(sites)], axis=1)
-            out.append(generalised((X[:, None] + sign * EPS_NM * wt[:, None] + r_new)
-                                   .reshape(-1, 3)))
-        (_, Fp, tp), (_, Fm, tm) = out
-        lap_t -= float(np.sum(wt * (Fp - Fm))) / (2 * EPS_NM * PROBES)
-        lap_r -= float(np.sum(wr * (tp - tm))) / (2 * EPS_RAD * PROBES)
+
+    def displaced(dX, rotvec):
+        rot = Rotation.from_rotvec(rotvec)
+        r_new = np.stack([rot.apply(r[:, s]) for s in range(sites)], axis=1)
+        _, Fd, td = generalised((X[:, None] + dX[:, None] + r_new).reshape(-1, 3))
+        return Fd, td
+
+    lap_t, lap_r = hutchinson_laplacians(displaced, len(F), len(F), rng, PROBES, EPS_NM,
+                                         EPS_RAD)
     return u, float(np.sum(F * F)), lap_t, float(np.sum(tau * tau)), lap_r
 
 

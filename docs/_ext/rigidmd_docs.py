@@ -140,6 +140,7 @@ def _cell(value):
 def configuration_reference():
     """The MyST text of the full configuration reference, from the code's tables."""
     from rigidmd.config import DEMO_CONFIG, known_keys
+    from rigidmd.config.diagnostics import DiagnosticsSection
     from rigidmd.config.quantities import UNIT_TABLES
     from rigidmd.config.relaxsection import RelaxSection
     from rigidmd.config.sections import (
@@ -161,7 +162,7 @@ def configuration_reference():
     from rigidmd.water import WATER_MODELS
 
     sections = (StructureSection, RunSection, CalculatorSection, CouplingSection,
-                OutputsSection, RelaxSection)
+                OutputsSection, RelaxSection, DiagnosticsSection)
     documented = {key for section in sections for key in section.KEYS}
     if documented != known_keys():  # a new section must be added to this page
         raise RuntimeError(f"configuration keys not in the reference: "
@@ -282,6 +283,16 @@ def configuration_reference():
         text = allowed.get(name, text)
         add(f"| `{name}` | {_cell(kind)} | `{_default(RelaxSection, name)}` | "
             f"{_cell(text)} |\n")
+
+    add("\n## `diagnostics`\n\nMeasurements that leave the trajectory as it is; each reports "
+        "in the run's summary.\n\n| field | key | type | default | meaning |\n"
+        "|---|---|---|---|---|\n"
+        "| `configurational_temperature` | `interval` | integer ≥ 1 | required | steps "
+        "between samples of the translational and rotational configurational temperatures "
+        "(see *The step's error* in the guide) |\n"
+        "| | `probes` | integer ≥ 1 | `4` | Hutchinson probes per sample; each costs two "
+        "force calls |\n"
+        "| | `seed` | integer ≥ 0 | `0` | the probes' random numbers |\n")
 
     add("\n## The demo's configuration\n\n`rigidmd demo` runs this configuration "
         "(`rigidmd.config.DEMO_CONFIG`):\n\n```text\n")

@@ -42,6 +42,8 @@ A configuration is a YAML mapping (every key optional except ``structure``
     relax:                        # relax first (rigid bodies, optionally the cell); see
       fmax: 0.05                  # rigidmd.config.relaxsection; rigidmd relax CONFIG
       optimizer: BFGS             # relaxes only
+    diagnostics:                  # measurements that leave the trajectory alone (see
+      configurational_temperature: {interval: 100, probes: 4}   # rigidmd.config.diagnostics)
 
 Quantities with units are strings ``"<number> <unit>"``.  Every mistake is
 a :class:`ConfigError` naming the field.  Each group of keys is checked by
@@ -52,6 +54,7 @@ them into a :class:`RunConfig`.
 from dataclasses import dataclass
 from pathlib import Path
 
+from rigidmd.config.diagnostics import DiagnosticsSection
 from rigidmd.config.quantities import (
     ConfigError,
     key_name,
@@ -80,7 +83,8 @@ DEMO_CONFIG = {
 }
 
 _SECTIONS = {"structure": StructureSection, "run": RunSection, "calculator": CalculatorSection,
-             "coupling": CouplingSection, "outputs": OutputsSection, "relax": RelaxSection}
+             "coupling": CouplingSection, "outputs": OutputsSection, "relax": RelaxSection,
+             "diagnostics": DiagnosticsSection}
 
 
 @dataclass
@@ -93,6 +97,7 @@ class RunConfig:
     coupling: CouplingSection
     outputs: OutputsSection
     relax: RelaxSection | None = None
+    diagnostics: DiagnosticsSection | None = None
 
 
 def known_keys():

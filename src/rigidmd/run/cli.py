@@ -3,6 +3,7 @@
 ``rigidmd demo``                      a TIP3P water cluster, 2 ps, with plots
 ``rigidmd run CONFIG.yaml [flags]``   any system from a configuration file
 ``rigidmd relax CONFIG.yaml``         relax its rigid bodies (and cell) only
+``rigidmd bias CONFIG.yaml``          the time step's bias of ⟨U⟩, from runs at dt and dt/2
 ``rigidmd plot LOG``                  energies and temperature of an MD log, to PNG
 ``rigidmd export-lammps CONFIG DIR``  the same run as a LAMMPS data file and deck
 ``rigidmd --version``                 the version (with ASE's, NumPy's and Python's)
@@ -37,6 +38,7 @@ from rigidmd.couplings.base import NotExportable
 from rigidmd.lammps.library import LammpsError
 from rigidmd.relax.command import relax_only
 from rigidmd.relax.structure import RelaxationNotConverged, RelaxationStopped
+from rigidmd.run.bias import add_bias_parser, bias_command
 from rigidmd.run.fingerprint import resume_command
 from rigidmd.run.logplot import LogError, plot_log
 from rigidmd.run.outputs import OutputError, describe_os_error
@@ -191,6 +193,7 @@ def _parser():
     mode.add_argument("--overwrite", action="store_true",
                       help="replace the outputs of an earlier run in the output directory")
     _relax_parser(sub, trust_help)
+    add_bias_parser(sub, trust_help)
     plot = sub.add_parser("plot", help="plot energies and temperature of an MD log")
     plot.add_argument("log", help="an MD log written by rigidmd (or by ASE's MDLogger)")
     plot.add_argument("-o", "--output", help="PNG file (default: the log's name with .png)")
@@ -256,6 +259,8 @@ def main(argv=None):
             mode = "resume" if args.resume else "overwrite" if args.overwrite else "new"
             return relax_only(_apply_flags(load_config(args.config), args), trust=args.trust,
                               mode=mode, config_path=args.config)
+        if args.command == "bias":
+            return bias_command(args)
         if args.command == "export-lammps":
             config = _apply_flags(load_config(args.config), args)
             return _export(check_config(config, trust=args.trust), Path(args.directory))

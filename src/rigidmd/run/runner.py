@@ -91,6 +91,7 @@ class Run:
         self.outputs = config.outputs
         self.files = RunFiles(self.outputs, mode, self.stream, config.relax)
         self.checkpoints = RunCheckpoints(config, self.files, self.stream)
+        self.diagnostics = []  # attached with the outputs (config.diagnostics)
 
     @property
     def fingerprint(self):
@@ -266,9 +267,10 @@ class Run:
                 return self._drive(dyn, stop)
             finally:
                 # A calculator with a process of its own (LAMMPSEngine) stops with the run.
-                close = getattr(dyn.atoms.calc, "close", None)
-                if callable(close):
-                    close()
+                for calc in [dyn.atoms.calc] + [d.calculator for d in self.diagnostics]:
+                    close = getattr(calc, "close", None)
+                    if callable(close):
+                        close()
 
     def _drive(self, dyn, stop):
         out, config = self.outputs, self.config
@@ -290,6 +292,8 @@ class Run:
             dyn.attach(NamedOutput(writer, out.mdanalysis), interval=out.interval)
         dyn.attach(Progress(dyn, remaining), interval=max(1, remaining // 1000))
         dyn.attach(lambda: self.checkpoints.write(dyn, writer), interval=out.checkpoint_interval)
+        # The diagnostics (configurational temperature): they report in the summary.
+        self.diagnostics = self._diagnostics(dyn)
         dyn.attach(stop.check, interval=1)  # last: after every output of the step
         print(f"{dyn.bodies} with {dyn.scheme.name} integrator, {describe(dyn)}, "
               f"steps {dyn.nsteps + 1}-{total} of {config.run.timestep / TIME_UNITS['fs']:g} fs",
@@ -302,6 +306,17 @@ class Run:
         if at_once:
             return status  # a second Ctrl-C stopped the steps at once
         return self._finish(dyn, status, stop, (rows, steps, resumed_at), t0)
+
+    def _diagnostics(self, dyn):
+        """The configuration's diagnostics, attached; an in-process calculator of their own."""
+        section = self.config.diagnostics
+        if section is None or section.configurational_temperature is None:
+            return []
+        calc = self.config.calculator
+        own = None
+        if calc.processes is None and calc.address is None:
+            own = calc.build(dyn.atoms.copy(), self.outputs.directory / "engine")
+        return section.attach(dyn, calculator=own)
 
     def _finish(self, dyn, status, stop, statistics, t0):
         """The final checkpoint, the summary and the plot; the exit status."""
@@ -320,6 +335,8 @@ class Run:
                   file=self.stream)
         rows, steps, resumed_at = statistics
         summary(dyn, rows, time.perf_counter() - t0, self.stream, steps, resumed_at)
+        for diagnostic in self.diagnostics:
+            print(diagnostic.report(), file=self.stream)
         if out.plot is not None and out.log is not None and not status:
             from rigidmd.run.logplot import plot_log
 

@@ -1,0 +1,527 @@
+r"""``rigidmd bias``: a time step's bias in ⟨U⟩, from two short runs at dt and dt/2.
+
+One run cannot measure its own error: its ⟨U⟩ is all it has.  Two runs of
+the same configuration from the same thermal start, at the time step ``dt``
+and at ``dt/2``, can: for a second-order integrator the averages carry a
+leading error :math:`c\,\Delta t^2`, so
+
+.. math::
+    \langle U\rangle(\Delta t) - \langle U\rangle(0) \approx
+    \tfrac43\,\bigl(\langle U\rangle(\Delta t) - \langle U\rangle(\Delta t/2)\bigr),
+
+with a statistical error from block averages of each run (independent runs:
+the errors add in quadrature).  The same pair gives the kinetic temperatures
+of translation and rotation and, every ``tconf_fs``, the configurational ones
+(:mod:`rigidmd.core.configurational`), each of which the step biases in its
+own way.  The bias is said in kJ/mol per body and in kelvin: the shift of
+the bath temperature that would change ⟨U⟩ as much,
+:math:`\Delta T = N\,\mathrm{bias}\;k_BT^2/\mathrm{Var}(U)`, with
+:math:`\partial\langle U\rangle/\partial T = \mathrm{Var}(U)/k_BT^2` measured
+from the half-step run's fluctuations.
+
+Only a thermostatted run at constant volume is accepted: without a
+thermostat the temperature itself moves with the step (the energy is what is
+conserved), and under a barostat the density does, so ⟨U⟩ would mix the two
+errors; estimate the bias at the barostat's mean density.
+
+Progress goes to stderr (a bar on a terminal, a line every 1 % otherwise).
+SIGINT, SIGTERM and SIGUSR1 finish the current step, write the run's
+checkpoint and what was sampled (``bias.json``), print the estimate so far
+and the command that continues (``--resume``); the continued estimate is the
+one an uninterrupted command gives, bit for bit in the runs, with the
+configurational temperatures' probes drawn afresh.  Outputs in ``--outdir``:
+``bias.json`` (every sample and number) and ``bias.txt`` (the table).
+"""
+
+import json
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from ase import units
+
+from rigidmd.config import TIME_UNITS, ConfigError
+from rigidmd.core.configurational import ConfigurationalTemperature, block_mean, block_ratio
+from rigidmd.run.fingerprint import fingerprint
+from rigidmd.run.report import Progress
+from rigidmd.run.signals import EXIT_STATUS, StopRequest, StopSignals
+
+__all__ = ["estimate_bias", "BiasLeg", "check_bias_config", "add_bias_parser", "bias_command"]
+
+KJ_MOL = units.kJ / units.mol
+#: The flag (or field) that sets each argument of :func:`estimate_bias`, for the messages.
+FLAGS = {"production_ps": "--ps", "equilibrate_ps": "--equilibrate-ps",
+         "sample_fs": "--sample-fs", "tconf_fs": "--tconf-fs", "probes": "--probes",
+         "seed": "seed", "dt_fs": "timestep"}
+#: What a leg keeps per sample: step, potential energy (eV), kinetic energies (eV).
+SAMPLE_FIELDS = ("step", "U", "K_tr", "K_rot")
+
+
+def check_bias_config(config) -> None:
+    """Refuse, with one line naming the field, what ``rigidmd bias`` cannot estimate."""
+    coupling = config.coupling
+    if getattr(coupling, "barostat", None) is not None:
+        raise ConfigError("barostat: rigidmd bias runs at constant volume (a barostat moves the "
+                          "density with the step too); remove it and give the structure at "
+                          "the barostat's mean density")
+    if getattr(coupling, "thermostat", None) is None:
+        raise ConfigError("thermostat: rigidmd bias needs a thermostat (at constant energy the "
+                          "temperature itself moves with the step); add one, e.g. "
+                          "{kind: langevin, temperature: 300 K, friction: 1 1/ps}")
+    if config.relax is not None:
+        raise ConfigError("relax: rigidmd bias starts both runs from the structure as given; "
+                          "relax it first (rigidmd relax) and give the relaxed structure")
+
+
+class BiasLeg:
+    """One of the two runs: its time step, its samples, its checkpoint.
+
+    Parameters
+    ----------
+    name : str
+        ``"dt"`` or ``"dt/2"``.
+    dt : float
+        ASE time units.
+    equilibrate, production, every, tconf_every : int
+        Steps: discarded, sampled after them, between samples of ⟨U⟩ and the
+        kinetic energies, between configurational samples (0: none).
+    """
+
+    def __init__(self, name, dt, equilibrate, production, every, tconf_every):
+        self.name, self.dt = name, dt
+        self.equilibrate, self.production = equilibrate, production
+        self.every, self.tconf_every = every, tconf_every
+        self.samples = {key: [] for key in SAMPLE_FIELDS}
+        self.tconf_sums = []
+        self.done = False
+        self.dof = None  # (translational, rotational) degrees of freedom, once it ran
+        self.bodies = None  # bodies (and point particles) the energies are per
+
+    @property
+    def total(self):
+        """Steps of the whole leg."""
+        return self.equilibrate + self.production
+
+    def todict(self):
+        return {"name": self.name, "dt": self.dt, "equilibrate": self.equilibrate,
+                "production": self.production, "every": self.every,
+                "tconf_every": self.tconf_every, "samples": self.samples,
+                "tconf_sums": self.tconf_sums, "done": self.done, "dof": self.dof,
+                "bodies": self.bodies}
+
+    def restore(self, saved):
+        self.samples = {key: list(saved["samples"][key]) for key in SAMPLE_FIELDS}
+        self.tconf_sums = [tuple(s) for s in saved["tconf_sums"]]
+        self.done = bool(saved["done"])
+        self.dof = None if saved["dof"] is None else tuple(saved["dof"])
+        self.bodies = saved["bodies"]
+
+    def trim(self, step):
+        """Forget the samples after ``step`` (the run continues from its checkpoint there)."""
+        keep = [i for i, s in enumerate(self.samples["step"]) if s <= step]
+        self.samples = {key: [value[i] for i in keep] for key, value in self.samples.items()}
+        self.tconf_sums = [t for t in self.tconf_sums if t[4] <= step]
+
+    # ------------------------------------------------------------ the estimates
+    def temperatures(self, dyn_dof, blocks):
+        """⟨U⟩ (eV, total) and the temperatures (K) with block errors."""
+        s = {key: np.asarray(value, dtype=float) for key, value in self.samples.items()}
+        tr_dof, rot_dof = dyn_dof
+        out = {"U": block_mean(s["U"], blocks),
+               "T_tr": _scaled(block_mean(s["K_tr"], blocks), 2 / (tr_dof * units.kB)),
+               "T_rot": _scaled(block_mean(s["K_rot"], blocks), 2 / (rot_dof * units.kB))
+               if rot_dof else (np.nan, np.nan),
+               "var_U": float(np.var(s["U"], ddof=1)) if len(s["U"]) > 1 else np.nan,
+               "samples": len(s["U"])}
+        sums = np.array([t[:4] for t in self.tconf_sums]).reshape(-1, 4)
+        out["T_conf_tr"] = _scaled(block_ratio(sums[:, 0], sums[:, 1], blocks), 1 / units.kB)
+        out["T_conf_rot"] = _scaled(block_ratio(sums[:, 2], sums[:, 3], blocks), 1 / units.kB)
+        out["tconf_samples"] = len(sums)
+        return out
+
+
+def _scaled(pair, factor):
+    return pair[0] * factor, pair[1] * factor
+
+
+def _steps(name, time_span, dt, minimum=1):
+    steps = int(round(time_span / dt))
+    if steps < minimum:
+        raise ConfigError(f"{name}: {time_span / TIME_UNITS['fs']:g} fs is less than "
+                          f"{minimum} step(s) of {dt / TIME_UNITS['fs']:g} fs")
+    return steps
+
+
+def _legs(config, production_ps, equilibrate_ps, sample_fs, tconf_fs):
+    dt = config.run.timestep
+    legs = []
+    for name, step in (("dt", dt), ("dt/2", dt / 2)):
+        ps, fs = TIME_UNITS["ps"], TIME_UNITS["fs"]
+        every = _steps("--sample-fs", sample_fs * fs, dt)  # on the coarser grid: both legs
+        every *= 1 if name == "dt" else 2  # sample at the same times
+        tconf = 0 if not tconf_fs else _steps("--tconf-fs", tconf_fs * fs, dt) * (
+            1 if name == "dt" else 2)
+        scale = 1 if name == "dt" else 2
+        legs.append(BiasLeg(name, step, _steps("--equilibrate-ps", equilibrate_ps * ps, dt,
+                                               minimum=0) * scale,
+                            _steps("--ps", production_ps * ps, dt, minimum=5) * scale,
+                            every, tconf))
+    return legs
+
+
+class _Sampler:
+    """The leg's observer: ⟨U⟩ and the kinetic energies on sampled steps after equilibration."""
+
+    modifies_atoms = False
+
+    def __init__(self, dyn, leg):
+        self.dyn, self.leg = dyn, leg
+
+    def __call__(self):
+        dyn, leg = self.dyn, self.leg
+        if dyn.nsteps <= leg.equilibrate:
+            return
+        s = leg.samples
+        s["step"].append(int(dyn.nsteps))
+        s["U"].append(float(dyn.atoms.get_potential_energy()))
+        s["K_tr"].append(float(dyn.get_translational_kinetic_energy()))
+        s["K_rot"].append(float(dyn.get_rotational_kinetic_energy()))
+
+
+class _Conf:
+    """The configurational temperature, after equilibration, its sums kept by the leg."""
+
+    modifies_atoms = False
+    wants_properties = False
+
+    def __init__(self, dyn, leg, seed, probes, calculator):
+        self.leg = leg
+        # Probes drawn afresh on a resume: (seed, leg, samples already taken).
+        rng = np.random.default_rng([seed, int(leg.name != "dt"), len(leg.tconf_sums)])
+        self.tconf = ConfigurationalTemperature(dyn, probes=probes, rng=rng,
+                                                calculator=calculator)
+        self.dyn = dyn
+
+    def __call__(self):
+        if self.dyn.nsteps > self.leg.equilibrate:
+            self.leg.tconf_sums.append(self.tconf.sample())
+
+
+def _dynamics(config, leg, checkpoint, engine):
+    """The leg's dynamics: from its checkpoint, or from the configuration's start."""
+    from rigidmd import rigid_maxwell_boltzmann
+    from rigidmd.core.dynamics import RigidDynamics
+    from rigidmd.run.restart import load_checkpoint
+
+    if checkpoint.is_file():
+        from rigidmd.core.checkpoint import read_checkpoint
+
+        saved = read_checkpoint(checkpoint)
+        return load_checkpoint(saved, config.calculator.build(saved.atoms(), engine))
+    atoms = config.structure.build_atoms()
+    bodies = config.structure.resolve_bodies(atoms)
+    velocities = config.run.velocities
+    if velocities is not None and config.structure.restart is None:
+        rigid_maxwell_boltzmann(atoms, velocities["temperature_K"], bodies=bodies,
+                                rng=np.random.default_rng(velocities["seed"]))
+    atoms.calc = config.calculator.build(atoms, engine)
+    return RigidDynamics(atoms, leg.dt, bodies=bodies, couplings=config.coupling.parts(),
+                         integrator=config.run.integrator,
+                         integrator_options=config.run.integrator_options)
+
+
+def _run_leg(config, leg, directory, stop, progress, probes, seed):
+    """Run (or continue) one leg; returns None when done, else the stop signal's number."""
+    checkpoint = directory / f"leg-{leg.name.replace('/', '-')}.npz"
+    dyn = _dynamics(config, leg, checkpoint, directory / "engine")
+    own = None  # the configurational temperature's calculator (as rigidmd run gives it)
+    # Samples taken after the checkpoint (a failure, a second Ctrl-C) are taken again.
+    leg.trim(dyn.nsteps)
+    try:
+        leg.dof = (dyn.translational_dof - (3 if dyn.holds_momentum else 0),
+                   dyn.rotational_dof)
+        leg.bodies = dyn.model.n_bodies or dyn.model.n_free
+        remaining = leg.total - dyn.nsteps
+        dyn.attach(_Sampler(dyn, leg), interval=leg.every)
+        if leg.tconf_every:
+            calc = config.calculator
+            if calc.processes is None and calc.address is None:  # in process: one of its own
+                own = calc.build(dyn.atoms.copy(), directory / "engine")
+            dyn.attach(_Conf(dyn, leg, seed, probes, own), interval=leg.tconf_every)
+        dyn.attach(Progress(dyn, remaining, stream=progress),
+                   interval=max(1, remaining // 1000))
+        dyn.attach(stop.check, interval=1)  # last: after the step's samples
+        try:
+            dyn.run(remaining)
+        except StopRequest as request:
+            dyn.save_checkpoint(checkpoint)
+            return request.signum
+        leg.done = True
+        checkpoint.unlink(missing_ok=True)
+        return None
+    finally:
+        for calc in (dyn.atoms.calc, own):
+            close = getattr(calc, "close", None)
+            if callable(close):
+                close()
+
+
+def estimate_bias(config, directory, *, production_ps=10.0, equilibrate_ps=2.0,
+                  sample_fs=10.0, tconf_fs=100.0, probes=4, seed=0, blocks=5, resume=False,
+                  stream=None, progress=None, hint=None) -> dict:
+    r"""Estimate the bias of ⟨U⟩/N at the configuration's time step from runs at dt and dt/2.
+
+    Both runs start from the configuration's structure and velocities (its
+    ``velocities:`` seed, its thermostat's seed), run ``equilibrate_ps``
+    (discarded), then ``production_ps`` sampled every ``sample_fs`` (the same
+    times in both) and, every ``tconf_fs``, the configurational temperatures
+    (``2 * probes`` force calls each; 0 turns them off).
+
+    Parameters
+    ----------
+    config : rigidmd.config.RunConfig
+        Checked; a thermostat and no barostat (:func:`check_bias_config`).
+    directory : path-like
+        Where ``bias.json``, ``bias.txt`` and a stopped run's checkpoints go.
+    production_ps, equilibrate_ps, sample_fs, tconf_fs : float
+    probes, seed, blocks : int
+        Configurational probes per sample, their seed, blocks of the errors.
+    resume : bool
+        Continue the stopped estimate in ``directory`` (the same configuration
+        and arguments, or a ConfigError naming what differs).
+    stream, progress : file, optional
+        Messages (stdout) and the progress line (stderr).
+    hint : str, optional
+        The command that continues, printed after a stop.
+
+    Returns
+    -------
+    dict
+        ``"status"`` (0, or 130/143/138 after a signal), ``"legs"`` (each leg's
+        ⟨U⟩/N in kJ/mol and temperatures in K, value and error), ``"bias_kJ_mol"``,
+        ``"bias_K"`` (value and error), ``"complete"``.
+    """
+    stream = sys.stdout if stream is None else stream
+    check_bias_config(config)
+    directory = Path(directory)
+    arguments = {"production_ps": production_ps, "equilibrate_ps": equilibrate_ps,
+                 "sample_fs": sample_fs, "tconf_fs": tconf_fs, "probes": probes, "seed": seed,
+                 "dt_fs": config.run.timestep / TIME_UNITS["fs"]}
+    legs = _legs(config, production_ps, equilibrate_ps, sample_fs, tconf_fs)
+    record = directory / "bias.json"
+    prints = fingerprint(config)
+    if resume:
+        saved = _read_record(record)
+        for key, value in arguments.items():
+            if saved["arguments"].get(key) != value:
+                raise ConfigError(f"{FLAGS[key]}: {saved['arguments'].get(key)!r} in the "
+                                  f"estimate in {record}, {value!r} now; give it as before to "
+                                  "continue (or start again without --resume)")
+        changed = [k for k in prints if saved["fingerprint"].get(k) != prints[k]]
+        if changed:
+            raise ConfigError(f"{changed[0]}: differs from the configuration of the estimate "
+                              f"in {record}; give it as before to continue")
+        for leg, kept in zip(legs, saved["legs"], strict=True):
+            leg.restore(kept)
+    elif record.exists():
+        raise ConfigError(f"--outdir: {directory} already holds an estimate ({record.name}); "
+                          "continue it with --resume or give another directory")
+    directory.mkdir(parents=True, exist_ok=True)
+    status = 0
+    t0 = time.perf_counter()
+    def record_now(status):
+        result = _estimate(legs, blocks, config)
+        result.update(status=status, arguments=arguments, fingerprint=prints,
+                      legs_record=[leg.todict() for leg in legs],
+                      elapsed_s=time.perf_counter() - t0)
+        _write(directory, result)
+        return result
+
+    with StopSignals() as stop:
+        try:
+            for leg in legs:
+                if leg.done:
+                    continue
+                print(f"run at {leg.name} = {leg.dt / TIME_UNITS['fs']:g} fs: {leg.total} "
+                      f"steps ({leg.equilibrate} to equilibrate)", file=stream)
+                signum = _run_leg(config, leg, directory, stop, progress, probes, seed)
+                if signum is not None:
+                    status = EXIT_STATUS[signum]
+                    break
+        except BaseException:
+            # A failed step, a second Ctrl-C: what was sampled is kept (a --resume takes the
+            # run from its last checkpoint, or from its start, and samples again after it).
+            stop.shielded = True
+            record_now(1)
+            raise
+        stop.shielded = True  # the record is written whole
+        result = record_now(status)
+    print(result["text"], file=stream)
+    if status:
+        print(f"stopped by a signal: {record} and the run's checkpoint hold what was done; "
+              f"continue with: {hint or 'the same command with --resume'}", file=stream)
+    return result
+
+
+def _read_record(record):
+    if not record.is_file():
+        raise ConfigError(f"--resume: no estimate to continue ({record} does not exist)")
+    try:
+        saved = json.loads(record.read_text())
+        saved["arguments"], saved["fingerprint"], saved["legs"] = (
+            saved["arguments"], saved["fingerprint"], saved["legs_record"])
+    except (ValueError, KeyError, TypeError):
+        raise ConfigError(f"--resume: {record} is not an estimate rigidmd bias wrote") from None
+    return saved
+
+
+def _estimate(legs, blocks, config):
+    """The numbers and the table from the legs' samples (what there is of them)."""
+    n = _bodies(config, legs)
+    per = {}
+    for leg in legs:
+        if leg.dof is None or not leg.samples["U"]:
+            per[leg.name] = None
+            continue
+        per[leg.name] = leg.temperatures(leg.dof, blocks)
+    complete = all(leg.done for leg in legs)
+    bias = bias_k = (np.nan, np.nan)
+    a, b = per.get("dt"), per.get("dt/2")
+    if a is not None and b is not None:
+        value = 4 / 3 * (a["U"][0] - b["U"][0]) / n / KJ_MOL
+        error = 4 / 3 * np.hypot(a["U"][1], b["U"][1]) / n / KJ_MOL
+        bias = (value, error)
+        kT2 = (config.coupling.thermostat.kwargs["temperature_K"] * units.kB) ** 2
+        slope = b["var_U"] / kT2 * units.kB  # d<U>/dT (eV/K), the whole system
+        if slope > 0:
+            bias_k = (value * n * KJ_MOL / slope, error * n * KJ_MOL / slope)
+    text = _table(legs, per, n, bias, bias_k, complete, config)
+    legs_out = {}
+    for name, values in per.items():
+        if values is not None:
+            values = dict(values, U_per_body_kJ_mol=(values["U"][0] / n / KJ_MOL,
+                                                     values["U"][1] / n / KJ_MOL))
+        legs_out[name] = values
+    return {"legs": legs_out, "bias_kJ_mol": bias, "bias_K": bias_k, "complete": complete,
+            "bodies": n, "text": text}
+
+
+def _bodies(config, legs):
+    """Bodies (molecules; point particles when there are none) the energies are per."""
+    for leg in legs:
+        if leg.bodies:
+            return leg.bodies
+    return 1
+
+
+def _table(legs, per, n, bias, bias_k, complete, config):
+    def pm(pair, digits):
+        value, error = pair
+        if np.isnan(value):
+            return "-"
+        return f"{value:.{digits}f}" + ("" if np.isnan(error) else f" ± {error:.{digits}f}")
+
+    fs = TIME_UNITS["fs"]
+    head = [f"{leg.name} = {leg.dt / fs:g} fs" for leg in legs]
+    rows = [("samples", lambda v: f"{v['samples']} (T_conf {v['tconf_samples']})"),
+            ("<U>/N (kJ/mol)", lambda v: pm((v["U"][0] / n / KJ_MOL, v["U"][1] / n / KJ_MOL),
+                                            4)),
+            ("T_tr (K)", lambda v: pm(v["T_tr"], 1)),
+            ("T_rot (K)", lambda v: pm(v["T_rot"], 1)),
+            ("T_conf,tr (K)", lambda v: pm(v["T_conf_tr"], 1)),
+            ("T_conf,rot (K)", lambda v: pm(v["T_conf_rot"], 1))]
+    bath = config.coupling.thermostat.kwargs["temperature_K"]
+    lines = [f"step bias of {n} bodies at {legs[0].dt / fs:g} fs, bath {bath:g} K "
+             f"({'complete' if complete else 'so far: the runs stopped early'})",
+             f"{'':<16}" + "".join(f"{h:>24}" for h in head)]
+    for label, cell in rows:
+        cells = [cell(per[leg.name]) if per[leg.name] is not None else "-" for leg in legs]
+        lines.append(f"{label:<16}" + "".join(f"{c:>24}" for c in cells))
+    if np.isnan(bias[0]):
+        lines.append("bias: needs samples of both runs")
+    else:
+        lines.append(f"bias of <U>/N at {legs[0].dt / fs:g} fs: {pm(bias, 4)} kJ/mol "
+                     "(4/3 of the difference: the leading dt^2 term); as a temperature: "
+                     f"{pm(bias_k, 2)} K (d<U>/dT from the fluctuations of U at "
+                     f"{legs[1].dt / fs:g} fs)")
+    return "\n".join(lines)
+
+
+def _write(directory, result):
+    def plain(value):
+        if isinstance(value, dict):
+            return {k: plain(v) for k, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [plain(v) for v in value]
+        if isinstance(value, (np.floating, float)):
+            return None if np.isnan(value) else float(value)
+        if isinstance(value, np.integer):
+            return int(value)
+        return value
+
+    tmp = directory / "bias.json.tmp"
+    tmp.write_text(json.dumps(plain(result), indent=1))
+    tmp.replace(directory / "bias.json")
+    (directory / "bias.txt").write_text(result["text"] + "\n")
+
+
+# ------------------------------------------------------------ the command
+def add_bias_parser(sub, trust_help):
+    """Register ``rigidmd bias`` on the command's subparsers."""
+    bias = sub.add_parser("bias", help="estimate the time step's bias of <U> from runs at dt "
+                                       "and dt/2 (a thermostatted configuration)")
+    bias.add_argument("config", help="YAML configuration with a thermostat (no barostat)")
+    bias.add_argument("--timestep", help="dt with unit (default: the configuration's)")
+    bias.add_argument("--ps", type=float, default=10.0,
+                      help="sampled picoseconds of each run (default 10)")
+    bias.add_argument("--equilibrate-ps", type=float, default=2.0,
+                      help="picoseconds each run discards first (default 2)")
+    bias.add_argument("--sample-fs", type=float, default=10.0,
+                      help="femtoseconds between samples of U and the temperatures (default 10)")
+    bias.add_argument("--tconf-fs", type=float, default=100.0,
+                      help="femtoseconds between configurational temperatures (each 2 * probes "
+                           "force calls; 0: none; default 100)")
+    bias.add_argument("--probes", type=int, default=4, help="Hutchinson probes (default 4)")
+    bias.add_argument("--blocks", type=int, default=5, help="blocks of the errors (default 5)")
+    bias.add_argument("--outdir", default="rigidmd-bias", help="output directory")
+    bias.add_argument("--resume", action="store_true",
+                      help="continue a stopped estimate in the output directory")
+    bias.add_argument("--trust", action="store_true", help=trust_help)
+
+
+def bias_command(args, stream=None):
+    """``rigidmd bias``: the exit status (0, or 130/143/138 after a stop signal)."""
+    from rigidmd.config import check_config, load_config, parse_quantity
+
+    for name in ("ps", "equilibrate_ps", "sample_fs", "tconf_fs"):
+        value = getattr(args, name)
+        if not (np.isfinite(value) and value >= 0) or (name in ("ps", "sample_fs")
+                                                        and value == 0):
+            raise ConfigError(f"--{name.replace('_', '-')}: expected a positive number of "
+                              f"{name.split('_')[-1]}, got {value:g}")
+    for name, least in (("probes", 1), ("blocks", 2)):
+        if getattr(args, name) < least:
+            raise ConfigError(f"--{name}: expected a whole number >= {least}, got "
+                              f"{getattr(args, name)}")
+    raw = load_config(args.config)
+    if args.timestep is not None:
+        raw["timestep"] = args.timestep
+        parse_quantity("--timestep", args.timestep, TIME_UNITS)
+    config = check_config(raw, trust=args.trust)
+    check_bias_config(config)
+    words = ["rigidmd", "bias", args.config]
+    for name in ("timestep", "ps", "equilibrate_ps", "sample_fs", "tconf_fs", "probes",
+                 "blocks"):
+        words += [f"--{name.replace('_', '-')}", str(getattr(args, name))] if getattr(
+            args, name) is not None else []
+    words += ["--outdir", str(Path(args.outdir).resolve())] + (["--trust"] if args.trust else [])
+    hint = shlex.join(words + ["--resume"])
+    result = estimate_bias(config, args.outdir, production_ps=args.ps,
+                           equilibrate_ps=args.equilibrate_ps, sample_fs=args.sample_fs,
+                           tconf_fs=args.tconf_fs, probes=args.probes, blocks=args.blocks,
+                           resume=args.resume, stream=stream, hint=hint)
+    print(f"wrote {Path(args.outdir) / 'bias.json'} and {Path(args.outdir) / 'bias.txt'}",
+          file=stream or sys.stdout)
+    return result["status"]
