@@ -126,7 +126,9 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         The rotational integrator: ``"no_squish"`` (LAMMPS ``fix rigid/nve``),
         ``"richardson"`` (LAMMPS ``fix rigid``), ``"rozmanov_kusalik"``
         (RMPCDMD), ``"pcdm"`` (Zhao & van Wachem, two force calls per step),
-        ``"exadem"`` (first order; a DEM scheme, not for molecules); or a
+        ``"exadem"`` (first order; a DEM scheme, not for molecules), ``"baoab"``
+        (NO_SQUISH cut in two around the parts' middle action; the default
+        ``"no_squish"`` becomes it when a part acts there); or a
         scheme of operators as a list, a :class:`~rigidmd.core.schemes.Scheme` or a
         YAML file.  See :mod:`rigidmd.core.schemes`.
     integrator_options : dict, optional
@@ -178,6 +180,15 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         check_massless_momenta(atoms)
         couplings = tuple(couplings)
         mover = check_composition(couplings, fixcom)
+        middle = tuple(part for part in couplings if part.acts_in_middle)
+        if middle and not scheme.has_middle:
+            if isinstance(integrator, str) and integrator == "no_squish":
+                scheme = resolve_scheme("baoab")  # NO_SQUISH, cut where the part acts
+            else:
+                raise ValueError(
+                    f"thermostat {middle[0].kind} acts in the middle of the step: the "
+                    f"integrator needs a 'middle' operator (integrator='baoab'); "
+                    f"{scheme.name!r} has none")
         model = geometry.model
         for part in couplings:
             part.check(atoms, model, self._dt)
@@ -215,7 +226,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         context = StepContext(
             self.state, model, self.record, self.evaluator,
             positions=atoms.arrays["positions"], momenta=atoms.arrays["momenta"],
-            write_momenta=not couplings and not fixcom, cell_motion=mover, view=self.view)
+            write_momenta=not couplings and not fixcom, cell_motion=mover, view=self.view,
+            middle=middle)
         self.stepper = Stepper(scheme, context, couplings, self.view, self.link,
                                fused=self.fused, fixcom=fixcom)
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps
