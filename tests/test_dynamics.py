@@ -292,10 +292,15 @@ def test_trajectory_and_log(tmp_path):
     np.testing.assert_allclose(frames[-1].get_momenta(), atoms.get_momenta())
     assert frames[-1].constraints == []
     header, *lines = [ln.split() for ln in log.read_text().splitlines()]
-    assert header == ["Time[ps]", "Etot[eV]", "Epot[eV]", "Ekin[eV]", "T[K]", "Econs[eV]"]
+    assert header == ["Time[ps]", "Etot[eV]", "Epot[eV]", "Ekin[eV]", "T[K]", "Econs[eV]",
+                      "T_tr[K]", "T_rot[K]"]
     assert len(lines) == 5
     # The logger's temperature counts 6 degrees of freedom per water.
     assert float(lines[-1][4]) == pytest.approx(atoms.get_temperature(), abs=0.01)
+    # T_tr and T_rot split it: 12 translational and 12 rotational degrees of freedom.
+    T_tr, T_rot = map(float, lines[-1][6:8])
+    assert (T_tr, T_rot) == pytest.approx(dyn.get_kinetic_temperatures(), abs=0.006)
+    assert 0.5 * (T_tr + T_rot) == pytest.approx(float(lines[-1][4]), abs=0.011)
     # The conserved energy of NVE is the total energy, with 6 decimals (µeV).
     assert lines[-1][5] == lines[-1][1] and len(lines[-1][1].split(".")[1]) == 6
     assert atoms.get_temperature() == pytest.approx(

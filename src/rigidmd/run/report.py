@@ -86,8 +86,11 @@ def summary(dyn, rows, elapsed, stream):
     """Steps, speed, temperature, energy drift and (NPT) mean pressure, volume, density."""
     label = "conserved energy" if dyn.couplings else "total energy"
     print(f"{dyn.nsteps} steps ({elapsed:.1f} s for this run); "
-          f"T = {temperature(dyn.atoms):.1f} K ({dyn.degrees_of_freedom} degrees of "
+          f"T = {dyn.get_reported_kinetic_energy()[1]:.1f} K ({dyn.degrees_of_freedom} degrees of "
           "freedom)", file=stream)
+    T_tr, T_rot = dyn.get_kinetic_temperatures()
+    where = " (after the O step)" if dyn.reports_own_kinetic_energies else ""
+    print(f"T_tr = {T_tr:.1f} K, T_rot = {T_rot:.1f} K{where}", file=stream)
     for part in dyn.couplings:  # a part that reports on itself (the Monte Carlo barostat)
         report = getattr(part, "report", None)
         if callable(report):
