@@ -53,7 +53,7 @@ from rigidmd.core.model import BodyModel
 from rigidmd.core.observables import RigidObservables
 from rigidmd.core.operators import remove_centre_velocity
 from rigidmd.core.record import StepRecord
-from rigidmd.core.schemes import BUILTIN_SCHEMES, resolve_scheme
+from rigidmd.core.schemes import BUILTIN_SCHEMES, resolve_scheme, scheme_with_middle
 from rigidmd.core.state import STATE_FIELDS
 from rigidmd.core.stepcontext import StepContext
 from rigidmd.core.stepper import Stepper
@@ -181,14 +181,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         couplings = tuple(couplings)
         mover = check_composition(couplings, fixcom)
         middle = tuple(part for part in couplings if part.acts_in_middle)
-        if middle and not scheme.has_middle:
-            if isinstance(integrator, str) and integrator == "no_squish":
-                scheme = resolve_scheme("baoab")  # NO_SQUISH, cut where the part acts
-            else:
-                raise ValueError(
-                    f"thermostat {middle[0].kind} acts in the middle of the step: the "
-                    f"integrator needs a 'middle' operator (integrator='baoab'); "
-                    f"{scheme.name!r} has none")
+        scheme = scheme_with_middle(scheme, integrator, [part.kind for part in middle])
         model = geometry.model
         for part in couplings:
             part.check(atoms, model, self._dt)

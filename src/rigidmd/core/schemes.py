@@ -52,7 +52,8 @@ import numpy as np
 
 from rigidmd.core import stepcontext as sc
 
-__all__ = ["Scheme", "OPERATORS", "BUILTIN_SCHEMES", "resolve_scheme", "load_yaml"]
+__all__ = ["Scheme", "OPERATORS", "BUILTIN_SCHEMES", "resolve_scheme", "load_yaml",
+           "scheme_with_middle"]
 
 
 @dataclass(frozen=True)
@@ -371,3 +372,19 @@ def resolve_scheme(spec, **params):
                          "put them in the scheme's entries instead")
     return scheme
 
+
+
+def scheme_with_middle(scheme: Scheme, integrator, kinds) -> Scheme:
+    """The scheme a dynamics runs when coupling parts (of ``kinds``) act in its middle.
+
+    Without such parts, or with a scheme that has a ``middle`` operator,
+    ``scheme`` itself; for the default integrator ``"no_squish"``, ``baoab``
+    (NO_SQUISH cut in two where the parts act); for any other, a ValueError in one
+    line naming the part and the integrator.
+    """
+    if not kinds or scheme.has_middle:
+        return scheme
+    if isinstance(integrator, str) and integrator == "no_squish":
+        return resolve_scheme("baoab")
+    raise ValueError(f"thermostat {kinds[0]} acts in the middle of the step: the integrator "
+                     f"needs a 'middle' operator (integrator='baoab'); {scheme.name!r} has none")
