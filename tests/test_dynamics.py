@@ -536,3 +536,21 @@ print("ran")
                             timeout=300)
     assert result.returncode == 0, result.stderr[-2000:]
     assert result.stdout.strip() == "ran"
+
+
+def test_plot_reads_old_and_new_logs(tmp_path):
+    """``rigidmd plot``'s temperature panel: T_tr and T_rot when logged; a log written
+    before those columns (ASE's columns and Econs) still plots, with T alone."""
+    from rigidmd.run.logplot import plot_log, read_log, temperature_curves
+
+    atoms = waters(4)
+    log = tmp_path / "md.log"
+    RigidVerlet(atoms, 1 * units.fs, logfile=str(log), loginterval=5).run(10)
+    labels = [label for label, _ in temperature_curves(read_log(log))]
+    assert labels == ["T", "T_tr (translation)", "T_rot (rotation)"]
+    old = tmp_path / "old.log"
+    old.write_text("\n".join(" ".join(line.split()[:6]) for line in
+                             log.read_text().splitlines()) + "\n")
+    assert [label for label, _ in temperature_curves(read_log(old))] == ["T"]
+    for path in (log, old):
+        assert plot_log(path, tmp_path / f"{path.stem}.png").stat().st_size > 0
