@@ -10,6 +10,10 @@ splitting
     the integrator's deterministic step (forces, drift, rotation)
     part_n.second_half(Δt/2) ... part_1.second_half(Δt/2)
 
+A part may also act inside the deterministic step, between its two half
+drifts (:attr:`Coupling.acts_in_middle`, :meth:`Coupling.middle`, called by the
+scheme's ``middle`` operator: the O step of BAOAB).
+
 A part acts on the body state (centre-of-mass velocities, NO_SQUISH
 momenta, point particles; a barostat also on the cell), contributes a term to
 the conserved energy, saves and restores its own variables (for the rollback
