@@ -226,6 +226,16 @@ def test_a_barostat_moving_the_cell_in_the_drift_is_refused():
         RigidDynamics(atoms, units.fs, bodies="tags", couplings=parts)
 
 
+def test_the_fused_kernels_fall_back_on_the_scheme_itself():
+    """Under a barostat the baoab kernel runs its operator list: the built-in scheme's."""
+    from rigidmd.core.schemes import BUILTIN_SCHEMES, OPERATORS
+    from rigidmd.core.stepcontext import BAOAB_OPERATORS
+
+    scheme = [(OPERATORS[name].function, params.get("dt_scale"))
+              for name, params in BUILTIN_SCHEMES["baoab"]]
+    assert [(function, scale) for function, scale, _ in BAOAB_OPERATORS] == scheme
+
+
 def test_monte_carlo_barostat_composes():
     from helpers import dimer_fluid
 

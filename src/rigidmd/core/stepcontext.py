@@ -22,7 +22,7 @@ from rigidmd.core.model import BodyModel
 from rigidmd.core.record import StepRecord
 from rigidmd.core.state import RigidState
 
-__all__ = ["StepContext", "fused_no_squish", "fused_baoab"]
+__all__ = ["StepContext", "fused_no_squish", "fused_baoab", "BAOAB_OPERATORS"]
 
 
 @dataclass
@@ -302,7 +302,7 @@ def fused_baoab(ctx, dt):
     drift through ``cell_motion``) the operators run instead.
     """
     if ctx.cell_motion is not None:
-        for function, dt_scale, extra in _BAOAB_OPERATORS:
+        for function, dt_scale, extra in BAOAB_OPERATORS:
             function(ctx, dt_scale * dt, **extra) if dt_scale is not None else function(ctx)
         return
     s, record, m = ctx.state, ctx.record, ctx.model
@@ -333,8 +333,9 @@ def fused_baoab(ctx, dt):
             ctx.momenta[m.free] = m.free_masses[:, None] * s.v
 
 
-#: The ``baoab`` scheme's operators with their dt scales, for the barostat's path.
-_BAOAB_OPERATORS = (
+#: The ``baoab`` scheme's operators with their dt scales, for the barostat's path (the same
+#: list as :data:`rigidmd.core.schemes.BUILTIN_SCHEMES`' ``baoab``, checked in the tests).
+BAOAB_OPERATORS = (
     (apply_translational_kick, 0.5, {}), (apply_rotational_kick, 0.5, {}),
     (apply_drift, 0.5, {}), (apply_no_squish_rotate, 0.5, {}), (apply_middle, 1.0, {}),
     (apply_drift, 0.5, {}), (apply_no_squish_rotate, 0.5, {}), (apply_compute_force, None, {}),
