@@ -291,3 +291,36 @@ def test_configured_run_resumes_bit_for_bit(tmp_path, monkeypatch, capsys):
     status, _, stderr = run_here(resumed, monkeypatch, capsys, "--resume")
     assert status == 0, stderr
     assert file_bytes(resumed) == file_bytes(straight)
+
+
+@pytest.mark.parametrize("case", ["numpy", "monte_carlo"])
+def test_checkpoints_continue_bit_for_bit(tmp_path, case):
+    """The NumPy path, and the composition with the Monte Carlo barostat (the numba
+    backend alone is in tests/test_checkpoint.py): 12 steps, or 5, a checkpoint, 7 more."""
+    from helpers import CoulombLJ, PeriodicLJ, dimer_fluid
+
+    from rigidmd import RigidMCBarostat, load_checkpoint
+
+    def build():
+        rng = np.random.default_rng(8)
+        if case == "numpy":
+            return RigidLangevinBAOAB(mixture(), 2 * units.fs, 300, 0.01 / units.fs, rng=rng,
+                                      bodies="mol-id", backend="numpy")
+        part = LangevinBAOABThermostat(80, 0.01 / units.fs, rng=rng, fixcm=False)
+        return RigidMCBarostat(dimer_fluid(n_side=3, rc=5.0), 2 * units.fs, 80, units.bar,
+                               bodies="tags", every=2, thermostat=part, rng=rng)
+
+    reference = build()
+    reference.run(12)
+    first = build()
+    first.run(5)
+    first.save_checkpoint(tmp_path / "state.npz")
+    calculator = CoulombLJ() if case == "numpy" else PeriodicLJ(rc=5.0)
+    resumed = load_checkpoint(tmp_path / "state.npz", calculator)
+    assert resumed.scheme.name == "baoab"
+    assert resumed.thermostat.reported == first.thermostat.reported
+    resumed.run(7)
+    np.testing.assert_array_equal(resumed.atoms.positions, reference.atoms.positions)
+    np.testing.assert_array_equal(resumed.atoms.get_momenta(), reference.atoms.get_momenta())
+    np.testing.assert_array_equal(resumed.atoms.cell.array, reference.atoms.cell.array)
+    assert resumed.get_kinetic_temperatures() == reference.get_kinetic_temperatures()
