@@ -547,6 +547,8 @@ THERMOSTATS = {
     "nose_hoover": "thermostat: {kind: nose_hoover, temperature: 250 K, tdamp: 50 fs}",
     "langevin": "thermostat: {kind: langevin, temperature: 250 K, friction: 0.02 1/fs, seed: 2}",
     "bussi": "thermostat: {kind: bussi, temperature: 250 K, taut: 50 fs, seed: 3}",
+    "langevin_baoab": "thermostat: {kind: langevin_baoab, temperature: 250 K, "
+                      "friction: 1 1/ps, seed: 4}",
 }
 STEPS = 1500
 

@@ -13,6 +13,7 @@ from rigidmd import (
     RigidBussi,
     RigidCRescale,
     RigidLangevin,
+    RigidLangevinBAOAB,
     RigidNoseHoover,
     RigidNPT,
     RigidVerlet,
@@ -20,7 +21,7 @@ from rigidmd import (
 )
 from rigidmd.core.checkpoint import CheckpointError, read_checkpoint, remove_stale_temporaries
 
-KINDS = ["nve", "langevin", "bussi", "nose_hoover", "mtk", "crescale"]
+KINDS = ["nve", "langevin", "baoab", "bussi", "nose_hoover", "mtk", "crescale"]
 
 
 def build(kind, integrator="no_squish"):
@@ -39,6 +40,8 @@ def build(kind, integrator="no_squish"):
         return RigidVerlet(atoms, 2 * units.fs, **kwargs)
     if kind == "langevin":
         return RigidLangevin(atoms, 2 * units.fs, 300, 0.01 / units.fs, rng=rng, **kwargs)
+    if kind == "baoab":
+        return RigidLangevinBAOAB(atoms, 2 * units.fs, 300, 0.01 / units.fs, rng=rng, **kwargs)
     if kind == "bussi":
         return RigidBussi(atoms, 2 * units.fs, 300, 50 * units.fs, rng=rng, **kwargs)
     return RigidNoseHoover(atoms, 2 * units.fs, 300, 50 * units.fs, **kwargs)

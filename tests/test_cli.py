@@ -296,6 +296,8 @@ def test_export_lammps_round_trip(project, monkeypatch):
 
 @pytest.mark.parametrize("change, message", [
     ("thermostat: {kind: bussi, temperature: 300 K, taut: 100 fs}", "no Bussi thermostat"),
+    ("thermostat: {kind: langevin_baoab, temperature: 300 K, friction: 1 1/ps}",
+     "BAOAB splitting, which no LAMMPS rigid fix runs"),
     ("integrator: pcdm", "export-lammps writes fix rigid/nve/small"),
     ("calculator: {name: tip3p, options: {rc: 5.0}}", "switches off each molecule pair"),
 ])

@@ -292,10 +292,15 @@ def test_trajectory_and_log(tmp_path):
     np.testing.assert_allclose(frames[-1].get_momenta(), atoms.get_momenta())
     assert frames[-1].constraints == []
     header, *lines = [ln.split() for ln in log.read_text().splitlines()]
-    assert header == ["Time[ps]", "Etot[eV]", "Epot[eV]", "Ekin[eV]", "T[K]", "Econs[eV]"]
+    assert header == ["Time[ps]", "Etot[eV]", "Epot[eV]", "Ekin[eV]", "T[K]", "Econs[eV]",
+                      "T_tr[K]", "T_rot[K]"]
     assert len(lines) == 5
     # The logger's temperature counts 6 degrees of freedom per water.
     assert float(lines[-1][4]) == pytest.approx(atoms.get_temperature(), abs=0.01)
+    # T_tr and T_rot split it: 12 translational and 12 rotational degrees of freedom.
+    T_tr, T_rot = map(float, lines[-1][6:8])
+    assert (T_tr, T_rot) == pytest.approx(dyn.get_kinetic_temperatures(), abs=0.006)
+    assert 0.5 * (T_tr + T_rot) == pytest.approx(float(lines[-1][4]), abs=0.011)
     # The conserved energy of NVE is the total energy, with 6 decimals (µeV).
     assert lines[-1][5] == lines[-1][1] and len(lines[-1][1].split(".")[1]) == 6
     assert atoms.get_temperature() == pytest.approx(
@@ -531,3 +536,21 @@ print("ran")
                             timeout=300)
     assert result.returncode == 0, result.stderr[-2000:]
     assert result.stdout.strip() == "ran"
+
+
+def test_plot_reads_old_and_new_logs(tmp_path):
+    """``rigidmd plot``'s temperature panel: T_tr and T_rot when logged; a log written
+    before those columns (ASE's columns and Econs) still plots, with T alone."""
+    from rigidmd.run.logplot import plot_log, read_log, temperature_curves
+
+    atoms = waters(4)
+    log = tmp_path / "md.log"
+    RigidVerlet(atoms, 1 * units.fs, logfile=str(log), loginterval=5).run(10)
+    labels = [label for label, _ in temperature_curves(read_log(log))]
+    assert labels == ["T", "T_tr (translation)", "T_rot (rotation)"]
+    old = tmp_path / "old.log"
+    old.write_text("\n".join(" ".join(line.split()[:6]) for line in
+                             log.read_text().splitlines()) + "\n")
+    assert [label for label, _ in temperature_curves(read_log(old))] == ["T"]
+    for path in (log, old):
+        assert plot_log(path, tmp_path / f"{path.stem}.png").stat().st_size > 0

@@ -11,13 +11,14 @@ import pytest
 from ase import units
 from helpers import CoulombLJ, PeriodicLJ, ZeroForce, dimer_fluid, mixture
 
-from rigidmd import RigidBussi, RigidCRescale, RigidNPT, RigidVerlet
+from rigidmd import RigidBussi, RigidCRescale, RigidLangevinBAOAB, RigidNPT, RigidVerlet
 from rigidmd.core import observables as obs
 from rigidmd.core.bodies import RigidBodies
 from rigidmd.core.forces import ForceEvaluator, NonFiniteForceError
 from rigidmd.core.link import AtomsSync, BodyLink
 from rigidmd.core.model import BodyModel
 from rigidmd.core.record import StepRecord
+from rigidmd.couplings.baoab import LangevinBAOABThermostat
 from rigidmd.couplings.barostats import CRescaleBarostat, MTKBarostat
 from rigidmd.couplings.base import CouplingView
 from rigidmd.couplings.thermostats import (
@@ -154,7 +155,8 @@ def fresh_and_cached(record, state, model):
             (record.rotational_energy, obs.rotational_kinetic_energy(state, model))]
 
 
-@pytest.mark.parametrize("kind", ["langevin", "bussi", "nose_hoover", "mtk", "crescale"])
+@pytest.mark.parametrize("kind", ["langevin", "bussi", "nose_hoover", "mtk", "crescale",
+                                  "langevin_baoab"])
 def test_the_record_equals_a_fresh_computation_after_every_half_step(kind):
     """What the record caches (volume, kinetic tensor and energies) is what the state gives,
     after each part's first and second half and after the scheme, at every step."""
@@ -169,7 +171,8 @@ def test_the_record_equals_a_fresh_computation_after_every_half_step(kind):
         atoms = mixture()
         part = {"langevin": LangevinThermostat(300, 0.01 / units.fs, rng=rng),
                 "bussi": BussiThermostat(300, 20 * units.fs, rng=rng),
-                "nose_hoover": NoseHooverThermostat(300, 20 * units.fs)}[kind]
+                "nose_hoover": NoseHooverThermostat(300, 20 * units.fs),
+                "langevin_baoab": LangevinBAOABThermostat(300, 0.01 / units.fs, rng=rng)}[kind]
         couplings, bodies = [part], "mol-id"
     from rigidmd import RigidDynamics
 
@@ -189,6 +192,8 @@ def test_the_record_equals_a_fresh_computation_after_every_half_step(kind):
     for p in couplings:
         p.first_half = checking(p.first_half, f"{p.kind} first half")
         p.second_half = checking(p.second_half, f"{p.kind} second half")
+        if p.acts_in_middle:
+            p.middle = checking(p.middle, f"{p.kind} middle half")
     for _ in range(6):
         dyn.run(1)
         for cached, fresh in fresh_and_cached(dyn.record, dyn.state, dyn.model):
@@ -196,7 +201,8 @@ def test_the_record_equals_a_fresh_computation_after_every_half_step(kind):
                 np.testing.assert_allclose(cached, fresh, rtol=1e-12, atol=1e-14)
     # (A part whose second half is its first half checks twice there.)
     assert set(checked) == {f"{p.kind} {half} half" for p in couplings
-                            for half in ("first", "second")}
+                            for half in ("first", "second")
+                            + (("middle",) if p.acts_in_middle else ())}
     assert len(checked) >= 6 * 2 * len(couplings)
 
 
@@ -266,6 +272,23 @@ def test_a_stochastic_thermostat_books_the_energy_it_exchanges(make):
         part.second_half(view, units.fs)
     assert kinetic(view) != pytest.approx(K, rel=1e-6)  # it did act
     assert kinetic(view) + part.energy(view) == pytest.approx(start, rel=1e-12)
+
+
+def test_baoab_books_the_energy_its_O_step_exchanges():
+    """Kinetic energy plus the part's term does not change in its middle (O) step."""
+    view, atoms = fake_view()
+    part = LangevinBAOABThermostat(300, 0.02 / units.fs, rng=np.random.default_rng(3))
+    part.check(atoms, view.model, units.fs)
+    part.bind(view)
+    start = kinetic(view) + part.energy(view)
+    K = kinetic(view)
+    for _ in range(5):
+        part.first_half(view, units.fs)  # nothing
+        part.middle(view, units.fs)
+        part.second_half(view, units.fs)  # nothing
+    assert kinetic(view) != pytest.approx(K, rel=1e-6)  # it did act
+    assert kinetic(view) + part.energy(view) == pytest.approx(start, rel=1e-12)
+    assert part.reported == pytest.approx(part.kinetic_energies(view), rel=1e-12)
 
 
 def test_nose_hoover_keeps_its_extended_energy_to_second_order_on_a_fake_view():
@@ -341,6 +364,8 @@ def model_holders(dyn):
                           50 * units.fs, 500 * units.fs, 1e-4 / units.bar, bodies="tags",
                           rng=np.random.default_rng(1)),
     lambda: RigidVerlet(mixture(), 2 * units.fs, bodies="mol-id", backend="numba"),
+    lambda: RigidLangevinBAOAB(mixture(), 2 * units.fs, 300, 0.01 / units.fs, bodies="mol-id",
+                               rng=np.random.default_rng(1)),
 ])
 def test_a_restore_leaves_no_part_with_the_old_model(build):
     dyn = build()

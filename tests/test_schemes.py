@@ -10,7 +10,8 @@ from rigidmd.core.schemes import BUILTIN_SCHEMES, OPERATORS, Scheme, resolve_sch
 
 
 def test_builtins_are_valid_schemes():
-    calls = {"no_squish": 1, "richardson": 1, "rozmanov_kusalik": 1, "pcdm": 2, "exadem": 1}
+    calls = {"no_squish": 1, "richardson": 1, "rozmanov_kusalik": 1, "pcdm": 2, "exadem": 1,
+             "baoab": 1}
     for name in BUILTIN_SCHEMES:
         scheme = resolve_scheme(name)
         assert scheme.name == name

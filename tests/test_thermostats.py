@@ -19,6 +19,7 @@ from rigidmd import (
     RigidBussi,
     RigidDynamics,
     RigidLangevin,
+    RigidLangevinBAOAB,
     RigidNoseHoover,
     RigidVerlet,
     rigid_maxwell_boltzmann,
@@ -33,6 +34,7 @@ KT = units.kB * T
 EQUILIBRATION, PRODUCTION, EVERY = 2000, 20000, 5
 THERMOSTATS = {
     "langevin": (RigidLangevin, {"friction": 0.02 / units.fs}),
+    "baoab": (RigidLangevinBAOAB, {"friction": 0.02 / units.fs}),
     "bussi": (RigidBussi, {"taut": 50 * units.fs}),
     "nose-hoover": (RigidNoseHoover, {"tdamp": 50 * units.fs}),
 }

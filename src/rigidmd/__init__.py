@@ -15,6 +15,7 @@ from rigidmd.core.velocities import (
     rigid_temperature,
     rigid_zero_rotation,
 )
+from rigidmd.couplings.baoab import RigidLangevinBAOAB
 from rigidmd.couplings.barostats import RigidCRescale, RigidNPT
 from rigidmd.couplings.montecarlo import RigidMCBarostat
 from rigidmd.couplings.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover
@@ -24,6 +25,7 @@ __all__ = [
     "RigidDynamics",
     "RigidVerlet",
     "RigidLangevin",
+    "RigidLangevinBAOAB",
     "RigidBussi",
     "RigidNoseHoover",
     "RigidNPT",

@@ -18,7 +18,8 @@ except ImportError:  # pragma: no cover - exercised only without numba
 AVAILABLE = numba is not None
 
 __all__ = ["AVAILABLE", "resolve_backend", "jit", "pack_model", "first_half", "second_half",
-           "place", "momenta", "largest_angular_speed", "kinetic_tensor", "rotational_energy",
+           "place", "momenta", "kick_half_drift", "half_drift_place", "largest_angular_speed",
+           "kinetic_tensor", "rotational_energy",
            "intramolecular_virial", "molecular_virial_voigt", "net_force", "congruence",
            "smallest_width", "equal_or_close"]
 
@@ -229,6 +230,60 @@ def first_half(data, n, F, tau, body, atom, index, dt, r, positions, ABS, affine
         q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i0, 0, dt)
         q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i1, 1, half)
         q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i2, 2, half)
+        q[b, 0], q[b, 1], q[b, 2], q[b, 3] = q0, q1, q2, q3
+        p[b, 0], p[b, 1], p[b, 2], p[b, 3] = p0, p1, p2, p3
+        _place_body(b, X, q0, q1, q2, q3, d, bounds, order, r, positions)
+
+
+@_inline
+def _half_rotor(q0, q1, q2, q3, p0, p1, p2, p3, i0, i1, i2, half):
+    """NO_SQUISH's free rotor over ``half``: R3(half/2) R2(half/2) R1(half) R2 R3."""
+    quarter = 0.5 * half
+    q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i2, 2, quarter)
+    q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i1, 1, quarter)
+    q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i0, 0, half)
+    q0, q1, q2, q3, p0, p1, p2, p3 = _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i1, 1, quarter)
+    return _rotate(q0, q1, q2, q3, p0, p1, p2, p3, i2, 2, quarter)
+
+
+@jit
+def kick_half_drift(data, n, F, tau, body, dt):
+    """BAOAB's B and first A: kick (dt/2), drift (dt/2), free rotor (dt/2); no placement.
+
+    Arguments as in :func:`first_half`.
+    """
+    X, V, q, p = _unpack(data, n)
+    half = 0.5 * dt
+    for b in range(n):
+        hm = half * body[b, 0]
+        for a in range(3):
+            V[b, a] += hm * F[b, a]
+            X[b, a] += half * V[b, a]
+        q0, q1, q2, q3 = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+        p0, p1, p2, p3 = _kick(q0, q1, q2, q3, p[b, 0], p[b, 1], p[b, 2], p[b, 3],
+                               tau[b, 0], tau[b, 1], tau[b, 2], dt)
+        q0, q1, q2, q3, p0, p1, p2, p3 = _half_rotor(q0, q1, q2, q3, p0, p1, p2, p3,
+                                                     body[b, 1], body[b, 2], body[b, 3], half)
+        q[b, 0], q[b, 1], q[b, 2], q[b, 3] = q0, q1, q2, q3
+        p[b, 0], p[b, 1], p[b, 2], p[b, 3] = p0, p1, p2, p3
+
+
+@jit
+def half_drift_place(data, n, body, atom, index, dt, r, positions):
+    """BAOAB's second A: drift (dt/2), free rotor (dt/2), and place the body atoms.
+
+    Arguments as in :func:`first_half`.
+    """
+    X, V, q, p = _unpack(data, n)
+    bounds, order = index[:n + 1], index[n + 1:]
+    d = atom[:, :3]
+    half = 0.5 * dt
+    for b in range(n):
+        for a in range(3):
+            X[b, a] += half * V[b, a]
+        q0, q1, q2, q3, p0, p1, p2, p3 = _half_rotor(
+            q[b, 0], q[b, 1], q[b, 2], q[b, 3], p[b, 0], p[b, 1], p[b, 2], p[b, 3],
+            body[b, 1], body[b, 2], body[b, 3], half)
         q[b, 0], q[b, 1], q[b, 2], q[b, 3] = q0, q1, q2, q3
         p[b, 0], p[b, 1], p[b, 2], p[b, 3] = p0, p1, p2, p3
         _place_body(b, X, q0, q1, q2, q3, d, bounds, order, r, positions)

@@ -53,7 +53,7 @@ from rigidmd.core.model import BodyModel
 from rigidmd.core.observables import RigidObservables
 from rigidmd.core.operators import remove_centre_velocity
 from rigidmd.core.record import StepRecord
-from rigidmd.core.schemes import BUILTIN_SCHEMES, resolve_scheme
+from rigidmd.core.schemes import BUILTIN_SCHEMES, resolve_scheme, scheme_with_middle
 from rigidmd.core.state import STATE_FIELDS
 from rigidmd.core.stepcontext import StepContext
 from rigidmd.core.stepper import Stepper
@@ -126,7 +126,9 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         The rotational integrator: ``"no_squish"`` (LAMMPS ``fix rigid/nve``),
         ``"richardson"`` (LAMMPS ``fix rigid``), ``"rozmanov_kusalik"``
         (RMPCDMD), ``"pcdm"`` (Zhao & van Wachem, two force calls per step),
-        ``"exadem"`` (first order; a DEM scheme, not for molecules); or a
+        ``"exadem"`` (first order; a DEM scheme, not for molecules), ``"baoab"``
+        (NO_SQUISH cut in two around the parts' middle action; the default
+        ``"no_squish"`` becomes it when a part acts there); or a
         scheme of operators as a list, a :class:`~rigidmd.core.schemes.Scheme` or a
         YAML file.  See :mod:`rigidmd.core.schemes`.
     integrator_options : dict, optional
@@ -178,6 +180,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         check_massless_momenta(atoms)
         couplings = tuple(couplings)
         mover = check_composition(couplings, fixcom)
+        middle = tuple(part for part in couplings if part.acts_in_middle)
+        scheme = scheme_with_middle(scheme, integrator, [part.kind for part in middle])
         model = geometry.model
         for part in couplings:
             part.check(atoms, model, self._dt)
@@ -215,7 +219,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         context = StepContext(
             self.state, model, self.record, self.evaluator,
             positions=atoms.arrays["positions"], momenta=atoms.arrays["momenta"],
-            write_momenta=not couplings and not fixcom, cell_motion=mover, view=self.view)
+            write_momenta=not couplings and not fixcom, cell_motion=mover, view=self.view,
+            middle=middle)
         self.stepper = Stepper(scheme, context, couplings, self.view, self.link,
                                fused=self.fused, fixcom=fixcom)
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps

@@ -3,24 +3,30 @@
 The first five columns are those of ASE's :class:`~ase.md.MDLogger`
 (``Time[ps] Etot[eV] Epot[eV] Ekin[eV] T[K]``), so tools that read ASE logs
 read these; then the quantity the dynamics conserves (``Econs[eV]``, the total
-energy for NVE) and, for a periodic cell, the molecular pressure (``P[bar]``,
-when a barostat runs or ``log_pressure`` asks for it), the volume
+energy for NVE), the translational and rotational temperatures (``T_tr[K]``,
+``T_rot[K]``, over the degrees of freedom of
+:func:`rigidmd.core.observables.kinetic_dof`) and, for a periodic cell, the
+molecular pressure (``P[bar]``, when a barostat runs or ``log_pressure`` asks for it), the volume
 (``V[A^3]``) and the density (``rho[g/cm3]``), then the columns of the coupling
 parts that have any (:attr:`rigidmd.couplings.base.Coupling.log_columns`, e.g.
 ``MCacc[%]``, a Monte Carlo barostat's acceptance since the start).  Energies
 carry 6 decimals (µeV), so a slow drift shows as a line, not as steps.
+
+The kinetic columns (``Etot``, ``Ekin``, ``T``, ``T_tr``, ``T_rot``) are those of
+:meth:`~rigidmd.core.observables.RigidObservables.get_kinetic_energies`: for a
+:class:`~rigidmd.RigidLangevinBAOAB` the momenta right after its O step (which
+sample the bath's temperature), otherwise the Atoms' momenta.  ``Econs`` is always
+that of the end-of-step state.
 """
 
 from ase import units
 from ase.md.logger import MDLogger
 
-from rigidmd.core.dof import kinetic_energy, temperature
-
 __all__ = ["RigidLogger", "LOG_COLUMNS"]
 
 #: Column names, in order; the last four are optional.
-LOG_COLUMNS = ("Time[ps]", "Etot[eV]", "Epot[eV]", "Ekin[eV]", "T[K]", "Econs[eV]", "P[bar]",
-               "V[A^3]", "rho[g/cm3]")
+LOG_COLUMNS = ("Time[ps]", "Etot[eV]", "Epot[eV]", "Ekin[eV]", "T[K]", "Econs[eV]", "T_tr[K]",
+               "T_rot[K]", "P[bar]", "V[A^3]", "rho[g/cm3]")
 
 
 class RigidLogger(MDLogger):
@@ -42,15 +48,15 @@ class RigidLogger(MDLogger):
         self.log_pressure = bool(pressure)
         self.periodic = bool(dyn.atoms.pbc.all())
         super().__init__(dyn, dyn.atoms, logfile, header=False, mode=mode, comm=dyn.comm)
-        columns = list(LOG_COLUMNS[:6])
-        self.fmt = "%-10.4f %14.6f %14.6f %14.6f %8.2f %14.6f"
+        columns = list(LOG_COLUMNS[:8])
+        self.fmt = "%-10.4f %14.6f %14.6f %14.6f %8.2f %14.6f %8.2f %8.2f"
         if self.log_pressure:
             columns.append("P[bar]")
             self.fmt += " %11.3f"
         if self.periodic:
             columns += ["V[A^3]", "rho[g/cm3]"]
             self.fmt += " %12.3f %10.5f"
-        widths = [-10, 14, 14, 14, 8, 14] + ([11] if self.log_pressure else [])
+        widths = [-10, 14, 14, 14, 8, 14, 8, 8] + ([11] if self.log_pressure else [])
         widths += [12, 10] if self.periodic else []
         #: The coupling parts that add columns (their ``log_values()`` at each line).
         self.parts = [part for part in getattr(dyn, "couplings", ()) if part.log_columns]
@@ -68,9 +74,9 @@ class RigidLogger(MDLogger):
     def __call__(self):
         dyn, atoms = self.dyn, self.atoms
         epot = atoms.get_potential_energy()
-        ekin = kinetic_energy(atoms)  # ASE's is NaN with a massless site
-        row = [dyn.get_time() / (1000 * units.fs), epot + ekin, epot, ekin,
-               temperature(atoms), dyn.get_conserved_energy()]
+        ekin, T = dyn.get_reported_kinetic_energy()  # the Atoms', or BAOAB's after O
+        row = [dyn.get_time() / (1000 * units.fs), epot + ekin, epot, ekin, T,
+               dyn.get_conserved_energy(), *dyn.get_kinetic_temperatures()]
         if self.log_pressure:
             row.append(dyn.get_pressure() / units.bar)
         if self.periodic:

@@ -22,7 +22,7 @@ import numpy as np
 from ase import units
 
 from rigidmd.core import operators as ops
-from rigidmd.core.dof import kinetic_energy
+from rigidmd.core.dof import kinetic_energy, temperature
 from rigidmd.core.model import BodyModel
 from rigidmd.core.state import RigidState
 
@@ -30,7 +30,7 @@ __all__ = ["volume", "kinetic_tensor", "kinetic_tensor_of", "translational_kinet
            "rotational_kinetic_energies", "rotational_kinetic_energy", "angular_momenta",
            "angular_velocities", "largest_angular_speed", "total_angular_momentum",
            "free_kinetic_energy", "molecular_virial", "torque_virial", "stress_tensor",
-           "voigt", "RigidObservables"]
+           "voigt", "kinetic_dof", "kinetic_temperatures", "RigidObservables"]
 
 
 def volume(cell: np.ndarray) -> float:
@@ -170,12 +170,32 @@ def voigt(sigma: np.ndarray) -> np.ndarray:
 _voigt = voigt  # RigidObservables.get_stress's argument ``voigt`` hides the function
 
 
+def kinetic_dof(model: BodyModel, holds_momentum: bool) -> tuple[int, int]:
+    """(translational, rotational) degrees of freedom of the kinetic temperatures.
+
+    Translational: 3 per body and per point particle, less 3 when the total
+    momentum is held (``fixcm``, ASE's ``FixCom``); rotational: 3 per body, 2
+    per linear body.  Their sum is what ``atoms.get_temperature()`` counts
+    under the dynamics' :class:`~rigidmd.core.dof.RigidBodyDOF`.
+    """
+    n_tr = model.translational_dof - (3 if holds_momentum else 0)
+    return max(n_tr, 0), model.rotational_dof
+
+
+def kinetic_temperatures(K_tr: float, K_rot: float, dof: tuple[int, int]) -> tuple[float, float]:
+    """(T_tr, T_rot) in K of the kinetic energies ``K_tr, K_rot`` (eV) over ``dof``; a part
+    with no degree of freedom reads 0 K."""
+    return tuple(2.0 * K / (n * units.kB) if n else 0.0
+                 for K, n in zip((K_tr, K_rot), dof, strict=True))
+
+
 class RigidObservables:
     """The observables a rigid dynamics offers, read from its parts (a mixin).
 
     The class using it provides ``state``, ``model``, ``record``,
     ``evaluator`` (a :class:`~rigidmd.core.forces.ForceEvaluator`), ``link``,
-    ``view`` and ``couplings`` (the coupling parts and what they see) and ``atoms``.
+    ``view`` and ``couplings`` (the coupling parts and what they see), ``atoms`` and
+    ``holds_momentum`` (whether the total momentum is held).
     """
 
     @property
@@ -308,6 +328,52 @@ class RigidObservables:
     def get_pressure(self) -> float:
         """Instantaneous molecular pressure, minus a third of the stress trace (eV/Å³)."""
         return float(-np.trace(self.get_stress(voigt=False)) / 3.0)
+
+    @property
+    def reports_own_kinetic_energies(self) -> bool:
+        """Whether a coupling part keeps the kinetic energies the log reports (BAOAB's)."""
+        return any(part.reported_kinetic_energies(self.view) is not None
+                   for part in self.couplings)
+
+    def get_reported_kinetic_energy(self) -> tuple[float, float]:
+        """(kinetic energy in eV, temperature in K) as the log and the summary show them.
+
+        The Atoms' (:func:`rigidmd.core.dof.kinetic_energy`,
+        :func:`rigidmd.core.dof.temperature`), or, when a part keeps its own
+        (:attr:`reports_own_kinetic_energies`), the sum of
+        :meth:`get_kinetic_energies` over every kinetic degree of freedom.
+        """
+        if not self.reports_own_kinetic_energies:
+            return kinetic_energy(self.atoms), temperature(self.atoms)
+        ekin = sum(self.get_kinetic_energies())
+        return ekin, kinetic_temperatures(
+            ekin, 0.0, (sum(kinetic_dof(self.model, self.holds_momentum)), 0))[0]
+
+    def get_kinetic_energies(self) -> tuple[float, float]:
+        """(translational, rotational) kinetic energy the log and the summary report (eV).
+
+        Those a coupling part keeps where its scheme samples the kinetic
+        distribution (:class:`~rigidmd.RigidLangevinBAOAB`: right after its O step,
+        see :mod:`rigidmd.couplings.baoab`), else the state's at the end of the
+        step; the translational part relative to the centre of mass when the total
+        momentum is held.
+        """
+        for part in self.couplings:
+            values = part.reported_kinetic_energies(self.view)
+            if values is not None:
+                return float(values[0]), float(values[1])
+        K_tr = self.get_translational_kinetic_energy()
+        if self.holds_momentum:
+            s, m = self.state, self.model
+            M = m.mass.sum() + m.free_masses.sum()
+            P = m.mass @ s.V + m.free_masses @ s.v
+            K_tr -= 0.5 * float(P @ P) / M if M > 0 else 0.0
+        return K_tr, self.get_rotational_kinetic_energy()
+
+    def get_kinetic_temperatures(self) -> tuple[float, float]:
+        """(T_tr, T_rot) in K: :meth:`get_kinetic_energies` over :func:`kinetic_dof`."""
+        return kinetic_temperatures(*self.get_kinetic_energies(),
+                                    kinetic_dof(self.model, self.holds_momentum))
 
     def get_conserved_energy(self) -> float:
         """Total energy plus every coupling part's term (eV): what the dynamics conserves.

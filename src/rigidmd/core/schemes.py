@@ -23,6 +23,8 @@ name                          what it is                                        
 ``rozmanov_kusalik``          iterated quaternion velocity Verlet (RMPCDMD)           2
 ``pcdm``                      Zhao & van Wachem predictor–corrector, 2 forces/step    2
 ``exadem``                    exaDEM operator scheme (DEM; heats molecules)           1
+``baoab``                     NO_SQUISH cut at its middle: B A (middle) A B; with     2
+                              ``RigidLangevinBAOAB``'s O step there, BAOAB
 ============================  ======================================================  ======
 
 Operators
@@ -36,7 +38,10 @@ Rotation: ``rotational_kick`` (:math:`L \mathrel{+}= h\tau`), ``no_squish_rotate
 ``pcdm_predict`` / ``pcdm_correct``, and exaDEM's ``push_to_quaternion``,
 ``push_to_angular_acceleration``, ``push_to_angular_velocity``.  Forces:
 ``compute_force`` (place atoms, call the calculator, reduce to body forces and
-torques), ``reset_force_moment``.  Groups: ``combined_compute_prolog`` and
+torques), ``reset_force_moment``.  Couplings: ``middle`` (the coupling parts that act
+in the middle of the step, e.g. the O step of
+:class:`~rigidmd.couplings.baoab.LangevinBAOABThermostat`, for a time :math:`h`; nothing
+without such a part).  Groups: ``combined_compute_prolog`` and
 ``combined_compute_epilog`` (exaDEM's merged operators).  Here
 :math:`h = \mathrm{dt\_scale}\cdot\Delta t`.
 """
@@ -47,7 +52,8 @@ import numpy as np
 
 from rigidmd.core import stepcontext as sc
 
-__all__ = ["Scheme", "OPERATORS", "BUILTIN_SCHEMES", "resolve_scheme", "load_yaml"]
+__all__ = ["Scheme", "OPERATORS", "BUILTIN_SCHEMES", "resolve_scheme", "load_yaml",
+           "scheme_with_middle"]
 
 
 @dataclass(frozen=True)
@@ -76,6 +82,7 @@ OPERATORS = {
                                    tol=1e-13, max_iter=100),
     "pcdm_predict": _op(sc.apply_pcdm_predict, moves=True, dt_scale=1.0),
     "pcdm_correct": _op(sc.apply_pcdm_correct, moves=True, dt_scale=1.0),
+    "middle": _op(sc.apply_middle, dt_scale=1.0),
     "compute_force": Operator(sc.apply_compute_force, {}, timed=False, forces=True),
     "reset_force_moment": Operator(sc.apply_reset_force_moment, {}, timed=False),
     "force_to_accel": Operator(sc.apply_force_to_accel, {}, timed=False),
@@ -113,6 +120,14 @@ BUILTIN_SCHEMES = {
              ("pcdm_predict", {"dt_scale": 1.0}), ("compute_force", {}),
              ("pcdm_correct", {"dt_scale": 1.0}), ("drift", {"dt_scale": 0.5}),
              ("compute_force", {}), ("translational_kick", {"dt_scale": 0.5})],
+    # BAOAB (Leimkuhler & Matthews 2013): B(dt/2) A(dt/2) O(dt) A(dt/2) B(dt/2), the O
+    # step being the coupling parts' middle; A is NO_SQUISH's drift and free rotor.
+    "baoab": [("translational_kick", {"dt_scale": 0.5}), ("rotational_kick", {"dt_scale": 0.5}),
+              ("drift", {"dt_scale": 0.5}), ("no_squish_rotate", {"dt_scale": 0.5}),
+              ("middle", {"dt_scale": 1.0}),
+              ("drift", {"dt_scale": 0.5}), ("no_squish_rotate", {"dt_scale": 0.5}),
+              ("compute_force", {}),
+              ("translational_kick", {"dt_scale": 0.5}), ("rotational_kick", {"dt_scale": 0.5})],
     "exadem": [("combined_compute_prolog", {"dt_scale": 1.0}), ("reset_force_moment", {}),
                ("compute_force", {}), ("force_to_accel", {}),
                ("combined_compute_epilog", {"dt_scale": 1.0})],
@@ -194,16 +209,26 @@ class Scheme:
     def kernel(self):
         """The compiled, fused implementation of this scheme, or None.
 
-        The built-in ``no_squish`` (and any scheme equal to it, e.g. from
-        YAML) has one: :func:`rigidmd.core.stepcontext.fused_no_squish`, which a
-        dynamics on the numba backend runs.
+        The built-in ``no_squish`` and ``baoab`` (and any scheme equal to one, e.g.
+        from YAML) have one: :func:`rigidmd.core.stepcontext.fused_no_squish` and
+        :func:`rigidmd.core.stepcontext.fused_baoab`, which a dynamics on the numba
+        backend runs.
         """
         try:
             return self._kernel
         except AttributeError:
-            no_squish = [_parse_entry(i, e) for i, e in enumerate(BUILTIN_SCHEMES["no_squish"])]
-            self._kernel = sc.fused_no_squish if self.steps == no_squish else None
+            self._kernel = None
+            for name, kernel in (("no_squish", sc.fused_no_squish),
+                                 ("baoab", sc.fused_baoab)):
+                if self.steps == [_parse_entry(i, e)
+                                  for i, e in enumerate(BUILTIN_SCHEMES[name])]:
+                    self._kernel = kernel
             return self._kernel
+
+    @property
+    def has_middle(self) -> bool:
+        """Whether the scheme runs the ``middle`` operator (where parts may act mid-step)."""
+        return any(name == "middle" for name, _ in self.steps)
 
     def run(self, ctx, dt, fused=False):
         """Advance ``ctx`` by one step of ``dt`` (ASE time units).
@@ -347,3 +372,19 @@ def resolve_scheme(spec, **params):
                          "put them in the scheme's entries instead")
     return scheme
 
+
+
+def scheme_with_middle(scheme: Scheme, integrator, kinds) -> Scheme:
+    """The scheme a dynamics runs when coupling parts (of ``kinds``) act in its middle.
+
+    Without such parts, or with a scheme that has a ``middle`` operator,
+    ``scheme`` itself; for the default integrator ``"no_squish"``, ``baoab``
+    (NO_SQUISH cut in two where the parts act); for any other, a ValueError in one
+    line naming the part and the integrator.
+    """
+    if not kinds or scheme.has_middle:
+        return scheme
+    if isinstance(integrator, str) and integrator == "no_squish":
+        return resolve_scheme("baoab")
+    raise ValueError(f"thermostat {kinds[0]} acts in the middle of the step: the integrator "
+                     f"needs a 'middle' operator (integrator='baoab'); {scheme.name!r} has none")

@@ -22,7 +22,7 @@ from rigidmd.core.model import BodyModel
 from rigidmd.core.record import StepRecord
 from rigidmd.core.state import RigidState
 
-__all__ = ["StepContext", "fused_no_squish"]
+__all__ = ["StepContext", "fused_no_squish", "fused_baoab", "BAOAB_OPERATORS"]
 
 
 @dataclass
@@ -58,7 +58,12 @@ class StepContext:
         (:func:`~rigidmd.core.operators.affine_drift`), and a note the context
         keeps in ``record.cell_move`` for the barostat's second half.
     view : object or None
-        What ``cell_motion`` reads (a :class:`rigidmd.couplings.base.CouplingView`).
+        What ``cell_motion`` and the ``middle`` parts read (a
+        :class:`rigidmd.couplings.base.CouplingView`).
+    middle : tuple
+        The coupling parts that act in the middle of the step (their
+        ``middle(view, h)``, run by the scheme's ``middle`` operator between its
+        half drifts: the O of BAOAB).
     """
 
     state: RigidState
@@ -70,6 +75,7 @@ class StepContext:
     write_momenta: bool = True
     cell_motion: object = None
     view: object = None
+    middle: tuple = ()
 
     @property
     def packed_model(self) -> tuple:
@@ -160,6 +166,12 @@ def apply_pcdm_correct(ctx, h):
                                   m.inv_moments, h)
     ctx.state.q = q1
     ctx.set_omega(omega1)
+
+
+def apply_middle(ctx, h):
+    for part in ctx.middle:
+        part.middle(ctx.view, h)
+    ctx.record.velocities_changed()
 
 
 def apply_compute_force(ctx):
@@ -274,3 +286,57 @@ def fused_no_squish(ctx, dt):
         s.v += 0.5 * dt * record.f / m.free_masses[:, None]
         if ctx.write_momenta:
             ctx.momenta[m.free] = m.free_masses[:, None] * s.v
+
+
+def fused_baoab(ctx, dt):
+    """BAOAB as two compiled loops around the middle: the ``baoab`` scheme, fused.
+
+    The same arithmetic as the operator list ``translational_kick(1/2),
+    rotational_kick(1/2), drift(1/2), no_squish_rotate(1/2), middle,
+    drift(1/2), no_squish_rotate(1/2), compute_force, translational_kick(1/2),
+    rotational_kick(1/2)`` (checked operator by operator in the tests): one loop
+    before the middle (kick, half drift, half free rotor), the coupling parts'
+    middle (the O step, its own kernel), one loop after it (half drift, half free
+    rotor, placement), the force call and :func:`rigidmd.core._numba.second_half`.
+    Free atoms take their kicks and drifts in NumPy.  Under a barostat (its
+    drift through ``cell_motion``) the operators run instead.
+    """
+    if ctx.cell_motion is not None:
+        for function, dt_scale, extra in BAOAB_OPERATORS:
+            function(ctx, dt_scale * dt, **extra) if dt_scale is not None else function(ctx)
+        return
+    s, record, m = ctx.state, ctx.record, ctx.model
+    body, atom, index = m.packed
+    n, half = ctx.n_bodies, 0.5 * dt
+    _numba.kick_half_drift(s.data, n, record.F, record.tau, body, dt)
+    if ctx.n_free:
+        s.v += half * record.f / m.free_masses[:, None]
+        s.x += half * s.v
+    apply_middle(ctx, dt)
+    _numba.half_drift_place(s.data, n, body, atom, index, dt, record.r, ctx.positions)
+    if ctx.n_free:
+        s.x += half * s.v
+        ctx.positions[m.free] = s.x
+    evaluator = ctx.evaluator
+    forces = evaluator.calculator_forces(s, check=False)
+    if ctx.n_free:
+        evaluator.check_forces(forces)
+    if not _numba.second_half(s.data, n, record.F, record.tau, body, atom, index, dt, forces,
+                              record.r, ctx.momenta, ctx.write_momenta):
+        evaluator.check_forces(forces)
+        raise NonFiniteForceError(f"calculator returned forces whose sum is not finite after "
+                                  f"step {evaluator.step}")
+    if ctx.n_free:
+        record.f = forces[m.free]
+        s.v += half * record.f / m.free_masses[:, None]
+        if ctx.write_momenta:
+            ctx.momenta[m.free] = m.free_masses[:, None] * s.v
+
+
+#: The ``baoab`` scheme's operators with their dt scales, for the barostat's path (the same
+#: list as :data:`rigidmd.core.schemes.BUILTIN_SCHEMES`' ``baoab``, checked in the tests).
+BAOAB_OPERATORS = (
+    (apply_translational_kick, 0.5, {}), (apply_rotational_kick, 0.5, {}),
+    (apply_drift, 0.5, {}), (apply_no_squish_rotate, 0.5, {}), (apply_middle, 1.0, {}),
+    (apply_drift, 0.5, {}), (apply_no_squish_rotate, 0.5, {}), (apply_compute_force, None, {}),
+    (apply_translational_kick, 0.5, {}), (apply_rotational_kick, 0.5, {}))

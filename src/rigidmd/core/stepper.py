@@ -8,7 +8,9 @@ One step of :math:`\Delta t` is the symmetric splitting
     the scheme's deterministic step (kicks, drift, rotation, force calls)
     part_n.second_half(Δt/2) ... part_1.second_half(Δt/2)
 
-after which the atom momenta are written once.  If anything fails (the
+after which the atom momenta are written once.  A part that acts inside the
+deterministic step (``acts_in_middle``, the O of BAOAB) is called by the
+scheme's ``middle`` operator, through the step context.  If anything fails (the
 calculator, an iteration, a coupling part, a cell too small for a body), the
 state, the per-step record, the parts' variables and the atoms are put back
 as they were at the start of the step.  The stepper never reads the Atoms:

@@ -17,6 +17,7 @@ kernel                             reference
 :func:`nose_hoover_scale`          ``NoseHooverThermostat``'s chains and scaling
 :func:`crescale_move`              ``CRescaleBarostat.drift_matrices``' arithmetic
 :func:`crescale_work`              ``CRescaleBarostat.second_half``'s bookkeeping
+:func:`ornstein_uhlenbeck`         ``LangevinBAOABThermostat.ornstein_uhlenbeck``
 =================================  ===================================================
 
 A dynamics on the ``"numba"`` backend runs these (its coupling view says
@@ -35,7 +36,7 @@ from rigidmd.core._numba import congruence, jit
 
 __all__ = ["COUPLE_CODES", "chain_propagate", "chain_scale", "symmetric_exp", "mtk_kick",
            "mtk_momentum_scale", "mtk_friction", "scale_translation", "scale_velocities",
-           "nose_hoover_scale", "crescale_move", "crescale_work"]
+           "nose_hoover_scale", "crescale_move", "crescale_work", "ornstein_uhlenbeck"]
 
 #: ``couple`` as the kernels take it.
 COUPLE_CODES = {"iso": 0, "aniso": 1, "tri": 2}
@@ -326,3 +327,41 @@ def crescale_work(virial, kinetic, volume, pressure_au, kT, dt, basis, step_lamb
     return (0.5 * step_lambda * f_lambda
             + 0.25 * d_lambda / kT * dt * f_lambda**2 - 0.5 * kT * np.log(volume)
             + 0.5 * eta_f + 0.25 * d_eta / kT * dt * eta_ff)
+
+
+@jit
+def ornstein_uhlenbeck(data, n, nf, c, sigma, inv_sqrt_mass, inv_sqrt_free, sqrt_moments,
+                       noise):
+    r"""BAOAB's O step on the state buffer, with the normal deviates ``noise`` drawn before.
+
+    :math:`V \leftarrow cV + \sigma\xi/\sqrt M`, :math:`v \leftarrow cv + \sigma\xi/\sqrt m`,
+    :math:`L_{b,k} \leftarrow cL_{b,k} + \sigma\sqrt{I_k}\,\xi` with
+    :math:`L_b = \tfrac12\mathrm{vec}(q^*\otimes p)` and :math:`p = 2q\otimes(0, L_b)`;
+    :math:`\sigma = \sqrt{(1-c^2)k_BT}`.  ``noise`` holds ``3n`` deviates for ``V``, then
+    ``3 nf`` for ``v``, then ``3n`` for ``L_b`` (row by row).
+    """
+    V = data[3 * n:6 * n].reshape((n, 3))
+    q = data[6 * n:10 * n].reshape((n, 4))
+    p = data[10 * n:14 * n].reshape((n, 4))
+    v = data[14 * n + 3 * nf:14 * n + 6 * nf].reshape((nf, 3))
+    for b in range(n):
+        for a in range(3):
+            V[b, a] = c * V[b, a] + sigma * noise[3 * b + a] * inv_sqrt_mass[b]
+    for i in range(nf):
+        for a in range(3):
+            v[i, a] = c * v[i, a] + sigma * noise[3 * n + 3 * i + a] * inv_sqrt_free[i]
+    start = 3 * n + 3 * nf
+    for b in range(n):
+        w, x, y, z = q[b, 0], q[b, 1], q[b, 2], q[b, 3]
+        p0, p1, p2, p3 = p[b, 0], p[b, 1], p[b, 2], p[b, 3]
+        l0 = 0.5 * (w * p1 - x * p0 - y * p3 + z * p2)
+        l1 = 0.5 * (w * p2 + x * p3 - y * p0 - z * p1)
+        l2 = 0.5 * (w * p3 - x * p2 + y * p1 - z * p0)
+        j = start + 3 * b
+        l0 = c * l0 + sigma * sqrt_moments[b, 0] * noise[j]
+        l1 = c * l1 + sigma * sqrt_moments[b, 1] * noise[j + 1]
+        l2 = c * l2 + sigma * sqrt_moments[b, 2] * noise[j + 2]
+        p[b, 0] = 2.0 * (-x * l0 - y * l1 - z * l2)
+        p[b, 1] = 2.0 * (w * l0 + y * l2 - z * l1)
+        p[b, 2] = 2.0 * (w * l1 - x * l2 + z * l0)
+        p[b, 3] = 2.0 * (w * l2 + x * l1 - y * l0)

@@ -127,6 +127,7 @@ class Barostat(Coupling):
     section = "barostat"
     needs_stress = True
     moves_cell = True
+    drift_moves_cell = True
 
     def __init__(self, temperature_K, pressure_au, couple):
         self.temperature_K = self._check_positive(check_temperature(temperature_K))

@@ -10,6 +10,10 @@ splitting
     the integrator's deterministic step (forces, drift, rotation)
     part_n.second_half(Δt/2) ... part_1.second_half(Δt/2)
 
+A part may also act inside the deterministic step, between its two half
+drifts (:attr:`Coupling.acts_in_middle`, :meth:`Coupling.middle`, called by the
+scheme's ``middle`` operator: the O step of BAOAB).
+
 A part acts on the body state (centre-of-mass velocities, NO_SQUISH
 momenta, point particles; a barostat also on the cell), contributes a term to
 the conserved energy, saves and restores its own variables (for the rollback
@@ -208,6 +212,13 @@ class Coupling:
     fixcm_option: bool | None = False
     #: Names of the columns the part adds to the MD log (values from :meth:`log_values`).
     log_columns: ClassVar[tuple] = ()
+    #: Whether the part acts in the middle of the scheme's step (:meth:`middle`), between
+    #: its two half drifts (the O of BAOAB); the scheme must then have a ``middle`` operator.
+    acts_in_middle: ClassVar[bool] = False
+    #: Whether a cell-moving part moves the cell in the scheme's drift
+    #: (:meth:`drift_matrices` not a plain drift): such a drift cannot be cut in two around
+    #: a :meth:`middle` action.
+    drift_moves_cell: ClassVar[bool] = False
 
     def check(self, atoms: Atoms, model: BodyModel, dt: float) -> None:
         """Check the parameters against a system and time step; change nothing.
@@ -235,6 +246,23 @@ class Coupling:
     def second_half(self, view: CouplingView, h: float) -> None:
         """Act for a time ``h`` after the integrator's step (by default as before it)."""
         self.first_half(view, h)
+
+    def middle(self, view: CouplingView, h: float) -> None:
+        """Act for a time ``h`` in the middle of the scheme's step (:attr:`acts_in_middle`).
+
+        Called by the scheme's ``middle`` operator, between its two half drifts,
+        for each part that acts there, in the order of the parts.
+        """
+        raise NotImplementedError
+
+    def reported_kinetic_energies(self, view: CouplingView) -> tuple | None:
+        """(translational, rotational) kinetic energy (eV) the log and summary report, or None.
+
+        None (the default): those of the state at the end of the step.  A part whose
+        scheme samples the kinetic distribution elsewhere in the step (BAOAB: right
+        after its O step) returns the values it kept there.
+        """
+        return None
 
     def drift_matrices(self, view: CouplingView, h: float) -> tuple:
         """A cell-moving part's drift over ``h``: ``(A, B, S, note)``; changes nothing.
@@ -636,6 +664,12 @@ def check_composition(couplings, fixcom: bool):
     if movers and any(part.fixcm_option for part in couplings):
         raise ValueError("thermostat fixcm=True with a barostat: the barostat's equations "
                          "count the centre of mass's degrees of freedom; use fixcm=False")
+    middle = [part for part in couplings if part.acts_in_middle]
+    if movers and middle and movers[0].drift_moves_cell:
+        raise ValueError(
+            f"{middle[0].kind} acts in the middle of the step, which cuts the drift in two, "
+            f"and the {movers[0].kind} barostat moves the cell in that drift: not supported; "
+            "use the Monte Carlo barostat (monte_carlo, RigidMCBarostat) for NPT")
     if movers and fixcom:
         raise ValueError("ase.constraints.FixCom with a barostat: the barostat's equations "
                          "count the centre of mass's degrees of freedom; remove FixCom")

@@ -332,6 +332,7 @@ class MonteCarloBarostat(Barostat):
     section 5.4.
     """
 
+    drift_moves_cell = False  # the drift leaves the cell alone (drift_matrices)
     kind = "monte_carlo"
     zero_kelvin = "a Monte Carlo barostat needs a temperature"
     needs_stress = False

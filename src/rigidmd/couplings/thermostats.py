@@ -73,6 +73,18 @@ class _Stochastic(Thermostat):
         set_rng_state(self.rng, state["rng"])
 
 
+def check_friction(friction) -> float:
+    """A friction (per ASE time unit) as a float >= 0, or one clear line."""
+    try:
+        gamma = float(friction)
+    except (TypeError, ValueError):
+        raise TypeError(f"friction must be a number per ASE time unit, got {friction!r}"
+                        ) from None
+    if not (np.isfinite(gamma) and gamma >= 0):
+        raise ValueError(f"friction must be >= 0 (per ASE time unit), got {friction!r}")
+    return gamma
+
+
 @register
 class LangevinThermostat(_Stochastic):
     r"""Langevin friction and noise on every rigid degree of freedom.
@@ -108,18 +120,7 @@ class LangevinThermostat(_Stochastic):
 
     def __init__(self, temperature_K, friction, rng=None, fixcm=None):
         super().__init__(temperature_K, rng, fixcm)
-        self.friction = self._check_friction(friction)
-
-    @staticmethod
-    def _check_friction(friction):
-        try:
-            gamma = float(friction)
-        except (TypeError, ValueError):
-            raise TypeError(f"friction must be a number per ASE time unit, got {friction!r}"
-                            ) from None
-        if not (np.isfinite(gamma) and gamma >= 0):
-            raise ValueError(f"friction must be >= 0 (per ASE time unit), got {friction!r}")
-        return gamma
+        self.friction = check_friction(friction)
 
     def check_timestep(self, dt):
         """Refuse ``friction * dt > 0.5``: almost surely friction given in the wrong unit."""
@@ -134,7 +135,7 @@ class LangevinThermostat(_Stochastic):
 
     def set_friction(self, friction: float, timestep: float | None = None) -> None:
         """Change the friction (per ASE time unit), checked against ``timestep`` when given."""
-        gamma = self._check_friction(friction)
+        gamma = check_friction(friction)
         old, self.friction = self.friction, gamma
         if timestep is not None:
             try:

@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["read_log", "plot_log", "LogError"]
+__all__ = ["read_log", "plot_log", "temperature_curves", "LogError"]
 
 
 class LogError(ValueError):
@@ -48,6 +48,18 @@ def read_log(path):
     return {name: data[:, i] for i, name in enumerate(names[:width])}
 
 
+def temperature_curves(columns):
+    """``[(label, values)]`` of the temperature panel: T, and T_tr and T_rot when logged.
+
+    Logs written before those columns existed (and ASE's) have T only.
+    """
+    curves = [("T", columns["T[K]"])]
+    for name, label in (("T_tr[K]", "T_tr (translation)"), ("T_rot[K]", "T_rot (rotation)")):
+        if name in columns:
+            curves.append((label, columns[name]))
+    return curves
+
+
 def plot_log(log, png, title=None):
     """Energies, temperature and (when logged) pressure and density against time, to ``png``.
 
@@ -79,8 +91,13 @@ def plot_log(log, png, title=None):
     axes[1].plot(t, columns["Ekin[eV]"] - columns["Ekin[eV]"][0], label="kinetic", color="C2")
     axes[1].set_ylabel("energy − initial (eV)")
     axes[1].legend(loc="best")
-    axes[2].plot(t, columns["T[K]"], color="C3")
+    curves = temperature_curves(columns)
+    for (label, values), color, width in zip(curves, ("C3", "C5", "C6"), (1.5, 0.8, 0.8),
+                                             strict=False):
+        axes[2].plot(t, values, color=color, lw=width, label=label)
     axes[2].set_ylabel("temperature (K)")
+    if len(curves) > 1:
+        axes[2].legend(loc="best")
     if npt:
         axes[3].plot(t, columns["rho[g/cm3]"], color="C4")
         axes[3].set_ylabel("density (g/cm³)")

@@ -131,8 +131,11 @@ def summary(dyn, rows, elapsed, stream, steps=None, resumed_at=0):
     label = "conserved energy" if dyn.couplings else "total energy"
     done = (f"{dyn.nsteps - resumed_at} since --resume at step {resumed_at}, {elapsed:.1f} s"
             if resumed_at else f"{elapsed:.1f} s for this run")
-    print(f"{dyn.nsteps} steps ({done}); T = {temperature(dyn.atoms):.1f} K "
+    print(f"{dyn.nsteps} steps ({done}); T = {dyn.get_reported_kinetic_energy()[1]:.1f} K "
           f"({dyn.degrees_of_freedom} degrees of freedom)", file=stream)
+    T_tr, T_rot = dyn.get_kinetic_temperatures()
+    where = " (after the O step)" if dyn.reports_own_kinetic_energies else ""
+    print(f"T_tr = {T_tr:.1f} K, T_rot = {T_rot:.1f} K{where}", file=stream)
     for part in dyn.couplings:  # a part that reports on itself (the Monte Carlo barostat)
         report = getattr(part, "report", None)
         if callable(report):
