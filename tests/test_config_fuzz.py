@@ -198,6 +198,14 @@ def test_a_compressibility_in_inverse_pascal(tmp_path):
     ("outputs: {directory: out, trajectory: 5}", "outputs.trajectory: expected a file or"),
     ("outputs: {directory: [out]}", "outputs.directory: expected a file or folder name"),
     ('outputs: {directory: out, "md\\nlog": 1}', "outputs.'md\\nlog': unknown key"),
+    ("calculator: {name: lammps, commands: null}",  # was TypeError: not iterable
+     "calculator.commands: expected LAMMPS commands (a list of strings or one string), "
+     "got None"),
+    ("calculator: {name: lammps, pair: 5}", "calculator.pair: expected LAMMPS commands"),
+    ("calculator: {name: lammps, commands: {pair_style: 1}}",  # was the command 'pair_style'
+     "calculator.commands: expected LAMMPS commands"),
+    ("calculator: {name: lammps, commands: [null]}",  # was the command 'None'
+     "calculator.commands: expected LAMMPS commands"),
 ])
 def test_quirks_the_fuzzing_found(tmp_path, line, message):
     """Found by the fuzzing above or while reading the reader.  Each was read as something

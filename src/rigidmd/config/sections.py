@@ -346,9 +346,13 @@ class CalculatorSection:
         options = dict(mapping("calculator.options", calc.get("options", {})))
         if "commands" in calc and "pair" in calc:
             raise ConfigError("calculator.pair: give the LAMMPS commands once, as commands")
-        commands = calc.get("commands", calc.get("pair", []))
+        key = "pair" if "pair" in calc else "commands"
+        commands = calc.get(key, [])
         if isinstance(commands, str):
             commands = commands.splitlines()
+        if not isinstance(commands, list) or not all(isinstance(c, str) for c in commands):
+            raise ConfigError(f"calculator.{key}: expected LAMMPS commands (a list of strings "
+                              f"or one string), got {commands!r}")
         charges = dict(mapping("calculator.charges", calc.get("charges", {})))
         atom_types = dict(mapping("calculator.atom_types", calc.get("atom_types", {})))
         water = None
@@ -383,7 +387,7 @@ class CalculatorSection:
         elif calc["name"] == "ipi":
             raise ConfigError("calculator.address: name: ipi needs the address an engine "
                               "connects to (unix:NAME or HOST:PORT)")
-        return cls(calc["name"], options, [str(c) for c in commands], charges, atom_types,
+        return cls(calc["name"], options, list(commands), charges, atom_types,
                    water, processes, threads, address)
 
     def build(self, atoms, engine_directory="engine"):
