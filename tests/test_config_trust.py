@@ -239,3 +239,64 @@ def test_a_unix_socket_or_loopback_needs_no_trust(tmp_path, address):
     check_config(config(tmp_path, calculator={"name": "ipi", "address": address}))
     check_config(config(tmp_path, calculator={"name": "lammps", "commands": LJ,
                                               "address": address}))
+
+
+SECRET = "TOKEN=hunter2-do-not-print"
+
+
+@pytest.mark.parametrize("field, name, options", [
+    ("structure", "secret.xyz", {}),
+    ("structure", "secret.txt", {}),
+    ("structure", "secret.txt", {"format": "xyz"}),
+    ("structure", "secret.cfg", {"format": "extxyz"}),
+    ("restart", "secret.traj", {}),
+])
+def test_an_unreadable_file_is_named_never_quoted(tmp_path, field, name, options):
+    """Readers quote the line they could not parse (ASE's xyz reader: ``Expected xyz header
+    but got: ... 'TOKEN=...'``): ``structure: /proc/self/environ`` printed the environment.
+    The message names the field, the file and the kind of failure, not the content."""
+    (tmp_path / name).write_text(f"{SECRET}\nsecond line {SECRET}\n")
+    raw = config(tmp_path, read_options=options)
+    raw[field] = name
+    if field == "restart":
+        raw.pop("structure")
+    with pytest.raises(ConfigError) as err:
+        check_config(raw).structure.build_atoms()
+    message = str(err.value)
+    assert message.startswith(f"{field}: cannot read {str(tmp_path / name)!r} ("), message
+    assert "hunter2" not in message and "TOKEN" not in message and "\n" not in message, message
+
+
+def test_the_environment_is_not_printed(tmp_path):
+    """The case reported: the process's environment read as a structure (in a process whose
+    environment starts with a token: /proc/self/environ is the environment at its start)."""
+    import os
+    import subprocess
+
+    if not os.path.isfile("/proc/self/environ"):
+        pytest.skip("no /proc/self/environ on this system")
+    code = ("from rigidmd.config import ConfigError, check_config\n"
+            "raw = dict(structure='/proc/self/environ', read_options={'format': 'xyz'},\n"
+            "           timestep='1 fs', steps=1)\n"
+            "try:\n    check_config(raw).structure.build_atoms()\n"
+            "except ConfigError as err:\n    print(err)\n")
+    env = {"RIGIDMD_TEST_TOKEN": "hunter2-do-not-print", **os.environ}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=120, check=True).stdout
+    assert out.startswith("structure: cannot read '/proc/self/environ' ("), out
+    assert "hunter2" not in out, out
+
+
+@pytest.mark.parametrize("text, message", [
+    (f"key: {SECRET}: x\n", "integrator: '{path}' is not valid YAML at line 1"),  # was a
+    # yaml ScannerError: a traceback quoting the line
+    (None, "integrator: cannot read '{path}' (No such file or directory)"),  # was
+    # FileNotFoundError
+])
+def test_an_unreadable_scheme_file_in_one_line(tmp_path, text, message):
+    path = tmp_path / "scheme.yaml"
+    if text is not None:
+        path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        check_config(config(tmp_path, integrator=str(path)))
+    assert str(err.value) == message.format(path=path), str(err.value)
