@@ -101,7 +101,7 @@ def test_what_is_on_the_list_is_accepted(tmp_path):
                   "options": {"sigma": 3.0, "epsilon": 0.005, "rc": 9.0, "smooth": True}},
                  {"name": "ase.calculators.emt.EMT"},
                  {"name": "lammps", "commands": LJ, "options": {"skin": 1.0, "threads": 1}},
-                 {"name": "lammps", "commands": LJ, "processes": 2,
+                 {"name": "lammps", "commands": LJ, "processes": 1,
                   "options": {"timeout": 30.0}},
                  {"name": "lammps", "water_model": {"name": "tip4p2005", "cutoff": 4.0},
                   "options": {"exclude_intramolecular": True}},
@@ -131,7 +131,7 @@ def test_a_dotted_lammps_engine_has_its_commands_checked(tmp_path):
     {"name": "lammps", "water_model": {"name": "tip3p", "cutoff": 4.0},
      "options": {"cmdargs": ["-log", "elsewhere.log"]}},
     {"name": "lammps", "commands": LJ, "options": {"cmdargs": ["-in", "pwned.in"]}},
-    {"name": "lammps", "commands": LJ, "processes": 2, "options": {"cmdargs": ["-log", "x"]}},
+    {"name": "lammps", "commands": LJ, "processes": 1, "options": {"cmdargs": ["-log", "x"]}},
     {"name": "rigidmd.lammps.LAMMPSCalculator",
      "options": {"commands": LJ, "cmdargs": ["-log", "x"]}},
 ])
@@ -300,3 +300,76 @@ def test_an_unreadable_scheme_file_in_one_line(tmp_path, text, message):
     with pytest.raises(ConfigError) as err:
         check_config(config(tmp_path, integrator=str(path)))
     assert str(err.value) == message.format(path=path), str(err.value)
+
+
+def nested_aliases(levels, width=9):
+    """``levels`` anchors, each a list of ``width`` aliases of the one before: the last
+    stands for width**levels values in a few hundred bytes."""
+    parts = ["a0: &a0 [" + ", ".join(["x"] * width) + "]"]
+    parts += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * width) + "]"
+              for i in range(1, levels + 1)]
+    return "x: {" + ", ".join(parts) + "}\n" + f"y: *a{levels}\n"
+
+
+@pytest.mark.parametrize("text, message", [
+    (nested_aliases(6), "its aliases (*name) expand it by 11434267 values, more than 10000; "
+                        "write the values out"),
+    ("steps: " + "[" * 5000 + "]" * 5000 + "\n",  # was RecursionError, a traceback
+     "it nests deeper than 50 levels (line 1)"),
+    ("".join(f"a{i}: &a{i} [*a{i - 1}]\n" if i else "a0: &a0 [1]\n" for i in range(60)),
+     "aliases nest it deeper than 50 levels (line 50)"),  # was RecursionError
+    ("a: &a [1, *a]\n", "an alias at line 1 refers to a mapping or list that contains it"),
+])
+def test_yaml_that_expands_or_nests_without_bound_is_refused_at_once(tmp_path, text, message):
+    """Nested aliases: 646 bytes took 135 s and 3.1 GB before they were refused (the
+    refusal quoted the expanded value).  Refused while the file is read, before anything is
+    built, in one line naming the file."""
+    import time
+
+    from rigidmd.config import load_config
+
+    path = tmp_path / "bomb.yaml"
+    path.write_text(text)
+    start = time.perf_counter()
+    with pytest.raises(ConfigError) as err:
+        load_config(path)
+    elapsed = time.perf_counter() - start
+    assert str(err.value) == f"config: {path} is refused: {message}"
+    assert elapsed < 5, elapsed  # measured: 0.01 s, 0.6 s for the 5000 brackets (the scanner)
+
+
+def test_a_few_aliases_are_read():
+    """Aliases that repeat a setting are YAML's own and stay allowed."""
+    from rigidmd.config.loader import _strict_loader
+
+    text = "t: &t 300 K\nthermostat: {temperature: *t}\n" + nested_aliases(2)  # 729 values
+    data = __import__("yaml").load(text, Loader=_strict_loader())  # noqa: S506
+    assert data["thermostat"]["temperature"] == "300 K" and len(data["y"]) == 9
+
+
+@pytest.mark.parametrize("calc, field", [
+    ({"name": "lammps", "commands": LJ, "processes": 1000}, "calculator.processes"),
+    ({"name": "lammps", "commands": LJ, "threads": 64}, "calculator.threads"),
+    ({"name": "lammps", "commands": LJ, "processes": 2, "threads": 3}, "calculator.threads"),
+    ({"name": "lammps", "commands": LJ, "options": {"threads": 9}},
+     "calculator.options.threads"),
+    ({"name": "rigidmd.lammps.LAMMPSEngine", "options": {"commands": LJ, "processes": 5}},
+     "calculator.options.processes"),
+])
+def test_processes_and_threads_bounded_by_the_cores(tmp_path, monkeypatch, calc, field):
+    """``processes: 100000`` started that many LAMMPS ranks.  Without --trust processes
+    times threads is at most the cores the run may use (here 4)."""
+    import rigidmd.config.trust as trust
+
+    monkeypatch.setattr(trust, "machine_cores", lambda: 4)
+    message = refused(config(tmp_path, calculator=calc), field)
+    assert "(4)" in message, message
+    nothing_written(tmp_path)
+
+
+def test_processes_within_the_cores_are_accepted(tmp_path, monkeypatch):
+    import rigidmd.config.trust as trust
+
+    monkeypatch.setattr(trust, "machine_cores", lambda: 4)
+    check_config(config(tmp_path, calculator={"name": "lammps", "commands": LJ,
+                                              "processes": 2, "threads": 2}))

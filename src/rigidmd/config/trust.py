@@ -53,13 +53,14 @@ limited: ASE's readers and rigidmd's scheme files run no code.
 import importlib
 import ipaddress
 import math
+import os
 from pathlib import PurePath
 
 from rigidmd.config.quantities import ConfigError, parse_address
 
 __all__ = ["SAFE_LAMMPS_COMMANDS", "ALLOWED_CALCULATORS", "GivenOnCommandLine",
            "check_lammps_commands", "check_calculator", "check_output_paths",
-           "check_listen_address", "calculator_class"]
+           "check_listen_address", "check_cores", "machine_cores", "calculator_class"]
 
 #: LAMMPS commands a configuration may give without ``--trust``: interactions only.
 SAFE_LAMMPS_COMMANDS = frozenset({
@@ -184,6 +185,35 @@ def check_lammps_commands(where, commands):
                               f"code; {TRUST_HINT}")
 
 
+def machine_cores():
+    """The cores this process may run on (its CPU affinity; ``os.cpu_count()`` elsewhere)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def check_cores(counts):
+    """Refuse (ConfigError naming the field) more processes or threads than the machine has.
+
+    Parameters
+    ----------
+    counts : dict
+        Field name -> whole number or None (not given).  Processes times threads per
+        process must not exceed :func:`machine_cores`: a configuration must not start a
+        thousand LAMMPS processes.
+    """
+    cores = machine_cores()
+    given = {key: value for key, value in counts.items()
+             if isinstance(value, int) and not isinstance(value, bool) and value >= 1}
+    total = math.prod(given.values())
+    if total > cores:
+        field_name = max(given, key=lambda key: given[key])
+        asked = " x ".join(f"{key.rpartition('.')[2]} {value}" for key, value in given.items())
+        raise ConfigError(f"{field_name}: {asked} needs more cores than this machine gives "
+                          f"the run ({cores}); {TRUST_HINT}")
+
+
 def check_listen_address(where, address):
     """Refuse (ConfigError naming ``where``) a TCP address other machines can reach.
 
@@ -263,6 +293,12 @@ def check_calculator(section, trust=False):
     name = section.name
     if section.address is not None and not trust:
         check_listen_address("calculator.address", section.address)
+    if not trust:
+        options = section.options if isinstance(section.options, dict) else {}
+        check_cores({"calculator.processes": section.processes,
+                     "calculator.threads": section.threads,
+                     "calculator.options.processes": options.get("processes"),
+                     "calculator.options.threads": options.get("threads")})
     if name in ("tip3p", "tip4p", "lammps", "ipi"):
         if trust:
             return None
