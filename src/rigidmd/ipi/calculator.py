@@ -22,6 +22,7 @@ from rigidmd.ipi.connection import (
     close_sockets,
     open_server,
     process_folder,
+    socket_name_ok,
     unlink_if_ours,
     wait_readable,
     word,
@@ -81,6 +82,10 @@ class IPICalculator(Calculator):
             raise ValueError(f"IPICalculator: timeout must be positive, got {timeout!r}")
         if port is None and unixsocket is None:
             unixsocket = f"rigidmd-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        if unixsocket is not None and not socket_name_ok(unixsocket):
+            raise ValueError(f"IPICalculator: unixsocket {unixsocket!r} is not a plain name "
+                             "(letters, digits, '.', '_' and '-', not starting with '.'; the "
+                             "socket is /tmp/ipi_NAME, so '/' and '..' would put it elsewhere)")
         self.unixsocket = unixsocket
         self.port = None if port is None else int(port)
         self.host = host

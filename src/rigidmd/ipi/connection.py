@@ -13,14 +13,16 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import select
 import socket
+import stat
 import struct
 import time
 
 __all__ = ["MSGLEN", "WAIT_SLICE", "EngineError", "accept", "add_wait_check", "close_sockets",
-           "open_server", "process_folder", "remove_wait_check", "unlink_if_ours",
-           "wait_readable", "word"]
+           "open_server", "process_folder", "remove_wait_check", "socket_name_ok",
+           "unlink_if_ours", "wait_readable", "word"]
 
 #: Length of an i-PI header (bytes).
 MSGLEN = 12
@@ -49,6 +51,16 @@ def remove_wait_check(check):
 
 class EngineError(RuntimeError):
     """An i-PI engine died, hung or broke the protocol (the message says which and where)."""
+
+
+def socket_name_ok(name):
+    """Whether ``name`` is a plain Unix socket name: ``/tmp/ipi_NAME`` stays in ``/tmp``.
+
+    Letters, digits, ``.``, ``_`` and ``-``, at most 80, not starting with ``.``: no
+    ``/`` or ``..`` that would put the socket (and its removal) elsewhere.
+    """
+    return isinstance(name, str) and re.fullmatch(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,79}",
+                                                  name) is not None
 
 
 def word(text):
@@ -231,19 +243,47 @@ def _bind_unix(server, path):
     removed at the end (never another process's).
     """
     try:
-        server.bind(path)
+        _bind_private(server, path)
     except OSError as err:
         if err.errno != errno.EADDRINUSE:
             raise EngineError(f"IPICalculator: cannot create the socket {path} "
                               f"({err.strerror or err})") from None
+        try:
+            info = os.lstat(path)
+        except OSError:
+            info = None
+        if info is not None and not stat.S_ISSOCK(info.st_mode):
+            raise EngineError(f"IPICalculator: {path} exists and is not a socket (left "
+                              "alone); give another unixsocket name") from None
+        if info is not None and info.st_uid != os.getuid():
+            raise EngineError(f"IPICalculator: the socket {path} belongs to another user "
+                              f"(uid {info.st_uid}; left alone); give another unixsocket "
+                              "name") from None
         if _served(path):
             raise EngineError(f"IPICalculator: the socket {path} is in use by another live "
                               "process (another run's engine server?); give another "
                               "unixsocket name") from None
-        os.unlink(path)  # left by a process that is gone
-        server.bind(path)
+        try:
+            os.unlink(path)  # our own socket, left by a process that is gone
+            _bind_private(server, path)
+        except OSError as err:
+            raise EngineError(f"IPICalculator: cannot replace the stale socket {path} "
+                              f"({err.strerror or err})") from None
     info = os.stat(path)
     return info.st_dev, info.st_ino
+
+
+def _bind_private(server, path):
+    """Bind the Unix socket ``server`` to ``path`` as mode 0600: only this user connects.
+
+    (Linux checks write permission on the socket file at ``connect``; the mode is set by
+    the umask at ``bind``, so the umask is narrowed around it.)
+    """
+    old = os.umask(0o177)
+    try:
+        server.bind(path)
+    finally:
+        os.umask(old)
 
 
 def _peer_pid(conn):
