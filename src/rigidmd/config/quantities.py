@@ -114,13 +114,12 @@ def parse_address(field, address):
     """
     text = str(address)
     if text.startswith("unix:") and len(text) > 5:
-        from rigidmd.ipi.connection import socket_name_ok
+        from rigidmd.ipi.connection import SOCKET_NAME_RULE, socket_name_ok
 
         name = text[5:]
         if not socket_name_ok(name):
-            raise ConfigError(f"{field}: {name!r} is not a plain socket name (letters, digits, "
-                              "'.', '_' and '-', not starting with '.', at most 80; the "
-                              "socket is /tmp/ipi_NAME, so '/' and '..' would put it elsewhere)")
+            raise ConfigError(f"{field}: {name!r} is not a plain socket name "
+                              f"({SOCKET_NAME_RULE})")
         return {"unixsocket": name}
     host, _, port = text.rpartition(":")
     if ":" in host or host.startswith("["):  # the socket is IPv4 (ipi.connection)

@@ -17,6 +17,7 @@ from ase.calculators.calculator import Calculator, PropertyNotImplementedError, 
 from rigidmd.core.checks import copy_atoms, quick_check_state
 from rigidmd.ipi.connection import (
     MSGLEN,
+    SOCKET_NAME_RULE,
     EngineError,
     accept,
     close_sockets,
@@ -84,8 +85,7 @@ class IPICalculator(Calculator):
             unixsocket = f"rigidmd-{os.getpid()}-{uuid.uuid4().hex[:8]}"
         if unixsocket is not None and not socket_name_ok(unixsocket):
             raise ValueError(f"IPICalculator: unixsocket {unixsocket!r} is not a plain name "
-                             "(letters, digits, '.', '_' and '-', not starting with '.'; the "
-                             "socket is /tmp/ipi_NAME, so '/' and '..' would put it elsewhere)")
+                             f"({SOCKET_NAME_RULE})")
         self.unixsocket = unixsocket
         self.port = None if port is None else int(port)
         self.host = host

@@ -20,8 +20,8 @@ import stat
 import struct
 import time
 
-__all__ = ["MSGLEN", "WAIT_SLICE", "EngineError", "accept", "add_wait_check", "close_sockets",
-           "open_server", "process_folder", "remove_wait_check", "socket_name_ok",
+__all__ = ["MSGLEN", "SOCKET_NAME_RULE", "WAIT_SLICE", "EngineError", "accept", "add_wait_check",
+           "close_sockets", "open_server", "process_folder", "remove_wait_check", "socket_name_ok",
            "unlink_if_ours", "wait_readable", "word"]
 
 #: Length of an i-PI header (bytes).
@@ -51,6 +51,11 @@ def remove_wait_check(check):
 
 class EngineError(RuntimeError):
     """An i-PI engine died, hung or broke the protocol (the message says which and where)."""
+
+
+#: What a Unix socket's name may be (said when one is refused).
+SOCKET_NAME_RULE = ("letters, digits, '.', '_' and '-', not starting with '.', at most 80; the "
+                    "socket is /tmp/ipi_NAME, so '/' and '..' would put it elsewhere")
 
 
 def socket_name_ok(name):
