@@ -17,13 +17,12 @@ from ase.calculators.calculator import Calculator, PropertyNotImplementedError, 
 from rigidmd.core.checks import copy_atoms, quick_check_state
 from rigidmd.ipi.connection import (
     MSGLEN,
-    SOCKET_NAME_RULE,
     EngineError,
     accept,
+    check_socket_name,
     close_sockets,
     open_server,
     process_folder,
-    socket_name_ok,
     unlink_if_ours,
     wait_readable,
     word,
@@ -83,10 +82,7 @@ class IPICalculator(Calculator):
             raise ValueError(f"IPICalculator: timeout must be positive, got {timeout!r}")
         if port is None and unixsocket is None:
             unixsocket = f"rigidmd-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-        if unixsocket is not None and not socket_name_ok(unixsocket):
-            raise ValueError(f"IPICalculator: unixsocket {unixsocket!r} is not a plain name "
-                             f"({SOCKET_NAME_RULE})")
-        self.unixsocket = unixsocket
+        self.unixsocket = check_socket_name(unixsocket)
         self.port = None if port is None else int(port)
         self.host = host
         self.timeout = float(timeout)

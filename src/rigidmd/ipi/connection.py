@@ -21,8 +21,8 @@ import struct
 import time
 
 __all__ = ["MSGLEN", "SOCKET_NAME_RULE", "WAIT_SLICE", "EngineError", "accept", "add_wait_check",
-           "close_sockets", "open_server", "process_folder", "remove_wait_check", "socket_name_ok",
-           "unlink_if_ours", "wait_readable", "word"]
+           "check_socket_name", "close_sockets", "open_server", "process_folder",
+           "remove_wait_check", "socket_name_ok", "unlink_if_ours", "wait_readable", "word"]
 
 #: Length of an i-PI header (bytes).
 MSGLEN = 12
@@ -66,6 +66,14 @@ def socket_name_ok(name):
     """
     return isinstance(name, str) and re.fullmatch(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,79}",
                                                   name) is not None
+
+
+def check_socket_name(name):
+    """``name`` (None: TCP) if it is a plain socket name, else ValueError saying the rule."""
+    if name is not None and not socket_name_ok(name):
+        raise ValueError(f"IPICalculator: unixsocket {name!r} is not a plain name "
+                         f"({SOCKET_NAME_RULE})")
+    return name
 
 
 def word(text):
