@@ -373,3 +373,33 @@ def test_processes_within_the_cores_are_accepted(tmp_path, monkeypatch):
     monkeypatch.setattr(trust, "machine_cores", lambda: 4)
     check_config(config(tmp_path, calculator={"name": "lammps", "commands": LJ,
                                               "processes": 2, "threads": 2}))
+
+
+@pytest.mark.parametrize("link, outputs, field", [
+    ("out", {"directory": "out"}, "outputs.directory"),
+    ("out/md.log", {"directory": "out", "log": "md.log"}, "outputs.log"),
+    ("out/sub", {"directory": "out", "trajectory": "sub/md.traj"}, "outputs.trajectory"),
+    ("out/checkpoint.npz", {"directory": "out"}, "outputs.checkpoint"),  # the default name
+    ("out/relax.traj", {"directory": "out"}, "relax.trajectory"),
+])
+def test_a_symbolic_link_does_not_lead_outputs_outside(tmp_path, link, outputs, field):
+    """An output folder (or file) that is a symbolic link wrote outside the run's directory,
+    and --overwrite replaced the user's file there.  The rule holds for the path with its
+    links followed; --trust lets it through."""
+    config_dir, elsewhere = tmp_path / "config", tmp_path / "elsewhere"
+    (config_dir / "out").mkdir(parents=True)
+    elsewhere.mkdir()
+    (elsewhere / "thesis.tex").write_text("years of work")
+    target = elsewhere / ("thesis.tex" if "." in link.rpartition("/")[2] else "")
+    if link == "out":
+        (config_dir / "out").rmdir()
+    (config_dir / link).symlink_to(target)
+    raw = config(config_dir, outputs=outputs)
+    before = sorted(p.name for p in elsewhere.iterdir())
+    message = refused(raw, field)
+    assert "symbolic link" in message and str(elsewhere) in message, message
+    if field.startswith("relax"):
+        with pytest.raises(ConfigError, match=f"^{field}: "):
+            relax_only(dict(raw, relax={"fmax": 0.1, "steps": 1}))
+    assert sorted(p.name for p in elsewhere.iterdir()) == before
+    assert (elsewhere / "thesis.tex").read_text() == "years of work"

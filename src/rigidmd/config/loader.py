@@ -273,7 +273,7 @@ def check_config(config, trust=False):
     if unknown:
         raise ConfigError(f"{key_name(unknown[0])}: unknown key; allowed: "
                           f"{', '.join(sorted(known))}")
-    check_output_paths(config, trust)
+    check_output_paths(config, trust, base)
     checked = RunConfig(**{name: section.from_config(config, base)
                            for name, section in _SECTIONS.items()})
     checked.calculator.check_trust(trust)

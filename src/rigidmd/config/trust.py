@@ -54,7 +54,7 @@ import importlib
 import ipaddress
 import math
 import os
-from pathlib import PurePath
+from pathlib import Path, PurePath
 
 from rigidmd.config.quantities import ConfigError, parse_address
 
@@ -379,7 +379,21 @@ def _inside(field_name, value, trust, optional=True):
                           f"'..'); {TRUST_HINT}")
 
 
-def check_output_paths(raw, trust=False):
+#: Files a run writes in its directory when the configuration names none.
+DEFAULT_FILES = {"outputs.checkpoint": "checkpoint.npz", "relax.trajectory": "relax.traj",
+                 "relax.log": "relax.log"}
+
+
+def _resolved_inside(field_name, value, path, root):
+    """Refuse ``path`` if, with its symbolic links followed, it is not inside ``root``."""
+    resolved = Path(path).resolve()
+    if resolved != root and root not in resolved.parents:
+        raise ConfigError(f"{field_name}: {str(value)!r} leads outside the run's directory "
+                          f"through a symbolic link (to {str(resolved)!r}); a configuration "
+                          f"writes only inside it; {TRUST_HINT}")
+
+
+def check_output_paths(raw, trust=False, base=None):
     """Refuse output paths outside the run's directory (see the module's docstring).
 
     Parameters
@@ -388,6 +402,10 @@ def check_output_paths(raw, trust=False):
         The configuration as read (``outputs`` and ``relax`` mappings).
     trust : bool
         ``--trust``: paths anywhere.
+    base : path-like, optional
+        The configuration's folder.  Given, the rule also holds for the paths with their
+        symbolic links followed: ``outputs.directory`` inside ``base`` (unless given on
+        the command line), each output file (named or default) inside the directory.
     """
     outputs = raw.get("outputs")
     if isinstance(outputs, dict) and "directory" in outputs:
@@ -399,3 +417,19 @@ def check_output_paths(raw, trust=False):
                 if key in values:
                     _inside(f"{section}.{key}", values[key], trust,
                             optional=(section, key) != ("outputs", "checkpoint"))
+    if trust or base is None:
+        return
+    outputs = outputs if isinstance(outputs, dict) else {}
+    given = outputs.get("directory", ".")
+    directory = Path(base) / given
+    if not isinstance(given, GivenOnCommandLine):
+        _resolved_inside("outputs.directory", given, directory, Path(base).resolve())
+    root = directory.resolve()
+    files = dict(DEFAULT_FILES)  # (rigidmd relax writes relax's without a relax: section)
+    for section, keys in OUTPUT_FILES.items():
+        values = raw.get(section)
+        if isinstance(values, dict):
+            files.update({f"{section}.{key}": values[key] for key in keys
+                          if isinstance(values.get(key), str) and values[key]})
+    for field_name, value in files.items():
+        _resolved_inside(field_name, value, directory / value, root)
