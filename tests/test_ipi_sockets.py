@@ -88,3 +88,95 @@ def test_a_stale_socket_of_this_user_is_still_replaced():
     calc.listen()
     calc.close()
     assert not os.path.exists(path)
+
+
+ZERO_FORCE_CLIENT = """
+import sys
+from ase import Atoms
+from ase.calculators.lj import LennardJones
+from ase.calculators.socketio import SocketClient
+atoms = Atoms("Ar2", positions=[[0, 0, 0], [0, 0, 3.0]])
+atoms.calc = LennardJones(epsilon=0.0)  # zero forces, as the intruder reported
+if len(sys.argv) > 2:  # become that user before the socket is made (its owner)
+    import os
+    os.setgid(int(sys.argv[2]))
+    os.setuid(int(sys.argv[2]))
+try:
+    SocketClient(host="localhost", port=int(sys.argv[1])).run(atoms)
+except Exception:
+    pass
+"""
+
+
+def free_port():
+    with socket.socket() as probe:
+        probe.bind(("localhost", 0))
+        return probe.getsockname()[1]
+
+
+def intruder(port, user=None):
+    """A process answering zero forces on localhost:``port`` (as ``user``, a uid)."""
+    import subprocess
+    import sys
+
+    return subprocess.Popen(
+        [sys.executable, "-c", ZERO_FORCE_CLIENT, str(port), *([] if user is None else
+                                                              [str(user)])],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def argon():
+    from ase import Atoms
+
+    return Atoms("Ar2", positions=[[0, 0, 0], [0, 0, 3.0]])
+
+
+def test_another_users_process_on_loopback_is_refused():
+    """A program of another local user connected first to a run's localhost:PORT and
+    supplied zero forces for 21 calls, exit 0.  Its owner is read from /proc/net/tcp and
+    the connection refused: the run stops, naming it."""
+    if os.getuid() != 0:
+        pytest.skip("needs root to start a process as another user")
+    if not os.path.exists("/proc/net/tcp"):
+        pytest.skip("needs Linux's /proc/net/tcp")
+    port = free_port()
+    calc = IPICalculator(port=port, timeout=20)
+    calc.listen()
+    proc = intruder(port, user=65534)
+    try:
+        atoms = argon()
+        atoms.calc = calc
+        with pytest.raises(EngineError, match="of another user \\(uid 65534\\) connected"):
+            atoms.get_forces()
+    finally:
+        calc.close()
+        proc.kill()
+        proc.wait(timeout=10)
+
+
+def test_a_loopback_engine_is_named_by_its_process():
+    """Over TCP the engine was only an address; now its process, as for a Unix socket,
+    so that LAMMPSEngine's check that it started the engine (check_peer) applies."""
+    if not os.path.exists("/proc/net/tcp"):
+        pytest.skip("needs Linux's /proc/net/tcp")
+    port = free_port()
+    seen = []
+
+    class Expecting(IPICalculator):
+        def check_peer(self, pid):
+            seen.append(pid)
+            return None if pid == proc.pid else f"process {pid} is not {proc.pid}"
+
+    calc = Expecting(port=port, timeout=20)
+    calc.listen()
+    proc = intruder(port)
+    try:
+        atoms = argon()
+        atoms.calc = calc
+        atoms.get_forces()
+        assert seen == [proc.pid]
+        assert f"process {proc.pid} (python" in calc.describe_engine()
+    finally:
+        calc.close()
+        proc.kill()
+        proc.wait(timeout=10)

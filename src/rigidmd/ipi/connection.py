@@ -3,8 +3,10 @@
 A Unix socket ``/tmp/ipi_<name>`` or a TCP port is opened
 (:func:`open_server`); a stale socket file (its process gone) is replaced, a
 live one refused, and only the file this process bound is removed at the end
-(:func:`unlink_if_ours`).  An engine that connects through a Unix socket is
-named by its process (Linux's ``SO_PEERCRED``, :func:`accept`).  While an
+(:func:`unlink_if_ours`).  A Unix socket is bound with mode 0600.  An engine that
+connects is named by its process (Linux's ``SO_PEERCRED`` for a Unix socket,
+``/proc/net/tcp`` for loopback TCP: :func:`accept`), and another user's process is
+refused.  While an
 engine is awaited, the checks of :func:`add_wait_check` run every
 :data:`WAIT_SLICE` seconds (:func:`wait_readable`).
 """
@@ -19,6 +21,8 @@ import socket
 import stat
 import struct
 import time
+
+from rigidmd.ipi.processes import tcp_peer
 
 __all__ = ["MSGLEN", "SOCKET_NAME_RULE", "WAIT_SLICE", "EngineError", "accept", "add_wait_check",
            "check_socket_name", "close_sockets", "open_server", "process_folder",
@@ -160,23 +164,37 @@ def accept(server, socketfile):
     -------
     conn : socket.socket
     peer : str
-        The engine in words (its process, program and working folder for a Unix
-        socket, when the system says, else its address).
+        The engine in words (its process, program and working folder when the system
+        says, else its address).
     peer_pid : int or None
-        Its process (Unix socket, Linux).
+        Its process (Linux: ``SO_PEERCRED`` for a Unix socket, ``/proc/net/tcp`` for
+        loopback TCP).
+
+    Raises
+    ------
+    EngineError
+        The process that connected is another user's (it is disconnected): on loopback
+        any local user can connect first and answer the forces.
     """
     conn, address = server.accept()
     if conn.family != socket.AF_UNIX:
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        peer, pid = f"i-PI engine at {address[0]}:{address[1]}", None
+        on = f"at {address[0]}:{address[1]}"
+        uid, pid = tcp_peer(conn)
     else:
-        pid = _peer_pid(conn)
-        if pid is None:
-            peer = f"i-PI engine on {socketfile}"
-        else:
-            folder = process_folder(pid)
-            where = "" if folder is None else f", in {folder}"
-            peer = f"i-PI engine process {pid} ({_command_name(pid)}{where}) on {socketfile}"
+        on = f"on {socketfile}"
+        uid, pid = _peer_credentials(conn)
+    if pid is None:
+        peer = f"i-PI engine {on}"
+    else:
+        folder = process_folder(pid)
+        where = "" if folder is None else f", in {folder}"
+        peer = f"i-PI engine process {pid} ({_command_name(pid)}{where}) {on}"
+    if uid is not None and uid != os.getuid():
+        close_sockets(conn, None, say_exit=False)
+        shown = f"process {pid}" if pid is not None else "a process"
+        raise EngineError(f"IPICalculator: {shown} of another user (uid {uid}) connected "
+                          f"{on} first; its forces are not used (refused, the run stops)")
     conn.setblocking(True)
     return conn, peer, pid
 
@@ -299,17 +317,18 @@ def _bind_private(server, path):
         os.umask(old)
 
 
-def _peer_pid(conn):
-    """The process at the other end of a Unix socket (Linux's SO_PEERCRED), or None."""
+def _peer_credentials(conn):
+    """The owner and process at the other end of a Unix socket (Linux's SO_PEERCRED):
+    ``(uid, pid)``, each None when unknown."""
     option = getattr(socket, "SO_PEERCRED", None)
     if option is None:
-        return None
+        return None, None
     try:
-        pid, _, _ = struct.unpack("3i", conn.getsockopt(socket.SOL_SOCKET, option,
-                                                        struct.calcsize("3i")))
+        pid, uid, _ = struct.unpack("3i", conn.getsockopt(socket.SOL_SOCKET, option,
+                                                          struct.calcsize("3i")))
     except OSError:
-        return None
-    return pid if pid > 0 else None
+        return None, None
+    return (uid if pid > 0 else None), (pid if pid > 0 else None)
 
 
 def process_folder(pid):
