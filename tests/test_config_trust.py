@@ -418,6 +418,7 @@ def test_a_symbolic_link_does_not_lead_outputs_outside(tmp_path, link, outputs, 
     ("bond_style table linear 100", "table is not a bond style"),
     ("dihedral_style table/cut linear 100", "table/cut is not a dihedral style"),
     ("kspace_style scafacos fmm 0.001", "scafacos is not a kspace style"),
+    ("angle_style * 1.0", "* is not an angle style"),  # found by the fuzzing
     ("pair_coeff * * /etc/shadow Cu", "'/etc/shadow' is not a number"),  # echoed in errors
     ("pair_coeff * * ../ffield.reax O", "'../ffield.reax' is not a number"),
     ('pair_coeff * * "0.1" 3.0', "'\"0.1\"' is not a number"),

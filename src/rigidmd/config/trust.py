@@ -160,13 +160,15 @@ def _check_words(where, line, name, words):
                               f"labelmap write writes a file); {TRUST_HINT}")
     hybrid = name.endswith("_style") and words[1:2] != [] and words[1].startswith("hybrid")
     for position, word in enumerate(words[1:], start=1):
-        if _NUMBER_WORD.fullmatch(word) or _TYPE_RANGE.fullmatch(word):
+        style_word = name.endswith("_style") and position == 1
+        if not style_word and (_NUMBER_WORD.fullmatch(word) or _TYPE_RANGE.fullmatch(word)):
             continue
         styled = category is not None and safe_style(category, word)
         if name.endswith("_style") and (position == 1 or hybrid or "/" in word):
             if not styled:
+                article = "an" if category[0] in "aeiou" else "a"
                 raise ConfigError(
-                    f"{where}: {shown!r}: {word} is not a {category} style a configuration "
+                    f"{where}: {shown!r}: {word} is not {article} {category} style a configuration "
                     f"may name without --trust (styles that read files, such as table, eam, "
                     f"tersoff and sw, or run code, such as python, are not; see "
                     f"rigidmd.config.trust.SAFE_LAMMPS_STYLES); {TRUST_HINT}")
