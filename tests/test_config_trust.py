@@ -445,7 +445,8 @@ def test_ordinary_interactions_are_accepted(tmp_path):
         "labelmap atom 1 OW 2 HW", "neigh_modify exclude molecule/intra all",
         "special_bonds lj/coul 0.0 0.0 0.5", "bond_style harmonic", "mass 1 15.9994",
         "pair_style hybrid/overlay lj/cut/omp 5.0 coul/long 5.0", "neighbor 2.0 bin",
-        "pair_style lj/long/coul/long long long 10.0", "pair_style zero 10.0 nocoeff"]
+        "pair_style lj/long/coul/long long long 10.0", "pair_style zero 10.0 nocoeff",
+        "pair_coeff 1 1 0.1852 3.1589  # O-O, 'TIP4P/2005'", "# a comment: `x` /etc/x"]
     check_config(config(tmp_path, calculator={"name": "lammps", "commands": commands}))
 
 

@@ -24,7 +24,12 @@ wrote or has read.  What is allowed without it:
   :class:`~rigidmd.lammps.LAMMPSEngine` by their dotted paths, and a
   ``kspace_parameters`` option): only the commands that define interactions
   (:data:`SAFE_LAMMPS_COMMANDS`), without ``$`` substitution (which could
-  spell any command) and without Python pair styles.  LAMMPS's ``shell``
+  spell any command) and without Python pair styles; their arguments are
+  checked too (:func:`check_lammps_commands`): styles on
+  :data:`SAFE_LAMMPS_STYLES` only (none that reads a file, evaluates
+  expressions or runs code), ``labelmap`` only defining labels, every other
+  word a number, a type or a plain word (no path, quote, backquote or ``&``).
+  LAMMPS's ``shell``
   (runs programs), ``python`` and ``plugin`` (run code), ``include`` and
   ``jump`` (read other input files), ``if`` and ``run ... every`` (run
   commands given as strings) and the commands that write files (``dump``,
@@ -35,12 +40,14 @@ wrote or has read.  What is allowed without it:
   relative to the configuration's folder and the output files
   (``outputs.trajectory``, ``log``, ``plot``, ``mdanalysis``,
   ``checkpoint``, ``relax.trajectory``, ``relax.log``) relative to it,
-  none of them absolute or with a ``..`` part: a run writes only inside its
-  own directory.  A directory given on the command line (``--outdir``) is
-  the user's own choice and may be anywhere.
+  none of them absolute or with a ``..`` part, and none leading outside
+  through a symbolic link: a run writes only inside its own directory.  A
+  directory given on the command line (``--outdir``) is the user's own
+  choice and may be anywhere.
+* processes and threads (:func:`check_cores`): at most the machine's cores.
 * sockets listened on (:func:`check_listen_address`): ``calculator.address``
   of ``ipi`` and of ``lammps`` (an engine started elsewhere) is a Unix socket
-  (``unix:NAME``) or a loopback address (``localhost``, ``127.x.x.x``; the
+  (``unix:NAME``, a plain name) or a loopback address (``localhost``, ``127.x.x.x``; the
   socket is IPv4: IPv6 addresses are refused).  Any other host (``0.0.0.0``,
   a host name, an interface's address) opens a port other machines can
   reach, and whatever connects
@@ -274,8 +281,8 @@ def check_lammps_commands(where, commands):
     """
     lines = [line for command in commands for line in str(command).splitlines()]
     for line in lines:
-        words = line.split()
-        if not words or words[0].startswith("#"):
+        words = line.split("#", 1)[0].split()  # (LAMMPS: '#' starts a comment)
+        if not words:
             continue
         name = words[0]
         if "$" in line:
