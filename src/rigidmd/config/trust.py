@@ -542,6 +542,10 @@ def check_output_paths(raw, trust=False, base=None):
         _resolved_inside("outputs.directory", given, directory, Path(base).resolve())
     root = directory.resolve()
     files = dict(DEFAULT_FILES)  # (rigidmd relax writes relax's without a relax: section)
+    files["outputs.directory"] = ".rigidmd.lock"  # the run's lock (rigidmd.run.outputs)
+    calc = raw.get("calculator")
+    if isinstance(calc, dict) and calc.get("address") is not None:
+        files["calculator.address"] = "engine"  # the input of an engine started elsewhere
     for section, keys in OUTPUT_FILES.items():
         values = raw.get(section)
         if isinstance(values, dict):
