@@ -500,10 +500,11 @@ DEFAULT_FILES = {"outputs.checkpoint": "checkpoint.npz", "relax.trajectory": "re
                  "relax.log": "relax.log"}
 
 
-def _resolved_inside(field_name, value, path, root):
-    """Refuse ``path`` if, with its symbolic links followed, it is not inside ``root``."""
+def _resolved_inside(field_name, value, path, root, may_be_root=False):
+    """Refuse ``path`` if, with its symbolic links followed, it is not inside ``root``
+    (or ``root`` itself, for a folder: ``may_be_root``)."""
     resolved = Path(path).resolve()
-    if resolved != root and root not in resolved.parents:
+    if not (may_be_root and resolved == root) and root not in resolved.parents:
         raise ConfigError(f"{field_name}: {str(value)!r} leads outside the run's directory "
                           f"through a symbolic link (to {str(resolved)!r}); a configuration "
                           f"writes only inside it; {TRUST_HINT}")
@@ -539,7 +540,8 @@ def check_output_paths(raw, trust=False, base=None):
     given = outputs.get("directory", ".")
     directory = Path(base) / given
     if not isinstance(given, GivenOnCommandLine):
-        _resolved_inside("outputs.directory", given, directory, Path(base).resolve())
+        _resolved_inside("outputs.directory", given, directory, Path(base).resolve(),
+                         may_be_root=True)
     root = directory.resolve()
     files = dict(DEFAULT_FILES)  # (rigidmd relax writes relax's without a relax: section)
     files["outputs.directory"] = ".rigidmd.lock"  # the run's lock (rigidmd.run.outputs)
