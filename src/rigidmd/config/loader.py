@@ -113,15 +113,90 @@ _YAML_FLOAT = (r"^(?:[-+]?(?:[0-9]+\.[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?"
                r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$")
 
 
+#: Deepest nesting of mappings and lists a configuration may have (its own are 4 deep):
+#: PyYAML composes and constructs recursively, and 5000 ``[`` crashed it (RecursionError).
+MAX_DEPTH = 50
+#: Nodes that aliases (``*name``) may add to a configuration beyond those written: nested
+#: aliases multiply (646 bytes took 135 s and 3.1 GB), a few repeated settings do not.
+MAX_ALIAS_NODES = 10_000
+
+
+class _Refused(Exception):
+    """The YAML text is refused before it is built (the message, without the file)."""
+
+
+def _check_aliases(root):
+    """Refuse a document whose aliases expand it past :data:`MAX_ALIAS_NODES` more nodes
+    than written, nest it deeper than :data:`MAX_DEPTH`, or make it contain itself.
+
+    One pass over the composed graph, each node once (an anchor's size and depth are
+    remembered), without recursion.
+    """
+    size, depth, written, open_nodes = {}, {}, set(), set()
+    stack = [(root, False)]
+    while stack:
+        node, done = stack.pop()
+        key = id(node)
+        if done:
+            open_nodes.discard(key)
+            children = _children(node)
+            size[key] = 1 + sum(size[id(c)] for c in children)
+            depth[key] = 1 + max((depth[id(c)] for c in children), default=0)
+            if depth[key] > MAX_DEPTH:
+                raise _Refused(f"aliases nest it deeper than {MAX_DEPTH} levels (line "
+                               f"{node.start_mark.line + 1})")
+            continue
+        if key in size:
+            continue
+        if key in open_nodes:
+            raise _Refused(f"an alias at line {node.start_mark.line + 1} refers to a mapping or "
+                           "list that contains it")
+        written.add(key)
+        open_nodes.add(key)
+        stack.append((node, True))
+        stack.extend((c, False) for c in _children(node) if id(c) not in size)
+    extra = size[id(root)] - len(written)
+    if extra > MAX_ALIAS_NODES:
+        raise _Refused(f"its aliases (*name) expand it by {extra} values, more than "
+                       f"{MAX_ALIAS_NODES}; write the values out")
+
+
+def _children(node):
+    import yaml
+
+    if isinstance(node, yaml.MappingNode):
+        return [part for pair in node.value for part in pair]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []
+
+
 def _strict_loader():
-    """A YAML safe loader that refuses a key given twice in one mapping (and reads numbers
-    as YAML 1.2 does: see ``_YAML_INT``)."""
+    """A YAML safe loader that refuses a key given twice in one mapping, nesting deeper than
+    :data:`MAX_DEPTH` and aliases that expand the document by more than
+    :data:`MAX_ALIAS_NODES` values (and reads numbers as YAML 1.2 does: see ``_YAML_INT``)."""
     import re
 
     import yaml
 
     class StrictLoader(yaml.SafeLoader):
-        pass
+        _depth = 0
+
+        def compose_node(self, parent, index):
+            self._depth += 1
+            try:
+                if self._depth > MAX_DEPTH:
+                    mark = self.peek_event().start_mark
+                    raise _Refused(f"it nests deeper than {MAX_DEPTH} levels (line "
+                                   f"{mark.line + 1})")
+                return super().compose_node(parent, index)
+            finally:
+                self._depth -= 1
+
+        def compose_document(self):
+            node = super().compose_document()
+            _check_aliases(node)
+            return node
 
     numbers = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
     StrictLoader.yaml_implicit_resolvers = {
@@ -165,6 +240,8 @@ def load_config(path):
                           "configuration") from None
     try:
         data = yaml.load(text, Loader=_strict_loader())  # noqa: S506 - a SafeLoader subclass
+    except _Refused as err:
+        raise ConfigError(f"config: {path} is refused: {err}") from None
     except yaml.YAMLError as err:
         where = getattr(err, "problem_mark", None)
         line = f" at line {where.line + 1}" if where is not None else ""
@@ -201,7 +278,7 @@ def check_config(config, trust=False):
     if unknown:
         raise ConfigError(f"{key_name(unknown[0])}: unknown key; allowed: "
                           f"{', '.join(sorted(known))}")
-    check_output_paths(config, trust)
+    check_output_paths(config, trust, base)
     checked = RunConfig(**{name: section.from_config(config, base)
                            for name, section in _SECTIONS.items()})
     checked.calculator.check_trust(trust)

@@ -114,7 +114,13 @@ def parse_address(field, address):
     """
     text = str(address)
     if text.startswith("unix:") and len(text) > 5:
-        return {"unixsocket": text[5:]}
+        from rigidmd.ipi.connection import SOCKET_NAME_RULE, socket_name_ok
+
+        name = text[5:]
+        if not socket_name_ok(name):
+            raise ConfigError(f"{field}: {name!r} is not a plain socket name "
+                              f"({SOCKET_NAME_RULE})")
+        return {"unixsocket": name}
     host, _, port = text.rpartition(":")
     if ":" in host or host.startswith("["):  # the socket is IPv4 (ipi.connection)
         raise ConfigError(f"{field}: {address!r} is an IPv6 address; the i-PI socket "

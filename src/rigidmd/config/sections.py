@@ -115,8 +115,8 @@ class StructureSection:
         if self.restart is not None:
             try:
                 atoms = read(self.restart, index=-1)
-            except Exception as err:  # ASE raises many kinds for unreadable files
-                raise ConfigError(f"restart: cannot read {str(self.restart)!r} ({err})") from None
+            except Exception as err:  # noqa: BLE001 - ASE raises many kinds for unreadable files
+                raise unreadable("restart", self.restart, err, self.read_options) from None
             atoms.calc = None
             return atoms
         if isinstance(self.source, dict):
@@ -130,7 +130,7 @@ class StructureSection:
         try:
             atoms = read(self.source, **self.read_options)
         except Exception as err:  # noqa: BLE001 - any reader failure is a config mistake
-            raise ConfigError(f"structure: cannot read {str(self.source)!r} ({err})") from None
+            raise unreadable("structure", self.source, err, self.read_options) from None
         if isinstance(atoms, list):
             atoms = atoms[-1]
         return atoms
@@ -148,6 +148,30 @@ class StructureSection:
         if rule == "mol-id" and "mol-id" not in atoms.arrays and self.restart is not None:
             rule = "tags"
         return RigidBodies.resolve(atoms, rule)
+
+
+def unreadable(field_name, path, err, read_options=None):
+    """The ConfigError for a file that could not be read: the field, the file and why.
+
+    Never the reader's message: readers quote the line they could not parse, and a
+    file named by mistake (``/proc/self/environ``, a key file) would have its content
+    printed.  The reason is the system's (``Permission denied``) or the kind of failure.
+    """
+    from ase.io.formats import UnknownFileTypeError
+
+    given = (read_options or {}).get("format")
+    if isinstance(err, OSError) and err.strerror:
+        reason = err.strerror
+    elif isinstance(err, UnknownFileTypeError):
+        reason = ("ASE cannot tell its format from its name or first bytes; give "
+                  "read_options: {format: ...}")
+    elif isinstance(err, UnicodeDecodeError):
+        reason = "it is not text in the format's encoding"
+    else:
+        fmt = f"format {given!r}" if isinstance(given, str) else "the format its name suggests"
+        reason = (f"ASE's reader for {fmt} failed with {type(err).__name__}: not a structure "
+                  "in that format?")
+    return ConfigError(f"{field_name}: cannot read {str(path)!r} ({reason})")
 
 
 def _check_builder(source):
@@ -255,6 +279,12 @@ class RunSection:
             resolve_scheme(integrator, **options)
         except (ValueError, TypeError) as err:
             raise ConfigError(f"integrator: {err}") from None
+        except OSError as err:  # the scheme file: missing, a folder, unreadable
+            raise unreadable("integrator", integrator, err) from None
+        except Exception as err:  # noqa: BLE001 - YAML's errors quote the file's lines
+            where = getattr(err, "problem_mark", None)
+            line = f" at line {where.line + 1}" if where is not None else ""
+            raise ConfigError(f"integrator: {integrator!r} is not valid YAML{line}") from None
         if "timestep" not in raw:
             raise ConfigError("timestep: missing (e.g. '1 fs')")
         timestep = parse_quantity("timestep", raw["timestep"], TIME_UNITS)
@@ -346,9 +376,13 @@ class CalculatorSection:
         options = dict(mapping("calculator.options", calc.get("options", {})))
         if "commands" in calc and "pair" in calc:
             raise ConfigError("calculator.pair: give the LAMMPS commands once, as commands")
-        commands = calc.get("commands", calc.get("pair", []))
+        key = "pair" if "pair" in calc else "commands"
+        commands = calc.get(key, [])
         if isinstance(commands, str):
             commands = commands.splitlines()
+        if not isinstance(commands, list) or not all(isinstance(c, str) for c in commands):
+            raise ConfigError(f"calculator.{key}: expected LAMMPS commands (a list of strings "
+                              f"or one string), got {commands!r}")
         charges = dict(mapping("calculator.charges", calc.get("charges", {})))
         atom_types = dict(mapping("calculator.atom_types", calc.get("atom_types", {})))
         water = None
@@ -383,7 +417,7 @@ class CalculatorSection:
         elif calc["name"] == "ipi":
             raise ConfigError("calculator.address: name: ipi needs the address an engine "
                               "connects to (unix:NAME or HOST:PORT)")
-        return cls(calc["name"], options, [str(c) for c in commands], charges, atom_types,
+        return cls(calc["name"], options, list(commands), charges, atom_types,
                    water, processes, threads, address)
 
     def build(self, atoms, engine_directory="engine"):

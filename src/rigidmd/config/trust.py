@@ -24,7 +24,12 @@ wrote or has read.  What is allowed without it:
   :class:`~rigidmd.lammps.LAMMPSEngine` by their dotted paths, and a
   ``kspace_parameters`` option): only the commands that define interactions
   (:data:`SAFE_LAMMPS_COMMANDS`), without ``$`` substitution (which could
-  spell any command) and without Python pair styles.  LAMMPS's ``shell``
+  spell any command) and without Python pair styles; their arguments are
+  checked too (:func:`check_lammps_commands`): styles on
+  :data:`SAFE_LAMMPS_STYLES` only (none that reads a file, evaluates
+  expressions or runs code), ``labelmap`` only defining labels, every other
+  word a number, a type or a plain word (no path, quote, backquote or ``&``).
+  LAMMPS's ``shell``
   (runs programs), ``python`` and ``plugin`` (run code), ``include`` and
   ``jump`` (read other input files), ``if`` and ``run ... every`` (run
   commands given as strings) and the commands that write files (``dump``,
@@ -35,12 +40,14 @@ wrote or has read.  What is allowed without it:
   relative to the configuration's folder and the output files
   (``outputs.trajectory``, ``log``, ``plot``, ``mdanalysis``,
   ``checkpoint``, ``relax.trajectory``, ``relax.log``) relative to it,
-  none of them absolute or with a ``..`` part: a run writes only inside its
-  own directory.  A directory given on the command line (``--outdir``) is
-  the user's own choice and may be anywhere.
+  none of them absolute or with a ``..`` part, and none leading outside
+  through a symbolic link: a run writes only inside its own directory.  A
+  directory given on the command line (``--outdir``) is the user's own
+  choice and may be anywhere.
+* processes and threads (:func:`check_cores`): at most the machine's cores.
 * sockets listened on (:func:`check_listen_address`): ``calculator.address``
   of ``ipi`` and of ``lammps`` (an engine started elsewhere) is a Unix socket
-  (``unix:NAME``) or a loopback address (``localhost``, ``127.x.x.x``; the
+  (``unix:NAME``, a plain name) or a loopback address (``localhost``, ``127.x.x.x``; the
   socket is IPv4: IPv6 addresses are refused).  Any other host (``0.0.0.0``,
   a host name, an interface's address) opens a port other machines can
   reach, and whatever connects
@@ -53,13 +60,16 @@ limited: ASE's readers and rigidmd's scheme files run no code.
 import importlib
 import ipaddress
 import math
-from pathlib import PurePath
+import os
+import re
+from pathlib import Path, PurePath
 
 from rigidmd.config.quantities import ConfigError, parse_address
 
-__all__ = ["SAFE_LAMMPS_COMMANDS", "ALLOWED_CALCULATORS", "GivenOnCommandLine",
-           "check_lammps_commands", "check_calculator", "check_output_paths",
-           "check_listen_address", "calculator_class"]
+__all__ = ["SAFE_LAMMPS_COMMANDS", "SAFE_LAMMPS_STYLES", "safe_style", "ALLOWED_CALCULATORS",
+           "GivenOnCommandLine", "check_lammps_commands", "check_calculator",
+           "check_output_paths", "check_listen_address", "check_cores", "machine_cores",
+           "calculator_class"]
 
 #: LAMMPS commands a configuration may give without ``--trust``: interactions only.
 SAFE_LAMMPS_COMMANDS = frozenset({
@@ -69,7 +79,113 @@ SAFE_LAMMPS_COMMANDS = frozenset({
     "mass", "neighbor", "neigh_modify", "comm_modify", "newton", "labelmap",
 })
 
+#: Styles (without an accelerator suffix: ``/omp``, ``/opt``, ``/gpu``, ``/intel``, ``/kk``)
+#: a configuration may name without ``--trust``: those whose coefficients are numbers.
+#: Styles that read files (``table``, ``eam``, ``tersoff``, ``sw``, ``meam``, ``reaxff``,
+#: ``snap``, ...), evaluate expressions (``lepton``) or run code (``python``) are left off.
+SAFE_LAMMPS_STYLES = {
+    "pair": frozenset({
+        "beck", "born", "born/coul/dsf", "born/coul/long", "born/coul/msm", "born/coul/wolf",
+        "born/gauss", "buck", "buck/coul/cut", "buck/coul/long", "buck/coul/msm",
+        "buck/long/coul/long", "buck/mdf", "coul/cut", "coul/cut/global", "coul/cut/soft",
+        "coul/debye", "coul/dsf", "coul/long", "coul/long/soft", "coul/msm", "coul/wolf",
+        "coul/slater/cut", "coul/slater/long", "gauss", "gauss/cut", "harmonic/cut",
+        "hybrid", "hybrid/overlay", "hybrid/scaled", "lennard/mdf",
+        "lj/charmm/coul/charmm", "lj/charmm/coul/charmm/implicit", "lj/charmm/coul/long",
+        "lj/charmm/coul/long/soft", "lj/charmm/coul/msm", "lj/charmmfsw/coul/charmmfsh",
+        "lj/charmmfsw/coul/long", "lj/class2", "lj/class2/coul/cut",
+        "lj/class2/coul/cut/soft", "lj/class2/coul/long", "lj/class2/coul/long/soft",
+        "lj/class2/soft", "lj/cubic", "lj/cut", "lj/cut/coul/cut", "lj/cut/coul/cut/soft",
+        "lj/cut/coul/debye", "lj/cut/coul/dsf", "lj/cut/coul/long", "lj/cut/coul/long/soft",
+        "lj/cut/coul/msm", "lj/cut/coul/wolf", "lj/cut/soft", "lj/cut/tip4p/cut",
+        "lj/cut/tip4p/long", "lj/cut/tip4p/long/soft", "lj/expand", "lj/expand/coul/long",
+        "lj/gromacs", "lj/gromacs/coul/gromacs", "lj/long/coul/long", "lj/long/tip4p/long",
+        "lj/mdf", "lj/sf", "lj/smooth", "lj/smooth/linear", "lj96/cut", "mie/cut", "morse",
+        "morse/smooth/linear", "morse/soft", "nm/cut", "nm/cut/coul/cut", "nm/cut/coul/long",
+        "soft", "tip4p/cut", "tip4p/long", "tip4p/long/soft", "ufm", "yukawa", "zbl",
+        "zero"}),
+    "bond": frozenset({
+        "class2", "fene", "fene/expand", "fene/nm", "gaussian", "gromos", "harmonic",
+        "harmonic/restrain", "harmonic/shift", "harmonic/shift/cut", "hybrid", "mm3",
+        "morse", "nonlinear", "none", "quartic", "zero"}),
+    "angle": frozenset({
+        "charmm", "class2", "class2/p6", "cosine", "cosine/buck6d", "cosine/delta",
+        "cosine/periodic", "cosine/shift", "cosine/shift/exp", "cosine/squared",
+        "cosine/squared/restricted", "cross", "fourier", "fourier/simple", "gaussian",
+        "harmonic", "hybrid", "mm3", "none", "quartic", "zero"}),
+    "dihedral": frozenset({
+        "charmm", "charmmfsw", "class2", "cosine/shift/exp", "cosine/squared/restricted",
+        "fourier", "harmonic", "helix", "hybrid", "multi/harmonic", "nharmonic", "none",
+        "opls", "quadratic", "zero"}),
+    "improper": frozenset({
+        "class2", "cossq", "cvff", "distance", "distharm", "fourier", "harmonic", "hybrid",
+        "inversion/harmonic", "none", "ring", "sqdistharm", "umbrella", "zero"}),
+    "kspace": frozenset({
+        "ewald", "ewald/disp", "ewald/dipole", "msm", "msm/cg", "none", "pppm", "pppm/cg",
+        "pppm/dipole", "pppm/disp", "pppm/disp/tip4p", "pppm/stagger", "pppm/tip4p"}),
+}
+#: Accelerator suffixes LAMMPS adds to a style's name.
+ACCELERATOR_SUFFIXES = ("omp", "opt", "gpu", "intel", "kk")
+#: Keywords with a ``/`` that the allowed commands take (no file names).
+_SLASH_KEYWORDS = frozenset({
+    "molecule/intra", "molecule/inter", "table/disp", "disp/auto", "kmax/ewald",
+    "cutoff/multi", "compute/tally", "neigh/trim", "lj/coul", "mesh/disp", "order/disp",
+    "gewald/disp", "force/disp/real", "force/disp/kspace", "mix/disp"})
+#: The command whose style each ``*_style``/``*_coeff`` command names.
+_STYLE_OF = {"pair_style": "pair", "bond_style": "bond", "angle_style": "angle",
+             "dihedral_style": "dihedral", "improper_style": "improper",
+             "kspace_style": "kspace", "pair_coeff": "pair", "bond_coeff": "bond",
+             "angle_coeff": "angle", "dihedral_coeff": "dihedral",
+             "improper_coeff": "improper", "pair_modify": "pair"}
+_LABEL_KINDS = ("atom", "bond", "angle", "dihedral", "improper")
+#: A word of an allowed command: a number, a type or type range (``*``, ``1*3``) or a
+#: plain word (keyword, type label); never quotes, backquotes, ``&`` or a path.
+_NUMBER_WORD = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+_TYPE_RANGE = re.compile(r"\d*\*\d*")
+_PLAIN_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_+\-.=]*")
+
 TRUST_HINT = "rigidmd run --trust allows it (give it only for a configuration you trust)"
+
+
+def safe_style(category, word):
+    """Whether ``word`` is a ``category`` style on :data:`SAFE_LAMMPS_STYLES` (with or
+    without an accelerator suffix)."""
+    allowed = SAFE_LAMMPS_STYLES[category]
+    base, _, suffix = word.rpartition("/")
+    return word in allowed or (suffix in ACCELERATOR_SUFFIXES and base in allowed)
+
+
+def _check_words(where, line, name, words):
+    """Refuse a word of an allowed command that could name a file, a style that reads one,
+    or text LAMMPS would read in another way (ConfigError naming ``where``)."""
+    category = _STYLE_OF.get(name)
+    shown = line.strip()
+    if name == "labelmap":
+        if words[1:2] not in ([kind] for kind in (*_LABEL_KINDS, "clear")):
+            raise ConfigError(f"{where}: {shown!r}: labelmap may only define type labels "
+                              f"(labelmap atom|bond|angle|dihedral|improper N LABEL ...; "
+                              f"labelmap write writes a file); {TRUST_HINT}")
+    hybrid = name.endswith("_style") and words[1:2] != [] and words[1].startswith("hybrid")
+    for position, word in enumerate(words[1:], start=1):
+        style_word = name.endswith("_style") and position == 1
+        if not style_word and (_NUMBER_WORD.fullmatch(word) or _TYPE_RANGE.fullmatch(word)):
+            continue
+        styled = category is not None and safe_style(category, word)
+        if name.endswith("_style") and (position == 1 or hybrid or "/" in word):
+            if not styled:
+                article = "an" if category[0] in "aeiou" else "a"
+                raise ConfigError(
+                    f"{where}: {shown!r}: {word} is not {article} {category} style a configuration "
+                    f"may name without --trust (styles that read files, such as table, eam, "
+                    f"tersoff and sw, or run code, such as python, are not; see "
+                    f"rigidmd.config.trust.SAFE_LAMMPS_STYLES); {TRUST_HINT}")
+            continue
+        if styled or word in _SLASH_KEYWORDS or (
+                _PLAIN_WORD.fullmatch(word) and word.lower() != "write"):
+            continue
+        raise ConfigError(f"{where}: {shown!r}: {word!r} is not a number, a type or a plain "
+                          f"word (file names, quotes, backquotes and '&' are not read from a "
+                          f"configuration); {TRUST_HINT}")
 
 
 class GivenOnCommandLine(str):
@@ -165,8 +281,8 @@ def check_lammps_commands(where, commands):
     """
     lines = [line for command in commands for line in str(command).splitlines()]
     for line in lines:
-        words = line.split()
-        if not words or words[0].startswith("#"):
+        words = line.split("#", 1)[0].split()  # (LAMMPS: '#' starts a comment)
+        if not words:
             continue
         name = words[0]
         if "$" in line:
@@ -182,6 +298,36 @@ def check_lammps_commands(where, commands):
                                         for w in words[1:]):
             raise ConfigError(f"{where}: {line.strip()!r}: pair style python imports Python "
                               f"code; {TRUST_HINT}")
+        _check_words(where, line, name, words)
+
+
+def machine_cores():
+    """The cores this process may run on (its CPU affinity; ``os.cpu_count()`` elsewhere)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def check_cores(counts):
+    """Refuse (ConfigError naming the field) more processes or threads than the machine has.
+
+    Parameters
+    ----------
+    counts : dict
+        Field name -> whole number or None (not given).  Processes times threads per
+        process must not exceed :func:`machine_cores`: a configuration must not start a
+        thousand LAMMPS processes.
+    """
+    cores = machine_cores()
+    given = {key: value for key, value in counts.items()
+             if isinstance(value, int) and not isinstance(value, bool) and value >= 1}
+    total = math.prod(given.values())
+    if total > cores:
+        field_name = max(given, key=lambda key: given[key])
+        asked = " x ".join(f"{key.rpartition('.')[2]} {value}" for key, value in given.items())
+        raise ConfigError(f"{field_name}: {asked} needs more cores than this machine gives "
+                          f"the run ({cores}); {TRUST_HINT}")
 
 
 def check_listen_address(where, address):
@@ -263,6 +409,12 @@ def check_calculator(section, trust=False):
     name = section.name
     if section.address is not None and not trust:
         check_listen_address("calculator.address", section.address)
+    if not trust:
+        options = section.options if isinstance(section.options, dict) else {}
+        check_cores({"calculator.processes": section.processes,
+                     "calculator.threads": section.threads,
+                     "calculator.options.processes": options.get("processes"),
+                     "calculator.options.threads": options.get("threads")})
     if name in ("tip3p", "tip4p", "lammps", "ipi"):
         if trust:
             return None
@@ -343,7 +495,22 @@ def _inside(field_name, value, trust, optional=True):
                           f"'..'); {TRUST_HINT}")
 
 
-def check_output_paths(raw, trust=False):
+#: Files a run writes in its directory when the configuration names none.
+DEFAULT_FILES = {"outputs.checkpoint": "checkpoint.npz", "relax.trajectory": "relax.traj",
+                 "relax.log": "relax.log"}
+
+
+def _resolved_inside(field_name, value, path, root, may_be_root=False):
+    """Refuse ``path`` if, with its symbolic links followed, it is not inside ``root``
+    (or ``root`` itself, for a folder: ``may_be_root``)."""
+    resolved = Path(path).resolve()
+    if not (may_be_root and resolved == root) and root not in resolved.parents:
+        raise ConfigError(f"{field_name}: {str(value)!r} leads outside the run's directory "
+                          f"through a symbolic link (to {str(resolved)!r}); a configuration "
+                          f"writes only inside it; {TRUST_HINT}")
+
+
+def check_output_paths(raw, trust=False, base=None):
     """Refuse output paths outside the run's directory (see the module's docstring).
 
     Parameters
@@ -352,6 +519,10 @@ def check_output_paths(raw, trust=False):
         The configuration as read (``outputs`` and ``relax`` mappings).
     trust : bool
         ``--trust``: paths anywhere.
+    base : path-like, optional
+        The configuration's folder.  Given, the rule also holds for the paths with their
+        symbolic links followed: ``outputs.directory`` inside ``base`` (unless given on
+        the command line), each output file (named or default) inside the directory.
     """
     outputs = raw.get("outputs")
     if isinstance(outputs, dict) and "directory" in outputs:
@@ -363,3 +534,24 @@ def check_output_paths(raw, trust=False):
                 if key in values:
                     _inside(f"{section}.{key}", values[key], trust,
                             optional=(section, key) != ("outputs", "checkpoint"))
+    if trust or base is None:
+        return
+    outputs = outputs if isinstance(outputs, dict) else {}
+    given = outputs.get("directory", ".")
+    directory = Path(base) / given
+    if not isinstance(given, GivenOnCommandLine):
+        _resolved_inside("outputs.directory", given, directory, Path(base).resolve(),
+                         may_be_root=True)
+    root = directory.resolve()
+    files = dict(DEFAULT_FILES)  # (rigidmd relax writes relax's without a relax: section)
+    files["outputs.directory"] = ".rigidmd.lock"  # the run's lock (rigidmd.run.outputs)
+    calc = raw.get("calculator")
+    if isinstance(calc, dict) and calc.get("address") is not None:
+        files["calculator.address"] = "engine"  # the input of an engine started elsewhere
+    for section, keys in OUTPUT_FILES.items():
+        values = raw.get(section)
+        if isinstance(values, dict):
+            files.update({f"{section}.{key}": values[key] for key in keys
+                          if isinstance(values.get(key), str) and values[key]})
+    for field_name, value in files.items():
+        _resolved_inside(field_name, value, directory / value, root)

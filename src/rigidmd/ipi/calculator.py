@@ -19,6 +19,7 @@ from rigidmd.ipi.connection import (
     MSGLEN,
     EngineError,
     accept,
+    check_socket_name,
     close_sockets,
     open_server,
     process_folder,
@@ -81,7 +82,7 @@ class IPICalculator(Calculator):
             raise ValueError(f"IPICalculator: timeout must be positive, got {timeout!r}")
         if port is None and unixsocket is None:
             unixsocket = f"rigidmd-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-        self.unixsocket = unixsocket
+        self.unixsocket = check_socket_name(unixsocket)
         self.port = None if port is None else int(port)
         self.host = host
         self.timeout = float(timeout)

@@ -3,8 +3,10 @@
 A Unix socket ``/tmp/ipi_<name>`` or a TCP port is opened
 (:func:`open_server`); a stale socket file (its process gone) is replaced, a
 live one refused, and only the file this process bound is removed at the end
-(:func:`unlink_if_ours`).  An engine that connects through a Unix socket is
-named by its process (Linux's ``SO_PEERCRED``, :func:`accept`).  While an
+(:func:`unlink_if_ours`).  A Unix socket is bound with mode 0600.  An engine that
+connects is named by its process (Linux's ``SO_PEERCRED`` for a Unix socket,
+``/proc/net/tcp`` for loopback TCP: :func:`accept`), and another user's process is
+refused.  While an
 engine is awaited, the checks of :func:`add_wait_check` run every
 :data:`WAIT_SLICE` seconds (:func:`wait_readable`).
 """
@@ -13,14 +15,18 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import select
 import socket
+import stat
 import struct
 import time
 
-__all__ = ["MSGLEN", "WAIT_SLICE", "EngineError", "accept", "add_wait_check", "close_sockets",
-           "open_server", "process_folder", "remove_wait_check", "unlink_if_ours",
-           "wait_readable", "word"]
+from rigidmd.ipi.processes import tcp_peer
+
+__all__ = ["MSGLEN", "SOCKET_NAME_RULE", "WAIT_SLICE", "EngineError", "accept", "add_wait_check",
+           "check_socket_name", "close_sockets", "open_server", "process_folder",
+           "remove_wait_check", "socket_name_ok", "unlink_if_ours", "wait_readable", "word"]
 
 #: Length of an i-PI header (bytes).
 MSGLEN = 12
@@ -49,6 +55,29 @@ def remove_wait_check(check):
 
 class EngineError(RuntimeError):
     """An i-PI engine died, hung or broke the protocol (the message says which and where)."""
+
+
+#: What a Unix socket's name may be (said when one is refused).
+SOCKET_NAME_RULE = ("letters, digits, '.', '_' and '-', not starting with '.', at most 80; the "
+                    "socket is /tmp/ipi_NAME, so '/' and '..' would put it elsewhere")
+
+
+def socket_name_ok(name):
+    """Whether ``name`` is a plain Unix socket name: ``/tmp/ipi_NAME`` stays in ``/tmp``.
+
+    Letters, digits, ``.``, ``_`` and ``-``, at most 80, not starting with ``.``: no
+    ``/`` or ``..`` that would put the socket (and its removal) elsewhere.
+    """
+    return isinstance(name, str) and re.fullmatch(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,79}",
+                                                  name) is not None
+
+
+def check_socket_name(name):
+    """``name`` (None: TCP) if it is a plain socket name, else ValueError saying the rule."""
+    if name is not None and not socket_name_ok(name):
+        raise ValueError(f"IPICalculator: unixsocket {name!r} is not a plain name "
+                         f"({SOCKET_NAME_RULE})")
+    return name
 
 
 def word(text):
@@ -135,23 +164,37 @@ def accept(server, socketfile):
     -------
     conn : socket.socket
     peer : str
-        The engine in words (its process, program and working folder for a Unix
-        socket, when the system says, else its address).
+        The engine in words (its process, program and working folder when the system
+        says, else its address).
     peer_pid : int or None
-        Its process (Unix socket, Linux).
+        Its process (Linux: ``SO_PEERCRED`` for a Unix socket, ``/proc/net/tcp`` for
+        loopback TCP).
+
+    Raises
+    ------
+    EngineError
+        The process that connected is another user's (it is disconnected): on loopback
+        any local user can connect first and answer the forces.
     """
     conn, address = server.accept()
     if conn.family != socket.AF_UNIX:
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        peer, pid = f"i-PI engine at {address[0]}:{address[1]}", None
+        on = f"at {address[0]}:{address[1]}"
+        uid, pid = tcp_peer(conn)
     else:
-        pid = _peer_pid(conn)
-        if pid is None:
-            peer = f"i-PI engine on {socketfile}"
-        else:
-            folder = process_folder(pid)
-            where = "" if folder is None else f", in {folder}"
-            peer = f"i-PI engine process {pid} ({_command_name(pid)}{where}) on {socketfile}"
+        on = f"on {socketfile}"
+        uid, pid = _peer_credentials(conn)
+    if pid is None:
+        peer = f"i-PI engine {on}"
+    else:
+        folder = process_folder(pid)
+        where = "" if folder is None else f", in {folder}"
+        peer = f"i-PI engine process {pid} ({_command_name(pid)}{where}) {on}"
+    if uid is not None and uid != os.getuid():
+        close_sockets(conn, None, say_exit=False)
+        shown = f"process {pid}" if pid is not None else "a process"
+        raise EngineError(f"IPICalculator: {shown} of another user (uid {uid}) connected "
+                          f"{on} first; its forces are not used (refused, the run stops)")
     conn.setblocking(True)
     return conn, peer, pid
 
@@ -231,32 +274,61 @@ def _bind_unix(server, path):
     removed at the end (never another process's).
     """
     try:
-        server.bind(path)
+        _bind_private(server, path)
     except OSError as err:
         if err.errno != errno.EADDRINUSE:
             raise EngineError(f"IPICalculator: cannot create the socket {path} "
                               f"({err.strerror or err})") from None
+        try:
+            info = os.lstat(path)
+        except OSError:
+            info = None
+        if info is not None and not stat.S_ISSOCK(info.st_mode):
+            raise EngineError(f"IPICalculator: {path} exists and is not a socket (left "
+                              "alone); give another unixsocket name") from None
+        if info is not None and info.st_uid != os.getuid():
+            raise EngineError(f"IPICalculator: the socket {path} belongs to another user "
+                              f"(uid {info.st_uid}; left alone); give another unixsocket "
+                              "name") from None
         if _served(path):
             raise EngineError(f"IPICalculator: the socket {path} is in use by another live "
                               "process (another run's engine server?); give another "
                               "unixsocket name") from None
-        os.unlink(path)  # left by a process that is gone
-        server.bind(path)
+        try:
+            os.unlink(path)  # our own socket, left by a process that is gone
+            _bind_private(server, path)
+        except OSError as err:
+            raise EngineError(f"IPICalculator: cannot replace the stale socket {path} "
+                              f"({err.strerror or err})") from None
     info = os.stat(path)
     return info.st_dev, info.st_ino
 
 
-def _peer_pid(conn):
-    """The process at the other end of a Unix socket (Linux's SO_PEERCRED), or None."""
+def _bind_private(server, path):
+    """Bind the Unix socket ``server`` to ``path`` as mode 0600: only this user connects.
+
+    (Linux checks write permission on the socket file at ``connect``; the mode is set by
+    the umask at ``bind``, so the umask is narrowed around it.)
+    """
+    old = os.umask(0o177)
+    try:
+        server.bind(path)
+    finally:
+        os.umask(old)
+
+
+def _peer_credentials(conn):
+    """The owner and process at the other end of a Unix socket (Linux's SO_PEERCRED):
+    ``(uid, pid)``, each None when unknown."""
     option = getattr(socket, "SO_PEERCRED", None)
     if option is None:
-        return None
+        return None, None
     try:
-        pid, _, _ = struct.unpack("3i", conn.getsockopt(socket.SOL_SOCKET, option,
-                                                        struct.calcsize("3i")))
+        pid, uid, _ = struct.unpack("3i", conn.getsockopt(socket.SOL_SOCKET, option,
+                                                          struct.calcsize("3i")))
     except OSError:
-        return None
-    return pid if pid > 0 else None
+        return None, None
+    return (uid if pid > 0 else None), (pid if pid > 0 else None)
 
 
 def process_folder(pid):

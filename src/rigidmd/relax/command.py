@@ -60,7 +60,7 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     if unknown:
         raise ConfigError(f"{unknown[0]}: unknown key; allowed: "
                           f"{', '.join(sorted(known_keys()))}")
-    check_output_paths(raw, trust)
+    check_output_paths(raw, trust, base)
     structure = StructureSection.from_config(raw, base)
     calculator = CalculatorSection.from_config(raw, base)
     calculator.check_trust(trust)
