@@ -182,7 +182,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         mover = check_composition(couplings, fixcom)
         middle = tuple(part for part in couplings if part.acts_in_middle)
         scheme = scheme_with_middle(scheme, integrator, [part.kind for part in middle])
-        model, (split, respa) = geometry.model, respa_for(atoms.calc, scheme, backend)
+        model, (split, respa) = geometry.model, respa_for(atoms.calc, scheme, backend,
+                                                                   couplings)
         for part in couplings:
             part.check(atoms, model, self._dt)
         # -- from here on the atoms and files change --

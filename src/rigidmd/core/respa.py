@@ -31,8 +31,6 @@ roundoff.
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from rigidmd.core import operators as ops
 from rigidmd.core.forces import ForceEvaluator
 from rigidmd.core.record import StepRecord
@@ -44,11 +42,15 @@ __all__ = ["SplitRecord", "SplitForceEvaluator", "RespaStep", "respa_for", "reco
            "evaluator_for", "respa_step"]
 
 
-def respa_for(calc, scheme: Scheme, backend: str) -> tuple:
+def respa_for(calc, scheme: Scheme, backend: str, couplings=()) -> tuple:
     """``(split, outer step)`` for a dynamics whose atoms carry ``calc``; ``(None, None)``
-    when ``calc`` is no :class:`MultipleTimeStep`.  Changes nothing (see :func:`respa_step`)."""
+    when ``calc`` is no :class:`MultipleTimeStep`.  Changes nothing; refuses in one line
+    a scheme it cannot run (:func:`respa_step`) or a level without the stress a part needs."""
     if not isinstance(calc, MultipleTimeStep):
         return None, None
+    for part in couplings:
+        if part.needs_stress:
+            calc.check_level_properties("stress", f"the {part.kind} barostat")
     return calc, respa_step(scheme, calc, backend == "numba")
 
 
@@ -144,8 +146,8 @@ class SplitForceEvaluator(ForceEvaluator):
         """The slow level at the atoms the fast level placed last; then the sums."""
         fast, slow = self.fast_record, self.slow_record
         slow.cell_changed()  # the fast call may have moved the cell
+        slow.r = fast.r  # the placement the slow call's molecular virial reads
         forces = self.slow.calculator_forces(state)
-        slow.r = fast.r
         slow.F, slow.tau = ops.reduce_forces(forces, fast.r, self.model)
         slow.f = forces[self.model.free]
         self.combine()
@@ -170,6 +172,7 @@ class _InnerContext(StepContext):
     note of its cell move goes to the dynamics' record, where the barostat reads it."""
 
     outer: StepRecord = None
+    outer_middle: bool = False  # a part acts in the middle of the outer step
 
     def cell_move(self, h):
         A, B, S, note = self.cell_motion.drift_matrices(self.view, h)
@@ -232,7 +235,8 @@ class RespaStep:
         if self._contexts is None:
             ev = ctx.evaluator
             common = dict(positions=ctx.positions, momenta=ctx.momenta, write_momenta=False,
-                          cell_motion=ctx.cell_motion, view=ctx.view, outer=ctx.record)
+                          cell_motion=ctx.cell_motion, view=ctx.view, outer=ctx.record,
+                          outer_middle=bool(ctx.middle))
             plain = _InnerContext(ctx.state, ctx.model, ev.fast_record, ev.fast, **common)
             middle = _InnerContext(ctx.state, ctx.model, ev.fast_record, ev.fast,
                                    middle=tuple(_Stretched(part, self.split.substeps)
@@ -246,7 +250,8 @@ class RespaStep:
         return plain, middle
 
     def _inner_step(self, ctx, dt, with_middle: bool) -> None:
-        scheme = self.baoab if with_middle else self.scheme
+        # NO_SQUISH inner steps around a middle part's step; else the dynamics' own scheme.
+        scheme = self.baoab if with_middle else self.plain if ctx.outer_middle else self.scheme
         if self.fused:
             (fused_baoab if scheme is self.baoab or scheme == self.baoab
              else fused_no_squish)(ctx, dt)

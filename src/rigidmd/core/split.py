@@ -94,6 +94,12 @@ class MultipleTimeStep(Calculator):
         k = check_substeps(substeps)
         super().__init__()
         self.fast, self.slow, self._substeps = fast, slow, k
+        # What both levels compute (a property one lacks is no property of the sum).
+        own = [getattr(calc, "implemented_properties", _SUMMED) for calc in (fast, slow)]
+        self.implemented_properties = [
+            name for name in _SUMMED
+            if all(name in names or (name == "free_energy" and "energy" in names)
+                   for names in own)]
 
     @property
     def substeps(self) -> int:
@@ -132,6 +138,16 @@ class MultipleTimeStep(Calculator):
         if "energy" in sums and "free_energy" not in sums:
             sums["free_energy"] = sums["energy"]
         self.results.update(sums)
+
+    def check_level_properties(self, name: str, needed_by: str) -> None:
+        """Refuse in one line a level that lacks ``name`` (e.g. ``"stress"``), naming it."""
+        for level, calc in self.levels:
+            implemented = getattr(calc, "implemented_properties", _SUMMED)
+            if name not in implemented:
+                raise ValueError(
+                    f"MultipleTimeStep: the {level} calculator {type(calc).__name__} provides "
+                    f"no {name} (it implements {', '.join(implemented)}), which {needed_by} "
+                    "needs")
 
     def todict(self) -> dict:
         return {"fast": type(self.fast).__name__, "slow": type(self.slow).__name__,
