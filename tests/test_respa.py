@@ -348,3 +348,97 @@ def test_a_checkpoint_without_levels_evaluates_them_before_the_next_kick(tmp_pat
     reference.run(6)
     np.testing.assert_allclose(resumed.atoms.positions, reference.atoms.positions, rtol=0,
                                atol=1e-12)
+
+
+# ------------------------------------------------------------------ configuration and CLI
+SPLIT_CONFIG = """
+structure: {builtin: water_cluster, n_molecules: 8, seed: 4}
+calculator:
+  fast: {name: tip3p, options: {rc: 7.0, width: 3.0}}
+  slow: {name: tests_split.SlowTIP3P}
+  substeps: 4
+velocities: {temperature: 250 K, seed: 1}
+thermostat: {kind: bussi, temperature: 250 K, taut: 50 fs, seed: 2}
+timestep: 4 fs
+steps: 20
+outputs: {directory: out, log: md.log, interval: 5, checkpoint: state.npz,
+          checkpoint_interval: 10}
+"""
+
+
+def run_cli(path, monkeypatch, capsys, *args):
+    from rigidmd.run import cli
+
+    monkeypatch.chdir(path)
+    status = cli.main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
+@pytest.fixture
+def split_project(tmp_path, monkeypatch):
+    (tmp_path / "tests_split.py").write_text(
+        "from ase.calculators.mixing import LinearCombinationCalculator\n"
+        "from ase.calculators.tip3p import TIP3P\n\n\n"
+        "class SlowTIP3P(LinearCombinationCalculator):\n"
+        "    def __init__(self):\n"
+        "        super().__init__([TIP3P(rc=40.0), TIP3P(rc=7.0, width=3.0)], [1.0, -1.0])\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    (tmp_path / "run.yaml").write_text(SPLIT_CONFIG)
+    return tmp_path
+
+
+def test_a_configured_split_runs_and_resumes_exactly(split_project, monkeypatch, capsys):
+    from rigidmd.config import check_config, load_config
+
+    config = check_config(load_config(split_project / "run.yaml"), trust=True)
+    assert config.calculator.substeps == 4
+    status, _, err = run_cli(split_project, monkeypatch, capsys, "run", "run.yaml", "--trust")
+    assert status == 0, err
+    full = (split_project / "out" / "md.log").read_text()
+    first = load_checkpoint(split_project / "out" / "state.npz", TIP3P())
+    assert first.nsteps == 20 and first.atoms.calc is not None
+    # Stop at 10 steps, then resume: the log is the same bytes.
+    (split_project / "run.yaml").write_text(SPLIT_CONFIG.replace("steps: 20", "steps: 10"))
+    (split_project / "out").rename(split_project / "whole")
+    status, _, err = run_cli(split_project, monkeypatch, capsys, "run", "run.yaml", "--trust")
+    assert status == 0, err
+    (split_project / "run.yaml").write_text(SPLIT_CONFIG)
+    status, _, err = run_cli(split_project, monkeypatch, capsys, "run", "run.yaml", "--trust",
+                             "--resume")
+    assert status == 0, err
+    assert (split_project / "out" / "md.log").read_text() == full
+
+
+@pytest.mark.parametrize("change, field", [
+    ("  substeps: 0\n", "calculator.substeps: expected a whole number >= 1"),
+    ("  substeps: 2.5\n", "calculator.substeps: expected a whole number >= 1"),
+    ("", "calculator.substeps: missing"),
+    ("  substeps: 2\n  name: tip3p\n", "calculator.name: unknown key"),
+])
+def test_a_bad_split_section_is_one_line(split_project, monkeypatch, capsys, change, field):
+    text = SPLIT_CONFIG.replace("  substeps: 4\n", change)
+    (split_project / "bad.yaml").write_text(text)
+    status, _, err = run_cli(split_project, monkeypatch, capsys, "run", "bad.yaml", "--trust")
+    assert status == 2
+    assert err.startswith(f"rigidmd: error: {field}"), err
+    assert err.count("\n") == 1
+    assert not (split_project / "out").exists()
+
+
+def test_a_bad_level_is_named_under_its_level(split_project, monkeypatch, capsys):
+    text = SPLIT_CONFIG.replace("{name: tests_split.SlowTIP3P}", "{options: {rc: 3}}")
+    (split_project / "bad.yaml").write_text(text)
+    status, _, err = run_cli(split_project, monkeypatch, capsys, "run", "bad.yaml", "--trust")
+    assert status == 2 and err.startswith("rigidmd: error: calculator.slow.name: missing"), err
+    status, _, err = run_cli(split_project, monkeypatch, capsys, "run", "run.yaml")
+    assert status == 2 and err.startswith("rigidmd: error: calculator.slow.name:"), err
+
+
+def test_export_lammps_refuses_a_split_in_one_line(split_project, monkeypatch, capsys):
+    status, _, err = run_cli(split_project, monkeypatch, capsys, "export-lammps", "run.yaml",
+                             "deck", "--trust")
+    assert status == 2
+    assert err.startswith("rigidmd: error: calculator: export-lammps cannot write a split"), err
+    assert err.count("\n") == 1
+    assert not (split_project / "deck").exists()

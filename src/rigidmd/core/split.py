@@ -149,6 +149,30 @@ class MultipleTimeStep(Calculator):
                     f"no {name} (it implements {', '.join(implemented)}), which {needed_by} "
                     "needs")
 
+    def close(self) -> None:
+        """Close each level that has a ``close`` (an engine in its own process), both
+        always: the slow level is closed even when the fast level's close fails."""
+        try:
+            close = getattr(self.fast, "close", None)
+            if callable(close):
+                close()
+        finally:
+            close = getattr(self.slow, "close", None)
+            if callable(close):
+                close()
+
+    def get_checkpoint_state(self) -> dict:
+        """Each level's ``get_checkpoint_state()`` (None for a level without one)."""
+        return {level: (calc.get_checkpoint_state()
+                        if hasattr(calc, "get_checkpoint_state") else None)
+                for level, calc in self.levels}
+
+    def set_checkpoint_state(self, saved: dict) -> None:
+        """Give each level what its ``get_checkpoint_state`` gave."""
+        for level, calc in self.levels:
+            if saved.get(level) is not None and hasattr(calc, "set_checkpoint_state"):
+                calc.set_checkpoint_state(saved[level])
+
     def todict(self) -> dict:
         return {"fast": type(self.fast).__name__, "slow": type(self.slow).__name__,
                 "substeps": self._substeps}

@@ -96,6 +96,10 @@ def _export(config, directory, stream=sys.stdout):
         relax_for_export(config, atoms, bodies, directory, stream)
     atoms.positions = bodies.whole_positions(atoms)
     calc = config.calculator
+    if calc.name == "multiple_time_step":
+        raise ConfigError("calculator: export-lammps cannot write a split (fast, slow, substeps): "
+                          "LAMMPS's run_style respa takes fix rigid in NVE only and splits one "
+                          "LAMMPS model by its own levels, not two calculators; export one model")
     if calc.name == "tip3p":
         rc = calc.options.get("rc", 5.0)
         width = calc.options.get("width", 1.0)
