@@ -4,11 +4,16 @@ Each level is a calculator section of its own (any calculator a configuration
 supports: ``tip3p``, ``tip4p``, ``lammps``, ``ipi`` or a dotted class path); the
 configured run's calculator is :class:`rigidmd.MultipleTimeStep` of the two, which
 every dynamics integrates by r-RESPA with ``substeps`` inner steps per ``timestep``.
+``full: {...}`` in place of ``slow`` makes the slow level the full model less the fast
+one (ASE's ``LinearCombinationCalculator``; the fast level's call at the end of each
+outer step is its cache, so the difference costs one call of the full model).
 :func:`calculator_section` reads either form.
 """
 
 from dataclasses import asdict, dataclass
 from pathlib import Path
+
+from ase.calculators.mixing import LinearCombinationCalculator
 
 from rigidmd.config.quantities import ConfigError, mapping
 from rigidmd.config.sections import CalculatorSection
@@ -17,7 +22,7 @@ from rigidmd.core.split import MultipleTimeStep
 __all__ = ["SplitCalculatorSection", "calculator_section"]
 
 #: The keys that make a ``calculator:`` section a force split.
-SPLIT_FIELDS = ("fast", "slow", "substeps")
+SPLIT_FIELDS = ("fast", "slow", "full", "substeps")
 
 
 def _renamed(err: ConfigError, level: str) -> ConfigError:
@@ -35,8 +40,11 @@ class SplitCalculatorSection:
     Attributes
     ----------
     fast, slow : CalculatorSection
+        ``slow`` is the full model when ``difference`` is set.
     substeps : int
         Inner (fast) steps per ``timestep``.
+    difference : bool
+        ``full`` was given: the slow level is ``slow`` less ``fast``.
     """
 
     KEYS = ("calculator",)
@@ -44,6 +52,7 @@ class SplitCalculatorSection:
     fast: CalculatorSection
     slow: CalculatorSection
     substeps: int
+    difference: bool = False
 
     @property
     def name(self) -> str:
@@ -52,12 +61,16 @@ class SplitCalculatorSection:
 
     @property
     def levels(self) -> tuple:
-        return (("fast", self.fast), ("slow", self.slow))
+        return (("fast", self.fast), ("full" if self.difference else "slow", self.slow))
 
     @classmethod
     def from_config(cls, raw, base) -> "SplitCalculatorSection":
         calc = mapping("calculator", raw["calculator"], SPLIT_FIELDS)
-        for key in SPLIT_FIELDS:
+        difference = "full" in calc
+        if difference and "slow" in calc:
+            raise ConfigError("calculator.full: the slow level is full less fast; give slow or "
+                              "full, not both")
+        for key in ("fast", "full" if difference else "slow", "substeps"):
             if key not in calc:
                 what = ("inner steps per timestep, e.g. 4" if key == "substeps"
                         else "a calculator section, e.g. {name: tip3p}")
@@ -67,7 +80,7 @@ class SplitCalculatorSection:
             raise ConfigError(f"calculator.substeps: expected a whole number >= 1 (inner steps "
                               f"per timestep), got {substeps!r}")
         levels = {}
-        for level in ("fast", "slow"):
+        for level in ("fast", "full" if difference else "slow"):
             spec = calc[level]
             if isinstance(spec, dict) and set(SPLIT_FIELDS) & set(spec):
                 raise ConfigError(f"calculator.{level}: a level is one calculator, not another "
@@ -76,7 +89,8 @@ class SplitCalculatorSection:
                 levels[level] = CalculatorSection.from_config({"calculator": spec}, base)
             except ConfigError as err:
                 raise _renamed(err, level) from None
-        return cls(levels["fast"], levels["slow"], substeps)
+        return cls(levels["fast"], levels["full" if difference else "slow"], substeps,
+                   difference)
 
     def check_trust(self, trust=False) -> None:
         """Each level's :meth:`CalculatorSection.check_trust`, its errors naming the level."""
@@ -95,11 +109,14 @@ class SplitCalculatorSection:
                 built[level] = section.build(atoms, Path(engine_directory) / level)
             except ConfigError as err:
                 raise _renamed(err, level) from None
-        return MultipleTimeStep(built["fast"], built["slow"], substeps=self.substeps)
+        fast = built["fast"]
+        slow = (LinearCombinationCalculator([built["full"], fast], [1.0, -1.0])
+                if self.difference else built["slow"])
+        return MultipleTimeStep(fast, slow, substeps=self.substeps)
 
     def fingerprint_fields(self, leave_out) -> dict:
         """What the levels compute (not where they run: ``leave_out``), for ``--resume``."""
-        return {"substeps": self.substeps,
+        return {"substeps": self.substeps, "difference": self.difference,
                 **{level: {key: value for key, value in asdict(section).items()
                            if key not in leave_out} for level, section in self.levels}}
 
