@@ -460,3 +460,52 @@ def test_export_lammps_refuses_a_split_in_one_line(split_project, monkeypatch, c
     assert err.startswith("rigidmd: error: calculator: export-lammps cannot write a split"), err
     assert err.count("\n") == 1
     assert not (split_project / "deck").exists()
+
+
+class FailingOnce(Calculator):
+    """A calculator that raises at its ``when``-th call, once."""
+
+    implemented_properties = ["energy", "forces"]
+
+    def __init__(self, inner, when):
+        super().__init__()
+        self.inner, self.when, self.calls = inner, when, 0
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        self.calls += 1
+        if self.calls == self.when:
+            raise RuntimeError("engine lost")
+        self.inner.calculate(self.atoms, properties, system_changes)
+        self.results = dict(self.inner.results)
+
+
+@pytest.mark.parametrize("level", ["fast", "slow"])
+def test_a_failed_outer_step_is_undone_and_the_run_continues_as_if_it_had_not_failed(level):
+    a, b = waters(4), waters(4)
+    fast, slow = TIP3P(rc=7.0, width=3.0), TIP3P(rc=40)
+    when = 6 if level == "fast" else 3  # inside the second outer step
+    if level == "fast":
+        fast = FailingOnce(fast, when)
+    else:
+        slow = FailingOnce(slow, when)
+    a.calc = MultipleTimeStep(fast, slow, substeps=3)
+    b.calc = MultipleTimeStep(TIP3P(rc=7.0, width=3.0), TIP3P(rc=40), substeps=3)
+    dyn = RigidVerlet(a, 2 * units.fs)
+    dyn.run(1)
+    steps = dyn.irun(3)
+    next(steps)  # a run's start evaluates both levels afresh
+    records = dyn.record, dyn.record.fast, dyn.record.slow
+    before = [a.positions.copy()] + [r.F.copy() for r in records] + [r.tau.copy()
+                                                                      for r in records]
+    with pytest.raises(RuntimeError, match="engine lost"):
+        next(steps)
+    after = [a.positions] + [r.F for r in records] + [r.tau for r in records]
+    for was, now in zip(before, after, strict=True):
+        np.testing.assert_array_equal(now, was)
+    dyn.run(3)
+    reference = RigidVerlet(b, 2 * units.fs)
+    reference.run(1)
+    reference.run(3)
+    np.testing.assert_array_equal(a.positions, b.positions)
+    np.testing.assert_array_equal(a.get_momenta(), b.get_momenta())
