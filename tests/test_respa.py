@@ -90,6 +90,21 @@ def test_the_split_caches_like_an_ase_calculator():
     assert fast.calls == calls[0] + 1 and slow.calls == calls[1] + 1
 
 
+def test_an_ase_optimizer_sees_the_full_model():
+    """rigidmd.relax (RigidLBFGS on ASE's optimizer interface) on the split relaxes as on
+    the sum it stands for (measured: identical energies and positions; the bounds allow the
+    roundoff of a sum of two levels)."""
+    from rigidmd.relax import relax
+
+    a, b = waters(4), waters(4)
+    a.calc = water_split(3)
+    b.calc = TIP3P(rc=40)
+    relax(a, fmax=0.05)
+    relax(b, fmax=0.05)
+    assert a.get_potential_energy() == pytest.approx(b.get_potential_energy(), abs=1e-12)
+    np.testing.assert_allclose(a.positions, b.positions, rtol=0, atol=1e-10)
+
+
 def test_a_dynamics_calls_the_slow_level_once_and_the_fast_k_times_per_outer_step():
     atoms = waters(4)
     fast, slow = Counting(TIP3P(rc=7.0, width=3.0)), Counting(TIP3P(rc=40))
