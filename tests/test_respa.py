@@ -552,3 +552,16 @@ def test_the_validation_script_runs_quick():
     bench = benchmark_module("respa_standin")
     atoms = bench.start()
     assert bench.fluctuation(atoms, 4, 2.0, 50.0) < bench.fluctuation(atoms, 1, 1.0, 50.0)
+
+
+def test_a_replaced_calculator_is_refused_in_one_line_and_nothing_moves():
+    atoms = waters(4)
+    atoms.calc = water_split(2)
+    dyn = RigidVerlet(atoms, 2 * units.fs)
+    dyn.run(2)
+    atoms.calc = TIP3P(rc=40)
+    before = atoms.positions.copy()
+    with pytest.raises(ValueError, match="calculator was replaced") as err:
+        dyn.run(1)
+    assert "\n" not in str(err.value)
+    np.testing.assert_array_equal(atoms.positions, before)
