@@ -230,6 +230,11 @@ def configuration_reference():
         f"its `name` is one of {', '.join(f'`{m}`' for m in WATER_MODELS)}.  Without "
         "`--trust`, `commands` may hold only these LAMMPS commands: "
         f"{', '.join(f'`{c}`' for c in sorted(SAFE_LAMMPS_COMMANDS))}.\n\n")
+    add("A force split for multiple time steps (the guide's Multiple time steps page) "
+        "gives `fast` (a calculator section as above), `slow` (another) or `full` (the slow "
+        "level is `full` less `fast`), and `substeps` (inner steps per `timestep`, a whole "
+        "number >= 1): `calculator: {fast: {name: tip3p, options: {rc: 7.0, width: 3.0}}, "
+        "full: {name: tip3p, options: {rc: 40.0}}, substeps: 4}`.\n\n")
 
     add("## `thermostat` and `barostat`\n\nEach names a `kind`; the other fields are the "
         "kind's parameters.  A barostat takes the thermostat's temperature unless it "

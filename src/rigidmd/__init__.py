@@ -9,6 +9,7 @@ from rigidmd.core.bodies import RigidBodies
 from rigidmd.core.dof import RigidBodyDOF, kinetic_energy, temperature
 from rigidmd.core.dynamics import NonFiniteForceError, RigidDynamics, RigidVerlet
 from rigidmd.core.model import BodyGeometry, BodyModel
+from rigidmd.core.split import MultipleTimeStep
 from rigidmd.core.velocities import (
     rigid_maxwell_boltzmann,
     rigid_stationary,
@@ -31,6 +32,7 @@ __all__ = [
     "RigidNPT",
     "RigidCRescale",
     "RigidMCBarostat",
+    "MultipleTimeStep",
     "RigidBodies",
     "BodyModel",
     "BodyGeometry",

@@ -67,6 +67,7 @@ from rigidmd.config.sections import (
     RunSection,
     StructureSection,
 )
+from rigidmd.config.splitsection import CalculatorChoice, SplitCalculatorSection
 from rigidmd.config.trust import check_output_paths
 
 __all__ = ["RunConfig", "load_config", "check_config", "known_keys", "DEMO_CONFIG"]
@@ -82,7 +83,7 @@ DEMO_CONFIG = {
                 "interval": 20, "plot": "demo-energy.png", "checkpoint": "demo-checkpoint.npz"},
 }
 
-_SECTIONS = {"structure": StructureSection, "run": RunSection, "calculator": CalculatorSection,
+_SECTIONS = {"structure": StructureSection, "run": RunSection, "calculator": CalculatorChoice,
              "coupling": CouplingSection, "outputs": OutputsSection, "relax": RelaxSection,
              "diagnostics": DiagnosticsSection}
 
@@ -93,7 +94,7 @@ class RunConfig:
 
     structure: StructureSection
     run: RunSection
-    calculator: CalculatorSection
+    calculator: CalculatorSection | SplitCalculatorSection
     coupling: CouplingSection
     outputs: OutputsSection
     relax: RelaxSection | None = None

@@ -172,6 +172,11 @@ def save_checkpoint(dyn, path, extra=None):
     arrays.update({f"state_{name}": value for name, value in saved["state"].items()})
     if record["virial"] is not None:
         arrays["virial"] = record["virial"]
+    levels = record.get("levels") or {}  # a force split's fast and slow records
+    for level, kept in levels.items():
+        arrays.update({f"{level}_{key}": kept[key] for key in ("F", "tau", "f", "r")})
+        if kept["virial"] is not None:
+            arrays[f"{level}_virial"] = kept["virial"]
     # Other per-atom arrays (a LAMMPS data file's mol-id and type, ...), for calculators.
     for name, values in atoms.arrays.items():
         if name not in _ATOMS_ARRAYS and values.dtype.kind in "biuf":
@@ -188,6 +193,7 @@ def save_checkpoint(dyn, path, extra=None):
         # What the per-step record had computed (the kinetic tensor as the coupling parts
         # updated it): a continuation reads these, not fresh sums that differ in roundoff.
         "record": {key: record[key] for key in ("volume", "kinetic", "rotational")},
+        "levels": {level: {"energy": kept["energy"]} for level, kept in levels.items()},
         "info": {k: v for k, v in atoms.info.items() if _is_json(v)},
         "extra": extra or {},
         "atoms_arrays": sorted(atoms.arrays),  # which arrays the Atoms had set
@@ -238,6 +244,12 @@ class Checkpoint:
         meta, a = self.meta, self.arrays
         record = {"F": a["F"], "tau": a["tau"], "f": a["f"], "virial": a.get("virial"),
                   "scratch": dict(meta["scratch"]), **meta.get("record", {})}
+        if meta.get("levels"):  # a force split's records, each level's own
+            record["levels"] = {
+                level: {"F": a[f"{level}_F"], "tau": a[f"{level}_tau"], "f": a[f"{level}_f"],
+                        "r": a[f"{level}_r"], "virial": a.get(f"{level}_virial"),
+                        "energy": kept["energy"]}
+                for level, kept in meta["levels"].items()}
         return {
             "nsteps": meta["nsteps"], "time": meta["time"], "dt": meta["dt"],
             "scheme": meta["scheme"], "scheme_name": meta["scheme_name"],
@@ -345,6 +357,9 @@ def _shapes(meta, arrays):
                      "state_X": ("bodies", 3), "state_V": ("bodies", 3), "state_q": ("bodies", 4),
                      "state_p": ("bodies", 4), "state_x": ("free atoms", 3),
                      "state_v": ("free atoms", 3)})
+    for level in meta.get("levels") or {}:  # a force split's records
+        expected.update({f"{level}_F": ("bodies", 3), f"{level}_tau": ("bodies", 3),
+                         f"{level}_f": ("free atoms", 3), f"{level}_r": ("body atoms", 3)})
     return per, expected
 
 

@@ -211,10 +211,15 @@ class StepSizeCheck:
         if self.warned or step == 0 or not (rotation or self.evaluator.energy_known):
             return  # step 0: no step taken yet; else nothing to check at this step
         dt, message = dyn.dt, None
+        # Under a force split the bodies turn in the inner steps: the rotation is theirs.
+        split = getattr(self.evaluator, "split", None)
+        if split is not None:
+            dt = dt / split.substeps
         if rotation and dyn.model.n_bodies:
             b, speed = dyn.link.largest_angular_speed(dyn.state)
             if speed * dt > MAX_ROTATION_PER_STEP:
-                message = (f"body {b} turns by {speed * dt:.2f} rad per step at step "
+                message = (f"body {b} turns by {speed * dt:.2f} rad per "
+                           f"{'step' if split is None else 'inner step'} at step "
                            f"{step} (above {MAX_ROTATION_PER_STEP} rad)")
         if message is None and dyn.evaluator.energy_known:
             energy = dyn.get_conserved_energy()
@@ -230,5 +235,6 @@ class StepSizeCheck:
                                f"kinetic energy ({kinetic:.4g} eV)")
         if message is not None:
             self.warned = True
-            warnings.warn(f"{type(dyn).__name__}: {message}: the time step "
+            what = "time step" if split is None else f"inner step (timestep / {split.substeps})"
+            warnings.warn(f"{type(dyn).__name__}: {message}: the {what} "
                           f"{dt / units.fs:g} fs is probably too large", stacklevel=5)

@@ -46,13 +46,13 @@ from rigidmd.core.checks import (
     check_timestep,
 )
 from rigidmd.core.dof import RigidBodyDOF
-from rigidmd.core.forces import ForceEvaluator, NonFiniteForceError
+from rigidmd.core.forces import NonFiniteForceError
 from rigidmd.core.link import AtomsSync, BodyLink
 from rigidmd.core.logger import RigidLogger
 from rigidmd.core.model import BodyModel
 from rigidmd.core.observables import RigidObservables
 from rigidmd.core.operators import remove_centre_velocity
-from rigidmd.core.record import StepRecord
+from rigidmd.core.respa import evaluator_for, record_for, respa_for
 from rigidmd.core.schemes import BUILTIN_SCHEMES, resolve_scheme, scheme_with_middle
 from rigidmd.core.state import STATE_FIELDS
 from rigidmd.core.stepcontext import StepContext
@@ -182,7 +182,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         mover = check_composition(couplings, fixcom)
         middle = tuple(part for part in couplings if part.acts_in_middle)
         scheme = scheme_with_middle(scheme, integrator, [part.kind for part in middle])
-        model = geometry.model
+        model, (split, respa) = geometry.model, respa_for(atoms.calc, scheme, backend,
+                                                                   couplings)
         for part in couplings:
             part.check(atoms, model, self._dt)
         # -- from here on the atoms and files change --
@@ -200,8 +201,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self.needs_energy = any(part.needs_energy for part in couplings)
         self.link = BodyLink(atoms, model, backend)
         self.state = self.link.initial_state(geometry)
-        self.record = StepRecord(self.state, model, self.link)
-        self.evaluator = ForceEvaluator(self.link, self.record,
+        self.record = record_for(split, self.state, model, self.link)
+        self.evaluator = evaluator_for(split, self.link, self.record,
                                         stress=any(part.needs_stress for part in couplings),
                                         cell_moves=mover is not None)
         self.view = CouplingView(self.state, model, self.record, self.evaluator, 0, fixcom,
@@ -221,7 +222,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             positions=atoms.arrays["positions"], momenta=atoms.arrays["momenta"],
             write_momenta=not couplings and not fixcom, cell_motion=mover, view=self.view,
             middle=middle)
-        self.stepper = Stepper(scheme, context, couplings, self.view, self.link,
+        self.stepper = Stepper(respa or scheme, context, couplings, self.view, self.link,
                                fused=self.fused, fixcom=fixcom)
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps
         self.link.read_momenta(self.state, owner=type(self).__name__)

@@ -36,7 +36,7 @@ from rigidmd.core.link import BodyLink
 from rigidmd.core.record import StepRecord
 from rigidmd.core.state import RigidState
 
-__all__ = ["ForceEvaluator", "NonFiniteForceError", "calculate_together"]
+__all__ = ["ForceEvaluator", "NonFiniteForceError", "calculate_together", "level_forces"]
 
 
 class NonFiniteForceError(ValueError):
@@ -90,6 +90,21 @@ def _reads_results(calc, atoms: Atoms) -> bool:
             and getattr(kind, "get_stress", None) is BaseCalculator.get_stress)
 
 
+def level_forces(calc, atoms: Atoms) -> np.ndarray:
+    """The forces of ``calc`` on ``atoms`` as ``atoms.get_forces(md=True)`` would give them.
+
+    For a calculator that is not the atoms' own (a level of a force split): the
+    atoms' constraints adjust them as ASE does in molecular dynamics.
+    """
+    forces = np.array(calc.get_forces(atoms), dtype=float)
+    for constraint in atoms.constraints:
+        if hasattr(constraint, "redistribute_forces_md"):
+            constraint.redistribute_forces_md(atoms, forces)
+        if hasattr(constraint, "adjust_potential_energy"):
+            constraint.adjust_forces(atoms, forces)
+    return forces
+
+
 class ForceEvaluator:
     """Calculator calls for a rigid system, filling a :class:`StepRecord`.
 
@@ -104,6 +119,10 @@ class ForceEvaluator:
     cell_moves : bool
         Set the atoms' cell from the state before every call, and check
         that every body stays under half the cell's width.
+    calc : ASE calculator, optional
+        The calculator to call on the atoms instead of the atoms' own: one
+        level of a :class:`~rigidmd.core.split.MultipleTimeStep` (its fast or
+        slow part), whose record holds that level's forces alone.
 
     Attributes
     ----------
@@ -115,8 +134,9 @@ class ForceEvaluator:
     """
 
     def __init__(self, link: BodyLink, record: StepRecord, *, stress: bool = False,
-                 cell_moves: bool = False):
+                 cell_moves: bool = False, calc=None):
         self.link, self.record = link, record
+        self.calc = calc  # None: the atoms' calculator
         self.atoms, self.model = link.atoms, link.model
         self.stress, self.cell_moves = stress, cell_moves
         self._shape = (len(self.atoms), 3)  # of the forces (the atoms cannot change in number)
@@ -184,23 +204,26 @@ class ForceEvaluator:
                 wanted.append("stress")  # a barostat, or an observer (a stress recorder)
             if self._energy:
                 wanted.append("energy")  # a logger will ask: one calculator call, not two
-            calc = atoms.calc
+            calc = atoms.calc if self.calc is None else self.calc
             if (len(wanted) > 1 and calculate_together(calc, atoms, wanted)
                     and _reads_results(calc, atoms) and "forces" in calc.results):
                 results = calc.results
         if results is not None:  # what atoms.get_forces would copy, without its checks
             forces = np.array(results["forces"], dtype=float)
-        else:
+        elif self.calc is None:
             forces = np.asarray(atoms.get_forces(md=True), dtype=float)
+        else:
+            forces = level_forces(self.calc, atoms)
         if forces.shape != self._shape:
             raise ValueError(f"calculator returned forces of shape {forces.shape}, "
                              f"expected {(len(atoms), 3)}")
         if check or together:  # the energy's and stress's messages assume finite forces
             self.check_forces(forces)
         record.energy = None
-        self.energy_known = self._energy and "energy" in getattr(atoms.calc, "results", {})
+        calc = atoms.calc if self.calc is None else self.calc
+        self.energy_known = self._energy and "energy" in getattr(calc, "results", {})
         if self.energy_known:
-            results = atoms.calc.results
+            results = calc.results
             energy = results["energy"]
             if not np.isfinite(energy):
                 raise NonFiniteForceError(
@@ -230,12 +253,14 @@ class ForceEvaluator:
         ``atoms.get_stress``.
         """
         atoms = self.atoms
+        calc = atoms.calc if self.calc is None else self.calc
         if stress is None:
             try:
-                stress = atoms.get_stress(voigt=False, include_ideal_gas=False)
+                stress = (atoms.get_stress(voigt=False, include_ideal_gas=False)
+                          if self.calc is None else self.calc.get_stress(atoms))
             except PropertyNotImplementedError:
                 raise PropertyNotImplementedError(
-                    f"the calculator {type(atoms.calc).__name__} provides no stress, so the "
+                    f"the calculator {type(calc).__name__} provides no stress, so the "
                     "pressure is unknown; use a calculator with stress (e.g. "
                     "rigidmd.lammps.LAMMPSCalculator)") from None
         stress = np.asarray(stress, dtype=float)

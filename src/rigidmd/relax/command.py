@@ -50,7 +50,8 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     from rigidmd.config import known_keys
     from rigidmd.config.quantities import ConfigError
     from rigidmd.config.relaxsection import RelaxSection
-    from rigidmd.config.sections import CalculatorSection, OutputsSection, StructureSection
+    from rigidmd.config.sections import OutputsSection, StructureSection
+    from rigidmd.config.splitsection import calculator_section
     from rigidmd.config.trust import check_output_paths
     from rigidmd.run.outputs import OutputError, OutputLock
 
@@ -62,7 +63,7 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
                           f"{', '.join(sorted(known_keys()))}")
     check_output_paths(raw, trust, base)
     structure = StructureSection.from_config(raw, base)
-    calculator = CalculatorSection.from_config(raw, base)
+    calculator = calculator_section(raw, base)
     calculator.check_trust(trust)
     outputs = OutputsSection.from_config(raw, base)
     section = RelaxSection.from_config(raw, base) or RelaxSection()

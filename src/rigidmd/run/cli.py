@@ -92,6 +92,10 @@ def _resume_hint(args):
 def _export(config, directory, stream=sys.stdout):
     from rigidmd.lammps import export_lammps, tip3p_charges, tip3p_pair_commands
 
+    if config.calculator.name == "multiple_time_step":  # before any file is read or written
+        raise ConfigError("calculator: export-lammps cannot write a split (fast, slow, substeps): "
+                          "LAMMPS's run_style respa takes fix rigid in NVE only and splits one "
+                          "LAMMPS model by its own levels, not two calculators; export one model")
     atoms, bodies = Run(config).start_atoms()
     if config.relax is not None:  # the deck starts where `rigidmd run` would start its MD
         from rigidmd.relax.command import relax_for_export

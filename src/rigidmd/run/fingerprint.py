@@ -76,8 +76,12 @@ def fingerprint(config):
     if isinstance(integrator, str) and integrator.endswith((".yaml", ".yml")):
         integrator = {"file content": _file_digest(integrator)}
     # Where the forces run (processes, threads, address) is not what they are.
-    calculator = {key: value for key, value in asdict(config.calculator).items()
-                  if key not in ("calculator_class", "processes", "threads", "address")}
+    where = ("calculator_class", "processes", "threads", "address")
+    if hasattr(config.calculator, "fingerprint_fields"):  # a split: each level's fields
+        calculator = config.calculator.fingerprint_fields(where)
+    else:
+        calculator = {key: value for key, value in asdict(config.calculator).items()
+                      if key not in where}
     fields = {
         "structure": source, "read_options": structure.read_options,
         "bodies": structure.bodies, "calculator": calculator,
