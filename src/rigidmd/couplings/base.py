@@ -10,9 +10,8 @@ splitting
     the integrator's deterministic step (forces, drift, rotation)
     part_n.second_half(Δt/2) ... part_1.second_half(Δt/2)
 
-A part may also act inside the deterministic step, between its two half
-drifts (:attr:`Coupling.acts_in_middle`, :meth:`Coupling.middle`, called by the
-scheme's ``middle`` operator: the O step of BAOAB).
+A part may also act inside the deterministic step, between its two half drifts
+(:meth:`Coupling.middle`, called by the scheme's ``middle`` operator: BAOAB's O).
 
 A part acts on the body state (centre-of-mass velocities, NO_SQUISH
 momenta, point particles; a barostat also on the cell), contributes a term to
@@ -666,10 +665,9 @@ def check_composition(couplings, fixcom: bool):
                          "count the centre of mass's degrees of freedom; use fixcm=False")
     middle = [part for part in couplings if part.acts_in_middle]
     if movers and middle and movers[0].drift_moves_cell:
-        raise ValueError(
-            f"{middle[0].kind} acts in the middle of the step, which cuts the drift in two, "
-            f"and the {movers[0].kind} barostat moves the cell in that drift: not supported; "
-            "use the Monte Carlo barostat (monte_carlo, RigidMCBarostat) for NPT")
+        raise ValueError(f"{middle[0].kind} acts in the middle of the step, which cuts the "
+                         f"drift in two, and the {movers[0].kind} barostat moves the cell in that "
+                         "drift: not supported; use the Monte Carlo barostat for NPT")
     if movers and fixcom:
         raise ValueError("ase.constraints.FixCom with a barostat: the barostat's equations "
                          "count the centre of mass's degrees of freedom; remove FixCom")
