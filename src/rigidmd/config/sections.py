@@ -26,6 +26,7 @@ import numpy as np
 
 from rigidmd.config.couplingsection import CouplingSection
 from rigidmd.config.quantities import (
+    LENGTH_UNITS,
     TEMPERATURE_UNITS,
     TIME_UNITS,
     ConfigError,
@@ -199,11 +200,11 @@ def _water_commands(raw):
     if "cutoff" not in spec:
         raise ConfigError("calculator.water_model.cutoff: missing (real-space cut-off, Å)")
     model = _water_model("calculator.water_model.name", spec["name"])
-    cutoff = spec["cutoff"]
-    if isinstance(cutoff, bool) or not isinstance(cutoff, (int, float)) or not (
-            np.isfinite(cutoff) and cutoff > 0):
-        raise ConfigError(f"calculator.water_model.cutoff: expected a positive number (Å), "
-                          f"got {cutoff!r}")
+    cutoff = parse_quantity("calculator.water_model.cutoff", spec["cutoff"], LENGTH_UNITS,
+                            default_unit="A")  # a bare number is in Å
+    if not cutoff > 0:
+        raise ConfigError(f"calculator.water_model.cutoff: expected a positive length (Å), "
+                          f"got {spec['cutoff']!r}")
     kspace = spec.get("kspace", "pppm")
     if kspace not in ("pppm", "ewald", None):
         raise ConfigError(f"calculator.water_model.kspace: use pppm, ewald or null (plain "
