@@ -309,3 +309,23 @@ def test_export_lammps_starts_from_the_relaxed_structure(tmp_path):
     assert np.abs(positions - relaxed.positions).max() < 1e-6
     unrelaxed = water_cluster(6, seed=2).positions
     assert np.abs(positions - unrelaxed).max() > 0.05
+
+
+def test_rigidmd_relax_refuses_a_log_on_its_configuration(tmp_path):
+    """Issue 45 item 13: the relaxation's log was not checked against the inputs
+    (``relax: {log: ../relax.yaml}`` with --trust, which allows a path outside the
+    directory, replaced the configuration); it is refused before anything is written,
+    naming the field."""
+    import io
+
+    from rigidmd.config.quantities import ConfigError
+    from rigidmd.relax.command import relax_only
+
+    raw = relax_config(tmp_path)
+    raw["relax"]["log"] = "../relax.yaml"
+    before = (tmp_path / "relax.yaml").read_bytes()
+    with pytest.raises(ConfigError, match=r"^relax.log: .*relax.yaml is also the configuration "
+                                          "this run reads"):
+        relax_only(raw, io.StringIO(), trust=True, config_path=str(tmp_path / "relax.yaml"))
+    assert (tmp_path / "relax.yaml").read_bytes() == before
+    assert not (tmp_path / "out").exists()

@@ -422,3 +422,82 @@ def test_openmm_water_system_refuses_a_cell_openmm_cannot_take_in_one_line(cell)
                                          r"half the length below it\), not \[\["):
         water_system(atoms, water_model("tip4pew"), 3.5)
     np.testing.assert_array_equal(atoms.positions, before)
+
+
+# ---------------------------------------------------------------- outputs on the inputs' paths
+def water_project(path, outputs, relax=None, structure="start.xyz"):
+    """``c.yaml`` for 2 TIP3P waters read from ``start.xyz``, with these ``outputs``."""
+    from ase.io import write
+
+    from rigidmd.systems import water_cluster
+
+    write(path / "start.xyz", water_cluster(2, seed=0))
+    text = (f"structure: {structure}\ncalculator: {{name: tip3p, options: {{rc: 40.0}}}}\n"
+            f"timestep: 1 fs\nsteps: 4\noutputs: {outputs}\n")
+    if relax is not None:
+        text += f"relax: {relax}\n"
+    (path / "c.yaml").write_text(text)
+    return {name: (path / name).read_bytes() for name in ("c.yaml", "start.xyz")}
+
+
+@pytest.mark.parametrize("outputs, flags, message", [
+    ("{directory: ., log: c.yaml}", (),
+     "outputs.log: c.yaml is also the configuration this run reads"),
+    ("{directory: ., trajectory: md.traj, log: start.xyz}", (),
+     "outputs.log: start.xyz is also the structure this run reads"),
+    ("{directory: ., log: md.log, plot: c.yaml}", ("--overwrite",),
+     "outputs.plot: c.yaml is not an image file the plot can write"),
+    ("{directory: ., log: md.log, checkpoint: c.yaml}", ("--overwrite",),
+     "outputs.checkpoint: c.yaml is also the configuration this run reads"),
+])
+def test_an_output_on_an_input_is_refused_before_anything_is_written(
+        tmp_path, monkeypatch, capsys, outputs, flags, message):
+    """Issue 45 item 13: outputs were not checked against the inputs: ``log: c.yaml``
+    replaced the configuration, ``log: start.xyz`` the structure, ``plot: c.yaml`` (with
+    --overwrite) deleted the configuration.  Each is refused in one line naming the output,
+    and every file stays as it was."""
+    before = water_project(tmp_path, outputs)
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["run", "c.yaml", *flags]) == 2
+    err = capsys.readouterr().err.strip()
+    field, what = message.split(": ", 1)
+    assert err.startswith(f"rigidmd: error: {field}: ") and what in err and "\n" not in err, err
+    assert {name: (tmp_path / name).read_bytes() for name in before} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml", "start.xyz"]
+
+
+def test_a_plot_of_a_format_matplotlib_cannot_write_is_refused_before_the_run(
+        tmp_path, monkeypatch, capsys):
+    """Issue 45 item 13: ``plot: md.dat`` was refused by matplotlib only after the whole run
+    (exit 2 then, with the run done); now before it starts."""
+    water_project(tmp_path, "{directory: out, log: md.log, plot: md.dat}")
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["run", "c.yaml"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("rigidmd: error: outputs.plot: md.dat is not an image file the plot "
+                          "can write; end its name in .png, .pdf or .svg"), err
+    assert not (tmp_path / "out").exists()
+
+
+def test_run_overwrite_never_deletes_the_relaxation_it_starts_from(tmp_path, monkeypatch,
+                                                                   capsys):
+    """Issue 45 item 12: ``rigidmd run --overwrite`` with a relax: section and ``structure:
+    out/relax.traj`` (a relaxation of ``rigidmd relax``) deleted the structure before reading
+    it.  Now it is refused in one line, in every mode, and the file is kept."""
+    from ase.io import write
+
+    from rigidmd.systems import water_cluster
+
+    (tmp_path / "out").mkdir()
+    write(tmp_path / "out" / "relax.traj", water_cluster(2, seed=0))
+    water_project(tmp_path, "{directory: out, log: md.log}", relax="{fmax: 0.05, steps: 5}",
+                  structure="out/relax.traj")
+    kept = (tmp_path / "out" / "relax.traj").read_bytes()
+    monkeypatch.chdir(tmp_path)
+    for flags in ((), ("--overwrite",), ("--resume",)):
+        assert cli.main(["run", "c.yaml", *flags]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("rigidmd: error: relax.trajectory: ") and \
+            "relax.traj is also the structure this run reads" in err and "\n" not in err, err
+        assert (tmp_path / "out" / "relax.traj").read_bytes() == kept
+        assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["relax.traj"]

@@ -55,6 +55,8 @@ BUILDER_FIELDS = {
 #: Fields of ``calculator.water_model``.
 WATER_MODEL_FIELDS = ("name", "cutoff", "kspace", "accuracy", "tail")
 REQUIRED_BUILDER_FIELD = {"water_cluster": "n_molecules", "water_box": "n_side"}
+#: The endings of ``outputs.plot`` (formats every matplotlib writes).
+PLOT_FORMATS = ("png", "pdf", "svg", "svgz", "eps", "ps", "jpg", "jpeg", "tif", "tiff", "webp")
 #: Body rules a configuration may name.
 BODY_RULES = ("connectivity", "mol-id", "tags")
 
@@ -551,6 +553,11 @@ class OutputsSection:
             raise ConfigError(f"outputs.checkpoint_interval: {every} is not a multiple of "
                               f"outputs.interval ({interval}): a checkpoint must fall on a frame")
         _check_output_paths(directory, files)
+        plot = files.get("plot")
+        if plot is not None and plot.suffix.lower().lstrip(".") not in PLOT_FORMATS:
+            raise ConfigError(f"outputs.plot: {plot.name} is not an image file the plot can "
+                              f"write; end its name in .png, .pdf or .svg (or "
+                              f"{', '.join('.' + f for f in PLOT_FORMATS[3:])})")
         files["checkpoint_interval"] = every
         if "mdanalysis" in files:
             try:

@@ -52,7 +52,7 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     from rigidmd.config.relaxsection import RelaxSection
     from rigidmd.config.sections import CalculatorSection, OutputsSection, StructureSection
     from rigidmd.config.trust import check_output_paths
-    from rigidmd.run.outputs import OutputError, OutputLock
+    from rigidmd.run.outputs import LOCK_NAME, OutputError, OutputLock, check_apart_from_inputs
 
     raw = dict(raw)
     base = Path(raw.pop("_base", "."))
@@ -73,6 +73,12 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     state = state_path(trajectory)
     source = structure.source if isinstance(structure.source, Path) else None
     own = source is not None and source.resolve() == trajectory.resolve()
+    if own and mode != "resume":
+        raise ConfigError(f"structure: {source} is this relaxation's own trajectory; "
+                          "continue it with --resume (or copy it elsewhere first)")
+    check_apart_from_inputs({"relax.log": log, "relax state": state,
+                             "the lock file": directory / LOCK_NAME},
+                            {"configuration": config_path, "structure": source})
     directory.mkdir(parents=True, exist_ok=True)
     lock = OutputLock(directory)
     lock.acquire()
@@ -82,9 +88,6 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
             done = continue_from(atoms, trajectory, stream)
         else:
             existing = [p for p in (trajectory, log, state) if p.exists()]
-            if own:
-                raise ConfigError(f"structure: {source} is this relaxation's own trajectory; "
-                                  "continue it with --resume (or copy it elsewhere first)")
             if existing and mode != "overwrite":
                 raise OutputError(f"relax: {existing[0]} holds an earlier relaxation; "
                                   "continue it with --resume or replace it with --overwrite")

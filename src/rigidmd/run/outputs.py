@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["OutputLock", "OutputError", "output_lengths", "trim_outputs", "LOCK_NAME"]
+__all__ = ["OutputLock", "OutputError", "output_lengths", "trim_outputs", "LOCK_NAME",
+           "check_apart_from_inputs"]
 
 #: Name of the lock file in an output directory.
 LOCK_NAME = ".rigidmd.lock"
@@ -197,6 +198,50 @@ def _restore_ulm(path, recorded):
 def _restore_ulm_header(fh, recorded):
     fh.seek(32)
     fh.write(np.array([recorded["nitems"], recorded["pos0"]], dtype="<i8").tobytes())
+
+
+def check_apart_from_inputs(outputs, inputs):
+    """Refuse an output on the path of an input, before anything is read or written.
+
+    An output there would replace the input (a log over the configuration, a
+    trajectory over the structure) or remove it (``--overwrite``).
+
+    Parameters
+    ----------
+    outputs, inputs : dict
+        Field name -> path (``None`` is skipped): what the run writes, what it reads.
+
+    Raises
+    ------
+    rigidmd.config.ConfigError
+        Naming the output's field, its path and the input it is.
+    """
+    from rigidmd.config import ConfigError
+
+    read = {}
+    for name, path in inputs.items():
+        if path is not None:
+            read.setdefault(_identity(path), name)
+    for name, path in outputs.items():
+        if path is None:
+            continue
+        source = read.get(_identity(path))
+        if source is None:
+            continue
+        raise ConfigError(f"{name}: {path} is also the {source} this run reads, which "
+                          f"writing it would destroy; give {name} another file, or copy the "
+                          f"{source} elsewhere first")
+
+
+def _identity(path):
+    """What names one file: its device and inode when it exists (a link, another spelling),
+    else its resolved path."""
+    path = Path(path).resolve()  # "out/../c.yaml" is c.yaml before "out" exists too
+    try:
+        info = path.stat()
+    except OSError:
+        return str(path)
+    return (info.st_dev, info.st_ino)
 
 
 def describe_os_error(err, path=None):

@@ -40,6 +40,7 @@ import os
 import signal
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -48,7 +49,12 @@ from rigidmd.ipi import EngineError
 from rigidmd.run.checkpointing import RunCheckpoints
 from rigidmd.run.directory import NamedOutput, RunFiles
 from rigidmd.run.fingerprint import fingerprint, resume_command
-from rigidmd.run.outputs import OutputError, describe_os_error, trim_outputs
+from rigidmd.run.outputs import (
+    OutputError,
+    check_apart_from_inputs,
+    describe_os_error,
+    trim_outputs,
+)
 from rigidmd.run.report import Progress, describe, observables, summary
 from rigidmd.run.signals import EXIT_STATUS, StopRequest, StopSignals
 
@@ -230,8 +236,18 @@ class Run:
         return dyn
 
     # ------------------------------------------------------------ the run
+    def inputs(self):
+        """The files the run reads, by field: ``{field: path or None}``."""
+        structure, integrator = self.config.structure, self.config.run.integrator
+        return {"configuration": self.config_path,
+                "structure": structure.source if isinstance(structure.source, Path) else None,
+                "restart": structure.restart,
+                "integrator": integrator if isinstance(integrator, str) and
+                integrator.endswith((".yaml", ".yml")) else None}
+
     def execute(self):
         """Run; returns the exit status (0, or 130/143/138 after a stop signal)."""
+        check_apart_from_inputs(self.files.named(), self.inputs())  # before anything is touched
         lock = self.files.open()
         try:
             return self._execute()
