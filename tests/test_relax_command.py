@@ -329,3 +329,74 @@ def test_rigidmd_relax_refuses_a_log_on_its_configuration(tmp_path):
         relax_only(raw, io.StringIO(), trust=True, config_path=str(tmp_path / "relax.yaml"))
     assert (tmp_path / "relax.yaml").read_bytes() == before
     assert not (tmp_path / "out").exists()
+
+
+def fail_in_step(monkeypatch, cls, n):
+    """Make the optimizer ``cls`` move its atoms to a trial point and raise in step ``n``, as
+    ASE's line searches do when they find no descent."""
+    original, steps = cls.step, []
+
+    def step(self, *args, **kwargs):
+        steps.append(1)
+        if len(steps) == n:
+            self.optimizable.set_x(self.optimizable.get_x() + 0.05)  # a trial point
+            raise RuntimeError("LineSearch failed!")
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(cls, "step", step)
+
+
+def test_an_optimizer_s_exception_is_one_line_with_the_structure_reached(
+        tmp_path, monkeypatch, capsys):
+    """Issue 45 item 18: ASE's line search raising RuntimeError (PreconLBFGS with a cell)
+    ended rigidmd relax and rigidmd run with a traceback; now one line that names the step,
+    the structure reached (the last frame, where the atoms are back) and the command that
+    continues, exit status 1."""
+    from ase.io import read
+    from ase.optimize.precon import PreconLBFGS
+
+    from rigidmd.run.cli import main
+
+    config = tmp_path / "relax.yaml"
+    config.write_text(RELAX_CONFIG.replace("STEPS", "2000").replace("FIRE", "PreconLBFGS"))
+    outdir = {"relax": f" --outdir {tmp_path / 'out'}", "run": ""}  # as each command says it
+    for command in ("relax", "run"):
+        fail_in_step(monkeypatch, PreconLBFGS, 4)
+        assert main([command, str(config), "--overwrite"]) == 1
+        err = capsys.readouterr().err.strip().splitlines()[-1]
+        trajectory = tmp_path / "out" / "relax.traj"
+        assert err == (f"rigidmd: run stopped: relax: PreconLBFGS failed after step 3 "
+                       f"(RuntimeError: LineSearch failed!); the atoms are back at the "
+                       f"structure of step 3, the last frame of {trajectory}; continue with: "
+                       f"rigidmd {command} {config}{outdir[command]} --resume"), err
+        assert len(read(trajectory, ":")) == 4  # the start and 3 steps
+
+
+def test_relax_leaves_the_atoms_at_the_last_whole_step_and_says_so(monkeypatch):
+    """Issue 45 item 20: a relaxation stopped by NaN forces said the atoms are "left at step
+    0" (the dynamics' step); they were at the failed trial point.  Now they are back at the
+    last whole step of the optimizer, and the message says which."""
+    from rigidmd.core.forces import NonFiniteForceError
+    from rigidmd.relax import relax
+
+    atoms = water_cluster(4, seed=1)
+    atoms.calc = TIP3P(rc=40.0)
+    calls = tip3p_calls(monkeypatch)
+    original = TIP3P.calculate  # counts the calls
+
+    def calculate(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        if len(calls) == 6:
+            self.results["forces"][2] = np.nan
+
+    monkeypatch.setattr(TIP3P, "calculate", calculate)
+    frames = []
+    with pytest.raises(NonFiniteForceError) as err:
+        relax(atoms, fmax=1e-6, optimizer="FIRE",
+              observers=[lambda *_: frames.append(atoms.positions.copy())])
+    message = str(err.value)
+    assert message.startswith(f"relax: FIRE failed after step {len(frames) - 1} (calculator "
+                              "returned non-finite forces on atom(s) [2]); the atoms are back "
+                              f"at the structure of step {len(frames) - 1}"), message
+    assert "step 0;" not in message and "left at" not in message
+    np.testing.assert_array_equal(atoms.positions, frames[-1])

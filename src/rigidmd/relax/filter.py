@@ -61,8 +61,8 @@ from rigidmd.relax import state as relaxstate
 from rigidmd.relax.facade import AtomsFacade
 from rigidmd.relax.rotation import right_jacobian_transpose, rotation_quaternion
 
-__all__ = ["RigidFilter", "relax", "Relaxation", "OPTIMIZERS", "optimizer_class", "ANCHOR_ANGLE",
-           "rotation_quaternion", "right_jacobian_transpose"]
+__all__ = ["RigidFilter", "relax", "Relaxation", "RelaxationFailed", "OPTIMIZERS",
+           "optimizer_class", "ANCHOR_ANGLE", "rotation_quaternion", "right_jacobian_transpose"]
 
 #: Rotation (rad) beyond which a body's reference orientation is moved to its current one.
 ANCHOR_ANGLE = 2.5
@@ -472,6 +472,12 @@ OPTIMIZERS = ("RigidLBFGS", "PreconLBFGS", "PreconFIRE", "BFGS", "LBFGS", "FIRE"
 PRECONDITIONED = ("RigidLBFGS", "PreconLBFGS", "PreconFIRE")
 
 
+class RelaxationFailed(RuntimeError):
+    """The optimizer or the calculator failed in a step of :func:`relax` (a line search
+    that found no descent, an exception of the calculator); the atoms are back at the
+    structure of the last whole step, which the message names."""
+
+
 @dataclass
 class Relaxation:
     """What :func:`relax` did.
@@ -566,6 +572,15 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
     Returns
     -------
     Relaxation
+
+    Raises
+    ------
+    RelaxationFailed
+        The optimizer or the calculator raised in a step (a line search that
+        found no descent, ...); the atoms are back at the structure of the
+        last whole step, which the message names.
+    rigidmd.core.forces.NonFiniteForceError
+        The calculator returned NaN or infinite forces; the atoms as above.
     """
     if not (np.isfinite(fmax) and fmax > 0):
         raise ValueError(f"relax: fmax={fmax!r} eV/Å must be positive")
@@ -586,15 +601,22 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
             view.set_state(relaxstate.split(saved, "view"))
             if hasattr(opt, "set_state"):
                 opt.set_state(relaxstate.split(saved, "opt"))
+        whole = _WholeStep(atoms, opt)  # first: the structure of each whole step
+        opt.attach(whole, interval=1)
         reports = [_Report(observer, opt, view) for observer in observers]
         for report in reports:
             opt.attach(report, interval=1)
         try:
             converged = bool(opt.run(fmax=fmax, steps=int(steps)))
-        except Exception:
-            if state_file is not None and any(report.raised for report in reports):
-                relaxstate.write_state(state_file, view, opt)  # after a whole step
-            raise
+        except Exception as err:
+            if any(report.raised for report in reports):  # after a whole step
+                if state_file is not None:
+                    relaxstate.write_state(state_file, view, opt)
+                raise
+            whole.restore()  # not at the failed trial point: at the last whole step
+            if isinstance(err, OSError) or getattr(err, "setup", False):
+                raise  # a failed write (named by the caller), an input's mistake
+            raise _failed(err, cls.__name__, whole.step) from err
         nsteps = opt.get_number_of_steps()
         if state_file is not None:
             if converged:
@@ -603,6 +625,45 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
                 relaxstate.write_state(state_file, view, opt)
     left = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.0
     return Relaxation(converged, int(nsteps), float(atoms.get_potential_energy()), left)
+
+
+def _failed(err, optimizer, done):
+    """The exception that says a step failed: of ``err``'s kind for non-finite forces
+    (:class:`~rigidmd.core.forces.NonFiniteForceError`), else :class:`RelaxationFailed`."""
+    from rigidmd.core.forces import NonFiniteForceError
+
+    reason = " ".join(str(err).split()) or type(err).__name__
+    if isinstance(err, NonFiniteForceError):
+        reason = reason.split(" after step ")[0]  # the dynamics' step: not the optimizer's
+    else:
+        reason = f"{type(err).__name__}: {reason}"
+    message = (f"relax: {optimizer} failed after step {done} ({reason}); the atoms are back "
+               f"at the structure of step {done}")
+    if isinstance(err, NonFiniteForceError):
+        return NonFiniteForceError(message)
+    return _FailedValue(message) if isinstance(err, ValueError) else RelaxationFailed(message)
+
+
+class _FailedValue(RelaxationFailed, ValueError):
+    """A ValueError in a step (a cell shrunk below a body, ...): still one for its callers."""
+
+
+class _WholeStep:
+    """The positions and cell of the optimizer's last whole step (an observer), and its
+    number (``step``: the optimizer's steps then)."""
+
+    def __init__(self, atoms, opt):
+        self.atoms, self.opt = atoms, opt
+        self()
+
+    def __call__(self):
+        self.step = self.opt.nsteps
+        self.positions = self.atoms.positions.copy()
+        self.cell = self.atoms.cell.array.copy()
+
+    def restore(self):
+        self.atoms.set_cell(self.cell, scale_atoms=False)
+        self.atoms.positions = self.positions
 
 
 class _Report:

@@ -22,8 +22,10 @@ output directory.  It is a product path as ``rigidmd run`` is:
   ``--overwrite``, and never when the structure *is* that trajectory.
 
 A relaxation that does not converge within its steps raises
-:class:`RelaxationNotConverged` with one line naming the trajectory and how
-to continue.
+:class:`RelaxationNotConverged`, one whose optimizer or calculator fails in a
+step :class:`~rigidmd.relax.filter.RelaxationFailed` (or the calculator's
+:class:`~rigidmd.core.forces.NonFiniteForceError`), each with one line naming
+the trajectory and how to continue.
 """
 
 import sys
@@ -31,10 +33,11 @@ import time
 
 import numpy as np
 
-from rigidmd.relax.filter import relax
+from rigidmd.core.forces import NonFiniteForceError
+from rigidmd.relax.filter import RelaxationFailed, relax
 
 __all__ = ["relax_structure", "RelaxationNotConverged", "RelaxationStopped", "RelaxProgress",
-           "continue_from", "state_path"]
+           "RelaxationFailed", "continue_from", "state_path"]
 
 
 def state_path(trajectory):
@@ -206,6 +209,9 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
                            scalar_pressure=section.pressure, trajectory=str(trajectory),
                            logfile=logfile, append_trajectory=resume, observers=observers,
                            state_file=state_file, resume=exact)
+    except (RelaxationFailed, NonFiniteForceError) as err:  # the atoms are at a whole step
+        raise type(err)(f"{err}, the last frame of {trajectory}; continue with: "
+                        f"{continuing}") from None
     except Exception as err:
         signum = getattr(err, "signum", None)  # the stop's StopRequest, after a whole step
         if stop is None or signum is None:

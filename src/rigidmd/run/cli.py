@@ -35,7 +35,7 @@ from rigidmd.core.operators import ConvergenceError
 from rigidmd.couplings.base import NotExportable
 from rigidmd.lammps.library import LammpsError
 from rigidmd.relax.command import relax_only
-from rigidmd.relax.structure import RelaxationNotConverged, RelaxationStopped
+from rigidmd.relax.structure import RelaxationFailed, RelaxationNotConverged, RelaxationStopped
 from rigidmd.run.fingerprint import resume_command
 from rigidmd.run.logplot import LogError, plot_log
 from rigidmd.run.outputs import OutputError, describe_os_error
@@ -274,7 +274,8 @@ def main(argv=None):
         # started, so there is nothing to continue.
         print(f"rigidmd: interrupted before the {args.command} started", file=sys.stderr)
         return 130
-    except (NonFiniteForceError, ConvergenceError, RelaxationNotConverged) as err:
+    except (NonFiniteForceError, ConvergenceError, RelaxationNotConverged,
+            RelaxationFailed) as err:
         # The run stopped; its outputs and checkpoint hold every step before the failure.
         print(f"rigidmd: run stopped: {err}", file=sys.stderr)
         return 1
