@@ -99,9 +99,9 @@ class RigidFilter(AtomsFacade):
         all directions or a calculator without stress; a constraint the
         bodies cannot honour (only ``FixAtoms`` on whole bodies or free atoms,
         ``FixBondLengths`` within bodies and :class:`~rigidmd.RigidBodyDOF`
-        are); a bad ``cell``, ``scalar_pressure`` or ``cell_factor``; every
-        error of :meth:`rigidmd.RigidBodies.geometry`.  All before anything
-        changes.
+        are); a cell not finite or degenerate in its periodic directions; a
+        bad ``cell``, ``scalar_pressure`` or ``cell_factor``; every error of
+        :meth:`rigidmd.RigidBodies.geometry`.  All before anything changes.
     """
 
     def __init__(self, atoms, bodies=None, *, cell=False, scalar_pressure=0.0,
@@ -121,6 +121,7 @@ class RigidFilter(AtomsFacade):
                 raise ValueError(f"RigidFilter: cell={cell!r} needs the stress, which the "
                                  f"calculator {type(atoms.calc).__name__} does not provide")
         check_finite(atoms.positions, "position", "Å", "in RigidFilter")
+        _check_cell(atoms)
         rigid = RigidBodies.resolve(atoms, bodies)
         geometry = rigid.geometry(atoms)
         model = geometry.model
@@ -408,6 +409,26 @@ class RigidFilter(AtomsFacade):
 
     def get_global_number_of_atoms(self):
         return len(self._x)
+
+
+def _check_cell(atoms):
+    """Refuse a cell that is not finite, or whose periodic vectors are not independent (a
+    zero vector, two parallel, three in a plane): one line, not NumPy's or SciPy's."""
+    cell, pbc = atoms.cell.array, np.asarray(atoms.pbc, dtype=bool)
+    if not np.isfinite(cell).all():
+        raise ValueError(f"RigidFilter: the cell {cell.tolist()} has a non-finite entry; give "
+                         "a finite cell")
+    if not pbc.any():
+        return
+    # Singular values of the periodic vectors: one near 0 relative to the largest is a
+    # degenerate cell (1e-9: far below any cell a structure has, far above round-off).
+    s = np.linalg.svd(cell[pbc], compute_uv=False)
+    if s.min() <= 1e-9 * max(s.max(), 1.0):
+        raise ValueError(f"RigidFilter: the cell vectors {np.flatnonzero(pbc).tolist()} are "
+                         f"periodic (atoms.pbc {pbc.tolist()}) but not independent (cell "
+                         f"{np.round(cell, 6).tolist()}): a zero vector, or vectors in one line "
+                         "or plane; give a cell with a length in every periodic direction, or "
+                         "set atoms.pbc False there")
 
 
 def _body_lengths(model):
