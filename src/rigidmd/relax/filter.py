@@ -575,8 +575,8 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         Append to ``trajectory`` (continuing a relaxation) instead of replacing it.
     state_file : str or pathlib.Path, optional
         Where the relaxation's state is written when it stops before
-        converging, after a whole step (an observer raised, or ``steps`` were
-        taken): the view's chart and the optimizer's memory
+        converging, after a whole step (Ctrl-C, an observer raised, or
+        ``steps`` were taken): the view's chart and the optimizer's memory
         (:mod:`rigidmd.relax.state`); removed when the relaxation converges.
         Only for an optimizer that gives its memory
         (:func:`rigidmd.relax.state.keeps_memory`; ASE's keep theirs).
@@ -596,6 +596,10 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
 
     Raises
     ------
+    KeyboardInterrupt
+        Ctrl-C (SIGINT with Python's own handler, in the main thread): after
+        the step in progress, its trajectory frame and the ``state_file``, as
+        ``rigidmd relax`` stops; a second Ctrl-C at once.
     RelaxationFailed
         The optimizer or the calculator raised in a step (a line search that
         found no descent, ...); the atoms are back at the structure of the
@@ -627,12 +631,20 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         reports = [_Report(observer, opt, view) for observer in observers]
         for report in reports:
             opt.attach(report, interval=1)
+        interrupt = _Interrupt()
+        opt.attach(interrupt, interval=1)  # last: after the step's frame and observers
         try:
-            converged = bool(opt.run(fmax=fmax, steps=int(steps)))
+            with interrupt:
+                converged = bool(opt.run(fmax=fmax, steps=int(steps)))
         except Exception as err:
-            if any(report.raised for report in reports):  # after a whole step
-                if state_file is not None:
+            if isinstance(err, _Interrupted) or any(report.raised for report in reports):
+                if state_file is not None:  # after a whole step
                     relaxstate.write_state(state_file, view, opt)
+                if isinstance(err, _Interrupted):
+                    kept = (f"its state is in {state_file}: relax(..., resume=True) continues"
+                            if state_file is not None else "give a state_file to continue")
+                    raise KeyboardInterrupt(f"relax: interrupted (Ctrl-C) after step "
+                                            f"{whole.step}; {kept}") from None
                 raise
             whole.restore()  # not at the failed trial point: at the last whole step
             if isinstance(err, OSError) or getattr(err, "setup", False):
@@ -667,6 +679,48 @@ def _failed(err, optimizer, done):
 
 class _FailedValue(RelaxationFailed, ValueError):
     """A ValueError in a step (a cell shrunk below a body, ...): still one for its callers."""
+
+
+class _Interrupted(Exception):
+    """A Ctrl-C arrived during a step of :func:`relax`; raised after the step, as an observer."""
+
+
+class _Interrupt:
+    """Ctrl-C in :func:`relax` as in ``rigidmd relax``: the step, its frame and the state
+    file are finished, then ``KeyboardInterrupt``; a second Ctrl-C interrupts at once.
+
+    Only where SIGINT has Python's own handler, in the main thread: a program that
+    handles it (``rigidmd``'s commands) keeps its handling.
+    """
+
+    def __init__(self):
+        self.pending, self.previous = False, None
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread() and \
+                signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self.previous = signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def _handler(self, signum, frame):
+        if self.pending:
+            raise KeyboardInterrupt
+        self.pending = True
+
+    def __call__(self):
+        if self.pending:
+            raise _Interrupted
+
+    def __exit__(self, *exc):
+        if self.previous is not None:
+            import signal
+
+            signal.signal(signal.SIGINT, self.previous)
+            self.previous = None
+        return False
 
 
 class _WholeStep:

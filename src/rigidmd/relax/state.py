@@ -2,8 +2,8 @@
 
 :func:`rigidmd.relax.filter.relax` writes it (``state_file``) when a
 relaxation stops before converging, after a whole step: an observer raised
-(a stop signal of ``rigidmd relax``) or the step limit was reached.  It holds
-the view's chart (:meth:`rigidmd.relax.filter.RigidFilter.get_state`: the
+(a stop signal of ``rigidmd relax``), Ctrl-C stopped it or the step limit was
+reached.  It holds the view's chart (:meth:`rigidmd.relax.filter.RigidFilter.get_state`: the
 coordinates, the bodies' reference orientations, the energy and forces
 already computed there) and the optimizer's memory where the optimizer has
 one to give (:meth:`rigidmd.relax.lbfgs.RigidLBFGS.get_state`: its curvature
@@ -114,7 +114,9 @@ def resumed_state(state_file, atoms, optimizer):
                          "the last frame without resume)")
     saved = read_state(state_file)
     if saved is None:
-        raise ValueError(f"relax: resume=True but {state_file} does not exist")
+        raise ValueError(f"relax: resume=True but {state_file} does not exist (a relaxation "
+                         "writes it when Ctrl-C, an observer or its steps stop it, and removes "
+                         "it once converged); relax the atoms as they are without resume")
     differs = state_matches(saved, atoms, optimizer)
     if differs:
         raise ValueError(f"relax: cannot continue from {state_file}: {differs}")
