@@ -400,3 +400,45 @@ def test_relax_leaves_the_atoms_at_the_last_whole_step_and_says_so(monkeypatch):
                               f"at the structure of step {len(frames) - 1}"), message
     assert "step 0;" not in message and "left at" not in message
     np.testing.assert_array_equal(atoms.positions, frames[-1])
+
+
+def damage_state(path, name, change):
+    """Rewrite the array ``name`` of the state file at ``path`` with ``change(array)``."""
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays[name] = change(arrays[name])
+    with open(path, "wb") as fh:
+        np.savez(fh, **arrays)
+
+
+@pytest.mark.parametrize("name, change, said", [
+    ("view.q_ref", lambda q: 2 * q, "body 0 has a reference orientation of norm 2, not 1"),
+    ("view.x", lambda x: np.where(np.arange(x.size).reshape(x.shape) == 4, np.nan, x),
+     "view.x holds a non-finite number"),
+    ("opt.s", lambda s: s * np.nan, "opt.s holds a non-finite number"),
+])
+def test_a_damaged_relaxation_state_is_not_used(tmp_path, monkeypatch, name, change, said):
+    """Issue 45 item 19: a damaged relax.state.npz was used unchecked: NaN gave internal
+    messages, reference orientations x2 appended 500 steps of molecules with O-H 5.67 Å to
+    relax.traj.  Now it is checked as checkpoints are: the memory starts afresh, saying why,
+    and the relaxation continues from the trajectory's last frame with whole molecules."""
+    import io
+    import signal
+
+    from ase.io import read
+
+    from rigidmd.relax.command import relax_only
+
+    raw = relax_config(tmp_path)
+    signal_at_call(monkeypatch, 12, signal.SIGTERM)
+    assert relax_only(raw, io.StringIO()) == 143
+    state = tmp_path / "out" / "relax.state.npz"
+    damage_state(state, name, change)
+    monkeypatch.setattr(RigidFilter, "get_forces", signal_at_call.original)
+    out = io.StringIO()
+    assert relax_only(raw, out, mode="resume") == 0
+    assert f"relax: the optimizer's memory starts afresh: {state}: a damaged relaxation state " \
+           f"({said})" in out.getvalue(), out.getvalue()
+    for frame in read(tmp_path / "out" / "relax.traj", ":"):
+        oh = np.linalg.norm(frame.positions[1::3] - frame.positions[0::3], axis=1)
+        np.testing.assert_allclose(oh, 0.9572, atol=1e-6)  # whole waters (TIP3P's O-H)

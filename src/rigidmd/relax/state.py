@@ -64,10 +64,36 @@ def read_state(path):
     except Exception as err:  # numpy raises several kinds on a damaged file  # noqa: BLE001
         raise ValueError(f"{path}: not a relaxation state ({type(err).__name__}: "
                          f"{' '.join(str(err).split())})") from None
-    missing = {"optimizer", "positions", "cell", "view.x"} - set(arrays)
+    missing = {"optimizer", "positions", "cell", "view.x", "view.q_ref", "view.n_atoms"} - \
+        set(arrays)
     if missing:
         raise ValueError(f"{path}: not a relaxation state (no {sorted(missing)[0]})")
+    _check_contents(arrays, path)
     return arrays
+
+
+def _check_contents(arrays, path):
+    """Refuse a state whose numbers are not finite, whose reference orientations are not unit
+    quaternions or whose parts do not fit together, as checkpoints are checked
+    (:func:`rigidmd.core.checkpoint.check_checkpoint`): a damaged file is never used."""
+    from rigidmd.core.checkpoint import QUATERNION_NORM_TOLERANCE
+
+    where = f"{path}: a damaged relaxation state"
+    for name, values in arrays.items():
+        if values.dtype.kind == "f" and not np.isfinite(values).all():
+            raise ValueError(f"{where} ({name} holds a non-finite number)")
+    positions, cell, q_ref = arrays["positions"], arrays["cell"], arrays["view.q_ref"]
+    if positions.ndim != 2 or positions.shape[1:] != (3,) or \
+            len(positions) != int(arrays["view.n_atoms"]) or cell.shape != (3, 3):
+        raise ValueError(f"{where} (positions {positions.shape}, cell {cell.shape} for "
+                         f"{int(arrays['view.n_atoms'])} atoms)")
+    if q_ref.ndim != 2 or q_ref.shape[1:] != (4,):
+        raise ValueError(f"{where} (view.q_ref has shape {q_ref.shape}, not (bodies, 4))")
+    norms = np.linalg.norm(q_ref, axis=1)
+    bad = np.flatnonzero(np.abs(norms - 1.0) > QUATERNION_NORM_TOLERANCE)
+    if bad.size:
+        raise ValueError(f"{where} (body {int(bad[0])} has a reference orientation of norm "
+                         f"{norms[bad[0]]:.9g}, not 1)")
 
 
 def state_matches(state, atoms, optimizer):
