@@ -442,3 +442,31 @@ def test_a_damaged_relaxation_state_is_not_used(tmp_path, monkeypatch, name, cha
     for frame in read(tmp_path / "out" / "relax.traj", ":"):
         oh = np.linalg.norm(frame.positions[1::3] - frame.positions[0::3], axis=1)
         np.testing.assert_allclose(oh, 0.9572, atol=1e-6)  # whole waters (TIP3P's O-H)
+
+
+def test_rigidmd_relax_resume_refuses_another_calculator(tmp_path, monkeypatch):
+    """Issue 45 item 19: ``rigidmd relax --resume`` with another calculator continued
+    silently, appending frames of another energy surface (``rigidmd run --resume`` refuses
+    it).  Now it is refused in one line before anything is written; the same calculator
+    continues."""
+    import io
+    import signal
+
+    from rigidmd.config.quantities import ConfigError
+    from rigidmd.relax.command import relax_only
+
+    raw = relax_config(tmp_path)
+    signal_at_call(monkeypatch, 12, signal.SIGTERM)
+    assert relax_only(raw, io.StringIO()) == 143
+    monkeypatch.setattr(RigidFilter, "get_forces", signal_at_call.original)
+    files = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
+    other = dict(raw, calculator={"name": "tip3p", "options": {"rc": 30.0}})
+    with pytest.raises(ConfigError, match=r"^--resume: the calculator differs from the "
+                                          r"relaxation's \(.*relax.state.npz records "
+                                          r"calculator \w+, the configuration gives calculator "
+                                          r"\w+\); restore it, or start anew with --overwrite$"):
+        relax_only(other, io.StringIO(), mode="resume")
+    assert {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()} == files
+    out = io.StringIO()
+    assert relax_only(raw, out, mode="resume") == 0
+    assert "continuing with the optimizer's memory" in out.getvalue()

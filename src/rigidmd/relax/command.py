@@ -17,7 +17,7 @@ from rigidmd.relax.structure import (
     relax_structure,
     state_path,
 )
-from rigidmd.run.fingerprint import resume_command
+from rigidmd.run.fingerprint import calculator_digest, resume_command
 from rigidmd.run.runner import StopSignals
 
 __all__ = ["relax_only", "relax_for_export"]
@@ -96,7 +96,9 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
         atoms.calc = calculator.build(atoms)
         try:
             relax_structure(atoms, bodies, section, directory, stream, resume=mode == "resume",
-                            done=done, stop=StopSignals(), hint=resume_command(
+                            done=done, stop=StopSignals(),
+                            label=f"calculator {calculator_digest(calculator)}",
+                            hint=resume_command(
                                 config_path or "CONFIG", directory,
                                 ["--trust"] if trust else [], command="relax"))
         except RelaxationStopped as stopped:

@@ -542,7 +542,8 @@ def optimizer_class(name):
 
 def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", cell=False,
           scalar_pressure=0.0, trajectory=None, logfile=None, observers=(),
-          append_trajectory=False, state_file=None, resume=False, **kwargs) -> Relaxation:
+          append_trajectory=False, state_file=None, resume=False, state_label=None,
+          **kwargs) -> Relaxation:
     """Relax the rigid bodies of ``atoms`` (and the cell) in place with an ASE optimizer.
 
     Parameters
@@ -584,6 +585,10 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         Continue from ``state_file``, written at ``atoms``' positions by this
         optimizer: the steps are those the uninterrupted relaxation would have
         taken (ValueError when it does not match the atoms).
+    state_label : str, optional
+        Text recorded in the state file, which ``resume=True`` requires to be
+        the same (ValueError otherwise): what else the continuation must
+        share, such as a digest of the calculator.
     **kwargs
         Further optimizer arguments (``maxstep``, ...).  With ASE's BFGS,
         ``alpha`` (initial Hessian, eV/Å² times the identity in the rows of
@@ -617,7 +622,7 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         from rigidmd.relax.precon import RigidPrecon
 
         kwargs["precon"] = RigidPrecon()
-    saved = relaxstate.resumed_state(state_file, atoms, cls) if resume else None
+    saved = relaxstate.resumed_state(state_file, atoms, cls, state_label) if resume else None
     if not relaxstate.keeps_memory(cls):
         state_file = None  # nothing a continuation could take the same steps from
     with cls(view, trajectory=trajectory, logfile=logfile, append_trajectory=append_trajectory,
@@ -639,7 +644,7 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         except Exception as err:
             if isinstance(err, _Interrupted) or any(report.raised for report in reports):
                 if state_file is not None:  # after a whole step
-                    relaxstate.write_state(state_file, view, opt)
+                    relaxstate.write_state(state_file, view, opt, state_label)
                 if isinstance(err, _Interrupted):
                     kept = (f"its state is in {state_file}: relax(..., resume=True) continues"
                             if state_file is not None else "give a state_file to continue")
@@ -655,7 +660,7 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
             if converged:
                 Path(state_file).unlink(missing_ok=True)
             else:
-                relaxstate.write_state(state_file, view, opt)
+                relaxstate.write_state(state_file, view, opt, state_label)
     left = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.0
     return Relaxation(converged, int(nsteps), float(atoms.get_potential_energy()), left)
 

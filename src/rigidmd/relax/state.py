@@ -35,8 +35,9 @@ def keeps_memory(optimizer) -> bool:
         callable(getattr(optimizer, "set_state", None))
 
 
-def write_state(path, view, opt):
-    """Write the state of ``view`` (a RigidFilter) and ``opt`` (its optimizer) to ``path``."""
+def write_state(path, view, opt, label=None):
+    """Write the state of ``view`` (a RigidFilter) and ``opt`` (its optimizer) to ``path``,
+    with ``label`` (text: what else the continuation must share, e.g. the calculator)."""
     path = Path(path)
     arrays = {f"view.{k}": v for k, v in view.get_state().items()}
     if hasattr(opt, "get_state"):
@@ -44,6 +45,8 @@ def write_state(path, view, opt):
     arrays["optimizer"] = np.array(type(opt).__name__)
     arrays["positions"] = view.atoms.positions.copy()
     arrays["cell"] = view.atoms.cell.array.copy()
+    if label is not None:
+        arrays["label"] = np.array(str(label))
     atomic_write(path, lambda fh: np.savez(fh, **arrays))
 
 
@@ -96,9 +99,9 @@ def _check_contents(arrays, path):
                          f"{norms[bad[0]]:.9g}, not 1)")
 
 
-def state_matches(state, atoms, optimizer):
+def state_matches(state, atoms, optimizer, label=None):
     """Whether ``state`` was taken at ``atoms``' positions and cell, by ``optimizer`` (a
-    class or its name).
+    class or its name), with ``label`` (as :func:`write_state` recorded it; None: unchecked).
 
     Returns
     -------
@@ -106,6 +109,9 @@ def state_matches(state, atoms, optimizer):
         None when it matches, else what differs (for a message).
     """
     optimizer = optimizer if isinstance(optimizer, str) else optimizer.__name__
+    if label is not None and str(state.get("label", "")) != str(label):
+        return (f"it was written with {state.get('label', 'no label')}, this relaxation has "
+                f"{label}")
     if str(state["optimizer"]) != optimizer:
         return f"it was written by {state['optimizer']}, this relaxation uses {optimizer}"
     if state["positions"].shape != atoms.positions.shape:
@@ -122,7 +128,7 @@ def split(state, prefix):
     return {k[len(prefix) + 1:]: v for k, v in state.items() if k.startswith(prefix + ".")}
 
 
-def resumed_state(state_file, atoms, optimizer):
+def resumed_state(state_file, atoms, optimizer, label=None):
     """The state ``relax(resume=True)`` continues from, checked against the atoms and the
     ``optimizer`` class.
 
@@ -143,7 +149,7 @@ def resumed_state(state_file, atoms, optimizer):
         raise ValueError(f"relax: resume=True but {state_file} does not exist (a relaxation "
                          "writes it when Ctrl-C, an observer or its steps stop it, and removes "
                          "it once converged); relax the atoms as they are without resume")
-    differs = state_matches(saved, atoms, optimizer)
+    differs = state_matches(saved, atoms, optimizer, label)
     if differs:
         raise ValueError(f"relax: cannot continue from {state_file}: {differs}")
     return saved

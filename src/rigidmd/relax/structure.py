@@ -143,7 +143,7 @@ def continue_from(atoms, trajectory, stream=None):
 
 
 def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, resume=False,
-                    done=0, hint=None, progress=None, stop=None):
+                    done=0, hint=None, progress=None, stop=None, label=None):
     """Relax ``atoms`` in place as ``section`` says; files go to ``directory``.
 
     Parameters
@@ -166,6 +166,10 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     stop : rigidmd.run.runner.StopSignals, optional
         Signal handling for the relaxation (installed around it; checked after
         every step).  Without it a signal does what it does outside rigidmd.
+    label : str, optional
+        What a continuation must share with the relaxation it continues (the
+        calculator's digest, ``"calculator <digest>"``): recorded in the state
+        file; a continuation with another is refused.
 
     Returns
     -------
@@ -191,7 +195,8 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     state_file = state_path(trajectory)
     exact = False
     if resume:
-        exact, why = _can_continue_exactly(state_file, atoms, section.optimizer)
+        _check_label(state_file, label)
+        exact, why = _can_continue_exactly(state_file, atoms, section.optimizer, label)
         said = (f"continuing with the optimizer's memory ({state_file})" if exact
                 else f"the optimizer's memory starts afresh: {why}")
         print(f"relax: {said}", file=stream)
@@ -208,7 +213,7 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
                            optimizer=section.optimizer, cell=section.cell,
                            scalar_pressure=section.pressure, trajectory=str(trajectory),
                            logfile=logfile, append_trajectory=resume, observers=observers,
-                           state_file=state_file, resume=exact)
+                           state_file=state_file, resume=exact, state_label=label)
     except (RelaxationFailed, NonFiniteForceError) as err:  # the atoms are at a whole step
         raise type(err)(f"{err}, the last frame of {trajectory}; continue with: "
                         f"{continuing}") from None
@@ -239,7 +244,27 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     return result
 
 
-def _can_continue_exactly(state_file, atoms, optimizer):
+def _check_label(state_file, label):
+    """Refuse to continue a relaxation whose state file records another ``label`` (another
+    calculator): its frames and the new ones would be of two energy surfaces."""
+    from rigidmd.config.quantities import ConfigError
+    from rigidmd.relax.state import read_state
+
+    if label is None:
+        return
+    try:
+        state = read_state(state_file)
+    except ValueError:
+        return  # a damaged state: the memory starts afresh, and says why
+    recorded = None if state is None else state.get("label")
+    if recorded is not None and str(recorded) != label:
+        field = label.split()[0]
+        raise ConfigError(f"--resume: the {field} differs from the relaxation's ({state_file} "
+                          f"records {recorded}, the configuration gives {label}); restore it, "
+                          "or start anew with --overwrite")
+
+
+def _can_continue_exactly(state_file, atoms, optimizer, label=None):
     """``(True, "")`` when ``state_file`` holds the state of the last frame, else (False, why)."""
     from rigidmd.relax.filter import optimizer_class
     from rigidmd.relax.state import keeps_memory, read_state, state_matches
@@ -252,5 +277,5 @@ def _can_continue_exactly(state_file, atoms, optimizer):
         return False, str(err)
     if state is None:
         return False, f"no {state_file} (the relaxation was not stopped by a signal or its steps)"
-    differs = state_matches(state, atoms, optimizer)
+    differs = state_matches(state, atoms, optimizer, label)
     return (False, f"{state_file}: {differs}") if differs else (True, "")

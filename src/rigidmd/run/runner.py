@@ -197,7 +197,8 @@ class Run:
         else:
             self.checkpoints.write(start, relaxation=str(section.trajectory))
         relax_structure(atoms, bodies, section, directory, self.stream, resume=continuing,
-                        done=done, hint=self._resume_hint(), stop=StopSignals())
+                        done=done, hint=self._resume_hint(), stop=StopSignals(),
+                        label=f"calculator {self.fingerprint['calculator']}")
         self._draw_velocities(atoms, bodies)
 
     def _resumed_dynamics(self):
