@@ -470,3 +470,38 @@ def test_rigidmd_relax_resume_refuses_another_calculator(tmp_path, monkeypatch):
     out = io.StringIO()
     assert relax_only(raw, out, mode="resume") == 0
     assert "continuing with the optimizer's memory" in out.getvalue()
+
+
+@pytest.mark.parametrize("where", ["trajectory", "log"])
+def test_a_full_disk_while_relaxing_names_the_file(tmp_path, monkeypatch, capsys, where):
+    """Issue 45 item 19: a full disk during ``rigidmd relax`` said "cannot write an output
+    file" (ASE's write errors carry no file name); now the file is named."""
+    import errno
+
+    from ase.io.ulm import Writer
+
+    from rigidmd.run.cli import main
+
+    config = tmp_path / "relax.yaml"
+    config.write_text(RELAX_CONFIG.replace("STEPS", "2000"))
+    writes = []
+
+    def full(*args, **kwargs):
+        writes.append(1)
+        if len(writes) == 3:
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    if where == "trajectory":
+        original = Writer.write  # under ASE's trajectory writer
+        monkeypatch.setattr(Writer, "write",
+                            lambda self, *a, **k: (full(), original(self, *a, **k)))
+    else:
+        from ase.optimize.fire import FIRE
+
+        original = FIRE.log
+        monkeypatch.setattr(FIRE, "log", lambda self, *a, **k: (full(), original(self, *a, **k)))
+    assert main(["relax", str(config)]) == 1  # as a failed write of rigidmd run
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    path = tmp_path / "out" / ("relax.traj" if where == "trajectory" else "relax.log")
+    assert err.startswith(f"rigidmd: run stopped: relax: cannot write {path}: the disk is full; "
+                          f"continue with: rigidmd relax {config}"), err

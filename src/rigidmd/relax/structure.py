@@ -217,6 +217,12 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     except (RelaxationFailed, NonFiniteForceError) as err:  # the atoms are at a whole step
         raise type(err)(f"{err}, the last frame of {trajectory}; continue with: "
                         f"{continuing}") from None
+    except OSError as err:  # a failed write: ASE's errors name no file
+        from rigidmd.run.outputs import describe_os_error
+
+        where = err.filename or _written_file(err, trajectory, log, state_file)
+        raise RelaxationFailed(f"relax: {describe_os_error(err, where)}; continue with: "
+                               f"{continuing} once it can be written") from None
     except Exception as err:
         signum = getattr(err, "signum", None)  # the stop's StopRequest, after a whole step
         if stop is None or signum is None:
@@ -242,6 +248,22 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
           f"fmax {result.fmax:.3g} eV/Å, energy {result.energy:.6f} eV; wrote {trajectory} and "
           f"{log}", file=stream)
     return result
+
+
+def _written_file(err, trajectory, log, state_file):
+    """The file a write error without a file name came from, by where it was raised: ASE's
+    trajectory writer, the state file's writer, else the optimizer's log."""
+    frames = []
+    tb = err.__traceback__
+    while tb is not None:
+        frames.append(tb.tb_frame.f_code.co_filename.replace("\\", "/"))
+        tb = tb.tb_next
+    if any("/ase/io/" in name for name in frames):
+        return trajectory
+    if any(name.endswith(("/rigidmd/relax/state.py", "/rigidmd/core/checkpoint.py"))
+           for name in frames):
+        return state_file
+    return log
 
 
 def _check_label(state_file, label):
