@@ -505,3 +505,24 @@ def test_a_full_disk_while_relaxing_names_the_file(tmp_path, monkeypatch, capsys
     path = tmp_path / "out" / ("relax.traj" if where == "trajectory" else "relax.log")
     assert err.startswith(f"rigidmd: run stopped: relax: cannot write {path}: the disk is full; "
                           f"continue with: rigidmd relax {config}"), err
+
+
+def test_rigidmd_relax_resume_of_a_converged_relaxation_says_it_is_complete(tmp_path):
+    """Issue 45 item 21: ``rigidmd relax --resume`` of a converged relaxation said it was
+    "continuing ... after step N" and that "the optimizer's memory starts afresh", as if work
+    were left.  Now it says the relaxation is complete, and writes nothing."""
+    import io
+
+    from rigidmd.relax.command import relax_only
+
+    raw = relax_config(tmp_path)
+    assert relax_only(raw, io.StringIO()) == 0
+    files = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
+    out = io.StringIO()
+    assert relax_only(raw, out, mode="resume") == 0
+    said = out.getvalue().strip().splitlines()
+    assert len(said) == 1 and said[0].startswith(
+        f"relax: the relaxation in {tmp_path / 'out' / 'relax.traj'} is complete: it converged "
+        "at step "), said
+    assert said[0].endswith("below fmax 0.01); nothing is left to do")
+    assert {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()} == files

@@ -85,7 +85,7 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     try:
         done = 0
         if mode == "resume":
-            done = continue_from(atoms, trajectory, stream)
+            done = continue_from(atoms, trajectory)
         else:
             existing = [p for p in (trajectory, log, state) if p.exists()]
             if existing and mode != "overwrite":

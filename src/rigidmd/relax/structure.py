@@ -34,7 +34,7 @@ import time
 import numpy as np
 
 from rigidmd.core.forces import NonFiniteForceError
-from rigidmd.relax.filter import RelaxationFailed, relax
+from rigidmd.relax.filter import Relaxation, RelaxationFailed, RigidFilter, relax
 
 __all__ = ["relax_structure", "RelaxationNotConverged", "RelaxationStopped", "RelaxProgress",
            "RelaxationFailed", "continue_from", "state_path"]
@@ -93,7 +93,7 @@ class RelaxProgress:
             self.stream.flush()
 
 
-def continue_from(atoms, trajectory, stream=None):
+def continue_from(atoms, trajectory):
     """Put the last frame of a relaxation's ``trajectory`` into ``atoms``; steps it holds.
 
     Parameters
@@ -101,8 +101,6 @@ def continue_from(atoms, trajectory, stream=None):
     atoms : ase.Atoms
         The configuration's structure (its atoms, bodies and calculator are kept).
     trajectory : pathlib.Path
-    stream : file-like, optional
-        Told which relaxation continues after which step.
 
     Returns
     -------
@@ -136,9 +134,6 @@ def continue_from(atoms, trajectory, stream=None):
                           f"{len(atoms)} ({atoms.get_chemical_formula()}); not its relaxation")
     atoms.set_cell(last.cell, scale_atoms=False)
     atoms.positions = last.positions
-    if stream is not None:
-        print(f"continuing the relaxation of {trajectory} after step {len(frames) - 1}",
-              file=stream)
     return len(frames) - 1
 
 
@@ -197,6 +192,18 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     if resume:
         _check_label(state_file, label)
         exact, why = _can_continue_exactly(state_file, atoms, section.optimizer, label)
+        if not exact and not state_file.exists():
+            # No state: killed outright, or converged (its state removed).  The forces of
+            # the last frame say which (one call, which the relaxation's first reuses).
+            view = RigidFilter(atoms, bodies, cell=section.cell,
+                               scalar_pressure=section.pressure)
+            force = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.
+            if force < section.fmax:
+                print(f"relax: the relaxation in {trajectory} is complete: it converged at "
+                      f"step {done} (largest generalized force {force:.3g} eV/Å, below fmax "
+                      f"{section.fmax:g}); nothing is left to do", file=stream)
+                return Relaxation(True, 0, float(atoms.get_potential_energy()), force)
+        print(f"continuing the relaxation of {trajectory} after step {done}", file=stream)
         said = (f"continuing with the optimizer's memory ({state_file})" if exact
                 else f"the optimizer's memory starts afresh: {why}")
         print(f"relax: {said}", file=stream)

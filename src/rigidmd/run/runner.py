@@ -193,7 +193,7 @@ class Run:
         section, directory = self.config.relax, self.outputs.directory
         done = 0
         if continuing:
-            done = continue_from(atoms, directory / section.trajectory, self.stream)
+            done = continue_from(atoms, directory / section.trajectory)
         else:
             self.checkpoints.write(start, relaxation=str(section.trajectory))
         relax_structure(atoms, bodies, section, directory, self.stream, resume=continuing,
