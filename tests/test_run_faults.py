@@ -501,3 +501,26 @@ def test_run_overwrite_never_deletes_the_relaxation_it_starts_from(tmp_path, mon
             "relax.traj is also the structure this run reads" in err and "\n" not in err, err
         assert (tmp_path / "out" / "relax.traj").read_bytes() == kept
         assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["relax.traj"]
+
+
+def test_a_lost_log_advises_first_what_keeps_the_trajectory_and_checkpoint(
+        tmp_path, monkeypatch, capsys):
+    """Issue 45 item 21: a deleted md.log made --resume advise only "rerun with --overwrite",
+    which discards an intact trajectory and checkpoint.  Now it says to restore the log, or
+    to start a new run from the trajectory's last frame (keeping them), before --overwrite;
+    nothing is changed."""
+    path = short_project(tmp_path, steps=20)
+    assert run_here(path, monkeypatch, capsys)[0] == 0
+    (path / "out" / "md.log").unlink()
+    kept = {p.name: p.read_bytes() for p in (path / "out").iterdir()}
+    status, _, stderr = run_here(path, monkeypatch, capsys, "--resume", "--steps", "40")
+    assert status == 2
+    line = stderr.strip()
+    assert "\n" not in line and line.startswith(
+        f"rigidmd: error: outputs.log: {path / 'out' / 'md.log'} is shorter than at the "
+        "checkpoint (0 < "), line
+    assert line.endswith(
+        f"the run cannot be continued without it: restore it, or start a new run from its "
+        f"last frame with --restart {path / 'out' / 'md.traj'} --outdir NEW_DIRECTORY (which "
+        "keeps these outputs), or start it again with --overwrite (which removes them)"), line
+    assert {p.name: p.read_bytes() for p in (path / "out").iterdir()} == kept

@@ -150,11 +150,12 @@ def output_lengths(files):
     return lengths
 
 
-def trim_outputs(files, lengths):
+def trim_outputs(files, lengths, advice="start it again with --overwrite"):
     """Cut each output file back to its recorded length (before a resumed run appends).
 
     A file shorter than recorded (lost after the checkpoint) is an error:
-    the run cannot continue it.  Returns the names of the files trimmed.
+    the run cannot continue it, and ``advice`` says what to do instead.
+    Returns the names of the files trimmed.
     """
     trimmed = []
     for name, path in files.items():
@@ -170,7 +171,7 @@ def trim_outputs(files, lengths):
             raise OutputError(
                 f"outputs.{name}: {path} is shorter than at the checkpoint "
                 f"({path.stat().st_size if path.exists() else 0} < {recorded['size']} bytes); "
-                "it cannot be continued: rerun with --overwrite")
+                f"the run cannot be continued without it: restore it, or {advice}")
         if path.stat().st_size == recorded["size"]:
             if name == "trajectory" and "nitems" in recorded:
                 _restore_ulm(path, recorded)

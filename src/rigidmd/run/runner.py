@@ -224,7 +224,8 @@ class Run:
             return self._new_dynamics(replace=True)
         calc = self.config.calculator.build(checkpoint.atoms(), out.directory / "engine")
         self.files.prepare(self.checkpoints.is_earlier_demo)
-        trimmed = trim_outputs(self.files.appended(), checkpoint.extra.get("outputs", {}))
+        trimmed = trim_outputs(self.files.appended(), checkpoint.extra.get("outputs", {}),
+                               self.files.fresh_start_advice())
         self.checkpoints.step = checkpoint.nsteps
         dyn = load_checkpoint(checkpoint, calc,
                               trajectory=str(out.trajectory) if out.trajectory else None,
