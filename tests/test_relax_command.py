@@ -526,3 +526,35 @@ def test_rigidmd_relax_resume_of_a_converged_relaxation_says_it_is_complete(tmp_
         "at step "), said
     assert said[0].endswith("below fmax 0.01); nothing is left to do")
     assert {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()} == files
+
+
+@pytest.mark.parametrize("signame", ["SIGTERM", "SIGINT"])
+def test_a_signal_just_after_the_relaxation_is_noted_not_a_kill(tmp_path, signame):
+    """Issue 45 item 21: a signal in the moment after convergence (the relaxation's handlers
+    gone, the command not yet ended) killed rigidmd relax without a word (exit -15, -2).
+    Now it is noted: the relaxation is complete, and the command says so and exits 0."""
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    script = tmp_path / "late_signal.py"
+    script.write_text(textwrap.dedent(f"""
+        import os, signal, sys
+        from rigidmd.relax.structure import RelaxProgress
+        finish = RelaxProgress.finish
+        def late(self):  # after the relaxation's own handlers are gone
+            finish(self)
+            os.kill(os.getpid(), signal.{signame})
+        RelaxProgress.finish = late
+        from rigidmd.run.cli import main
+        sys.exit(main(["relax", "relax.yaml"]))
+    """))
+    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "2000"))
+    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                            text=True, timeout=600, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    assert result.returncode == 0, (result.returncode, result.stderr)
+    assert result.stdout.strip().splitlines()[-1] == (
+        f"relax: {signame} arrived after the relaxation had ended; it is complete and its "
+        "outputs are whole")
+    assert "Traceback" not in result.stderr

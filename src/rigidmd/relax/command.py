@@ -6,6 +6,7 @@ relaxation (refused, replaced with ``--overwrite`` or continued with
 ``--resume``, never the structure being read), and signals.
 """
 
+import signal
 import sys
 from pathlib import Path
 
@@ -94,22 +95,38 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
             for path in existing:
                 path.unlink()
         atoms.calc = calculator.build(atoms)
+        # Installed before the relaxation's own handlers and kept after them: a signal once
+        # the relaxation has ended is noted, never a kill without a word (exit -15).
+        after = StopSignals()
+        after.shielded = True  # a second Ctrl-C then is only counted
+        calc = atoms.calc
         try:
-            relax_structure(atoms, bodies, section, directory, stream, resume=mode == "resume",
-                            done=done, stop=StopSignals(),
-                            label=f"calculator {calculator_digest(calculator)}",
-                            hint=resume_command(
-                                config_path or "CONFIG", directory,
-                                ["--trust"] if trust else [], command="relax"))
+            with after:
+                relax_structure(atoms, bodies, section, directory, stream,
+                                resume=mode == "resume", done=done, stop=StopSignals(),
+                                label=f"calculator {calculator_digest(calculator)}",
+                                hint=resume_command(config_path or "CONFIG", directory,
+                                                    ["--trust"] if trust else [],
+                                                    command="relax"))
+                calc = _close(calc)
+                lock.release()
         except RelaxationStopped as stopped:
             return stopped.status
         finally:
-            close = getattr(atoms.calc, "close", None)
-            if callable(close):
-                close()
+            _close(calc)
+        if after.signum is not None:
+            print(f"relax: {signal.Signals(after.signum).name} arrived after the relaxation "
+                  "had ended; it is complete and its outputs are whole", file=stream)
     finally:
         lock.release()
     return 0
+
+
+def _close(calc):
+    """Close a calculator with a process of its own (``None``: closed already); None."""
+    close = getattr(calc, "close", None)
+    if callable(close):
+        close()
 
 
 
