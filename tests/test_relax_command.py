@@ -558,3 +558,34 @@ def test_a_signal_just_after_the_relaxation_is_noted_not_a_kill(tmp_path, signam
         f"relax: {signame} arrived after the relaxation had ended; it is complete and its "
         "outputs are whole")
     assert "Traceback" not in result.stderr
+
+
+def test_a_signal_just_after_a_run_s_relaxation_stops_the_md_with_a_checkpoint(tmp_path):
+    """Issue 45 item 21: ``rigidmd run`` with a relax: section, signalled in the moment after
+    the relaxation converged (its handlers gone, the MD's not yet there), was killed without
+    a word (exit -15).  Now the signal is noted and obeyed as in the MD: a checkpoint at its
+    start, the command that resumes, exit 143."""
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    script = tmp_path / "late_signal.py"
+    script.write_text(textwrap.dedent("""
+        import os, signal, sys
+        from rigidmd.relax.structure import RelaxProgress
+        finish = RelaxProgress.finish
+        def late(self):  # after the relaxation's own handlers are gone
+            finish(self)
+            os.kill(os.getpid(), signal.SIGTERM)
+        RelaxProgress.finish = late
+        from rigidmd.run.cli import main
+        sys.exit(main(["run", "relax.yaml"]))
+    """))
+    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "2000"))
+    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                            text=True, timeout=600, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    assert result.returncode == 143, (result.returncode, result.stderr)
+    assert "stopped by SIGTERM after step 0" in result.stdout  # (ASE observes step 0 too)
+    assert "continue with: rigidmd run relax.yaml --resume" in result.stdout
+    assert "Traceback" not in result.stderr

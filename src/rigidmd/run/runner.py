@@ -97,6 +97,7 @@ class Run:
         self.outputs = config.outputs
         self.files = RunFiles(self.outputs, mode, self.stream, config.relax)
         self.checkpoints = RunCheckpoints(config, self.files, self.stream)
+        self._after_relax = None  # the stop signals between the relaxation and the MD
 
     @property
     def fingerprint(self):
@@ -196,6 +197,11 @@ class Run:
             done = continue_from(atoms, directory / section.trajectory)
         else:
             self.checkpoints.write(start, relaxation=str(section.trajectory))
+        # Installed before the relaxation's own handlers and kept until the MD's: a signal
+        # once the relaxation has ended is noted (the MD stops after its first step, with a
+        # checkpoint), never a kill without a word.
+        self._after_relax = StopSignals().__enter__()
+        self._after_relax.shielded = True  # a second Ctrl-C then is only counted
         relax_structure(atoms, bodies, section, directory, self.stream, resume=continuing,
                         done=done, hint=self._resume_hint(), stop=StopSignals(),
                         label=f"calculator {self.fingerprint['calculator']}")
@@ -275,8 +281,17 @@ class Run:
         return RunStopped(f"{reason} (at step {dyn.nsteps}); {where}")
 
     def _execute(self):
+        try:
+            return self._execute_steps()
+        finally:
+            if self._after_relax is not None:
+                self._after_relax.__exit__(None, None, None)  # the handlers before the run's
+
+    def _execute_steps(self):
         dyn = self._set_up()
         stop = StopSignals()
+        if self._after_relax is not None and self._after_relax.signum is not None:
+            stop.signum = self._after_relax.signum  # arrived after the relaxation: obeyed now
         # The handlers stay until the calculator is closed: a signal after the steps is noted,
         # never a KeyboardInterrupt in the final checkpoint's write or the engine's shutdown.
         with stop:
