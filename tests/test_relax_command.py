@@ -589,3 +589,36 @@ def test_a_signal_just_after_a_run_s_relaxation_stops_the_md_with_a_checkpoint(t
     assert "stopped by SIGTERM after step 0" in result.stdout  # (ASE observes step 0 too)
     assert "continue with: rigidmd run relax.yaml --resume" in result.stdout
     assert "Traceback" not in result.stderr
+
+
+def test_a_damaged_trajectory_continues_from_the_state_file(tmp_path, monkeypatch):
+    """Issue 45 item 19: a damaged relax.traj could not be continued ("cannot read") though
+    relax.state.npz held the positions.  Now --resume continues from the state, keeping the
+    damaged file beside it, and reaches the uninterrupted relaxation's minimum."""
+    import io
+    import signal
+
+    from ase.io import read
+
+    from rigidmd.relax.command import relax_only
+
+    reference = tmp_path / "reference"
+    reference.mkdir()
+    assert relax_only(relax_config(reference), io.StringIO()) == 0
+    minimum = read(reference / "out" / "relax.traj")
+
+    raw = relax_config(tmp_path)
+    signal_at_call(monkeypatch, 12, signal.SIGTERM)
+    assert relax_only(raw, io.StringIO()) == 143
+    monkeypatch.setattr(RigidFilter, "get_forces", signal_at_call.original)
+    traj = tmp_path / "out" / "relax.traj"
+    damaged = traj.read_bytes()[:-100]  # its frame table cut off
+    traj.write_bytes(damaged)
+    out = io.StringIO()
+    assert relax_only(raw, out, mode="resume") == 0
+    assert (f"relax: {traj} cannot be read (" in out.getvalue() and "it is kept as "
+            "relax.damaged.traj, and the relaxation continues from the positions in "
+            f"{tmp_path / 'out' / 'relax.state.npz'} in a new relax.traj") in out.getvalue()
+    assert "continuing with the optimizer's memory" in out.getvalue()
+    assert (tmp_path / "out" / "relax.damaged.traj").read_bytes() == damaged
+    np.testing.assert_array_equal(read(traj).positions, minimum.positions)

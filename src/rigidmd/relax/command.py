@@ -86,7 +86,7 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     try:
         done = 0
         if mode == "resume":
-            done = continue_from(atoms, trajectory)
+            done = continue_from(atoms, trajectory, state, stream)
         else:
             existing = [p for p in (trajectory, log, state) if p.exists()]
             if existing and mode != "overwrite":

@@ -93,14 +93,22 @@ class RelaxProgress:
             self.stream.flush()
 
 
-def continue_from(atoms, trajectory):
+def continue_from(atoms, trajectory, state_file=None, stream=None):
     """Put the last frame of a relaxation's ``trajectory`` into ``atoms``; steps it holds.
+
+    A trajectory that cannot be read is continued from the positions of the
+    relaxation's ``state_file`` when that is whole: the damaged file is kept
+    beside it (``relax.damaged.traj``) and the continuation writes a new one.
 
     Parameters
     ----------
     atoms : ase.Atoms
         The configuration's structure (its atoms, bodies and calculator are kept).
     trajectory : pathlib.Path
+    state_file : pathlib.Path, optional
+        The relaxation's state (:func:`state_path`).
+    stream : file, optional
+        Told when the state's positions replace a damaged trajectory.
 
     Returns
     -------
@@ -122,8 +130,11 @@ def continue_from(atoms, trajectory):
     try:
         frames = read(trajectory, index=":")
     except Exception as err:  # ASE raises many kinds on a damaged file  # noqa: BLE001
-        raise ConfigError(f"--resume: cannot read {trajectory} "
-                          f"({type(err).__name__}: {' '.join(str(err).split())})") from None
+        reason = f"{type(err).__name__}: {' '.join(str(err).split())}"
+        done = _from_state(atoms, trajectory, state_file, reason, stream)
+        if done is None:
+            raise ConfigError(f"--resume: cannot read {trajectory} ({reason})") from None
+        return done
     if not frames:
         raise ConfigError(f"--resume: {trajectory} holds no frame; start again with "
                           "--overwrite")
@@ -135,6 +146,38 @@ def continue_from(atoms, trajectory):
     atoms.set_cell(last.cell, scale_atoms=False)
     atoms.positions = last.positions
     return len(frames) - 1
+
+
+def _from_state(atoms, trajectory, state_file, reason, stream):
+    """Continue from the positions of a whole ``state_file`` of these atoms instead of a
+    damaged ``trajectory``, which is kept under another name; steps taken, or None."""
+    from rigidmd.relax.state import read_state
+    from rigidmd.run.outputs import OutputError, _ulm_header
+
+    if state_file is None:
+        return None
+    try:
+        state = read_state(state_file)
+    except ValueError:
+        return None
+    if state is None or state["positions"].shape != atoms.positions.shape:
+        return None
+    try:
+        done = max(_ulm_header(trajectory)[0] - 1, 0)  # the frames its header counts
+    except (OSError, OutputError):
+        done = 0
+    aside, n = trajectory.with_name(f"{trajectory.stem}.damaged{trajectory.suffix}"), 1
+    while aside.exists():
+        n += 1
+        aside = trajectory.with_name(f"{trajectory.stem}.damaged{n}{trajectory.suffix}")
+    trajectory.rename(aside)
+    atoms.set_cell(state["cell"], scale_atoms=False)
+    atoms.positions = state["positions"]
+    if stream is not None:
+        print(f"relax: {trajectory} cannot be read ({reason}); it is kept as {aside.name}, and "
+              f"the relaxation continues from the positions in {state_file} in a new "
+              f"{trajectory.name}", file=stream)
+    return done
 
 
 def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, resume=False,

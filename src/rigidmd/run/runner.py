@@ -189,12 +189,13 @@ class Run:
         trajectory, and the MD after it.  The MD's own step-0 checkpoint
         replaces it.
         """
-        from rigidmd.relax.structure import continue_from, relax_structure
+        from rigidmd.relax.structure import continue_from, relax_structure, state_path
 
         section, directory = self.config.relax, self.outputs.directory
         done = 0
         if continuing:
-            done = continue_from(atoms, directory / section.trajectory)
+            trajectory = directory / section.trajectory
+            done = continue_from(atoms, trajectory, state_path(trajectory), self.stream)
         else:
             self.checkpoints.write(start, relaxation=str(section.trajectory))
         # Installed before the relaxation's own handlers and kept until the MD's: a signal
