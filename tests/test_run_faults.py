@@ -524,3 +524,41 @@ def test_a_lost_log_advises_first_what_keeps_the_trajectory_and_checkpoint(
         f"last frame with --restart {path / 'out' / 'md.traj'} --outdir NEW_DIRECTORY (which "
         "keeps these outputs), or start it again with --overwrite (which removes them)"), line
     assert {p.name: p.read_bytes() for p in (path / "out").iterdir()} == kept
+
+
+def test_a_second_ctrl_c_while_interrupted_before_the_start_is_no_traceback(tmp_path):
+    """Issue 45 item 21: Ctrl-C twice during start-up (slow imports, building the
+    calculator): the first ended the set-up, the second, arriving while the one line was
+    written, printed a KeyboardInterrupt traceback.  Now it is ignored: one line, exit 130."""
+    import textwrap
+
+    path = short_project(tmp_path, steps=10)
+    script = path / "twice.py"
+    script.write_text(textwrap.dedent("""
+        import os, signal, sys
+        from rigidmd.run import cli
+        from rigidmd.run.runner import Run
+
+        def slow_start(self):  # the first Ctrl-C, in the set-up
+            raise KeyboardInterrupt
+
+        class Stderr:  # the second Ctrl-C, while the message is written
+            def __init__(self, stream):
+                self.stream, self.sent = stream, False
+            def write(self, text):
+                if not self.sent:
+                    self.sent = True
+                    os.kill(os.getpid(), signal.SIGINT)
+                return self.stream.write(text)
+            def flush(self):
+                self.stream.flush()
+
+        Run.execute = slow_start
+        sys.stderr = Stderr(sys.stderr)
+        sys.exit(cli.main(["run", "run.yaml"]))
+    """))
+    result = subprocess.run([sys.executable, str(script)], cwd=path, capture_output=True,
+                            text=True, timeout=300)
+    assert result.returncode == 130, (result.returncode, result.stderr)
+    assert result.stderr.strip() == "rigidmd: interrupted before the run started", \
+        result.stderr

@@ -16,7 +16,9 @@ with a checkpoint (130, 143, 138), and ``--resume`` continues exactly.
 
 import argparse
 import os
+import signal
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -202,6 +204,20 @@ def _relax_parser(sub, trust_help):
                       help="replace an earlier relaxation's outputs in the output directory")
 
 
+@contextmanager
+def _further_ctrl_c_ignored():
+    """SIGINT ignored inside (in the main thread; elsewhere signals are the main thread's)."""
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread
+        previous = None
+    try:
+        yield
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
 def main(argv=None):
     """Entry point of the ``rigidmd`` console script; returns the exit status."""
     args = _parser().parse_args(argv)
@@ -271,8 +287,10 @@ def main(argv=None):
         return 1
     except KeyboardInterrupt:
         # Ctrl-C before the steps began (reading, building the calculator, relaxing): no run
-        # started, so there is nothing to continue.
-        print(f"rigidmd: interrupted before the {args.command} started", file=sys.stderr)
+        # started, so there is nothing to continue.  A further Ctrl-C (a second press while
+        # slow imports ran) has nothing left to stop: ignored while the line is written.
+        with _further_ctrl_c_ignored():
+            print(f"rigidmd: interrupted before the {args.command} started", file=sys.stderr)
         return 130
     except (NonFiniteForceError, ConvergenceError, RelaxationNotConverged,
             RelaxationFailed) as err:
