@@ -201,7 +201,7 @@ def _restore_ulm_header(fh, recorded):
     fh.write(np.array([recorded["nitems"], recorded["pos0"]], dtype="<i8").tobytes())
 
 
-def check_apart_from_inputs(outputs, inputs):
+def check_apart_from_inputs(outputs, inputs, allowed=()):
     """Refuse an output on the path of an input, before anything is read or written.
 
     An output there would replace the input (a log over the configuration, a
@@ -211,6 +211,9 @@ def check_apart_from_inputs(outputs, inputs):
     ----------
     outputs, inputs : dict
         Field name -> path (``None`` is skipped): what the run writes, what it reads.
+    allowed : collection of (str, str)
+        (output field, input field) pairs that may share a path: the input is
+        read whole before the output is written.
 
     Raises
     ------
@@ -227,7 +230,7 @@ def check_apart_from_inputs(outputs, inputs):
         if path is None:
             continue
         source = read.get(_identity(path))
-        if source is None:
+        if source is None or (name, source) in allowed:
             continue
         raise ConfigError(f"{name}: {path} is also the {source} this run reads, which "
                           f"writing it would destroy; give {name} another file, or copy the "

@@ -256,7 +256,10 @@ class Run:
 
     def execute(self):
         """Run; returns the exit status (0, or 130/143/138 after a stop signal)."""
-        check_apart_from_inputs(self.files.named(), self.inputs())  # before anything is touched
+        # Before anything is touched.  A restart from this directory's own trajectory is
+        # read before the outputs are removed (--overwrite), or refused (a new run).
+        check_apart_from_inputs(self.files.named(), self.inputs(),
+                                allowed={("outputs.trajectory", "restart")})
         lock = self.files.open()
         try:
             return self._execute()
