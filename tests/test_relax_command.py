@@ -318,13 +318,13 @@ def test_rigidmd_relax_refuses_a_log_on_its_configuration(tmp_path):
     naming the field."""
     import io
 
-    from rigidmd.config.quantities import ConfigError
     from rigidmd.relax.command import relax_only
+    from rigidmd.run.outputs import OutputError
 
     raw = relax_config(tmp_path)
     raw["relax"]["log"] = "../relax.yaml"
     before = (tmp_path / "relax.yaml").read_bytes()
-    with pytest.raises(ConfigError, match=r"^relax.log: .*relax.yaml is also the configuration "
+    with pytest.raises(OutputError, match=r"^relax.log: .*relax.yaml is also the configuration "
                                           "this run reads"):
         relax_only(raw, io.StringIO(), trust=True, config_path=str(tmp_path / "relax.yaml"))
     assert (tmp_path / "relax.yaml").read_bytes() == before

@@ -60,6 +60,7 @@ from rigidmd.relax import kernels
 from rigidmd.relax import state as relaxstate
 from rigidmd.relax.facade import AtomsFacade
 from rigidmd.relax.rotation import right_jacobian_transpose, rotation_quaternion
+from rigidmd.relax.stops import Interrupt, Interrupted, RelaxationFailed, WholeStep, failed
 
 __all__ = ["RigidFilter", "relax", "Relaxation", "RelaxationFailed", "OPTIMIZERS",
            "optimizer_class", "ANCHOR_ANGLE", "rotation_quaternion", "right_jacobian_transpose"]
@@ -493,12 +494,6 @@ OPTIMIZERS = ("RigidLBFGS", "PreconLBFGS", "PreconFIRE", "BFGS", "LBFGS", "FIRE"
 PRECONDITIONED = ("RigidLBFGS", "PreconLBFGS", "PreconFIRE")
 
 
-class RelaxationFailed(RuntimeError):
-    """The optimizer or the calculator failed in a step of :func:`relax` (a line search
-    that found no descent, an exception of the calculator); the atoms are back at the
-    structure of the last whole step, which the message names."""
-
-
 @dataclass
 class Relaxation:
     """What :func:`relax` did.
@@ -631,21 +626,21 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
             view.set_state(relaxstate.split(saved, "view"))
             if hasattr(opt, "set_state"):
                 opt.set_state(relaxstate.split(saved, "opt"))
-        whole = _WholeStep(atoms, opt)  # first: the structure of each whole step
+        whole = WholeStep(atoms, opt)  # first: the structure of each whole step
         opt.attach(whole, interval=1)
         reports = [_Report(observer, opt, view) for observer in observers]
         for report in reports:
             opt.attach(report, interval=1)
-        interrupt = _Interrupt()
+        interrupt = Interrupt()
         opt.attach(interrupt, interval=1)  # last: after the step's frame and observers
         try:
             with interrupt:
                 converged = bool(opt.run(fmax=fmax, steps=int(steps)))
         except Exception as err:
-            if isinstance(err, _Interrupted) or any(report.raised for report in reports):
+            if isinstance(err, Interrupted) or any(report.raised for report in reports):
                 if state_file is not None:  # after a whole step
                     relaxstate.write_state(state_file, view, opt, state_label)
-                if isinstance(err, _Interrupted):
+                if isinstance(err, Interrupted):
                     kept = (f"its state is in {state_file}: relax(..., resume=True) continues"
                             if state_file is not None else "give a state_file to continue")
                     raise KeyboardInterrupt(f"relax: interrupted (Ctrl-C) after step "
@@ -654,7 +649,7 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
             whole.restore()  # not at the failed trial point: at the last whole step
             if isinstance(err, OSError) or getattr(err, "setup", False):
                 raise  # a failed write (named by the caller), an input's mistake
-            raise _failed(err, cls.__name__, whole.step) from err
+            raise failed(err, cls.__name__, whole.step) from err
         nsteps = opt.get_number_of_steps()
         if state_file is not None:
             if converged:
@@ -663,87 +658,6 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
                 relaxstate.write_state(state_file, view, opt, state_label)
     left = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.0
     return Relaxation(converged, int(nsteps), float(atoms.get_potential_energy()), left)
-
-
-def _failed(err, optimizer, done):
-    """The exception that says a step failed: of ``err``'s kind for non-finite forces
-    (:class:`~rigidmd.core.forces.NonFiniteForceError`), else :class:`RelaxationFailed`."""
-    from rigidmd.core.forces import NonFiniteForceError
-
-    reason = " ".join(str(err).split()) or type(err).__name__
-    if isinstance(err, NonFiniteForceError):
-        reason = reason.split(" after step ")[0]  # the dynamics' step: not the optimizer's
-    else:
-        reason = f"{type(err).__name__}: {reason}"
-    message = (f"relax: {optimizer} failed after step {done} ({reason}); the atoms are back "
-               f"at the structure of step {done}")
-    if isinstance(err, NonFiniteForceError):
-        return NonFiniteForceError(message)
-    return _FailedValue(message) if isinstance(err, ValueError) else RelaxationFailed(message)
-
-
-class _FailedValue(RelaxationFailed, ValueError):
-    """A ValueError in a step (a cell shrunk below a body, ...): still one for its callers."""
-
-
-class _Interrupted(Exception):
-    """A Ctrl-C arrived during a step of :func:`relax`; raised after the step, as an observer."""
-
-
-class _Interrupt:
-    """Ctrl-C in :func:`relax` as in ``rigidmd relax``: the step, its frame and the state
-    file are finished, then ``KeyboardInterrupt``; a second Ctrl-C interrupts at once.
-
-    Only where SIGINT has Python's own handler, in the main thread: a program that
-    handles it (``rigidmd``'s commands) keeps its handling.
-    """
-
-    def __init__(self):
-        self.pending, self.previous = False, None
-
-    def __enter__(self):
-        import signal
-        import threading
-
-        if threading.current_thread() is threading.main_thread() and \
-                signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-            self.previous = signal.signal(signal.SIGINT, self._handler)
-        return self
-
-    def _handler(self, signum, frame):
-        if self.pending:
-            raise KeyboardInterrupt
-        self.pending = True
-
-    def __call__(self):
-        if self.pending:
-            raise _Interrupted
-
-    def __exit__(self, *exc):
-        if self.previous is not None:
-            import signal
-
-            signal.signal(signal.SIGINT, self.previous)
-            self.previous = None
-        return False
-
-
-class _WholeStep:
-    """The positions and cell of the optimizer's last whole step (an observer), and its
-    number (``step``: the optimizer's steps then)."""
-
-    def __init__(self, atoms, opt):
-        self.atoms, self.opt = atoms, opt
-        self()
-
-    def __call__(self):
-        self.step = self.opt.nsteps
-        self.positions = self.atoms.positions.copy()
-        self.cell = self.atoms.cell.array.copy()
-
-    def restore(self):
-        self.atoms.set_cell(self.cell, scale_atoms=False)
-        self.atoms.positions = self.positions
 
 
 class _Report:

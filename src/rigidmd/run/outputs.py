@@ -217,11 +217,9 @@ def check_apart_from_inputs(outputs, inputs, allowed=()):
 
     Raises
     ------
-    rigidmd.config.ConfigError
+    OutputError
         Naming the output's field, its path and the input it is.
     """
-    from rigidmd.config import ConfigError
-
     read = {}
     for name, path in inputs.items():
         if path is not None:
@@ -232,7 +230,7 @@ def check_apart_from_inputs(outputs, inputs, allowed=()):
         source = read.get(_identity(path))
         if source is None or (name, source) in allowed:
             continue
-        raise ConfigError(f"{name}: {path} is also the {source} this run reads, which "
+        raise OutputError(f"{name}: {path} is also the {source} this run reads, which "
                           f"writing it would destroy; give {name} another file, or copy the "
                           f"{source} elsewhere first")
 
