@@ -391,3 +391,46 @@ def test_random_socket_names_stay_in_tmp(tmp_path, name):
     assert "/" not in parsed["unixsocket"] and "\0" not in path
     assert os.path.dirname(os.path.normpath(path)) == "/tmp"
     assert not parsed["unixsocket"].startswith(".")
+@pytest.mark.parametrize("line, field, expected", [
+    ("relax: {fmax: 1e-4}", ("relax", "fmax"), 1e-4),
+    ("relax: {fmax: 5E-3}", ("relax", "fmax"), 5e-3),
+    ("relax: {fmax: +2e-2}", ("relax", "fmax"), 2e-2),
+])
+def test_a_number_with_an_exponent_and_no_point_is_a_number(tmp_path, line, field, expected):
+    """Issue 45 item 21: PyYAML (YAML 1.1) reads ``1e-4`` as the text '1e-4' (it wants a
+    point), and the field refused it with a message about its form; YAML 1.2 reads it as
+    the number, which is what the user meant."""
+    text = yaml.safe_dump(BASES[0])
+    path = tmp_path / "exponent.yaml"
+    path.write_text(text + line + "\n")
+    checked = check_config(load_config(path))
+    assert getattr(getattr(checked, field[0]), field[1]) == expected
+
+
+@pytest.mark.parametrize("cutoff, expected", [(4.5, 4.5), ("4.5 A", 4.5), ("4.5 Å", 4.5),
+                                              ("0.45 nm", 4.5)])
+def test_the_water_model_cutoff_takes_a_length_with_its_unit(tmp_path, cutoff, expected):
+    """Issue 45 item 21: ``water_model.cutoff: 4.5 A`` was refused ("expected a positive
+    number"); it takes a unit as the other quantities do, and a bare number is in Å."""
+    from rigidmd.water import water_model
+
+    raw = yaml.safe_load(yaml.safe_dump(BASES[1]))
+    raw["calculator"]["water_model"]["cutoff"] = cutoff
+    raw["_base"] = str(tmp_path)
+    commands = check_config(raw).calculator.commands
+    assert commands == water_model("tip4p2005").lammps_commands(expected, "pppm", 1e-5, True)
+
+
+@pytest.mark.parametrize("cutoff, message", [
+    ("4.5 m", "calculator.water_model.cutoff: unknown unit 'm'"),
+    ("-1 A", "calculator.water_model.cutoff: expected a positive length (Å), got '-1 A'"),
+    (True, "calculator.water_model.cutoff: expected a quantity"),
+])
+def test_a_water_model_cutoff_that_is_no_length_is_named(tmp_path, cutoff, message):
+    raw = yaml.safe_load(yaml.safe_dump(BASES[1]))
+    raw["calculator"]["water_model"]["cutoff"] = cutoff
+    raw["_base"] = str(tmp_path)
+    with pytest.raises(ConfigError) as err:
+        check_config(raw)
+    assert str(err.value).startswith(message), str(err.value)
+    assert_one_clear_line(err.value)

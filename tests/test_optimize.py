@@ -371,3 +371,27 @@ def test_cell_relaxation_refuses_to_shrink_the_cell_below_a_body():
                                          r"width .* the cell relaxation shrank the cell"):
         relax(atoms, cell="iso", scalar_pressure=0.01, steps=500)
     assert 4 * 0.9 < atoms.cell.lengths().min()  # the atoms' cell still fits the water
+
+
+@pytest.mark.parametrize("cell, said", [
+    ([[0, 0, 0], [0, 5, 0], [0, 0, 5]], "not independent"),
+    ([[5, 0, 0], [5, 0, 0], [0, 0, 5]], "not independent"),
+    ([[5, 0, 0], [0, 5, 0], [0, 0, 1e-12]], "not independent"),
+    ([[np.nan, 0, 0], [0, 5, 0], [0, 0, 5]], "has a non-finite entry"),
+])
+@pytest.mark.parametrize("cell_mode", [False, "iso"])
+def test_a_degenerate_cell_is_one_line_of_rigidmd_s(cell, said, cell_mode):
+    """Issue 45 item 20: a degenerate or non-finite cell gave NumPy's "Singular matrix" or
+    SciPy's "data must be finite" from inside the relaxation; now RigidFilter refuses it
+    before anything changes, naming the cell."""
+    from ase.build import molecule
+
+    atoms = molecule("H2O")
+    atoms.set_cell(cell, scale_atoms=False)
+    atoms.pbc = True
+    atoms.calc = ZeroStress()
+    before = atoms.positions.copy()
+    with pytest.raises(ValueError, match=f"^RigidFilter: the cell.* {said}") as err:
+        relax(atoms, cell=cell_mode, steps=2)
+    assert "\n" not in str(err.value)
+    np.testing.assert_array_equal(atoms.positions, before)

@@ -334,3 +334,314 @@ def test_relax_log_continues_its_step_count_on_resume(tmp_path):
     frames = read(tmp_path / "out" / "relax.traj", ":")
     assert steps == list(range(len(frames))), steps
     assert f"in {len(frames) - 1} steps" in out.getvalue()
+def test_rigidmd_relax_refuses_a_log_on_its_configuration(tmp_path):
+    """Issue 45 item 13: the relaxation's log was not checked against the inputs
+    (``relax: {log: ../relax.yaml}`` with --trust, which allows a path outside the
+    directory, replaced the configuration); it is refused before anything is written,
+    naming the field."""
+    import io
+
+    from rigidmd.relax.command import relax_only
+    from rigidmd.run.outputs import OutputError
+
+    raw = relax_config(tmp_path)
+    raw["relax"]["log"] = "../relax.yaml"
+    before = (tmp_path / "relax.yaml").read_bytes()
+    with pytest.raises(OutputError, match=r"^relax.log: .*relax.yaml is also the configuration "
+                                          "this run reads"):
+        relax_only(raw, io.StringIO(), trust=True, config_path=str(tmp_path / "relax.yaml"))
+    assert (tmp_path / "relax.yaml").read_bytes() == before
+    assert not (tmp_path / "out").exists()
+
+
+def fail_in_step(monkeypatch, cls, n):
+    """Make the optimizer ``cls`` move its atoms to a trial point and raise in step ``n``, as
+    ASE's line searches do when they find no descent."""
+    original, steps = cls.step, []
+
+    def step(self, *args, **kwargs):
+        steps.append(1)
+        if len(steps) == n:
+            self.optimizable.set_x(self.optimizable.get_x() + 0.05)  # a trial point
+            raise RuntimeError("LineSearch failed!")
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(cls, "step", step)
+
+
+def test_an_optimizer_s_exception_is_one_line_with_the_structure_reached(
+        tmp_path, monkeypatch, capsys):
+    """Issue 45 item 18: ASE's line search raising RuntimeError (PreconLBFGS with a cell)
+    ended rigidmd relax and rigidmd run with a traceback; now one line that names the step,
+    the structure reached (the last frame, where the atoms are back) and the command that
+    continues, exit status 1."""
+    from ase.io import read
+    from ase.optimize.precon import PreconLBFGS
+
+    from rigidmd.run.cli import main
+
+    config = tmp_path / "relax.yaml"
+    config.write_text(RELAX_CONFIG.replace("STEPS", "2000").replace("FIRE", "PreconLBFGS"))
+    outdir = {"relax": f" --outdir {tmp_path / 'out'}", "run": ""}  # as each command says it
+    for command in ("relax", "run"):
+        fail_in_step(monkeypatch, PreconLBFGS, 4)
+        assert main([command, str(config), "--overwrite"]) == 1
+        err = capsys.readouterr().err.strip().splitlines()[-1]
+        trajectory = tmp_path / "out" / "relax.traj"
+        assert err == (f"rigidmd: run stopped: relax: PreconLBFGS failed after step 3 "
+                       f"(RuntimeError: LineSearch failed!); the atoms are back at the "
+                       f"structure of step 3, the last frame of {trajectory}; continue with: "
+                       f"rigidmd {command} {config}{outdir[command]} --resume"), err
+        assert len(read(trajectory, ":")) == 4  # the start and 3 steps
+
+
+def test_relax_leaves_the_atoms_at_the_last_whole_step_and_says_so(monkeypatch):
+    """Issue 45 item 20: a relaxation stopped by NaN forces said the atoms are "left at step
+    0" (the dynamics' step); they were at the failed trial point.  Now they are back at the
+    last whole step of the optimizer, and the message says which."""
+    from rigidmd.core.forces import NonFiniteForceError
+    from rigidmd.relax import relax
+
+    atoms = water_cluster(4, seed=1)
+    atoms.calc = TIP3P(rc=40.0)
+    calls = tip3p_calls(monkeypatch)
+    original = TIP3P.calculate  # counts the calls
+
+    def calculate(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        if len(calls) == 6:
+            self.results["forces"][2] = np.nan
+
+    monkeypatch.setattr(TIP3P, "calculate", calculate)
+    frames = []
+    with pytest.raises(NonFiniteForceError) as err:
+        relax(atoms, fmax=1e-6, optimizer="FIRE",
+              observers=[lambda *_: frames.append(atoms.positions.copy())])
+    message = str(err.value)
+    assert message.startswith(f"relax: FIRE failed after step {len(frames) - 1} (calculator "
+                              "returned non-finite forces on atom(s) [2]); the atoms are back "
+                              f"at the structure of step {len(frames) - 1}"), message
+    assert "step 0;" not in message and "left at" not in message
+    np.testing.assert_array_equal(atoms.positions, frames[-1])
+
+
+def damage_state(path, name, change):
+    """Rewrite the array ``name`` of the state file at ``path`` with ``change(array)``."""
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays[name] = change(arrays[name])
+    with open(path, "wb") as fh:
+        np.savez(fh, **arrays)
+
+
+@pytest.mark.parametrize("name, change, said", [
+    ("view.q_ref", lambda q: 2 * q, "body 0 has a reference orientation of norm 2, not 1"),
+    ("view.x", lambda x: np.where(np.arange(x.size).reshape(x.shape) == 4, np.nan, x),
+     "view.x holds a non-finite number"),
+    ("opt.s", lambda s: s * np.nan, "opt.s holds a non-finite number"),
+])
+def test_a_damaged_relaxation_state_is_not_used(tmp_path, monkeypatch, name, change, said):
+    """Issue 45 item 19: a damaged relax.state.npz was used unchecked: NaN gave internal
+    messages, reference orientations x2 appended 500 steps of molecules with O-H 5.67 Å to
+    relax.traj.  Now it is checked as checkpoints are: the memory starts afresh, saying why,
+    and the relaxation continues from the trajectory's last frame with whole molecules."""
+    import io
+    import signal
+
+    from ase.io import read
+
+    from rigidmd.relax.command import relax_only
+
+    raw = relax_config(tmp_path)
+    signal_at_call(monkeypatch, 12, signal.SIGTERM)
+    assert relax_only(raw, io.StringIO()) == 143
+    state = tmp_path / "out" / "relax.state.npz"
+    damage_state(state, name, change)
+    monkeypatch.setattr(RigidFilter, "get_forces", signal_at_call.original)
+    out = io.StringIO()
+    assert relax_only(raw, out, mode="resume") == 0
+    assert f"relax: the optimizer's memory starts afresh: {state}: a damaged relaxation state " \
+           f"({said})" in out.getvalue(), out.getvalue()
+    for frame in read(tmp_path / "out" / "relax.traj", ":"):
+        oh = np.linalg.norm(frame.positions[1::3] - frame.positions[0::3], axis=1)
+        np.testing.assert_allclose(oh, 0.9572, atol=1e-6)  # whole waters (TIP3P's O-H)
+
+
+def test_rigidmd_relax_resume_refuses_another_calculator(tmp_path, monkeypatch):
+    """Issue 45 item 19: ``rigidmd relax --resume`` with another calculator continued
+    silently, appending frames of another energy surface (``rigidmd run --resume`` refuses
+    it).  Now it is refused in one line before anything is written; the same calculator
+    continues."""
+    import io
+    import signal
+
+    from rigidmd.config.quantities import ConfigError
+    from rigidmd.relax.command import relax_only
+
+    raw = relax_config(tmp_path)
+    signal_at_call(monkeypatch, 12, signal.SIGTERM)
+    assert relax_only(raw, io.StringIO()) == 143
+    monkeypatch.setattr(RigidFilter, "get_forces", signal_at_call.original)
+    files = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
+    other = dict(raw, calculator={"name": "tip3p", "options": {"rc": 30.0}})
+    with pytest.raises(ConfigError, match=r"^--resume: the calculator differs from the "
+                                          r"relaxation's \(.*relax.state.npz records "
+                                          r"calculator \w+, the configuration gives calculator "
+                                          r"\w+\); restore it, or start anew with --overwrite$"):
+        relax_only(other, io.StringIO(), mode="resume")
+    assert {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()} == files
+    out = io.StringIO()
+    assert relax_only(raw, out, mode="resume") == 0
+    assert "continuing with the optimizer's memory" in out.getvalue()
+
+
+@pytest.mark.parametrize("where", ["trajectory", "log"])
+def test_a_full_disk_while_relaxing_names_the_file(tmp_path, monkeypatch, capsys, where):
+    """Issue 45 item 19: a full disk during ``rigidmd relax`` said "cannot write an output
+    file" (ASE's write errors carry no file name); now the file is named."""
+    import errno
+
+    from ase.io.ulm import Writer
+
+    from rigidmd.run.cli import main
+
+    config = tmp_path / "relax.yaml"
+    config.write_text(RELAX_CONFIG.replace("STEPS", "2000"))
+    writes = []
+
+    def full(*args, **kwargs):
+        writes.append(1)
+        if len(writes) == 3:
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    if where == "trajectory":
+        original = Writer.write  # under ASE's trajectory writer
+        monkeypatch.setattr(Writer, "write",
+                            lambda self, *a, **k: (full(), original(self, *a, **k)))
+    else:
+        from ase.optimize.fire import FIRE
+
+        original = FIRE.log
+        monkeypatch.setattr(FIRE, "log", lambda self, *a, **k: (full(), original(self, *a, **k)))
+    assert main(["relax", str(config)]) == 1  # as a failed write of rigidmd run
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    path = tmp_path / "out" / ("relax.traj" if where == "trajectory" else "relax.log")
+    assert err.startswith(f"rigidmd: run stopped: relax: cannot write {path}: the disk is full; "
+                          f"continue with: rigidmd relax {config}"), err
+
+
+def test_rigidmd_relax_resume_of_a_converged_relaxation_says_it_is_complete(tmp_path):
+    """Issue 45 item 21: ``rigidmd relax --resume`` of a converged relaxation said it was
+    "continuing ... after step N" and that "the optimizer's memory starts afresh", as if work
+    were left.  Now it says the relaxation is complete, and writes nothing."""
+    import io
+
+    from rigidmd.relax.command import relax_only
+
+    raw = relax_config(tmp_path)
+    assert relax_only(raw, io.StringIO()) == 0
+    files = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
+    out = io.StringIO()
+    assert relax_only(raw, out, mode="resume") == 0
+    said = out.getvalue().strip().splitlines()
+    assert len(said) == 1 and said[0].startswith(
+        f"relax: the relaxation in {tmp_path / 'out' / 'relax.traj'} is complete: it converged "
+        "at step "), said
+    assert said[0].endswith("below fmax 0.01); nothing is left to do")
+    assert {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()} == files
+
+
+@pytest.mark.parametrize("signame", ["SIGTERM", "SIGINT"])
+def test_a_signal_just_after_the_relaxation_is_noted_not_a_kill(tmp_path, signame):
+    """Issue 45 item 21: a signal in the moment after convergence (the relaxation's handlers
+    gone, the command not yet ended) killed rigidmd relax without a word (exit -15, -2).
+    Now it is noted: the relaxation is complete, and the command says so and exits 0."""
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    script = tmp_path / "late_signal.py"
+    script.write_text(textwrap.dedent(f"""
+        import os, signal, sys
+        from rigidmd.relax.structure import RelaxProgress
+        finish = RelaxProgress.finish
+        def late(self):  # after the relaxation's own handlers are gone
+            finish(self)
+            os.kill(os.getpid(), signal.{signame})
+        RelaxProgress.finish = late
+        from rigidmd.run.cli import main
+        sys.exit(main(["relax", "relax.yaml"]))
+    """))
+    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "2000"))
+    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                            text=True, timeout=600, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    assert result.returncode == 0, (result.returncode, result.stderr)
+    assert result.stdout.strip().splitlines()[-1] == (
+        f"relax: {signame} arrived after the relaxation had ended; it is complete and its "
+        "outputs are whole")
+    assert "Traceback" not in result.stderr
+
+
+def test_a_signal_just_after_a_run_s_relaxation_stops_the_md_with_a_checkpoint(tmp_path):
+    """Issue 45 item 21: ``rigidmd run`` with a relax: section, signalled in the moment after
+    the relaxation converged (its handlers gone, the MD's not yet there), was killed without
+    a word (exit -15).  Now the signal is noted and obeyed as in the MD: a checkpoint at its
+    start, the command that resumes, exit 143."""
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    script = tmp_path / "late_signal.py"
+    script.write_text(textwrap.dedent("""
+        import os, signal, sys
+        from rigidmd.relax.structure import RelaxProgress
+        finish = RelaxProgress.finish
+        def late(self):  # after the relaxation's own handlers are gone
+            finish(self)
+            os.kill(os.getpid(), signal.SIGTERM)
+        RelaxProgress.finish = late
+        from rigidmd.run.cli import main
+        sys.exit(main(["run", "relax.yaml"]))
+    """))
+    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "2000"))
+    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                            text=True, timeout=600, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    assert result.returncode == 143, (result.returncode, result.stderr)
+    assert "stopped by SIGTERM after step 0" in result.stdout  # (ASE observes step 0 too)
+    assert "continue with: rigidmd run relax.yaml --resume" in result.stdout
+    assert "Traceback" not in result.stderr
+
+
+def test_a_damaged_trajectory_continues_from_the_state_file(tmp_path, monkeypatch):
+    """Issue 45 item 19: a damaged relax.traj could not be continued ("cannot read") though
+    relax.state.npz held the positions.  Now --resume continues from the state, keeping the
+    damaged file beside it, and reaches the uninterrupted relaxation's minimum."""
+    import io
+    import signal
+
+    from ase.io import read
+
+    from rigidmd.relax.command import relax_only
+
+    reference = tmp_path / "reference"
+    reference.mkdir()
+    assert relax_only(relax_config(reference), io.StringIO()) == 0
+    minimum = read(reference / "out" / "relax.traj")
+
+    raw = relax_config(tmp_path)
+    signal_at_call(monkeypatch, 12, signal.SIGTERM)
+    assert relax_only(raw, io.StringIO()) == 143
+    monkeypatch.setattr(RigidFilter, "get_forces", signal_at_call.original)
+    traj = tmp_path / "out" / "relax.traj"
+    damaged = traj.read_bytes()[:-100]  # its frame table cut off
+    traj.write_bytes(damaged)
+    out = io.StringIO()
+    assert relax_only(raw, out, mode="resume") == 0
+    assert (f"relax: {traj} cannot be read (" in out.getvalue() and "it is kept as "
+            "relax.damaged.traj, and the relaxation continues from the positions in "
+            f"{tmp_path / 'out' / 'relax.state.npz'} in a new relax.traj") in out.getvalue()
+    assert "continuing with the optimizer's memory" in out.getvalue()
+    assert (tmp_path / "out" / "relax.damaged.traj").read_bytes() == damaged
+    np.testing.assert_array_equal(read(traj).positions, minimum.positions)

@@ -145,3 +145,74 @@ def test_the_preconditioner_s_solve_is_the_inverse_and_the_same_in_any_batch():
     assert not np.array_equal(each[1], together[1])  # the looser one stopped earlier
     residual = np.linalg.norm(P @ each[1] - b[1]) / np.linalg.norm(b[1])
     assert CG_TOLERANCE < residual < SCALE_TOLERANCE  # measured 1.2e-2 to 1.4e-2 (seeds 0-2)
+
+
+def ctrl_c_at_call(monkeypatch, n, times=1):
+    """SIGINT to this process ``times`` times in the ``n``-th TIP3P evaluation (mid-step)."""
+    import signal
+
+    calls, original = [], TIP3P.calculate
+
+    def calculate(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == n:
+            for _ in range(times):
+                os.kill(os.getpid(), signal.SIGINT)
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(TIP3P, "calculate", calculate)
+    return calls
+
+
+def test_ctrl_c_stops_relax_after_its_step_with_the_state_and_resume_continues(
+        tmp_path, monkeypatch):
+    """Issue 45 item 14: relax() stopped by Ctrl-C wrote no state file, so resume=True failed
+    ("does not exist", no advice) and a restart from the last frame took another path.  Now
+    Ctrl-C finishes the step and writes the state, as rigidmd relax does, then raises
+    KeyboardInterrupt; resume=True reaches the uninterrupted minimum bit for bit, in the
+    same force calls in all."""
+    atoms = water_cluster(16, seed=0)
+    atoms.calc = TIP3P(rc=20.0)
+    counted = ctrl_c_at_call(monkeypatch, 10**9)  # counts only
+    whole = relax(atoms, fmax=0.01)
+    reference, calls = atoms.positions.copy(), len(counted)
+
+    state = tmp_path / "relax.state.npz"
+    atoms = water_cluster(16, seed=0)
+    atoms.calc = TIP3P(rc=20.0)
+    counted = ctrl_c_at_call(monkeypatch, 12)
+    steps = []
+    with pytest.raises(KeyboardInterrupt, match=r"^relax: interrupted \(Ctrl-C\) after step "
+                                                r"\d+; its state is in .*relax.state.npz: "
+                                                r"relax\(\.\.\., resume=True\) continues$"):
+        relax(atoms, fmax=0.01, state_file=state, observers=[lambda *a: steps.append(a[0])])
+    assert state.exists() and 0 < steps[-1] < whole.steps
+    second = relax(atoms, fmax=0.01, state_file=state, resume=True)
+    assert second.converged and steps[-1] + second.steps == whole.steps
+    assert len(counted) == calls
+    np.testing.assert_array_equal(atoms.positions, reference)
+
+
+def test_a_second_ctrl_c_interrupts_relax_at_once(tmp_path, monkeypatch):
+    """Two Ctrl-Cs: the second interrupts at once (no whole step, no state written)."""
+    import signal
+
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    state = tmp_path / "relax.state.npz"
+    atoms = water_cluster(8, seed=0)
+    atoms.calc = TIP3P(rc=20.0)
+    ctrl_c_at_call(monkeypatch, 5, times=2)
+    with pytest.raises(KeyboardInterrupt) as err:
+        relax(atoms, fmax=0.01, state_file=state)
+    assert str(err.value) == "" and not state.exists()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handed back
+
+
+def test_resume_without_a_state_file_says_where_it_comes_from(tmp_path):
+    """Issue 45 item 14: "does not exist" gave no advice."""
+    atoms = water_cluster(2, seed=0)
+    atoms.calc = TIP3P(rc=20.0)
+    with pytest.raises(ValueError, match=r"none.npz does not exist \(a relaxation writes it "
+                                         r"when Ctrl-C, .*\); relax the atoms as they are "
+                                         r"without resume$"):
+        relax(atoms, state_file=tmp_path / "none.npz", resume=True)

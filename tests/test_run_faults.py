@@ -422,3 +422,143 @@ def test_openmm_water_system_refuses_a_cell_openmm_cannot_take_in_one_line(cell)
                                          r"half the length below it\), not \[\["):
         water_system(atoms, water_model("tip4pew"), 3.5)
     np.testing.assert_array_equal(atoms.positions, before)
+
+
+# ---------------------------------------------------------------- outputs on the inputs' paths
+def water_project(path, outputs, relax=None, structure="start.xyz"):
+    """``c.yaml`` for 2 TIP3P waters read from ``start.xyz``, with these ``outputs``."""
+    from ase.io import write
+
+    from rigidmd.systems import water_cluster
+
+    write(path / "start.xyz", water_cluster(2, seed=0))
+    text = (f"structure: {structure}\ncalculator: {{name: tip3p, options: {{rc: 40.0}}}}\n"
+            f"timestep: 1 fs\nsteps: 4\noutputs: {outputs}\n")
+    if relax is not None:
+        text += f"relax: {relax}\n"
+    (path / "c.yaml").write_text(text)
+    return {name: (path / name).read_bytes() for name in ("c.yaml", "start.xyz")}
+
+
+@pytest.mark.parametrize("outputs, flags, message", [
+    ("{directory: ., log: c.yaml}", (),
+     "outputs.log: c.yaml is also the configuration this run reads"),
+    ("{directory: ., trajectory: md.traj, log: start.xyz}", (),
+     "outputs.log: start.xyz is also the structure this run reads"),
+    ("{directory: ., log: md.log, plot: c.yaml}", ("--overwrite",),
+     "outputs.plot: c.yaml is not an image file the plot can write"),
+    ("{directory: ., log: md.log, checkpoint: c.yaml}", ("--overwrite",),
+     "outputs.checkpoint: c.yaml is also the configuration this run reads"),
+])
+def test_an_output_on_an_input_is_refused_before_anything_is_written(
+        tmp_path, monkeypatch, capsys, outputs, flags, message):
+    """Issue 45 item 13: outputs were not checked against the inputs: ``log: c.yaml``
+    replaced the configuration, ``log: start.xyz`` the structure, ``plot: c.yaml`` (with
+    --overwrite) deleted the configuration.  Each is refused in one line naming the output,
+    and every file stays as it was."""
+    before = water_project(tmp_path, outputs)
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["run", "c.yaml", *flags]) == 2
+    err = capsys.readouterr().err.strip()
+    field, what = message.split(": ", 1)
+    assert err.startswith(f"rigidmd: error: {field}: ") and what in err and "\n" not in err, err
+    assert {name: (tmp_path / name).read_bytes() for name in before} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.yaml", "start.xyz"]
+
+
+def test_a_plot_of_a_format_matplotlib_cannot_write_is_refused_before_the_run(
+        tmp_path, monkeypatch, capsys):
+    """Issue 45 item 13: ``plot: md.dat`` was refused by matplotlib only after the whole run
+    (exit 2 then, with the run done); now before it starts."""
+    water_project(tmp_path, "{directory: out, log: md.log, plot: md.dat}")
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["run", "c.yaml"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("rigidmd: error: outputs.plot: md.dat is not an image file the plot "
+                          "can write; end its name in .png, .pdf or .svg"), err
+    assert not (tmp_path / "out").exists()
+
+
+def test_run_overwrite_never_deletes_the_relaxation_it_starts_from(tmp_path, monkeypatch,
+                                                                   capsys):
+    """Issue 45 item 12: ``rigidmd run --overwrite`` with a relax: section and ``structure:
+    out/relax.traj`` (a relaxation of ``rigidmd relax``) deleted the structure before reading
+    it.  Now it is refused in one line, in every mode, and the file is kept."""
+    from ase.io import write
+
+    from rigidmd.systems import water_cluster
+
+    (tmp_path / "out").mkdir()
+    write(tmp_path / "out" / "relax.traj", water_cluster(2, seed=0))
+    water_project(tmp_path, "{directory: out, log: md.log}", relax="{fmax: 0.05, steps: 5}",
+                  structure="out/relax.traj")
+    kept = (tmp_path / "out" / "relax.traj").read_bytes()
+    monkeypatch.chdir(tmp_path)
+    for flags in ((), ("--overwrite",), ("--resume",)):
+        assert cli.main(["run", "c.yaml", *flags]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("rigidmd: error: relax.trajectory: ") and \
+            "relax.traj is also the structure this run reads" in err and "\n" not in err, err
+        assert (tmp_path / "out" / "relax.traj").read_bytes() == kept
+        assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["relax.traj"]
+
+
+def test_a_lost_log_advises_first_what_keeps_the_trajectory_and_checkpoint(
+        tmp_path, monkeypatch, capsys):
+    """Issue 45 item 21: a deleted md.log made --resume advise only "rerun with --overwrite",
+    which discards an intact trajectory and checkpoint.  Now it says to restore the log, or
+    to start a new run from the trajectory's last frame (keeping them), before --overwrite;
+    nothing is changed."""
+    path = short_project(tmp_path, steps=20)
+    assert run_here(path, monkeypatch, capsys)[0] == 0
+    (path / "out" / "md.log").unlink()
+    kept = {p.name: p.read_bytes() for p in (path / "out").iterdir()}
+    status, _, stderr = run_here(path, monkeypatch, capsys, "--resume", "--steps", "40")
+    assert status == 2
+    line = stderr.strip()
+    assert "\n" not in line and line.startswith(
+        f"rigidmd: error: outputs.log: {path / 'out' / 'md.log'} is shorter than at the "
+        "checkpoint (0 < "), line
+    assert line.endswith(
+        f"the run cannot be continued without it: restore it, or start a new run from its "
+        f"last frame with --restart {path / 'out' / 'md.traj'} --outdir NEW_DIRECTORY (which "
+        "keeps these outputs), or start it again with --overwrite (which removes them)"), line
+    assert {p.name: p.read_bytes() for p in (path / "out").iterdir()} == kept
+
+
+def test_a_second_ctrl_c_while_interrupted_before_the_start_is_no_traceback(tmp_path):
+    """Issue 45 item 21: Ctrl-C twice during start-up (slow imports, building the
+    calculator): the first ended the set-up, the second, arriving while the one line was
+    written, printed a KeyboardInterrupt traceback.  Now it is ignored: one line, exit 130."""
+    import textwrap
+
+    path = short_project(tmp_path, steps=10)
+    script = path / "twice.py"
+    script.write_text(textwrap.dedent("""
+        import os, signal, sys
+        from rigidmd.run import cli
+        from rigidmd.run.runner import Run
+
+        def slow_start(self):  # the first Ctrl-C, in the set-up
+            raise KeyboardInterrupt
+
+        class Stderr:  # the second Ctrl-C, while the message is written
+            def __init__(self, stream):
+                self.stream, self.sent = stream, False
+            def write(self, text):
+                if not self.sent:
+                    self.sent = True
+                    os.kill(os.getpid(), signal.SIGINT)
+                return self.stream.write(text)
+            def flush(self):
+                self.stream.flush()
+
+        Run.execute = slow_start
+        sys.stderr = Stderr(sys.stderr)
+        sys.exit(cli.main(["run", "run.yaml"]))
+    """))
+    result = subprocess.run([sys.executable, str(script)], cwd=path, capture_output=True,
+                            text=True, timeout=300)
+    assert result.returncode == 130, (result.returncode, result.stderr)
+    assert result.stderr.strip() == "rigidmd: interrupted before the run started", \
+        result.stderr

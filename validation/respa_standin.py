@@ -1,4 +1,4 @@
-"""r-RESPA on a TIP3P cluster split at 4-7 Å: force calls per ps at equal energy conservation, k = 1..8.
+"""r-RESPA on a TIP3P cluster split at 4-7 Å: force calls per ps at equal energy conservation.
 
 16 rigid TIP3P waters (a cluster, 250 K).  The split is the stand-in of the guide's
 Multiple time steps page: ``fast = TIP3P(rc=7, width=3)`` (molecule pairs within 4 Å in

@@ -110,7 +110,9 @@ def known_keys():
 #: (base 60), ``010`` as 8 (octal), ``0x1f``, ``0b11`` and ``1_000``: these stay text, so
 #: the field that wanted a number says so.
 _YAML_INT = r"^[-+]?(?:0|[1-9][0-9]*)$"
+#: A float has a point or an exponent (``1e-4`` too, which YAML 1.1 leaves text).
 _YAML_FLOAT = (r"^(?:[-+]?(?:[0-9]+\.[0-9]*|\.[0-9]+)(?:[eE][-+]?[0-9]+)?"
+               r"|[-+]?[0-9]+[eE][-+]?[0-9]+"
                r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$")
 
 

@@ -11,13 +11,15 @@ import re
 from ase import units
 
 __all__ = ["ConfigError", "parse_quantity", "mapping", "key_name", "whole_number", "parse_address",
-           "UNIT_TABLES",
+           "UNIT_TABLES", "LENGTH_UNITS",
            "TIME_UNITS", "RATE_UNITS", "TEMPERATURE_UNITS", "PRESSURE_UNITS",
            "COMPRESSIBILITY_UNITS"]
 
 TIME_UNITS = {"fs": units.fs, "ps": 1000 * units.fs, "ase": 1.0}
 RATE_UNITS = {"1/fs": 1 / units.fs, "1/ps": 1 / (1000 * units.fs), "1/ase": 1.0}
 TEMPERATURE_UNITS = {"K": 1.0}
+#: Lengths: Å (``A`` as ``eV/A`` and ``eV/A^3`` write it, or ``Å``) and nm.
+LENGTH_UNITS = {"A": 1.0, "Å": 1.0, "nm": 10.0}
 PRESSURE_UNITS = {"bar": units.bar, "atm": 1.01325 * units.bar, "GPa": units.GPa,
                   "Pa": units.Pascal, "eV/A^3": 1.0}
 COMPRESSIBILITY_UNITS = {"1/bar": 1 / units.bar, "1/atm": 1 / (1.01325 * units.bar),

@@ -26,6 +26,7 @@ import numpy as np
 
 from rigidmd.config.couplingsection import CouplingSection
 from rigidmd.config.quantities import (
+    LENGTH_UNITS,
     TEMPERATURE_UNITS,
     TIME_UNITS,
     ConfigError,
@@ -54,6 +55,8 @@ BUILDER_FIELDS = {
 #: Fields of ``calculator.water_model``.
 WATER_MODEL_FIELDS = ("name", "cutoff", "kspace", "accuracy", "tail")
 REQUIRED_BUILDER_FIELD = {"water_cluster": "n_molecules", "water_box": "n_side"}
+#: The endings of ``outputs.plot`` (formats every matplotlib writes).
+PLOT_FORMATS = ("png", "pdf", "svg", "svgz", "eps", "ps", "jpg", "jpeg", "tif", "tiff", "webp")
 #: Body rules a configuration may name.
 BODY_RULES = ("connectivity", "mol-id", "tags")
 
@@ -223,11 +226,11 @@ def _water_commands(raw):
     if "cutoff" not in spec:
         raise ConfigError("calculator.water_model.cutoff: missing (real-space cut-off, Å)")
     model = _water_model("calculator.water_model.name", spec["name"])
-    cutoff = spec["cutoff"]
-    if isinstance(cutoff, bool) or not isinstance(cutoff, (int, float)) or not (
-            np.isfinite(cutoff) and cutoff > 0):
-        raise ConfigError(f"calculator.water_model.cutoff: expected a positive number (Å), "
-                          f"got {cutoff!r}")
+    cutoff = parse_quantity("calculator.water_model.cutoff", spec["cutoff"], LENGTH_UNITS,
+                            default_unit="A")  # a bare number is in Å
+    if not cutoff > 0:
+        raise ConfigError(f"calculator.water_model.cutoff: expected a positive length (Å), "
+                          f"got {spec['cutoff']!r}")
     kspace = spec.get("kspace", "pppm")
     if kspace not in ("pppm", "ewald", None):
         raise ConfigError(f"calculator.water_model.kspace: use pppm, ewald or null (plain "
@@ -584,6 +587,11 @@ class OutputsSection:
             raise ConfigError(f"outputs.checkpoint_interval: {every} is not a multiple of "
                               f"outputs.interval ({interval}): a checkpoint must fall on a frame")
         _check_output_paths(directory, files)
+        plot = files.get("plot")
+        if plot is not None and plot.suffix.lower().lstrip(".") not in PLOT_FORMATS:
+            raise ConfigError(f"outputs.plot: {plot.name} is not an image file the plot can "
+                              f"write; end its name in .png, .pdf or .svg (or "
+                              f"{', '.join('.' + f for f in PLOT_FORMATS[3:])})")
         files["checkpoint_interval"] = every
         if "mdanalysis" in files:
             try:

@@ -6,6 +6,7 @@ relaxation (refused, replaced with ``--overwrite`` or continued with
 ``--resume``, never the structure being read), and signals.
 """
 
+import signal
 import sys
 from pathlib import Path
 
@@ -17,7 +18,7 @@ from rigidmd.relax.structure import (
     relax_structure,
     state_path,
 )
-from rigidmd.run.fingerprint import resume_command
+from rigidmd.run.fingerprint import calculator_digest, resume_command
 from rigidmd.run.runner import StopSignals
 
 __all__ = ["relax_only", "relax_for_export"]
@@ -53,7 +54,7 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     from rigidmd.config.sections import OutputsSection, StructureSection
     from rigidmd.config.splitsection import calculator_section
     from rigidmd.config.trust import check_output_paths
-    from rigidmd.run.outputs import OutputError, OutputLock
+    from rigidmd.run.outputs import LOCK_NAME, OutputError, OutputLock, check_apart_from_inputs
 
     raw = dict(raw)
     base = Path(raw.pop("_base", "."))
@@ -74,38 +75,59 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     state = state_path(trajectory)
     source = structure.source if isinstance(structure.source, Path) else None
     own = source is not None and source.resolve() == trajectory.resolve()
+    if own and mode != "resume":
+        raise ConfigError(f"structure: {source} is this relaxation's own trajectory; "
+                          "continue it with --resume (or copy it elsewhere first)")
+    check_apart_from_inputs({"relax.log": log, "relax state": state,
+                             "the lock file": directory / LOCK_NAME},
+                            {"configuration": config_path, "structure": source})
     directory.mkdir(parents=True, exist_ok=True)
     lock = OutputLock(directory)
     lock.acquire()
     try:
         done = 0
         if mode == "resume":
-            done = continue_from(atoms, trajectory, stream)
+            done = continue_from(atoms, trajectory, state, stream)
         else:
             existing = [p for p in (trajectory, log, state) if p.exists()]
-            if own:
-                raise ConfigError(f"structure: {source} is this relaxation's own trajectory; "
-                                  "continue it with --resume (or copy it elsewhere first)")
             if existing and mode != "overwrite":
                 raise OutputError(f"relax: {existing[0]} holds an earlier relaxation; "
                                   "continue it with --resume or replace it with --overwrite")
             for path in existing:
                 path.unlink()
         atoms.calc = calculator.build(atoms)
+        # Installed before the relaxation's own handlers and kept after them: a signal once
+        # the relaxation has ended is noted, never a kill without a word (exit -15).
+        after = StopSignals()
+        after.shielded = True  # a second Ctrl-C then is only counted
+        calc = atoms.calc
         try:
-            relax_structure(atoms, bodies, section, directory, stream, resume=mode == "resume",
-                            done=done, stop=StopSignals(), hint=resume_command(
-                                config_path or "CONFIG", directory,
-                                ["--trust"] if trust else [], command="relax"))
+            with after:
+                relax_structure(atoms, bodies, section, directory, stream,
+                                resume=mode == "resume", done=done, stop=StopSignals(),
+                                label=f"calculator {calculator_digest(calculator)}",
+                                hint=resume_command(config_path or "CONFIG", directory,
+                                                    ["--trust"] if trust else [],
+                                                    command="relax"))
+                calc = _close(calc)
+                lock.release()
         except RelaxationStopped as stopped:
             return stopped.status
         finally:
-            close = getattr(atoms.calc, "close", None)
-            if callable(close):
-                close()
+            _close(calc)
+        if after.signum is not None:
+            print(f"relax: {signal.Signals(after.signum).name} arrived after the relaxation "
+                  "had ended; it is complete and its outputs are whole", file=stream)
     finally:
         lock.release()
     return 0
+
+
+def _close(calc):
+    """Close a calculator with a process of its own (``None``: closed already); None."""
+    close = getattr(calc, "close", None)
+    if callable(close):
+        close()
 
 
 

@@ -60,9 +60,10 @@ from rigidmd.relax import kernels
 from rigidmd.relax import state as relaxstate
 from rigidmd.relax.facade import AtomsFacade
 from rigidmd.relax.rotation import right_jacobian_transpose, rotation_quaternion
+from rigidmd.relax.stops import Interrupt, Interrupted, RelaxationFailed, WholeStep, failed
 
-__all__ = ["RigidFilter", "relax", "Relaxation", "OPTIMIZERS", "optimizer_class", "ANCHOR_ANGLE",
-           "rotation_quaternion", "right_jacobian_transpose"]
+__all__ = ["RigidFilter", "relax", "Relaxation", "RelaxationFailed", "OPTIMIZERS",
+           "optimizer_class", "ANCHOR_ANGLE", "rotation_quaternion", "right_jacobian_transpose"]
 
 #: Rotation (rad) beyond which a body's reference orientation is moved to its current one.
 ANCHOR_ANGLE = 2.5
@@ -99,9 +100,9 @@ class RigidFilter(AtomsFacade):
         all directions or a calculator without stress; a constraint the
         bodies cannot honour (only ``FixAtoms`` on whole bodies or free atoms,
         ``FixBondLengths`` within bodies and :class:`~rigidmd.RigidBodyDOF`
-        are); a bad ``cell``, ``scalar_pressure`` or ``cell_factor``; every
-        error of :meth:`rigidmd.RigidBodies.geometry`.  All before anything
-        changes.
+        are); a cell not finite or degenerate in its periodic directions; a
+        bad ``cell``, ``scalar_pressure`` or ``cell_factor``; every error of
+        :meth:`rigidmd.RigidBodies.geometry`.  All before anything changes.
     """
 
     def __init__(self, atoms, bodies=None, *, cell=False, scalar_pressure=0.0,
@@ -121,6 +122,7 @@ class RigidFilter(AtomsFacade):
                 raise ValueError(f"RigidFilter: cell={cell!r} needs the stress, which the "
                                  f"calculator {type(atoms.calc).__name__} does not provide")
         check_finite(atoms.positions, "position", "Å", "in RigidFilter")
+        _check_cell(atoms)
         rigid = RigidBodies.resolve(atoms, bodies)
         geometry = rigid.geometry(atoms)
         model = geometry.model
@@ -410,6 +412,26 @@ class RigidFilter(AtomsFacade):
         return len(self._x)
 
 
+def _check_cell(atoms):
+    """Refuse a cell that is not finite, or whose periodic vectors are not independent (a
+    zero vector, two parallel, three in a plane): one line, not NumPy's or SciPy's."""
+    cell, pbc = atoms.cell.array, np.asarray(atoms.pbc, dtype=bool)
+    if not np.isfinite(cell).all():
+        raise ValueError(f"RigidFilter: the cell {cell.tolist()} has a non-finite entry; give "
+                         "a finite cell")
+    if not pbc.any():
+        return
+    # Singular values of the periodic vectors: one near 0 relative to the largest is a
+    # degenerate cell (1e-9: far below any cell a structure has, far above round-off).
+    s = np.linalg.svd(cell[pbc], compute_uv=False)
+    if s.min() <= 1e-9 * max(s.max(), 1.0):
+        raise ValueError(f"RigidFilter: the cell vectors {np.flatnonzero(pbc).tolist()} are "
+                         f"periodic (atoms.pbc {pbc.tolist()}) but not independent (cell "
+                         f"{np.round(cell, 6).tolist()}): a zero vector, or vectors in one line "
+                         "or plane; give a cell with a length in every periodic direction, or "
+                         "set atoms.pbc False there")
+
+
 def _body_lengths(model):
     """Root-mean-square distance of each body's atoms from its centre (Å), shape (n_bodies,)."""
     if not model.n_bodies:
@@ -516,7 +538,7 @@ def optimizer_class(name):
 def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", cell=False,
           scalar_pressure=0.0, trajectory=None, logfile=None, observers=(),
           append_trajectory=False, state_file=None, resume=False, first_step=0,
-          **kwargs) -> Relaxation:
+          state_label=None, **kwargs) -> Relaxation:
     """Relax the rigid bodies of ``atoms`` (and the cell) in place with an ASE optimizer.
 
     Parameters
@@ -549,8 +571,8 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         Append to ``trajectory`` (continuing a relaxation) instead of replacing it.
     state_file : str or pathlib.Path, optional
         Where the relaxation's state is written when it stops before
-        converging, after a whole step (an observer raised, or ``steps`` were
-        taken): the view's chart and the optimizer's memory
+        converging, after a whole step (Ctrl-C, an observer raised, or
+        ``steps`` were taken): the view's chart and the optimizer's memory
         (:mod:`rigidmd.relax.state`); removed when the relaxation converges.
         Only for an optimizer that gives its memory
         (:func:`rigidmd.relax.state.keeps_memory`; ASE's keep theirs).
@@ -562,6 +584,10 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         Steps an earlier part of this relaxation took (a continued one): the
         log numbers its steps from there, with no second header and no second
         line for the starting point, which the earlier part logged last.
+    state_label : str, optional
+        Text recorded in the state file, which ``resume=True`` requires to be
+        the same (ValueError otherwise): what else the continuation must
+        share, such as a digest of the calculator.
     **kwargs
         Further optimizer arguments (``maxstep``, ...).  With ASE's BFGS,
         ``alpha`` (initial Hessian, eV/Å² times the identity in the rows of
@@ -571,6 +597,19 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
     Returns
     -------
     Relaxation
+
+    Raises
+    ------
+    KeyboardInterrupt
+        Ctrl-C (SIGINT with Python's own handler, in the main thread): after
+        the step in progress, its trajectory frame and the ``state_file``, as
+        ``rigidmd relax`` stops; a second Ctrl-C at once.
+    RelaxationFailed
+        The optimizer or the calculator raised in a step (a line search that
+        found no descent, ...); the atoms are back at the structure of the
+        last whole step, which the message names.
+    rigidmd.core.forces.NonFiniteForceError
+        The calculator returned NaN or infinite forces; the atoms as above.
     """
     if not (np.isfinite(fmax) and fmax > 0):
         raise ValueError(f"relax: fmax={fmax!r} eV/Å must be positive")
@@ -584,7 +623,7 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         from rigidmd.relax.precon import RigidPrecon
 
         kwargs["precon"] = RigidPrecon()
-    saved = relaxstate.resumed_state(state_file, atoms, cls) if resume else None
+    saved = relaxstate.resumed_state(state_file, atoms, cls, state_label) if resume else None
     if not relaxstate.keeps_memory(cls):
         state_file = None  # nothing a continuation could take the same steps from
     with cls(view, trajectory=trajectory, logfile=logfile, append_trajectory=append_trajectory,
@@ -594,21 +633,36 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
             view.set_state(relaxstate.split(saved, "view"))
             if hasattr(opt, "set_state"):
                 opt.set_state(relaxstate.split(saved, "opt"))
+        whole = WholeStep(atoms, opt)  # first: the structure of each whole step
+        opt.attach(whole, interval=1)
         reports = [_Report(observer, opt, view, int(first_step)) for observer in observers]
         for report in reports:
             opt.attach(report, interval=1)
+        interrupt = Interrupt()
+        opt.attach(interrupt, interval=1)  # last: after the step's frame and observers
         try:
-            converged = bool(opt.run(fmax=fmax, steps=int(steps)))
-        except Exception:
-            if state_file is not None and any(report.raised for report in reports):
-                relaxstate.write_state(state_file, view, opt)  # after a whole step
-            raise
+            with interrupt:
+                converged = bool(opt.run(fmax=fmax, steps=int(steps)))
+        except Exception as err:
+            if isinstance(err, Interrupted) or any(report.raised for report in reports):
+                if state_file is not None:  # after a whole step
+                    relaxstate.write_state(state_file, view, opt, state_label)
+                if isinstance(err, Interrupted):
+                    kept = (f"its state is in {state_file}: relax(..., resume=True) continues"
+                            if state_file is not None else "give a state_file to continue")
+                    raise KeyboardInterrupt(f"relax: interrupted (Ctrl-C) after step "
+                                            f"{whole.step}; {kept}") from None
+                raise
+            whole.restore()  # not at the failed trial point: at the last whole step
+            if isinstance(err, OSError) or getattr(err, "setup", False):
+                raise  # a failed write (named by the caller), an input's mistake
+            raise failed(err, cls.__name__, whole.step) from err
         nsteps = opt.get_number_of_steps() - int(first_step)
         if state_file is not None:
             if converged:
                 Path(state_file).unlink(missing_ok=True)
             else:
-                relaxstate.write_state(state_file, view, opt)
+                relaxstate.write_state(state_file, view, opt, state_label)
     left = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.0
     return Relaxation(converged, int(nsteps), float(atoms.get_potential_energy()), left)
 

@@ -22,8 +22,10 @@ output directory.  It is a product path as ``rigidmd run`` is:
   ``--overwrite``, and never when the structure *is* that trajectory.
 
 A relaxation that does not converge within its steps raises
-:class:`RelaxationNotConverged` with one line naming the trajectory and how
-to continue.
+:class:`RelaxationNotConverged`, one whose optimizer or calculator fails in a
+step :class:`~rigidmd.relax.filter.RelaxationFailed` (or the calculator's
+:class:`~rigidmd.core.forces.NonFiniteForceError`), each with one line naming
+the trajectory and how to continue.
 """
 
 import sys
@@ -31,10 +33,11 @@ import time
 
 import numpy as np
 
-from rigidmd.relax.filter import relax
+from rigidmd.core.forces import NonFiniteForceError
+from rigidmd.relax.filter import Relaxation, RelaxationFailed, RigidFilter, relax
 
 __all__ = ["relax_structure", "RelaxationNotConverged", "RelaxationStopped", "RelaxProgress",
-           "continue_from", "state_path"]
+           "RelaxationFailed", "continue_from", "state_path"]
 
 
 def state_path(trajectory):
@@ -90,16 +93,22 @@ class RelaxProgress:
             self.stream.flush()
 
 
-def continue_from(atoms, trajectory, stream=None):
+def continue_from(atoms, trajectory, state_file=None, stream=None):
     """Put the last frame of a relaxation's ``trajectory`` into ``atoms``; steps it holds.
+
+    A trajectory that cannot be read is continued from the positions of the
+    relaxation's ``state_file`` when that is whole: the damaged file is kept
+    beside it (``relax.damaged.traj``) and the continuation writes a new one.
 
     Parameters
     ----------
     atoms : ase.Atoms
         The configuration's structure (its atoms, bodies and calculator are kept).
     trajectory : pathlib.Path
-    stream : file-like, optional
-        Told which relaxation continues after which step.
+    state_file : pathlib.Path, optional
+        The relaxation's state (:func:`state_path`).
+    stream : file, optional
+        Told when the state's positions replace a damaged trajectory.
 
     Returns
     -------
@@ -121,8 +130,11 @@ def continue_from(atoms, trajectory, stream=None):
     try:
         frames = read(trajectory, index=":")
     except Exception as err:  # ASE raises many kinds on a damaged file  # noqa: BLE001
-        raise ConfigError(f"--resume: cannot read {trajectory} "
-                          f"({type(err).__name__}: {' '.join(str(err).split())})") from None
+        reason = f"{type(err).__name__}: {' '.join(str(err).split())}"
+        done = _from_state(atoms, trajectory, state_file, reason, stream)
+        if done is None:
+            raise ConfigError(f"--resume: cannot read {trajectory} ({reason})") from None
+        return done
     if not frames:
         raise ConfigError(f"--resume: {trajectory} holds no frame; start again with "
                           "--overwrite")
@@ -133,14 +145,43 @@ def continue_from(atoms, trajectory, stream=None):
                           f"{len(atoms)} ({atoms.get_chemical_formula()}); not its relaxation")
     atoms.set_cell(last.cell, scale_atoms=False)
     atoms.positions = last.positions
-    if stream is not None:
-        print(f"continuing the relaxation of {trajectory} after step {len(frames) - 1}",
-              file=stream)
     return len(frames) - 1
 
 
+def _from_state(atoms, trajectory, state_file, reason, stream):
+    """Continue from the positions of a whole ``state_file`` of these atoms instead of a
+    damaged ``trajectory``, which is kept under another name; steps taken, or None."""
+    from rigidmd.relax.state import read_state
+    from rigidmd.run.outputs import OutputError, _ulm_header
+
+    if state_file is None:
+        return None
+    try:
+        state = read_state(state_file)
+    except ValueError:
+        return None
+    if state is None or state["positions"].shape != atoms.positions.shape:
+        return None
+    try:
+        done = max(_ulm_header(trajectory)[0] - 1, 0)  # the frames its header counts
+    except (OSError, OutputError):
+        done = 0
+    aside, n = trajectory.with_name(f"{trajectory.stem}.damaged{trajectory.suffix}"), 1
+    while aside.exists():
+        n += 1
+        aside = trajectory.with_name(f"{trajectory.stem}.damaged{n}{trajectory.suffix}")
+    trajectory.rename(aside)
+    atoms.set_cell(state["cell"], scale_atoms=False)
+    atoms.positions = state["positions"]
+    if stream is not None:
+        print(f"relax: {trajectory} cannot be read ({reason}); it is kept as {aside.name}, and "
+              f"the relaxation continues from the positions in {state_file} in a new "
+              f"{trajectory.name}", file=stream)
+    return done
+
+
 def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, resume=False,
-                    done=0, hint=None, progress=None, stop=None):
+                    done=0, hint=None, progress=None, stop=None, label=None):
     """Relax ``atoms`` in place as ``section`` says; files go to ``directory``.
 
     Parameters
@@ -163,6 +204,10 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     stop : rigidmd.run.runner.StopSignals, optional
         Signal handling for the relaxation (installed around it; checked after
         every step).  Without it a signal does what it does outside rigidmd.
+    label : str, optional
+        What a continuation must share with the relaxation it continues (the
+        calculator's digest, ``"calculator <digest>"``): recorded in the state
+        file; a continuation with another is refused.
 
     Returns
     -------
@@ -188,7 +233,20 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     state_file = state_path(trajectory)
     exact = False
     if resume:
-        exact, why = _can_continue_exactly(state_file, atoms, section.optimizer)
+        _check_label(state_file, label)
+        exact, why = _can_continue_exactly(state_file, atoms, section.optimizer, label)
+        if not exact and not state_file.exists():
+            # No state: killed outright, or converged (its state removed).  The forces of
+            # the last frame say which (one call, which the relaxation's first reuses).
+            view = RigidFilter(atoms, bodies, cell=section.cell,
+                               scalar_pressure=section.pressure)
+            force = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.
+            if force < section.fmax:
+                print(f"relax: the relaxation in {trajectory} is complete: it converged at "
+                      f"step {done} (largest generalized force {force:.3g} eV/Å, below fmax "
+                      f"{section.fmax:g}); nothing is left to do", file=stream)
+                return Relaxation(True, 0, float(atoms.get_potential_energy()), force)
+        print(f"continuing the relaxation of {trajectory} after step {done}", file=stream)
         said = (f"continuing with the optimizer's memory ({state_file})" if exact
                 else f"the optimizer's memory starts afresh: {why}")
         print(f"relax: {said}", file=stream)
@@ -205,8 +263,17 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
                            optimizer=section.optimizer, cell=section.cell,
                            scalar_pressure=section.pressure, trajectory=str(trajectory),
                            logfile=logfile, append_trajectory=resume, observers=observers,
-                           state_file=state_file, resume=exact,
+                           state_file=state_file, resume=exact, state_label=label,
                            first_step=done if resume else 0)
+    except (RelaxationFailed, NonFiniteForceError) as err:  # the atoms are at a whole step
+        raise type(err)(f"{err}, the last frame of {trajectory}; continue with: "
+                        f"{continuing}") from None
+    except OSError as err:  # a failed write: ASE's errors name no file
+        from rigidmd.run.outputs import describe_os_error
+
+        where = err.filename or _written_file(err, trajectory, log, state_file)
+        raise RelaxationFailed(f"relax: {describe_os_error(err, where)}; continue with: "
+                               f"{continuing} once it can be written") from None
     except Exception as err:
         signum = getattr(err, "signum", None)  # the stop's StopRequest, after a whole step
         if stop is None or signum is None:
@@ -234,7 +301,43 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     return result
 
 
-def _can_continue_exactly(state_file, atoms, optimizer):
+def _written_file(err, trajectory, log, state_file):
+    """The file a write error without a file name came from, by where it was raised: ASE's
+    trajectory writer, the state file's writer, else the optimizer's log."""
+    frames = []
+    tb = err.__traceback__
+    while tb is not None:
+        frames.append(tb.tb_frame.f_code.co_filename.replace("\\", "/"))
+        tb = tb.tb_next
+    if any("/ase/io/" in name for name in frames):
+        return trajectory
+    if any(name.endswith(("/rigidmd/relax/state.py", "/rigidmd/core/checkpoint.py"))
+           for name in frames):
+        return state_file
+    return log
+
+
+def _check_label(state_file, label):
+    """Refuse to continue a relaxation whose state file records another ``label`` (another
+    calculator): its frames and the new ones would be of two energy surfaces."""
+    from rigidmd.config.quantities import ConfigError
+    from rigidmd.relax.state import read_state
+
+    if label is None:
+        return
+    try:
+        state = read_state(state_file)
+    except ValueError:
+        return  # a damaged state: the memory starts afresh, and says why
+    recorded = None if state is None else state.get("label")
+    if recorded is not None and str(recorded) != label:
+        field = label.split()[0]
+        raise ConfigError(f"--resume: the {field} differs from the relaxation's ({state_file} "
+                          f"records {recorded}, the configuration gives {label}); restore it, "
+                          "or start anew with --overwrite")
+
+
+def _can_continue_exactly(state_file, atoms, optimizer, label=None):
     """``(True, "")`` when ``state_file`` holds the state of the last frame, else (False, why)."""
     from rigidmd.relax.filter import optimizer_class
     from rigidmd.relax.state import keeps_memory, read_state, state_matches
@@ -247,5 +350,5 @@ def _can_continue_exactly(state_file, atoms, optimizer):
         return False, str(err)
     if state is None:
         return False, f"no {state_file} (the relaxation was not stopped by a signal or its steps)"
-    differs = state_matches(state, atoms, optimizer)
+    differs = state_matches(state, atoms, optimizer, label)
     return (False, f"{state_file}: {differs}") if differs else (True, "")

@@ -18,7 +18,9 @@ with a checkpoint (130, 143, 138), and ``--resume`` continues exactly.
 
 import argparse
 import os
+import signal
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +39,7 @@ from rigidmd.core.operators import ConvergenceError
 from rigidmd.couplings.base import NotExportable
 from rigidmd.lammps.library import LammpsError
 from rigidmd.relax.command import relax_only
-from rigidmd.relax.structure import RelaxationNotConverged, RelaxationStopped
+from rigidmd.relax.structure import RelaxationFailed, RelaxationNotConverged, RelaxationStopped
 from rigidmd.run.bias import add_bias_parser, bias_command
 from rigidmd.run.fingerprint import resume_command
 from rigidmd.run.logplot import LogError, plot_log
@@ -223,6 +225,20 @@ def _relax_parser(sub, trust_help):
                       help="replace an earlier relaxation's outputs in the output directory")
 
 
+@contextmanager
+def _further_ctrl_c_ignored():
+    """SIGINT ignored inside (in the main thread; elsewhere signals are the main thread's)."""
+    try:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread
+        previous = None
+    try:
+        yield
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
 def main(argv=None):
     """Entry point of the ``rigidmd`` console script; returns the exit status."""
     args = _parser().parse_args(argv)
@@ -294,10 +310,13 @@ def main(argv=None):
         return 1
     except KeyboardInterrupt:
         # Ctrl-C before the steps began (reading, building the calculator, relaxing): no run
-        # started, so there is nothing to continue.
-        print(f"rigidmd: interrupted before the {args.command} started", file=sys.stderr)
+        # started, so there is nothing to continue.  A further Ctrl-C (a second press while
+        # slow imports ran) has nothing left to stop: ignored while the line is written.
+        with _further_ctrl_c_ignored():
+            print(f"rigidmd: interrupted before the {args.command} started", file=sys.stderr)
         return 130
-    except (NonFiniteForceError, ConvergenceError, RelaxationNotConverged) as err:
+    except (NonFiniteForceError, ConvergenceError, RelaxationNotConverged,
+            RelaxationFailed) as err:
         # The run stopped; its outputs and checkpoint hold every step before the failure.
         print(f"rigidmd: run stopped: {err}", file=sys.stderr)
         return 1

@@ -77,6 +77,23 @@ class RunFiles:
         files += [p for p in (self.outputs.plot, self.outputs.checkpoint) if p]
         return self.relaxation + files
 
+    def named(self):
+        """Every file the run writes (the lock file included), by its field: ``{field: path}``."""
+        from rigidmd.relax.structure import state_path
+        from rigidmd.run.outputs import LOCK_NAME
+
+        out = self.outputs
+        named = {f"outputs.{name}": path for name, path in out.files.items()}
+        if out.mdanalysis is not None:
+            named["outputs.mdanalysis topology"] = out.mdanalysis.with_suffix(".psf")
+        named["outputs.checkpoint"] = out.checkpoint
+        if self.relaxation:
+            trajectory, log = self.relaxation
+            named.update({"relax.trajectory": trajectory, "relax.log": log,
+                          "relax state": state_path(trajectory)})
+        named["the lock file"] = out.directory / LOCK_NAME
+        return named
+
     def fresh_start_advice(self):
         """How to go on without the checkpoint: keeping the outputs first, then removing them."""
         trajectory = self.outputs.trajectory

@@ -18,7 +18,8 @@ import numpy as np
 
 from rigidmd.couplings.base import COUPLINGS
 
-__all__ = ["fingerprint", "differing_fields", "earlier_release_differences", "resume_command"]
+__all__ = ["fingerprint", "differing_fields", "earlier_release_differences", "resume_command",
+           "calculator_digest"]
 
 
 def resume_command(config_path=None, directory=None, flags=(), command="run"):
@@ -56,6 +57,20 @@ def _file_digest(path):
     return digest.hexdigest()[:16]
 
 
+def _calculator_fields(calculator):
+    # Where the forces run (processes, threads, address) is not what they are.
+    where = ("calculator_class", "processes", "threads", "address")
+    if hasattr(calculator, "fingerprint_fields"):  # a split: each level's fields
+        return calculator.fingerprint_fields(where)
+    return {key: value for key, value in asdict(calculator).items() if key not in where}
+
+
+def calculator_digest(calculator):
+    """The digest :func:`fingerprint` gives the ``calculator`` field, of a
+    :class:`~rigidmd.config.sections.CalculatorSection` (a relaxation's state records it)."""
+    return _digest(_calculator_fields(calculator))
+
+
 def fingerprint(config):
     """What defines the trajectory, field by field: a digest per configuration field.
 
@@ -75,16 +90,9 @@ def fingerprint(config):
     integrator = config.run.integrator
     if isinstance(integrator, str) and integrator.endswith((".yaml", ".yml")):
         integrator = {"file content": _file_digest(integrator)}
-    # Where the forces run (processes, threads, address) is not what they are.
-    where = ("calculator_class", "processes", "threads", "address")
-    if hasattr(config.calculator, "fingerprint_fields"):  # a split: each level's fields
-        calculator = config.calculator.fingerprint_fields(where)
-    else:
-        calculator = {key: value for key, value in asdict(config.calculator).items()
-                      if key not in where}
     fields = {
         "structure": source, "read_options": structure.read_options,
-        "bodies": structure.bodies, "calculator": calculator,
+        "bodies": structure.bodies, "calculator": _calculator_fields(config.calculator),
         "integrator": integrator, "integrator_options": config.run.integrator_options,
         "timestep": config.run.timestep, "velocities": config.run.velocities,
         "outputs.interval": config.outputs.interval,

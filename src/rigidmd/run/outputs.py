@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["OutputLock", "OutputError", "output_lengths", "trim_outputs", "LOCK_NAME"]
+__all__ = ["OutputLock", "OutputError", "output_lengths", "trim_outputs", "LOCK_NAME",
+           "check_apart_from_inputs"]
 
 #: Name of the lock file in an output directory.
 LOCK_NAME = ".rigidmd.lock"
@@ -149,11 +150,12 @@ def output_lengths(files):
     return lengths
 
 
-def trim_outputs(files, lengths):
+def trim_outputs(files, lengths, advice="start it again with --overwrite"):
     """Cut each output file back to its recorded length (before a resumed run appends).
 
     A file shorter than recorded (lost after the checkpoint) is an error:
-    the run cannot continue it.  Returns the names of the files trimmed.
+    the run cannot continue it, and ``advice`` says what to do instead.
+    Returns the names of the files trimmed.
     """
     trimmed = []
     for name, path in files.items():
@@ -169,7 +171,7 @@ def trim_outputs(files, lengths):
             raise OutputError(
                 f"outputs.{name}: {path} is shorter than at the checkpoint "
                 f"({path.stat().st_size if path.exists() else 0} < {recorded['size']} bytes); "
-                "it cannot be continued: rerun with --overwrite")
+                f"the run cannot be continued without it: restore it, or {advice}")
         if path.stat().st_size == recorded["size"]:
             if name == "trajectory" and "nitems" in recorded:
                 _restore_ulm(path, recorded)
@@ -197,6 +199,51 @@ def _restore_ulm(path, recorded):
 def _restore_ulm_header(fh, recorded):
     fh.seek(32)
     fh.write(np.array([recorded["nitems"], recorded["pos0"]], dtype="<i8").tobytes())
+
+
+def check_apart_from_inputs(outputs, inputs, allowed=()):
+    """Refuse an output on the path of an input, before anything is read or written.
+
+    An output there would replace the input (a log over the configuration, a
+    trajectory over the structure) or remove it (``--overwrite``).
+
+    Parameters
+    ----------
+    outputs, inputs : dict
+        Field name -> path (``None`` is skipped): what the run writes, what it reads.
+    allowed : collection of (str, str)
+        (output field, input field) pairs that may share a path: the input is
+        read whole before the output is written.
+
+    Raises
+    ------
+    OutputError
+        Naming the output's field, its path and the input it is.
+    """
+    read = {}
+    for name, path in inputs.items():
+        if path is not None:
+            read.setdefault(_identity(path), name)
+    for name, path in outputs.items():
+        if path is None:
+            continue
+        source = read.get(_identity(path))
+        if source is None or (name, source) in allowed:
+            continue
+        raise OutputError(f"{name}: {path} is also the {source} this run reads, which "
+                          f"writing it would destroy; give {name} another file, or copy the "
+                          f"{source} elsewhere first")
+
+
+def _identity(path):
+    """What names one file: its device and inode when it exists (a link, another spelling),
+    else its resolved path."""
+    path = Path(path).resolve()  # "out/../c.yaml" is c.yaml before "out" exists too
+    try:
+        info = path.stat()
+    except OSError:
+        return str(path)
+    return (info.st_dev, info.st_ino)
 
 
 def describe_os_error(err, path=None):

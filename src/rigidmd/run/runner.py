@@ -40,6 +40,7 @@ import os
 import signal
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -48,7 +49,12 @@ from rigidmd.ipi import EngineError
 from rigidmd.run.checkpointing import RunCheckpoints
 from rigidmd.run.directory import NamedOutput, RunFiles
 from rigidmd.run.fingerprint import fingerprint, resume_command
-from rigidmd.run.outputs import OutputError, describe_os_error, trim_outputs
+from rigidmd.run.outputs import (
+    OutputError,
+    check_apart_from_inputs,
+    describe_os_error,
+    trim_outputs,
+)
 from rigidmd.run.report import Progress, describe, observables, summary
 from rigidmd.run.signals import EXIT_STATUS, StopRequest, StopSignals
 
@@ -92,6 +98,7 @@ class Run:
         self.files = RunFiles(self.outputs, mode, self.stream, config.relax)
         self.checkpoints = RunCheckpoints(config, self.files, self.stream)
         self.diagnostics = []  # attached with the outputs (config.diagnostics)
+        self._after_relax = None  # the stop signals between the relaxation and the MD
 
     @property
     def fingerprint(self):
@@ -183,16 +190,23 @@ class Run:
         trajectory, and the MD after it.  The MD's own step-0 checkpoint
         replaces it.
         """
-        from rigidmd.relax.structure import continue_from, relax_structure
+        from rigidmd.relax.structure import continue_from, relax_structure, state_path
 
         section, directory = self.config.relax, self.outputs.directory
         done = 0
         if continuing:
-            done = continue_from(atoms, directory / section.trajectory, self.stream)
+            trajectory = directory / section.trajectory
+            done = continue_from(atoms, trajectory, state_path(trajectory), self.stream)
         else:
             self.checkpoints.write(start, relaxation=str(section.trajectory))
+        # Installed before the relaxation's own handlers and kept until the MD's: a signal
+        # once the relaxation has ended is noted (the MD stops after its first step, with a
+        # checkpoint), never a kill without a word.
+        self._after_relax = StopSignals().__enter__()
+        self._after_relax.shielded = True  # a second Ctrl-C then is only counted
         relax_structure(atoms, bodies, section, directory, self.stream, resume=continuing,
-                        done=done, hint=self._resume_hint(), stop=StopSignals())
+                        done=done, hint=self._resume_hint(), stop=StopSignals(),
+                        label=f"calculator {self.fingerprint['calculator']}")
         self._draw_velocities(atoms, bodies)
 
     def _resumed_dynamics(self):
@@ -218,7 +232,8 @@ class Run:
             return self._new_dynamics(replace=True)
         calc = self.config.calculator.build(checkpoint.atoms(), out.directory / "engine")
         self.files.prepare(self.checkpoints.is_earlier_demo)
-        trimmed = trim_outputs(self.files.appended(), checkpoint.extra.get("outputs", {}))
+        trimmed = trim_outputs(self.files.appended(), checkpoint.extra.get("outputs", {}),
+                               self.files.fresh_start_advice())
         self.checkpoints.step = checkpoint.nsteps
         dyn = load_checkpoint(checkpoint, calc,
                               trajectory=str(out.trajectory) if out.trajectory else None,
@@ -231,8 +246,21 @@ class Run:
         return dyn
 
     # ------------------------------------------------------------ the run
+    def inputs(self):
+        """The files the run reads, by field: ``{field: path or None}``."""
+        structure, integrator = self.config.structure, self.config.run.integrator
+        return {"configuration": self.config_path,
+                "structure": structure.source if isinstance(structure.source, Path) else None,
+                "restart": structure.restart,
+                "integrator": integrator if isinstance(integrator, str) and
+                integrator.endswith((".yaml", ".yml")) else None}
+
     def execute(self):
         """Run; returns the exit status (0, or 130/143/138 after a stop signal)."""
+        # Before anything is touched.  A restart from this directory's own trajectory is
+        # read before the outputs are removed (--overwrite), or refused (a new run).
+        check_apart_from_inputs(self.files.named(), self.inputs(),
+                                allowed={("outputs.trajectory", "restart")})
         lock = self.files.open()
         try:
             return self._execute()
@@ -258,8 +286,17 @@ class Run:
         return RunStopped(f"{reason} (at step {dyn.nsteps}); {where}")
 
     def _execute(self):
+        try:
+            return self._execute_steps()
+        finally:
+            if self._after_relax is not None:
+                self._after_relax.__exit__(None, None, None)  # the handlers before the run's
+
+    def _execute_steps(self):
         dyn = self._set_up()
         stop = StopSignals()
+        if self._after_relax is not None and self._after_relax.signum is not None:
+            stop.signum = self._after_relax.signum  # arrived after the relaxation: obeyed now
         # The handlers stay until the calculator is closed: a signal after the steps is noted,
         # never a KeyboardInterrupt in the final checkpoint's write or the engine's shutdown.
         with stop:
