@@ -22,9 +22,16 @@ def test_the_readme_is_a_front_door():
     assert len(text.splitlines()) <= 150
     bash = [body for lang, body in blocks(text) if lang == "bash"]
     assert 'python -m pip install . && rigidmd demo\n' in bash
-    assert 'python -m pip install -e ".[test]" && python -m pytest -n auto\n' in bash
+    # The test command as a user types it, in a fresh virtual environment of their own.
+    assert ('python -m venv .venv && . .venv/bin/activate\n'
+            'python -m pip install -e ".[test]" && python -m pytest -n auto\n') in bash
     ci = (README.parent / ".ci" / "run").read_text()
     assert 'python -m pip install -e ".[test]" && python -m pytest -n auto' in ci
+    # What a new user sees: a fresh environment of its own, made and entered before any
+    # install, removed when CI ends.
+    assert (ci.index("-m venv") < ci.index("/bin/activate")
+            < ci.index("pip install -e") < ci.index("pytest"))
+    assert "trap 'rm -rf" in ci
     assert "python -m sphinx -W -b html docs docs/_build/html" in ci
     assert [lang for lang, _ in blocks(text)].count("python") >= 1
 
