@@ -14,7 +14,9 @@ centre of mass and :math:`d_i` the body-frame coordinate.  The body frame is
 the principal frame, so the inertia tensor there is
 :math:`\mathrm{diag}(I_1, I_2, I_3)` with :math:`I_1 \le I_2 \le I_3`.  A
 moment below ``LINEAR_TOLERANCE * max(I)`` is set to exactly 0 (a linear
-body), the rule LAMMPS ``fix rigid`` uses.
+body), the rule LAMMPS ``fix rigid`` uses.  The axes' signs, and their choice
+within a plane or space of equal moments, are taken from the atoms
+(:func:`principal_frames`), so a body measured again gets the same frame.
 
 Atoms of mass 0 (virtual sites, such as the M site of TIP4P water) belong to
 a body like any other atom: they are placed at :math:`X_b + R(q_b)\, d_i`
