@@ -31,6 +31,7 @@ OPENING = re.compile(r"^(`{3,})\s*([^`\s]*)")
 #: Bash lines covered elsewhere: (marker in the line, where it is checked).
 CHECKED_ELSEWHERE = (
     ("pip install", ".ci/run installs and tests a clean checkout"),
+    ("python -m venv .venv", ".ci/run makes a fresh virtual environment of its own"),
     ("sphinx", ".ci/run builds the documentation with -W"),
     ("examples/tip3p_water.py --outdir out", "tests/test_examples.py runs it with --quick"),
     ("examples/tip4p2005.py --outdir out4", "tests/test_examples.py runs it with --quick"),

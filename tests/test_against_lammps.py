@@ -74,14 +74,18 @@ def test_water_clusters_with_lammps_constants(n):
 
     LAMMPS's ``ftm2v`` and ``qqr2e`` differ from ASE's CODATA values by
     5.5e-8 and 2.4e-8, so the codes integrate slightly different equations
-    and the chaos of the cluster amplifies that.  Measured (8, 27 waters):
-    9e-8, 8e-8 Å at step 100; 3.4e-5, 4.5e-5 Å at step 500; 1e-8, 9e-8 eV.
+    and the chaos of the cluster amplifies that.  How much depends on the start:
+    measured, 8 waters (seeds 1-8): 4e-8 to 8e-8 Å at step 100, 3.6e-7 to 4.1e-5 Å
+    at step 500; 27 waters (seeds 1-10 and 27): 9e-8 to 2.2e-7 Å, then 1.4e-5 to
+    8.8e-4 Å (the start of seed 27 alone gave 4.5e-5 with the body frames LAPACK
+    chose before, 1.9e-4 now; seed 4 gave 2.8e-4 then); energies below 2.6e-7 eV.
+    With ASE's constants the same runs agree to 1e-10 Å (test_water_clusters).
     """
     atoms = waters(n, seed=n)
     gap, de = compare(atoms, "mol-id", tip3p_pair_commands(40.0), tip3p_charges(atoms),
                       ase_constants=False)
     assert gap[100 // EVERY] < 1e-6
-    assert gap[500 // EVERY] < 1e-4
+    assert gap[500 // EVERY] < 2e-3  # the chaos's spread over starts, twice the largest
     assert de.max() < 1e-6
 
 

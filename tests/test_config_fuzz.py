@@ -14,8 +14,7 @@ import re
 
 import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis_or_skip import HealthCheck, given, settings, st
 
 from rigidmd.config import ConfigError, check_config, load_config
 from rigidmd.config.quantities import UNIT_TABLES

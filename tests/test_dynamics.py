@@ -554,3 +554,75 @@ def test_plot_reads_old_and_new_logs(tmp_path):
     assert [label for label, _ in temperature_curves(read_log(old))] == ["T"]
     for path in (log, old):
         assert plot_log(path, tmp_path / f"{path.stem}.png").stat().st_size > 0
+def _every_dynamics():
+    """One of each user class, by name: NVE, the thermostats, the barostats."""
+    from helpers import dimer_fluid
+
+    from rigidmd import (
+        RigidBussi,
+        RigidCRescale,
+        RigidLangevin,
+        RigidLangevinBAOAB,
+        RigidMCBarostat,
+        RigidNoseHoover,
+        RigidNPT,
+    )
+
+    rng = np.random.default_rng
+    fluid = {"bodies": "tags"}
+    return {
+        "RigidVerlet": lambda cls=RigidVerlet: cls(mixture(), units.fs, bodies="mol-id"),
+        "RigidLangevin": lambda cls=RigidLangevin: cls(
+            mixture(), units.fs, temperature_K=300, friction=0.01 / units.fs,
+            bodies="mol-id", rng=rng(1)),
+        "RigidBussi": lambda cls=RigidBussi: cls(mixture(), units.fs, 300, 20 * units.fs,
+                                                 bodies="mol-id", rng=rng(1)),
+        "RigidLangevinBAOAB": lambda cls=RigidLangevinBAOAB: cls(
+            mixture(), units.fs, temperature_K=300, friction=0.01 / units.fs,
+            bodies="mol-id", rng=rng(1)),
+        "RigidNoseHoover": lambda cls=RigidNoseHoover: cls(
+            mixture(), units.fs, temperature_K=300, tdamp=50 * units.fs, bodies="mol-id"),
+        "RigidNPT": lambda cls=RigidNPT: cls(dimer_fluid(n_side=2, rc=3.0), 2 * units.fs, 80,
+                                             units.bar, 50 * units.fs, 500 * units.fs,
+                                             **fluid),
+        "RigidCRescale": lambda cls=RigidCRescale: cls(
+            dimer_fluid(n_side=2, rc=3.0), 2 * units.fs, 80, units.bar, 50 * units.fs,
+            500 * units.fs, 1e-4 / units.bar, rng=rng(1), **fluid),
+        "RigidMCBarostat": lambda cls=RigidMCBarostat: cls(
+            dimer_fluid(n_side=2, rc=3.0), 2 * units.fs, 80, units.bar, 50 * units.fs,
+            every=2, rng=rng(1), **fluid),
+    }
+
+
+@pytest.mark.parametrize("name", list(_every_dynamics()))
+def test_irun_calls_what_ase_calls_in_its_order(name):
+    """ASE's test_irun_force_call_order, for every rigid dynamics: a subclass may override
+    ``_refresh_properties`` and ``log``, and irun calls them as ASE's loop does."""
+    dyn = _every_dynamics()[name]()
+    calls = []
+
+    def record(what):
+        return lambda *args, **kwargs: calls.append(what)
+
+    for what in ("step", "_refresh_properties", "log", "call_observers"):
+        setattr(dyn, what, record(what))
+    list(dyn.irun(steps=2))
+    assert calls == ["_refresh_properties", "log", "call_observers",
+                     "step", "_refresh_properties", "log", "call_observers",
+                     "step", "_refresh_properties", "log", "call_observers"]
+
+
+def test_a_subclass_log_is_called_at_every_step_of_a_run():
+    logged = []
+
+    class Logged(RigidVerlet):
+        def log(self):
+            logged.append((self.nsteps, self.atoms.get_potential_energy()))
+
+    atoms = mixture()
+    dyn = Logged(atoms, units.fs, bodies="mol-id")
+    dyn.run(3)
+    dyn.run(2)
+    assert [n for n, _ in logged] == [0, 1, 2, 3, 4, 5]
+    # The log reads the energy of the atoms as they are at that step.
+    assert logged[-1][1] == atoms.get_potential_energy()

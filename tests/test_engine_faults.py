@@ -19,8 +19,7 @@ import numpy as np
 import pytest
 from ase import Atoms
 from helpers import PPPM_27, processes_named, start_cli_run, water_box_27
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis_or_skip import HealthCheck, given, settings, st
 
 from rigidmd.ipi import EngineError, IPICalculator
 from rigidmd.ipi.processes import descendants

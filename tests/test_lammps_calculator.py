@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 from ase import units
 from helpers import PPPM_27, water_box_27, waters
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis_or_skip import given, settings, st
 
 from rigidmd import RigidBodies, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.lammps import (

@@ -7,8 +7,7 @@ lower-triangular cells, image flags and permutations (hypothesis).
 """
 
 import numpy as np
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis_or_skip import given, settings, st
 
 from rigidmd.lammps import kernels
 

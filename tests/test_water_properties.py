@@ -229,7 +229,7 @@ def test_dielectric_takes_the_m_site_charges_from_the_topology():
     from rigidmd.mdanalysis import DielectricConstant, to_universe
 
     model = water_model("tip4p2005")
-    box = water_box(2, model="tip4p2005")
+    box = water_box(2, model="tip4p2005", whole=False)
     box.set_initial_charges(model.charges(8))
     u = to_universe([box])
     res = DielectricConstant(u.atoms, blocks=2).run().results

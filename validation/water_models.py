@@ -315,7 +315,7 @@ def total_dipole(atoms, charges, sites):
 def temperature(dyn):
     """Rigid-body temperature (K) with 6N - 3 degrees of freedom (LAMMPS's count)."""
     kinetic = dyn.translational_kinetic_energies.sum() + dyn.rotational_kinetic_energies.sum()
-    return 2 * kinetic / ((dyn.degrees_of_freedom - 3) * units.kB)
+    return 2 * kinetic / ((dyn.model.degrees_of_freedom - 3) * units.kB)
 
 
 def rescale_to_volume(atoms, volume, sites):

@@ -315,16 +315,24 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             self.sync.synced = self.link.snapshot()
 
     def _steps(self, steps):
-        """ASE's ``MolecularDynamics.irun`` loop, without the hooks this class leaves empty."""
+        """ASE's ``irun`` loop and its calls, in its order: a subclass's overrides are called."""
         self.max_steps = self.nsteps + steps
         if self.nsteps == 0:
+            self._refresh_properties()
+            self.log()
             self.call_observers()
         yield self.nsteps == self.max_steps
         while self.nsteps < self.max_steps:
             self.step()
             self.nsteps += 1
+            self._refresh_properties()
+            self.log()
             self.call_observers()
             yield self.nsteps == self.max_steps
+
+    def _refresh_properties(self):
+        """Nothing to refresh (ASE's asks for the forces): the step computed what the
+        observers due read.  A subclass may override it, as in ASE."""
 
     def call_observers(self):
         """Call the observers due at this step, noting whether they changed the Atoms."""

@@ -14,7 +14,9 @@ centre of mass and :math:`d_i` the body-frame coordinate.  The body frame is
 the principal frame, so the inertia tensor there is
 :math:`\mathrm{diag}(I_1, I_2, I_3)` with :math:`I_1 \le I_2 \le I_3`.  A
 moment below ``LINEAR_TOLERANCE * max(I)`` is set to exactly 0 (a linear
-body), the rule LAMMPS ``fix rigid`` uses.
+body), the rule LAMMPS ``fix rigid`` uses.  The axes' signs, and their choice
+within a plane or space of equal moments, are taken from the atoms
+(:func:`principal_frames`), so a body measured again gets the same frame.
 
 Atoms of mass 0 (virtual sites, such as the M site of TIP4P water) belong to
 a body like any other atom: they are placed at :math:`X_b + R(q_b)\, d_i`
@@ -30,8 +32,8 @@ import numpy as np
 from rigidmd.core import quaternion as quat
 from rigidmd.core._numba import pack_model
 
-__all__ = ["BodyModel", "BodyGeometry", "LINEAR_TOLERANCE", "measure", "inertia_tensors",
-           "safe_inverse"]
+__all__ = ["BodyModel", "BodyGeometry", "LINEAR_TOLERANCE", "FRAME_TOLERANCE", "measure",
+           "principal_frames", "inertia_tensors", "safe_inverse"]
 
 #: Relative threshold below which a principal moment counts as zero.
 LINEAR_TOLERANCE = 1e-7
@@ -240,6 +242,141 @@ def inertia_tensors(r, m, starts):
     return np.add.reduceat(per_atom, starts, axis=0)
 
 
+#: Relative length below which an atom counts as lying on a plane or axis of its
+#: body when the frame's signs are taken from the atoms (of the body's largest
+#: atom distance from its centre of mass).
+FRAME_TOLERANCE = 1e-6
+
+
+def _first_atom(mask, starts):
+    """Per body, the index of its first atom where ``mask`` holds, ``len(mask)`` if none."""
+    index = np.where(mask, np.arange(len(mask)), len(mask))
+    return np.minimum.reduceat(index, starts)
+
+
+def _unit(v):
+    """``v`` normalised along its last axis (a zero vector stays zero)."""
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(norm > 0, norm, 1.0)
+
+
+def _from_atoms(vectors, eps, starts, fallback):
+    """Per body, the direction of its first atom vector longer than ``eps``, else ``fallback``."""
+    first = _first_atom(np.linalg.norm(vectors, axis=1) > eps, starts)
+    found = first < len(vectors)
+    picked = _unit(vectors[np.minimum(first, len(vectors) - 1)])
+    return np.where(found[:, None], picked, fallback), found
+
+
+def _signed(axis, r, eps, starts, atom_body):
+    """``axis`` (per body) turned so that its body's first atom off the plane normal to it
+    has a positive coordinate along it; unchanged where every atom lies in that plane."""
+    d = np.einsum("ni,ni->n", r, axis[atom_body])
+    first = _first_atom(np.abs(d) > eps, starts)
+    found = first < len(d)
+    sign = np.where(found & (d[np.minimum(first, len(d) - 1)] < 0), -1.0, 1.0)
+    return axis * sign[:, None], found
+
+
+def _in_plane(r, normal, atom_body):
+    """Each atom vector with its component along its body's ``normal`` removed."""
+    n = normal[atom_body]
+    return r - np.einsum("ni,ni->n", r, n)[:, None] * n
+
+
+def principal_frames(r, m, starts, atom_body):
+    r"""Principal moments and right-handed principal axes, taken from the atoms.
+
+    LAPACK's eigenvectors are defined only up to the sign of each axis, and
+    only up to a rotation within the plane (or space) of equal moments; which
+    one it returns depends on the last bits of the tensor, so the same body
+    measured twice (rigidly moved, or on another machine) could get another
+    frame.  Here each choice is made by the atoms, in their order:
+
+    * a principal axis of its own moment points so that the first atom off
+      the plane normal to it has a positive coordinate along it;
+    * two equal moments (a symmetric top, a linear body) are an eigenplane:
+      its first axis points to the first atom off the unique axis; the second
+      follows from the right hand, or, when every atom lies in the plane (a
+      planar oblate top), from the first atom off the first axis;
+    * three equal moments (a spherical top): the first axis points to the
+      first atom off the centre of mass, the second to the first atom off
+      that axis;
+    * the remaining axis completes a right-handed frame; a linear body, whose
+      atoms fix no direction across its axis, takes the lab axis least
+      aligned with its own.
+
+    Moments within ``LINEAR_TOLERANCE`` of the largest of each other count
+    as equal and are replaced by their mean, so the frame chosen in their
+    eigenspace diagonalises the inertia tensor to that tolerance.
+
+    Parameters
+    ----------
+    r : numpy.ndarray, shape (n_body_atoms, 3)
+        Atom positions relative to their body's centre of mass (Å), grouped by body.
+    m : numpy.ndarray, shape (n_body_atoms,)
+        Atom masses (amu).
+    starts, atom_body : numpy.ndarray of int
+        Body layout, as in :class:`BodyModel`.
+
+    Returns
+    -------
+    moments : numpy.ndarray, shape (n_bodies, 3)
+        Ascending principal moments (amu Å²).
+    axes : numpy.ndarray, shape (n_bodies, 3, 3)
+        Rotation matrices whose columns are the principal axes (determinant +1).
+    """
+    moments, eig = np.linalg.eigh(inertia_tensors(r, m, starts))
+    tol = LINEAR_TOLERANCE * moments[:, 2]
+    low = moments[:, 1] - moments[:, 0] <= tol     # I1 = I2
+    high = moments[:, 2] - moments[:, 1] <= tol    # I2 = I3 (a linear body too)
+    sphere, oblate, prolate = low & high, low & ~high, high & ~low
+    size = np.sqrt(np.maximum.reduceat(np.einsum("ni,ni->n", r, r), starts))
+    eps = (FRAME_TOLERANCE * size)[atom_body]
+    out = eig.copy()
+
+    # An axis of its own moment: its sign from the atoms.
+    a0, _ = _signed(eig[:, :, 0], r, eps, starts, atom_body)
+    a1, _ = _signed(eig[:, :, 1], r, eps, starts, atom_body)
+    a2, a2_found = _signed(eig[:, :, 2], r, eps, starts, atom_body)
+    out[:, :, 0], out[:, :, 1] = a0, a1
+    out[:, :, 2] = np.cross(a0, a1)
+
+    # I2 = I3 (prolate top, linear body): the unique axis a0, the plane's first axis
+    # towards the first atom off a0 (a linear body: the lab axis least along a0).
+    lab = np.eye(3)[np.argmin(np.abs(a0), axis=1)]
+    across = _unit(lab - np.einsum("ni,ni->n", lab, a0)[:, None] * a0)
+    e1, _ = _from_atoms(_in_plane(r, a0, atom_body), eps, starts, across)
+    frame = np.stack([a0, e1, np.cross(a0, e1)], axis=2)
+    out[prolate] = frame[prolate]
+
+    # I1 = I2 (oblate top): the unique axis a2, the plane's first axis towards the first
+    # atom off a2; the second from the right hand, or, a planar top, from its atoms.
+    planar = ~a2_found
+    flat = _in_plane(r, a2, atom_body)
+    e0, _ = _from_atoms(flat, eps, starts, eig[:, :, 0])
+    e1 = np.cross(a2, e0)
+    e1_atoms, _ = _from_atoms(_in_plane(flat, e0, atom_body), eps, starts, e1)
+    e1 = np.where(planar[:, None], e1_atoms, e1)
+    frame = np.stack([e0, e1, np.cross(e0, e1)], axis=2)
+    out[oblate] = frame[oblate]
+
+    # I1 = I2 = I3: the first atom off the centre, then the first atom off that axis.
+    e0, _ = _from_atoms(r, eps, starts, eig[:, :, 0])
+    e1, _ = _from_atoms(_in_plane(r, e0, atom_body), eps, starts, eig[:, :, 1])
+    frame = np.stack([e0, e1, np.cross(e0, e1)], axis=2)
+    out[sphere] = frame[sphere]
+
+    moments = moments.copy()
+    mean01 = 0.5 * (moments[:, 0] + moments[:, 1])
+    mean12 = 0.5 * (moments[:, 1] + moments[:, 2])
+    mean = moments.mean(axis=1)
+    moments[oblate, :2] = mean01[oblate, None]
+    moments[prolate, 1:] = mean12[prolate, None]
+    moments[sphere] = mean[sphere, None]
+    return moments, out
+
+
 def _refuse_off_axis_sites(d, m, moments, mass, order, atom_body):
     """Refuse an atom off the axis of a linear body.
 
@@ -304,10 +441,7 @@ def measure(order, starts, atom_body, free, masses, x):
     mass = np.add.reduceat(m, starts)
     com = np.add.reduceat(m[:, None] * x, starts) / mass[:, None]
     r = x - com[atom_body]
-    moments, axes = np.linalg.eigh(inertia_tensors(r, m, starts))
-    # Right-handed principal frames: R(q) = axes (columns are body axes).
-    flip = np.linalg.det(axes) < 0
-    axes[flip, :, 2] *= -1.0
+    moments, axes = principal_frames(r, m, starts, atom_body)
     imax = moments[:, 2]
     point = ~(imax > 0)
     if np.any(point):

@@ -205,8 +205,17 @@ class RigidObservables:
 
     @property
     def degrees_of_freedom(self) -> int:
-        """Rigid degrees of freedom: 6 per body, 5 per linear body, 3 per point particle."""
-        return self.model.degrees_of_freedom
+        """The degrees of freedom every temperature of this dynamics counts.
+
+        6 per body, 5 per linear body, 3 per point particle, less the 3 of the
+        centre of mass where the dynamics holds the total momentum (a
+        thermostat's ``fixcm``, ASE's ``FixCom`` on the atoms): the count that
+        ``atoms.get_temperature()``, the MD log and the run summary use.  The
+        bodies' own count, centre of mass included, is
+        ``model.degrees_of_freedom``.
+        """
+        held = 3 if self.holds_momentum else 0
+        return max(self.model.degrees_of_freedom - held, 0)
 
     @property
     def translational_dof(self) -> int:

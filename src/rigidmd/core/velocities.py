@@ -169,13 +169,16 @@ def rigid_temperature(frames, bodies=None):
     ASE cannot rebuild rigidmd's constraint from a ``.traj`` file, so
     ``frame.get_temperature()`` divides by 3 degrees of freedom per atom and
     reads low (2/3 for water).  This divides the kinetic energy of the atoms
-    by the rigid count, as the dynamics and its log do:
+    by the rigid count:
 
     .. math::
         T = \frac{2 K}{N_f k_B},\qquad N_f = 6 n_\mathrm{bodies}
             - n_\mathrm{linear} + 3 n_\mathrm{free}
 
-    (no centre-of-mass correction, as in ASE).
+    (no centre-of-mass correction, as in ASE).  A dynamics that held the total
+    momentum (a thermostat's ``fixcm``, ASE's ``FixCom``) counted 3 fewer in
+    its log (``dyn.degrees_of_freedom``): its logged temperatures are these
+    times :math:`N_f / (N_f - 3)`.
 
     Parameters
     ----------

@@ -119,18 +119,20 @@ def water_cluster(n_molecules, seed=0, spacing=3.1, jitter=0.1, tries=64, model=
     return atoms
 
 
-def water_box(n_side=3, seed=0, spacing=3.1, jitter=0.1, model="tip3p", whole=False):
+def water_box(n_side=3, seed=0, spacing=3.1, jitter=0.1, model="tip3p", whole=True):
     """A periodic cubic box of ``n_side**3`` randomly oriented waters.
 
     About liquid density at the default spacing (1.0 g/cm³ at 3.1 Å).  The
     lattice starts at the cell's origin (each site jittered by up to
-    ``jitter`` Å) and every atom is wrapped into the cell, so molecules
-    straddle the boundaries; with ``whole=True`` nothing is
-    wrapped and every molecule is whole, its atoms up to one molecule's size
-    outside the cell (what codes need that take intramolecular distances
-    without the minimum image, as OpenMM's constraints and virtual sites
-    do).  ``model`` names the water model (:data:`rigidmd.water.WATER_MODELS`;
-    four-site models carry M explicitly).
+    ``jitter`` Å).  Every molecule is whole, its atoms up to one molecule's
+    size outside the cell: calculators that take intramolecular distances
+    without the minimum image need it (ASE's ``TIP3P`` and ``TIP4P``, OpenMM's
+    constraints and virtual sites), and every other reads it as well.  With
+    ``whole=False`` every atom is wrapped into the cell, so molecules straddle
+    the boundaries: ASE's ``TIP3P`` then counts the split molecules' charges
+    across the box (+192 eV for ``water_box(4)`` with ``rc=6``, against
+    +0.70 eV whole).  ``model`` names the water model
+    (:data:`rigidmd.water.WATER_MODELS`; four-site models carry M explicitly).
     """
     rng = np.random.default_rng(seed)
     n = n_side**3
