@@ -491,3 +491,31 @@ def test_progress_off_a_terminal_writes_a_line_every_tenth_at_most_one_a_minute(
     # The last line may come sooner after the one before.
     assert all(b - a >= 60 for a, b in zip(times[:-2], times[1:-1], strict=True))
     assert lines[-1][2].startswith(f"[{'#' * 30}] {total}/{total} steps")
+
+
+def test_ctrl_c_while_the_command_line_is_imported_is_one_line():
+    """A Ctrl-C while ``rigidmd`` was still importing ASE, NumPy, SciPy and the package
+    printed a traceback (the console script imported ``rigidmd.run.cli`` itself); the entry
+    point outside the package ends in one line and status 130.  The interrupt is raised by
+    an import hook at the command line's import, where a real Ctrl-C lands at start-up."""
+    hook = (
+        "import sys\n"
+        "class Interrupt:\n"
+        "    def find_spec(self, name, path=None, target=None):\n"
+        "        if name == 'rigidmd.run.cli':\n"
+        "            raise KeyboardInterrupt\n"
+        "sys.meta_path.insert(0, Interrupt())\n"
+        "from rigidmd_launcher import main\n"
+        "sys.exit(main())\n")
+    result = subprocess.run([sys.executable, "-c", hook], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 130
+    assert result.stderr == "rigidmd: interrupted while starting; nothing was run or written\n"
+
+
+def test_the_console_script_is_the_launcher():
+    """The installed ``rigidmd`` command enters through :mod:`rigidmd_launcher`."""
+    from importlib.metadata import entry_points
+
+    (script,) = [e for e in entry_points(group="console_scripts") if e.name == "rigidmd"]
+    assert script.value == "rigidmd_launcher:main"
