@@ -238,35 +238,25 @@ def molecule_centres(positions, masses, sites, cell):
     return x[:, 0].copy(), np.einsum("s,bsk->bk", m, x) / m.sum()
 
 
-def intramolecular_energy(model, kspace_parameters):
+def intramolecular_energy(model, calc):
     """The constant in LAMMPS's energy of rigid molecules, kJ/mol per molecule.
 
-    The pair style leaves a molecule's own pairs out (``neigh_modify exclude molecule/intra``)
-    but the k-space sum has them: :math:`k_e \\sum_{i<j} q_i q_j\\,\\mathrm{erf}(g r_{ij})/r_{ij}`
-    over each molecule's charged sites, with PPPM's ``gewald`` :math:`g` (from
-    ``kspace_parameters``, the calculator's).  ⟨U⟩/N is given without it.
+    The pair style leaves a molecule's own pairs out but the k-space sum has them
+    (:func:`rigidmd.mdanalysis.thermo.excluded_kspace_energy` at the calculator's pinned
+    Ewald parameter); ⟨U⟩/N is given without it.
     """
-    import math
-    import re
-
     from ase import units
 
-    g = float(re.search(r"gewald\s+(\S+)", kspace_parameters).group(1))
-    x, q = model.molecule().positions, model.charges(1)
-    total = 0.0
-    for i in range(len(q)):
-        for j in range(i + 1, len(q)):
-            if q[i] and q[j]:
-                r = float(np.linalg.norm(x[i] - x[j]))
-                total += q[i] * q[j] * math.erf(g * r) / r
-    return total * units.Hartree * units.Bohr / (units.kJ / units.mol)
+    from rigidmd.mdanalysis.thermo import ewald_parameter, excluded_kspace_energy
+
+    return excluded_kspace_energy(model, ewald_parameter(calc)) / (units.kJ / units.mol)
 
 
 def lammps_offset(state, model):
     """:func:`intramolecular_energy` of the calculator :func:`make_atoms` builds for ``state``."""
     atoms = make_atoms(state, model)
     atoms.get_potential_energy()
-    offset = intramolecular_energy(model, atoms.calc.kspace_parameters)
+    offset = intramolecular_energy(model, atoms.calc)
     if hasattr(atoms.calc, "close"):
         atoms.calc.close()
     return offset
@@ -364,10 +354,10 @@ def run_rigidmd(p, paths, stop, progress, resume):
     save()
     steps = dyn.nsteps
     atoms.get_potential_energy()
-    offset = intramolecular_energy(model, atoms.calc.kspace_parameters)
+    offset = intramolecular_energy(model, atoms.calc)
     if hasattr(atoms.calc, "close"):
         atoms.calc.close()
-    return series, steps, ms, offset
+    return series, steps, ms, offset, s0
 
 
 def run_openmm(p, paths, stop, progress, resume):
@@ -440,7 +430,7 @@ def run_openmm(p, paths, stop, progress, resume):
             last_save = time.perf_counter()
     ms = 1000 * (time.perf_counter() - t0) / max(steps - s0, 1)
     save()
-    return series, steps, ms, 0.0
+    return series, steps, ms, 0.0, s0
 
 
 def openmm_water_system(state, model, cutoff):
@@ -514,7 +504,7 @@ def run_lammps(p, paths, stop, progress, resume):
         chk.write_text(json.dumps({"samples": samples, "frames": frames, "steps": steps}))
         progress(steps * p["dt_fs"] / 1000)
     ms = 1000 * (time.perf_counter() - t0) / max(steps - s0, 1)
-    return series, steps, ms, lammps_offset(load_start(p["model"], p["waters"]), model)
+    return series, steps, ms, lammps_offset(load_start(p["model"], p["waters"]), model), s0
 
 
 # --------------------------------------------------------------------------- analysis
@@ -615,12 +605,13 @@ def point_main(p, resume):
     progress = Progress(name, p["ps"], p["log_s"])
     runner = {"rigidmd": run_rigidmd, "openmm": run_openmm, "lammps": run_lammps}[p["code"]]
     wall = time.perf_counter()
-    series, steps, ms, offset = runner(p, paths, stop, progress, resume)
+    series, steps, ms, offset, first = runner(p, paths, stop, progress, resume)
     n = len(state["numbers"]) // (4 if p["model"].startswith("tip4p") else 3)
     total = int(round(p["ps"] * 1000 / p["dt_fs"]))
     results = analyse(series, p, n, offset)
     out = {"point": {k: v for k, v in p.items() if k != "outdir"}, "name": name,
-           "complete": steps >= total, "steps": steps, "ps": steps * p["dt_fs"] / 1000,
+           "complete": steps >= total, "steps": steps, "resumed_from_step": first,
+           "ps": steps * p["dt_fs"] / 1000,
            "stopped_by": stop.signal, "ms_per_step": ms,
            "wall_s": time.perf_counter() - wall, "molecules": n,
            "temperature_K": TEMPERATURE_K, "friction_per_ps": FRICTION_PER_PS,
@@ -706,7 +697,7 @@ def cost(args):
                  "chk": args.outdir / f"{name}.chk.{'omm' if code == 'openmm' else 'npz'}"}
         args.outdir.mkdir(parents=True, exist_ok=True)
         runner = {"rigidmd": run_rigidmd, "openmm": run_openmm, "lammps": run_lammps}[code]
-        _, _, ms, _ = runner(p, paths, Stop(), Progress(name, p["ps"], 1e9), False)
+        _, _, ms, _, _ = runner(p, paths, Stop(), Progress(name, p["ps"], 1e9), False)
         rows.append({"code": code, "integrator": integ, "waters": args.waters,
                      "steps": args.steps, "ms_per_step": ms})
         print(f"{code:8} {integ:10} {ms:8.2f} ms/step", flush=True)
