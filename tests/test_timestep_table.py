@@ -62,6 +62,27 @@ def test_a_run_writes_every_field(tmp_path):
 
 
 @pytest.mark.lammps
+@pytest.mark.parametrize("code, integrator", [("lammps", "nvt_small"), ("openmm", "middle")])
+def test_the_other_codes_write_the_same_fields(tmp_path, code, integrator):
+    if code == "openmm":
+        pytest.importorskip("openmm", reason="needs OpenMM (pip install openmm)")
+    rc, _, err = _finish(_run(["--code", code, "--dt-fs", "2", "--ps", "0.02", "--sample-fs",
+                               "4", "--frame-fs", "8", "--piece-ps", "0.01", "--outdir",
+                               str(tmp_path)]))
+    assert rc == 0, err
+    result = json.loads((tmp_path / f"tip4p2005_64_{code}_{integrator}_dt2_s1.json")
+                        .read_text())
+    assert result["complete"] and result["steps"] == 10 and result["samples"] == 6
+    for field in table.RESULT_FIELDS:
+        assert field in result
+    # Each code's energy on one scale: -48.35 (LAMMPS, its molecules' own Coulomb energy
+    # off) and -48.34 kJ/mol (OpenMM) measured at 2 fs over 0.2 ps of this start.
+    assert -55 < result["U"][0] < -40
+    assert 200 < result["T_tr"][0] < 400 and 200 < result["T_rot"][0] < 400
+    assert not list(tmp_path.glob("*.chk*.json"))  # the collector reads every *.json
+
+
+@pytest.mark.lammps
 def test_sigterm_writes_what_it_has_and_resume_continues_exactly(tmp_path):
     common = ["--integrator", "langevin", "--dt-fs", "2", "--ps", "0.6", "--sample-fs", "4",
               "--frame-fs", "8", "--save-s", "0"]

@@ -252,14 +252,15 @@ def intramolecular_energy(model, calc):
     return excluded_kspace_energy(model, ewald_parameter(calc)) / (units.kJ / units.mol)
 
 
-def lammps_offset(state, model):
-    """:func:`intramolecular_energy` of the calculator :func:`make_atoms` builds for ``state``."""
-    atoms = make_atoms(state, model)
-    atoms.get_potential_energy()
-    offset = intramolecular_energy(model, atoms.calc)
-    if hasattr(atoms.calc, "close"):
-        atoms.calc.close()
-    return offset
+def coulomb_energy(model):
+    """A molecule's own Coulomb energy, kJ/mol: the constant in the energy of
+    :func:`~rigidmd.lammps.reference.run_rigid_reference`'s runs, whose pair list keeps a
+    molecule's own pairs (``erf(g r) → 1`` in :func:`intramolecular_energy`'s sum)."""
+    from ase import units
+
+    from rigidmd.mdanalysis.thermo import excluded_kspace_energy
+
+    return excluded_kspace_energy(model, 1e6) / (units.kJ / units.mol)
 
 
 def configurational_temperatures(dyn):
@@ -376,7 +377,7 @@ def run_openmm(p, paths, stop, progress, resume):
     integrator.setRandomNumberSeed(1000 + p["seed"])
     context, masses, v = openmm_context(system, integrator, state)
     series = Series(paths["series"])
-    meta_path = paths["chk"].with_suffix(".json")
+    meta_path = paths["chk"].with_name(paths["chk"].name + ".meta")
     if resume and paths["chk"].exists() and meta_path.exists():
         context.loadCheckpoint(paths["chk"].read_bytes())
         extra = json.loads(meta_path.read_text())
@@ -460,7 +461,7 @@ def run_lammps(p, paths, stop, progress, resume):
     state = load_start(p["model"], p["waters"])
     cutoff = cutoff_for(state["cell"])
     series = Series(paths["series"])
-    chk = paths["chk"].with_suffix(".json")
+    chk = paths["chk"].with_name(paths["chk"].name + ".meta")
     steps = 0
     if resume and chk.exists():
         saved = json.loads(chk.read_text())
@@ -475,7 +476,7 @@ def run_lammps(p, paths, stop, progress, resume):
     kj = units.kJ / units.mol
     n = len(state["numbers"]) // model.sites
     masses = np.tile(model.masses(), n)
-    t0, s0 = time.perf_counter(), steps
+    s0, loop_s = steps, 0.0
     while steps < total and not stop:
         atoms = make_atoms(state, model)
         k = min(piece, total - steps)
@@ -484,6 +485,7 @@ def run_lammps(p, paths, stop, progress, resume):
                 cutoff, "pppm", 1e-5, tail=True), p["dt_fs"] * units.fs, k, every=sample,
             fix="rigid/nvt/small", temperature_K=TEMPERATURE_K,
             tdamp=p["tau_ps"] * 1000 * units.fs, seed=1000 + p["seed"] + steps)
+        loop_s += ref.timing.get("loop_time", float("nan"))
         first = 1 if steps else 0
         for f in range(first, len(ref.step)):
             x, v = ref.positions[f], ref.velocities[f]
@@ -503,8 +505,9 @@ def run_lammps(p, paths, stop, progress, resume):
         np.savez(paths["chk"], positions=state["positions"], momenta=state["momenta"])
         chk.write_text(json.dumps({"samples": samples, "frames": frames, "steps": steps}))
         progress(steps * p["dt_fs"] / 1000)
-    ms = 1000 * (time.perf_counter() - t0) / max(steps - s0, 1)
-    return series, steps, ms, lammps_offset(load_start(p["model"], p["waters"]), model), s0
+    # LAMMPS's own loop (its start, the data file and the dump's parsing left out)
+    ms = 1000 * loop_s / max(steps - s0, 1) if steps > s0 else float("nan")
+    return series, steps, ms, coulomb_energy(model), s0
 
 
 # --------------------------------------------------------------------------- analysis
@@ -680,27 +683,38 @@ def run_many(args):
     return 0
 
 
+#: The full table's points: steps, runs and length per code (see the docs page).
+TABLE_DT_FS = (0.5, 1.0, 2.0, 3.0, 4.0, 5.0)
+TABLE_RUNS, TABLE_PS = 3, 200.0
+
+
 def cost(args):
-    """ms/step of each code at ``--waters`` (``--steps`` after a warm-up), one thread."""
+    """ms/step of each code at ``--waters`` (``--steps`` after a warm-up of 20), one thread,
+    and the core-hours of the TIP4P/2005 table's points at that speed."""
     rows = []
+    steps_per_code = TABLE_RUNS * sum(TABLE_PS * 1000 / dt for dt in TABLE_DT_FS)
     for code, integ in ([("rigidmd", i) for i in INTEGRATORS]
                         + [("lammps", "nvt_small"), ("openmm", "middle")]):
-        p = {"code": code, "integrator": integ, "model": args.model[0], "waters": args.waters,
-             "dt_fs": 2.0, "seed": 1, "ps": args.steps * 2e-3, "equil_ps": 0.0,
-             "tau_ps": 1.0, "sample_fs": 2.0 * args.steps, "frame_fs": 2.0 * args.steps,
-             "blocks": 1, "msd_fit_ps": [3, 10], "piece_ps": 1e9, "save_s": 1e9,
-             "log_s": 1e9, "outdir": str(args.outdir)}
-        state = load_start(p["model"], p["waters"])
-        p.update(box_A=float(state["cell"][0, 0]))
-        name = run_name(p)
-        paths = {"series": args.outdir / f"{name}.series.npz",
-                 "chk": args.outdir / f"{name}.chk.{'omm' if code == 'openmm' else 'npz'}"}
-        args.outdir.mkdir(parents=True, exist_ok=True)
-        runner = {"rigidmd": run_rigidmd, "openmm": run_openmm, "lammps": run_lammps}[code]
-        _, _, ms, _, _ = runner(p, paths, Stop(), Progress(name, p["ps"], 1e9), False)
+        for steps in (20, args.steps):  # the first pays for compiling and starting
+            p = {"code": code, "integrator": integ, "model": args.model[0],
+                 "waters": args.waters, "dt_fs": 2.0, "seed": 1, "ps": steps * 2e-3,
+                 "equil_ps": 0.0, "tau_ps": 1.0, "sample_fs": 2.0 * steps,
+                 "frame_fs": 2.0 * steps, "blocks": 1, "msd_fit_ps": [3, 10],
+                 "piece_ps": 1e9, "save_s": 1e9, "log_s": 1e9, "outdir": str(args.outdir)}
+            name = run_name(p)
+            paths = {"series": args.outdir / f"{name}.series.npz",
+                     "chk": args.outdir / f"{name}.chk.{'omm' if code == 'openmm' else 'npz'}"}
+            args.outdir.mkdir(parents=True, exist_ok=True)
+            runner = {"rigidmd": run_rigidmd, "openmm": run_openmm, "lammps": run_lammps}[code]
+            _, _, ms, _, _ = runner(p, paths, Stop(), Progress(name, p["ps"], 1e9), False)
+        hours = steps_per_code * ms / 3.6e6
         rows.append({"code": code, "integrator": integ, "waters": args.waters,
-                     "steps": args.steps, "ms_per_step": ms})
-        print(f"{code:8} {integ:10} {ms:8.2f} ms/step", flush=True)
+                     "steps": args.steps, "ms_per_step": ms, "table_core_hours": hours})
+        print(f"{code:8} {integ:10} {ms:8.2f} ms/step  {hours:7.1f} core-hours for "
+              f"{TABLE_RUNS} x {TABLE_PS:g} ps at {', '.join(f'{d:g}' for d in TABLE_DT_FS)} fs",
+              flush=True)
+    print(f"total {sum(r['table_core_hours'] for r in rows):.1f} core-hours; load average "
+          f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores while measuring", flush=True)
     return rows
 
 
