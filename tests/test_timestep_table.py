@@ -167,6 +167,20 @@ def test_collector_recovers_a_known_limit_and_flags_disagreement(tmp_path):
     assert "| NO |" in (tmp_path / "t.md").read_text()
 
 
+def test_the_collector_leaves_out_stopped_runs(tmp_path):
+    files = [_synthetic(tmp_path, "langevin", dt, 1, -47.0 + 0.05 * dt ** 2)
+             for dt in (0.5, 1.0, 2.0)]
+    stopped = json.loads(files[0].read_text())
+    stopped.update(complete=False, U=[-40.0, 0.5], point=dict(stopped["point"], seed=2))
+    files.append(tmp_path / "stopped.json")
+    files[-1].write_text(json.dumps(stopped))
+    points, fits = collector.report(files, tmp_path, "t")
+    assert fits[("tip4p2005", 216, "rigidmd", "U")]["shared"]["a"] == pytest.approx(-47.0)
+    assert next(p for p in points if p["dt_fs"] == 0.5)["runs"] == 1
+    points, _ = collector.report(files, tmp_path, "t", include_incomplete=True)
+    assert next(p for p in points if p["dt_fs"] == 0.5)["runs"] == 2
+
+
 def test_other_codes_get_their_own_limit(tmp_path):
     files = [_synthetic(tmp_path, "middle", dt, seed, -46.0 + 0.01 * dt ** 2, code="openmm")
              for dt in (0.5, 1.0, 2.0) for seed in (1, 2)]

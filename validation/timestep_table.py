@@ -689,13 +689,17 @@ TABLE_RUNS, TABLE_PS = 3, 200.0
 
 
 def cost(args):
-    """ms/step of each code at ``--waters`` (``--steps`` after a warm-up of 20), one thread,
-    and the core-hours of the TIP4P/2005 table's points at that speed."""
+    """ms/step of each code at ``--waters``, one thread: the CPU time of this process (and
+    the wall time) of a run of ``--steps`` less that of a run of 20, after a first run of 20
+    that pays for compiling; then the core-hours of the TIP4P/2005 table at that speed.  The
+    CPU time is what a machine of idle cores would take; the wall time also holds what
+    other processes took from this one."""
     rows = []
     steps_per_code = TABLE_RUNS * sum(TABLE_PS * 1000 / dt for dt in TABLE_DT_FS)
     for code, integ in ([("rigidmd", i) for i in INTEGRATORS]
                         + [("lammps", "nvt_small"), ("openmm", "middle")]):
-        for steps in (20, args.steps):  # the first pays for compiling and starting
+        spent = {}
+        for i, steps in enumerate((20, 20, args.steps)):
             p = {"code": code, "integrator": integ, "model": args.model[0],
                  "waters": args.waters, "dt_fs": 2.0, "seed": 1, "ps": steps * 2e-3,
                  "equil_ps": 0.0, "tau_ps": 1.0, "sample_fs": 2.0 * steps,
@@ -706,15 +710,22 @@ def cost(args):
                      "chk": args.outdir / f"{name}.chk.{'omm' if code == 'openmm' else 'npz'}"}
             args.outdir.mkdir(parents=True, exist_ok=True)
             runner = {"rigidmd": run_rigidmd, "openmm": run_openmm, "lammps": run_lammps}[code]
-            _, _, ms, _, _ = runner(p, paths, Stop(), Progress(name, p["ps"], 1e9), False)
-        hours = steps_per_code * ms / 3.6e6
+            cpu, wall = time.process_time(), time.perf_counter()
+            runner(p, paths, Stop(), Progress(name, p["ps"], 1e9), False)
+            spent[i] = (time.process_time() - cpu, time.perf_counter() - wall)
+        cpu_ms, wall_ms = (1000 * (spent[2][k] - spent[1][k]) / (args.steps - 20)
+                           for k in (0, 1))
+        hours = steps_per_code * cpu_ms / 3.6e6
         rows.append({"code": code, "integrator": integ, "waters": args.waters,
-                     "steps": args.steps, "ms_per_step": ms, "table_core_hours": hours})
-        print(f"{code:8} {integ:10} {ms:8.2f} ms/step  {hours:7.1f} core-hours for "
-              f"{TABLE_RUNS} x {TABLE_PS:g} ps at {', '.join(f'{d:g}' for d in TABLE_DT_FS)} fs",
-              flush=True)
+                     "steps": args.steps, "cpu_ms_per_step": cpu_ms,
+                     "wall_ms_per_step": wall_ms, "table_core_hours": hours})
+        print(f"{code:8} {integ:10} {cpu_ms:7.2f} ms/step CPU ({wall_ms:6.2f} wall)  "
+              f"{hours:6.1f} core-hours for {TABLE_RUNS} x {TABLE_PS:g} ps at "
+              f"{', '.join(f'{d:g}' for d in TABLE_DT_FS)} fs", flush=True)
     print(f"total {sum(r['table_core_hours'] for r in rows):.1f} core-hours; load average "
           f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores while measuring", flush=True)
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1) + "\n")
     return rows
 
 
@@ -757,6 +768,7 @@ def parse(argv=None):
     c.add_argument("--waters", type=int, default=216)
     c.add_argument("--steps", type=int, default=200)
     c.add_argument("--outdir", type=Path, default=Path("/tmp/timestep_cost"))
+    c.add_argument("--json", type=Path, help="also write the rows here")
     return p.parse_args(argv)
 
 

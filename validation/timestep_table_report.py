@@ -61,11 +61,16 @@ def pool(runs, key):
     return [float(x[0]), values[0][1]]
 
 
-def load_points(paths):
-    """Pooled points, one per (model, waters, code, integrator, dt)."""
+def load_points(paths, include_incomplete=False):
+    """Pooled points, one per (model, waters, code, integrator, dt); a run that was stopped
+    before its length (``"complete": false``) is left out unless ``include_incomplete``."""
     groups = {}
     for path in paths:
         run = json.loads(Path(path).read_text())
+        if not run.get("complete") and not include_incomplete:
+            print(f"{Path(path).name}: stopped at {run.get('ps', 0):g} ps, left out "
+                  f"(--include-incomplete takes it)")
+            continue
         p = run["point"]
         key = (p["model"], int(p["waters"]), p["code"], p["integrator"], float(p["dt_fs"]))
         groups.setdefault(key, []).append(run)
@@ -213,9 +218,10 @@ def write_csv(points, fit_table, path):
                         p["runs"], f"{p['ps']:.3f}"] + vals + lim)
 
 
-def report(paths, outdir, name, fit_max_fs=2.0, agree_sigma=2.0, header=""):
+def report(paths, outdir, name, fit_max_fs=2.0, agree_sigma=2.0, header="",
+           include_incomplete=False):
     """Read the runs, write ``<name>.md``, ``.json`` and ``.csv``; return (points, fits)."""
-    points = load_points(paths)
+    points = load_points(paths, include_incomplete)
     fit_table = fits(points, fit_max_fs, agree_sigma)
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
@@ -237,8 +243,11 @@ def main(argv=None):
     p.add_argument("--fit-max-fs", type=float, default=2.0)
     p.add_argument("--agree-sigma", type=float, default=2.0)
     p.add_argument("--header", default="", help="a line written above the table")
+    p.add_argument("--include-incomplete", action="store_true",
+                   help="also pool runs that were stopped before their length")
     args = p.parse_args(argv)
-    report(args.files, args.outdir, args.name, args.fit_max_fs, args.agree_sigma, args.header)
+    report(args.files, args.outdir, args.name, args.fit_max_fs, args.agree_sigma, args.header,
+           args.include_incomplete)
     print((args.outdir / f"{args.name}.md").read_text())
 
 
