@@ -120,6 +120,25 @@ def test_sigterm_writes_what_it_has_and_resume_continues_exactly(tmp_path):
             np.testing.assert_allclose(a[key], b[key], rtol=1e-10, err_msg=key)
 
 
+@pytest.mark.lammps
+def test_a_signal_to_the_jobs_parent_stops_every_run_and_waits_for_them(tmp_path):
+    proc = _run(["--integrator", "langevin", "--dt-fs", "2", "--ps", "2", "--seed", "1", "2",
+                 "--sample-fs", "4", "--frame-fs", "8", "--save-s", "0", "--jobs", "2",
+                 "--outdir", str(tmp_path)])
+    names = [f"tip4p2005_64_rigidmd_langevin_dt2_s{seed}" for seed in (1, 2)]
+    deadline = time.monotonic() + 200
+    while not all((tmp_path / f"{n}.chk.npz").exists() for n in names) \
+            and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    rc, out, err = _finish(proc)
+    assert rc == 3, err
+    assert "2 of 2 runs incomplete (SIGTERM)" in out
+    for n in names:  # each run finished its step and wrote what it had before the parent left
+        result = json.loads((tmp_path / f"{n}.json").read_text())
+        assert result["stopped_by"] == "SIGTERM" and not result["complete"]
+
+
 def _synthetic(path, integrator, dt, seed, U, code="rigidmd"):
     point = {"model": "tip4p2005", "waters": 216, "code": code, "integrator": integrator,
              "dt_fs": dt, "seed": seed}
