@@ -59,6 +59,11 @@ def test_a_run_writes_every_field(tmp_path):
     assert 200 < result["T_tr"][0] < 400 and 200 < result["T_rot_end"][0] < 400
     assert 2.6 < result["rdf_peak_r"] < 3.0  # the O–O first shell
     assert result["samples"] == 6 and result["frames"] == 3
+    # Analysed again from its series with more of the start left out: t = 0.012, 0.016, 0.02.
+    table.reanalyse([tmp_path / "tip4p2005_64_rigidmd_baoab_dt2_s1.json"], equil_ps=0.01)
+    again = json.loads((tmp_path / "tip4p2005_64_rigidmd_baoab_dt2_s1.json").read_text())
+    assert again["samples"] == 3 and again["point"]["equil_ps"] == 0.01
+    assert again["steps"] == result["steps"] and again["U"] != result["U"]
 
 
 @pytest.mark.lammps
@@ -110,6 +115,7 @@ def test_sigterm_writes_what_it_has_and_resume_continues_exactly(tmp_path):
     resumed = json.loads((cut / f"{name}.json").read_text())
     assert resumed["complete"] and resumed["steps"] == 300
     assert resumed["resumed_from_step"] == stopped["steps"]  # from the checkpoint, not step 0
+    assert resumed["T_rot_gap"] == [0.0, 0.0]  # RigidLangevin reports its end of step
     with np.load(tmp_path / "whole" / f"{name}.series.npz") as a, \
             np.load(cut / f"{name}.series.npz") as b:
         np.testing.assert_array_equal(a["t_ps"], b["t_ps"])  # no sample lost or repeated

@@ -35,8 +35,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 #: The quantities fitted against dt²; the temperatures are compared with the bath instead.
 FITTED = ("U", "rdf_peak_r", "rdf_peak_g", "D_pbc")
-POOLED = ("U", "T_tr", "T_rot", "T_tr_end", "T_rot_end", "rdf_peak_r", "rdf_peak_g", "D_pbc",
-          "T_conf_tr", "T_conf_rot")
+POOLED = ("U", "T_tr", "T_rot", "T_tr_end", "T_rot_end", "T_tr_gap", "T_rot_gap",
+          "rdf_peak_r", "rdf_peak_g", "D_pbc", "T_conf_tr", "T_conf_rot")
 
 
 def _value(entry):
@@ -170,9 +170,9 @@ def _gap(point, key, fit_table, digits):
 
 def table(points, fit_table, fit_max_fs):
     lines = ["| model | N | code | integrator | dt (fs) | runs | ps | ⟨U⟩/N (kJ/mol) | "
-             "Δ⟨U⟩/N | T_tr (K) | T_rot (K) | T_conf tr/rot (K) | RDF r₁ (Å) | g(r₁) | "
-             "D_PBC (1e-5 cm²/s) | ΔD |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "Δ⟨U⟩/N | T_tr (K) | T_rot (K) | reported − end of step, tr / rot (K) | "
+             "T_conf tr/rot (K) | RDF r₁ (Å) | g(r₁) | D_PBC (1e-5 cm²/s) | ΔD |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for p in points:
         conf = "—" if p["T_conf_tr"] is None else \
             f"{_pm(p['T_conf_tr'], 1)} / {_pm(p['T_conf_rot'], 1)}"
@@ -180,7 +180,8 @@ def table(points, fit_table, fit_max_fs):
             f"| {p['model']} | {p['waters']} | {p['code']} | {p['integrator']} | "
             f"{p['dt_fs']:g} | {p['runs']} | {p['ps']:.0f} | {_pm(p['U'], 3)} | "
             f"{_gap(p, 'U', fit_table, 3)} | {_pm(p['T_tr'], 1)} | {_pm(p['T_rot'], 1)} | "
-            f"{conf} | {_pm(p['rdf_peak_r'], 3)} | {_pm(p['rdf_peak_g'], 2)} | "
+            f"{_pm(p.get('T_tr_gap'), 2)} / {_pm(p.get('T_rot_gap'), 2)} | {conf} | "
+            f"{_pm(p['rdf_peak_r'], 3)} | {_pm(p['rdf_peak_g'], 2)} | "
             f"{_pm(p['D_pbc'], 2)} | {_gap(p, 'D_pbc', fit_table, 2)} |")
     lines += ["", f"dt → 0 limits (a + b·dt² over dt ≤ {fit_max_fs:g} fs; rigidmd's "
                   "integrators share a; 'agree': each integrator's own limit is within the "
@@ -200,8 +201,8 @@ def table(points, fit_table, fit_max_fs):
 
 
 def write_csv(points, fit_table, path):
-    keys = ("U", "T_tr", "T_rot", "T_tr_end", "T_rot_end", "rdf_peak_r", "rdf_peak_g",
-            "D_pbc")
+    keys = ("U", "T_tr", "T_rot", "T_tr_end", "T_rot_end", "T_tr_gap", "T_rot_gap",
+            "rdf_peak_r", "rdf_peak_g", "D_pbc")
     with open(path, "w", newline="") as fh:
         fh.write("# timestep_table_report.py: pooled points; <q>_limit is the family's "
                  "dt -> 0 fit (nan where none)\n")
@@ -212,7 +213,7 @@ def write_csv(points, fit_table, path):
         for p in points:
             vals = []
             for k in keys:
-                vals += list(p[k]) if p[k] is not None else ["nan", "nan"]
+                vals += list(p[k]) if p.get(k) is not None else ["nan", "nan"]
             lim = [fit_table[(*family(p), k)]["shared"]["a"] for k in FITTED]
             w.writerow([p["model"], p["waters"], p["code"], p["integrator"], p["dt_fs"],
                         p["runs"], f"{p['ps']:.3f}"] + vals + lim)
