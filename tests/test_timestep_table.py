@@ -213,6 +213,7 @@ def test_other_codes_get_their_own_limit(tmp_path):
               for dt in (0.5, 1.0, 2.0)]
     _, fits = collector.report(files, tmp_path, "t")
     assert fits[("tip4p2005", 216, "openmm", "U")]["shared"]["a"] == pytest.approx(-46.0)
+    assert fits[("tip4p2005", 216, "openmm", "U")]["agree"] is None  # nothing to agree with
     assert fits[("tip4p2005", 216, "rigidmd", "U")]["shared"]["a"] == pytest.approx(-47.0)
 
 

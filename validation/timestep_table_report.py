@@ -139,7 +139,7 @@ def fits(points, fit_max_fs, agree_sigma):
             use = [p for p in members if p[key] is not None]
             shared = fit_limit([p["dt_fs"] for p in use], [p[key][0] for p in use],
                                [p[key][1] for p in use], [p["integrator"] for p in use])
-            alone, agree = {}, True
+            alone, agree, compared = {}, True, 0
             for integ in sorted({p["integrator"] for p in use}):
                 mine = [p for p in use if p["integrator"] == integ]
                 f = fit_limit([p["dt_fs"] for p in mine], [p[key][0] for p in mine],
@@ -148,8 +148,9 @@ def fits(points, fit_max_fs, agree_sigma):
                 if np.isfinite(f["a"]) and np.isfinite(shared["a"]):
                     gap = abs(f["a"] - shared["a"])
                     agree &= bool(gap <= agree_sigma * np.hypot(f["a_err"], shared["a_err"]))
+                    compared += 1
             out[(*fam, key)] = {"shared": shared, "alone": alone,
-                                "agree": agree if len(alone) > 1 else None}
+                                "agree": agree if compared > 1 else None}
     return out
 
 
