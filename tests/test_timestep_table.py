@@ -213,8 +213,15 @@ def test_other_codes_get_their_own_limit(tmp_path):
               for dt in (0.5, 1.0, 2.0)]
     _, fits = collector.report(files, tmp_path, "t")
     assert fits[("tip4p2005", 216, "openmm", "U")]["shared"]["a"] == pytest.approx(-46.0)
-    assert fits[("tip4p2005", 216, "openmm", "U")]["agree"] is None  # nothing to agree with
     assert fits[("tip4p2005", 216, "rigidmd", "U")]["shared"]["a"] == pytest.approx(-47.0)
+
+
+def test_no_agreement_is_claimed_where_no_limit_could_be_fitted(tmp_path):
+    files = [_synthetic(tmp_path, integrator, 1.0, 1, -47.0)
+             for integrator in ("langevin", "baoab")]  # one step each: no limit
+    _, fits = collector.report(files, tmp_path, "t")
+    assert fits[("tip4p2005", 216, "rigidmd", "U")]["agree"] is None
+    assert "| yes |" not in (tmp_path / "t.md").read_text()
 
 
 def test_fit_limit_needs_enough_points():
