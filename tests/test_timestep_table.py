@@ -229,6 +229,25 @@ def test_fit_limit_needs_enough_points():
     assert np.isnan(fit["a"])
 
 
+def test_configurational_temperatures_from_the_hooks_sums(tmp_path):
+    from ase import units
+
+    series = table.Series(tmp_path / "s.npz")
+    rng = np.random.default_rng(1)
+    for i in range(20):
+        den_tr, den_rot = rng.uniform(1, 2, 2)
+        series.add(i * 0.1, -3000.0, (298.0, 298.0), (298.0, 298.0))
+        series.frame(i * 0.1, np.zeros((2, 3)), np.zeros((2, 3)), np.eye(3) * 10,
+                     (300 * units.kB * den_tr, den_tr, 310 * units.kB * den_rot, den_rot))
+    p = {"equil_ps": 0.0, "blocks": 4, "msd_fit_ps": [3, 10], "box_A": 10.0}
+    out = table.analyse(series, p, 2)
+    assert out["T_conf_tr"][0] == pytest.approx(300.0) and out["T_conf_rot"][0] == \
+        pytest.approx(310.0)
+    # Without the hook's sums (None: rigidmd has no observer yet), null, never a number.
+    series.frame(2.0, np.zeros((2, 3)), np.zeros((2, 3)), np.eye(3) * 10, None)
+    assert table.analyse(series, p, 2)["T_conf_tr"] is None
+
+
 def test_block_mean_and_rdf_peak():
     x = np.repeat([1.0, 2.0, 3.0, 4.0], 5)
     mean, err = table.block_mean(x, 4)

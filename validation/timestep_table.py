@@ -34,7 +34,8 @@ sizes are made by ``start`` (TIP4P-Ew quenched and equilibrated as
 ``timestep_table.start_<model>_<n>.npz``, deterministic for a seed.
 
 A run prints progress (a line on a terminal, a log line a minute otherwise), stops on
-SIGTERM or SIGINT after the step it is in and writes what it has (its JSON says
+SIGTERM or SIGINT at the end of the sample interval it is in (at most ``--sample-fs``;
+LAMMPS: of the piece it is in) and writes what it has (its JSON says
 ``"complete": false``), and ``--resume`` continues it from its checkpoint.  ``--jobs N``
 runs the points of several values (``--dt-fs 1 2 4 --seed 1 2 3``) in N processes.
 
@@ -140,7 +141,7 @@ def make_atoms(state, model):
 
 # --------------------------------------------------------------------------- one run
 class Stop:
-    """SIGTERM and SIGINT ask the run to stop after the step it is in."""
+    """SIGTERM and SIGINT ask the run to stop at the end of its sample interval."""
 
     def __init__(self):
         self.signal = None
@@ -184,14 +185,15 @@ def run_name(p):
 class Series:
     """A run's samples: ``t_ps``, ``U`` (kJ/mol, whole system), ``T_tr``, ``T_rot``,
     ``T_tr_end``, ``T_rot_end`` (K) every ``sample_fs``; ``frame_t_ps``, ``O`` and ``com``
-    (Å, unwrapped from frame to frame) every ``frame_fs``."""
+    (Å, unwrapped from frame to frame) and ``conf`` (:func:`configurational_temperatures`'
+    four sums, nan where it gave none) every ``frame_fs``."""
 
     KEYS = ("t_ps", "U", "T_tr", "T_rot", "T_tr_end", "T_rot_end")
 
     def __init__(self, path):
         self.path = path
         self.rec = {k: [] for k in self.KEYS}
-        self.frames = {"frame_t_ps": [], "O": [], "com": []}
+        self.frames = {"frame_t_ps": [], "O": [], "com": [], "conf": []}
 
     def load(self, samples, frames):
         """The series as saved, cut to what the checkpoint had recorded."""
@@ -199,13 +201,14 @@ class Series:
             for k in self.KEYS:
                 self.rec[k] = list(d[k][:samples])
             for k in self.frames:
-                self.frames[k] = list(d[k][:frames])
+                self.frames[k] = list(d[k][:frames]) if k in d.files else \
+                    [np.full(4, np.nan)] * min(frames, len(d["frame_t_ps"]))
 
     def add(self, t_ps, U, T, T_end):
         for k, v in zip(self.KEYS, (t_ps, U, *T, *T_end), strict=True):
             self.rec[k].append(float(v))
 
-    def frame(self, t_ps, O, com, cell):
+    def frame(self, t_ps, O, com, cell, conf=None):
         box = np.diag(cell)
         if self.frames["com"]:  # unwrap from the previous frame (moves ≪ L/2 between frames)
             O = self.frames["O"][-1] + _minimage(O - self.frames["O"][-1], box)
@@ -213,6 +216,8 @@ class Series:
         self.frames["frame_t_ps"].append(t_ps)
         self.frames["O"].append(np.asarray(O, dtype=float))
         self.frames["com"].append(np.asarray(com, dtype=float))
+        self.frames["conf"].append(np.full(4, np.nan) if conf is None
+                                   else np.asarray(conf, dtype=float))
 
     def counts(self):
         return len(self.rec["t_ps"]), len(self.frames["com"])
@@ -264,10 +269,13 @@ def coulomb_energy(model):
 
 
 def configurational_temperatures(dyn):
-    """(T_conf_tr, T_conf_rot) in K of the current state, or None where no observer gives them.
+    """The configurational temperatures' sums of the current state, or None.
 
-    The hook for the configurational-temperature observer: until rigidmd has one, the run's
-    JSON holds null for both (never an estimate made here).
+    The hook for a configurational-temperature observer: it returns
+    ``(Σ_b |F_b|², Σ_b ∇²_{X_b} U, Σ_b |τ_b|², Σ_b ∇²_{θ_b} U)`` (eV²/Å², eV/Å², eV², eV),
+    whose ratios over the recorded frames, over k_B, are T_conf of translation and of
+    rotation.  rigidmd has no such observer yet: this returns None, and the run's JSON holds
+    null for both (never an estimate made here).
     """
     return None
 
@@ -334,7 +342,8 @@ def run_rigidmd(p, paths, stop, progress, resume):
         if (step // sample) % frame_every == 0:
             series.frame(step * p["dt_fs"] / 1000,
                          *molecule_centres(atoms.positions, masses, model.sites,
-                                           atoms.cell.array), atoms.cell.array)
+                                           atoms.cell.array), atoms.cell.array,
+                         configurational_temperatures(dyn))
 
     def save():
         samples, frames = series.counts()
@@ -585,6 +594,16 @@ def analyse(series, p, n, offset=0.0):
     out["D_pbc"] = msd_diffusion(fr["com"][keep_f], fr["frame_t_ps"][keep_f], fit) \
         if keep_f.sum() else float("nan")
     out["T_conf_tr"] = out["T_conf_rot"] = None
+    conf = fr["conf"][keep_f] if len(fr.get("conf", [])) else np.zeros((0, 4))
+    if len(conf) and np.isfinite(conf).all():
+        from ase import units
+
+        for name, (num, den) in (("T_conf_tr", (0, 1)), ("T_conf_rot", (2, 3))):
+            parts = [b[:, num].sum() / b[:, den].sum() / units.kB
+                     for b in np.array_split(conf, min(p["blocks"], len(conf)))]
+            value = conf[:, num].sum() / conf[:, den].sum() / units.kB
+            err = np.std(parts, ddof=1) / np.sqrt(len(parts)) if len(parts) > 1 else np.nan
+            out[name] = [float(value), float(err)]
     out.update(U_offset_per_molecule=offset, recorded_ps=length, msd_fit_ps=list(fit),
                samples=int(keep.sum()), frames=int(keep_f.sum()))
     return out
