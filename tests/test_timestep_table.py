@@ -127,6 +127,34 @@ def test_sigterm_writes_what_it_has_and_resume_continues_exactly(tmp_path):
 
 
 @pytest.mark.lammps
+@pytest.mark.parametrize("code", ["lammps", "openmm"])
+def test_the_other_codes_stop_and_resume(tmp_path, code):
+    if code == "openmm":
+        pytest.importorskip("openmm", reason="needs OpenMM (pip install openmm)")
+    args = ["--code", code, "--dt-fs", "2", "--ps", "1.2", "--sample-fs", "4", "--frame-fs",
+            "8", "--save-s", "0", "--piece-ps", "0.1", "--outdir", str(tmp_path)]
+    name = f"tip4p2005_64_{code}_{'nvt_small' if code == 'lammps' else 'middle'}_dt2_s1"
+    proc = _run(args)
+    deadline = time.monotonic() + 200
+    while not list(tmp_path.glob(f"{name}.chk.*.meta")) and proc.poll() is None \
+            and time.monotonic() < deadline:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGTERM)
+    rc, _, err = _finish(proc)
+    assert rc == 3, err
+    stopped = json.loads((tmp_path / f"{name}.json").read_text())
+    assert not stopped["complete"] and 0 < stopped["steps"] < 600
+    rc, _, err = _finish(_run([*args, "--resume"]))
+    assert rc == 0, err
+    resumed = json.loads((tmp_path / f"{name}.json").read_text())
+    assert resumed["complete"] and resumed["steps"] == 600
+    assert resumed["resumed_from_step"] == stopped["steps"]
+    with np.load(tmp_path / f"{name}.series.npz") as d:  # every sample once, in order
+        np.testing.assert_allclose(d["t_ps"], np.arange(301) * 0.004, atol=1e-12)
+        assert len(d["frame_t_ps"]) == 151
+
+
+@pytest.mark.lammps
 def test_a_signal_to_the_jobs_parent_stops_every_run_and_waits_for_them(tmp_path):
     proc = _run(["--integrator", "langevin", "--dt-fs", "2", "--ps", "2", "--seed", "1", "2",
                  "--sample-fs", "4", "--frame-fs", "8", "--save-s", "0", "--jobs", "2",

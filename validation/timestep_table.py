@@ -162,14 +162,16 @@ class Progress:
         self.name, self.total, self.every = name, total_ps, every_s
         self.tty = sys.stderr.isatty()
         self.last = time.perf_counter()
-        self.t0 = self.last
+        self.t0, self.ps0 = self.last, None
 
     def __call__(self, ps, force=False):
         now = time.perf_counter()
+        if self.ps0 is None:  # the rate counts from the first report (a resumed run's too)
+            self.t0, self.ps0 = now, ps
         if not force and now - self.last < (1.0 if self.tty else self.every):
             return
         self.last = now
-        rate = ps / max(now - self.t0, 1e-9) * 86400 / 1000  # ns/day
+        rate = (ps - self.ps0) / max(now - self.t0, 1e-9) * 86400 / 1000  # ns/day
         line = f"{self.name}: {ps:.2f} / {self.total:g} ps ({rate:.2f} ns/day)"
         if self.tty:
             print("\r" + line, end="\n" if force else "", file=sys.stderr, flush=True)
