@@ -276,6 +276,15 @@ def test_configurational_temperatures_from_the_hooks_sums(tmp_path):
     assert table.analyse(series, p, 2)["T_conf_tr"] is None
 
 
+def test_start_keeps_the_shared_216_water_states():
+    before = table.start_file("tip4p2005", 216).read_bytes()
+    with pytest.raises(SystemExit, match="--waters 216: the start is water_openmm_long"):
+        table.make_start("tip4p2005", 216)
+    assert table.start_file("tip4p2005", 216).read_bytes() == before
+    with pytest.raises(SystemExit, match="--waters 100: a start is made for a cube number"):
+        table.make_start("tip4p2005", 100)
+
+
 def test_block_mean_and_rdf_peak():
     x = np.repeat([1.0, 2.0, 3.0, 4.0], 5)
     mean, err = table.block_mean(x, 4)

@@ -100,6 +100,9 @@ def make_start(model_name, waters, seed=1, eq_ps=5.0):
     from rigidmd import RigidBussi
     from rigidmd.water import water_model
 
+    if waters == 216:  # the committed start every 216-water study shares
+        raise SystemExit(f"--waters 216: the start is {start_file(model_name, 216).name}, made "
+                         f"by 'water_openmm_long.py starts'; this makes other sizes")
     n_side = round(waters ** (1 / 3))
     if n_side ** 3 != waters:
         raise SystemExit(f"--waters {waters}: a start is made for a cube number of waters")
@@ -110,7 +113,8 @@ def make_start(model_name, waters, seed=1, eq_ps=5.0):
                rng=np.random.default_rng(seed), fixcm=True).run(int(round(eq_ps * 500)))
     out = state_at_rest(atoms, model.sites)
     np.savez(start_file(model_name, waters), seed=seed, eq_ps=eq_ps, **out)
-    atoms.calc.close() if hasattr(atoms.calc, "close") else None
+    if hasattr(atoms.calc, "close"):
+        atoms.calc.close()
     return start_file(model_name, waters)
 
 
