@@ -1,7 +1,8 @@
 """How far is each step from dt → 0?
 
-⟨U⟩/N against its dt → 0 limit, and the reported T_tr and T_rot against the bath, for each
-code and integrator of the time-step table, from ``validation/timestep_table.json``
+⟨U⟩/N against its dt → 0 limit, and the reported T_tr and T_rot against the bath (and
+``RigidLangevinBAOAB``'s end-of-step T_rot, dotted), for each code and integrator of the
+time-step table, from ``validation/timestep_table.json``
 (``validation/timestep_table_report.py``); until the full table is run, from the small run
 ``validation/timestep_table_small.json``, whose title says so.
 """
@@ -45,6 +46,9 @@ def draw(path):
         bx.errorbar(dt, [p["T_rot"][0] for p in sel], yerr=[p["T_rot"][1] for p in sel],
                     fmt=style, capsize=2, mfc="none", color=line[0].get_color(),
                     label=f"{label}, T_rot")
+        if integrator == "baoab":  # its end-of-step momenta, which it does not report
+            bx.plot(dt, [p["T_rot_end"][0] for p in sel], ":", color=line[0].get_color(),
+                    label=f"{label}, T_rot at the end of the step")
     ax.axhline(0.0, color="0.5", lw=0.8)
     bx.axhline(298.0, color="0.5", lw=0.8)
     ax.set_ylabel("⟨U⟩/N − its dt → 0 limit (kJ/mol)")
