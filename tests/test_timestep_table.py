@@ -285,6 +285,42 @@ def test_start_keeps_the_shared_216_water_states():
         table.make_start("tip4p2005", 100)
 
 
+def test_tip4p2005_xml_is_tip4p2005():
+    """OpenMM's TIP4P/2005 from ``validation/tip4p2005.xml`` against OpenMM's TIP4P-Ew system
+    given rigidmd's TIP4P/2005 charges, Lennard-Jones and M weights (``water_openmm_long``):
+    the same energy (measured 7e-10 kJ/mol per molecule apart; the file's weights have 12
+    digits)."""
+    mm = pytest.importorskip("openmm", reason="needs OpenMM (pip install openmm)")
+    from openmm import unit
+
+    from rigidmd.water import water_model
+
+    long = benchmark_module("water_openmm_long")
+    model = water_model("tip4p2005")
+    state = table.load_start("tip4p2005", 64)
+    cutoff = table.cutoff_for(state["cell"])
+    energies = []
+    for system in (table.openmm_water_system(state, model, cutoff),
+                   _reparametrised(long, state, model, cutoff)):
+        context = mm.Context(system, mm.VerletIntegrator(1e-3),
+                             mm.Platform.getPlatformByName("Reference"))
+        context.setPositions(state["positions"] / 10)
+        context.computeVirtualSites()
+        energies.append(context.getState(getEnergy=True).getPotentialEnergy()
+                        .value_in_unit(unit.kilojoule_per_mole) / 64)
+    assert energies[0] == pytest.approx(energies[1], abs=1e-8)
+    assert -49 < energies[0] < -47
+
+
+def _reparametrised(long, state, model, cutoff):
+    old = long.CUTOFF
+    long.CUTOFF = cutoff
+    try:
+        return long.openmm_system(state, model)
+    finally:
+        long.CUTOFF = old
+
+
 def test_block_mean_and_rdf_peak():
     x = np.repeat([1.0, 2.0, 3.0, 4.0], 5)
     mean, err = table.block_mean(x, 4)

@@ -23,8 +23,8 @@ Codes (``--code``): ``rigidmd`` with ``--integrator langevin`` (:class:`rigidmd.
 (``lj/cut/coul/long``, PPPM 1e-5, the tail correction); ``lammps``: ``fix rigid/nvt/small``
 (:func:`rigidmd.lammps.reference.run_rigid_reference`, in pieces of ``--piece-ps``: each
 piece starts from the last frame, its Nosé–Hoover chain from rest); ``openmm``:
-``LangevinMiddleIntegrator`` with SETTLE (TIP4P/2005 as OpenMM's TIP4P-Ew system with
-TIP4P/2005's charges, Lennard-Jones and M site; PME 1e-5).  Friction 1/ps for the
+``LangevinMiddleIntegrator`` with SETTLE (TIP4P/2005 from its own file ``tip4p2005.xml``
+beside this script, SPC/E from OpenMM's ``spce.xml``; PME 1e-5).  Friction 1/ps for the
 Langevin schemes, τ = ``--tau-ps`` for Bussi and the Nosé–Hoover chains.  Every code uses
 the cut-off ``min(9 Å, 0.49 L)``.
 
@@ -450,16 +450,29 @@ def run_openmm(p, paths, stop, progress, resume):
 
 
 def openmm_water_system(state, model, cutoff):
-    """OpenMM's system for ``state`` at ``cutoff`` (see ``water_openmm_long.openmm_system``,
-    whose TIP4P/2005 this is, at 9 Å)."""
-    import water_openmm_long
+    """OpenMM's system for ``state`` at ``cutoff`` (Å): PME 1e-5, the dispersion correction,
+    rigid water, rigidmd's masses.  TIP4P/2005 from its own file ``tip4p2005.xml`` (beside
+    this script; OpenMM ships none), the others from OpenMM's
+    (``water_openmm_nve.openmm_system``)."""
+    import openmm
+    from openmm import app, unit
+    from water_openmm_nve import openmm_system
 
-    old = water_openmm_long.CUTOFF
-    water_openmm_long.CUTOFF = cutoff
-    try:
-        return water_openmm_long.openmm_system(state, model)
-    finally:
-        water_openmm_long.CUTOFF = old
+    if model.name != "tip4p2005":
+        return openmm_system(state, model, cutoff)
+    from rigidmd.openmm import water_topology
+
+    n = len(state["numbers"]) // model.sites
+    system = app.ForceField(str(HERE / "tip4p2005.xml")).createSystem(
+        water_topology(model, n, state["cell"]), nonbondedMethod=app.PME,
+        nonbondedCutoff=cutoff / 10 * unit.nanometer, rigidWater=True,
+        ewaldErrorTolerance=1e-5)
+    for force in system.getForces():
+        if isinstance(force, openmm.NonbondedForce):
+            force.setUseDispersionCorrection(True)
+    for i, m in enumerate(np.tile(model.masses(), n)):
+        system.setParticleMass(i, float(m))
+    return system
 
 
 def run_lammps(p, paths, stop, progress, resume):
