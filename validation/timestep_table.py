@@ -160,11 +160,12 @@ class Stop:
 
 
 class Progress:
-    """A line on a terminal (rewritten), a log line every ``every_s`` otherwise."""
+    """A line on a terminal (rewritten), a log line every ``every_s`` otherwise (also on a
+    terminal that several runs share: ``shared``)."""
 
-    def __init__(self, name, total_ps, every_s=60.0):
+    def __init__(self, name, total_ps, every_s=60.0, shared=False):
         self.name, self.total, self.every = name, total_ps, every_s
-        self.tty = sys.stderr.isatty()
+        self.tty = sys.stderr.isatty() and not shared
         self.last = time.perf_counter()
         self.t0, self.ps0 = self.last, None
 
@@ -647,7 +648,7 @@ def point_main(p, resume):
     state = load_start(p["model"], p["waters"])
     p = dict(p, box_A=float(state["cell"][0, 0]), cutoff_A=cutoff_for(state["cell"]))
     stop = Stop()
-    progress = Progress(name, p["ps"], p["log_s"])
+    progress = Progress(name, p["ps"], p["log_s"], shared=p.get("jobs", 1) > 1)
     runner = {"rigidmd": run_rigidmd, "openmm": run_openmm, "lammps": run_lammps}[p["code"]]
     wall = time.perf_counter()
     series, steps, ms, offset, first = runner(p, paths, stop, progress, resume)
@@ -709,7 +710,8 @@ def points(args):
                         "sample_fs": args.sample_fs, "frame_fs": args.frame_fs,
                         "blocks": args.blocks, "msd_fit_ps": args.msd_fit_ps,
                         "piece_ps": args.piece_ps, "save_s": args.save_s,
-                        "log_s": args.log_s, "outdir": str(args.outdir)})
+                        "log_s": args.log_s, "jobs": args.jobs,
+                        "outdir": str(args.outdir)})
     return out
 
 
