@@ -45,6 +45,8 @@ CHECKED_ELSEWHERE = (
      "tests/test_water_openmm.py runs its --quick form and a 27-water tracking check"),
     ("validation/water_openmm_long.py", "each run as long as its --budget-s; "
      "tests/test_water_openmm.py runs its --quick form"),
+    ("validation/timestep_table", "core-days for the full table; tests/test_timestep_table.py "
+     "runs each code for a few steps, a stop and --resume, and the collector"),
     ("examples/mace_water.py --quick", "tests/test_ml_potential.py runs it where mace-torch "
      "is installed (the ml extra, not the test extra)"),
     ("benchmarks/", "benchmarks measure speed or physics for minutes to hours; each is run "

@@ -1,0 +1,63 @@
+"""How far is each step from dt → 0?
+
+⟨U⟩/N against its dt → 0 limit, and the reported T_tr and T_rot against the bath (and
+``RigidLangevinBAOAB``'s end-of-step T_rot, dotted), for each code and integrator of the
+time-step table, from ``validation/timestep_table.json``
+(``validation/timestep_table_report.py``); until the full table is run, from the small run
+``validation/timestep_table_small.json``, whose title says so.
+"""
+
+import json
+
+from _common import ROOT, figure, save
+
+STYLES = {("rigidmd", "langevin"): ("RigidLangevin", "o-"),
+          ("rigidmd", "baoab"): ("RigidLangevinBAOAB", "s-"),
+          ("rigidmd", "bussi"): ("RigidBussi", "^-"),
+          ("rigidmd", "nosehoover"): ("RigidNoseHoover", "v-"),
+          ("lammps", "nvt_small"): ("LAMMPS fix rigid/nvt/small", "D--"),
+          ("openmm", "middle"): ("OpenMM LangevinMiddle", "x--")}
+
+
+def _data():
+    full = ROOT / "validation" / "timestep_table.json"
+    if full.is_file():
+        return json.loads(full.read_text()), False
+    return json.loads((ROOT / "validation" / "timestep_table_small.json").read_text()), True
+
+
+def draw(path):
+    data, small = _data()
+    limits = {(f["model"], f["waters"], f["code"]): f["shared"]["a"]
+              for f in data["fits"] if f["quantity"] == "U"}
+    model = "tip4p2005"
+    fig, (ax, bx) = figure(ncols=2, width=7.2, height=3.4)
+    for (code, integrator), (label, style) in STYLES.items():
+        sel = sorted((p for p in data["points"] if p["model"] == model and p["code"] == code
+                      and p["integrator"] == integrator), key=lambda p: p["dt_fs"])
+        if not sel:
+            continue
+        dt = [p["dt_fs"] for p in sel]
+        limit = limits.get((model, sel[0]["waters"], code), float("nan"))
+        ax.errorbar(dt, [p["U"][0] - limit for p in sel], yerr=[p["U"][1] for p in sel],
+                    fmt=style, capsize=2, label=label)
+        line = bx.errorbar(dt, [p["T_tr"][0] for p in sel], yerr=[p["T_tr"][1] for p in sel],
+                           fmt=style, capsize=2, label=f"{label}, T_tr")
+        bx.errorbar(dt, [p["T_rot"][0] for p in sel], yerr=[p["T_rot"][1] for p in sel],
+                    fmt=style, capsize=2, mfc="none", color=line[0].get_color(),
+                    label=f"{label}, T_rot")
+        if integrator == "baoab":  # its end-of-step momenta, which it does not report
+            bx.plot(dt, [p["T_rot_end"][0] for p in sel], ":", color=line[0].get_color(),
+                    label=f"{label}, T_rot at the end of the step")
+    ax.axhline(0.0, color="0.5", lw=0.8)
+    bx.axhline(298.0, color="0.5", lw=0.8)
+    ax.set_ylabel("⟨U⟩/N − its dt → 0 limit (kJ/mol)")
+    bx.set_ylabel("reported temperature (K)")
+    for axis in (ax, bx):
+        axis.set_xlabel("time step (fs)")
+    ax.legend(fontsize=7)
+    bx.legend(fontsize=6)
+    n = data["points"][0]["waters"] if data["points"] else 0
+    fig.suptitle(f"TIP4P/2005, {n} waters, 298 K" + (": the small run, not the table"
+                                                     if small else ""))
+    save(fig, path)

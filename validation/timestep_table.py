@@ -1,0 +1,860 @@
+r"""The time-step table's runs: rigid water's ⟨U⟩, temperatures, RDF peak and D against the step.
+
+One run is one point: a code and integrator, a water model and size, a step, a seed and a
+length, started from the model's shared thermal state.  It writes one JSON of results
+(``<name>.json``) beside its series (``<name>.series.npz``) and its checkpoint
+(``<name>.chk.npz``, rigidmd's own checkpoint; OpenMM's checkpoint in ``<name>.chk.omm``):
+
+- ⟨U⟩/N (kJ/mol) with a block-average error (``--blocks`` blocks of the recorded part);
+- T_tr and T_rot as each code reports them (rigidmd: ``dyn.get_kinetic_temperatures()``,
+  which for ``RigidLangevinBAOAB`` are the momenta right after its O step; the end-of-step
+  values beside them as ``T_tr_end``, ``T_rot_end``); OpenMM's from its atom velocities
+  (for ``LangevinMiddleIntegrator`` those after its O step); LAMMPS's from its frames'
+  velocities;
+- the O–O RDF's first peak (position, height) over the recorded frames;
+- D_PBC from the centre-of-mass MSD (the box's drift removed, a straight line over the
+  lags ``--msd-fit-ps``, or a tenth to a third of the run when shorter);
+- ``T_conf_tr``, ``T_conf_rot``: null until a configurational-temperature observer exists
+  (:func:`configurational_temperatures` is the hook).
+
+Codes (``--code``): ``rigidmd`` with ``--integrator langevin`` (:class:`rigidmd.RigidLangevin`),
+``baoab`` (:class:`rigidmd.RigidLangevinBAOAB`), ``bussi`` (:class:`rigidmd.RigidBussi`),
+``nosehoover`` (:class:`rigidmd.RigidNoseHoover`), forces from LAMMPS in-process
+(``lj/cut/coul/long``, PPPM 1e-5, the tail correction); ``lammps``: ``fix rigid/nvt/small``
+(:func:`rigidmd.lammps.reference.run_rigid_reference`, in pieces of ``--piece-ps``: each
+piece starts from the last frame, its Nosé–Hoover chain from rest); ``openmm``:
+``LangevinMiddleIntegrator`` with SETTLE (TIP4P/2005 from its own file ``tip4p2005.xml``
+beside this script, SPC/E from OpenMM's ``spce.xml``; PME 1e-5).  Friction 1/ps for the
+Langevin schemes, τ = ``--tau-ps`` for Bussi and the Nosé–Hoover chains.  Every code uses
+the cut-off ``min(9 Å, 0.49 L)``.
+
+Start states: 216 waters are ``water_openmm_long.start_<model>.npz`` (committed); other
+sizes are made by ``start`` (TIP4P-Ew quenched and equilibrated as
+``water_openmm_nve.equilibrated_state``, rebuilt as the model, 5 ps of Bussi) into
+``timestep_table.start_<model>_<n>.npz``, deterministic for a seed.
+
+A run prints progress (a line on a terminal, a log line a minute otherwise), stops on
+SIGTERM or SIGINT at the end of the sample interval it is in (at most ``--sample-fs``;
+LAMMPS: of the piece it is in) and writes what it has (its JSON says
+``"complete": false``), and ``--resume`` continues it from its checkpoint.  ``--jobs N``
+runs the points of several values (``--dt-fs 1 2 4 --seed 1 2 3``) in N processes.
+
+Run::
+
+    python validation/timestep_table.py run --code rigidmd --integrator langevin baoab \
+        bussi nosehoover --dt-fs 0.5 1 2 3 4 5 --seed 1 2 3 --ps 200 --jobs 16 \
+        --outdir validation/timestep_runs
+    python validation/timestep_table.py run --code lammps openmm --dt-fs 0.5 1 2 3 4 5 \
+        --seed 1 2 3 --ps 200 --jobs 16 --outdir validation/timestep_runs
+    python validation/timestep_table.py run ... --resume      # continue the stopped ones
+    python validation/timestep_table_report.py validation/timestep_runs/*.json \
+        --name timestep_table
+    python validation/timestep_table.py cost --waters 216     # ms/step of every code here
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import numpy as np  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+TEMPERATURE_K = 298.0
+KB_KJ = 0.0083144626  # kJ/mol/K
+CUTOFF = 9.0  # Å, or 0.49 of the box when smaller
+FRICTION_PER_PS = 1.0
+INTEGRATORS = ("langevin", "baoab", "bussi", "nosehoover")
+CODES = ("rigidmd", "lammps", "openmm")
+MODELS = ("tip4p2005", "spce")
+#: Every result a run's JSON holds (the collector reads these).
+RESULT_FIELDS = ("U", "T_tr", "T_rot", "T_tr_end", "T_rot_end", "T_tr_gap", "T_rot_gap",
+                 "rdf_peak_r", "rdf_peak_g", "D_pbc", "T_conf_tr", "T_conf_rot")
+
+
+# --------------------------------------------------------------------------- start states
+def start_file(model_name, waters):
+    if waters == 216:
+        return HERE / f"water_openmm_long.start_{model_name}.npz"
+    return HERE / f"timestep_table.start_{model_name}_{waters}.npz"
+
+
+def make_start(model_name, waters, seed=1, eq_ps=5.0):
+    """The start state of ``waters`` molecules of ``model_name`` (see the module docstring)."""
+    from ase import units
+    from water_openmm_long import rebuild
+    from water_openmm_nve import equilibrated_state, state_at_rest
+
+    from rigidmd import RigidBussi
+    from rigidmd.water import water_model
+
+    if waters == 216:  # the committed start every 216-water study shares
+        raise SystemExit(f"--waters 216: the start is {start_file(model_name, 216).name}, made "
+                         f"by 'water_openmm_long.py starts'; this makes other sizes")
+    n_side = round(waters ** (1 / 3))
+    if n_side ** 3 != waters:
+        raise SystemExit(f"--waters {waters}: a start is made for a cube number of waters")
+    model = water_model(model_name)
+    state = rebuild(equilibrated_state(n_side, seed, eq_ps), water_model("tip4pew"), model)
+    atoms = make_atoms(state, model)
+    RigidBussi(atoms, 2 * units.fs, temperature_K=TEMPERATURE_K, taut=100 * units.fs,
+               rng=np.random.default_rng(seed), fixcm=True).run(int(round(eq_ps * 500)))
+    out = state_at_rest(atoms, model.sites)
+    np.savez(start_file(model_name, waters), seed=seed, eq_ps=eq_ps, **out)
+    if hasattr(atoms.calc, "close"):
+        atoms.calc.close()
+    return start_file(model_name, waters)
+
+
+def load_start(model_name, waters):
+    path = start_file(model_name, waters)
+    if not path.exists():
+        raise SystemExit(f"no start state {path.name}: make it with 'timestep_table.py start "
+                         f"--model {model_name} --waters {waters}'")
+    with np.load(path) as d:
+        state = {k: d[k] for k in ("positions", "momenta", "cell", "numbers")}
+    return state
+
+
+def cutoff_for(cell):
+    return min(CUTOFF, 0.49 * float(np.min(np.diag(cell))))
+
+
+def make_atoms(state, model):
+    """``state``'s atoms with LAMMPS's forces for ``model``, one body per molecule."""
+    from water_openmm_nve import lammps_calculator, state_atoms
+
+    atoms = state_atoms(state, model, cutoff_for(state["cell"]))
+    atoms.calc = lammps_calculator(model, cutoff_for(state["cell"]))
+    n = len(atoms) // model.sites
+    atoms.set_tags(np.repeat(np.arange(1, n + 1), model.sites))
+    return atoms
+
+
+# --------------------------------------------------------------------------- one run
+class Stop:
+    """SIGTERM and SIGINT ask the run to stop at the end of its sample interval."""
+
+    def __init__(self):
+        self.signal = None
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(sig, self._handle)
+
+    def _handle(self, signum, frame):
+        self.signal = signal.Signals(signum).name
+
+    def __bool__(self):
+        return self.signal is not None
+
+
+class Progress:
+    """A line on a terminal (rewritten), a log line every ``every_s`` otherwise (also on a
+    terminal that several runs share: ``shared``)."""
+
+    def __init__(self, name, total_ps, every_s=60.0, shared=False):
+        self.name, self.total, self.every = name, total_ps, every_s
+        self.tty = sys.stderr.isatty() and not shared
+        self.last = time.perf_counter()
+        self.t0, self.ps0 = self.last, None
+
+    def __call__(self, ps, force=False):
+        now = time.perf_counter()
+        if self.ps0 is None:  # the rate counts from the first report (a resumed run's too)
+            self.t0, self.ps0 = now, ps
+        if not force and now - self.last < (1.0 if self.tty else self.every):
+            return
+        self.last = now
+        rate = (ps - self.ps0) / max(now - self.t0, 1e-9) * 86400 / 1000  # ns/day
+        line = f"{self.name}: {ps:.2f} / {self.total:g} ps ({rate:.2f} ns/day)"
+        if self.tty:
+            print("\r" + line, end="\n" if force else "", file=sys.stderr, flush=True)
+        else:
+            print(time.strftime("%H:%M:%S ") + line, flush=True)
+
+
+def run_name(p):
+    return (f"{p['model']}_{p['waters']}_{p['code']}_{p['integrator']}_dt{p['dt_fs']:g}"
+            f"_s{p['seed']}")
+
+
+class Series:
+    """A run's samples: ``t_ps``, ``U`` (kJ/mol, whole system), ``T_tr``, ``T_rot``,
+    ``T_tr_end``, ``T_rot_end`` (K) every ``sample_fs``; ``frame_t_ps``, ``O`` and ``com``
+    (Å, unwrapped from frame to frame) and ``conf`` (:func:`configurational_temperatures`'
+    four sums, nan where it gave none) every ``frame_fs``."""
+
+    KEYS = ("t_ps", "U", "T_tr", "T_rot", "T_tr_end", "T_rot_end")
+
+    def __init__(self, path):
+        self.path = path
+        self.rec = {k: [] for k in self.KEYS}
+        self.frames = {"frame_t_ps": [], "O": [], "com": [], "conf": []}
+
+    def load(self, samples, frames):
+        """The series as saved, cut to what the checkpoint had recorded."""
+        with np.load(self.path) as d:
+            for k in self.KEYS:
+                self.rec[k] = list(d[k][:samples])
+            for k in self.frames:
+                self.frames[k] = list(d[k][:frames]) if k in d.files else \
+                    [np.full(4, np.nan)] * min(frames, len(d["frame_t_ps"]))
+
+    def add(self, t_ps, U, T, T_end):
+        for k, v in zip(self.KEYS, (t_ps, U, *T, *T_end), strict=True):
+            self.rec[k].append(float(v))
+
+    def frame(self, t_ps, O, com, cell, conf=None):
+        box = np.diag(cell)
+        if self.frames["com"]:  # unwrap from the previous frame (moves ≪ L/2 between frames)
+            O = self.frames["O"][-1] + _minimage(O - self.frames["O"][-1], box)
+            com = self.frames["com"][-1] + _minimage(com - self.frames["com"][-1], box)
+        self.frames["frame_t_ps"].append(t_ps)
+        self.frames["O"].append(np.asarray(O, dtype=float))
+        self.frames["com"].append(np.asarray(com, dtype=float))
+        self.frames["conf"].append(np.full(4, np.nan) if conf is None
+                                   else np.asarray(conf, dtype=float))
+
+    def counts(self):
+        return len(self.rec["t_ps"]), len(self.frames["com"])
+
+    def save(self):
+        arrays = {k: np.asarray(v, dtype=float) for k, v in self.rec.items()}
+        arrays.update({k: np.asarray(v, dtype=float) for k, v in self.frames.items()})
+        tmp = self.path.with_name(self.path.name + ".tmp.npz")
+        np.savez(tmp, **arrays)
+        os.replace(tmp, self.path)
+
+
+def _minimage(d, box):
+    return d - box * np.round(d / box)
+
+
+def molecule_centres(positions, masses, sites, cell):
+    """O positions and centres of mass (whole molecules made around O), Å."""
+    x = positions.reshape(-1, sites, 3)
+    box = np.diag(cell)
+    x = x[:, :1] + _minimage(x - x[:, :1], box)
+    m = masses.reshape(-1, sites)[0]
+    return x[:, 0].copy(), np.einsum("s,bsk->bk", m, x) / m.sum()
+
+
+def intramolecular_energy(model, calc):
+    """The constant in LAMMPS's energy of rigid molecules, kJ/mol per molecule.
+
+    The pair style leaves a molecule's own pairs out but the k-space sum has them
+    (:func:`rigidmd.mdanalysis.thermo.excluded_kspace_energy` at the calculator's pinned
+    Ewald parameter); ⟨U⟩/N is given without it.
+    """
+    from ase import units
+
+    from rigidmd.mdanalysis.thermo import ewald_parameter, excluded_kspace_energy
+
+    return excluded_kspace_energy(model, ewald_parameter(calc)) / (units.kJ / units.mol)
+
+
+def coulomb_energy(model):
+    """A molecule's own Coulomb energy, kJ/mol: the constant in the energy of
+    :func:`~rigidmd.lammps.reference.run_rigid_reference`'s runs, whose pair list keeps a
+    molecule's own pairs (``erf(g r) → 1`` in :func:`intramolecular_energy`'s sum)."""
+    from ase import units
+
+    from rigidmd.mdanalysis.thermo import excluded_kspace_energy
+
+    return excluded_kspace_energy(model, 1e6) / (units.kJ / units.mol)
+
+
+def configurational_temperatures(dyn):
+    """The configurational temperatures' sums of the current state, or None.
+
+    The hook for a configurational-temperature observer: it returns
+    ``(Σ_b |F_b|², Σ_b ∇²_{X_b} U, Σ_b |τ_b|², Σ_b ∇²_{θ_b} U)`` (eV²/Å², eV/Å², eV², eV),
+    whose ratios over the recorded frames, over k_B, are T_conf of translation and of
+    rotation.  rigidmd has no such observer yet: this returns None, and the run's JSON holds
+    null for both (never an estimate made here).
+    """
+    return None
+
+
+def _rigidmd_dynamics(p, atoms):
+    from ase import units
+
+    import rigidmd
+
+    dt = p["dt_fs"] * units.fs
+    rng = np.random.default_rng(1000 + p["seed"])
+    friction = FRICTION_PER_PS * 1e-3 / units.fs
+    tau = p["tau_ps"] * 1000 * units.fs
+    if p["integrator"] == "langevin":
+        return rigidmd.RigidLangevin(atoms, dt, temperature_K=TEMPERATURE_K, friction=friction,
+                                     rng=rng, fixcm=True)
+    if p["integrator"] == "baoab":
+        return rigidmd.RigidLangevinBAOAB(atoms, dt, temperature_K=TEMPERATURE_K,
+                                          friction=friction, rng=rng, fixcm=True)
+    if p["integrator"] == "bussi":
+        return rigidmd.RigidBussi(atoms, dt, temperature_K=TEMPERATURE_K, taut=tau, rng=rng,
+                                  fixcm=True)
+    return rigidmd.RigidNoseHoover(atoms, dt, temperature_K=TEMPERATURE_K, tdamp=tau,
+                                   fixcm=True)
+
+
+def run_rigidmd(p, paths, stop, progress, resume):
+    """Run (or continue) one rigidmd point; returns (series, steps done, ms/step)."""
+    from ase import units
+    from water_openmm_nve import lammps_calculator
+
+    from rigidmd import load_checkpoint
+    from rigidmd.core.checkpoint import save_checkpoint
+    from rigidmd.core.observables import kinetic_dof, kinetic_temperatures
+    from rigidmd.water import water_model
+
+    model = water_model(p["model"])
+    state = load_start(p["model"], p["waters"])
+    series = Series(paths["series"])
+    if resume and paths["chk"].exists():
+        from rigidmd.core.checkpoint import read_checkpoint
+
+        chk = read_checkpoint(paths["chk"])
+        dyn = load_checkpoint(chk, lammps_calculator(model, cutoff_for(state["cell"])))
+        series.load(chk.extra["samples"], chk.extra["frames"])
+    else:
+        dyn = _rigidmd_dynamics(p, make_atoms(state, model))
+    atoms = dyn.atoms
+    kj = units.kJ / units.mol
+    sample = max(int(round(p["sample_fs"] / p["dt_fs"])), 1)
+    frame_every = max(int(round(p["frame_fs"] / p["sample_fs"])), 1)
+    total = int(round(p["ps"] * 1000 / p["dt_fs"]))
+    dof = kinetic_dof(dyn.model, dyn.holds_momentum)
+    masses = atoms.get_masses()
+
+    def observe():
+        step = dyn.nsteps
+        if series.counts()[0] and series.rec["t_ps"][-1] >= step * p["dt_fs"] / 1000:
+            return  # a resumed run's first call: this step is recorded
+        series.add(step * p["dt_fs"] / 1000, atoms.get_potential_energy() / kj,
+                   dyn.get_kinetic_temperatures(),
+                   kinetic_temperatures(dyn.get_translational_kinetic_energy(),
+                                        dyn.get_rotational_kinetic_energy(), dof))
+        if (step // sample) % frame_every == 0:
+            series.frame(step * p["dt_fs"] / 1000,
+                         *molecule_centres(atoms.positions, masses, model.sites,
+                                           atoms.cell.array), atoms.cell.array,
+                         configurational_temperatures(dyn))
+
+    def save():
+        samples, frames = series.counts()
+        series.save()
+        save_checkpoint(dyn, paths["chk"], extra={"samples": samples, "frames": frames})
+
+    # An observer due at a step gets the energy from the step's own force call.
+    dyn.attach(observe, interval=sample)
+    last_save = time.perf_counter()
+    t0, s0 = time.perf_counter(), dyn.nsteps
+    while dyn.nsteps < total and not stop:
+        dyn.run(min(sample, total - dyn.nsteps))
+        progress(dyn.nsteps * p["dt_fs"] / 1000)
+        if time.perf_counter() - last_save > p["save_s"]:
+            save()
+            last_save = time.perf_counter()
+    ms = 1000 * (time.perf_counter() - t0) / max(dyn.nsteps - s0, 1)
+    save()
+    steps = dyn.nsteps
+    atoms.get_potential_energy()
+    offset = intramolecular_energy(model, atoms.calc)
+    if hasattr(atoms.calc, "close"):
+        atoms.calc.close()
+    return series, steps, ms, offset, s0
+
+
+def run_openmm(p, paths, stop, progress, resume):
+    """Run (or continue) OpenMM's ``LangevinMiddleIntegrator`` with SETTLE."""
+    import openmm
+    from openmm import unit
+    from water_openmm_nve import body_kinetic_energies, openmm_context
+
+    from rigidmd.water import water_model
+
+    model = water_model(p["model"])
+    state = load_start(p["model"], p["waters"])
+    system = openmm_water_system(state, model, cutoff_for(state["cell"]))
+    integrator = openmm.LangevinMiddleIntegrator(TEMPERATURE_K, FRICTION_PER_PS,
+                                                 p["dt_fs"] * 1e-3)
+    integrator.setRandomNumberSeed(1000 + p["seed"])
+    context, masses, v = openmm_context(system, integrator, state)
+    series = Series(paths["series"])
+    meta_path = paths["chk"].with_name(paths["chk"].name + ".meta")
+    if resume and paths["chk"].exists() and meta_path.exists():
+        context.loadCheckpoint(paths["chk"].read_bytes())
+        extra = json.loads(meta_path.read_text())
+        series.load(extra["samples"], extra["frames"])
+        steps = extra["steps"]
+    else:
+        context.setVelocities(v)
+        context.applyVelocityConstraints(1e-10)
+        steps = 0
+    sample = max(int(round(p["sample_fs"] / p["dt_fs"])), 1)
+    frame_every = max(int(round(p["frame_fs"] / p["sample_fs"])), 1)
+    total = int(round(p["ps"] * 1000 / p["dt_fs"]))
+    n = len(masses) // model.sites
+    cell = state["cell"]
+
+    def observe():
+        st = context.getState(getPositions=True, getVelocities=True, getEnergy=True)
+        x = st.getPositions(asNumpy=True).value_in_unit(unit.nanometer)
+        vel = st.getVelocities(asNumpy=True).value_in_unit(unit.nanometer / unit.picosecond)
+        kt, kr = body_kinetic_energies(x, vel, masses, model.sites)
+        T = (2 * kt / ((3 * n - 3) * KB_KJ), 2 * kr / (3 * n * KB_KJ))
+        series.add(steps * p["dt_fs"] / 1000,
+                   st.getPotentialEnergy().value_in_unit(unit.kilojoule_per_mole), T,
+                   (np.nan, np.nan))
+        if (steps // sample) % frame_every == 0:
+            series.frame(steps * p["dt_fs"] / 1000,
+                         *molecule_centres(np.asarray(x) * 10, masses, model.sites, cell), cell)
+
+    def save():
+        samples, frames = series.counts()
+        series.save()
+        tmp = paths["chk"].with_name(paths["chk"].name + ".tmp")
+        tmp.write_bytes(context.createCheckpoint())
+        os.replace(tmp, paths["chk"])
+        meta_path.write_text(json.dumps({"samples": samples, "frames": frames,
+                                         "steps": steps}))
+
+    if steps == 0:
+        observe()
+    last_save = time.perf_counter()
+    t0, s0 = time.perf_counter(), steps
+    while steps < total and not stop:
+        k = min(sample, total - steps)
+        integrator.step(k)
+        steps += k
+        if steps % sample == 0:
+            observe()
+        progress(steps * p["dt_fs"] / 1000)
+        if time.perf_counter() - last_save > p["save_s"]:
+            save()
+            last_save = time.perf_counter()
+    ms = 1000 * (time.perf_counter() - t0) / max(steps - s0, 1)
+    save()
+    return series, steps, ms, 0.0, s0
+
+
+def openmm_water_system(state, model, cutoff):
+    """OpenMM's system for ``state`` at ``cutoff`` (Å): PME 1e-5, the dispersion correction,
+    rigid water, rigidmd's masses.  TIP4P/2005 from its own file ``tip4p2005.xml`` (beside
+    this script; OpenMM ships none), the others from OpenMM's
+    (``water_openmm_nve.openmm_system``)."""
+    import openmm
+    from openmm import app, unit
+    from water_openmm_nve import openmm_system
+
+    if model.name != "tip4p2005":
+        return openmm_system(state, model, cutoff)
+    from rigidmd.openmm import water_topology
+
+    n = len(state["numbers"]) // model.sites
+    system = app.ForceField(str(HERE / "tip4p2005.xml")).createSystem(
+        water_topology(model, n, state["cell"]), nonbondedMethod=app.PME,
+        nonbondedCutoff=cutoff / 10 * unit.nanometer, rigidWater=True,
+        ewaldErrorTolerance=1e-5)
+    for force in system.getForces():
+        if isinstance(force, openmm.NonbondedForce):
+            force.setUseDispersionCorrection(True)
+    for i, m in enumerate(np.tile(model.masses(), n)):
+        system.setParticleMass(i, float(m))
+    return system
+
+
+def run_lammps(p, paths, stop, progress, resume):
+    """LAMMPS ``fix rigid/nvt/small`` in pieces of ``piece_ps`` (each from the last frame)."""
+    from ase import units
+    from water_openmm_nve import body_kinetic_energies
+
+    from rigidmd.lammps.reference import run_rigid_reference
+    from rigidmd.water import water_model
+
+    to_nm_ps = units.fs * 100.0  # Å per ASE time unit to nm/ps (amu nm²/ps² is kJ/mol)
+
+    model = water_model(p["model"])
+    state = load_start(p["model"], p["waters"])
+    cutoff = cutoff_for(state["cell"])
+    series = Series(paths["series"])
+    chk = paths["chk"].with_name(paths["chk"].name + ".meta")
+    steps = 0
+    if resume and chk.exists():
+        saved = json.loads(chk.read_text())
+        series.load(saved["samples"], saved["frames"])
+        steps = saved["steps"]
+        with np.load(paths["chk"]) as d:
+            state = dict(state, positions=d["positions"], momenta=d["momenta"])
+    sample = max(int(round(p["sample_fs"] / p["dt_fs"])), 1)
+    frame_every = max(int(round(p["frame_fs"] / p["sample_fs"])), 1)
+    total = int(round(p["ps"] * 1000 / p["dt_fs"]))
+    piece = max(int(round(p["piece_ps"] * 1000 / p["dt_fs"])) // sample, 1) * sample
+    kj = units.kJ / units.mol
+    n = len(state["numbers"]) // model.sites
+    masses = np.tile(model.masses(), n)
+    s0, loop_s = steps, 0.0
+    while steps < total and not stop:
+        atoms = make_atoms(state, model)
+        k = min(piece, total - steps)
+        ref = run_rigid_reference(
+            atoms, np.repeat(np.arange(n), model.sites), model.lammps_commands(
+                cutoff, "pppm", 1e-5, tail=True), p["dt_fs"] * units.fs, k, every=sample,
+            fix="rigid/nvt/small", temperature_K=TEMPERATURE_K,
+            tdamp=p["tau_ps"] * 1000 * units.fs, seed=1000 + p["seed"] + steps)
+        loop_s += ref.timing.get("loop_time", float("nan"))
+        first = 1 if steps else 0
+        for f in range(first, len(ref.step)):
+            x, v = ref.positions[f], ref.velocities[f]
+            kt, kr = body_kinetic_energies(x / 10, v * to_nm_ps, masses, model.sites)
+            t = (steps + ref.step[f]) * p["dt_fs"] / 1000
+            series.add(t, ref.potential_energy[f] / kj,
+                       (2 * kt / ((3 * n - 3) * KB_KJ), 2 * kr / (3 * n * KB_KJ)),
+                       (np.nan, np.nan))
+            if ((steps + ref.step[f]) // sample) % frame_every == 0:
+                series.frame(t, *molecule_centres(x, masses, model.sites, state["cell"]),
+                             state["cell"])
+        steps += k
+        state = dict(state, positions=ref.positions[-1], momenta=ref.velocities[-1]
+                     * masses[:, None])
+        samples, frames = series.counts()
+        series.save()
+        np.savez(paths["chk"], positions=state["positions"], momenta=state["momenta"])
+        chk.write_text(json.dumps({"samples": samples, "frames": frames, "steps": steps}))
+        progress(steps * p["dt_fs"] / 1000)
+    # LAMMPS's own loop (its start, the data file and the dump's parsing left out)
+    ms = 1000 * loop_s / max(steps - s0, 1) if steps > s0 else float("nan")
+    return series, steps, ms, coulomb_energy(model), s0
+
+
+# --------------------------------------------------------------------------- analysis
+def block_mean(x, blocks):
+    """Mean and the standard error of ``blocks`` block means (nan with fewer than 2)."""
+    x = np.asarray(x, dtype=float)
+    if len(x) == 0:
+        return [float("nan"), float("nan")]
+    parts = [b.mean() for b in np.array_split(x, min(blocks, len(x))) if len(b)]
+    err = float(np.std(parts, ddof=1) / np.sqrt(len(parts))) if len(parts) > 1 else np.nan
+    return [float(x.mean()), err]
+
+
+def rdf_first_peak(O, cell, bin_A=0.02, r_max=None):
+    """(r, g) of the O–O RDF's highest point below 3.5 Å over frames ``O`` (Å), a parabola
+    through the highest bin and its neighbours."""
+    box = np.diag(cell)
+    r_max = r_max or min(0.5 * box.min(), 8.0)
+    edges = np.arange(0.0, r_max + bin_A, bin_A)
+    hist = np.zeros(len(edges) - 1)
+    n = O.shape[1]
+    iu = np.triu_indices(n, 1)
+    for x in O:
+        d = _minimage(x[:, None] - x[None], box)[iu]
+        hist += np.histogram(np.linalg.norm(d, axis=1), edges)[0]
+    r = 0.5 * (edges[1:] + edges[:-1])
+    shell = 4 / 3 * np.pi * (edges[1:] ** 3 - edges[:-1] ** 3)
+    g = hist / (len(O) * n * (n - 1) / 2 / np.prod(box) * shell)
+    i = int(np.argmax(np.where(r < 3.5, g, -1)))
+    if 0 < i < len(g) - 1:
+        a, b, c = g[i - 1], g[i], g[i + 1]
+        den = a - 2 * b + c
+        shift = 0.5 * (a - c) / den if den else 0.0
+        return float(r[i] + shift * bin_A), float(b - 0.25 * (a - c) * shift)
+    return float(r[i]), float(g[i])
+
+
+def msd_diffusion(com, t_ps, fit):
+    """D_PBC (1e-5 cm²/s): the MSD of unwrapped centres of mass, the box's drift removed, over
+    every origin, a straight line over lags ``fit`` (ps) / 6."""
+    if len(com) < 3:
+        return float("nan")
+    frame_ps = float(np.median(np.diff(t_ps)))
+    lags = np.arange(max(int(round(fit[0] / frame_ps)), 1), int(round(fit[1] / frame_ps)) + 1)
+    lags = lags[lags < len(com)]
+    if len(lags) < 2:
+        return float("nan")
+    disp = com - com.mean(axis=1, keepdims=True)
+    msd = [np.mean(np.sum((disp[lag:] - disp[:-lag]) ** 2, axis=2)) for lag in lags]
+    return float(np.polyfit(lags * frame_ps, msd, 1)[0] / 6 * 10)
+
+
+def analyse(series, p, n, offset=0.0):
+    """The results of one run's series after ``equil_ps`` (see :data:`RESULT_FIELDS`);
+    ``offset`` (kJ/mol per molecule) is taken off ⟨U⟩/N."""
+    rec = {k: np.asarray(v, dtype=float) for k, v in series.rec.items()}
+    rec["U"] = rec["U"] - n * offset
+    fr = {k: np.asarray(v, dtype=float) for k, v in series.frames.items()}
+    keep = rec["t_ps"] >= p["equil_ps"]
+    keep_f = fr["frame_t_ps"] >= p["equil_ps"] if len(fr["frame_t_ps"]) else np.zeros(0, bool)
+    out = {k: block_mean(rec[k][keep] / (n if k == "U" else 1), p["blocks"])
+           for k in ("U", "T_tr", "T_rot", "T_tr_end", "T_rot_end")}
+    # Reported less end-of-step, sample by sample (BAOAB's after-O against its end of step;
+    # zero for the others): far less noisy than the difference of the two means.
+    for k in ("T_tr", "T_rot"):
+        out[f"{k}_gap"] = block_mean(rec[k][keep] - rec[f"{k}_end"][keep], p["blocks"])
+    length = float(rec["t_ps"][keep][-1] - rec["t_ps"][keep][0]) if keep.sum() > 1 else 0.0
+    fit = tuple(p["msd_fit_ps"]) if length >= 3 * p["msd_fit_ps"][1] else (length / 10,
+                                                                             length / 3)
+    cell = np.diag([p["box_A"]] * 3)
+    if keep_f.sum() >= 1:
+        out["rdf_peak_r"], out["rdf_peak_g"] = rdf_first_peak(fr["O"][keep_f], cell)
+    else:
+        out["rdf_peak_r"] = out["rdf_peak_g"] = float("nan")
+    out["D_pbc"] = msd_diffusion(fr["com"][keep_f], fr["frame_t_ps"][keep_f], fit) \
+        if keep_f.sum() else float("nan")
+    out["T_conf_tr"] = out["T_conf_rot"] = None
+    conf = fr["conf"][keep_f] if len(fr.get("conf", [])) else np.zeros((0, 4))
+    if len(conf) and np.isfinite(conf).all():
+        from ase import units
+
+        for name, (num, den) in (("T_conf_tr", (0, 1)), ("T_conf_rot", (2, 3))):
+            parts = [b[:, num].sum() / b[:, den].sum() / units.kB
+                     for b in np.array_split(conf, min(p["blocks"], len(conf)))]
+            value = conf[:, num].sum() / conf[:, den].sum() / units.kB
+            err = np.std(parts, ddof=1) / np.sqrt(len(parts)) if len(parts) > 1 else np.nan
+            out[name] = [float(value), float(err)]
+    out.update(U_offset_per_molecule=offset, recorded_ps=length, msd_fit_ps=list(fit),
+               samples=int(keep.sum()), frames=int(keep_f.sum()))
+    return out
+
+
+# --------------------------------------------------------------------------- command line
+def point_main(p, resume):
+    """Run one point and write its JSON; exit status 0 when complete, 3 when stopped."""
+    outdir = Path(p["outdir"])
+    outdir.mkdir(parents=True, exist_ok=True)
+    name = run_name(p)
+    paths = {"json": outdir / f"{name}.json", "series": outdir / f"{name}.series.npz",
+             "chk": outdir / (f"{name}.chk.omm" if p["code"] == "openmm" else f"{name}.chk.npz")}
+    if paths["json"].exists() and not resume:
+        raise SystemExit(f"{paths['json']}: exists; give --resume to continue it or remove it")
+    if resume and paths["json"].exists() and json.loads(paths["json"].read_text()).get(
+            "complete"):
+        print(f"{name}: complete", flush=True)
+        return 0
+    if p["code"] == "rigidmd" and p["integrator"] not in INTEGRATORS:
+        raise SystemExit(f"--integrator {p['integrator']!r}: rigidmd has {', '.join(INTEGRATORS)}")
+    state = load_start(p["model"], p["waters"])
+    p = dict(p, box_A=float(state["cell"][0, 0]), cutoff_A=cutoff_for(state["cell"]))
+    stop = Stop()
+    progress = Progress(name, p["ps"], p["log_s"], shared=p.get("jobs", 1) > 1)
+    runner = {"rigidmd": run_rigidmd, "openmm": run_openmm, "lammps": run_lammps}[p["code"]]
+    wall = time.perf_counter()
+    series, steps, ms, offset, first = runner(p, paths, stop, progress, resume)
+    n = len(state["numbers"]) // (4 if p["model"].startswith("tip4p") else 3)
+    total = int(round(p["ps"] * 1000 / p["dt_fs"]))
+    results = analyse(series, p, n, offset)
+    out = {"point": {k: v for k, v in p.items() if k != "outdir"}, "name": name,
+           "complete": steps >= total, "steps": steps, "resumed_from_step": first,
+           "ps": steps * p["dt_fs"] / 1000,
+           "stopped_by": stop.signal, "ms_per_step": ms,
+           "wall_s": time.perf_counter() - wall, "molecules": n,
+           "temperature_K": TEMPERATURE_K, "friction_per_ps": FRICTION_PER_PS,
+           "T_reported_as": {"rigidmd": "dyn.get_kinetic_temperatures()",
+                             "openmm": "atom velocities from getState",
+                             "lammps": "frame velocities"}[p["code"]],
+           **results}
+    tmp = paths["json"].with_name(paths["json"].name + ".tmp")
+    tmp.write_text(json.dumps(out, indent=1, allow_nan=True) + "\n")
+    os.replace(tmp, paths["json"])
+    progress(steps * p["dt_fs"] / 1000, force=True)
+    if stop:
+        print(f"{name}: stopped by {stop.signal} at {out['ps']:.3f} ps; written, continue "
+              f"with --resume", flush=True)
+        return 3
+    return 0
+
+
+def reanalyse(paths, equil_ps=None):
+    """Analyse runs again from their series (another ``--equil-ps``, or a newer analysis);
+    each JSON keeps its run's record and gets the new results."""
+    for path in paths:
+        path = Path(path)
+        out = json.loads(path.read_text())
+        p = dict(out["point"])
+        if equil_ps is not None:
+            p["equil_ps"] = equil_ps
+        series = Series(path.with_name(out["name"] + ".series.npz"))
+        with np.load(series.path) as d:
+            samples, frames = len(d["t_ps"]), len(d["frame_t_ps"])
+        series.load(samples, frames)
+        out.update(analyse(series, p, out["molecules"], out.get("U_offset_per_molecule", 0.0)))
+        out["point"] = p
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(out, indent=1, allow_nan=True) + "\n")
+        os.replace(tmp, path)
+        print(f"{path.name}: analysed again", flush=True)
+
+
+def points(args):
+    integrators = args.integrator if args.integrator else list(INTEGRATORS)
+    out = []
+    for code, model, dt, seed in itertools.product(args.code, args.model, args.dt_fs,
+                                                   args.seed):
+        for integ in (integrators if code == "rigidmd" else
+                      ["nvt_small" if code == "lammps" else "middle"]):
+            out.append({"code": code, "integrator": integ, "model": model,
+                        "waters": args.waters, "dt_fs": dt, "seed": seed, "ps": args.ps,
+                        "equil_ps": args.equil_ps, "tau_ps": args.tau_ps,
+                        "sample_fs": args.sample_fs, "frame_fs": args.frame_fs,
+                        "blocks": args.blocks, "msd_fit_ps": args.msd_fit_ps,
+                        "piece_ps": args.piece_ps, "save_s": args.save_s,
+                        "log_s": args.log_s, "jobs": args.jobs,
+                        "outdir": str(args.outdir)})
+    return out
+
+
+def run_many(args):
+    """Run every point, ``--jobs`` at a time, each in its own process; a signal is passed on
+    to the running ones (each finishes its step and writes) and starts no more."""
+    todo = points(args)
+    if len(todo) == 1 and args.jobs == 1:
+        return point_main(todo[0], args.resume)
+    stop = Stop()
+    running, status = [], {}
+    while (todo and not stop) or running:
+        while todo and not stop and len(running) < args.jobs:
+            p = todo.pop(0)
+            cmd = [sys.executable, __file__, "_point", json.dumps(p)] + (
+                ["--resume"] if args.resume else [])
+            running.append((p, subprocess.Popen(cmd)))
+        for p, proc in list(running):
+            if stop:
+                try:
+                    proc.send_signal(signal.SIGTERM)
+                except ProcessLookupError:
+                    pass
+            rc = proc.poll()
+            if rc is not None:
+                running.remove((p, proc))
+                status[run_name(p)] = rc
+        time.sleep(0.2)
+    bad = {k: v for k, v in status.items() if v}
+    if bad or stop:
+        print(f"{len(bad)} of {len(status)} runs incomplete ({stop.signal or 'failed'}): "
+              f"{', '.join(sorted(bad))}; not started: {len(todo)}", flush=True)
+        return 3
+    return 0
+
+
+#: The full table's points: steps, runs and length per code (see the docs page).
+TABLE_DT_FS = (0.5, 1.0, 2.0, 3.0, 4.0, 5.0)
+TABLE_RUNS, TABLE_PS = 3, 200.0
+
+
+def cost(args):
+    """ms/step of each code at ``--waters``, one thread: the CPU time of this process (and
+    the wall time) of a run of ``--steps`` less that of a run of 20, after a first run of 20
+    that pays for compiling; then the core-hours of the TIP4P/2005 table at that speed.  The
+    CPU time is what a machine of idle cores would take; the wall time also holds what
+    other processes took from this one."""
+    rows = []
+    steps_per_code = TABLE_RUNS * sum(TABLE_PS * 1000 / dt for dt in TABLE_DT_FS)
+    for code, integ in ([("rigidmd", i) for i in INTEGRATORS]
+                        + [("lammps", "nvt_small"), ("openmm", "middle")]):
+        spent = {}
+        for i, steps in enumerate((20, 20, args.steps)):
+            p = {"code": code, "integrator": integ, "model": args.model[0],
+                 "waters": args.waters, "dt_fs": 2.0, "seed": 1, "ps": steps * 2e-3,
+                 "equil_ps": 0.0, "tau_ps": 1.0, "sample_fs": 2.0 * steps,
+                 "frame_fs": 2.0 * steps, "blocks": 1, "msd_fit_ps": [3, 10],
+                 "piece_ps": 1e9, "save_s": 1e9, "log_s": 1e9, "outdir": str(args.outdir)}
+            name = run_name(p)
+            paths = {"series": args.outdir / f"{name}.series.npz",
+                     "chk": args.outdir / f"{name}.chk.{'omm' if code == 'openmm' else 'npz'}"}
+            args.outdir.mkdir(parents=True, exist_ok=True)
+            runner = {"rigidmd": run_rigidmd, "openmm": run_openmm, "lammps": run_lammps}[code]
+            cpu, wall = time.process_time(), time.perf_counter()
+            runner(p, paths, Stop(), Progress(name, p["ps"], 1e9), False)
+            spent[i] = (time.process_time() - cpu, time.perf_counter() - wall)
+        cpu_ms, wall_ms = (1000 * (spent[2][k] - spent[1][k]) / (args.steps - 20)
+                           for k in (0, 1))
+        hours = steps_per_code * cpu_ms / 3.6e6
+        rows.append({"code": code, "integrator": integ, "waters": args.waters,
+                     "steps": args.steps, "cpu_ms_per_step": cpu_ms,
+                     "wall_ms_per_step": wall_ms, "table_core_hours": hours})
+        print(f"{code:8} {integ:10} {cpu_ms:7.2f} ms/step CPU ({wall_ms:6.2f} wall)  "
+              f"{hours:6.1f} core-hours for {TABLE_RUNS} x {TABLE_PS:g} ps at "
+              f"{', '.join(f'{d:g}' for d in TABLE_DT_FS)} fs", flush=True)
+    print(f"total {sum(r['table_core_hours'] for r in rows):.1f} core-hours; load average "
+          f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores while measuring", flush=True)
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1) + "\n")
+    return rows
+
+
+def parse(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", help="run points (the product of the lists given)")
+    r.add_argument("--code", nargs="+", choices=CODES, default=["rigidmd"])
+    r.add_argument("--integrator", nargs="+", choices=INTEGRATORS,
+                   help="rigidmd's integrators (default all)")
+    r.add_argument("--model", nargs="+", choices=MODELS, default=["tip4p2005"])
+    r.add_argument("--waters", type=int, default=216)
+    r.add_argument("--dt-fs", nargs="+", type=float, required=True)
+    r.add_argument("--seed", nargs="+", type=int, default=[1])
+    r.add_argument("--ps", type=float, required=True, help="length of each run, ps")
+    r.add_argument("--equil-ps", type=float, default=0.0,
+                   help="ps left out of the analysis at the start")
+    r.add_argument("--tau-ps", type=float, default=1.0,
+                   help="Bussi's τ and the Nosé–Hoover chains' damping time, ps")
+    r.add_argument("--sample-fs", type=float, default=20.0, help="U and T every this, fs")
+    r.add_argument("--frame-fs", type=float, default=200.0, help="frames (RDF, MSD), fs")
+    r.add_argument("--blocks", type=int, default=10, help="blocks for the errors")
+    r.add_argument("--msd-fit-ps", nargs=2, type=float, default=[3.0, 10.0])
+    r.add_argument("--piece-ps", type=float, default=10.0, help="LAMMPS: ps per piece")
+    r.add_argument("--save-s", type=float, default=300.0, help="checkpoint every, s")
+    r.add_argument("--log-s", type=float, default=60.0, help="log line every, s (no terminal)")
+    r.add_argument("--jobs", type=int, default=1)
+    r.add_argument("--resume", action="store_true", help="continue stopped runs")
+    r.add_argument("--outdir", type=Path, default=HERE / "timestep_runs")
+    pt = sub.add_parser("_point")
+    pt.add_argument("point")
+    pt.add_argument("--resume", action="store_true")
+    s = sub.add_parser("start", help="make a start state")
+    s.add_argument("--model", choices=MODELS, default="tip4p2005")
+    s.add_argument("--waters", type=int, default=64)
+    s.add_argument("--seed", type=int, default=1)
+    s.add_argument("--eq-ps", type=float, default=5.0)
+    a = sub.add_parser("analyse", help="analyse runs again from their series")
+    a.add_argument("files", nargs="+", type=Path, help="the runs' JSONs")
+    a.add_argument("--equil-ps", type=float, help="another length left out at the start")
+    c = sub.add_parser("cost", help="ms/step of every code")
+    c.add_argument("--model", nargs=1, choices=MODELS, default=["tip4p2005"])
+    c.add_argument("--waters", type=int, default=216)
+    c.add_argument("--steps", type=int, default=200)
+    c.add_argument("--outdir", type=Path, default=Path("/tmp/timestep_cost"))
+    c.add_argument("--json", type=Path, help="also write the rows here")
+    return p.parse_args(argv)
+
+
+def main(argv=None):
+    args = parse(argv)
+    if args.command == "_point":
+        return point_main(json.loads(args.point), args.resume)
+    if args.command == "start":
+        print(make_start(args.model, args.waters, args.seed, args.eq_ps))
+        return 0
+    if args.command == "analyse":
+        reanalyse(args.files, args.equil_ps)
+        return 0
+    if args.command == "cost":
+        cost(args)
+        return 0
+    return run_many(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

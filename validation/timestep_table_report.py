@@ -1,0 +1,257 @@
+r"""The time-step table from ``timestep_table.py``'s runs: each point against its dt → 0 limit.
+
+Reads the run JSONs, pools the seeds of each point (model, waters, code, integrator, step:
+the mean of the runs' means, its standard error over runs, or the one run's block error),
+and fits :math:`a + b\,\delta t^2` over the steps up to ``--fit-max-fs`` (2 fs) per model
+and quantity (⟨U⟩/N, the RDF's first peak position and height, D_PBC), weighted by the
+points' errors:
+
+- rigidmd: one limit :math:`a` shared by all its integrators, each with its own :math:`b`;
+  each integrator is also fitted alone, and the table says whether those limits agree with
+  the shared one (within ``--agree-sigma`` combined standard errors);
+- LAMMPS and OpenMM: each its own limit (their long-range and dispersion treatments differ).
+
+Writes ``<name>.md`` (the table, Markdown), ``<name>.json`` (points and fits) and
+``<name>.csv`` (the points with their distance from the limit, for the docs' figure) into
+``--outdir``.  T_tr and T_rot are as each code reports them (rigidmd's BAOAB: after its O
+step; its end-of-step values are in the JSON and the CSV); T_conf shows "—" until the runs
+carry it.
+
+Run::
+
+    python validation/timestep_table_report.py validation/timestep_runs/*.json \
+        --name timestep_table
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+#: The quantities fitted against dt²; the temperatures are compared with the bath instead.
+FITTED = ("U", "rdf_peak_r", "rdf_peak_g", "D_pbc")
+POOLED = ("U", "T_tr", "T_rot", "T_tr_end", "T_rot_end", "T_tr_gap", "T_rot_gap",
+          "rdf_peak_r", "rdf_peak_g", "D_pbc", "T_conf_tr", "T_conf_rot")
+
+
+def _value(entry):
+    """(value, error) of a run's field: ``[mean, err]`` or a bare number; None stays None."""
+    if entry is None:
+        return None
+    if isinstance(entry, list | tuple):
+        return float(entry[0]), float(entry[1]) if entry[1] is not None else float("nan")
+    return float(entry), float("nan")
+
+
+def pool(runs, key):
+    """[mean, standard error] of ``key`` over ``runs``: across runs when there are several,
+    else the run's own error; None when no run has it."""
+    values = [_value(r.get(key)) for r in runs]
+    values = [v for v in values if v is not None and np.isfinite(v[0])]
+    if not values:
+        return None
+    x = np.array([v[0] for v in values])
+    if len(x) > 1:
+        return [float(x.mean()), float(x.std(ddof=1) / np.sqrt(len(x)))]
+    return [float(x[0]), values[0][1]]
+
+
+def load_points(paths, include_incomplete=False):
+    """Pooled points, one per (model, waters, code, integrator, dt); a run that was stopped
+    before its length (``"complete": false``) is left out unless ``include_incomplete``."""
+    groups = {}
+    for path in paths:
+        run = json.loads(Path(path).read_text())
+        if not run.get("complete") and not include_incomplete:
+            print(f"{Path(path).name}: stopped at {run.get('ps', 0):g} ps, left out "
+                  f"(--include-incomplete takes it)")
+            continue
+        p = run["point"]
+        key = (p["model"], int(p["waters"]), p["code"], p["integrator"], float(p["dt_fs"]))
+        groups.setdefault(key, []).append(run)
+    points = []
+    for key in sorted(groups):
+        runs = groups[key]
+        row = dict(zip(("model", "waters", "code", "integrator", "dt_fs"), key, strict=True))
+        row.update(runs=len(runs), seeds=sorted(r["point"]["seed"] for r in runs),
+                   ps=float(sum(r.get("recorded_ps", 0.0) for r in runs)),
+                   complete=all(r.get("complete") for r in runs),
+                   ms_per_step=float(np.mean([r["ms_per_step"] for r in runs])))
+        row.update({k: pool(runs, k) for k in POOLED})
+        points.append(row)
+    return points
+
+
+def fit_limit(dt, y, err, groups):
+    r"""Weighted least squares of :math:`y = a + b_g\,\delta t^2` (one :math:`b` per group).
+
+    Parameters
+    ----------
+    dt, y, err : array_like, shape (n,)
+        Steps (fs), values and their standard errors (non-finite: weight of the mean error,
+        or 1 when none is finite).
+    groups : sequence, shape (n,)
+        The group of each point; each group gets its own slope.
+
+    Returns
+    -------
+    dict
+        ``a`` and ``a_err`` (the limit and its standard error), ``b`` (per group, per fs²),
+        ``chi2`` and ``dof``; ``a`` is nan when the points cannot determine it.
+    """
+    dt, y, err = (np.asarray(v, dtype=float) for v in (dt, y, err))
+    names = sorted(set(groups))
+    ok = np.isfinite(err) & (err > 0)
+    sigma = np.where(ok, err, err[ok].mean() if ok.any() else 1.0)
+    A = np.zeros((len(y), 1 + len(names)))
+    A[:, 0] = 1.0
+    for i, g in enumerate(groups):
+        A[i, 1 + names.index(g)] = dt[i] ** 2
+    if len(y) < A.shape[1] or np.linalg.matrix_rank(A) < A.shape[1]:
+        return {"a": float("nan"), "a_err": float("nan"), "b": {}, "chi2": float("nan"),
+                "dof": 0, "points": len(y)}
+    w = 1.0 / sigma
+    coef, *_ = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)
+    cov = np.linalg.inv((A * w[:, None]).T @ (A * w[:, None]))
+    resid = (y - A @ coef) * w
+    return {"a": float(coef[0]), "a_err": float(np.sqrt(cov[0, 0])),
+            "b": {g: float(coef[1 + i]) for i, g in enumerate(names)},
+            "chi2": float(resid @ resid), "dof": int(len(y) - A.shape[1]), "points": len(y)}
+
+
+def family(point):
+    """The set of runs that share a limit: rigidmd's integrators together, each other code."""
+    return (point["model"], point["waters"], point["code"])
+
+
+def fits(points, fit_max_fs, agree_sigma):
+    """Per family and fitted quantity: the shared fit, each integrator's own, and whether
+    they agree."""
+    out = {}
+    for fam in sorted({family(p) for p in points}):
+        members = [p for p in points if family(p) == fam and p["dt_fs"] <= fit_max_fs + 1e-9]
+        for key in FITTED:
+            use = [p for p in members if p[key] is not None]
+            shared = fit_limit([p["dt_fs"] for p in use], [p[key][0] for p in use],
+                               [p[key][1] for p in use], [p["integrator"] for p in use])
+            alone, agree, compared = {}, True, 0
+            for integ in sorted({p["integrator"] for p in use}):
+                mine = [p for p in use if p["integrator"] == integ]
+                f = fit_limit([p["dt_fs"] for p in mine], [p[key][0] for p in mine],
+                              [p[key][1] for p in mine], [integ] * len(mine))
+                alone[integ] = f
+                if np.isfinite(f["a"]) and np.isfinite(shared["a"]):
+                    gap = abs(f["a"] - shared["a"])
+                    agree &= bool(gap <= agree_sigma * np.hypot(f["a_err"], shared["a_err"]))
+                    compared += 1
+            out[(*fam, key)] = {"shared": shared, "alone": alone,
+                                "agree": agree if compared > 1 else None}
+    return out
+
+
+def _pm(v, digits):
+    if v is None:
+        return "—"
+    if not np.isfinite(v[1]):
+        return f"{v[0]:.{digits}f}"
+    return f"{v[0]:.{digits}f} ± {v[1]:.{digits}f}"
+
+
+def _gap(point, key, fit_table, digits):
+    f = fit_table.get((*family(point), key))
+    if f is None or point[key] is None or not np.isfinite(f["shared"]["a"]):
+        return "—"
+    return f"{point[key][0] - f['shared']['a']:+.{digits}f}"
+
+
+def table(points, fit_table, fit_max_fs):
+    lines = ["| model | N | code | integrator | dt (fs) | runs | ps | ⟨U⟩/N (kJ/mol) | "
+             "Δ⟨U⟩/N | T_tr (K) | T_rot (K) | reported − end of step, tr / rot (K) | "
+             "T_conf tr/rot (K) | RDF r₁ (Å) | g(r₁) | D_PBC (1e-5 cm²/s) | ΔD |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for p in points:
+        conf = "—" if p["T_conf_tr"] is None else \
+            f"{_pm(p['T_conf_tr'], 1)} / {_pm(p['T_conf_rot'], 1)}"
+        lines.append(
+            f"| {p['model']} | {p['waters']} | {p['code']} | {p['integrator']} | "
+            f"{p['dt_fs']:g} | {p['runs']} | {p['ps']:.0f} | {_pm(p['U'], 3)} | "
+            f"{_gap(p, 'U', fit_table, 3)} | {_pm(p['T_tr'], 1)} | {_pm(p['T_rot'], 1)} | "
+            f"{_pm(p.get('T_tr_gap'), 2)} / {_pm(p.get('T_rot_gap'), 2)} | {conf} | "
+            f"{_pm(p['rdf_peak_r'], 3)} | {_pm(p['rdf_peak_g'], 2)} | "
+            f"{_pm(p['D_pbc'], 2)} | {_gap(p, 'D_pbc', fit_table, 2)} |")
+    lines += ["", f"dt → 0 limits (a + b·dt² over dt ≤ {fit_max_fs:g} fs; rigidmd's "
+                  "integrators share a; 'agree': each integrator's own limit is within the "
+                  "stated combined standard errors of the shared one)", "",
+              "| model | N | code | quantity | limit | χ²/dof | own limits | agree |",
+              "|---|---|---|---|---|---|---|---|"]
+    for (model, waters, code, key), f in sorted(fit_table.items()):
+        s = f["shared"]
+        own = ", ".join(f"{k} {v['a']:.4g} ± {v['a_err']:.2g}" for k, v in f["alone"].items()
+                        if np.isfinite(v["a"])) or "—"
+        chi = f"{s['chi2']:.2f}/{s['dof']}" if s["dof"] else "—"
+        agree = {None: "—", True: "yes", False: "NO"}[f["agree"]]
+        limit = f"{s['a']:.4g} ± {s['a_err']:.2g}" if np.isfinite(s["a"]) else "—"
+        lines.append(f"| {model} | {waters} | {code} | {key} | {limit} | {chi} | {own} | "
+                     f"{agree} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_csv(points, fit_table, path):
+    keys = ("U", "T_tr", "T_rot", "T_tr_end", "T_rot_end", "T_tr_gap", "T_rot_gap",
+            "rdf_peak_r", "rdf_peak_g", "D_pbc")
+    with open(path, "w", newline="") as fh:
+        fh.write("# timestep_table_report.py: pooled points; <q>_limit is the family's "
+                 "dt -> 0 fit (nan where none)\n")
+        w = csv.writer(fh)
+        w.writerow(["model", "waters", "code", "integrator", "dt_fs", "runs", "ps"]
+                   + [f"{k}{s}" for k in keys for s in ("", "_err")]
+                   + [f"{k}_limit" for k in FITTED])
+        for p in points:
+            vals = []
+            for k in keys:
+                vals += list(p[k]) if p.get(k) is not None else ["nan", "nan"]
+            lim = [fit_table[(*family(p), k)]["shared"]["a"] for k in FITTED]
+            w.writerow([p["model"], p["waters"], p["code"], p["integrator"], p["dt_fs"],
+                        p["runs"], f"{p['ps']:.3f}"] + vals + lim)
+
+
+def report(paths, outdir, name, fit_max_fs=2.0, agree_sigma=2.0, header="",
+           include_incomplete=False):
+    """Read the runs, write ``<name>.md``, ``.json`` and ``.csv``; return (points, fits)."""
+    points = load_points(paths, include_incomplete)
+    fit_table = fits(points, fit_max_fs, agree_sigma)
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    text = (header + "\n\n" if header else "") + table(points, fit_table, fit_max_fs)
+    (outdir / f"{name}.md").write_text(text)
+    (outdir / f"{name}.json").write_text(json.dumps(
+        {"fit_max_fs": fit_max_fs, "agree_sigma": agree_sigma, "points": points,
+         "fits": [{"model": k[0], "waters": k[1], "code": k[2], "quantity": k[3], **v}
+                  for k, v in sorted(fit_table.items())]}, indent=1) + "\n")
+    write_csv(points, fit_table, outdir / f"{name}.csv")
+    return points, fit_table
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("files", nargs="+", type=Path)
+    p.add_argument("--name", default="timestep_table")
+    p.add_argument("--outdir", type=Path, default=HERE)
+    p.add_argument("--fit-max-fs", type=float, default=2.0)
+    p.add_argument("--agree-sigma", type=float, default=2.0)
+    p.add_argument("--header", default="", help="a line written above the table")
+    p.add_argument("--include-incomplete", action="store_true",
+                   help="also pool runs that were stopped before their length")
+    args = p.parse_args(argv)
+    report(args.files, args.outdir, args.name, args.fit_max_fs, args.agree_sigma, args.header,
+           args.include_incomplete)
+    print((args.outdir / f"{args.name}.md").read_text())
+
+
+if __name__ == "__main__":
+    main()
