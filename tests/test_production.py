@@ -492,13 +492,14 @@ def test_the_summary_says_which_steps_its_statistics_cover(tmp_path, monkeypatch
     assert status == 0, stderr
     lines = stdout.splitlines()
     first = next(i for i, line in enumerate(lines) if line.startswith("20 steps"))
-    assert lines[first + 1] == "statistics over steps 0-20 (the run from its start)"
-    assert lines[first + 2].startswith("total energy: drift ")
+    assert lines[first + 1].startswith("T_tr = ")  # the temperatures of this moment
+    assert lines[first + 2] == "statistics over steps 0-20 (the run from its start)"
+    assert lines[first + 3].startswith("total energy: drift ")
     status, stdout, stderr = run_here(path, monkeypatch, capsys, "--resume")
     assert status == 0, stderr
     lines = stdout.splitlines()
     first = next(i for i, line in enumerate(lines) if line.startswith("50 steps"))
     assert lines[first].startswith("50 steps (30 since --resume at step 20, ")
-    assert lines[first + 1] == ("statistics over steps 30-50 only: the part run since "
+    assert lines[first + 2] == ("statistics over steps 30-50 only: the part run since "
                                 "--resume at step 20")
-    assert lines[first + 2].startswith("total energy: drift ")
+    assert lines[first + 3].startswith("total energy: drift ")

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 from rigidmd.config.quantities import ConfigError, mapping, whole_number
 
-__all__ = ["DiagnosticsSection"]
+__all__ = ["DiagnosticsSection", "own_calculator"]
 
 
 @dataclass
@@ -75,3 +75,12 @@ class DiagnosticsSection:
             dyn.attach(tconf, interval=spec["interval"])
             attached.append(tconf)
         return attached
+
+
+def own_calculator(calculator, atoms, engine_directory):
+    """A calculator of the diagnostics' own for ``atoms``, built from the ``calculator:``
+    section when its forces run in this process; ``None`` (the dynamics' own is shared) for
+    an engine in other processes or at an address."""
+    if calculator.processes is None and calculator.address is None:
+        return calculator.build(atoms.copy(), engine_directory)
+    return None

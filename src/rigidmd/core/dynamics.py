@@ -63,6 +63,16 @@ __all__ = ["RigidDynamics", "RigidVerlet", "RigidBodyDOF", "NonFiniteForceError"
            "check_timestep"]
 
 
+def observed_at(observers, step: int) -> bool:
+    """Whether an observer (ASE's ``(function, interval, args, kwargs)``) that reads the
+    calculator's results is due at ``step``."""
+    for function, interval, _, _ in observers:
+        if ((step % interval == 0 if interval > 0 else step == -interval)
+                and getattr(function, "wants_properties", True)):
+            return True
+    return False
+
+
 class RigidDynamics(RigidObservables, MolecularDynamics):
     r"""Rigid-body molecular dynamics: an integrator scheme and optional coupling parts.
 
@@ -349,21 +359,13 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         if self.sync.changed is not None and self.sync.before_step(
                 self._evaluate_forces, self.nsteps, type(self).__name__):
             self.step_check.reset()
-        observed = self._observed(self.nsteps + 1)
+        observed = observed_at(self.observers, self.nsteps + 1)
         self.stepper.step(self._dt, self.nsteps, self.needs_energy or observed,
                           self.stress_on_observed_steps and observed)
 
-    def _observed(self, step):
-        """Whether an observer that reads the calculator's results is due at ``step``."""
-        for function, interval, _, _ in self.observers:
-            if ((step % interval == 0 if interval > 0 else step == -interval)
-                    and getattr(function, "wants_properties", True)):
-                return True
-        return False
-
     def _evaluate_forces(self):
         """Place the atoms from the state, call the calculator, reduce to bodies."""
-        observed = self._observed(self.nsteps)
+        observed = observed_at(self.observers, self.nsteps)
         self.evaluator.begin_step(self.nsteps, energy=self.needs_energy or observed,
                                   stress=self.stress_on_observed_steps and observed)
         self.evaluator.evaluate(self.state)

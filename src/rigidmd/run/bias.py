@@ -43,6 +43,7 @@ import numpy as np
 from ase import units
 
 from rigidmd.config import TIME_UNITS, ConfigError
+from rigidmd.config.diagnostics import own_calculator
 from rigidmd.core.configurational import ConfigurationalTemperature, block_mean, block_ratio
 from rigidmd.run.fingerprint import fingerprint
 from rigidmd.run.report import Progress
@@ -246,9 +247,7 @@ def _run_leg(config, leg, directory, stop, progress, probes, seed):
         remaining = leg.total - dyn.nsteps
         dyn.attach(_Sampler(dyn, leg), interval=leg.every)
         if leg.tconf_every:
-            calc = config.calculator
-            if calc.processes is None and calc.address is None:  # in process: one of its own
-                own = calc.build(dyn.atoms.copy(), directory / "engine")
+            own = own_calculator(config.calculator, dyn.atoms, directory / "engine")
             dyn.attach(_Conf(dyn, leg, seed, probes, own), interval=leg.tconf_every)
         dyn.attach(Progress(dyn, remaining, stream=progress),
                    interval=max(1, remaining // 1000))

@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from rigidmd.config import TIME_UNITS
+from rigidmd.config.diagnostics import own_calculator
 from rigidmd.ipi import EngineError
 from rigidmd.run.checkpointing import RunCheckpoints
 from rigidmd.run.directory import NamedOutput, RunFiles
@@ -329,8 +330,9 @@ class Run:
             dyn.attach(NamedOutput(writer, out.mdanalysis), interval=out.interval)
         dyn.attach(Progress(dyn, remaining), interval=max(1, remaining // 1000))
         dyn.attach(lambda: self.checkpoints.write(dyn, writer), interval=out.checkpoint_interval)
-        # The diagnostics (configurational temperature): they report in the summary.
-        self.diagnostics = self._diagnostics(dyn)
+        if config.diagnostics and config.diagnostics.configurational_temperature:  # summary's
+            self.diagnostics = config.diagnostics.attach(
+                dyn, own_calculator(config.calculator, dyn.atoms, out.directory / "engine"))
         dyn.attach(stop.check, interval=1)  # last: after every output of the step
         print(f"{dyn.bodies} with {dyn.scheme.name} integrator, {describe(dyn)}, "
               f"steps {dyn.nsteps + 1}-{total} of {config.run.timestep / TIME_UNITS['fs']:g} fs",
@@ -343,17 +345,6 @@ class Run:
         if at_once:
             return status  # a second Ctrl-C stopped the steps at once
         return self._finish(dyn, status, stop, (rows, steps, resumed_at), t0)
-
-    def _diagnostics(self, dyn):
-        """The configuration's diagnostics, attached; an in-process calculator of their own."""
-        section = self.config.diagnostics
-        if section is None or section.configurational_temperature is None:
-            return []
-        calc = self.config.calculator
-        own = None
-        if calc.processes is None and calc.address is None:
-            own = calc.build(dyn.atoms.copy(), self.outputs.directory / "engine")
-        return section.attach(dyn, calculator=own)
 
     def _finish(self, dyn, status, stop, statistics, t0):
         """The final checkpoint, the summary and the plot; the exit status."""
