@@ -475,3 +475,19 @@ def test_the_engine_folder_is_not_a_link_outside(tmp_path):
     raw = config(tmp_path, calculator={"name": "lammps", "commands": LJ,
                                        "address": "unix:rigidmd-link-test"})
     assert "symbolic link" in refused(raw, "calculator.address")
+
+
+@pytest.mark.parametrize("level", ["fast", "slow"])
+def test_a_split_level_s_engine_folder_is_not_a_link_outside(tmp_path, level):
+    """A level of a split with ``address:`` writes its engine's input to
+    <outputs.directory>/engine/<level>; that folder was not checked (only the top-level
+    ``calculator.address`` was), so a link there led the input outside the run's folder."""
+    (tmp_path / "out" / "engine").mkdir(parents=True)
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "out" / "engine" / level).symlink_to(tmp_path / "elsewhere")
+    engine = {"name": "lammps", "commands": LJ, "address": "unix:rigidmd-link-test"}
+    other = {"name": "lammps", "commands": LJ}
+    split = {"fast": engine if level == "fast" else other,
+             "slow": engine if level == "slow" else other, "substeps": 2}
+    raw = config(tmp_path, calculator=split)
+    assert "symbolic link" in refused(raw, f"calculator.{level}.address")

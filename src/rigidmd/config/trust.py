@@ -546,8 +546,12 @@ def check_output_paths(raw, trust=False, base=None):
     files = dict(DEFAULT_FILES)  # (rigidmd relax writes relax's without a relax: section)
     files["outputs.directory"] = ".rigidmd.lock"  # the run's lock (rigidmd.run.outputs)
     calc = raw.get("calculator")
-    if isinstance(calc, dict) and calc.get("address") is not None:
-        files["calculator.address"] = "engine"  # the input of an engine started elsewhere
+    if isinstance(calc, dict):  # the input of an engine started elsewhere (a split's level's)
+        for level in (None, "fast", "slow", "full"):
+            spec = calc if level is None else calc.get(level)
+            if isinstance(spec, dict) and spec.get("address") is not None:
+                where = "calculator" if level is None else f"calculator.{level}"
+                files[f"{where}.address"] = "engine" if level is None else f"engine/{level}"
     for section, keys in OUTPUT_FILES.items():
         values = raw.get(section)
         if isinstance(values, dict):

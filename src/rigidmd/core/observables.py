@@ -348,11 +348,15 @@ class RigidObservables:
         """(kinetic energy in eV, temperature in K) as the log and the summary show them.
 
         The Atoms' (:func:`rigidmd.core.dof.kinetic_energy`,
-        :func:`rigidmd.core.dof.temperature`), or, when a part keeps its own
-        (:attr:`reports_own_kinetic_energies`), the sum of
-        :meth:`get_kinetic_energies` over every kinetic degree of freedom.
+        :func:`rigidmd.core.dof.temperature`), or the sum of
+        :meth:`get_kinetic_energies` over every kinetic degree of freedom when a
+        part keeps its own (:attr:`reports_own_kinetic_energies`) or the total
+        momentum is held: the centre of mass's kinetic energy, a constant then and
+        not among the degrees of freedom counted, is left out (ASE's
+        ``atoms.get_temperature()`` counts it over the same degrees of freedom, and
+        reads higher by ``P²/(M k_B N_f)`` when the held momentum is not zero).
         """
-        if not self.reports_own_kinetic_energies:
+        if not (self.reports_own_kinetic_energies or self.holds_momentum):
             return kinetic_energy(self.atoms), temperature(self.atoms)
         ekin = sum(self.get_kinetic_energies())
         return ekin, kinetic_temperatures(

@@ -19,9 +19,11 @@ point-particle forces, virial, energy: :attr:`~SplitForceEvaluator.fast_record`,
 sums after each outer step, so coupling parts, observers and checkpoints see the
 full model.  A part acting in the middle of the step (the O of
 :class:`~rigidmd.RigidLangevinBAOAB`) acts in the middle of the outer step, for
-:math:`\Delta t`: between inner steps ``k/2`` and ``k/2 + 1`` for even ``k``; for odd
-``k`` inside the middle inner step, which is then the ``baoab`` scheme's (its two
-half drifts around the O step).  A barostat's drift (MTK's, C-rescale's move)
+:math:`\Delta t`, inside inner step ``k//2`` (counted from 0: the middle one for odd
+``k``, the one just after the outer step's midpoint for even ``k``), which is then the
+``baoab`` scheme's: its two half drifts around the O step.  O always sits between half
+drifts, as BAOAB needs; between two kicks (the midpoint of an even ``k``) the momenta it
+reports would carry velocity Verlet's kinetic bias.  A barostat's drift (MTK's, C-rescale's move)
 acts in the inner drifts: MTK's cell velocity carries the cell through each
 inner drift; C-rescale moves the cell once, in the first.  A Monte Carlo cell
 move, made in the first half, re-evaluates both levels.  With a slow part that
@@ -36,7 +38,7 @@ from rigidmd.core.forces import ForceEvaluator
 from rigidmd.core.record import StepRecord
 from rigidmd.core.schemes import Scheme, resolve_scheme
 from rigidmd.core.split import MultipleTimeStep
-from rigidmd.core.stepcontext import StepContext, apply_middle, fused_baoab, fused_no_squish
+from rigidmd.core.stepcontext import StepContext, fused_baoab, fused_no_squish
 
 __all__ = ["SplitRecord", "SplitForceEvaluator", "RespaStep", "respa_for", "record_for",
            "evaluator_for", "respa_step"]
@@ -279,10 +281,8 @@ class RespaStep:
             acts = bool(ctx.middle)
             energy, stress = ev.asked
             for j in range(k):
-                if acts and k % 2 == 0 and j == centre:
-                    apply_middle(ctx, dt)  # O for the outer step, between inner steps
                 ev.fast.begin_step(ev.step, *((energy, stress) if j == k - 1 else (False, False)))
-                inside = acts and k % 2 == 1 and j == centre
+                inside = acts and j == centre  # O between the half drifts of inner step k//2
                 self._inner_step(middle if inside else plain, h, inside)
                 record.velocities_changed()
             ev.evaluate_slow(state)

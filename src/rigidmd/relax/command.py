@@ -95,7 +95,7 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
                                   "continue it with --resume or replace it with --overwrite")
             for path in existing:
                 path.unlink()
-        atoms.calc = calculator.build(atoms)
+        atoms.calc = calculator.build(atoms, directory / "engine")
         # Installed before the relaxation's own handlers and kept after them: a signal once
         # the relaxation has ended is noted, never a kill without a word (exit -15).
         after = StopSignals()

@@ -45,6 +45,7 @@ from ase import units
 from rigidmd.config import TIME_UNITS, ConfigError
 from rigidmd.config.diagnostics import own_calculator
 from rigidmd.core.configurational import ConfigurationalTemperature, block_mean, block_ratio
+from rigidmd.core.observables import kinetic_dof
 from rigidmd.run.fingerprint import fingerprint
 from rigidmd.run.report import Progress
 from rigidmd.run.signals import EXIT_STATUS, StopRequest, StopSignals
@@ -187,8 +188,9 @@ class _Sampler:
         s = leg.samples
         s["step"].append(int(dyn.nsteps))
         s["U"].append(float(dyn.atoms.get_potential_energy()))
-        s["K_tr"].append(float(dyn.get_translational_kinetic_energy()))
-        s["K_rot"].append(float(dyn.get_rotational_kinetic_energy()))
+        K_tr, K_rot = dyn.get_kinetic_energies()  # as reported: BAOAB's after O
+        s["K_tr"].append(float(K_tr))
+        s["K_rot"].append(float(K_rot))
 
 
 class _Conf:
@@ -241,8 +243,7 @@ def _run_leg(config, leg, directory, stop, progress, probes, seed):
     # Samples taken after the checkpoint (a failure, a second Ctrl-C) are taken again.
     leg.trim(dyn.nsteps)
     try:
-        leg.dof = (dyn.translational_dof - (3 if dyn.holds_momentum else 0),
-                   dyn.rotational_dof)
+        leg.dof = kinetic_dof(dyn.model, dyn.holds_momentum)
         leg.bodies = dyn.model.n_bodies or dyn.model.n_free
         remaining = leg.total - dyn.nsteps
         dyn.attach(_Sampler(dyn, leg), interval=leg.every)

@@ -13,7 +13,6 @@ import numpy as np
 from ase import units
 
 from rigidmd.config import TIME_UNITS
-from rigidmd.core.dof import temperature
 
 __all__ = ["Progress", "time_left", "observables", "describe", "summary"]
 
@@ -75,7 +74,7 @@ class Progress:
         bar = "#" * int(self.width * fraction)
         speed = f"{rate:8.1f}" if rate is not None else f"{'--':>8}"
         line = (f"[{bar:<{self.width}}] {done:>{len(str(self.total))}}/{self.total} steps "
-                f"{speed} steps/s  T {temperature(self.dyn.atoms):7.1f} K"
+                f"{speed} steps/s  T {self.dyn.get_reported_kinetic_energy()[1]:7.1f} K"
                 f"{time_left(self.total - done, rate or 0.0)}")
         if self.tty:
             self.stream.write("\r" + line + ("\n" if done >= self.total else ""))
