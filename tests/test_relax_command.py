@@ -641,7 +641,13 @@ def test_a_damaged_trajectory_continues_from_the_state_file(tmp_path, monkeypatc
     assert relax_only(raw, out, mode="resume") == 0
     assert (f"relax: {traj} cannot be read (" in out.getvalue() and "it is kept as "
             "relax.damaged.traj, and the relaxation continues from the positions in "
-            f"{tmp_path / 'out' / 'relax.state.npz'} in a new relax.traj") in out.getvalue()
+            f"{tmp_path / 'out' / 'relax.state.npz'} in a new relax.traj, whose steps count "
+            "from 0 again") in out.getvalue()
     assert "continuing with the optimizer's memory" in out.getvalue()
     assert (tmp_path / "out" / "relax.damaged.traj").read_bytes() == damaged
     np.testing.assert_array_equal(read(traj).positions, minimum.positions)
+    # The new trajectory starts with its start frame and the log's steps count from it (the
+    # frame was missing and the count went on from the old one), so a later --resume, which
+    # counts the trajectory's frames, continues the log's count.
+    log = (tmp_path / "out" / "relax.log").read_text().splitlines()
+    assert int(log[-1].split()[1]) == len(read(traj, ":")) - 1

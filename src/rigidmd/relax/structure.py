@@ -176,7 +176,7 @@ def _from_state(atoms, trajectory, state_file, reason, stream):
     if stream is not None:
         print(f"relax: {trajectory} cannot be read ({reason}); it is kept as {aside.name}, and "
               f"the relaxation continues from the positions in {state_file} in a new "
-              f"{trajectory.name}", file=stream)
+              f"{trajectory.name}, whose steps count from 0 again", file=stream)
     return done
 
 
@@ -256,6 +256,9 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     observers = (report,) if stop is None else (report, lambda *_: stop.check())
     continuing = hint or "rigidmd relax CONFIG --resume"
     status = 0
+    # A trajectory rebuilt from the state file (the old one unreadable) starts anew with its
+    # start frame, so its steps count from 0 again (a later --resume counts its frames).
+    first_step = done if resume and trajectory.exists() else 0
     try:
         with stop or nullcontext(), open(log, "a" if resume else "w",
                                          encoding="utf-8") as logfile:
@@ -264,7 +267,7 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
                            scalar_pressure=section.pressure, trajectory=str(trajectory),
                            logfile=logfile, append_trajectory=resume, observers=observers,
                            state_file=state_file, resume=exact, state_label=label,
-                           first_step=done if resume else 0)
+                           first_step=first_step)
     except (RelaxationFailed, NonFiniteForceError) as err:  # the atoms are at a whole step
         raise type(err)(f"{err}, the last frame of {trajectory}; continue with: "
                         f"{continuing}") from None
