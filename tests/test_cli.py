@@ -442,8 +442,8 @@ def _progress_lines(monkeypatch, tty, total, first_step_s, step_s):
 
     clock = _Clock()
     monkeypatch.setattr(report, "time", clock)
-    monkeypatch.setattr(report, "temperature", lambda atoms: 300.0)
-    dyn = SimpleNamespace(nsteps=0, atoms=None)
+    dyn = SimpleNamespace(nsteps=0, atoms=None,  # the temperature the log reports
+                          get_reported_kinetic_energy=lambda: (0.0, 300.0))
     stream = _Stream(tty)
     progress = report.Progress(dyn, total, stream=stream)
     progress()  # step 0, before any step (ASE calls the observers there too)
