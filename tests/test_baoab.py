@@ -13,9 +13,8 @@ group, computed here by quadrature.
 
 import numpy as np
 import pytest
-from ase import Atoms, units
-from ase.calculators.calculator import Calculator, all_changes
-from helpers import block_mean, mixture
+from ase import units
+from helpers import benchmark_module, block_mean, mixture
 
 from rigidmd import RigidDynamics, RigidLangevin, RigidLangevinBAOAB
 from rigidmd.core import _numba
@@ -24,45 +23,9 @@ from rigidmd.couplings import _kernels
 from rigidmd.couplings.baoab import LangevinBAOABThermostat
 from rigidmd.couplings.base import NotExportable
 
-
-class Tethers(Calculator):
-    """Each atom pulled to its anchor by a spring of stiffness ``k`` times its mass."""
-
-    implemented_properties = ("energy", "forces")
-
-    def __init__(self, anchors, masses, k):
-        super().__init__()
-        self.anchors, self.km = anchors, k * masses[:, None]
-
-    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
-        super().calculate(atoms, properties, system_changes)
-        d = self.atoms.positions - self.anchors
-        self.results = {"energy": 0.5 * float(np.sum(self.km * d * d)), "forces": -self.km * d}
-
-
-def tethered_tops(n, omega):
-    """``n`` rigid waters (TIP3P's geometry) far apart, tethered at frequency ``omega``."""
-    water = np.array([[0.0, 0, 0], [0.7570, 0.5859, 0], [-0.7570, 0.5859, 0]])
-    atoms = Atoms("OH2" * n, positions=np.concatenate([water + [5.0 * i, 0, 0]
-                                                       for i in range(n)]))
-    k = omega**2
-    atoms.calc = Tethers(atoms.positions.copy(), atoms.get_masses(), k)
-    return atoms, k, [[3 * i, 3 * i + 1, 3 * i + 2] for i in range(n)]
-
-
-def exact_rotational_energy(moments, k, kT):
-    r""":math:`\langle k(1-\cos\theta)\,n^\mathsf{T}In\rangle` over the Haar measure
-    :math:`\sin^2(\theta/2)\,d\theta\,d^2n`, by quadrature (converged to 1e-6)."""
-    theta = np.linspace(0.0, np.pi, 2001)
-    x, wx = np.polynomial.legendre.leggauss(96)
-    phi = np.linspace(0.0, 2 * np.pi, 193)[:-1]
-    sin = np.sqrt(1 - x[:, None] ** 2)
-    nIn = (moments[0] * (sin * np.cos(phi)) ** 2 + moments[1] * (sin * np.sin(phi)) ** 2
-           + moments[2] * x[:, None] ** 2)
-    U = k * (1 - np.cos(theta))[:, None, None] * nIn
-    weight = np.exp(-U / kT) * (np.sin(theta / 2) ** 2)[:, None, None] * wx[:, None]
-    return float(np.trapezoid((U * weight).sum((1, 2)), theta)
-                 / np.trapezoid(weight.sum((1, 2)), theta))
+#: The tethered tops and their exact rotational energy: validation/baoab_tethered_tops.py's.
+TOPS = benchmark_module("baoab_tethered_tops")
+tethered_tops, exact_rotational_energy = TOPS.tethered_tops, TOPS.exact_rotational_energy
 
 
 def sample(cls, dt, steps, n=128, T=300.0, equilibration=200, seed=1, backend=None):

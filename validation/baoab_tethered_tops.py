@@ -23,6 +23,8 @@ T, N, OMEGA = 300.0, 128, 0.125 / units.fs
 
 
 class Tethers(Calculator):
+    """Each atom pulled to its anchor by a spring of stiffness ``k`` times its mass."""
+
     implemented_properties = ("energy", "forces")
 
     def __init__(self, anchors, masses, k):
@@ -35,15 +37,19 @@ class Tethers(Calculator):
         self.results = {"energy": 0.5 * float(np.sum(self.km * d * d)), "forces": -self.km * d}
 
 
-def tops():
+def tethered_tops(n, omega):
+    """``n`` rigid waters (TIP3P's geometry) far apart, tethered at frequency ``omega``."""
     water = np.array([[0.0, 0, 0], [0.7570, 0.5859, 0], [-0.7570, 0.5859, 0]])
-    atoms = Atoms("OH2" * N, positions=np.concatenate([water + [5.0 * i, 0, 0]
-                                                       for i in range(N)]))
-    atoms.calc = Tethers(atoms.positions.copy(), atoms.get_masses(), OMEGA**2)
-    return atoms, [[3 * i, 3 * i + 1, 3 * i + 2] for i in range(N)]
+    atoms = Atoms("OH2" * n, positions=np.concatenate([water + [5.0 * i, 0, 0]
+                                                       for i in range(n)]))
+    k = omega**2
+    atoms.calc = Tethers(atoms.positions.copy(), atoms.get_masses(), k)
+    return atoms, k, [[3 * i, 3 * i + 1, 3 * i + 2] for i in range(n)]
 
 
 def exact_rotational_energy(moments, k, kT):
+    r""":math:`\langle k(1-\cos\theta)\,n^\mathsf{T}In\rangle` over the Haar measure
+    :math:`\sin^2(\theta/2)\,d\theta\,d^2n`, by quadrature (converged to 1e-6)."""
     theta = np.linspace(0.0, np.pi, 2001)
     x, wx = np.polynomial.legendre.leggauss(96)
     phi = np.linspace(0.0, 2 * np.pi, 193)[:-1]
@@ -63,7 +69,7 @@ def block_mean(values, n=10):
 
 def point(cls, fs):
     dt, kT, k = fs * units.fs, units.kB * T, OMEGA**2
-    atoms, bodies = tops()
+    atoms, _, bodies = tethered_tops(N, OMEGA)
     dyn = cls(atoms, dt, T, 1.0 / (50 * units.fs), rng=np.random.default_rng(7), fixcm=False,
               bodies=bodies)
     anchors, M = dyn.state.X.copy(), dyn.model.mass

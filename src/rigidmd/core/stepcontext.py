@@ -270,18 +270,25 @@ def fused_no_squish(ctx, dt):
             s.v += 0.5 * dt * record.f / m.free_masses[:, None]
             s.x += dt * s.v
             ctx.positions[m.free] = s.x
+    _force_and_closing_kick(ctx, dt)
+
+
+def _force_and_closing_kick(ctx, dt):
+    """The fused steps' end: the force call, then :func:`rigidmd.core._numba.second_half`
+    (body forces and torques, closing kick, momenta) and the free atoms' closing kick."""
+    s, record, m = ctx.state, ctx.record, ctx.model
+    body, atom, index = m.packed
     evaluator = ctx.evaluator
     forces = evaluator.calculator_forces(s, check=False)
     if ctx.n_free:
         evaluator.check_forces(forces)  # before anything is written
     # The body forces and torques are overwritten only after the forces were found finite.
-    if not _numba.second_half(s.data, n, record.F, record.tau, body, atom, index, dt, forces,
-                              record.r, ctx.momenta, ctx.write_momenta):
+    if not _numba.second_half(s.data, ctx.n_bodies, record.F, record.tau, body, atom, index,
+                              dt, forces, record.r, ctx.momenta, ctx.write_momenta):
         evaluator.check_forces(forces)
         raise NonFiniteForceError(f"calculator returned forces whose sum is not finite after "
                                   f"step {evaluator.step}")
     if ctx.n_free:
-        m = ctx.model
         record.f = forces[m.free]
         s.v += 0.5 * dt * record.f / m.free_masses[:, None]
         if ctx.write_momenta:
@@ -317,20 +324,7 @@ def fused_baoab(ctx, dt):
     if ctx.n_free:
         s.x += half * s.v
         ctx.positions[m.free] = s.x
-    evaluator = ctx.evaluator
-    forces = evaluator.calculator_forces(s, check=False)
-    if ctx.n_free:
-        evaluator.check_forces(forces)
-    if not _numba.second_half(s.data, n, record.F, record.tau, body, atom, index, dt, forces,
-                              record.r, ctx.momenta, ctx.write_momenta):
-        evaluator.check_forces(forces)
-        raise NonFiniteForceError(f"calculator returned forces whose sum is not finite after "
-                                  f"step {evaluator.step}")
-    if ctx.n_free:
-        record.f = forces[m.free]
-        s.v += half * record.f / m.free_masses[:, None]
-        if ctx.write_momenta:
-            ctx.momenta[m.free] = m.free_masses[:, None] * s.v
+    _force_and_closing_kick(ctx, dt)
 
 
 #: The ``baoab`` scheme's operators with their dt scales, for the barostat's path (the same
