@@ -11,13 +11,9 @@
   :class:`rigidmd.relax.filter.Relaxation`);
 * the ``relax:`` section and ``rigidmd relax`` (:mod:`rigidmd.relax.structure`,
   :mod:`rigidmd.relax.command`).
-
-``rigidmd.relax.Relaxation``, :func:`relax_bodies`'s result in rigidmd 0.1.0, is
-a deprecated name of :class:`BodyRelaxation` (it warns).
 """
 
 from rigidmd.relax.bodies import BodyRelaxation, relax_bodies
-from rigidmd.relax.bodies import old_name as __getattr__  # noqa: F401 - 0.1.0's Relaxation
 from rigidmd.relax.cell import CELL_MODES
 from rigidmd.relax.filter import OPTIMIZERS, RigidFilter, optimizer_class, relax
 from rigidmd.relax.lbfgs import RigidLBFGS
