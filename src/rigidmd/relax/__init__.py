@@ -9,8 +9,10 @@
   the internal geometry a calculator prefers, before it is made rigid (its
   result is a :class:`BodyRelaxation`; :func:`relax`'s is a
   :class:`rigidmd.relax.filter.Relaxation`);
-* the ``relax:`` section and ``rigidmd relax`` (:mod:`rigidmd.relax.structure`,
-  :mod:`rigidmd.relax.command`).
+
+This package is a library: it imports only the core.  The ``relax:`` section of a
+run and ``rigidmd relax`` are the application's (:mod:`rigidmd.run.relaxstructure`,
+:mod:`rigidmd.run.relaxcommand`).
 """
 
 from rigidmd.relax.bodies import BodyRelaxation, relax_bodies
@@ -18,13 +20,7 @@ from rigidmd.relax.cell import CELL_MODES
 from rigidmd.relax.filter import OPTIMIZERS, RigidFilter, optimizer_class, relax
 from rigidmd.relax.lbfgs import RigidLBFGS
 from rigidmd.relax.precon import RigidPrecon
-from rigidmd.relax.structure import (
-    RelaxationNotConverged,
-    RelaxationStopped,
-    relax_structure,
-)
 
 __all__ = ["relax", "RigidFilter", "RigidLBFGS", "RigidPrecon", "OPTIMIZERS", "optimizer_class",
-           "CELL_MODES", "relax_bodies", "BodyRelaxation", "relax_structure",
-           "RelaxationNotConverged", "RelaxationStopped"]
+           "CELL_MODES", "relax_bodies", "BodyRelaxation"]
 

@@ -1,4 +1,4 @@
-"""Relaxing the structure of a run: the ``relax:`` section (the command: rigidmd.relax.command).
+"""Relaxing the structure of a run: the ``relax:`` section (the command: relaxcommand).
 
 :func:`relax_structure` relaxes the rigid bodies (and the cell) of a run's
 start with :func:`rigidmd.relax.filter.relax`, writing the optimizer's trajectory
@@ -152,7 +152,7 @@ def _from_state(atoms, trajectory, state_file, reason, stream):
     """Continue from the positions of a whole ``state_file`` of these atoms instead of a
     damaged ``trajectory``, which is kept under another name; steps taken, or None."""
     from rigidmd.relax.state import read_state
-    from rigidmd.run.outputs import OutputError, _ulm_header
+    from rigidmd.run.outputs import OutputError, ulm_header
 
     if state_file is None:
         return None
@@ -163,7 +163,7 @@ def _from_state(atoms, trajectory, state_file, reason, stream):
     if state is None or state["positions"].shape != atoms.positions.shape:
         return None
     try:
-        done = max(_ulm_header(trajectory)[0] - 1, 0)  # the frames its header counts
+        done = max(ulm_header(trajectory)[0] - 1, 0)  # the frames its header counts
     except (OSError, OutputError):
         done = 0
     aside, n = trajectory.with_name(f"{trajectory.stem}.damaged{trajectory.suffix}"), 1
