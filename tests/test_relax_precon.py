@@ -88,8 +88,8 @@ def test_the_two_relaxation_results_have_two_names():
     the old name is gone (no release was made with it)."""
     import rigidmd.relax
     from rigidmd.relax import BodyRelaxation
-    from rigidmd.relax.bodies import BodyRelaxation as same
     from rigidmd.relax.filter import Relaxation
+    from rigidmd.relax.relaxbodies import BodyRelaxation as same
 
     assert same is BodyRelaxation and BodyRelaxation is not Relaxation
     assert "Relaxation" not in rigidmd.relax.__all__

@@ -20,10 +20,10 @@ Everything here speaks ASE units (eV, Å, amu, ASE time); see
 :mod:`rigidmd.lammps.library` for the unit constants.
 """
 
-from rigidmd.lammps.calculator import LAMMPSCalculator
 from rigidmd.lammps.data import LammpsData, write_data
 from rigidmd.lammps.deck import export_lammps
 from rigidmd.lammps.engine import LAMMPSEngine
+from rigidmd.lammps.inprocess import LAMMPSCalculator
 from rigidmd.lammps.library import (
     DEFAULT_CMDARGS,
     LAMMPS_METAL_FTM2V,
