@@ -9,6 +9,7 @@ imports the top-level ``rigidmd`` (it only re-exports).
 """
 
 import ast
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -204,7 +205,8 @@ def test_importing_lammps_imports_neither_the_engine_nor_the_reference_runs():
         "print(lammps.LAMMPSEngine.__module__, 'rigidmd.lammps.engine' in sys.modules)\n"
         "print(all(getattr(lammps, name) is not None for name in lammps.__all__))\n")
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                         check=True, env={"PYTHONPATH": str(SOURCE.parent)}).stdout.splitlines()
+                         check=True, env={**os.environ, "PYTHONPATH": str(SOURCE.parent)}
+                         ).stdout.splitlines()
     assert out == ["['rigidmd.lammps.lazy']", "[]", "rigidmd.lammps.engine True", "True"], out
 
 
