@@ -166,7 +166,7 @@ def test_the_one_rule_for_a_body_spanning_half_the_cell():
     less than half the cell along every cell vector, computed atom by atom, so the
     minimum image is unambiguous (random sheared and shrunk cells around the threshold)."""
     from rigidmd.core.bodies import body_radii, body_too_wide, cell_widths, check_bodies_fit
-    from rigidmd.core.dynamics import RigidVerlet
+    from rigidmd.md.verlet import RigidVerlet
 
     atoms = co2_water_mixture(n_co2=2, n_water=2, box=True)
     dyn = RigidVerlet(atoms, 1.0, bodies="mol-id")

@@ -15,7 +15,7 @@ import pytest
 
 from rigidmd.config import ConfigError, check_config
 from rigidmd.config.trust import ALLOWED_CALCULATORS, GivenOnCommandLine
-from rigidmd.relax.command import relax_only
+from rigidmd.run.relaxcommand import relax_only
 
 WATERS = {"builtin": "water_cluster", "n_molecules": 2, "seed": 0}
 LJ = ["pair_style lj/cut 5.0", "pair_coeff * * 0.0 1.0"]

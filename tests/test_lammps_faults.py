@@ -16,7 +16,7 @@ from ase.calculators.calculator import Calculator, all_changes
 from ase.io import write
 from helpers import PPPM_27, lammps_instances, water_box_27
 
-import rigidmd.lammps.calculator as lammps_calculator
+import rigidmd.lammps.inprocess as lammps_calculator
 from rigidmd import RigidBodies, RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.core.checkpoint import save_checkpoint
 from rigidmd.lammps import LAMMPSCalculator

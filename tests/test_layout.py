@@ -1,22 +1,47 @@
-"""The package's layout, read with ``ast``: no private access across objects, no import cycles.
+"""The package's layout, read with ``ast``: layers, no private access across objects, no cycles.
 
 Checked over every module under ``src/rigidmd`` (lazy imports inside functions
-count: a lazy import is still a dependency); modules are grouped in packages
-by concern (``core``, ``couplings``, ``run``, ``systems``, ...: see
-``docs/developer/layout.md``), with few left at the top, and no module or class
-grows past what a reader takes in.
+count: a lazy import is still a dependency).  Modules are grouped in packages
+by concern, and the packages in layers (:data:`LAYERS`, drawn in
+``docs/developer/layout.md``): a package imports only the packages its row
+names, so the lower layers build and test without the upper ones, and nothing
+imports the top-level ``rigidmd`` (it only re-exports).
 """
 
 import ast
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 SOURCE = Path(__file__).resolve().parents[1] / "src" / "rigidmd"
-#: Longest module accepted (lines).
-MAX_LINES = 700
 #: Most modules left flat in ``src/rigidmd`` (``__init__.py`` not counted).
 MAX_TOP_MODULES = 12
-#: Longest class accepted (lines, docstring included).
-MAX_CLASS_LINES = 350
+
+#: The layers, lowest first: the step and its interfaces, the coupling parts, the user's
+#: dynamics classes, the libraries built on them, LAMMPS, relaxation, the configuration,
+#: the application.  A top-level module (``water.py``, ``openmm.py``) is a package here.
+_BASE = ("core", "couplings", "md")
+_LIBRARIES = ("water", "systems", "ipi", "openmm", "mdanalysis")
+#: Package -> the packages it may import (itself always): the layer contract.  ``rigidmd``
+#: is the top-level ``__init__``, which re-exports and which no module imports.
+LAYERS = {
+    "core": (),
+    "couplings": ("core",),
+    "md": ("core", "couplings"),
+    "water": _BASE,
+    "systems": _BASE + ("water",),
+    "ipi": _BASE,
+    "openmm": _BASE + ("water",),
+    "mdanalysis": _BASE,
+    "lammps": _BASE + _LIBRARIES,
+    "relax": ("core",),  # a library: the relax: section and command are run's
+    "config": _BASE + _LIBRARIES + ("lammps", "relax"),
+    "run": _BASE + _LIBRARIES + ("lammps", "relax", "config"),
+    "rigidmd": _BASE + _LIBRARIES + ("lammps", "relax", "config", "run"),
+}
+#: Basenames several packages may use: a package's ``__init__`` and its compiled kernels.
+SHARED_BASENAMES = ("__init__", "_numba")
 
 
 def modules():
@@ -50,13 +75,16 @@ def private_accesses(tree):
     return found
 
 
-def imports(name, tree, known):
-    """The package modules ``name`` imports, anywhere in its code."""
+def import_lines(name, tree, known):
+    """``(line, module)`` of every package module ``name`` imports, anywhere in its code.
+
+    A string that is a dotted module name (a lazy import table, ``import_module``) counts.
+    """
     package = name if known[name].name == "__init__.py" else name.rpartition(".")[0]
     found = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            found |= {alias.name for alias in node.names}
+            found |= {(node.lineno, alias.name) for alias in node.names}
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:
@@ -64,8 +92,67 @@ def imports(name, tree, known):
                 base = ".".join(anchor + ([base] if base else []))
             for alias in node.names:
                 # ``from package import module`` depends on the module, not the package.
-                found.add(f"{base}.{alias.name}" if f"{base}.{alias.name}" in known else base)
-    return {module for module in found if module in known and module != name}
+                full = f"{base}.{alias.name}"
+                found.add((node.lineno, full if full in known else base))
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and "." in node.value:
+            found.add((node.lineno, node.value))
+    return sorted((line, module) for line, module in found
+                  if module in known and module != name)
+
+
+def imports(name, tree, known):
+    """The package modules ``name`` imports, anywhere in its code."""
+    return {module for _, module in import_lines(name, tree, known)}
+
+
+def package_of(module):
+    """``rigidmd.core.state`` -> ``core``; ``rigidmd.water`` -> ``water``; ``rigidmd`` itself."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "rigidmd"
+
+
+def forbidden_imports(known, layers=None):
+    """``module:line imports target (...)`` for each import its package's row does not allow."""
+    layers = LAYERS if layers is None else layers
+    offences = []
+    for name, path in known.items():
+        own = package_of(name)
+        for line, target in import_lines(name, ast.parse(path.read_text()), known):
+            other = package_of(target)
+            if other == "rigidmd" or (other != own and other not in layers.get(own, ())):
+                offences.append(f"{name}:{line} imports {target} ({own} may import "
+                                f"{', '.join(layers.get(own, ())) or 'nothing else'})")
+    return offences
+
+
+def cycles_of(graph):
+    """Every cycle a depth-first search of ``{node: successors}`` closes."""
+    cycles, state, stack = [], {}, []
+
+    def visit(node):  # a back edge closes a cycle
+        state[node] = "open"
+        stack.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == "open":
+                cycles.append(stack[stack.index(nxt):] + [nxt])
+            elif nxt not in state:
+                visit(nxt)
+        stack.pop()
+        state[node] = "done"
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node)
+    return cycles
+
+
+def shared_basenames(paths):
+    """``{basename: [modules]}`` of the basenames two modules share (allowed ones aside)."""
+    found = {}
+    for name, path in paths.items():
+        found.setdefault(path.stem, []).append(name)
+    return {base: names for base, names in sorted(found.items())
+            if len(names) > 1 and base not in SHARED_BASENAMES}
 
 
 def test_no_module_reads_another_objects_private_attributes():
@@ -80,50 +167,73 @@ def test_no_import_cycles():
     known = modules()
     graph = {name: imports(name, ast.parse(path.read_text()), known)
              for name, path in known.items()}
-    cycles, state, stack = [], {}, []
-
-    def visit(node):  # depth-first search; a back edge closes a cycle
-        state[node] = "open"
-        stack.append(node)
-        for nxt in sorted(graph[node]):
-            if state.get(nxt) == "open":
-                cycles.append(stack[stack.index(nxt):] + [nxt])
-            elif nxt not in state:
-                visit(nxt)
-        stack.pop()
-        state[node] = "done"
-
-    for node in sorted(graph):
-        if node not in state:
-            visit(node)
+    cycles = cycles_of(graph)
     assert cycles == [], "\n".join(" -> ".join(cycle) for cycle in cycles)
 
 
-def test_the_checks_find_what_they_look_for():
-    """The two checks above cannot pass vacuously."""
+def test_every_import_obeys_the_layers():
+    """Each import (eager or lazy) goes to the package's own modules or to a package its
+    row of :data:`LAYERS` names; nothing imports the top-level ``rigidmd``."""
+    offences = forbidden_imports(modules())
+    assert offences == [], "\n".join(offences)
+
+
+def test_the_layers_have_no_cycle_and_cover_every_package():
+    assert cycles_of({package: set(allowed) for package, allowed in LAYERS.items()}) == []
+    assert all(allowed in LAYERS for row in LAYERS.values() for allowed in row)
+    assert not any("rigidmd" in row for row in LAYERS.values())
+    packages = {package_of(name) for name in modules()}
+    assert packages == set(LAYERS), packages ^ set(LAYERS)
+
+
+def test_no_two_modules_share_a_basename():
+    """``state`` meant rigidmd.core.state or a relaxation's state: each basename names one
+    module (``__init__`` and each package's compiled kernels ``_numba`` aside)."""
+    assert shared_basenames(modules()) == {}
+
+
+def test_importing_lammps_imports_neither_the_engine_nor_the_reference_runs():
+    """``rigidmd.lammps``'s names are imported on first access (PEP 562): importing the
+    package (the configuration does, to check a section) starts none of the engine's,
+    i-PI's, the reference runs' or the calculator's modules; every name still resolves and
+    ``dir()`` lists each."""
+    script = (
+        "import sys, rigidmd.lammps as lammps\n"
+        "print(sorted(m for m in sys.modules if m.startswith('rigidmd.lammps.')"
+        " or m.startswith('rigidmd.ipi')))\n"
+        "print(sorted(set(lammps.__all__) - set(dir(lammps))))\n"
+        "print(lammps.LAMMPSEngine.__module__, 'rigidmd.lammps.engine' in sys.modules)\n"
+        "print(all(getattr(lammps, name) is not None for name in lammps.__all__))\n")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True, env={**os.environ, "PYTHONPATH": str(SOURCE.parent)}
+                         ).stdout.splitlines()
+    assert out == ["['rigidmd.lammps.lazy']", "[]", "rigidmd.lammps.engine True", "True"], out
+
+
+def test_the_checks_find_what_they_look_for(tmp_path):
+    """The checks above cannot pass vacuously."""
     tree = ast.parse("def f(dyn):\n    return dyn._ctx.model, self._own\n")
     assert private_accesses(tree) == [(2, "dyn._ctx")]
     known = {"rigidmd": SOURCE / "__init__.py", "rigidmd.a": SOURCE / "a.py",
              "rigidmd.b": SOURCE / "b.py"}
     lazy = ast.parse("def g():\n    from rigidmd import b\n")
     assert imports("rigidmd.a", lazy, known) == {"rigidmd.b"}
+    assert import_lines("rigidmd.a", ast.parse("x = 1\nTABLE = {'rigidmd.b': ()}\n"),
+                        known) == [(2, "rigidmd.b")]
     assert len(modules()) > 20
-
-
-def test_no_module_is_over_700_lines():
-    long = {name: n for name, path in modules().items()
-            if (n := len(path.read_text().splitlines())) > MAX_LINES}
-    assert long == {}
-
-
-def class_lengths():
-    """``{module.Class: lines}`` of every class of the package (nested ones too)."""
-    found = {}
-    for name, path in modules().items():
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.ClassDef):
-                found[f"{name}.{node.name}"] = node.end_lineno - node.lineno + 1
-    return found
+    (tmp_path / "core.py").write_text("def f():\n    import rigidmd.run.x\n")
+    (tmp_path / "x.py").write_text("from rigidmd import RigidVerlet\n")
+    fake = {"rigidmd.core.y": tmp_path / "core.py", "rigidmd.run.x": tmp_path / "x.py",
+            "rigidmd": tmp_path / "x.py"}
+    assert forbidden_imports(fake, {"core": (), "run": ("core",)}) == [
+        "rigidmd.core.y:2 imports rigidmd.run.x (core may import nothing else)",
+        "rigidmd.run.x:1 imports rigidmd (run may import core)"]
+    assert cycles_of({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == [["a", "b", "c", "a"]]
+    assert shared_basenames({"rigidmd.core.state": Path("core/state.py"),
+                             "rigidmd.relax.state": Path("relax/state.py"),
+                             "rigidmd.core._numba": Path("core/_numba.py"),
+                             "rigidmd.relax._numba": Path("relax/_numba.py")}) == {
+        "state": ["rigidmd.core.state", "rigidmd.relax.state"]}
 
 
 def test_at_most_a_dozen_modules_at_the_top():
@@ -131,13 +241,6 @@ def test_at_most_a_dozen_modules_at_the_top():
     assert len(top) <= MAX_TOP_MODULES, top
     for package in ("core", "couplings", "run", "systems"):
         assert (SOURCE / package / "__init__.py").is_file(), package
-
-
-def test_no_class_is_over_350_lines():
-    lengths = class_lengths()
-    assert lengths["rigidmd.core.dynamics.RigidDynamics"] <= MAX_CLASS_LINES
-    long = {name: n for name, n in lengths.items() if n > MAX_CLASS_LINES}
-    assert long == {}, "\n".join(f"{name}: {n} lines" for name, n in long.items())
 
 
 def test_init_files_only_re_export():
@@ -157,38 +260,14 @@ def test_init_files_only_re_export():
     assert offences == [], offences
 
 
-#: What the core may import besides itself: the coupling parts' interface, which the
-#: dynamics composes (couplings import the core's state and record, never the dynamics).
-CORE_MAY_IMPORT = ("rigidmd.core", "rigidmd.couplings")
+def test_the_removed_paths_are_gone():
+    """No release was made with the old paths, so no shim keeps them: rigidmd.optimize
+    (now rigidmd.relax), rigidmd.run.checkpoint and rigidmd.run.logger (rigidmd.core's),
+    rigidmd.relax.Relaxation (rigidmd.relax.BodyRelaxation)."""
+    import importlib.util
 
+    import rigidmd.relax
 
-def test_the_core_imports_nothing_above_it():
-    """The core (state, model, step, dynamics, its checkpoint file and log) imports no
-    package built on it: not run (it imported run.checkpoint and run.logger), config,
-    relax, the engines or the systems, eagerly or lazily."""
-    known = modules()
-    offences = []
-    for name, path in known.items():
-        if name == "rigidmd.core" or name.startswith("rigidmd.core."):
-            for module in sorted(imports(name, ast.parse(path.read_text()), known)):
-                if not any(module == allowed or module.startswith(allowed + ".")
-                           for allowed in CORE_MAY_IMPORT):
-                    offences.append(f"{name} imports {module}")
-    assert offences == [], "\n".join(offences)
-
-
-def test_old_paths_of_moved_modules_still_import():
-    """rigidmd.run.checkpoint and rigidmd.run.logger moved into the core, the loader out
-    of rigidmd.config's __init__: the old names are the same objects."""
-    from rigidmd import config
-    from rigidmd.config import loader
-    from rigidmd.core import checkpoint, logger
-    from rigidmd.run import checkpoint as old_checkpoint
-    from rigidmd.run import logger as old_logger
-
-    for name in old_checkpoint.__all__:
-        assert getattr(old_checkpoint, name) is getattr(checkpoint, name), name
-    for name in old_logger.__all__:
-        assert getattr(old_logger, name) is getattr(logger, name), name
-    for name in loader.__all__:
-        assert getattr(config, name) is getattr(loader, name), name
+    for name in ("rigidmd.optimize", "rigidmd.run.checkpoint", "rigidmd.run.logger"):
+        assert importlib.util.find_spec(name) is None, name
+    assert not hasattr(rigidmd.relax, "Relaxation")

@@ -129,7 +129,7 @@ def test_rigidmd_relax_says_how_to_continue_as_a_command_a_shell_runs(tmp_path, 
     import shlex
     import signal
 
-    from rigidmd.relax.command import relax_only
+    from rigidmd.run.relaxcommand import relax_only
 
     raw = relax_config(tmp_path)
     raw["outputs"]["directory"] = "my out"
@@ -157,7 +157,7 @@ def test_a_signal_stops_rigidmd_relax_after_a_step_and_resume_finishes(
 
     from ase.io import read
 
-    from rigidmd.relax.command import relax_only
+    from rigidmd.run.relaxcommand import relax_only
 
     raw = relax_config(tmp_path)
     reference = tmp_path / "reference"
@@ -264,9 +264,9 @@ def test_rigidmd_relax_never_deletes_its_input(tmp_path):
     from ase.io import read
 
     from rigidmd.config.quantities import ConfigError
-    from rigidmd.relax.command import relax_only
-    from rigidmd.relax.structure import RelaxationNotConverged
     from rigidmd.run.outputs import OutputError
+    from rigidmd.run.relaxcommand import relax_only
+    from rigidmd.run.relaxstructure import RelaxationNotConverged
 
     with pytest.raises(RelaxationNotConverged, match="raise relax.steps and continue with"):
         relax_only(relax_config(tmp_path, steps=5), io.StringIO())
@@ -320,8 +320,8 @@ def test_relax_log_continues_its_step_count_on_resume(tmp_path):
 
     from ase.io import read
 
-    from rigidmd.relax.command import relax_only
-    from rigidmd.relax.structure import RelaxationNotConverged
+    from rigidmd.run.relaxcommand import relax_only
+    from rigidmd.run.relaxstructure import RelaxationNotConverged
 
     with pytest.raises(RelaxationNotConverged):
         relax_only(relax_config(tmp_path, steps=5), io.StringIO())
@@ -341,8 +341,8 @@ def test_rigidmd_relax_refuses_a_log_on_its_configuration(tmp_path):
     naming the field."""
     import io
 
-    from rigidmd.relax.command import relax_only
     from rigidmd.run.outputs import OutputError
+    from rigidmd.run.relaxcommand import relax_only
 
     raw = relax_config(tmp_path)
     raw["relax"]["log"] = "../relax.yaml"
@@ -450,7 +450,7 @@ def test_a_damaged_relaxation_state_is_not_used(tmp_path, monkeypatch, name, cha
 
     from ase.io import read
 
-    from rigidmd.relax.command import relax_only
+    from rigidmd.run.relaxcommand import relax_only
 
     raw = relax_config(tmp_path)
     signal_at_call(monkeypatch, 12, signal.SIGTERM)
@@ -476,7 +476,7 @@ def test_rigidmd_relax_resume_refuses_another_calculator(tmp_path, monkeypatch):
     import signal
 
     from rigidmd.config.quantities import ConfigError
-    from rigidmd.relax.command import relax_only
+    from rigidmd.run.relaxcommand import relax_only
 
     raw = relax_config(tmp_path)
     signal_at_call(monkeypatch, 12, signal.SIGTERM)
@@ -536,7 +536,7 @@ def test_rigidmd_relax_resume_of_a_converged_relaxation_says_it_is_complete(tmp_
     were left.  Now it says the relaxation is complete, and writes nothing."""
     import io
 
-    from rigidmd.relax.command import relax_only
+    from rigidmd.run.relaxcommand import relax_only
 
     raw = relax_config(tmp_path)
     assert relax_only(raw, io.StringIO()) == 0
@@ -564,7 +564,7 @@ def test_a_signal_just_after_the_relaxation_is_noted_not_a_kill(tmp_path, signam
     script = tmp_path / "late_signal.py"
     script.write_text(textwrap.dedent(f"""
         import os, signal, sys
-        from rigidmd.relax.structure import RelaxProgress
+        from rigidmd.run.relaxstructure import RelaxProgress
         finish = RelaxProgress.finish
         def late(self):  # after the relaxation's own handlers are gone
             finish(self)
@@ -596,7 +596,7 @@ def test_a_signal_just_after_a_run_s_relaxation_stops_the_md_with_a_checkpoint(t
     script = tmp_path / "late_signal.py"
     script.write_text(textwrap.dedent("""
         import os, signal, sys
-        from rigidmd.relax.structure import RelaxProgress
+        from rigidmd.run.relaxstructure import RelaxProgress
         finish = RelaxProgress.finish
         def late(self):  # after the relaxation's own handlers are gone
             finish(self)
@@ -623,7 +623,7 @@ def test_a_damaged_trajectory_continues_from_the_state_file(tmp_path, monkeypatc
 
     from ase.io import read
 
-    from rigidmd.relax.command import relax_only
+    from rigidmd.run.relaxcommand import relax_only
 
     reference = tmp_path / "reference"
     reference.mkdir()

@@ -7,7 +7,7 @@ import numpy as np
 from rigidmd.core import operators as ops
 from rigidmd.core import quaternion as quat
 from rigidmd.relax import kernels
-from rigidmd.relax.rotation import right_jacobian_transpose, rotation_quaternion
+from rigidmd.relax.rotationvector import right_jacobian_transpose, rotation_quaternion
 
 
 def _rows(rng, n):

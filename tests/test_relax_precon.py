@@ -85,17 +85,15 @@ def test_the_preconditioner_s_pairs_are_ase_s_neighbour_list():
 def test_the_two_relaxation_results_have_two_names():
     """rigidmd.relax.Relaxation (relax_bodies's result) and rigidmd.relax.filter.Relaxation
     (relax()'s) were two classes of one name; relax_bodies's is BodyRelaxation now, and
-    its 0.1.0 name still works, with a warning that names both."""
+    the old name is gone (no release was made with it)."""
     import rigidmd.relax
     from rigidmd.relax import BodyRelaxation
-    from rigidmd.relax.bodies import BodyRelaxation as same
     from rigidmd.relax.filter import Relaxation
+    from rigidmd.relax.relaxbodies import BodyRelaxation as same
 
     assert same is BodyRelaxation and BodyRelaxation is not Relaxation
     assert "Relaxation" not in rigidmd.relax.__all__
-    with pytest.warns(DeprecationWarning, match=r"BodyRelaxation; relax\(\)'s result is "
-                                                r"rigidmd.relax.filter.Relaxation"):
-        assert rigidmd.relax.Relaxation is BodyRelaxation
+    assert not hasattr(rigidmd.relax, "Relaxation")
     cluster = water_cluster(2, seed=0)
     cluster.calc = TIP3P(rc=20.0)
     assert type(relax(cluster, fmax=0.5)) is Relaxation

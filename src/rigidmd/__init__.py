@@ -7,7 +7,7 @@ body move as point particles in the same step.
 
 from rigidmd.core.bodies import RigidBodies
 from rigidmd.core.dof import RigidBodyDOF, kinetic_energy, temperature
-from rigidmd.core.dynamics import NonFiniteForceError, RigidDynamics, RigidVerlet
+from rigidmd.core.dynamics import NonFiniteForceError, RigidDynamics
 from rigidmd.core.model import BodyGeometry, BodyModel
 from rigidmd.core.split import MultipleTimeStep
 from rigidmd.core.velocities import (
@@ -16,10 +16,16 @@ from rigidmd.core.velocities import (
     rigid_temperature,
     rigid_zero_rotation,
 )
-from rigidmd.couplings.baoab import RigidLangevinBAOAB
-from rigidmd.couplings.barostats import RigidCRescale, RigidNPT
-from rigidmd.couplings.montecarlo import RigidMCBarostat
-from rigidmd.couplings.thermostats import RigidBussi, RigidLangevin, RigidNoseHoover
+from rigidmd.md import (
+    RigidBussi,
+    RigidCRescale,
+    RigidLangevin,
+    RigidLangevinBAOAB,
+    RigidMCBarostat,
+    RigidNoseHoover,
+    RigidNPT,
+    RigidVerlet,
+)
 from rigidmd.run.restart import load_checkpoint
 
 __all__ = [

@@ -14,7 +14,7 @@
 
 ``rigidmd run`` relaxes the structure first (a new run, not a restart or a
 resume), then draws velocities and runs MD from the relaxed structure;
-``rigidmd relax CONFIG`` only relaxes (see :mod:`rigidmd.relax.structure`).
+``rigidmd relax CONFIG`` only relaxes (see :mod:`rigidmd.run.relaxstructure`).
 """
 
 from dataclasses import dataclass

@@ -38,7 +38,11 @@ from rigidmd.config.quantities import (
 from rigidmd.config.trust import calculator_class, check_calculator
 
 __all__ = ["StructureSection", "RunSection", "CalculatorSection", "CouplingSection",
-           "OutputsSection", "BUILTIN_STRUCTURES", "BODY_RULES"]
+           "OutputsSection", "BUILTIN_STRUCTURES", "BODY_RULES", "LOCK_NAME"]
+
+#: Name of the lock file in an output directory (no output may take it; the run's
+#: :class:`rigidmd.run.outputs.OutputLock` writes it).
+LOCK_NAME = ".rigidmd.lock"
 
 #: Builders of :mod:`rigidmd.systems` a configuration may name.
 BUILTIN_STRUCTURES = ("water_cluster", "water_box")
@@ -123,7 +127,7 @@ class StructureSection:
             atoms.calc = None
             return atoms
         if isinstance(self.source, dict):
-            from rigidmd import systems
+            import rigidmd.systems as systems
 
             options = {k: v for k, v in self.source.items() if k != "builtin"}
             try:
@@ -145,7 +149,7 @@ class StructureSection:
         stores each atom's body in its tag (body ``b``: ``b + 1``, free atoms
         -1), so a restart configured with ``bodies: mol-id`` reads the tags.
         """
-        from rigidmd import RigidBodies
+        from rigidmd.core.bodies import RigidBodies
 
         rule = self.bodies
         if rule == "mol-id" and "mol-id" not in atoms.arrays and self.restart is not None:
@@ -519,8 +523,6 @@ def _check_output_paths(directory, files):
     Two outputs on one path would overwrite each other (the MDAnalysis output
     also writes its topology, ``.psf``, and the directory holds the lock file).
     """
-    from rigidmd.run.outputs import LOCK_NAME
-
     claimed = {(directory / LOCK_NAME).resolve(): "the lock file"}
     paths = dict(files)
     if "mdanalysis" in files:

@@ -25,8 +25,9 @@ inherited); the check for a time step that is too large is an observer
 serves every part; :meth:`RigidDynamics.set_state` updates it in place.
 
 The time step is read from :attr:`RigidDynamics.dt` at every step.
-:class:`RigidVerlet` is the plain NVE case.  :func:`rigidmd.run.restart.load_checkpoint`
-rebuilds a dynamics from a file :mod:`rigidmd.core.checkpoint` wrote.
+:class:`~rigidmd.md.verlet.RigidVerlet` is the plain NVE case.
+:func:`rigidmd.run.restart.load_checkpoint` rebuilds a dynamics from a file
+:mod:`rigidmd.core.checkpoint` wrote.
 """
 
 import warnings
@@ -59,7 +60,7 @@ from rigidmd.core.stepcontext import StepContext
 from rigidmd.core.stepper import Stepper
 from rigidmd.couplings.base import CouplingView, check_composition, export_parts
 
-__all__ = ["RigidDynamics", "RigidVerlet", "RigidBodyDOF", "NonFiniteForceError",
+__all__ = ["RigidDynamics", "RigidBodyDOF", "NonFiniteForceError",
            "check_timestep"]
 
 
@@ -420,35 +421,3 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         See :mod:`rigidmd.core.checkpoint`; :func:`rigidmd.load_checkpoint` continues.
         """
         save_checkpoint(self, path, extra)
-
-
-class RigidVerlet(RigidDynamics):
-    r"""NVE rigid-body molecular dynamics (NO_SQUISH quaternion velocity Verlet by default).
-
-    One step of ``timestep`` with the default integrator is (Miller et al.
-    2002; LAMMPS ``fix rigid/nve``)
-
-    1. :math:`V \mathrel{+}= \tfrac{\Delta t}{2} F/M`, :math:`X \mathrel{+}= \Delta t\,V`,
-       :math:`p \mathrel{+}= \Delta t\; q \otimes (0, R(q)^\mathsf{T}\tau)`;
-    2. free rotation :math:`R_3(\tfrac{\Delta t}{2}) R_2(\tfrac{\Delta t}{2})
-       R_1(\Delta t) R_2(\tfrac{\Delta t}{2}) R_3(\tfrac{\Delta t}{2})`;
-    3. atoms placed at :math:`x_i = X + R(q)\,d_i`, one force call;
-    4. :math:`V \mathrel{+}= \tfrac{\Delta t}{2} F/M`,
-       :math:`p \mathrel{+}= \Delta t\; q \otimes (0, R(q)^\mathsf{T}\tau)`;
-    5. atom momenta :math:`m_i (V + \omega \times (x_i - X))`.
-
-    It is symplectic, time reversible and second order, with one force
-    evaluation per step.  Parameters as :class:`RigidDynamics`, without
-    ``couplings``.
-    """
-
-    def __init__(self, atoms, timestep, bodies=None, trajectory=None, logfile=None,
-                 loginterval=1, integrator="no_squish", integrator_options=None, backend=None,
-                 **kwargs):
-        if "couplings" in kwargs:
-            raise TypeError("RigidVerlet is NVE and takes no couplings; use RigidDynamics "
-                            "or a thermostat class")
-        super().__init__(atoms, timestep, bodies=bodies, trajectory=trajectory,
-                         logfile=logfile, loginterval=loginterval, integrator=integrator,
-                         integrator_options=integrator_options, backend=backend, **kwargs)
-

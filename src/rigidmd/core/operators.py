@@ -2,7 +2,7 @@ r"""The operators a rigid-body time step is made of: the readable reference path
 
 Each function updates a :class:`~rigidmd.core.state.RigidState` in place (or maps
 between the state and atom arrays), vectorised over bodies with NumPy.  The
-NO_SQUISH step of :class:`~rigidmd.core.dynamics.RigidVerlet` is
+NO_SQUISH step of :class:`~rigidmd.md.verlet.RigidVerlet` is
 
 .. code-block:: text
 

@@ -1,4 +1,4 @@
-r"""Thermostats: the coupling parts and the dynamics classes users construct.
+r"""Thermostats: the coupling parts (the dynamics classes users construct are in :mod:`rigidmd.md`).
 
 The parts (:class:`LangevinThermostat`, :class:`BussiThermostat`,
 :class:`NoseHooverThermostat`; registered in :data:`rigidmd.couplings.base.COUPLINGS`)
@@ -26,7 +26,6 @@ import numpy as np
 from ase import units
 
 from rigidmd.core import operators as ops
-from rigidmd.core.dynamics import RigidDynamics
 from rigidmd.couplings import _kernels
 from rigidmd.couplings.base import (
     TEMPERATURE,
@@ -46,7 +45,7 @@ from rigidmd.couplings.base import (
     set_rng_state,
 )
 
-__all__ = ["RigidLangevin", "RigidBussi", "RigidNoseHoover", "Thermostat",
+__all__ = ["Thermostat",
            "LangevinThermostat", "BussiThermostat", "NoseHooverThermostat"]
 
 
@@ -383,175 +382,3 @@ class NoseHooverThermostat(Thermostat):
     def todict(self):
         return super().todict() | {"tdamp": self.tdamp, "tchain": self.tchain,
                                    "tloop": self.tloop}
-
-
-# ---------------------------------------------------------------- user constructors
-class _Thermostatted(RigidDynamics):
-    """A rigid dynamics with one thermostat part, exposed as ``self.thermostat``."""
-
-    def __init__(self, atoms, timestep, thermostat, **kwargs):
-        if "couplings" in kwargs:
-            raise TypeError(f"{type(self).__name__} builds its own thermostat; "
-                            "use RigidDynamics(couplings=...) to compose parts")
-        self.thermostat = thermostat
-        super().__init__(atoms, timestep, couplings=[thermostat], **kwargs)
-
-    @property
-    def temperature_K(self):
-        """Target temperature (K)."""
-        return self.thermostat.temperature_K
-
-    @property
-    def thermostat_work(self):
-        """Energy a stochastic thermostat has put into the system so far (eV)."""
-        return self.thermostat.work
-
-    def todict(self):
-        return super().todict() | self.thermostat.todict()
-
-
-_UNITS = {"temperature_K": "K", "friction": "per ASE time unit", "taut": "ASE time units",
-          "tdamp": "ASE time units"}
-
-
-def _required(cls, **values):
-    missing = [name for name, value in values.items() if value is None]
-    if missing:
-        needed = " and ".join(f"{name} ({_UNITS[name]})" for name in values)
-        raise TypeError(f"{cls} needs {needed}; missing: {', '.join(missing)}")
-
-
-class RigidLangevin(_Thermostatted):
-    r"""Langevin dynamics of rigid bodies.
-
-    See :class:`LangevinThermostat`.
-
-    Parameters
-    ----------
-    atoms : ase.Atoms
-    timestep : float
-        ASE time units.
-    temperature_K : float
-        K.
-    friction : float
-        :math:`\gamma`, per ASE time unit (``0.01 / ase.units.fs`` is 0.01 fs⁻¹),
-        as in ASE's ``Langevin``.  ``friction * timestep`` must not exceed 0.5.
-    rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
-    fixcm : bool or None, default None
-        Keep the total momentum (no drift of the whole system), as ASE's ``Langevin``;
-        None is True, with a warning at the first step whose forces do not conserve the
-        momentum (a wall, an external field: pass False there).
-    **kwargs
-        ``bodies``, ``integrator``, ``integrator_options``, ``trajectory``,
-        ``logfile``, ``loginterval``, ``backend`` as for
-        :class:`~rigidmd.core.dynamics.RigidDynamics`.
-    """
-
-    def __init__(self, atoms, timestep, temperature_K=None, friction=None, *, rng=None,
-                 fixcm=None, **kwargs):
-        _required("RigidLangevin", temperature_K=temperature_K, friction=friction)
-        super().__init__(atoms, timestep,
-                         LangevinThermostat(temperature_K, friction, rng, fixcm), **kwargs)
-
-    @property
-    def friction(self):
-        """Friction (per ASE time unit)."""
-        return self.thermostat.friction
-
-    def set_friction(self, friction):
-        """Change the friction (per ASE time unit), as ASE's ``Langevin.set_friction``."""
-        self.thermostat.set_friction(friction, self.dt)
-
-
-class RigidBussi(_Thermostatted):
-    r"""Stochastic velocity rescaling of rigid bodies.
-
-    See :class:`BussiThermostat`.
-
-    Parameters
-    ----------
-    atoms : ase.Atoms
-    timestep : float
-        ASE time units.
-    temperature_K : float
-        K.
-    taut : float
-        Relaxation time (ASE time units), as in ASE's ``Bussi``.
-    rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
-    fixcm : bool or None, default None
-        Keep the total momentum (no drift of the whole system) and count 3 fewer
-        degrees of freedom; None is True, with a warning at the first step whose
-        forces do not conserve the momentum (a wall, an external field: pass False
-        there).  With False the thermostat acts on the centre of mass too; from a
-        zero total momentum (which the forces and the rescaling keep zero) the
-        system then samples :math:`T\cdot 6N/(6N-3)` for N rigid molecules
-        (+0.7 K at 298 K and 216 waters), as LAMMPS's ``fix rigid/nvt``.
-    **kwargs
-        As for :class:`~rigidmd.core.dynamics.RigidDynamics`.
-
-    References
-    ----------
-    G. Bussi, D. Donadio and M. Parrinello, J. Chem. Phys. 126, 014101 (2007).
-    """
-
-    def __init__(self, atoms, timestep, temperature_K=None, taut=None, *, rng=None,
-                 fixcm=None, **kwargs):
-        _required("RigidBussi", temperature_K=temperature_K, taut=taut)
-        super().__init__(atoms, timestep, BussiThermostat(temperature_K, taut, rng, fixcm),
-                         **kwargs)
-
-    @property
-    def taut(self):
-        """Relaxation time (ASE time units)."""
-        return self.thermostat.taut
-
-
-class RigidNoseHoover(_Thermostatted):
-    r"""Nosé–Hoover chains for rigid bodies (LAMMPS ``fix rigid/nvt``).
-
-    See :class:`NoseHooverThermostat`.
-
-    Parameters
-    ----------
-    atoms : ase.Atoms
-    timestep : float
-        ASE time units.
-    temperature_K : float
-        K, positive.
-    tdamp : float
-        Chain time constant (ASE time units), as in ASE's
-        ``NoseHooverChainNVT``; at least the time step (100 steps is typical).
-    tchain : int, default 3
-        Chain length.
-    tloop : int, default 1
-        Sub-steps of each half-step chain update.
-    fixcm : bool or None, default None
-        Keep the total momentum (no drift of the whole system) and count 3 fewer
-        degrees of freedom; None is True, with a warning if the forces do not
-        conserve the momentum (see :class:`RigidBussi`; False acts on all
-        :math:`6N`, as LAMMPS's ``fix rigid/nvt``).
-    **kwargs
-        As for :class:`~rigidmd.core.dynamics.RigidDynamics`.
-
-    References
-    ----------
-    H. Kamberaj, R. J. Low and M. P. Neal, J. Chem. Phys. 122, 224114 (2005);
-    G. J. Martyna, M. E. Tuckerman, D. J. Tobias and M. L. Klein, Mol. Phys. 87,
-    1117 (1996).
-    """
-
-    def __init__(self, atoms, timestep, temperature_K=None, tdamp=None, tchain=3, tloop=1,
-                 *, fixcm=None, **kwargs):
-        _required("RigidNoseHoover", temperature_K=temperature_K, tdamp=tdamp)
-        super().__init__(atoms, timestep,
-                         NoseHooverThermostat(temperature_K, tdamp, tchain, tloop, fixcm),
-                         **kwargs)
-
-    @property
-    def tdamp(self):
-        """Chain time constant (ASE time units)."""
-        return self.thermostat.tdamp
-
-    def chain_energy(self):
-        """Energy of the two chains (eV)."""
-        return self.thermostat.energy()

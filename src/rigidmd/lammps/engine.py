@@ -92,7 +92,7 @@ from rigidmd.ipi import IPICalculator
 from rigidmd.ipi.processes import descends_from as _descends_from
 from rigidmd.lammps.box import reduce_tilt
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
-from rigidmd.lammps.calculator import LAMMPSCalculator, lower_triangular
+from rigidmd.lammps.inprocess import LAMMPSCalculator, lower_triangular
 from rigidmd.lammps.library import check_atom_types, flatten, mpich_prefix
 
 __all__ = ["LAMMPSEngine", "LAMMPS_IPI_BOHR", "LAMMPS_IPI_HARTREE", "answer_mismatch",

@@ -76,9 +76,9 @@ class LammpsInstance:
     atoms : ase.Atoms
         Periodic in all directions or in none.
     types : tuple
-        ``(types, type_mass, labels)`` of :func:`rigidmd.lammps.topology.lammps_types`.
+        ``(types, type_mass, labels)`` of :func:`rigidmd.lammps.atomtypes.lammps_types`.
     molecules : numpy.ndarray of int, shape (n_atoms,)
-        Molecule IDs (all > 0), see :func:`rigidmd.lammps.topology.lammps_molecule_ids`.
+        Molecule IDs (all > 0), see :func:`rigidmd.lammps.atomtypes.lammps_molecule_ids`.
     signature : tuple
         What the instance was made for (a call with other atoms needs a new one).
     commands : list of str

@@ -5,30 +5,22 @@
   :class:`RigidLBFGS` (:mod:`rigidmd.relax.lbfgs`) with :class:`RigidPrecon`
   (:mod:`rigidmd.relax.precon`) is the default, needing no tuning;
 * the cell's part (:mod:`rigidmd.relax.cell`);
-* :func:`relax_bodies` (:mod:`rigidmd.relax.bodies`): each kind of molecule in
+* :func:`relax_bodies` (:mod:`rigidmd.relax.relaxbodies`): each kind of molecule in
   the internal geometry a calculator prefers, before it is made rigid (its
   result is a :class:`BodyRelaxation`; :func:`relax`'s is a
   :class:`rigidmd.relax.filter.Relaxation`);
-* the ``relax:`` section and ``rigidmd relax`` (:mod:`rigidmd.relax.structure`,
-  :mod:`rigidmd.relax.command`).
 
-``rigidmd.relax.Relaxation``, :func:`relax_bodies`'s result in rigidmd 0.1.0, is
-a deprecated name of :class:`BodyRelaxation` (it warns).
+This package is a library: it imports only the core.  The ``relax:`` section of a
+run and ``rigidmd relax`` are the application's (:mod:`rigidmd.run.relaxstructure`,
+:mod:`rigidmd.run.relaxcommand`).
 """
 
-from rigidmd.relax.bodies import BodyRelaxation, relax_bodies
-from rigidmd.relax.bodies import old_name as __getattr__  # noqa: F401 - 0.1.0's Relaxation
 from rigidmd.relax.cell import CELL_MODES
 from rigidmd.relax.filter import OPTIMIZERS, RigidFilter, optimizer_class, relax
 from rigidmd.relax.lbfgs import RigidLBFGS
 from rigidmd.relax.precon import RigidPrecon
-from rigidmd.relax.structure import (
-    RelaxationNotConverged,
-    RelaxationStopped,
-    relax_structure,
-)
+from rigidmd.relax.relaxbodies import BodyRelaxation, relax_bodies
 
 __all__ = ["relax", "RigidFilter", "RigidLBFGS", "RigidPrecon", "OPTIMIZERS", "optimizer_class",
-           "CELL_MODES", "relax_bodies", "BodyRelaxation", "relax_structure",
-           "RelaxationNotConverged", "RelaxationStopped"]
+           "CELL_MODES", "relax_bodies", "BodyRelaxation"]
 

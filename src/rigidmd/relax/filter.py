@@ -57,9 +57,9 @@ from rigidmd.core.model import BodyModel, describe_atoms
 from rigidmd.core.record import StepRecord
 from rigidmd.relax import cell as relaxcell
 from rigidmd.relax import kernels
-from rigidmd.relax import state as relaxstate
+from rigidmd.relax import optimizerstate as relaxstate
 from rigidmd.relax.facade import AtomsFacade
-from rigidmd.relax.rotation import right_jacobian_transpose, rotation_quaternion
+from rigidmd.relax.rotationvector import right_jacobian_transpose, rotation_quaternion
 from rigidmd.relax.stops import Interrupt, Interrupted, RelaxationFailed, WholeStep, failed
 
 __all__ = ["RigidFilter", "relax", "Relaxation", "RelaxationFailed", "OPTIMIZERS",
@@ -573,9 +573,9 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         Where the relaxation's state is written when it stops before
         converging, after a whole step (Ctrl-C, an observer raised, or
         ``steps`` were taken): the view's chart and the optimizer's memory
-        (:mod:`rigidmd.relax.state`); removed when the relaxation converges.
+        (:mod:`rigidmd.relax.optimizerstate`); removed when the relaxation converges.
         Only for an optimizer that gives its memory
-        (:func:`rigidmd.relax.state.keeps_memory`; ASE's keep theirs).
+        (:func:`rigidmd.relax.optimizerstate.keeps_memory`; ASE's keep theirs).
     resume : bool, default False
         Continue from ``state_file``, written at ``atoms``' positions by this
         optimizer: the steps are those the uninterrupted relaxation would have

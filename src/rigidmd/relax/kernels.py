@@ -385,7 +385,7 @@ def orientations(q_ref, x, lengths, linear, q):
     r"""``q = q_ref ⊗ exp(φ)`` with :math:`\varphi_b = x_b/\ell_b` (0 about a linear body's axis).
 
     The arithmetic of :meth:`rigidmd.relax.filter.RigidFilter`'s NumPy route
-    (:func:`rigidmd.relax.rotation.rotation_quaternion` and
+    (:func:`rigidmd.relax.rotationvector.rotation_quaternion` and
     :func:`rigidmd.core.quaternion.multiply`), term for term, in one loop over bodies.
 
     Parameters
@@ -440,7 +440,7 @@ def body_gradient(forces, r, order, bounds, q, x, lengths, linear, fixed, F, tau
     (summed as NumPy's ``add.reduceat`` sums a short segment: the first term plus
     the sum of the rest, :func:`rigidmd.core.operators.reduce_forces`), and
     :math:`g_b = J_r(\varphi_b)^\mathsf{T} R(q_b)^\mathsf{T}\tau_b/\ell_b`
-    (:func:`rigidmd.relax.rotation.right_jacobian_transpose`, 0 about a linear
+    (:func:`rigidmd.relax.rotationvector.right_jacobian_transpose`, 0 about a linear
     body's axis), 0 for a fixed body (its force and torque are kept).  The dynamics' fused
     kick (:func:`rigidmd.core._numba.second_half`) sums a body's atoms in order instead; the
     relaxation keeps NumPy's order, as its path follows the last bit (water_box(6), TIP3P

@@ -22,8 +22,8 @@ import numpy as np
 from ase.optimize.optimize import Optimizer
 
 from rigidmd.relax import kernels
+from rigidmd.relax.optimizerstate import split
 from rigidmd.relax.precon import RigidPrecon
-from rigidmd.relax.state import split
 
 __all__ = ["RigidLBFGS", "MAX_HALVINGS", "SCALE_TOLERANCE"]
 

@@ -214,8 +214,8 @@ class _Conf:
 
 def _dynamics(config, leg, checkpoint, engine):
     """The leg's dynamics: from its checkpoint, or from the configuration's start."""
-    from rigidmd import rigid_maxwell_boltzmann
     from rigidmd.core.dynamics import RigidDynamics
+    from rigidmd.core.velocities import rigid_maxwell_boltzmann
     from rigidmd.run.restart import load_checkpoint
 
     if checkpoint.is_file():

@@ -38,12 +38,12 @@ from rigidmd.core.dynamics import NonFiniteForceError
 from rigidmd.core.operators import ConvergenceError
 from rigidmd.couplings.base import NotExportable
 from rigidmd.lammps.library import LammpsError
-from rigidmd.relax.command import relax_only
-from rigidmd.relax.structure import RelaxationFailed, RelaxationNotConverged, RelaxationStopped
 from rigidmd.run.bias import add_bias_parser, bias_command
 from rigidmd.run.fingerprint import resume_command
 from rigidmd.run.logplot import LogError, plot_log
 from rigidmd.run.outputs import OutputError, describe_os_error
+from rigidmd.run.relaxcommand import relax_only
+from rigidmd.run.relaxstructure import RelaxationFailed, RelaxationNotConverged, RelaxationStopped
 from rigidmd.run.runner import Run, RunStopped
 
 __all__ = ["main"]
@@ -100,7 +100,7 @@ def _export(config, directory, stream=sys.stdout):
                           "LAMMPS model by its own levels, not two calculators; export one model")
     atoms, bodies = Run(config).start_atoms()
     if config.relax is not None:  # the deck starts where `rigidmd run` would start its MD
-        from rigidmd.relax.command import relax_for_export
+        from rigidmd.run.relaxcommand import relax_for_export
 
         relax_for_export(config, atoms, bodies, directory, stream)
     atoms.positions = bodies.whole_positions(atoms)
@@ -160,12 +160,11 @@ DEMO_NOTE = ("rigidmd demo: 32 rigid TIP3P waters, built on a lattice and not re
 def _version():
     """``rigidmd 0.1.0 (ASE 3.29.0, NumPy 2.4.6, Python 3.11.9)``: what a bug report needs."""
     import platform
+    from importlib.metadata import version
 
     import ase
 
-    from rigidmd import __version__
-
-    return (f"rigidmd {__version__} (ASE {ase.__version__}, NumPy {np.__version__}, "
+    return (f"rigidmd {version('rigidmd')} (ASE {ase.__version__}, NumPy {np.__version__}, "
             f"Python {platform.python_version()})")
 
 

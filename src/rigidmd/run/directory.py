@@ -79,8 +79,8 @@ class RunFiles:
 
     def named(self):
         """Every file the run writes (the lock file included), by its field: ``{field: path}``."""
-        from rigidmd.relax.structure import state_path
         from rigidmd.run.outputs import LOCK_NAME
+        from rigidmd.run.relaxstructure import state_path
 
         out = self.outputs
         named = {f"outputs.{name}": path for name, path in out.files.items()}

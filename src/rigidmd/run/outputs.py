@@ -20,11 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["OutputLock", "OutputError", "output_lengths", "trim_outputs", "LOCK_NAME",
-           "check_apart_from_inputs"]
+from rigidmd.config.sections import LOCK_NAME
 
-#: Name of the lock file in an output directory.
-LOCK_NAME = ".rigidmd.lock"
+__all__ = ["OutputLock", "OutputError", "output_lengths", "trim_outputs", "LOCK_NAME",
+           "check_apart_from_inputs", "ulm_header"]
 
 
 class OutputError(RuntimeError):
@@ -113,8 +112,24 @@ class OutputLock:
         self.release()
 
 
-def _ulm_header(path):
-    """(nitems, pos0) of an ASE ULM (.traj) file."""
+def ulm_header(path) -> tuple[int, int]:
+    """The two header fields of an ASE ULM (``.traj``) file that appending changes.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    tuple of int
+        ``(nitems, pos0)``: the number of items (frames) and the position of
+        the frame table.
+
+    Raises
+    ------
+    OutputError
+        The file is not a ULM file.
+    """
     with open(path, "rb") as fh:
         head = fh.read(48)
     if len(head) < 48 or not head.startswith(b"- of Ulm"):
@@ -145,7 +160,7 @@ def output_lengths(files):
             continue
         entry = {"size": path.stat().st_size}
         if name == "trajectory" and entry["size"] > 0:
-            entry["nitems"], entry["pos0"] = _ulm_header(path)
+            entry["nitems"], entry["pos0"] = ulm_header(path)
         lengths[name] = entry
     return lengths
 
@@ -190,7 +205,7 @@ def trim_outputs(files, lengths, advice="start it again with --overwrite"):
 
 
 def _restore_ulm(path, recorded):
-    nitems, pos0 = _ulm_header(path)
+    nitems, pos0 = ulm_header(path)
     if (nitems, pos0) != (recorded["nitems"], recorded["pos0"]):
         with open(path, "r+b") as fh:
             _restore_ulm_header(fh, recorded)

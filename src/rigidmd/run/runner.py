@@ -132,7 +132,7 @@ class Run:
         return atoms, bodies
 
     def _draw_velocities(self, atoms, bodies):
-        from rigidmd import rigid_maxwell_boltzmann
+        from rigidmd.core.velocities import rigid_maxwell_boltzmann
 
         velocities = self.config.run.velocities
         if velocities is not None and self.config.structure.restart is None:
@@ -191,7 +191,7 @@ class Run:
         trajectory, and the MD after it.  The MD's own step-0 checkpoint
         replaces it.
         """
-        from rigidmd.relax.structure import continue_from, relax_structure, state_path
+        from rigidmd.run.relaxstructure import continue_from, relax_structure, state_path
 
         section, directory = self.config.relax, self.outputs.directory
         done = 0
@@ -416,7 +416,7 @@ class Run:
 def _holds_a_frame(trajectory):
     """False when the ASE trajectory file ``trajectory`` is missing, empty, or whole with no
     frame (killed before its first); else True: a damaged file is left to
-    :func:`rigidmd.relax.structure.continue_from`, which names it, and nothing is replaced."""
+    :func:`rigidmd.run.relaxstructure.continue_from`, which names it, and nothing is replaced."""
     from ase.io.trajectory import Trajectory
 
     if not trajectory.is_file() or trajectory.stat().st_size == 0:

@@ -10,7 +10,6 @@ geometry, each superposed on the body as it was (same centre of mass, best
 fit orientation), so the start is the calculator's own rigid molecule.
 """
 
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,8 +24,8 @@ __all__ = ["relax_bodies", "BodyRelaxation"]
 
 @dataclass
 class BodyRelaxation:
-    """What :func:`relax_bodies` did (``rigidmd.relax.Relaxation`` before 0.2, deprecated:
-    :func:`~rigidmd.relax.filter.relax` returns :class:`rigidmd.relax.filter.Relaxation`).
+    """What :func:`relax_bodies` did (:func:`~rigidmd.relax.filter.relax` returns another
+    class, :class:`rigidmd.relax.filter.Relaxation`).
 
     Attributes
     ----------
@@ -49,16 +48,6 @@ class BodyRelaxation:
     bodies: dict = field(default_factory=dict)
 
 
-
-def old_name(name):
-    """``rigidmd.relax``'s module ``__getattr__``: its 0.1.0 name ``Relaxation`` (when it was
-    one module), deprecated, is :class:`BodyRelaxation`."""
-    if name == "Relaxation":
-        warnings.warn("rigidmd.relax.Relaxation is relax_bodies's result, now named "
-                      "rigidmd.relax.BodyRelaxation; relax()'s result is "
-                      "rigidmd.relax.filter.Relaxation", DeprecationWarning, stacklevel=2)
-        return BodyRelaxation
-    raise AttributeError(f"module 'rigidmd.relax' has no attribute {name!r}")
 
 def _kabsch(reference, target, weights):
     r"""Rotations :math:`R` minimising :math:`\sum_i w_i |R a_i - b_i|^2` for centred sets.

@@ -54,6 +54,7 @@ from ase.calculators.calculator import Calculator, all_changes
 from ase.stress import voigt_6_to_full_3x3_stress
 
 from rigidmd.core.checks import check_finite, copy_atoms, quick_check_state
+from rigidmd.lammps.atomtypes import lammps_molecule_ids, lammps_types, molecules_of
 from rigidmd.lammps.box import lower_triangular
 from rigidmd.lammps.instance import LammpsInstance, chosen_kspace
 from rigidmd.lammps.library import (
@@ -64,7 +65,6 @@ from rigidmd.lammps.library import (
     lammps_warnings,
     load_lammps,
 )
-from rigidmd.lammps.topology import lammps_molecule_ids, lammps_types, molecules_of
 
 __all__ = ["LAMMPSCalculator", "lower_triangular"]
 

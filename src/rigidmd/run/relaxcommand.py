@@ -1,6 +1,6 @@
 """``rigidmd relax CONFIG`` and the relaxation before ``rigidmd export-lammps``.
 
-The command's side of :mod:`rigidmd.relax.structure`: the configuration's
+The command's side of :mod:`rigidmd.run.relaxstructure`: the configuration's
 sections, the output directory's lock, the outputs of an earlier
 relaxation (refused, replaced with ``--overwrite`` or continued with
 ``--resume``, never the structure being read), and signals.
@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
-from rigidmd.relax.structure import (
+from rigidmd.run.fingerprint import calculator_digest, resume_command
+from rigidmd.run.relaxstructure import (
     RelaxationStopped,
     continue_from,
     relax_structure,
     state_path,
 )
-from rigidmd.run.fingerprint import calculator_digest, resume_command
 from rigidmd.run.runner import StopSignals
 
 __all__ = ["relax_only", "relax_for_export"]
@@ -150,7 +150,7 @@ def relax_for_export(config, atoms, bodies, directory, stream=sys.stdout):
         The export directory.
     stream : file
     """
-    from rigidmd import rigid_maxwell_boltzmann
+    from rigidmd.core.velocities import rigid_maxwell_boltzmann
 
     directory.mkdir(parents=True, exist_ok=True)
     atoms.calc = config.calculator.build(atoms, directory / "engine")

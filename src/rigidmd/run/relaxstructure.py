@@ -1,4 +1,4 @@
-"""Relaxing the structure of a run: the ``relax:`` section (the command: rigidmd.relax.command).
+"""Relaxing the structure of a run: the ``relax:`` section (the command: relaxcommand).
 
 :func:`relax_structure` relaxes the rigid bodies (and the cell) of a run's
 start with :func:`rigidmd.relax.filter.relax`, writing the optimizer's trajectory
@@ -42,7 +42,7 @@ __all__ = ["relax_structure", "RelaxationNotConverged", "RelaxationStopped", "Re
 
 def state_path(trajectory):
     """Where a relaxation writing ``trajectory`` keeps its state when it stops early:
-    ``relax.traj`` -> ``relax.state.npz`` (:mod:`rigidmd.relax.state`)."""
+    ``relax.traj`` -> ``relax.state.npz`` (:mod:`rigidmd.relax.optimizerstate`)."""
     return trajectory.with_suffix(".state.npz")
 
 
@@ -151,8 +151,8 @@ def continue_from(atoms, trajectory, state_file=None, stream=None):
 def _from_state(atoms, trajectory, state_file, reason, stream):
     """Continue from the positions of a whole ``state_file`` of these atoms instead of a
     damaged ``trajectory``, which is kept under another name; steps taken, or None."""
-    from rigidmd.relax.state import read_state
-    from rigidmd.run.outputs import OutputError, _ulm_header
+    from rigidmd.relax.optimizerstate import read_state
+    from rigidmd.run.outputs import OutputError, ulm_header
 
     if state_file is None:
         return None
@@ -163,7 +163,7 @@ def _from_state(atoms, trajectory, state_file, reason, stream):
     if state is None or state["positions"].shape != atoms.positions.shape:
         return None
     try:
-        done = max(_ulm_header(trajectory)[0] - 1, 0)  # the frames its header counts
+        done = max(ulm_header(trajectory)[0] - 1, 0)  # the frames its header counts
     except (OSError, OutputError):
         done = 0
     aside, n = trajectory.with_name(f"{trajectory.stem}.damaged{trajectory.suffix}"), 1
@@ -314,7 +314,7 @@ def _written_file(err, trajectory, log, state_file):
         tb = tb.tb_next
     if any("/ase/io/" in name for name in frames):
         return trajectory
-    if any(name.endswith(("/rigidmd/relax/state.py", "/rigidmd/core/checkpoint.py"))
+    if any(name.endswith(("/rigidmd/relax/optimizerstate.py", "/rigidmd/core/checkpoint.py"))
            for name in frames):
         return state_file
     return log
@@ -324,7 +324,7 @@ def _check_label(state_file, label):
     """Refuse to continue a relaxation whose state file records another ``label`` (another
     calculator): its frames and the new ones would be of two energy surfaces."""
     from rigidmd.config.quantities import ConfigError
-    from rigidmd.relax.state import read_state
+    from rigidmd.relax.optimizerstate import read_state
 
     if label is None:
         return
@@ -343,7 +343,7 @@ def _check_label(state_file, label):
 def _can_continue_exactly(state_file, atoms, optimizer, label=None):
     """``(True, "")`` when ``state_file`` holds the state of the last frame, else (False, why)."""
     from rigidmd.relax.filter import optimizer_class
-    from rigidmd.relax.state import keeps_memory, read_state, state_matches
+    from rigidmd.relax.optimizerstate import keeps_memory, read_state, state_matches
 
     if not keeps_memory(optimizer_class(optimizer)):
         return False, f"{optimizer} keeps no memory that can be saved"

@@ -1,0 +1,51 @@
+"""Langevin dynamics of rigid bodies: :class:`RigidLangevin` (ASE's ``Langevin``).
+
+The part is :class:`~rigidmd.couplings.thermostats.LangevinThermostat`.
+"""
+
+from rigidmd.couplings.thermostats import LangevinThermostat
+from rigidmd.md.coupled import _required, _Thermostatted
+
+__all__ = ["RigidLangevin"]
+
+
+class RigidLangevin(_Thermostatted):
+    r"""Langevin dynamics of rigid bodies.
+
+    See :class:`LangevinThermostat`.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+    timestep : float
+        ASE time units.
+    temperature_K : float
+        K.
+    friction : float
+        :math:`\gamma`, per ASE time unit (``0.01 / ase.units.fs`` is 0.01 fs⁻¹),
+        as in ASE's ``Langevin``.  ``friction * timestep`` must not exceed 0.5.
+    rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
+    fixcm : bool or None, default None
+        Keep the total momentum (no drift of the whole system), as ASE's ``Langevin``;
+        None is True, with a warning at the first step whose forces do not conserve the
+        momentum (a wall, an external field: pass False there).
+    **kwargs
+        ``bodies``, ``integrator``, ``integrator_options``, ``trajectory``,
+        ``logfile``, ``loginterval``, ``backend`` as for
+        :class:`~rigidmd.core.dynamics.RigidDynamics`.
+    """
+
+    def __init__(self, atoms, timestep, temperature_K=None, friction=None, *, rng=None,
+                 fixcm=None, **kwargs):
+        _required("RigidLangevin", temperature_K=temperature_K, friction=friction)
+        super().__init__(atoms, timestep,
+                         LangevinThermostat(temperature_K, friction, rng, fixcm), **kwargs)
+
+    @property
+    def friction(self):
+        """Friction (per ASE time unit)."""
+        return self.thermostat.friction
+
+    def set_friction(self, friction):
+        """Change the friction (per ASE time unit), as ASE's ``Langevin.set_friction``."""
+        self.thermostat.set_friction(friction, self.dt)

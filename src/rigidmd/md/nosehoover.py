@@ -1,0 +1,61 @@
+"""Nosé–Hoover chains for rigid bodies: :class:`RigidNoseHoover` (ASE's
+``NoseHooverChainNVT``).
+
+The part is :class:`~rigidmd.couplings.thermostats.NoseHooverThermostat`.
+"""
+
+from rigidmd.couplings.thermostats import NoseHooverThermostat
+from rigidmd.md.coupled import _required, _Thermostatted
+
+__all__ = ["RigidNoseHoover"]
+
+
+class RigidNoseHoover(_Thermostatted):
+    r"""Nosé–Hoover chains for rigid bodies (LAMMPS ``fix rigid/nvt``).
+
+    See :class:`NoseHooverThermostat`.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+    timestep : float
+        ASE time units.
+    temperature_K : float
+        K, positive.
+    tdamp : float
+        Chain time constant (ASE time units), as in ASE's
+        ``NoseHooverChainNVT``; at least the time step (100 steps is typical).
+    tchain : int, default 3
+        Chain length.
+    tloop : int, default 1
+        Sub-steps of each half-step chain update.
+    fixcm : bool or None, default None
+        Keep the total momentum (no drift of the whole system) and count 3 fewer
+        degrees of freedom; None is True, with a warning if the forces do not
+        conserve the momentum (see :class:`RigidBussi`; False acts on all
+        :math:`6N`, as LAMMPS's ``fix rigid/nvt``).
+    **kwargs
+        As for :class:`~rigidmd.core.dynamics.RigidDynamics`.
+
+    References
+    ----------
+    H. Kamberaj, R. J. Low and M. P. Neal, J. Chem. Phys. 122, 224114 (2005);
+    G. J. Martyna, M. E. Tuckerman, D. J. Tobias and M. L. Klein, Mol. Phys. 87,
+    1117 (1996).
+    """
+
+    def __init__(self, atoms, timestep, temperature_K=None, tdamp=None, tchain=3, tloop=1,
+                 *, fixcm=None, **kwargs):
+        _required("RigidNoseHoover", temperature_K=temperature_K, tdamp=tdamp)
+        super().__init__(atoms, timestep,
+                         NoseHooverThermostat(temperature_K, tdamp, tchain, tloop, fixcm),
+                         **kwargs)
+
+    @property
+    def tdamp(self):
+        """Chain time constant (ASE time units)."""
+        return self.thermostat.tdamp
+
+    def chain_energy(self):
+        """Energy of the two chains (eV)."""
+        return self.thermostat.energy()
