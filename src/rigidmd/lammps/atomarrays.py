@@ -22,7 +22,7 @@ import ctypes
 
 import numpy as np
 
-from rigidmd.lammps import kernels
+from rigidmd.lammps import _numba
 
 __all__ = ["AtomArrays"]
 
@@ -83,11 +83,11 @@ class AtomArrays:
 
     def images(self) -> np.ndarray:
         """LAMMPS's image flags of its atoms (in its order), unpacked, shape (nlocal, 3)."""
-        return kernels.unpack_images(self.view("image"), self._bits)
+        return _numba.unpack_images(self.view("image"), self._bits)
 
     def pack_images(self, image) -> np.ndarray:
         """Image flags, shape (n, 3) of int, packed as LAMMPS packs them."""
-        return kernels.pack_images(image, self._bits)
+        return _numba.pack_images(image, self._bits)
 
     def write_positions(self, positions: np.ndarray, cell: np.ndarray) -> None:
         """Write ``positions`` (ASE order, LAMMPS's frame, Å) into LAMMPS, in its images.
@@ -98,9 +98,9 @@ class AtomArrays:
         given in another image: a restart from unwrapped positions), all atoms
         are shifted by whole vectors of ``cell`` (LAMMPS's box, lower triangular)
         and their image flags with them: LAMMPS wraps by one box only, and would
-        lose such atoms.  See :func:`rigidmd.lammps.kernels.write_positions`.
+        lose such atoms.  See :func:`rigidmd.lammps._numba.write_positions`.
         """
-        kernels.write_positions(positions, self.order(), self.view("image"), self._bits,
+        _numba.write_positions(positions, self.order(), self.view("image"), self._bits,
                                 cell, self.view("x"))
 
     def read_forces(self, out: np.ndarray) -> None:
@@ -110,4 +110,4 @@ class AtomArrays:
         """
         if self._order is None:
             self._order = np.empty(self.nlocal, dtype=np.int64)
-        kernels.read_forces(self.view("f"), self.view("id"), self._order, out)
+        _numba.read_forces(self.view("f"), self.view("id"), self._order, out)

@@ -26,7 +26,7 @@ image flags take the shift.
 
 import numpy as np
 
-from rigidmd.core import _numba
+from rigidmd.core._numba import AVAILABLE, jit
 
 __all__ = ["pack_images", "read_forces", "read_forces_numpy", "unpack_images", "write_positions",
            "write_positions_numpy"]
@@ -67,7 +67,7 @@ def read_forces_numpy(f, ids, order, out):
     out[order] = f
 
 
-@_numba.jit
+@jit
 def _write_positions(positions, order, image, shift, shift2, mask, offset, cell, x):
     n = x.shape[0]
     ax, bx, by = cell[0, 0], cell[1, 0], cell[1, 1]
@@ -111,7 +111,7 @@ def _write_positions(positions, order, image, shift, shift2, mask, offset, cell,
     return outside
 
 
-@_numba.jit
+@jit
 def _read_forces(f, ids, order, out):
     for i in range(f.shape[0]):
         j = ids[i] - 1
@@ -143,7 +143,7 @@ def write_positions(positions, order, image, bits, cell, x):
         Whether the atoms were shifted by whole cell vectors (an atom more
         than half a box outside LAMMPS's box in its own image).
     """
-    if not _numba.AVAILABLE:
+    if not AVAILABLE:
         return write_positions_numpy(positions, order, image, bits, cell, x)
     shift, shift2, mask, offset = bits
     return bool(_write_positions(positions, order, image, shift, shift2, mask, offset,
@@ -164,7 +164,7 @@ def read_forces(f, ids, order, out):
     out : numpy.ndarray, shape (n, 3)
         Written: the forces in the ASE order.
     """
-    if not _numba.AVAILABLE:
+    if not AVAILABLE:
         read_forces_numpy(f, ids, order, out)
     else:
         _read_forces(f, ids, order, out)

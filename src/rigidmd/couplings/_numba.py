@@ -8,7 +8,7 @@ kernel                             reference
 =================================  ===================================================
 :func:`chain_propagate`            :meth:`rigidmd.couplings.base.NoseHooverChain.propagate`
 :func:`chain_scale`                :meth:`rigidmd.couplings.base.NoseHooverChain.act_on`
-:func:`symmetric_exp`              :func:`rigidmd.couplings.barostats.symmetric_exp`
+:func:`symmetric_exp_det`          :func:`rigidmd.couplings.barostats.symmetric_exp`
 :func:`mtk_kick`                   ``MTKBarostat`` kick of :math:`p_g` by the pressure
 :func:`mtk_momentum_scale`         ``MTKBarostat``'s :math:`e^{-\kappa h}` (the friction)
 :func:`scale_translation`          :math:`V \leftarrow V F^\mathsf{T}` and the same of ``v``
@@ -34,7 +34,7 @@ import numpy as np
 
 from rigidmd.core._numba import congruence, jit
 
-__all__ = ["COUPLE_CODES", "chain_propagate", "chain_scale", "symmetric_exp", "mtk_kick",
+__all__ = ["COUPLE_CODES", "chain_propagate", "chain_scale", "symmetric_exp_det", "mtk_kick",
            "mtk_momentum_scale", "mtk_friction", "scale_translation", "scale_velocities",
            "nose_hoover_scale", "crescale_move", "crescale_work", "ornstein_uhlenbeck"]
 
@@ -107,7 +107,7 @@ def _exprel(x):
 
 
 @jit
-def symmetric_exp(G, t):
+def symmetric_exp_det(G, t):
     r""":math:`e^{Gt}`, :math:`\int_0^t e^{Gs}ds` of a symmetric 3x3 ``G`` and :math:`\det e^{Gt}`.
 
     A diagonal ``G`` (``iso`` and ``aniso`` barostats) takes no eigensolver:
@@ -182,7 +182,7 @@ def mtk_momentum_scale(p_g, W, n_f, h):
     for a in range(3):
         for c in range(3):
             G[a, c] = -((p_g[a, c] + (trace / n_f if a == c else 0.0)) / W)
-    return symmetric_exp(G, h)[0]
+    return symmetric_exp_det(G, h)[0]
 
 
 @jit
@@ -295,7 +295,7 @@ def crescale_move(virial, kinetic, volume, pressure_au, kT, beta, taup, dt, xi_l
         for i in range(3):
             for j in range(3):
                 strain[i, j] += step_eta[k] * basis[k, i, j]
-    mu, _, det = symmetric_exp(strain, 1.0)
+    mu, _, det = symmetric_exp_det(strain, 1.0)
     inverse = _inverse(mu, det)
     eta_f = 0.0
     eta_ff = 0.0
