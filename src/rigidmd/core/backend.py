@@ -48,7 +48,7 @@ _REGISTERED: dict[str, tuple[Callable, Callable]] = {}
 #: The operations the core defines as methods (both backends).
 _CORE = ("place", "write_momenta", "largest_angular_speed", "kinetic_tensor",
          "rotational_energy", "congruence", "net_force", "molecular_virial",
-         "cell_clearly_fits", "scheme_kernel", "step_function")
+         "cell_clearly_fits", "scheme_kernel", "step_function", "equal_or_close")
 
 
 class Backend:
@@ -116,6 +116,13 @@ class Backend:
         always runs the full check: False."""
         return False
 
+    # ------------------------------------------------------------ calculator checks
+    def equal_or_close(self, a: np.ndarray, b: np.ndarray, tol: float) -> bool:
+        """Whether float arrays ``a`` and ``b`` (same shape) are equal or close everywhere
+        (``numpy.allclose(a, b, rtol=tol, atol=tol)``; see
+        :func:`rigidmd.core.checks.changed_properties`)."""
+        return bool(np.array_equal(a, b) or np.allclose(a, b, tol, tol))
+
     # ------------------------------------------------------------ schemes
     def scheme_kernel(self, scheme) -> Callable | None:
         """The fused kernel that runs ``scheme`` on this backend, or None (its operators)."""
@@ -167,6 +174,11 @@ class CompiledBackend(Backend):
     def cell_clearly_fits(self, model, cell, pbc):
         # The rule's arithmetic with a margin; the full check near the edge.
         return bool(4.0 * model.radius < (1.0 - 1e-12) * _numba.smallest_width(cell, pbc))
+
+    def equal_or_close(self, a, b, tol):
+        # One compiled pass, stopping at the first change (the positions at every
+        # call: 28 us for the NumPy test of all arrays inside a 216-water step).
+        return bool(_numba.equal_or_close(a.reshape(-1), b.reshape(-1), tol))
 
     def scheme_kernel(self, scheme):
         return scheme.kernel

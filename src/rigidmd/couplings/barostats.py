@@ -29,6 +29,7 @@ from rigidmd.core.backend import register as register_operation
 from rigidmd.core.bodies import check_bodies_fit
 from rigidmd.core.dynamics import RigidDynamics
 from rigidmd.couplings import _numba
+from rigidmd.couplings._numpy import exprel, symmetric_exp
 from rigidmd.couplings.base import (
     TEMPERATURE,
     Coupling,
@@ -45,7 +46,6 @@ from rigidmd.couplings.base import (
     rng_state,
     set_rng_state,
 )
-from rigidmd.couplings.reference import exprel, symmetric_exp
 from rigidmd.couplings.thermostats import BussiThermostat, NoseHooverThermostat
 
 __all__ = ["RigidNPT", "RigidCRescale", "Barostat", "MTKBarostat", "CRescaleBarostat",
@@ -243,7 +243,7 @@ class MTKBarostat(Barostat):
         return float(p @ p) / (2 * self.W)
 
     # Each operator runs on the view's backend: its kernel (:mod:`._numba`) or the NumPy
-    # reference of the same name (:mod:`.reference`).
+    # reference of the same name (:mod:`._numpy`).
     def _thermostat(self, view, h):
         """The barostat's own chain over ``h``, driven by the cell's kinetic energy."""
         self.chain.act_on(self.p_g, self.W, self.kT, h, view.backend)

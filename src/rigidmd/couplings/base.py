@@ -47,7 +47,7 @@ from rigidmd.core.forces import ForceEvaluator
 from rigidmd.core.model import BodyModel
 from rigidmd.core.record import StepRecord
 from rigidmd.core.state import RigidState
-from rigidmd.couplings import reference as _reference  # noqa: F401  (registers operations)
+from rigidmd.couplings import _numpy  # noqa: F401  (registers the backends' operations)
 
 __all__ = ["Coupling", "CouplingView", "Parameter", "COUPLINGS", "register", "NotExportable",
            "LammpsFix", "NoseHooverChain", "NET_FORCE_FLOOR", "check_rng", "rng_state",
@@ -412,7 +412,7 @@ class NoseHooverChain:
         """Advance over ``h`` with the group's kinetic energy ``K``; returns its velocity scale.
 
         On ``backend`` (the caller's ``view.backend``):
-        :func:`rigidmd.couplings.reference.chain_propagate` or its kernel.
+        :func:`rigidmd.couplings._numpy.chain_propagate` or its kernel.
         """
         return backend.chain_propagate(self.xi, self.eta, self.ndof, kT * self.tdamp**2, K, kT,
                                        h, self.tloop)

@@ -1,4 +1,4 @@
-r"""The NumPy references of the coupling kernels, each beside its kernel by name.
+r"""The NumPy references of the coupling kernels, each named as its kernel.
 
 Each function here is the NumPy reference of the kernel of the same name in
 :mod:`rigidmd.couplings._numba` and takes the same arguments (the state buffer
