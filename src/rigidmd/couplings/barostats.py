@@ -475,6 +475,10 @@ class CRescaleBarostat(Barostat):
         note = (step_lambda, step_eta, d_lambda, d_eta, kinetic, first)
         return mu, B, inverse, note
 
+    # The move as an operation of the backends: the kernel takes the kinetic tensor, the
+    # reference the velocities, so the pair is a pair of methods (called with the part).
+    register_operation("crescale_drift", _drift_reference, _drift_compiled)
+
     def second_half(self, view: CouplingView, h: float) -> None:
         record = view.record
         if record.cell_move is None:
@@ -505,6 +509,8 @@ class CRescaleBarostat(Barostat):
                                     self.kT, self._span, self.basis, step_lambda, step_eta,
                                     d_lambda, d_eta)
 
+    register_operation("crescale_bookkeeping", _bookkeeping_reference, _bookkeeping_compiled)
+
     def energy(self, view: CouplingView) -> float:
         return self.pressure_au * view.record.volume + self.work
 
@@ -527,14 +533,6 @@ class CRescaleBarostat(Barostat):
 
 
 # ---------------------------------------------------------------- user constructors
-# The C-rescale move and bookkeeping as operations of the backends: the kernels take the
-# kinetic tensor (the reference the velocities), so each pair is a pair of methods.
-register_operation("crescale_drift", CRescaleBarostat._drift_reference,
-                   CRescaleBarostat._drift_compiled)
-register_operation("crescale_bookkeeping", CRescaleBarostat._bookkeeping_reference,
-                   CRescaleBarostat._bookkeeping_compiled)
-
-
 class BarostattedDynamics(RigidDynamics):
     """A rigid dynamics with a thermostat part and a barostat part."""
 
