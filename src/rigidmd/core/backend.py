@@ -14,14 +14,19 @@ and holds no branch: this module is the only place that tells the two apart
 Naming rule.  Each package's compiled kernels live in ``<package>/_numba.py``
 (:mod:`rigidmd.core._numba`, :mod:`rigidmd.couplings._numba`,
 :mod:`rigidmd.relax._numba`, :mod:`rigidmd.lammps._numba`), and a kernel is
-named as the NumPy reference it replaces.  An operation of the backend has
-that name too: :data:`NUMPY` runs the reference, :data:`NUMBA` the kernel.
-Where the two take the same arguments the pair is registered as it is
-(:func:`register`, or the decorator :func:`reference_of` on the reference);
-where they do not (a reference of a whole state, a kernel of the state
-buffer) the backend's method adapts the arguments, as the core operations
-below do.  :func:`operations` lists every pair; ``tests/test_backend.py`` runs
-each on random inputs on both backends and compares.
+named as the NumPy reference it replaces; a package above the core keeps those
+references in ``<package>/_numpy.py`` (:mod:`rigidmd.couplings._numpy`,
+:mod:`rigidmd.lammps._numpy`), same names, same arguments.  An operation of
+the backend has that name too: :data:`NUMPY` runs the reference, :data:`NUMBA`
+the kernel.  Such a pair is registered with the decorator :func:`reference_of`
+on the reference (or :func:`register`, for a pair of methods whose two sides
+cannot take the same arguments).  The core's own operations are methods of
+:class:`Backend` (calling :mod:`rigidmd.core.operators` and
+:mod:`rigidmd.core.observables`) and :class:`CompiledBackend` (calling
+:mod:`rigidmd.core._numba`), which adapt the arguments.  :func:`operations`
+lists every operation; ``tests/test_backend.py`` runs each on random inputs on
+both backends and compares.  (The relaxation's loops, :mod:`rigidmd.relax._numba`,
+have no reference: they are the one implementation, the same without numba.)
 
 A package above :mod:`rigidmd.core` (the couplings) registers its own pairs
 when it is imported, so that this module imports nothing above it.
