@@ -442,3 +442,39 @@ def test_the_kernel_is_its_reference(name):
     assert len(ref) == len(new)
     for k, (a, b) in enumerate(zip(new, ref, strict=True)):
         np.testing.assert_allclose(a, b, rtol=rtol, atol=atol, err_msg=f"{name}: output {k}")
+
+
+def test_without_numba_the_compiled_backend_is_unavailable():
+    """numba missing: ``None`` is NumPy, ``"numba"`` is refused as before, and a dynamics
+    and the LAMMPS loops run on the references."""
+    import subprocess
+    import sys
+
+    code = """
+import sys
+sys.modules["numba"] = None  # import numba raises ImportError
+import numpy as np
+from ase import units
+from ase.calculators.tip3p import TIP3P
+from rigidmd import RigidVerlet
+from rigidmd.core.backend import NUMPY, resolve_backend
+from rigidmd.lammps import _numpy
+from rigidmd.systems import water_cluster
+assert resolve_backend(None) is NUMPY
+try:
+    resolve_backend("numba")
+except ValueError as err:
+    assert str(err) == "backend='numba' but numba is not installed", err
+else:
+    raise AssertionError("numba was not refused")
+atoms = water_cluster(2)
+atoms.calc = TIP3P(rc=40)
+dyn = RigidVerlet(atoms, units.fs)
+dyn.run(2)
+assert dyn.backend == "numpy" and not dyn.fused
+print("ran")
+"""
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.strip() == "ran"
