@@ -6,7 +6,7 @@ fixed stress near 1 bar of liquid water), so that what is left is rigidmd's
 step: the scheme's compiled loops and the coupling parts.  Rows: ``RigidVerlet``
 (NVE), ``RigidNPT`` (Nosé–Hoover + MTK, iso) and ``RigidCRescale`` (Bussi +
 stochastic cell rescaling, every step), on the ``"numba"`` backend (the
-compiled coupling kernels, :mod:`rigidmd.couplings._kernels`) and on the
+compiled coupling kernels, :mod:`rigidmd.couplings._numba`) and on the
 ``"numpy"`` backend (their NumPy references).  CPU time (this process): best of ``--rounds``
 interleaved rounds of ``--steps`` steps.  Calls: Python function calls per step
 counted by ``cProfile`` over 100 steps (NumPy's ufuncs are not counted; each

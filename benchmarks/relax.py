@@ -417,7 +417,7 @@ def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000, tolerances
     - per step after the first: own and LAMMPS (ms), and the own share of their sum;
     - the whole ``relax()`` call: own of total, one-offs included, without and with
       numba's start;
-    - the preconditioner's conjugate gradients (:func:`rigidmd.relax.kernels.conjugate_gradient`,
+    - the preconditioner's conjugate gradients (:func:`rigidmd.relax._numba.conjugate_gradient`,
       part of own): solves, iterations per solve, CPU per step.
 
     ``tolerances``: ``(CG_TOLERANCE, SCALE_TOLERANCE)`` for this run instead of
@@ -454,11 +454,11 @@ def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000, tolerances
         if step == 1:
             first.append((time.process_time() - c0, spent[1]))
 
-    from rigidmd.relax import kernels, lbfgs, precon
+    from rigidmd.relax import _numba, lbfgs, precon
 
     if tolerances is not None:
         precon.CG_TOLERANCE, lbfgs.SCALE_TOLERANCE = tolerances
-    solver, solves = kernels.conjugate_gradient, [0, 0, 0.0, 0]  # solves, iterations, CPU, most
+    solver, solves = _numba.conjugate_gradient, [0, 0, 0.0, 0]  # solves, iterations, CPU, most
 
     def conjugate_gradient(*args):
         c = time.process_time()
@@ -469,9 +469,9 @@ def large(n_side=12, fmax=0.05, model="spce", cell=False, steps=2000, tolerances
         solves[3] = max(solves[3], iterations)
         return x, iterations
 
-    kernels.conjugate_gradient = conjugate_gradient
+    _numba.conjugate_gradient = conjugate_gradient
     c_start = time.process_time()
-    kernels.dot(np.ones(4), np.ones(4))  # numba's start (a kernel from its cache)
+    _numba.dot(np.ones(4), np.ones(4))  # numba's start (a kernel from its cache)
     numba_start = time.process_time() - c_start
     t0, c0 = time.perf_counter(), time.process_time()
     result = relax(atoms, fmax=fmax, steps=steps, cell=cell, observers=(after,))

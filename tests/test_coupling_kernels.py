@@ -1,6 +1,6 @@
 """The compiled coupling kernels against their NumPy references, operator by operator.
 
-Each kernel of :mod:`rigidmd.couplings._kernels` (and the record's and the force
+Each kernel of :mod:`rigidmd.couplings._numba` (and the record's and the force
 evaluator's loops in :mod:`rigidmd.core._numba`) is run beside the reference it
 replaces, from the same state, and compared.  The tolerances are roundoff:
 the kernels sum in another order (and take ``exp``/``expm1`` from another
@@ -15,9 +15,10 @@ from helpers import argon_crystal, dimer_fluid, npt
 from rigidmd.core import _numba
 from rigidmd.core import observables as obs
 from rigidmd.core import operators as ops
+from rigidmd.core.backend import NUMBA, NUMPY
 from rigidmd.core.bodies import cell_widths
 from rigidmd.core.state import RigidState
-from rigidmd.couplings import _kernels
+from rigidmd.couplings import _numba as coupling_kernels
 from rigidmd.couplings.barostats import MTKBarostat, symmetric_exp
 from rigidmd.couplings.base import NoseHooverChain
 from rigidmd.couplings.thermostats import NoseHooverThermostat
@@ -52,8 +53,8 @@ def test_chain_propagate_is_the_reference(tchain, tloop, ndof):
     chains[0].xi[:] = rng.normal(size=tchain) * 1e-2  # away from the zero start
     chains[1].set_state(chains[0].get_state())
     for K in (0.3, 0.05, 1.2):
-        scales = [chain.propagate(K, 0.025, 0.5, compiled) for chain, compiled
-                  in zip(chains, (False, True), strict=True)]
+        scales = [chain.propagate(K, 0.025, 0.5, backend) for chain, backend
+                  in zip(chains, (NUMPY, NUMBA), strict=True)]
         assert scales[1] == pytest.approx(scales[0], rel=RTOL, abs=0)
         np.testing.assert_allclose(chains[1].xi, chains[0].xi, rtol=RTOL, atol=1e-300)
         np.testing.assert_allclose(chains[1].eta, chains[0].eta, rtol=RTOL, atol=1e-300)
@@ -64,7 +65,7 @@ def test_symmetric_exp_is_the_reference(diagonal):
     rng = np.random.default_rng(1)
     for t in (0.5, 1.0, -1.0, 1e-9):
         G = symmetric(rng, diagonal)
-        A, B, det = _kernels.symmetric_exp(G, t)
+        A, B, det = coupling_kernels.symmetric_exp_det(G, t)
         A_ref, B_ref = symmetric_exp(G, t)
         if diagonal:  # no eigensolver: the reference's result, bit for bit
             np.testing.assert_array_equal(A, A_ref)
@@ -83,12 +84,12 @@ def test_state_scalings_and_sums_are_the_references():
     inv_moments[0, 0] = 0.0  # a linear body
     ref = state.copy()
     F = np.eye(3) + symmetric(rng)
-    _kernels.scale_translation(state.data, n, nf, F)
+    coupling_kernels.scale_translation(state.data, n, nf, F)
     np.testing.assert_allclose(state.V, ref.V @ F.T, rtol=RTOL, atol=1e-15)
     np.testing.assert_allclose(state.v, ref.v @ F.T, rtol=RTOL, atol=1e-15)
     np.testing.assert_array_equal(state.p, ref.p)
     ref = state.copy()
-    _kernels.scale_velocities(state.data, n, nf, 0.97, 1.03)
+    coupling_kernels.scale_velocities(state.data, n, nf, 0.97, 1.03)
     np.testing.assert_array_equal(state.V, 0.97 * ref.V)
     np.testing.assert_array_equal(state.v, 0.97 * ref.v)
     np.testing.assert_array_equal(state.p, 1.03 * ref.p)
@@ -136,12 +137,12 @@ def both(dyn, part, action):
     Returns the two (state, part variables) pairs after it."""
     start, variables = dyn.state.copy(), part.get_state()
     results = []
-    for compiled in (False, True):
+    for backend in (NUMPY, NUMBA):
         start.copy_into(dyn.state)
         part.set_state(variables)
         dyn.record.velocities_changed()
-        dyn.link.compiled = compiled  # the one backend flag: record, view and parts follow
-        assert dyn.view.compiled is compiled and dyn.record.compiled is compiled
+        dyn.link.backend = backend  # the one backend object: record, view and parts follow
+        assert dyn.view.backend is backend and dyn.record.backend is backend
         assert dyn.record.kinetic_tensor is not None  # summed now: a scaling must update it
         out = action(dyn.view)
         results.append((dyn.state.copy(), part.get_state(), out))

@@ -1,15 +1,15 @@
 """Issue 37: the LAMMPS calculator's compiled loops give what their NumPy references give.
 
-``rigidmd.lammps.kernels.write_positions`` (positions into LAMMPS's images, atoms more
+``rigidmd.lammps._numba.write_positions`` (positions into LAMMPS's images, atoms more
 than half a box out shifted by whole cell vectors) and ``read_forces`` (forces back in
-the ASE order) against ``write_positions_numpy`` and ``read_forces_numpy``, over random
+the ASE order) against their NumPy references in ``rigidmd.lammps._numpy``, over random
 lower-triangular cells, image flags and permutations (hypothesis).
 """
 
 import numpy as np
 from hypothesis_or_skip import given, settings, st
 
-from rigidmd.lammps import kernels
+from rigidmd.lammps import _numba, _numpy
 
 #: LAMMPS's default image packing (``-DLAMMPS_SMALLBIG``): IMGBITS, IMG2BITS, IMGMASK, IMGMAX.
 BITS = (10, 20, 1023, 512)
@@ -34,7 +34,7 @@ def _case(seed, n, tilt, outside):
     order = rng.permutation(n)
     positions = np.empty((n, 3))
     positions[order] = (frac + flags) @ cell  # LAMMPS atom i is ASE atom order[i]
-    image = kernels.pack_images(flags, BITS).astype(np.int32)
+    image = _numpy.pack_images(flags, BITS).astype(np.int32)
     return positions, order.astype(np.int64), image, cell
 
 
@@ -46,8 +46,8 @@ def test_positions_go_into_lammps_images_as_the_numpy_reference_puts_them(seed, 
     positions, order, image, cell = _case(seed, n, tilt, outside)
     image_ref = image.copy()
     x, x_ref = np.empty((n, 3)), np.empty((n, 3))
-    shifted = kernels.write_positions(positions, order, image, BITS, cell, x)
-    shifted_ref = kernels.write_positions_numpy(positions, order, image_ref, BITS, cell, x_ref)
+    shifted = _numba.write_positions(positions, order, image, BITS, cell, x)
+    shifted_ref = _numpy.write_positions(positions, order, image_ref, BITS, cell, x_ref)
     assert shifted == shifted_ref == outside
     np.testing.assert_array_equal(image, image_ref)
     # The same sums in another order (image @ cell as NumPy's matmul sums it): roundoff.
@@ -56,7 +56,7 @@ def test_positions_go_into_lammps_images_as_the_numpy_reference_puts_them(seed, 
     assert frac.min() >= -0.5 and frac.max() < 1.5
     if outside:  # every atom into the box, and the images say where it was
         assert frac.min() >= -1e-12 and frac.max() < 1 + 1e-12
-    unwrapped = x + kernels.unpack_images(image, BITS) @ cell
+    unwrapped = x + _numpy.unpack_images(image, BITS) @ cell
     np.testing.assert_allclose(unwrapped, positions[order], rtol=0,
                                atol=1e-11 * np.abs(cell).max())
 
@@ -69,8 +69,8 @@ def test_forces_come_back_in_the_ase_order(seed, n):
     f = rng.normal(size=(n, 3))
     out, out_ref = np.empty((n, 3)), np.empty((n, 3))
     order, order_ref = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
-    kernels.read_forces(f, ids, order, out)
-    kernels.read_forces_numpy(f, ids, order_ref, out_ref)
+    _numba.read_forces(f, ids, order, out)
+    _numpy.read_forces(f, ids, order_ref, out_ref)
     np.testing.assert_array_equal(out, out_ref)
     np.testing.assert_array_equal(order, order_ref)
     np.testing.assert_array_equal(out[ids - 1], f)
@@ -79,4 +79,4 @@ def test_forces_come_back_in_the_ase_order(seed, n):
 def test_image_flags_pack_and_unpack():
     flags = np.array([[-512, 0, 511], [3, -7, 1], [0, 0, 0]])
     np.testing.assert_array_equal(
-        kernels.unpack_images(kernels.pack_images(flags, BITS).astype(np.int32), BITS), flags)
+        _numpy.unpack_images(_numpy.pack_images(flags, BITS).astype(np.int32), BITS), flags)

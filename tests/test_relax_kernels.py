@@ -6,7 +6,7 @@ import numpy as np
 
 from rigidmd.core import operators as ops
 from rigidmd.core import quaternion as quat
-from rigidmd.relax import kernels
+from rigidmd.relax import _numba
 from rigidmd.relax.rotationvector import right_jacobian_transpose, rotation_quaternion
 
 
@@ -34,9 +34,9 @@ def test_the_compiled_placement_is_the_numpy_formula_bit_for_bit():
     phi = np.where(linear[:, None] & (np.arange(3) == 0), 0.0, x / lengths[:, None])
     expected = quat.multiply(q_ref, rotation_quaternion(phi))
     q = np.empty((n, 4))
-    kernels.orientations(q_ref, x, lengths, linear, q)
+    _numba.orientations(q_ref, x, lengths, linear, q)
     np.testing.assert_array_equal(q, expected)
-    assert kernels.largest_angle(x, lengths, linear) == np.linalg.norm(phi, axis=1).max()
+    assert _numba.largest_angle(x, lengths, linear) == np.linalg.norm(phi, axis=1).max()
 
 
 def test_the_compiled_reduction_is_the_numpy_formula():
@@ -59,7 +59,7 @@ def test_the_compiled_reduction_is_the_numpy_formula():
     fixed = np.zeros(n, dtype=bool)
     fixed[5] = True
     F, tau, g = (np.empty((n, 3)) for _ in range(3))
-    kernels.body_gradient(forces, r, order, bounds, q, x, lengths, linear, fixed, F, tau, g)
+    _numba.body_gradient(forces, r, order, bounds, q, x, lengths, linear, fixed, F, tau, g)
 
     model = SimpleNamespace(n_bodies=n, order=order, starts=starts)  # what it reads
     F_numpy, tau_numpy = ops.reduce_forces(forces, r, model)

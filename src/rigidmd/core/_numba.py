@@ -5,7 +5,12 @@ so that a step touches every body twice (before and after the force call).
 Measured on 4096 rigid waters: about 0.1 µs per body per step here against
 about 2 µs for the NumPy path, whose cost is dominated by temporaries.
 
-Only imported when numba is available; :data:`AVAILABLE` says whether it is.
+Only compiled when numba is available; :data:`AVAILABLE` says whether it is.
+The compiled backend (:class:`rigidmd.core.backend.CompiledBackend`) calls
+these; the reference backend (:class:`rigidmd.core.backend.Backend`) calls the
+NumPy operations each is named after or documented against.  Naming rule (all
+packages): the kernels of a package live in its ``_numba`` module, named as
+their NumPy reference (see :mod:`rigidmd.core.backend`).
 """
 
 import numpy as np
@@ -17,26 +22,11 @@ except ImportError:  # pragma: no cover - exercised only without numba
 
 AVAILABLE = numba is not None
 
-__all__ = ["AVAILABLE", "resolve_backend", "jit", "pack_model", "first_half", "second_half",
+__all__ = ["AVAILABLE", "jit", "pack_model", "first_half", "second_half",
            "place", "momenta", "kick_half_drift", "half_drift_place", "largest_angular_speed",
            "kinetic_tensor", "rotational_energy",
            "intramolecular_virial", "molecular_virial_voigt", "net_force", "congruence",
            "smallest_width", "equal_or_close"]
-
-
-def resolve_backend(backend=None):
-    """The backend a dynamics runs on, decided once: ``"numba"`` or ``"numpy"``.
-
-    ``None`` picks numba when it is installed; an unknown name, or numba
-    asked for but missing, is a ValueError.
-    """
-    if backend is None:
-        return "numba" if AVAILABLE else "numpy"
-    if backend not in ("numba", "numpy"):
-        raise ValueError(f"backend must be 'numba' or 'numpy', got {backend!r}")
-    if backend == "numba" and not AVAILABLE:
-        raise ValueError("backend='numba' but numba is not installed")
-    return backend
 
 
 #: Whether compiled functions are cached on disk (False when numba finds no writable place).

@@ -36,7 +36,7 @@ import numpy as np
 from ase import Atoms
 from ase.md.md import MolecularDynamics
 
-from rigidmd.core import _numba
+from rigidmd.core.backend import resolve_backend
 from rigidmd.core.bodies import RigidBodies, store_bodies_in_tags
 from rigidmd.core.checkpoint import save_checkpoint
 from rigidmd.core.checks import (
@@ -182,7 +182,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             raise TypeError(f"atoms must be an ase.Atoms, got {type(atoms).__name__}")
         self._dt = check_timestep(timestep)
         fixcom = check_constraints(atoms)
-        backend = _numba.resolve_backend(backend)
+        backend = resolve_backend(backend)
         check_finite(atoms.positions, "position", "Å")
         check_finite(atoms.get_momenta(), "momentum", "amu Å / ASE time")
         scheme = resolve_scheme(integrator, **(integrator_options or {}))
@@ -202,9 +202,10 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             warnings.filterwarnings("ignore", message="Zero mass encountered in atoms")
             super().__init__(atoms, self._dt, trajectory=trajectory, logfile=None,
                              loginterval=loginterval, **kwargs)
-        self.backend = backend
+        self.backend = backend.name
         self.scheme = scheme
-        self.fused = backend == "numba" and scheme.kernel is not None
+        #: Whether the scheme runs as its fused compiled kernel (the inner steps' under r-RESPA).
+        self.fused = backend.scheme_kernel(scheme) is not None
         self.bodies = rigid
         self.model = model
         self.couplings = couplings
@@ -234,7 +235,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             write_momenta=not couplings and not fixcom, cell_motion=mover, view=self.view,
             middle=middle)
         self.stepper = Stepper(respa or scheme, context, couplings, self.view, self.link,
-                               fused=self.fused, fixcom=fixcom)
+                               kernel=backend.scheme_kernel(respa or scheme), fixcom=fixcom)
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps
         self.link.read_momenta(self.state, owner=type(self).__name__)
         if fixcom:

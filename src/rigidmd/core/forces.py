@@ -25,10 +25,7 @@ centres of mass, point particles and cell moved); the evaluator never keeps it.
 import numpy as np
 from ase import Atoms
 from ase.calculators.calculator import BaseCalculator, PropertyNotImplementedError
-from ase.stress import voigt_6_to_full_3x3_stress
 
-from rigidmd.core import _numba
-from rigidmd.core import observables as obs
 from rigidmd.core import operators as ops
 from rigidmd.core.bodies import check_bodies_fit
 from rigidmd.core.dof import RigidBodyDOF
@@ -188,9 +185,7 @@ class ForceEvaluator:
         """
         atoms, record = self.atoms, self.record
         if self.cell_moves and not np.array_equal(atoms.cell.array, state.cell):
-            # Compiled: the rule's arithmetic with a margin, the full check near the edge.
-            if not (self.link.compiled and 4.0 * self.model.radius
-                    < (1.0 - 1e-12) * _numba.smallest_width(state.cell, atoms.pbc)):
+            if not self.link.backend.cell_clearly_fits(self.model, state.cell, atoms.pbc):
                 check_bodies_fit(self.model, state.cell, atoms.pbc,
                                  f"the barostat's cell at step {self.step + 1} is too small "
                                  "for it; the step was undone")
@@ -267,16 +262,8 @@ class ForceEvaluator:
         if not np.isfinite(stress.sum()):
             raise NonFiniteForceError(f"calculator returned a non-finite stress "
                                       f"{stress.tolist()} after step {self.step}")
-        if self.link.compiled and stress.shape == (6,):
-            return _numba.molecular_virial_voigt(stress, self.record.volume, self.record.r,
-                                                 forces, self.model.order)
-        if stress.shape == (6,):
-            stress = voigt_6_to_full_3x3_stress(stress)
-        if self.link.compiled:
-            return (-self.record.volume * stress
-                    - _numba.intramolecular_virial(self.record.r, forces, self.model.order))
-        return obs.molecular_virial(stress, self.record.volume, self.record.r, forces,
-                                    self.model)
+        return self.link.backend.molecular_virial(stress, self.record.volume, self.record.r,
+                                                  forces, self.model)
 
     # ------------------------------------------------------------ trial configurations
     def save_results(self) -> tuple:

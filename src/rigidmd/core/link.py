@@ -5,10 +5,11 @@ r"""The body link: an :class:`ase.Atoms` on one side, the rigid state on the oth
 momenta back (a best rigid fit and a projection onto rigid motion), and
 notices changes made to the Atoms between steps; :class:`AtomsSync`, its change
 detection for a dynamics, calls the observers, remembers what was written and
-reads a change before the next step.  The backend (the
-compiled loops of :mod:`rigidmd.core._numba` or the NumPy operators) is chosen
-once, at construction.  It never calls a calculator; an optimizer or a
-Monte Carlo move can use it without a dynamics::
+reads a change before the next step.  The backend
+(:mod:`rigidmd.core.backend`: the compiled loops or the NumPy operators) is
+chosen once, at construction, and carried here for every part that computes.
+It never calls a calculator; an optimizer or a Monte Carlo move can use it
+without a dynamics::
 
     link = BodyLink(atoms, geometry.model)
     state = link.initial_state(geometry)
@@ -23,9 +24,9 @@ from ase.constraints import FixCom
 from ase.io.trajectory import TrajectoryWriter
 from ase.md.logger import MDLogger
 
-from rigidmd.core import _numba
 from rigidmd.core import observables as obs
 from rigidmd.core import operators as ops
+from rigidmd.core.backend import Backend, resolve_backend
 from rigidmd.core.bodies import molecule_ids, unwrap_bodies
 from rigidmd.core.checks import check_constraints, check_finite, check_massless_momenta
 from rigidmd.core.dof import RigidBodyDOF
@@ -46,21 +47,23 @@ class BodyLink:
     atoms : ase.Atoms
         Written in place: ``atoms.arrays["positions"]`` and ``["momenta"]``.
     model : BodyModel
-    backend : {None, "numba", "numpy"}
-        See :func:`rigidmd.core._numba.resolve_backend`.
+    backend : {None, "numba", "numpy"} or Backend
+        See :func:`rigidmd.core.backend.resolve_backend`.
 
     Attributes
     ----------
-    atoms, model, backend
+    atoms, model
+    backend : rigidmd.core.backend.Backend
+        The backend every part that computes for this link runs on (the record,
+        the force evaluator, the stepper and the coupling parts read it here).
     removed_kinetic_energy : float
         Kinetic energy (eV) the last :meth:`read_momenta` removed by projecting
         the atoms' velocities onto rigid motion.
     """
 
-    def __init__(self, atoms: Atoms, model: BodyModel, backend: str | None = None):
+    def __init__(self, atoms: Atoms, model: BodyModel, backend: "str | Backend | None" = None):
         self.atoms, self.model = atoms, model
-        self.backend = _numba.resolve_backend(backend)
-        self.compiled = self.backend == "numba"
+        self.backend = resolve_backend(backend)
         self.masses = atoms.get_masses()
         self.removed_kinetic_energy = 0.0
 
@@ -82,12 +85,7 @@ class BodyLink:
         """
         m = self.model
         positions = self.atoms.arrays["positions"]
-        if self.compiled:
-            if r is None:
-                r = np.empty((len(m.order), 3))
-            _numba.place(state.X, state.q, m.body_coordinates, m.bounds, m.order, r, positions)
-        else:
-            r, positions[m.order] = ops.place_atoms(state, m)
+        r = self.backend.place(state, m, r, positions)
         positions[m.free] = state.x
         return r
 
@@ -95,11 +93,7 @@ class BodyLink:
         """Write the rigid momenta of ``state`` to the atoms (positions placed with ``r``)."""
         m = self.model
         momenta = self.atoms.arrays["momenta"]
-        if self.compiled:
-            _numba.momenta(state.V, state.q, state.p, m.inv_moments, m.bounds, m.order,
-                           m.atom_masses, r, momenta)
-        else:
-            momenta[m.order] = m.atom_masses[:, None] * ops.atom_velocities(state, r, m)
+        self.backend.write_momenta(state, m, r, momenta)
         if m.n_free:
             momenta[m.free] = m.free_masses[:, None] * state.v
 
@@ -109,10 +103,7 @@ class BodyLink:
         See :func:`rigidmd.core.observables.largest_angular_speed`; the compiled
         loop gives the same numbers without two dozen array operations.
         """
-        if self.compiled:
-            b, speed = _numba.largest_angular_speed(state.q, state.p, self.model.inv_moments)
-            return int(b), float(speed)
-        return obs.largest_angular_speed(state, self.model)
+        return self.backend.largest_angular_speed(state, self.model)
 
     # ------------------------------------------------------------ atoms -> state
     def read_momenta(self, state: RigidState, previous: np.ndarray | None = None,

@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from rigidmd.core import _numba
 from rigidmd.core import observables as obs
+from rigidmd.core.backend import NUMPY, Backend
 from rigidmd.core.model import BodyModel
 from rigidmd.core.state import RigidState
 
@@ -77,10 +77,11 @@ class StepRecord:
         self._rotational = None
 
     @property
-    def compiled(self) -> bool:
-        """The sums run the compiled loops of :mod:`rigidmd.core._numba`: the link's backend
-        (``link.compiled``; the dynamics' ``"numba"``), not :mod:`rigidmd.core.observables`."""
-        return self.link is not None and self.link.compiled
+    def backend(self) -> Backend:
+        """The backend the sums run on: the link's (:data:`~rigidmd.core.backend.NUMPY`
+        without a link)."""
+        link = self.link
+        return NUMPY if link is None else link.backend
 
     # ------------------------------------------------------------ derived, once
     @property
@@ -94,11 +95,7 @@ class StepRecord:
     def kinetic_tensor(self) -> np.ndarray:
         """Translational kinetic tensor (eV, 3x3; :func:`.observables.kinetic_tensor`)."""
         if self._kinetic is None:
-            if self.compiled:
-                s, m = self.state, self.model
-                self._kinetic = _numba.kinetic_tensor(s.V, s.v, m.mass, m.free_masses)
-            else:
-                self._kinetic = obs.kinetic_tensor(self.state, self.model)
+            self._kinetic = self.backend.kinetic_tensor(self.state, self.model)
         return self._kinetic
 
     @property
@@ -111,11 +108,7 @@ class StepRecord:
     def rotational_energy(self) -> float:
         """Rotational kinetic energy of the bodies (eV)."""
         if self._rotational is None:
-            if self.compiled:
-                s = self.state
-                self._rotational = _numba.rotational_energy(s.q, s.p, self.model.inv_moments)
-            else:
-                self._rotational = obs.rotational_kinetic_energy(self.state, self.model)
+            self._rotational = self.backend.rotational_energy(self.state, self.model)
         return self._rotational
 
     # ------------------------------------------------------------ what changed
@@ -139,8 +132,7 @@ class StepRecord:
         if K is None:
             return
         if isinstance(factor, np.ndarray) and factor.ndim == 2:
-            self._kinetic = (_numba.congruence(factor, K) if self.compiled
-                             else factor @ K @ factor.T)
+            self._kinetic = self.backend.congruence(factor, K)
         else:
             self._kinetic = K * float(factor) ** 2
 
@@ -170,11 +162,7 @@ class StepRecord:
         conserve the momentum, to roundoff.  One pass over the forces, on the
         link's backend.
         """
-        if self.compiled:
-            net, size = _numba.net_force(self.F, self.f)
-            return float(net), float(size)
-        net = float(np.linalg.norm(self.F.sum(axis=0) + self.f.sum(axis=0)))
-        return net, float(np.abs(self.F).sum() + np.abs(self.f).sum())
+        return self.backend.net_force(self.F, self.f)
 
     # ------------------------------------------------------------ rollback and checkpoints
     def get_state(self) -> dict:

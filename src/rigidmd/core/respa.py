@@ -34,17 +34,18 @@ roundoff.
 from dataclasses import dataclass
 
 from rigidmd.core import operators as ops
+from rigidmd.core.backend import Backend
 from rigidmd.core.forces import ForceEvaluator
 from rigidmd.core.record import StepRecord
 from rigidmd.core.schemes import Scheme, resolve_scheme
 from rigidmd.core.split import MultipleTimeStep
-from rigidmd.core.stepcontext import StepContext, fused_baoab, fused_no_squish
+from rigidmd.core.stepcontext import StepContext
 
 __all__ = ["SplitRecord", "SplitForceEvaluator", "RespaStep", "respa_for", "record_for",
            "evaluator_for", "respa_step"]
 
 
-def respa_for(calc, scheme: Scheme, backend: str, couplings=()) -> tuple:
+def respa_for(calc, scheme: Scheme, backend: Backend, couplings=()) -> tuple:
     """``(split, outer step)`` for a dynamics whose atoms carry ``calc``; ``(None, None)``
     when ``calc`` is no :class:`MultipleTimeStep`.  Changes nothing; refuses in one line
     a scheme it cannot run (:func:`respa_step`) or a level without the stress a part needs."""
@@ -53,7 +54,7 @@ def respa_for(calc, scheme: Scheme, backend: str, couplings=()) -> tuple:
     for part in couplings:
         if part.needs_stress:
             calc.check_level_properties("stress", f"the {part.kind} barostat")
-    return calc, respa_step(scheme, calc, backend == "numba")
+    return calc, respa_step(scheme, calc, backend)
 
 
 def record_for(split, state, model, link) -> StepRecord:
@@ -194,7 +195,7 @@ class _Stretched:
         self.part.middle(view, self.factor * h)
 
 
-def respa_step(scheme: Scheme, split: MultipleTimeStep, fused: bool) -> "RespaStep":
+def respa_step(scheme: Scheme, split: MultipleTimeStep, backend: Backend) -> "RespaStep":
     """The outer step a dynamics runs for ``split``; refuses an inner scheme it cannot run.
 
     Raises
@@ -204,7 +205,7 @@ def respa_step(scheme: Scheme, split: MultipleTimeStep, fused: bool) -> "RespaSt
     """
     for name in ("no_squish", "baoab"):
         if scheme == resolve_scheme(name):
-            return RespaStep(scheme, split, fused)
+            return RespaStep(scheme, split, backend)
     raise ValueError(f"MultipleTimeStep: the inner steps are NO_SQUISH (integrator no_squish, "
                      f"or baoab), not {scheme.name!r}")
 
@@ -219,17 +220,21 @@ class RespaStep:
         in the middle, see the module's text).
     split : MultipleTimeStep
         Its ``substeps`` are read at every outer step.
-    fused : bool
-        Run the inner steps' compiled kernels.
+    backend : rigidmd.core.backend.Backend
+        The dynamics' backend: the inner steps run its step functions (the fused
+        kernels on the compiled backend, the operators on the reference).
     """
 
     kernel = None  # the stepper runs run() and writes the momenta itself
 
-    def __init__(self, scheme: Scheme, split: MultipleTimeStep, fused: bool):
-        self.scheme, self.split, self.fused = scheme, split, fused
+    def __init__(self, scheme: Scheme, split: MultipleTimeStep, backend: Backend):
+        self.scheme, self.split, self.backend = scheme, split, backend
         self.name = scheme.name
         self.plain = resolve_scheme("no_squish")
         self.baoab = resolve_scheme("baoab")
+        #: The inner step of each scheme (own, plain, middle), on the backend.
+        self._step_of = {id(s): backend.step_function(s)
+                         for s in (self.scheme, self.plain, self.baoab)}
         self._contexts = None
 
     def _inner(self, ctx):
@@ -254,13 +259,9 @@ class RespaStep:
     def _inner_step(self, ctx, dt, with_middle: bool) -> None:
         # NO_SQUISH inner steps around a middle part's step; else the dynamics' own scheme.
         scheme = self.baoab if with_middle else self.plain if ctx.outer_middle else self.scheme
-        if self.fused:
-            (fused_baoab if scheme is self.baoab or scheme == self.baoab
-             else fused_no_squish)(ctx, dt)
-        else:
-            scheme.run(ctx, dt)
+        self._step_of[id(scheme)](ctx, dt)
 
-    def run(self, ctx, dt, fused=False) -> None:
+    def run(self, ctx, dt) -> None:
         """Advance ``ctx`` (the dynamics' context) by one outer step of ``dt``."""
         ev, state, model, record = ctx.evaluator, ctx.state, ctx.model, ctx.record
         if ev.atoms.calc is not self.split:

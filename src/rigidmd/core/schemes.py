@@ -230,21 +230,18 @@ class Scheme:
         """Whether the scheme runs the ``middle`` operator (where parts may act mid-step)."""
         return any(name == "middle" for name, _ in self.steps)
 
-    def run(self, ctx, dt, fused=False):
-        """Advance ``ctx`` by one step of ``dt`` (ASE time units).
+    def run(self, ctx, dt):
+        """Advance ``ctx`` by one step of ``dt`` (ASE time units), operator by operator.
+
+        The compiled backend runs the fused :attr:`kernel` instead, where the
+        scheme has one (:meth:`rigidmd.core.backend.Backend.step_function`).
 
         Parameters
         ----------
         ctx : StepContext
         dt : float
             The time step, read from the dynamics at every step.
-        fused : bool
-            Run the compiled :attr:`kernel` instead of the operators (the
-            same arithmetic); ignored when the scheme has none.
         """
-        if fused and self.kernel is not None:
-            self.kernel(ctx, dt)
-            return
         for function, dt_scale, extra in self._compiled:
             if dt_scale is None:
                 function(ctx)

@@ -43,8 +43,9 @@ class Stepper:
         What the parts see (its ``step`` is set before each step).
     link : BodyLink
         Writes the momenta once per step, and the atoms back after a rollback.
-    fused : bool
-        Run the scheme's compiled kernel.
+    kernel : callable or None
+        The scheme's fused kernel on the dynamics' backend
+        (:meth:`rigidmd.core.backend.Backend.scheme_kernel`), or None: the scheme's operators.
     fixcom : bool
         Hold the total momentum at zero (ASE's ``FixCom``).
 
@@ -55,12 +56,12 @@ class Stepper:
     """
 
     def __init__(self, scheme: Scheme, context: StepContext, couplings: Sequence[Coupling],
-                 view: CouplingView, link: BodyLink, fused: bool = False,
+                 view: CouplingView, link: BodyLink, kernel=None,
                  fixcom: bool = False):
         self.scheme, self.context, self.couplings = scheme, context, tuple(couplings)
         self.view, self.link, self.fixcom = view, link, fixcom
         #: The compiled kernel this stepper runs, or None (the scheme's operators).
-        self.kernel = scheme.kernel if fused else None
+        self.kernel = kernel
         self.cell_moves = context.cell_motion is not None
         self.state, self.record = context.state, context.record
         self._backup = self.state.copy()

@@ -32,8 +32,6 @@ end of the step: the exact state from which the next step continues.
 
 import numpy as np
 
-from rigidmd.core import operators as ops
-from rigidmd.couplings import _kernels
 from rigidmd.couplings.base import (
     TEMPERATURE,
     CouplingView,
@@ -114,25 +112,11 @@ class LangevinBAOABThermostat(_Stochastic):
         n, nf = len(s.X), len(s.x)
         noise = self.rng.standard_normal(6 * n + 3 * nf)
         scales = (1.0 / np.sqrt(m.mass), 1.0 / np.sqrt(m.free_masses), np.sqrt(m.moments))
-        if view.compiled:
-            _kernels.ornstein_uhlenbeck(s.data, n, nf, c, sigma, *scales, noise)
-        else:
-            self.ornstein_uhlenbeck(s, c, sigma, *scales, noise)
+        view.backend.ornstein_uhlenbeck(s.data, n, nf, c, sigma, *scales, noise)
         self.set_centre_velocity(view, U)
         record.velocities_changed()
         self.work += record.translational_energy + record.rotational_energy - before
         self.reported = self.kinetic_energies(view)
-
-    @staticmethod
-    def ornstein_uhlenbeck(s, c, sigma, inv_sqrt_mass, inv_sqrt_free, sqrt_moments, noise):
-        """The NumPy reference of :func:`rigidmd.couplings._kernels.ornstein_uhlenbeck`."""
-        n, nf = len(s.X), len(s.x)
-        s.V[...] = c * s.V + sigma * noise[:3 * n].reshape(n, 3) * inv_sqrt_mass[:, None]
-        s.v[...] = c * s.v + sigma * noise[3 * n:3 * n + 3 * nf].reshape(nf, 3) \
-            * inv_sqrt_free[:, None]
-        L = ops.body_angular_momentum(s.q, s.p)
-        L = c * L + sigma * sqrt_moments * noise[3 * n + 3 * nf:].reshape(n, 3)
-        s.p[...] = ops.conjugate_momentum(s.q, L)
 
     def reported_kinetic_energies(self, view: CouplingView) -> tuple | None:
         """(translational, rotational) kinetic energy after the last O step (eV), or None.

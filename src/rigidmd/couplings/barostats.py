@@ -25,8 +25,10 @@ import numpy as np
 from ase import units
 
 from rigidmd.core import observables as obs
+from rigidmd.core.backend import register as register_operation
 from rigidmd.core.bodies import check_bodies_fit
-from rigidmd.couplings import _kernels
+from rigidmd.couplings import _numba
+from rigidmd.couplings._numpy import exprel, symmetric_exp
 from rigidmd.couplings.base import (
     TEMPERATURE,
     Coupling,
@@ -60,37 +62,6 @@ _IDENTITY.flags.writeable = False
 
 class BarostatError(ValueError):
     """The barostat cannot go on (a volume jump, a collapsing cell); the step was undone."""
-
-
-def exprel(x):
-    r""":math:`(e^x - 1)/x`, 1 at 0, accurate for small :math:`|x|`."""
-    x = np.asarray(x, dtype=float)
-    small = np.abs(x) < 1e-5
-    safe = np.where(small, 1.0, x)
-    return np.where(small, 1.0 + x / 2 + x * x / 6, np.expm1(safe) / safe)
-
-
-def symmetric_exp(G, t):
-    r""":math:`e^{G t}` and :math:`\int_0^t e^{G s}\,ds` of a symmetric 3x3 matrix :math:`G`.
-
-    Returns
-    -------
-    A, B : numpy.ndarray, shape (3, 3)
-        Both symmetric; ``B`` has units of ``t``.
-    """
-    eigenvalues, U = np.linalg.eigh(G)
-    A = (U * np.exp(eigenvalues * t)) @ U.T
-    B = (U * (t * exprel(eigenvalues * t))) @ U.T
-    return A, B
-
-
-def project(G, couple):
-    """The part of a 3x3 tensor that a ``couple`` mode moves (iso: mean trace; aniso: diagonal)."""
-    if couple == "iso":
-        return np.trace(G) / 3.0 * np.eye(3)
-    if couple == "aniso":
-        return np.diag(np.diag(G))
-    return 0.5 * (G + G.T)
 
 
 def check_couple(couple):
@@ -246,7 +217,7 @@ class MTKBarostat(Barostat):
         self.ploop = check_positive_integer("ploop", ploop)
         self.p_g = np.zeros((3, 3))
         self.chain = NoseHooverChain(COUPLE[self.couple], self.pdamp, self.pchain, self.ploop)
-        self._couple_code = _kernels.COUPLE_CODES[self.couple]
+        self._couple_code = _numba.COUPLE_CODES[self.couple]
 
     def check_timestep(self, dt):
         # Below about 10 steps per period the barostat's oscillation is not resolved.
@@ -269,37 +240,23 @@ class MTKBarostat(Barostat):
         p = self.p_g.ravel()
         return float(p @ p) / (2 * self.W)
 
-    def _kappa(self):
-        """Friction tensor of the translational momenta, (p_g + Tr(p_g)/N_f) / W."""
-        return (self.p_g + np.trace(self.p_g) / self.n_f * np.eye(3)) / self.W
-
-    # Each operator runs its kernel (:mod:`._kernels`) on the compiled backend, else the
-    # NumPy reference beside it.
+    # Each operator runs on the view's backend: its kernel (:mod:`._numba`) or the NumPy
+    # reference of the same name (:mod:`._numpy`).
     def _thermostat(self, view, h):
         """The barostat's own chain over ``h``, driven by the cell's kinetic energy."""
-        self.chain.act_on(self.p_g, self.W, self.kT, h, view.compiled)
+        self.chain.act_on(self.p_g, self.W, self.kT, h, view.backend)
 
     def _kick(self, view, h):
         """:math:`p_g \\mathrel{+}= h\\,G` with the pressure at the current state."""
         record = view.record
-        if view.compiled:
-            _kernels.mtk_kick(self.p_g, record.virial, record.kinetic_tensor, record.volume,
+        view.backend.mtk_kick(self.p_g, record.virial, record.kinetic_tensor, record.volume,
                               self.pressure_au, self.n_f, h, self._couple_code)
-            return
-        kinetic = 2.0 * record.translational_energy / self.n_f
-        G = record.volume * (self.pressure_tensor(view) - self.pressure_au * np.eye(3))
-        self.p_g += h * project(G + kinetic * np.eye(3), self.couple)
 
     def _scale_momenta(self, view, h):
         """The friction: :math:`V \\leftarrow e^{-\\kappa h} V`, and of the point particles."""
         s = view.state
-        if view.compiled:
-            factor = _kernels.mtk_friction(s.data, len(s.X), len(s.x), self.p_g, self.W,
+        factor = view.backend.mtk_friction(s.data, len(s.X), len(s.x), self.p_g, self.W,
                                            self.n_f, h)
-        else:
-            factor, _ = symmetric_exp(-self._kappa(), h)
-            s.V[...] = s.V @ factor.T
-            s.v[...] = s.v @ factor.T
         view.record.scale_translation(factor)
 
     def first_half(self, view: CouplingView, h: float) -> None:
@@ -313,10 +270,7 @@ class MTKBarostat(Barostat):
         self._thermostat(view, h)
 
     def drift_matrices(self, view: CouplingView, h: float) -> tuple:
-        if view.compiled:
-            A, B, det = _kernels.symmetric_exp(self.p_g / self.W, h)
-        else:
-            (A, B), det = symmetric_exp(self.p_g / self.W, h), None
+        A, B, det = view.backend.symmetric_exp_det(self.p_g / self.W, h)
         self.check_volume_change(A, det)
         return A, B, _IDENTITY, None
 
@@ -473,10 +427,11 @@ class CRescaleBarostat(Barostat):
         record = view.record
         if record.cell_move is not None or self._noise is None:  # moved already, or not now
             return _IDENTITY, h * _IDENTITY, _IDENTITY, None
+        return view.backend.crescale_drift(self, view, record.volume, h)
+
+    def _drift_reference(self, view, volume, h):
+        """:meth:`drift_matrices` on the NumPy backend (the reference of the next)."""
         kT, dt = self.kT, self._span
-        volume = record.volume
-        if view.compiled:
-            return self._move_compiled(view, volume, h)
         f_lambda, f_eta = self._forces(self.pressure_tensor(view), volume)
         d_lambda = 0.25 * kT * self.compressibility_au / self.taup
         d_eta = kT * self.compressibility_au / (3.0 * self.taup * volume)
@@ -501,14 +456,14 @@ class CRescaleBarostat(Barostat):
         note = (step_lambda, step_eta, d_lambda, d_eta, kinetic, first)
         return mu, 0.5 * h * (mu + inverse), inverse, note
 
-    def _move_compiled(self, view, volume, h):
-        """:meth:`drift_matrices` in one compiled call (:func:`._kernels.crescale_move`)."""
+    def _drift_compiled(self, view, volume, h):
+        """:meth:`drift_matrices` in one compiled call (:func:`._numba.crescale_move`)."""
         xi_lambda, xi_eta = self._noise
         record = view.record
         # The kinetic tensor is the record's (one sum per step; the kernel also gives it
         # as the drift leaves the velocities, S V with S = mu^-1).
         mu, B, inverse, det, step_lambda, step_eta, d_lambda, d_eta, first, kinetic = \
-            _kernels.crescale_move(record.virial, record.kinetic_tensor, volume,
+            _numba.crescale_move(record.virial, record.kinetic_tensor, volume,
                                    self.pressure_au, self.kT, self.compressibility_au,
                                    self.taup, self._span, xi_lambda, xi_eta, self.basis, h)
         if det == 0.0:
@@ -518,27 +473,41 @@ class CRescaleBarostat(Barostat):
         note = (step_lambda, step_eta, d_lambda, d_eta, kinetic, first)
         return mu, B, inverse, note
 
+    # The move as an operation of the backends: the kernel takes the kinetic tensor, the
+    # reference the velocities, so the pair is a pair of methods (called with the part).
+    register_operation("crescale_drift", _drift_reference, _drift_compiled)
+
     def second_half(self, view: CouplingView, h: float) -> None:
         record = view.record
         if record.cell_move is None:
             return
-        step_lambda, step_eta, d_lambda, d_eta, kinetic, first = record.cell_move
+        first = record.cell_move[5]
+        self.work += first
+        self.work += view.backend.crescale_bookkeeping(self, view)
+
+    def _bookkeeping_reference(self, view):
+        """The second half's work (eV) less the first half's, on the NumPy backend."""
+        record = view.record
+        step_lambda, step_eta, d_lambda, d_eta, kinetic, _ = record.cell_move
         kT, dt = self.kT, self._span
         volume = record.volume
-        if view.compiled:
-            self.work += first
-            self.work += _kernels.crescale_work(record.virial, kinetic, volume,
-                                                self.pressure_au, kT, dt, self.basis,
-                                                step_lambda, step_eta, d_lambda, d_eta)
-            return
         # The pressure right after the force call: the velocities as the drift left them.
         kinetic = obs.kinetic_tensor_of(*kinetic, view.model)
         pressure = record.virial / volume + kinetic / volume
         f_lambda, f_eta = self._forces(pressure, volume)
-        self.work += first
-        self.work += (0.5 * step_lambda * f_lambda
-                      + 0.25 * d_lambda / kT * dt * f_lambda**2 - 0.5 * kT * np.log(volume)
-                      + 0.5 * step_eta @ f_eta + 0.25 * d_eta / kT * dt * f_eta @ f_eta)
+        return (0.5 * step_lambda * f_lambda
+                + 0.25 * d_lambda / kT * dt * f_lambda**2 - 0.5 * kT * np.log(volume)
+                + 0.5 * step_eta @ f_eta + 0.25 * d_eta / kT * dt * f_eta @ f_eta)
+
+    def _bookkeeping_compiled(self, view):
+        """:meth:`_bookkeeping_reference` in one compiled call (:func:`._numba.crescale_work`)."""
+        record = view.record
+        step_lambda, step_eta, d_lambda, d_eta, kinetic, _ = record.cell_move
+        return _numba.crescale_work(record.virial, kinetic, record.volume, self.pressure_au,
+                                    self.kT, self._span, self.basis, step_lambda, step_eta,
+                                    d_lambda, d_eta)
+
+    register_operation("crescale_bookkeeping", _bookkeeping_reference, _bookkeeping_compiled)
 
     def energy(self, view: CouplingView) -> float:
         return self.pressure_au * view.record.volume + self.work

@@ -42,11 +42,12 @@ from typing import ClassVar
 import numpy as np
 from ase import Atoms, units
 
+from rigidmd.core.backend import NUMPY, Backend
 from rigidmd.core.forces import ForceEvaluator
 from rigidmd.core.model import BodyModel
 from rigidmd.core.record import StepRecord
 from rigidmd.core.state import RigidState
-from rigidmd.couplings import _kernels
+from rigidmd.couplings import _numpy  # noqa: F401  (registers the backends' operations)
 
 __all__ = ["Coupling", "CouplingView", "Parameter", "COUPLINGS", "register", "NotExportable",
            "LammpsFix", "NoseHooverChain", "NET_FORCE_FLOOR", "check_rng", "rng_state",
@@ -168,10 +169,10 @@ class CouplingView:
     cell_moves: bool = False
 
     @property
-    def compiled(self) -> bool:
-        """The parts run their compiled kernels (:mod:`rigidmd.couplings._kernels`), not
-        their NumPy references: the backend of the record's link (the dynamics' ``"numba"``)."""
-        return self.record.compiled
+    def backend(self) -> Backend:
+        """The backend the parts run on (the record's link's): each operation with a
+        compiled kernel is a method of it (:mod:`rigidmd.core.backend`)."""
+        return self.record.backend
 
 
 class Coupling:
@@ -407,57 +408,23 @@ class NoseHooverChain:
         Q[0] *= self.ndof
         return Q
 
-    def propagate(self, K, kT, h, compiled=False):
+    def propagate(self, K, kT, h, backend: Backend = NUMPY):
         """Advance over ``h`` with the group's kinetic energy ``K``; returns its velocity scale.
 
-        ``compiled``: run :func:`rigidmd.couplings._kernels.chain_propagate` (the
-        caller's ``view.compiled``) instead of the NumPy reference below.
+        On ``backend`` (the caller's ``view.backend``):
+        :func:`rigidmd.couplings._numpy.chain_propagate` or its kernel.
         """
-        if compiled:
-            return _kernels.chain_propagate(self.xi, self.eta, self.ndof, kT * self.tdamp**2,
-                                            float(K), kT, h, self.tloop)
-        if self.ndof == 0:
-            return 1.0
-        xi, eta, ndof, M = self.xi, self.eta, self.ndof, self.tchain
-        Q = self.masses(kT)
-        scale = 1.0
-        delta = h / self.tloop
+        return backend.chain_propagate(self.xi, self.eta, self.ndof, kT * self.tdamp**2, K, kT,
+                                       h, self.tloop)
 
-        def force(j, K2):
-            if j == 0:
-                return (K2 - ndof * kT) / Q[0]
-            return (Q[j - 1] * xi[j - 1] ** 2 - kT) / Q[j]
-
-        for _ in range(self.tloop):
-            # Half kick of the chain over delta/2, from the end of the chain ...
-            K2 = 2.0 * K * scale**2
-            xi[M - 1] += 0.5 * delta * force(M - 1, K2)
-            for j in range(M - 2, -1, -1):
-                damp = np.exp(-0.25 * delta * xi[j + 1])
-                xi[j] = (xi[j] * damp + 0.5 * delta * force(j, K2)) * damp
-            # ... the particles' scaling and the positions of the chain ...
-            scale *= np.exp(-delta * xi[0])
-            eta += delta * xi
-            # ... and the other half kick, back to the end of the chain.
-            K2 = 2.0 * K * scale**2
-            for j in range(M - 1):
-                damp = np.exp(-0.25 * delta * xi[j + 1])
-                xi[j] = (xi[j] * damp + 0.5 * delta * force(j, K2)) * damp
-            xi[M - 1] += 0.5 * delta * force(M - 1, K2)
-        return scale
-
-    def act_on(self, p, mass, kT, h, compiled=False):
+    def act_on(self, p, mass, kT, h, backend: Backend = NUMPY):
         r"""Advance over ``h`` on a momentum of kinetic energy :math:`\sum p^2 / 2m`; scale it.
 
         ``p`` (2-D, changed in place) is the momentum the chain acts on, ``mass`` its
         mass (a barostat's cell momentum :math:`p_g` and mass :math:`W`).
         """
-        if compiled:
-            _kernels.chain_scale(p, mass, self.xi, self.eta, self.ndof, kT * self.tdamp**2,
-                                 kT, h, self.tloop)
-            return
-        flat = p.ravel()
-        p *= self.propagate(float(flat @ flat) / (2 * mass), kT, h)
+        backend.chain_scale(p, mass, self.xi, self.eta, self.ndof, kT * self.tdamp**2, kT, h,
+                            self.tloop)
 
     def energy(self, kT):
         if self.ndof == 0:
@@ -620,14 +587,9 @@ class Thermostat(Coupling):
             s.v[...] = U + translational * (s.v - U)
             s.p *= rotational
             record.scale_translation_about(translational, U, M)
-        elif view.compiled:  # the three scalings in one pass over the state buffer
-            _kernels.scale_velocities(s.data, len(s.X), len(s.x), float(translational),
-                                      float(rotational))
-            record.scale_translation(translational)
-        else:
-            s.V *= translational
-            s.v *= translational
-            s.p *= rotational
+        else:  # the three scalings in one pass over the state buffer
+            view.backend.scale_velocities(s.data, len(s.X), len(s.x), float(translational),
+                                          float(rotational))
             record.scale_translation(translational)
         record.scale_rotation(rotational)
 

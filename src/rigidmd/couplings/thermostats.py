@@ -26,7 +26,6 @@ import numpy as np
 from ase import units
 
 from rigidmd.core import operators as ops
-from rigidmd.couplings import _kernels
 from rigidmd.couplings.base import (
     TEMPERATURE,
     CouplingView,
@@ -343,18 +342,18 @@ class NoseHooverThermostat(Thermostat):
         K_t, K_r = self.kinetic_energies(view)
         translation, rotation = self.chains
         kT = self.kT
-        if view.compiled and not self.holds_momentum:  # chains and scaling in one call
+        backend = view.backend
+        if not self.holds_momentum:  # chains and scaling in one call
             s, record = view.state, view.record
-            factors = _kernels.nose_hoover_scale(
+            factors = backend.nose_hoover_scale(
                 s.data, len(s.X), len(s.x), translation.xi, translation.eta, translation.ndof,
                 rotation.xi, rotation.eta, rotation.ndof, kT * self.tdamp**2, K_t, K_r, kT, h,
                 self.tloop)
             record.scale_translation(factors[0])
             record.scale_rotation(factors[1])
             return
-        compiled = view.compiled
-        self.scale(view, translation.propagate(K_t, kT, h, compiled),
-                   rotation.propagate(K_r, kT, h, compiled))
+        self.scale(view, translation.propagate(K_t, kT, h, backend),
+                   rotation.propagate(K_r, kT, h, backend))
 
     def energy(self, view: CouplingView | None = None) -> float:
         """Energy of the two chains (eV)."""

@@ -22,7 +22,8 @@ import ctypes
 
 import numpy as np
 
-from rigidmd.lammps import kernels
+from rigidmd.core.backend import resolve_backend
+from rigidmd.lammps import _numpy
 
 __all__ = ["AtomArrays"]
 
@@ -49,6 +50,8 @@ class AtomArrays:
         self._bits = tuple(lmp.extract_setting(s)
                            for s in ("IMGBITS", "IMG2BITS", "IMGMASK", "IMGMAX"))
         self._order = None
+        #: The backend of the two per-atom loops: compiled when numba is installed.
+        self._backend = resolve_backend(None)
 
     def view(self, name: str) -> np.ndarray:
         """LAMMPS's array ``name`` for the local atoms (a view: writing it writes LAMMPS's).
@@ -83,11 +86,11 @@ class AtomArrays:
 
     def images(self) -> np.ndarray:
         """LAMMPS's image flags of its atoms (in its order), unpacked, shape (nlocal, 3)."""
-        return kernels.unpack_images(self.view("image"), self._bits)
+        return _numpy.unpack_images(self.view("image"), self._bits)
 
     def pack_images(self, image) -> np.ndarray:
         """Image flags, shape (n, 3) of int, packed as LAMMPS packs them."""
-        return kernels.pack_images(image, self._bits)
+        return _numpy.pack_images(image, self._bits)
 
     def write_positions(self, positions: np.ndarray, cell: np.ndarray) -> None:
         """Write ``positions`` (ASE order, LAMMPS's frame, Å) into LAMMPS, in its images.
@@ -98,10 +101,11 @@ class AtomArrays:
         given in another image: a restart from unwrapped positions), all atoms
         are shifted by whole vectors of ``cell`` (LAMMPS's box, lower triangular)
         and their image flags with them: LAMMPS wraps by one box only, and would
-        lose such atoms.  See :func:`rigidmd.lammps.kernels.write_positions`.
+        lose such atoms.  See :func:`rigidmd.lammps._numba.write_positions` (on the
+        default backend: the NumPy reference without numba).
         """
-        kernels.write_positions(positions, self.order(), self.view("image"), self._bits,
-                                cell, self.view("x"))
+        self._backend.write_positions(positions, self.order(), self.view("image"), self._bits,
+                                      cell, self.view("x"))
 
     def read_forces(self, out: np.ndarray) -> None:
         """LAMMPS's forces into ``out`` (n, 3) in the ASE order; :meth:`order` read anew.
@@ -110,4 +114,4 @@ class AtomArrays:
         """
         if self._order is None:
             self._order = np.empty(self.nlocal, dtype=np.int64)
-        kernels.read_forces(self.view("f"), self.view("id"), self._order, out)
+        self._backend.read_forces(self.view("f"), self.view("id"), self._order, out)

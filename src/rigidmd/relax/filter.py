@@ -55,8 +55,8 @@ from rigidmd.core.forces import ForceEvaluator
 from rigidmd.core.link import BodyLink
 from rigidmd.core.model import BodyModel, describe_atoms
 from rigidmd.core.record import StepRecord
+from rigidmd.relax import _numba
 from rigidmd.relax import cell as relaxcell
-from rigidmd.relax import kernels
 from rigidmd.relax import optimizerstate as relaxstate
 from rigidmd.relax.facade import AtomsFacade
 from rigidmd.relax.rotationvector import right_jacobian_transpose, rotation_quaternion
@@ -178,7 +178,7 @@ class RigidFilter(AtomsFacade):
 
     def _orientations(self):
         q = np.empty_like(self._q_ref)
-        kernels.orientations(self._q_ref, self._x[self._slices[1]], self.lengths,
+        _numba.orientations(self._q_ref, self._x[self._slices[1]], self.lengths,
                              self.model.linear, q)
         return q
 
@@ -232,7 +232,7 @@ class RigidFilter(AtomsFacade):
     def _reanchor(self):
         if not self.model.n_bodies:
             return
-        if kernels.largest_angle(self._x[self._slices[1]], self.lengths,
+        if _numba.largest_angle(self._x[self._slices[1]], self.lengths,
                                  self.model.linear) > ANCHOR_ANGLE:
             far = np.linalg.norm(self._phi(), axis=1) > ANCHOR_ANGLE
             q = self._current()[2]
@@ -382,11 +382,11 @@ class RigidFilter(AtomsFacade):
         _, r, q, D = self._current()  # the atoms are placed: r is the record's
         model, record = self.model, self._record
         # The dynamics' force call (ForceEvaluator), then its reduction to the bodies fused
-        # with the rotation rows' gradient (rigidmd.relax.kernels.body_gradient).
+        # with the rotation rows' gradient (rigidmd.relax._numba.body_gradient).
         forces = self._evaluator.calculator_forces(self._state)
         nb = model.n_bodies
         F, tau, g = np.empty((nb, 3)), np.empty((nb, 3)), np.empty((nb, 3))
-        kernels.body_gradient(forces, r, model.order, model.bounds, q, self._x[self._slices[1]],
+        _numba.body_gradient(forces, r, model.order, model.bounds, q, self._x[self._slices[1]],
                               self.lengths, model.linear, self._fixed_bodies, F, tau, g)
         record.F, record.tau, record.f = F, tau, forces[model.free]
         out = np.empty_like(self._x)

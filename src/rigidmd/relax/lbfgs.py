@@ -14,14 +14,14 @@ memory is cleared; every step is capped at ``maxstep`` (Å, the largest row,
 as ASE's ``LBFGS``).  Memory and time per step are O(n) (``memory`` pairs of
 vectors, a sparse preconditioner solved once per step for both vectors it
 is applied to), and every sum is a compiled loop in a fixed order
-(:mod:`rigidmd.relax.kernels`) rather than a BLAS dot product, so that the
+(:mod:`rigidmd.relax._numba`) rather than a BLAS dot product, so that the
 path does not depend on the number of BLAS threads.
 """
 
 import numpy as np
 from ase.optimize.optimize import Optimizer
 
-from rigidmd.relax import kernels
+from rigidmd.relax import _numba
 from rigidmd.relax.optimizerstate import split
 from rigidmd.relax.precon import RigidPrecon
 
@@ -42,8 +42,8 @@ SCALE_TOLERANCE = 3e-2
 
 
 def _dot(a, b):
-    """:math:`a \\cdot b` in a fixed order (:func:`rigidmd.relax.kernels.dot`; no BLAS)."""
-    return float(kernels.dot(a, b))
+    """:math:`a \\cdot b` in a fixed order (:func:`rigidmd.relax._numba.dot`; no BLAS)."""
+    return float(_numba.dot(a, b))
 
 
 class RigidLBFGS(Optimizer):
@@ -142,7 +142,7 @@ class RigidLBFGS(Optimizer):
         a = np.empty(len(self.s))
         for i in range(len(self.s) - 1, -1, -1):
             a[i] = self.rho[i] * _dot(self.s[i], q)
-            kernels.axpy(-a[i], self.y[i], q)
+            _numba.axpy(-a[i], self.y[i], q)
         if self.s:
             z, Hy = self._solve(q, self.y[-1], tolerances=(None, SCALE_TOLERANCE))
             z *= _dot(self.s[-1], self.y[-1]) / _dot(self.y[-1], Hy)
@@ -150,7 +150,7 @@ class RigidLBFGS(Optimizer):
             (z,) = self._solve(q)
         for i in range(len(self.s)):
             b = self.rho[i] * _dot(self.y[i], z)
-            kernels.axpy(a[i] - b, self.s[i], z)
+            _numba.axpy(a[i] - b, self.s[i], z)
         dx = -z.reshape(-1, 3)
         longest = np.sqrt(np.sum(dx * dx, axis=1)).max() if len(dx) else 0.0
         if longest > self.maxstep:

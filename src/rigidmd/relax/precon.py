@@ -38,7 +38,7 @@ when a centre moved more than ``recompute * r_NN``, and the Laplacian is
 solved by conjugate gradients (Jacobi-preconditioned, to a relative
 residual of :data:`CG_TOLERANCE`, several right-hand sides at once; a
 sparse LU factorisation fills in, 1.3 s for 1728 centres) in the compiled
-loops of :mod:`rigidmd.relax.kernels`: no dense matrix, no BLAS reduction
+loops of :mod:`rigidmd.relax._numba`: no dense matrix, no BLAS reduction
 whose order depends on the number of threads.
 """
 
@@ -49,7 +49,7 @@ from ase.optimize.precon.precon import Precon
 from scipy import sparse
 
 from rigidmd.core.neighbours import tree_nearest, tree_pairs
-from rigidmd.relax import kernels
+from rigidmd.relax import _numba
 
 __all__ = ["RigidPrecon", "MU_FLOOR", "CG_TOLERANCE", "SKIN", "MAX_ITERATIONS"]
 
@@ -180,7 +180,7 @@ class RigidPrecon(Precon):
 
     def _assemble_at(self, centres, cell, rows, mu, mu_rot, mu_c):
         _, first, second, shifts, _ = self._listed
-        indptr, indices, weights, degree = kernels.pair_graph(
+        indptr, indices, weights, degree = _numba.pair_graph(
             np.ascontiguousarray(centres, dtype=float), cell, first, second, shifts,
             float(self._cut()), float(self.r_NN), self.A)
         self._graph = (indptr, indices, mu * weights, mu * (degree + self.c_stab))
@@ -357,7 +357,7 @@ class RigidPrecon(Precon):
         t = rows["translation_rows"]
         if len(t):
             out = np.empty((len(t), 3))
-            kernels.laplacian_product(*self._graph, np.ascontiguousarray(x[t]), out)
+            _numba.laplacian_product(*self._graph, np.ascontiguousarray(x[t]), out)
             y[t] = out
         rot, mu_c = self._diag
         y[rows["rotation_rows"]] = x[rows["rotation_rows"]] * rot[:, None]
@@ -367,7 +367,7 @@ class RigidPrecon(Precon):
     def solve(self, x, tolerances=None):
         """:math:`P^{-1} x` for ``x`` of shape (3 n,), or for each row of ``x`` of shape (k, 3 n).
 
-        The translation block by conjugate gradients (:func:`rigidmd.relax.kernels.
+        The translation block by conjugate gradients (:func:`rigidmd.relax._numba.
         conjugate_gradient`, all right-hand sides at once), the rest diagonal.
         ``tolerances`` (k,): each row's relative residual (None: :data:`CG_TOLERANCE`).
         """
@@ -386,7 +386,7 @@ class RigidPrecon(Precon):
             mean = b.mean(axis=0)
             tol = np.repeat([CG_TOLERANCE if t is None else float(t)
                              for t in (tolerances or [None] * k)], 3)
-            solved, _ = kernels.conjugate_gradient(*self._graph, b - mean, tol,
+            solved, _ = _numba.conjugate_gradient(*self._graph, b - mean, tol,
                                                    MAX_ITERATIONS, True)
             solved += mean / self._uniform
             y[:, t, :] = solved.reshape(m, k, 3).transpose(1, 0, 2)
@@ -436,7 +436,7 @@ def _pairs(points, r_cut):
 
     The pair's vector is ``positions[j] - positions[i] + shifts @ cell`` (``shifts``
     whole numbers, shape (p, 3)).  A compiled cell list
-    (:func:`rigidmd.relax.kernels.cell_list_pairs`; 2.4 ms CPU for 1728 centres of
+    (:func:`rigidmd.relax._numba.cell_list_pairs`; 2.4 ms CPU for 1728 centres of
     water, 50,262 pairs within 7.5 Å, against 7.0 ms for scipy's k-d tree and its
     shifts) in a cell periodic in all three directions with its planes at least
     ``3 r_cut`` apart, of any shape (ASE's neighbour list took over 100 ms in a sheared
@@ -466,7 +466,7 @@ def _pairs(points, r_cut):
     over = inside >= 1.0  # -1e-17 - floor(-1e-17) rounds to 1
     inside[over], whole[over] = 0.0, whole[over] + 1.0
     # The shifts for the points as given (whole numbers, as floats).
-    return kernels.cell_list_pairs(np.ascontiguousarray(inside), whole, np.array(cell, float),
+    return _numba.cell_list_pairs(np.ascontiguousarray(inside), whole, np.array(cell, float),
                                    nbin, pbc.copy(), float(r_cut))
 
 

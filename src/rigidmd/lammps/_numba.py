@@ -6,9 +6,11 @@ temporaries (gather, unpack the image flags, ``image @ cell``, fractional
 coordinates, two range tests; scatter by atom ID): together about 90 µs per
 call on 648 atoms, a third of rigidmd's own share of a 216-water step under a
 barostat.  Compiled, each is one loop: :func:`write_positions` and
-:func:`read_forces`.  :func:`write_positions_numpy` and
-:func:`read_forces_numpy` are the NumPy references (and the path without
-numba); ``tests/test_lammps_kernels.py`` checks the two against each other.
+:func:`read_forces`.  Their NumPy references, of the same names and
+arguments, are in :mod:`rigidmd.lammps._numpy` (the path without numba);
+each pair is an operation of the backends (:mod:`rigidmd.core.backend`), and
+``tests/test_lammps_kernels.py`` and ``tests/test_backend.py`` check the two
+against each other.
 
 Definitions.  LAMMPS's box is lower triangular, rows
 :math:`\mathbf a = (a_x, 0, 0)`, :math:`\mathbf b = (b_x, b_y, 0)`,
@@ -26,48 +28,12 @@ image flags take the shift.
 
 import numpy as np
 
-from rigidmd.core import _numba
+from rigidmd.core._numba import jit
 
-__all__ = ["pack_images", "read_forces", "read_forces_numpy", "unpack_images", "write_positions",
-           "write_positions_numpy"]
-
-
-def unpack_images(image, bits):
-    """Image flags (n, 3) of int64 from LAMMPS's packed integers (``IMGBITS``, ... )."""
-    shift, shift2, mask, offset = bits
-    img = image.astype(np.int64)
-    return np.stack([(img & mask) - offset, ((img >> shift) & mask) - offset,
-                     (img >> shift2) - offset], axis=1)
+__all__ = ["read_forces", "write_positions"]
 
 
-def pack_images(flags, bits):
-    """LAMMPS's packed image integers from flags (n, 3) of int."""
-    shift, shift2, mask, offset = bits
-    packed = (np.asarray(flags, dtype=np.int64) + offset) & mask
-    return packed[:, 0] | (packed[:, 1] << shift) | (packed[:, 2] << shift2)
-
-
-def write_positions_numpy(positions, order, image, bits, cell, x):
-    """NumPy reference of :func:`write_positions` (same arguments and result)."""
-    flags = unpack_images(image, bits)
-    p = positions[order] - flags @ cell
-    frac = p @ np.linalg.inv(cell)
-    shifted = bool(np.any(frac < -0.5) or np.any(frac >= 1.5))
-    if shifted:
-        shift = np.floor(frac)
-        p -= shift @ cell
-        image[:] = pack_images(flags + shift.astype(np.int64), bits)
-    x[:] = p
-    return shifted
-
-
-def read_forces_numpy(f, ids, order, out):
-    """NumPy reference of :func:`read_forces` (same arguments)."""
-    np.subtract(ids, 1, out=order)
-    out[order] = f
-
-
-@_numba.jit
+@jit
 def _write_positions(positions, order, image, shift, shift2, mask, offset, cell, x):
     n = x.shape[0]
     ax, bx, by = cell[0, 0], cell[1, 0], cell[1, 1]
@@ -111,8 +77,21 @@ def _write_positions(positions, order, image, shift, shift2, mask, offset, cell,
     return outside
 
 
-@_numba.jit
-def _read_forces(f, ids, order, out):
+@jit
+def read_forces(f, ids, order, out):
+    """Scatter LAMMPS's forces into the ASE order and refresh ``order``.
+
+    Parameters
+    ----------
+    f : numpy.ndarray, shape (n, 3)
+        LAMMPS's forces (eV/Å), in LAMMPS's order.
+    ids : numpy.ndarray of int, shape (n,)
+        LAMMPS's atom IDs (1-based indices in the ASE atoms).
+    order : numpy.ndarray of int64, shape (n,)
+        Written: ``ids - 1``.
+    out : numpy.ndarray, shape (n, 3)
+        Written: the forces in the ASE order.
+    """
     for i in range(f.shape[0]):
         j = ids[i] - 1
         order[i] = j
@@ -143,28 +122,6 @@ def write_positions(positions, order, image, bits, cell, x):
         Whether the atoms were shifted by whole cell vectors (an atom more
         than half a box outside LAMMPS's box in its own image).
     """
-    if not _numba.AVAILABLE:
-        return write_positions_numpy(positions, order, image, bits, cell, x)
     shift, shift2, mask, offset = bits
     return bool(_write_positions(positions, order, image, shift, shift2, mask, offset,
                                  cell, x))
-
-
-def read_forces(f, ids, order, out):
-    """Scatter LAMMPS's forces into the ASE order and refresh ``order``.
-
-    Parameters
-    ----------
-    f : numpy.ndarray, shape (n, 3)
-        LAMMPS's forces (eV/Å), in LAMMPS's order.
-    ids : numpy.ndarray of int, shape (n,)
-        LAMMPS's atom IDs (1-based indices in the ASE atoms).
-    order : numpy.ndarray of int64, shape (n,)
-        Written: ``ids - 1``.
-    out : numpy.ndarray, shape (n, 3)
-        Written: the forces in the ASE order.
-    """
-    if not _numba.AVAILABLE:
-        read_forces_numpy(f, ids, order, out)
-    else:
-        _read_forces(f, ids, order, out)

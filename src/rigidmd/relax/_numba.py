@@ -15,6 +15,11 @@ centres of SPC/E water, 27 pairs per row): a product with the matrix in
 product of three; the conjugate gradients of one step of
 :class:`~rigidmd.relax.lbfgs.RigidLBFGS` (six columns, 6.3 iterations) in
 0.64-0.67 ms (``benchmarks/relax.txt``, the conjugate gradients' tolerances).
+
+The package's compiled loops live here, as every package's do in its ``_numba``
+module (the naming rule of :mod:`rigidmd.core.backend`).  Unlike the dynamics'
+kernels they have no NumPy reference backend: they are the one implementation
+(without numba the same functions run as Python).
 """
 
 import numpy as np

@@ -1,30 +1,18 @@
 r"""Compiled coupling half-steps: the arithmetic of the chains, the barostats and the scalings.
 
-Each kernel does what a NumPy reference does, expression by expression, in one
-compiled call on the state buffer and a few 3x3 matrices:
-
-=================================  ===================================================
-kernel                             reference
-=================================  ===================================================
-:func:`chain_propagate`            :meth:`rigidmd.couplings.base.NoseHooverChain.propagate`
-:func:`chain_scale`                :meth:`rigidmd.couplings.base.NoseHooverChain.act_on`
-:func:`symmetric_exp`              :func:`rigidmd.couplings.barostats.symmetric_exp`
-:func:`mtk_kick`                   ``MTKBarostat`` kick of :math:`p_g` by the pressure
-:func:`mtk_momentum_scale`         ``MTKBarostat``'s :math:`e^{-\kappa h}` (the friction)
-:func:`scale_translation`          :math:`V \leftarrow V F^\mathsf{T}` and the same of ``v``
-:func:`mtk_friction`               ``MTKBarostat``'s friction, applied
-:func:`scale_velocities`           :meth:`rigidmd.couplings.thermostats.Thermostat.scale`
-:func:`nose_hoover_scale`          ``NoseHooverThermostat``'s chains and scaling
-:func:`crescale_move`              ``CRescaleBarostat.drift_matrices``' arithmetic
-:func:`crescale_work`              ``CRescaleBarostat.second_half``'s bookkeeping
-:func:`ornstein_uhlenbeck`         ``LangevinBAOABThermostat.ornstein_uhlenbeck``
-=================================  ===================================================
-
-A dynamics on the ``"numba"`` backend runs these (its coupling view says
-``compiled``); the ``"numpy"`` backend runs the references.  The two agree to
-roundoff (``tests/test_coupling_kernels.py``, operator by operator).  A
-Python step of a barostat was about a thousand small NumPy calls; with the
-kernels it is a few dozen calls (``benchmarks/barostat_step.py``).
+Each kernel does what its NumPy reference does, expression by expression, in one
+compiled call on the state buffer and a few 3x3 matrices.  The references are
+the functions of the same names and arguments in :mod:`rigidmd.couplings._numpy`
+(the naming rule of :mod:`rigidmd.core.backend`); each pair is an operation of
+the backends, so a part calls ``view.backend.mtk_kick(...)``: the ``"numba"``
+backend runs the kernel, ``"numpy"`` the reference.  :func:`crescale_move` and
+:func:`crescale_work` are called by ``CRescaleBarostat``'s compiled methods, whose
+references are its NumPy methods (the operations ``crescale_drift`` and
+``crescale_bookkeeping``); :func:`mtk_momentum_scale` and :func:`scale_translation`
+are parts of :func:`mtk_friction`.  The two agree to roundoff
+(``tests/test_backend.py``, ``tests/test_coupling_kernels.py``, operator by
+operator).  A Python step of a barostat was about a thousand small NumPy calls;
+with the kernels it is a few dozen calls (``benchmarks/barostat_step.py``).
 
 The state buffer is :attr:`rigidmd.core.state.RigidState.data`: ``X, V, q, p``
 of ``n`` bodies, then ``x, v`` of ``nf`` point particles, then the cell.
@@ -34,7 +22,7 @@ import numpy as np
 
 from rigidmd.core._numba import congruence, jit
 
-__all__ = ["COUPLE_CODES", "chain_propagate", "chain_scale", "symmetric_exp", "mtk_kick",
+__all__ = ["COUPLE_CODES", "chain_propagate", "chain_scale", "symmetric_exp_det", "mtk_kick",
            "mtk_momentum_scale", "mtk_friction", "scale_translation", "scale_velocities",
            "nose_hoover_scale", "crescale_move", "crescale_work", "ornstein_uhlenbeck"]
 
@@ -107,7 +95,7 @@ def _exprel(x):
 
 
 @jit
-def symmetric_exp(G, t):
+def symmetric_exp_det(G, t):
     r""":math:`e^{Gt}`, :math:`\int_0^t e^{Gs}ds` of a symmetric 3x3 ``G`` and :math:`\det e^{Gt}`.
 
     A diagonal ``G`` (``iso`` and ``aniso`` barostats) takes no eigensolver:
@@ -182,7 +170,7 @@ def mtk_momentum_scale(p_g, W, n_f, h):
     for a in range(3):
         for c in range(3):
             G[a, c] = -((p_g[a, c] + (trace / n_f if a == c else 0.0)) / W)
-    return symmetric_exp(G, h)[0]
+    return symmetric_exp_det(G, h)[0]
 
 
 @jit
@@ -295,7 +283,7 @@ def crescale_move(virial, kinetic, volume, pressure_au, kT, beta, taup, dt, xi_l
         for i in range(3):
             for j in range(3):
                 strain[i, j] += step_eta[k] * basis[k, i, j]
-    mu, _, det = symmetric_exp(strain, 1.0)
+    mu, _, det = symmetric_exp_det(strain, 1.0)
     inverse = _inverse(mu, det)
     eta_f = 0.0
     eta_ff = 0.0
