@@ -41,7 +41,7 @@ LAYERS = {
     "rigidmd": _BASE + _LIBRARIES + ("lammps", "relax", "config", "run"),
 }
 #: Basenames several packages may use: a package's ``__init__`` and its compiled kernels.
-SHARED_BASENAMES = ("__init__", "_numba")
+SHARED_BASENAMES = ("__init__", "_numba", "_numpy")  # per package: kernels, their references
 
 
 def modules():
@@ -188,7 +188,7 @@ def test_the_layers_have_no_cycle_and_cover_every_package():
 
 def test_no_two_modules_share_a_basename():
     """``state`` meant rigidmd.core.state or a relaxation's state: each basename names one
-    module (``__init__`` and each package's compiled kernels ``_numba`` aside)."""
+    module (``__init__`` and each package's compiled kernels ``_numba`` and their NumPy references ``_numpy`` aside)."""
     assert shared_basenames(modules()) == {}
 
 
