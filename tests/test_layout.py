@@ -188,7 +188,8 @@ def test_the_layers_have_no_cycle_and_cover_every_package():
 
 def test_no_two_modules_share_a_basename():
     """``state`` meant rigidmd.core.state or a relaxation's state: each basename names one
-    module (``__init__`` and each package's compiled kernels ``_numba`` and their NumPy references ``_numpy`` aside)."""
+    module (``__init__``, and each package's compiled kernels ``_numba`` and their NumPy
+    references ``_numpy``, aside)."""
     assert shared_basenames(modules()) == {}
 
 
