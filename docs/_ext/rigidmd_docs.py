@@ -38,6 +38,7 @@ PUBLIC_MODULES = (
     ("rigidmd.openmm", "Water models as OpenMM systems, for comparison"),
     ("rigidmd.mdanalysis", "MDAnalysis Universes, writers and water analyses"),
     ("rigidmd.config", "Configuration files of the rigidmd command"),
+    ("rigidmd.couplings", "Extension API: write a thermostat, a barostat or another coupling part"),
 )
 
 
