@@ -138,6 +138,13 @@ def test_a_dotted_kind_that_is_not_a_registered_part_is_refused(folder, section,
         check_config(raw, trust=True)
 
 
+def test_a_kind_that_is_a_number_is_not_taken_for_a_dotted_path(folder):
+    raw = load_config(folder / "berendsen.yaml")
+    raw["thermostat"] = dict(raw["thermostat"], kind=3.5)
+    with pytest.raises(ConfigError, match=r"^thermostat\.kind: use langevin, .*got 3\.5$"):
+        check_config(raw, trust=True)
+
+
 def test_export_lammps_refuses_it_with_the_reason(folder, capsys):
     assert main(["export-lammps", "--trust", "berendsen.yaml", "deck"]) == 2
     error = capsys.readouterr().err

@@ -284,7 +284,7 @@ def check_config(config, trust=False):
     check_output_paths(config, trust, base)
     for section in CouplingSection.KEYS:  # a part of the user's own: --trust, then its kind
         raw = config.get(section)
-        if isinstance(raw, dict) and "." in str(raw.get("kind", "")):
+        if isinstance(raw, dict) and isinstance(raw.get("kind"), str) and "." in raw["kind"]:
             config[section] = dict(raw, kind=coupling_class(section, raw["kind"], trust,
                                                             base).kind)
     checked = RunConfig(**{name: section.from_config(config, base)
