@@ -7,6 +7,8 @@ under ``docs/``).  The blocks of one page run in order in one scratch directory:
   use what an earlier one defined, as a reader following along would);
 * ``yaml`` blocks whose first line is ``# file: NAME`` are written to NAME
   before the blocks after them run (other ``yaml`` blocks are fragments, not run);
+  so are ``python`` blocks that start so (a module the page writes, which later
+  blocks import and the ``rigidmd`` command may name: not run as a block);
 * ``bash`` blocks line by line (comments after ``#`` are shell comments);
 * an ``output`` block right after a ``python`` block is what that block prints: the
   test compares them line by line, token by token (:func:`outputs_match`); a number
@@ -127,9 +129,10 @@ def run_page(text, cwd, timeout=900):
             previous = lang
             continue
         previous = lang
-        if lang == "yaml" and body.startswith("# file: "):
+        if lang in ("yaml", "python") and body.startswith("# file: "):
             name = body.splitlines()[0].split()[2]
             (cwd / name).write_text(body)
+            previous = f"{lang} file"  # no output block follows a file
         elif lang == "python":
             python.append(body)
             ran.append("python")

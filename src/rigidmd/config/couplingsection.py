@@ -1,7 +1,11 @@
 """The coupling section of a run configuration: ``thermostat`` and ``barostat``.
 
 It reads the registry of coupling kinds (:data:`rigidmd.couplings.base.COUPLINGS`),
-so a new thermostat or barostat needs no change here.
+so a new thermostat or barostat needs no change here.  A ``kind`` written as a dotted
+path (a part of the user's own) is imported and replaced by its registered kind
+before this section is read, with ``--trust`` only
+(:func:`rigidmd.config.trust.coupling_class`, called by
+:func:`rigidmd.config.check_config`).
 """
 
 import re
@@ -70,7 +74,8 @@ def parse_coupling(section, raw, defaults=None):
     kinds = [kind for kind, cls in COUPLINGS.items() if cls.section == section]
     kind = raw.get("kind")
     if kind not in kinds:
-        raise ConfigError(f"{section}.kind: use {', '.join(kinds)}, got {kind!r}")
+        raise ConfigError(f"{section}.kind: use {', '.join(kinds)}, or module.Class for a "
+                          f"{section} of your own (with --trust), got {kind!r}")
     cls = COUPLINGS[kind]
     mapping(section, raw, {"kind"} | {p.field for p in cls.parameters})
     kwargs, seed = {}, None

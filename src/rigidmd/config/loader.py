@@ -68,7 +68,7 @@ from rigidmd.config.sections import (
     StructureSection,
 )
 from rigidmd.config.splitsection import CalculatorChoice, SplitCalculatorSection
-from rigidmd.config.trust import check_output_paths
+from rigidmd.config.trust import check_output_paths, coupling_class
 
 __all__ = ["RunConfig", "load_config", "check_config", "known_keys", "DEMO_CONFIG"]
 
@@ -282,6 +282,11 @@ def check_config(config, trust=False):
         raise ConfigError(f"{key_name(unknown[0])}: unknown key; allowed: "
                           f"{', '.join(sorted(known))}")
     check_output_paths(config, trust, base)
+    for section in CouplingSection.KEYS:  # a part of the user's own: --trust, then its kind
+        raw = config.get(section)
+        if isinstance(raw, dict) and isinstance(raw.get("kind"), str) and "." in raw["kind"]:
+            config[section] = dict(raw, kind=coupling_class(section, raw["kind"], trust,
+                                                            base).kind)
     checked = RunConfig(**{name: section.from_config(config, base)
                            for name, section in _SECTIONS.items()})
     checked.calculator.check_trust(trust)

@@ -53,6 +53,11 @@ wrote or has read.  What is allowed without it:
   reach, and whatever connects
   there is sent the run's positions and cell and its forces are used.
 
+* coupling parts (:func:`coupling_class`): ``thermostat.kind`` and
+  ``barostat.kind`` name a registered kind of rigidmd's (``bussi``, ``mtk``, ...);
+  a dotted path to a part of your own (``berendsen.BerendsenThermostat``) is
+  imported, which runs its module's code, so only with ``--trust``.
+
 Reading (``structure``, ``restart``, an integrator's ``.yaml``) is not
 limited: ASE's readers and rigidmd's scheme files run no code.
 """
@@ -62,6 +67,7 @@ import ipaddress
 import math
 import os
 import re
+import sys
 from pathlib import Path, PurePath
 
 from rigidmd.config.quantities import ConfigError, parse_address
@@ -69,7 +75,7 @@ from rigidmd.config.quantities import ConfigError, parse_address
 __all__ = ["SAFE_LAMMPS_COMMANDS", "SAFE_LAMMPS_STYLES", "safe_style", "ALLOWED_CALCULATORS",
            "GivenOnCommandLine", "check_lammps_commands", "check_calculator",
            "check_output_paths", "check_listen_address", "check_cores", "machine_cores",
-           "calculator_class"]
+           "calculator_class", "coupling_class"]
 
 #: LAMMPS commands a configuration may give without ``--trust``: interactions only.
 SAFE_LAMMPS_COMMANDS = frozenset({
@@ -559,3 +565,61 @@ def check_output_paths(raw, trust=False, base=None):
                           if isinstance(values.get(key), str) and values[key]})
     for field_name, value in files.items():
         _resolved_inside(field_name, value, directory / value, root)
+
+
+def coupling_class(section, name, trust, base=None):
+    """The coupling part class a dotted ``thermostat.kind`` (or ``barostat.kind``) names.
+
+    Without ``trust`` it is refused before its module is imported (importing runs
+    the module's code).  With it, the module is imported from Python's path, then
+    from the configuration's folder ``base`` (so that ``berendsen.py`` beside the
+    configuration is found by the ``rigidmd`` command too); the class must be a
+    :class:`rigidmd.couplings.Coupling` of that ``section``, registered with
+    :func:`rigidmd.couplings.register` (which its module's import does).
+
+    Parameters
+    ----------
+    section : str
+        ``"thermostat"`` or ``"barostat"``.
+    name : str
+        ``module.Class``.
+    trust : bool
+        ``--trust``.
+    base : str or os.PathLike, optional
+        The configuration's folder.
+
+    Returns
+    -------
+    type
+        The registered class; its ``kind`` is the name in :data:`rigidmd.couplings.COUPLINGS`.
+    """
+    field = f"{section}.kind"
+    module_name, _, class_name = str(name).rpartition(".")
+    if not module_name or not class_name:
+        raise ConfigError(f"{field}: {name!r} is not a dotted path module.Class")
+    if not trust:
+        raise ConfigError(f"{field}: {name!r} is a coupling part of your own; importing it runs "
+                          f"its module's code, so {TRUST_HINT}")
+    from rigidmd.couplings import COUPLINGS, Coupling
+
+    folder = None if base is None else str(Path(base).resolve())
+    added = folder is not None and folder not in sys.path
+    if added:
+        sys.path.append(folder)  # after the installed packages: a local file shadows nothing
+    try:
+        found = getattr(importlib.import_module(module_name), class_name)
+    except (ImportError, AttributeError) as err:
+        raise ConfigError(f"{field}: cannot import {name!r} ({err})") from None
+    finally:
+        if added:
+            sys.path.remove(folder)
+    if not (isinstance(found, type) and issubclass(found, Coupling)):
+        raise ConfigError(f"{field}: {name!r} is not a coupling part (a subclass of "
+                          "rigidmd.couplings.Coupling)")
+    if found.section != section:
+        raise ConfigError(f"{field}: {name!r} is a {found.section or 'part of no section'}, "
+                          f"not a {section}")
+    if COUPLINGS.get(found.kind) is not found:
+        raise ConfigError(f"{field}: {name!r} is not registered; decorate the class with "
+                          "@rigidmd.couplings.register")
+    return found

@@ -1,5 +1,40 @@
-"""Coupling parts: thermostats, barostats and the Monte Carlo barostat, on the base in ``base``.
+"""The extension API: what a thermostat, a barostat or another coupling part is built on.
 
-Nothing is re-exported here: the public names live in :mod:`rigidmd`; import a
-module of this package by its full path (``from rigidmd.couplings.base import Coupling``).
+A :class:`~rigidmd.RigidDynamics` is an integrator scheme and a list of coupling
+parts (``RigidDynamics(atoms, dt, couplings=[...])``).  A part subclasses
+:class:`Coupling` (a thermostat: :class:`Thermostat`; a barostat:
+:class:`Barostat`), says what it is in a configuration file (:attr:`Coupling.kind`,
+:attr:`Coupling.parameters`, :class:`Parameter`), joins the registry
+:data:`COUPLINGS` with :func:`register`, acts on the state a :class:`CouplingView`
+gives it for half a step before and after the deterministic step, and says what it
+is in a LAMMPS deck (:class:`LammpsFix`) or why it is nothing there
+(:class:`NotExportable`).  :doc:`/howto/write-a-thermostat` writes one end to end.
+
+The parts rigidmd ships are in the modules of this package
+(``rigidmd.couplings.thermostats``, ``barostats``, ``montecarlo``, ``baoab``);
+the dynamics users construct from them (:class:`~rigidmd.RigidBussi`, ...) are
+imported from :mod:`rigidmd`.
 """
+
+from rigidmd.couplings.barostats import Barostat
+from rigidmd.couplings.base import (
+    COUPLINGS,
+    TEMPERATURE,
+    Coupling,
+    CouplingView,
+    LammpsFix,
+    NotExportable,
+    Parameter,
+    Thermostat,
+    check_rng,
+    check_temperature,
+    check_time,
+    register,
+    rng_state,
+    set_rng_state,
+)
+
+__all__ = ["Coupling", "CouplingView", "Thermostat", "Barostat", "register", "COUPLINGS",
+           "Parameter", "TEMPERATURE", "LammpsFix", "NotExportable", "check_temperature",
+           "check_time", "check_rng", "rng_state", "set_rng_state"]
+

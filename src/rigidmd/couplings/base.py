@@ -61,7 +61,12 @@ COUPLINGS = {}
 
 
 class NotExportable(ValueError):
-    """A coupling part has no LAMMPS equivalent."""
+    """A coupling part has no LAMMPS equivalent.
+
+    Raised by :meth:`Coupling.lammps_fix`; the message is the one line ``rigidmd
+    export-lammps`` prints (exit status 2), so it names the configuration field
+    (``"thermostat.kind: ..."``) and says what to use instead.
+    """
 
 
 @dataclass(frozen=True)
@@ -125,7 +130,15 @@ class LammpsFix:
 
 
 def register(cls):
-    """Class decorator: add a coupling kind to :data:`COUPLINGS` under ``cls.kind``."""
+    """Class decorator: add a coupling kind to :data:`COUPLINGS` under ``cls.kind``.
+
+    Once registered (when the module defining the class is imported), the kind is
+    what checkpoints store and rebuild (``cls(**part.todict())`` without ``kind``),
+    what a configuration's ``thermostat:`` or ``barostat:`` section may name (the
+    kind of a part of rigidmd's; a part of your own by its dotted path, with
+    ``--trust``), and what the configuration reference lists.  A kind registered
+    twice is refused.
+    """
     if cls.kind in COUPLINGS:
         raise ValueError(f"coupling kind {cls.kind!r} registered twice")
     COUPLINGS[cls.kind] = cls
@@ -139,15 +152,26 @@ class CouplingView:
     Attributes
     ----------
     state : rigidmd.core.state.RigidState
-        The body state the part acts on (velocities and momenta in place; a
-        barostat's cell moves only through its drift query).
+        The body state the part acts on, changed in place: ``V`` (n_bodies, 3),
+        centre-of-mass velocities in Å per ASE time unit; ``p`` (n_bodies, 4),
+        NO_SQUISH quaternion momenta (amu Å² per ASE time unit); ``v``
+        (n_free, 3), velocities of the atoms in no body; ``X``, ``q``, ``x``
+        positions and orientations, which the parts leave alone.  A barostat's
+        cell moves only through its drift query (:meth:`Coupling.drift_matrices`).
     model : rigidmd.core.model.BodyModel
+        Masses (``mass``, amu, shape (n_bodies,); ``free_masses``, (n_free,)),
+        principal moments (``moments``, amu Å², (n_bodies, 3)) and the counts of
+        degrees of freedom (``translational_dof``, ``rotational_dof``).
     record : rigidmd.core.record.StepRecord
         Forces, virial and energy of the last force call; volume, kinetic
-        tensor and rotational kinetic energy computed at most once.  A part
-        that scales velocities tells the record (``scale_translation``,
-        ``scale_rotation``); one that changes them otherwise calls
-        ``velocities_changed()``.
+        tensor and the translational and rotational kinetic energies (eV),
+        computed at most once.  A part that changes velocities or momenta must
+        tell it, right after the change: ``scale_translation(factor)`` (or
+        ``scale_translation_about(factor, centre, mass)``) and
+        ``scale_rotation(factor)`` for a scaling (the kinetic sums follow it
+        without a new sum over the bodies), ``velocities_changed()`` for any
+        other change (the next reader sums again).  :meth:`Thermostat.scale`
+        scales and tells.
     evaluator : rigidmd.core.forces.ForceEvaluator
         Energy-only questions about trial configurations
         (``save_results``, ``trial_energy``, ``restore_results``) and the forces
@@ -183,8 +207,25 @@ class Coupling:
     check them against the system in :meth:`check`, create their variables
     in :meth:`bind`, and implement :meth:`first_half` (and
     :meth:`second_half` when the two half steps differ), :meth:`energy`,
-    :meth:`get_state` and :meth:`set_state`.  A part that moves the cell
-    (:attr:`moves_cell`) answers :meth:`drift_matrices`.
+    :meth:`get_state`, :meth:`set_state`, :meth:`todict` and
+    :meth:`lammps_fix`.  A part that moves the cell (:attr:`moves_cell`)
+    answers :meth:`drift_matrices`.
+
+    In :meth:`rigidmd.RigidDynamics.step` the parts act in this order, each
+    half step ``h`` being half the time step (ASE time units):
+
+    .. code-block:: text
+
+        get_state() of every part (kept to undo a step that fails)
+        part_1.first_half(view, h) ... part_n.first_half(view, h)
+        the scheme's deterministic step: kicks, drift, rotation, one force call
+            (part.middle(view, h) between two half drifts, for parts that act there)
+        part_n.second_half(view, h) ... part_1.second_half(view, h)
+
+    If anything in the step raises, the state, the record and every part
+    (:meth:`set_state` with what :meth:`get_state` gave) are restored and the
+    error is raised again.  :meth:`energy` is read when the conserved energy is
+    asked for (``dyn.get_conserved_energy()``, the log).
 
     A part belongs to one dynamics (:attr:`bound` after :meth:`bind`).
     """
@@ -224,8 +265,19 @@ class Coupling:
         """Check the parameters against a system and time step; change nothing.
 
         Called by the dynamics' constructor after the atoms and bodies were
-        validated and before anything is changed: raising here leaves
-        everything as it was.
+        validated and before anything is changed: raising here (``ValueError``
+        with one line saying what to change) leaves everything as it was.  The
+        base class refuses a part already bound and calls :meth:`check_timestep`;
+        an override calls ``super().check(atoms, model, dt)``.
+
+        Parameters
+        ----------
+        atoms : ase.Atoms
+            The atoms, with their calculator.
+        model : rigidmd.core.model.BodyModel
+            The bodies: masses, moments, degrees of freedom.
+        dt : float
+            Time step (ASE time units).
         """
         if self.bound:
             raise ValueError(f"this {type(self).__name__} already belongs to another dynamics; "
@@ -233,18 +285,39 @@ class Coupling:
         self.check_timestep(dt)
 
     def check_timestep(self, dt: float) -> None:
-        """Refuse a time step (ASE units) the part cannot work with; change nothing."""
+        """Refuse a time step (ASE units) the part cannot work with; change nothing.
+
+        Called by :meth:`check` and again when the time step changes.
+        """
 
     def bind(self, view: CouplingView) -> None:
-        """Attach to a dynamics (after :meth:`check`), creating the part's variables."""
+        """Attach to a dynamics (after :meth:`check`), creating the part's variables.
+
+        Called once, by the dynamics' constructor, after every part was checked;
+        ``view`` has the initial state and the record of the first force call.
+        Sizes that depend on the system (degrees of freedom, chains) are set
+        here.  An override calls ``super().bind(view)`` first.
+        """
         self.bound = True
 
     def first_half(self, view: CouplingView, h: float) -> None:
-        """Act on ``view.state`` for a time ``h`` before the integrator's step."""
+        """Act on ``view.state`` for a time ``h`` before the integrator's step.
+
+        Parameters
+        ----------
+        view : CouplingView
+            The state to change in place (``view.state.V``, ``.p``, ``.v``) and
+            the record to tell about the change (see :class:`CouplingView`).
+        h : float
+            Half the time step (ASE time units).
+        """
         raise NotImplementedError
 
     def second_half(self, view: CouplingView, h: float) -> None:
-        """Act for a time ``h`` after the integrator's step (by default as before it)."""
+        """Act for a time ``h`` after the integrator's step (by default as before it).
+
+        The forces of ``view.record`` are then those of the new positions.
+        """
         self.first_half(view, h)
 
     def middle(self, view: CouplingView, h: float) -> None:
@@ -273,7 +346,13 @@ class Coupling:
         raise NotImplementedError
 
     def energy(self, view: CouplingView) -> float:
-        """This part's term in the conserved energy (eV)."""
+        """This part's term in the conserved energy (eV).
+
+        The dynamics' ``get_conserved_energy()`` is the total energy plus the
+        terms of every part: minus the energy a part has put in (a Langevin or
+        Bussi thermostat), or the energy of its own variables (a Nosé–Hoover
+        chain, a barostat's cell).  Zero by default.
+        """
         return 0.0
 
     def log_values(self) -> tuple:
@@ -281,18 +360,44 @@ class Coupling:
         return ()
 
     def get_state(self) -> dict:
-        """The part's own variables, as a dict of floats, arrays and RNG states (copies)."""
+        """The part's own variables, as a dict of floats, arrays and RNG states (copies).
+
+        Called before every step (to undo a step that fails) and when a
+        checkpoint is written: keep it cheap, and return copies (a checkpoint
+        stores the dict: numbers, arrays, lists and dicts of them, the states
+        :func:`rng_state` returns).  Parameters are not state: they come back
+        through :meth:`todict`.
+        """
         return {}
 
     def set_state(self, state: dict) -> None:
-        """Restore variables returned by :meth:`get_state`."""
+        """Restore variables returned by :meth:`get_state`.
+
+        Called after a failed step and when a dynamics is rebuilt from a
+        checkpoint (on a new part made from :meth:`todict` and bound).
+        """
 
     def lammps_fix(self, time_unit: float, seed=None) -> "LammpsFix":
-        """The LAMMPS equivalent (:class:`LammpsFix`); raises :class:`NotExportable` if none."""
+        """The LAMMPS equivalent (:class:`LammpsFix`); raises :class:`NotExportable` if none.
+
+        Parameters
+        ----------
+        time_unit : float
+            LAMMPS's time unit in ASE time units (a damping time ``tau`` is
+            written ``tau / time_unit``).
+        seed : int, optional
+            Seed for a stochastic fix.
+        """
         raise NotExportable(f"{self.section} kind {self.kind!r} has no LAMMPS equivalent")
 
     def todict(self) -> dict:
-        """Parameters of this part, for trajectories and logs."""
+        """Parameters of this part, for trajectories, logs and checkpoints.
+
+        ``{"kind": kind, name: value, ...}`` with the constructor's keywords and
+        plain values (numbers, strings, None): a checkpoint rebuilds the part as
+        ``COUPLINGS[kind](**rest)``, and ``rigidmd run --resume`` compares it with
+        the configuration's.
+        """
         return {"kind": self.kind}
 
 
@@ -377,6 +482,7 @@ def check_positive_integer(name, value):
     return int(value)
 
 
+#: The ``temperature`` field of a thermostat's or barostat's section (``temperature_K``).
 TEMPERATURE = Parameter("temperature_K", "temperature", "temperature", example="300 K")
 
 
@@ -472,6 +578,11 @@ class Thermostat(Coupling):
     of :math:`N_f` degrees of freedom lands on :math:`N_f - 3`: the system
     then samples :math:`T N_f / (N_f - 3)`, 0.23 % above the target for 216
     rigid waters and 1.9 % for 27.
+
+    A subclass calls ``super().__init__(temperature_K, fixcm)`` and
+    ``super().bind(view)`` (which resolves ``fixcm`` and counts
+    :attr:`n_translational`), reads what it acts on with :meth:`kinetic_energies`
+    and changes it with :meth:`scale`, which also tells the record.
     """
 
     section = "thermostat"
