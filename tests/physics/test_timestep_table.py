@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from helpers import benchmark_module
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "validation" / "timestep_table.py"
 table = benchmark_module("timestep_table")
 collector = benchmark_module("timestep_table_report")

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from codeblocks import CHECKED_ELSEWHERE, blocks, run_page, shell_lines
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+README = Path(__file__).resolve().parents[2] / "README.md"
 
 
 def test_the_readme_is_a_front_door():

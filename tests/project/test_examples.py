@@ -15,7 +15,7 @@ import pytest
 
 pytestmark = [pytest.mark.lammps, pytest.mark.mdanalysis, pytest.mark.slow]
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 #: A number as the examples print them (1, -0.5, 3.3e-04, 1.004): masked when outputs are
 #: compared, since timings, and the numbers of a shortened run, vary.
 NUMBER = re.compile(r"nan|[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")

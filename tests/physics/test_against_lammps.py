@@ -28,7 +28,7 @@ from rigidmd.lammps import (
 pytestmark = pytest.mark.lammps
 
 NSTEPS, EVERY = 500, 10
-DATA = Path(__file__).with_name("data")
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def follow(atoms, bodies, nsteps=NSTEPS, every=EVERY):

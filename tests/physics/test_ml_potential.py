@@ -14,7 +14,7 @@ import pytest
 
 pytest.importorskip("mace", reason='needs mace-torch (pip install "rigidmd[ml]")')
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_mace_example_runs_rigid_water(tmp_path):

@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 from codeblocks import blocks, outputs_match, run_page, shell_lines
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
 sys.path.insert(0, str(DOCS / "_ext"))
 import rigidmd_docs  # noqa: E402

@@ -23,7 +23,7 @@ from rigidmd.core.dof import kinetic_energy
 from rigidmd.couplings.barostats import CRescaleBarostat
 from rigidmd.couplings.thermostats import BussiThermostat
 
-DATA = Path(__file__).with_name("data")
+DATA = Path(__file__).resolve().parents[1] / "data"
 sys.path.insert(0, str(DATA))
 from make_flat_layout_checkpoints import AFTER, BEFORE, calculator  # noqa: E402
 

@@ -45,7 +45,7 @@ from rigidmd.systems import co2_water_mixture, random_quaternions, water_box, wa
 pytestmark = pytest.mark.filterwarnings(
     "ignore:DCDReader currently makes independent timesteps:DeprecationWarning")
 
-DATA = Path(__file__).with_name("data")
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def water_frames(n_frames=4, seed=0):

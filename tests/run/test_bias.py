@@ -74,7 +74,7 @@ TRAP = {
     "structure": "trap.xyz",
     "read_options": {"format": "extxyz"},
     "bodies": "tags",
-    "calculator": {"name": "test_bias.Trap", "options": {"k": 15.0}},
+    "calculator": {"name": f"{__name__}.Trap", "options": {"k": 15.0}},
     "velocities": {"temperature": "300 K", "seed": 1},
     "thermostat": {"kind": "langevin", "temperature": "300 K", "friction": "0.01 1/fs",
                    "seed": 2, "fixcm": False},
@@ -179,7 +179,8 @@ def test_a_stopped_estimate_continues_to_the_same_runs(tmp_path, capsys):
 
     source = os.path.dirname(rigidmd.__path__[0])  # this checkout's package, and Trap
     env = dict(os.environ, PYTHONUNBUFFERED="1",
-               PYTHONPATH=os.pathsep.join([source, os.path.dirname(__file__)]))
+               PYTHONPATH=os.pathsep.join(
+                   [source, os.path.dirname(os.path.dirname(os.path.dirname(__file__)))]))
     (tmp_path / "stopped").mkdir()
     args = _command(tmp_path / "stopped", "--ps", "1")
     proc = subprocess.Popen([sys.executable, "-m", "rigidmd.run.cli", *args], env=env,
