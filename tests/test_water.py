@@ -242,7 +242,7 @@ def test_lammps_follows_explicit_m_sites():
     ``fix rigid/nve`` with M at 1e-20 amu (LAMMPS refuses a mass of 0) and RigidVerlet
     with M massless: measured gap 1.1e-11 Å and 3.5e-14 eV after 500 steps of 1 fs
     (roundoff growing in a chaotic cluster, as for three-site water in
-    test_against_lammps.py); bounds 1e-8 Å and 1e-10 eV.
+    physics/test_against_lammps.py); bounds 1e-8 Å and 1e-10 eV.
     """
     from rigidmd.lammps import LAMMPSCalculator, run_rigid_reference
 

@@ -140,7 +140,7 @@ def test_bad_geometry():
     with pytest.raises(ValueError, match=r"body 0 \(atoms \[0, 1, 2\]\) has all its mass at one"):
         RigidBodies.resolve(atoms, [[0, 1, 2]]).geometry(atoms)
     atoms = water_cluster(2)
-    # (A mass of 0 is a virtual site, allowed inside a body: see test_virtual_sites.py.)
+    # (A mass of 0 is a virtual site, allowed inside a body: see test_water.py.)
     for mass in (-1.0, np.nan):
         m = atoms.get_masses()
         m[4] = mass

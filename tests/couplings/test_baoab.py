@@ -259,7 +259,7 @@ def test_configured_run_resumes_bit_for_bit(tmp_path, monkeypatch, capsys):
 @pytest.mark.parametrize("case", ["numpy", "monte_carlo"])
 def test_checkpoints_continue_bit_for_bit(tmp_path, case):
     """The NumPy path, and the composition with the Monte Carlo barostat (the numba
-    backend alone is in tests/test_checkpoint.py): 12 steps, or 5, a checkpoint, 7 more."""
+    backend alone is in tests/core/test_checkpoint.py): 12 steps, or 5, a checkpoint, 7 more."""
     from helpers import CoulombLJ, PeriodicLJ, dimer_fluid
 
     from rigidmd import RigidMCBarostat, load_checkpoint

@@ -2,7 +2,7 @@
 
 The periodic liquid is ``tests/data/water_box_27.traj`` (27 TIP3P waters in a
 9.3 Å box) with ``lj/cut/coul/long 4.5`` and PPPM_27 at 1e-5, as in
-``test_lammps_calculator.py``.  With the plugin a new cell costs what it costs
+``lammps/test_calculator.py``.  With the plugin a new cell costs what it costs
 LAMMPS's own barostats (the new box and ``KSpace::setup()``, no ``lmp->init()``);
 without it, ``change_box`` and a set-up run.  Both must give what a fresh LAMMPS
 at that cell gives with the same k-space parameters.

@@ -2,7 +2,7 @@
 
 The periodic liquid is ``tests/data/water_box_27.traj`` (27 TIP3P waters in a
 9.3 Å box) with ``lj/cut/coul/long 4.5`` and PPPM_27 at 1e-5, as in
-``test_lammps_calculator.py``.
+``lammps/test_calculator.py``.
 """
 
 import subprocess

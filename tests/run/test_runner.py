@@ -15,7 +15,7 @@ from functools import cache
 import numpy as np
 import pytest
 from ase.io import read, write
-from helpers import (  # the rigidmd-run projects these tests share with test_run_faults.py
+from helpers import (  # the rigidmd-run projects these tests share with run/test_runner_faults.py
     STEPS,
     config_text,
     file_bytes,

@@ -22,7 +22,7 @@ kernel                             reference
 
 A dynamics on the ``"numba"`` backend runs these (its coupling view says
 ``compiled``); the ``"numpy"`` backend runs the references.  The two agree to
-roundoff (``tests/test_coupling_kernels.py``, operator by operator).  A
+roundoff (``tests/couplings/test_kernels.py``, operator by operator).  A
 Python step of a barostat was about a thousand small NumPy calls; with the
 kernels it is a few dozen calls (``benchmarks/barostat_step.py``).
 

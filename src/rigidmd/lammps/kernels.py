@@ -8,7 +8,7 @@ call on 648 atoms, a third of rigidmd's own share of a 216-water step under a
 barostat.  Compiled, each is one loop: :func:`write_positions` and
 :func:`read_forces`.  :func:`write_positions_numpy` and
 :func:`read_forces_numpy` are the NumPy references (and the path without
-numba); ``tests/test_lammps_kernels.py`` checks the two against each other.
+numba); ``tests/lammps/test_kernels.py`` checks the two against each other.
 
 Definitions.  LAMMPS's box is lower triangular, rows
 :math:`\mathbf a = (a_x, 0, 0)`, :math:`\mathbf b = (b_x, b_y, 0)`,
