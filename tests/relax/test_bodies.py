@@ -71,7 +71,8 @@ def test_what_it_cannot_do_is_refused():
     with pytest.raises(ValueError, match="relax_bodies: atom 3 is massless"):
         relax_bodies(four, Springs())
     assert model.sites == 4
-    with pytest.raises(ValueError, match=r"relax_bodies: OHH \(body 0, atoms \[0, 1, 2\]\) did not relax "
+    with pytest.raises(ValueError, match=r"relax_bodies: OHH \(body 0, atoms \[0, 1, 2\]\) "
+                                         r"did not relax "
                                          r"to fmax=1e-09 eV/Å in 1 steps"):
         relax_bodies(water_box(1, seed=0), Springs(), fmax=1e-9, steps=1)
 
