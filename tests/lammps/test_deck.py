@@ -8,7 +8,11 @@ from ase import units
 
 from rigidmd.couplings.barostats import MTKBarostat
 from rigidmd.couplings.base import NotExportable
-from rigidmd.couplings.thermostats import BussiThermostat, NoseHooverThermostat
+from rigidmd.couplings.thermostats import (
+    BussiThermostat,
+    LangevinThermostat,
+    NoseHooverThermostat,
+)
 from rigidmd.lammps.data import write_data
 from rigidmd.lammps.deck import coupling_fix, number, pressure_commands, setup_commands
 from rigidmd.systems import water_cluster
@@ -45,7 +49,11 @@ def test_the_coupling_parts_become_one_rigid_fix():
     assert both.body_style == "npt" and both.body_keywords == (
         "temp 300.0 300.0 0.1 tparam 3 1 3 iso 1.0 1.0 1.0")
     bussi = BussiThermostat(300.0, 100 * units.fs, rng=np.random.default_rng(0))
+    with pytest.raises(NotExportable, match="LAMMPS has no Bussi thermostat for rigid bodies"):
+        coupling_fix([bussi], time_unit=units.fs * 1000)
+    langevin = LangevinThermostat(300.0, 0.01, rng=np.random.default_rng(0))
+    assert coupling_fix([langevin], time_unit=units.fs * 1000).body_style == "nve"
     with pytest.raises(NotExportable, match="takes Nose-Hoover chains only"):
-        coupling_fix([bussi, mtk], time_unit=units.fs * 1000)
+        coupling_fix([langevin, mtk], time_unit=units.fs * 1000)
     with pytest.raises(NotExportable, match="does not move atoms in no body"):
         coupling_fix([nh, mtk], time_unit=units.fs * 1000, free_atoms=True)
