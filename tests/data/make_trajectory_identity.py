@@ -86,8 +86,9 @@ def cases():
 
 def start(name):
     """The starting atoms of a case (a new object each call)."""
-    import rigidmd
     from helpers import PeriodicLJ, dimer_fluid
+
+    import rigidmd
 
     atoms = dimer_fluid(n_side=3, spacing=4.6, seed=5, temperature_K=80, rc=5.5)
     if name.startswith("respa"):
@@ -103,8 +104,9 @@ def start(name):
 
 
 def dynamics(name, atoms, backend):
-    import rigidmd
     from ase import units
+
+    import rigidmd
 
     made = cases()[name]
     if made == "respa":
