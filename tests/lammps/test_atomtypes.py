@@ -6,8 +6,8 @@ from ase import Atoms, units
 from ase.calculators.tip3p import TIP3P
 
 from rigidmd import RigidVerlet
-from rigidmd.lammps.data import MASSLESS_SITE_MASS
 from rigidmd.lammps.atomtypes import lammps_molecule_ids, lammps_types, molecules_of
+from rigidmd.lammps.data import MASSLESS_SITE_MASS
 from rigidmd.systems import water_cluster
 
 
