@@ -45,6 +45,7 @@ from rigidmd.core.checks import (
     check_massless_momenta,
     check_timestep,
 )
+from rigidmd.core.coupling import CouplingView, check_composition, export_parts
 from rigidmd.core.dof import RigidBodyDOF
 from rigidmd.core.forces import NonFiniteForceError
 from rigidmd.core.link import AtomsSync, BodyLink
@@ -57,7 +58,6 @@ from rigidmd.core.schemes import BUILTIN_SCHEMES, resolve_scheme, scheme_with_mi
 from rigidmd.core.state import STATE_FIELDS
 from rigidmd.core.stepcontext import StepContext
 from rigidmd.core.stepper import Stepper
-from rigidmd.couplings.base import CouplingView, check_composition, export_parts
 
 __all__ = ["RigidDynamics", "RigidVerlet", "RigidBodyDOF", "NonFiniteForceError",
            "check_timestep"]
@@ -150,7 +150,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         its operators (:mod:`rigidmd.core.operators`, the readable reference
         path).  ``None`` picks numba when it is installed.  Schemes without a
         kernel always run their operators.
-    couplings : sequence of rigidmd.couplings.base.Coupling, optional
+    couplings : sequence of rigidmd.core.coupling.Coupling, optional
         Thermostat and barostat parts, applied in this order before the
         scheme's step and in reverse order after it.
     **kwargs

@@ -57,7 +57,7 @@ class StepRecord:
         PCDM's start-of-step values); kept across steps.
     cell_move : object or None
         What a barostat's drift query returned during this step (see
-        :meth:`rigidmd.couplings.base.Coupling.drift_matrices`); None before the drift.
+        :meth:`rigidmd.core.coupling.Coupling.drift_matrices`); None before the drift.
     link : rigidmd.core.link.BodyLink or None
         The body link whose backend the record's sums follow (None: NumPy).
     """

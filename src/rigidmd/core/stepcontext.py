@@ -59,7 +59,7 @@ class StepContext:
         keeps in ``record.cell_move`` for the barostat's second half.
     view : object or None
         What ``cell_motion`` and the ``middle`` parts read (a
-        :class:`rigidmd.couplings.base.CouplingView`).
+        :class:`rigidmd.core.coupling.CouplingView`).
     middle : tuple
         The coupling parts that act in the middle of the step (their
         ``middle(view, h)``, run by the scheme's ``middle`` operator between its

@@ -21,11 +21,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from rigidmd.core.coupling import Coupling, CouplingView
 from rigidmd.core.link import BodyLink
 from rigidmd.core.operators import remove_centre_velocity
 from rigidmd.core.schemes import Scheme
 from rigidmd.core.stepcontext import StepContext
-from rigidmd.couplings.base import Coupling, CouplingView
 
 __all__ = ["Stepper", "remove_centre_velocity"]
 
