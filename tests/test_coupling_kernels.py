@@ -138,8 +138,7 @@ def both(dyn, part, action):
     results = []
     for compiled in (False, True):
         start.copy_into(dyn.state)
-        part.set_state(variables)
-        dyn.record.velocities_changed()
+        part.set_state(variables)  # copy_into moved the state's versions: sums anew
         dyn.link.compiled = compiled  # the one backend flag: record, view and parts follow
         assert dyn.view.compiled is compiled and dyn.record.compiled is compiled
         assert dyn.record.kinetic_tensor is not None  # summed now: a scaling must update it
@@ -226,7 +225,7 @@ def test_crescale_move_and_bookkeeping_are_the_reference(couple, argon):
         dyn.record.cell_move = note
         dyn.state.V[...] = dyn.state.V @ S.T  # the drift's velocities
         dyn.state.v[...] = dyn.state.v @ S.T
-        dyn.record.velocities_changed()
+        dyn.state.touched(momenta=True)
         baro.second_half(view, h)
         return A, B, S
 

@@ -139,10 +139,11 @@ class CouplingView:
     model : rigidmd.core.model.BodyModel
     record : rigidmd.core.record.StepRecord
         Forces, virial and energy of the last force call; volume, kinetic
-        tensor and rotational kinetic energy computed at most once.  A part
-        that scales velocities tells the record (``scale_translation``,
-        ``scale_rotation``); one that changes them otherwise calls
-        ``velocities_changed()``.
+        tensor and rotational kinetic energy computed at most once per version
+        of the state.  A part that assigns the state's arrays (``state.V = ...``)
+        has nothing more to do; one that scales them in place by a known factor
+        calls ``record.scaled(...)``; one that writes them in place otherwise
+        (``state.V[...] = ...``, a kernel) calls ``state.touched(momenta=True)``.
     evaluator : rigidmd.core.forces.ForceEvaluator
         Energy-only questions about trial configurations
         (``save_results``, ``trial_energy``, ``restore_results``) and the forces

@@ -403,8 +403,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         used at the next step without a calculator call.
         """
         self.model.update_from(BodyModel(n_atoms=saved["n_atoms"], **saved["model"]))
-        for name in STATE_FIELDS:
-            np.copyto(getattr(self.state, name), saved["state"][name])
+        for name in STATE_FIELDS:  # assignments: the state's versions move
+            setattr(self.state, name, saved["state"][name])
         self.record.set_state(saved["record"])
         self.stepper.set_state({"time": saved["time"],
                                 "couplings": [part["state"] for part in saved["couplings"]]})

@@ -147,7 +147,6 @@ class SplitForceEvaluator(ForceEvaluator):
     def evaluate_slow(self, state) -> None:
         """The slow level at the atoms the fast level placed last; then the sums."""
         fast, slow = self.fast_record, self.slow_record
-        slow.cell_changed()  # the fast call may have moved the cell
         slow.r = fast.r  # the placement the slow call's molecular virial reads
         forces = self.slow.calculator_forces(state)
         slow.F, slow.tau = ops.reduce_forces(forces, fast.r, self.model)
@@ -164,7 +163,6 @@ class SplitForceEvaluator(ForceEvaluator):
         record.energy = (None if fast.energy is None or slow.energy is None
                          else fast.energy + slow.energy)
         self.energy_known = self.fast.energy_known and self.slow.energy_known
-        record.cell_changed()
         record.levels_known = True
 
 
@@ -190,7 +188,6 @@ class _Stretched:
         self.part, self.factor = part, factor
 
     def middle(self, view, h):
-        view.record.velocities_changed()
         self.part.middle(view, self.factor * h)
 
 
@@ -276,7 +273,6 @@ class RespaStep:
             half = 0.5 * dt
             ops.translational_kick(state, slow.F, slow.f, model, half)
             ops.rotational_kick(state, slow.tau, half)
-            record.velocities_changed()
             h, centre = dt / k, k // 2
             acts = bool(ctx.middle)
             energy, stress = ev.asked
@@ -284,11 +280,9 @@ class RespaStep:
                 ev.fast.begin_step(ev.step, *((energy, stress) if j == k - 1 else (False, False)))
                 inside = acts and j == centre  # O between the half drifts of inner step k//2
                 self._inner_step(middle if inside else plain, h, inside)
-                record.velocities_changed()
             ev.evaluate_slow(state)
             ops.translational_kick(state, slow.F, slow.f, model, half)
             ops.rotational_kick(state, slow.tau, half)
-            record.velocities_changed()
         except BaseException:
             ev.fast_record.restore(saved[0])
             slow.restore(saved[1])

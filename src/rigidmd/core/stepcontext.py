@@ -171,7 +171,6 @@ def apply_pcdm_correct(ctx, h):
 def apply_middle(ctx, h):
     for part in ctx.middle:
         part.middle(ctx.view, h)
-    ctx.record.velocities_changed()
 
 
 def apply_compute_force(ctx):
@@ -255,7 +254,7 @@ def fused_no_squish(ctx, dt):
         if ctx.n_free:  # NumPy's 1 µs on empty arrays otherwise
             s.v += half * record.f / m.free_masses[:, None]
         A, B, S = ctx.cell_move(dt)
-        s.cell[...] = s.cell @ A.T
+        s.cell = s.cell @ A.T
         _numba.first_half(s.data, n, np.zeros_like(record.F), record.tau, body, atom, index, dt,
                           record.r, ctx.positions, np.array([A, B, S]), True)
         if ctx.n_free:
@@ -283,8 +282,12 @@ def _force_and_closing_kick(ctx, dt):
     if ctx.n_free:
         evaluator.check_forces(forces)  # before anything is written
     # The body forces and torques are overwritten only after the forces were found finite.
-    if not _numba.second_half(s.data, ctx.n_bodies, record.F, record.tau, body, atom, index,
-                              dt, forces, record.r, ctx.momenta, ctx.write_momenta):
+    written = _numba.second_half(s.data, ctx.n_bodies, record.F, record.tau, body, atom,
+                                 index, dt, forces, record.r, ctx.momenta, ctx.write_momenta)
+    # The kernels wrote the state's buffer in place (first_half, second_half or
+    # kick_half_drift, half_drift_place): the state's versions move once, here.
+    s.touched(positions=True, momenta=True, cell=True)
+    if not written:
         evaluator.check_forces(forces)
         raise NonFiniteForceError(f"calculator returned forces whose sum is not finite after "
                                   f"step {evaluator.step}")
@@ -316,6 +319,7 @@ def fused_baoab(ctx, dt):
     body, atom, index = m.packed
     n, half = ctx.n_bodies, 0.5 * dt
     _numba.kick_half_drift(s.data, n, record.F, record.tau, body, dt)
+    s.touched(positions=True, momenta=True)  # what the middle parts read is summed again
     if ctx.n_free:
         s.v += half * record.f / m.free_masses[:, None]
         s.x += half * s.v

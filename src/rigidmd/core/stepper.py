@@ -88,12 +88,10 @@ class Stepper:
             if couplings:
                 for part in couplings:
                     part.first_half(view, half)
-                record.velocities_changed()  # what the scheme's drift may ask is fresh
             if self.kernel is not None:
                 self.kernel(ctx, dt)
             else:
                 self.scheme.run(ctx, dt)
-            record.velocities_changed()
             if self.fixcom:
                 remove_centre_velocity(state, ctx.model)
             if couplings:

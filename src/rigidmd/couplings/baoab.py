@@ -118,8 +118,8 @@ class LangevinBAOABThermostat(_Stochastic):
             _kernels.ornstein_uhlenbeck(s.data, n, nf, c, sigma, *scales, noise)
         else:
             self.ornstein_uhlenbeck(s, c, sigma, *scales, noise)
+        s.touched(momenta=True)  # written in place
         self.set_centre_velocity(view, U)
-        record.velocities_changed()
         self.work += record.translational_energy + record.rotational_energy - before
         self.reported = self.kinetic_energies(view)
 

@@ -302,7 +302,7 @@ class MTKBarostat(Barostat):
             factor, _ = symmetric_exp(-self._kappa(), h)
             s.V[...] = s.V @ factor.T
             s.v[...] = s.v @ factor.T
-        view.record.scale_translation(factor)
+        view.record.scaled(factor)
 
     def first_half(self, view: CouplingView, h: float) -> None:
         self._thermostat(view, h)

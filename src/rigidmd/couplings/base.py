@@ -315,25 +315,25 @@ class Thermostat(Coupling):
     def scale(self, view: CouplingView, translational: float, rotational: float) -> None:
         """Multiply translational velocities (relative to U) and angular momenta.
 
-        The record's kinetic sums follow the scaling (no new sum over bodies).
+        Written in place, then :meth:`rigidmd.core.record.StepRecord.scaled`: the
+        record's kinetic sums follow the scaling (no new sum over bodies).
         """
         s, record = view.state, view.record
         if self.holds_momentum:
             U, M = self.centre(view)
             s.V[...] = U + translational * (s.V - U)
             s.v[...] = U + translational * (s.v - U)
-            s.p *= rotational
-            record.scale_translation_about(translational, U, M)
-        elif view.compiled:  # the three scalings in one pass over the state buffer
+            s.p[...] *= rotational
+            record.scaled(translational, rotational, about=(U, M))
+            return
+        if view.compiled:  # the three scalings in one pass over the state buffer
             _kernels.scale_velocities(s.data, len(s.X), len(s.x), float(translational),
                                       float(rotational))
-            record.scale_translation(translational)
         else:
-            s.V *= translational
-            s.v *= translational
-            s.p *= rotational
-            record.scale_translation(translational)
-        record.scale_rotation(rotational)
+            s.V[...] *= translational
+            s.v[...] *= translational
+            s.p[...] *= rotational
+        record.scaled(translational, rotational)
 
     def fixcm_notes(self):
         """What the deck says about ``fixcm``, which LAMMPS's rigid thermostats do not have."""

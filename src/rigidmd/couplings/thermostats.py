@@ -157,7 +157,7 @@ class LangevinThermostat(_Stochastic):
         noise = sigma * np.sqrt(m.moments) * rng.standard_normal(L_body.shape)
         s.p[...] = ops.conjugate_momentum(s.q, c * L_body + noise)
         self.set_centre_velocity(view, U)
-        record.velocities_changed()
+        s.touched(momenta=True)  # written in place
         self.work += record.translational_energy + record.rotational_energy - before
 
     def lammps_fix(self, time_unit, seed=12345):
@@ -350,8 +350,7 @@ class NoseHooverThermostat(Thermostat):
                 s.data, len(s.X), len(s.x), translation.xi, translation.eta, translation.ndof,
                 rotation.xi, rotation.eta, rotation.ndof, kT * self.tdamp**2, K_t, K_r, kT, h,
                 self.tloop)
-            record.scale_translation(factors[0])
-            record.scale_rotation(factors[1])
+            record.scaled(factors[0], factors[1])
             return
         compiled = view.compiled
         self.scale(view, translation.propagate(K_t, kT, h, compiled),
