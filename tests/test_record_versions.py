@@ -57,6 +57,10 @@ def make(case, backend):
     atoms.calc = FailingLJ(rc=5.5)
     rng = np.random.default_rng(11)
     common = dict(bodies="tags", backend=backend)
+    if case.startswith("respa"):  # two levels, each with its record (SplitRecord)
+        atoms.calc = rigidmd.MultipleTimeStep(FailingLJ(rc=5.5, epsilon=0.005),
+                                              PeriodicLJ(rc=5.5, epsilon=0.001), substeps=3)
+        case = case.removeprefix("respa_")
     if case == "bussi":
         return rigidmd.RigidBussi(atoms, DT, T, 100 * units.fs, rng=rng, **common)
     if case == "langevin":
@@ -91,22 +95,29 @@ def check(dyn, where):
     np.testing.assert_allclose(record.rotational_energy,
                                obs.rotational_kinetic_energy(state, model), rtol=RTOL,
                                err_msg=f"rotational energy, {where}")
+    for level in (getattr(record, "fast", None), getattr(record, "slow", None)):
+        if level is not None:  # a split's levels: the same state, the same versions
+            np.testing.assert_allclose(level.volume, obs.volume(state.cell), rtol=RTOL,
+                                       err_msg=f"a level's volume, {where}")
+
+
+def checked(dyn, action, where):
+    """``action(view, h)`` with the record checked before and after it."""
+    def run(view, h):
+        check(dyn, f"before {where}")
+        action(view, h)
+        check(dyn, f"after {where}")
+
+    return run
 
 
 def watch(dyn):
     """Check the record before and after every part's half step and middle action, and
     at the start of every step (after the Atoms' changes were read)."""
     for part in dyn.couplings:
-        for name in ("first_half", "second_half", "middle"):
-            if name == "middle" and not part.acts_in_middle:
-                continue
-
-            def checked(view, h, _action=getattr(part, name), _where=f"{part.kind}.{name}"):
-                check(dyn, f"before {_where}")
-                _action(view, h)
-                check(dyn, f"after {_where}")
-
-            setattr(part, name, checked)
+        names = ("first_half", "second_half") + (("middle",) if part.acts_in_middle else ())
+        for name in names:
+            setattr(part, name, checked(dyn, getattr(part, name), f"{part.kind}.{name}"))
     step = dyn.stepper.step
 
     def checked_step(*args, **kwargs):
@@ -130,12 +141,12 @@ def change_atoms(atoms, rng, what):
 
 ACTIONS = ("step", "between_steps", "observer", "set_state", "rollback", "irun")
 CHANGES = ("kick", "scale", "move", "strain")
-CASES = ("bussi", "langevin", "baoab", "baoab_fixcm_false", "nose_hoover_mtk", "langevin_crescale", "monte_carlo")
+CASES = ("bussi", "langevin", "baoab", "baoab_fixcm_false", "nose_hoover_mtk",
+         "langevin_crescale", "monte_carlo", "respa_bussi", "respa_nose_hoover_mtk")
 
 
 @pytest.mark.filterwarnings("ignore:.*rigid image of the body")
-@settings(max_examples=60, deadline=None,
-          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(case=st.sampled_from(CASES), backend=st.sampled_from(("numpy", "numba")),
        actions=st.lists(st.tuples(st.sampled_from(ACTIONS), st.sampled_from(CHANGES)),
                         min_size=1, max_size=6),
@@ -169,7 +180,7 @@ def test_the_record_follows_every_change_of_the_state(case, backend, actions, se
             dyn.set_state(saved)
         else:  # "rollback": the step fails at its force call and is undone
             check(dyn, "before the failing step")  # the sums kept, then restored
-            atoms.calc.armed = True
+            getattr(atoms.calc, "fast", atoms.calc).armed = True
             with pytest.raises(RuntimeError, match="on purpose"):
                 dyn.run(1)
         check(dyn, where)

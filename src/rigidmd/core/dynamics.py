@@ -31,7 +31,6 @@ rebuilds a dynamics from a file :mod:`rigidmd.core.checkpoint` wrote.
 
 import warnings
 
-import numpy as np
 from ase import Atoms
 from ase.md.md import MolecularDynamics
 

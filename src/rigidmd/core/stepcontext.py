@@ -284,9 +284,10 @@ def _force_and_closing_kick(ctx, dt):
     # The body forces and torques are overwritten only after the forces were found finite.
     written = _numba.second_half(s.data, ctx.n_bodies, record.F, record.tau, body, atom,
                                  index, dt, forces, record.r, ctx.momenta, ctx.write_momenta)
-    # The kernels wrote the state's buffer in place (first_half, second_half or
-    # kick_half_drift, half_drift_place): the state's versions move once, here.
-    s.touched(positions=True, momenta=True, cell=True)
+    # The kernels wrote the bodies' arrays in place (first_half, second_half or
+    # kick_half_drift, half_drift_place): their versions move once, here (the cell, when
+    # a barostat moved it, was assigned, which moved its version then).
+    s.touched(positions=True, momenta=True)
     if not written:
         evaluator.check_forces(forces)
         raise NonFiniteForceError(f"calculator returned forces whose sum is not finite after "
