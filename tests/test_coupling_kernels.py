@@ -220,9 +220,9 @@ def test_crescale_move_and_bookkeeping_are_the_reference(couple, argon):
 
     def move_and_book(view):
         baro._noise = noise
-        dyn.record.cell_move = None
+        dyn.view.cell_note = None
         A, B, S, note = baro.drift_matrices(view, h)
-        dyn.record.cell_move = note
+        dyn.view.cell_note = note
         dyn.state.V[...] = dyn.state.V @ S.T  # the drift's velocities
         dyn.state.v[...] = dyn.state.v @ S.T
         dyn.state.touched(momenta=True)

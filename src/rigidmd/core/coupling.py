@@ -42,10 +42,8 @@ from typing import ClassVar
 import numpy as np
 from ase import Atoms
 
-from rigidmd.core.forces import ForceEvaluator
 from rigidmd.core.model import BodyModel
-from rigidmd.core.record import StepRecord
-from rigidmd.core.state import RigidState
+from rigidmd.core.stepcontext import StepContext
 
 __all__ = ["Coupling", "CouplingView", "Parameter", "COUPLINGS", "register", "NotExportable",
            "LammpsFix", "check_rng", "rng_state", "set_rng_state", "rng_kind", "new_rng",
@@ -127,48 +125,11 @@ def register(cls):
     return cls
 
 
-@dataclass
-class CouplingView:
-    """What a coupling part sees: never the dynamics, only what a half step needs.
-
-    Attributes
-    ----------
-    state : rigidmd.core.state.RigidState
-        The body state the part acts on (velocities and momenta in place; a
-        barostat's cell moves only through its drift query).
-    model : rigidmd.core.model.BodyModel
-    record : rigidmd.core.record.StepRecord
-        Forces, virial and energy of the last force call; volume, kinetic
-        tensor and rotational kinetic energy computed at most once per version
-        of the state.  A part that assigns the state's arrays (``state.V = ...``)
-        has nothing more to do; one that scales them in place by a known factor
-        calls ``record.scaled(...)``; one that writes them in place otherwise
-        (``state.V[...] = ...``, a kernel) calls ``state.touched(momenta=True)``.
-    evaluator : rigidmd.core.forces.ForceEvaluator
-        Energy-only questions about trial configurations
-        (``save_results``, ``trial_energy``, ``restore_results``) and the forces
-        of an accepted one (``evaluate``).
-    step : int
-        Steps completed before the one being taken.
-    fixcom : bool
-        The total momentum is held at zero (ASE's ``FixCom`` on the atoms).
-    cell_moves : bool
-        A part of the dynamics moves the cell (a barostat).
-    """
-
-    state: RigidState
-    model: BodyModel
-    record: StepRecord
-    evaluator: ForceEvaluator
-    step: int = 0
-    fixcom: bool = False
-    cell_moves: bool = False
-
-    @property
-    def compiled(self) -> bool:
-        """The parts run their compiled kernels (:mod:`rigidmd.couplings._kernels`), not
-        their NumPy references: the backend of the record's link (the dynamics' ``"numba"``)."""
-        return self.record.compiled
+#: What a coupling part sees: the one view of a step
+#: (:class:`rigidmd.core.stepcontext.StepContext`), never the dynamics: the state, the body
+#: model, the per-step record, the force evaluator, the step number, ``fixcom``,
+#: ``cell_moves``, ``compiled`` and the barostat's ``cell_note``.
+CouplingView = StepContext
 
 
 class Coupling:
@@ -264,7 +225,7 @@ class Coupling:
         """A cell-moving part's drift over ``h``: ``(A, B, S, note)``; changes nothing.
 
         ``A, B, S`` as in :func:`rigidmd.core.operators.affine_drift`; ``note`` (or
-        None) is kept in ``view.record.cell_move`` for the second half.
+        None) is kept in ``view.cell_note`` for the second half.
         """
         raise NotImplementedError
 

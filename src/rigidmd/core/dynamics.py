@@ -44,7 +44,7 @@ from rigidmd.core.checks import (
     check_massless_momenta,
     check_timestep,
 )
-from rigidmd.core.coupling import CouplingView, check_composition, export_parts
+from rigidmd.core.coupling import check_composition, export_parts
 from rigidmd.core.dof import RigidBodyDOF
 from rigidmd.core.forces import NonFiniteForceError
 from rigidmd.core.link import AtomsSync, BodyLink
@@ -214,8 +214,12 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self.evaluator = evaluator_for(split, self.link, self.record,
                                         stress=any(part.needs_stress for part in couplings),
                                         cell_moves=mover is not None)
-        self.view = CouplingView(self.state, model, self.record, self.evaluator, 0, fixcom,
-                                 cell_moves=mover is not None)
+        #: The one view of a step: the scheme's operators and the coupling parts read it.
+        self.view = context = StepContext(
+            self.state, model, self.record, self.evaluator,
+            positions=atoms.arrays["positions"], momenta=atoms.arrays["momenta"],
+            write_momenta=not couplings and not fixcom, cell_motion=mover, middle=middle,
+            fixcom=fixcom)
         #: The stress with the forces when an observer is due (``StressRecorder`` sets it).
         self.stress_on_observed_steps = False
         for part in couplings:
@@ -226,12 +230,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
                               self.holds_momentum)
         self.sync.mark_atoms()
         store_bodies_in_tags(atoms, rigid.body_ids)
-        context = StepContext(
-            self.state, model, self.record, self.evaluator,
-            positions=atoms.arrays["positions"], momenta=atoms.arrays["momenta"],
-            write_momenta=not couplings and not fixcom, cell_motion=mover, view=self.view,
-            middle=middle)
-        self.stepper = Stepper(respa or scheme, context, couplings, self.view, self.link,
+        self.stepper = Stepper(respa or scheme, context, couplings, self.link,
                                fused=self.fused, fixcom=fixcom)
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps
         self.link.read_momenta(self.state, owner=type(self).__name__)

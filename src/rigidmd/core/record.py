@@ -58,9 +58,6 @@ class StepRecord:
     scratch : dict
         Values an operator hands to a later one (exaDEM's accelerations,
         PCDM's start-of-step values); kept across steps.
-    cell_move : object or None
-        What a barostat's drift query returned during this step (see
-        :meth:`rigidmd.core.coupling.Coupling.drift_matrices`); None before the drift.
     link : rigidmd.core.link.BodyLink or None
         The body link whose backend the record's sums follow (None: NumPy).
     """
@@ -74,7 +71,6 @@ class StepRecord:
         self.virial = None
         self.energy = None
         self.scratch = {}
-        self.cell_move = None
         # Each derived quantity with the state's version it describes (-1: none yet).
         self._volume, self._volume_at = None, -1
         self._kinetic, self._kinetic_at = None, -1
@@ -230,7 +226,6 @@ class StepRecord:
         self.virial = None if saved.get("virial") is None else np.array(saved["virial"])
         self.energy = saved.get("energy")
         self.scratch = dict(saved.get("scratch", {}))
-        self.cell_move = None
         volume, kinetic, rotational = (saved.get("volume"), saved.get("kinetic"),
                                        saved.get("rotational"))
         self.adopt(None if volume is None else float(volume),
@@ -256,4 +251,3 @@ class StepRecord:
         then (restored first: the derived values describe it)."""
         (self.F, self.tau, self.f, self.virial, self.energy, derived, self.scratch) = token
         self.adopt(*derived)
-        self.cell_move = None

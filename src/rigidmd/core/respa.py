@@ -168,17 +168,10 @@ class SplitForceEvaluator(ForceEvaluator):
 
 @dataclass
 class _InnerContext(StepContext):
-    """An inner step's context: the fast level's record and evaluator; the barostat's
-    note of its cell move goes to the dynamics' record, where the barostat reads it."""
+    """An inner step's context: the fast level's record and evaluator; its ``view`` (what
+    the parts and the barostat's drift query get) is the dynamics' context."""
 
-    outer: StepRecord = None
     outer_middle: bool = False  # a part acts in the middle of the outer step
-
-    def cell_move(self, h):
-        A, B, S, note = self.cell_motion.drift_matrices(self.view, h)
-        if note is not None:
-            self.outer.cell_move = note
-        return A, B, S
 
 
 class _Stretched:
@@ -234,7 +227,7 @@ class RespaStep:
         if self._contexts is None:
             ev = ctx.evaluator
             common = dict(positions=ctx.positions, momenta=ctx.momenta, write_momenta=False,
-                          cell_motion=ctx.cell_motion, view=ctx.view, outer=ctx.record,
+                          cell_motion=ctx.cell_motion, view=ctx.view,
                           outer_middle=bool(ctx.middle))
             plain = _InnerContext(ctx.state, ctx.model, ev.fast_record, ev.fast, **common)
             middle = _InnerContext(ctx.state, ctx.model, ev.fast_record, ev.fast,

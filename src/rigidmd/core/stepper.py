@@ -21,7 +21,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rigidmd.core.coupling import Coupling, CouplingView
+from rigidmd.core.coupling import Coupling
 from rigidmd.core.link import BodyLink
 from rigidmd.core.operators import remove_centre_velocity
 from rigidmd.core.schemes import Scheme
@@ -37,10 +37,10 @@ class Stepper:
     ----------
     scheme : Scheme
     context : StepContext
+        The one view of the step: the scheme's operators and the parts read it (its
+        ``step`` is set and its ``cell_note`` cleared before each step).
     couplings : sequence of Coupling
         Applied in this order before the scheme and in reverse after it.
-    view : CouplingView
-        What the parts see (its ``step`` is set before each step).
     link : BodyLink
         Writes the momenta once per step, and the atoms back after a rollback.
     fused : bool
@@ -55,13 +55,12 @@ class Stepper:
     """
 
     def __init__(self, scheme: Scheme, context: StepContext, couplings: Sequence[Coupling],
-                 view: CouplingView, link: BodyLink, fused: bool = False,
-                 fixcom: bool = False):
+                 link: BodyLink, fused: bool = False, fixcom: bool = False):
         self.scheme, self.context, self.couplings = scheme, context, tuple(couplings)
-        self.view, self.link, self.fixcom = view, link, fixcom
+        self.view, self.link, self.fixcom = context, link, fixcom
         #: The compiled kernel this stepper runs, or None (the scheme's operators).
         self.kernel = scheme.kernel if fused else None
-        self.cell_moves = context.cell_motion is not None
+        self.cell_moves = context.cell_moves
         self.state, self.record = context.state, context.record
         self._backup = self.state.copy()
         self.time = 0.0
@@ -82,7 +81,7 @@ class Stepper:
         saved = record.backup(copy=self.kernel is None or bool(couplings))
         coupled = [part.get_state() for part in couplings] if couplings else ()
         try:
-            record.cell_move = None
+            view.cell_note = None
             view.step = step
             half = 0.5 * dt
             if couplings:
@@ -103,6 +102,7 @@ class Stepper:
         except BaseException:
             backup.copy_into(state)
             record.restore(saved)
+            view.cell_note = None
             for part, variables in zip(couplings, coupled, strict=True):
                 part.set_state(variables)
             if self.cell_moves:

@@ -473,7 +473,7 @@ class CRescaleBarostat(Barostat):
     def drift_matrices(self, view: CouplingView, h: float) -> tuple:
         """The cell's move in the step's first drift, from this step's noise; changes nothing."""
         record = view.record
-        if record.cell_move is not None or self._noise is None:  # moved already, or not now
+        if view.cell_note is not None or self._noise is None:  # moved already, or not now
             return _IDENTITY, h * _IDENTITY, _IDENTITY, None
         kT, dt = self.kT, self._span
         volume = record.volume
@@ -522,9 +522,9 @@ class CRescaleBarostat(Barostat):
 
     def second_half(self, view: CouplingView, h: float) -> None:
         record = view.record
-        if record.cell_move is None:
+        if view.cell_note is None:
             return
-        step_lambda, step_eta, d_lambda, d_eta, kinetic, first = record.cell_move
+        step_lambda, step_eta, d_lambda, d_eta, kinetic, first = view.cell_note
         kT, dt = self.kT, self._span
         volume = record.volume
         if view.compiled:
