@@ -47,7 +47,7 @@ from rigidmd.core.stepcontext import StepContext
 
 __all__ = ["Coupling", "CouplingView", "Parameter", "COUPLINGS", "register", "NotExportable",
            "LammpsFix", "check_rng", "rng_state", "set_rng_state", "rng_kind", "new_rng",
-           "check_composition", "export_parts"]
+           "check_composition", "export_parts", "Target", "share_target"]
 
 #: Registered coupling kinds, name -> class.
 COUPLINGS = {}
@@ -351,3 +351,46 @@ def export_parts(couplings) -> list[dict]:
                       "state": part.get_state(), "rng_owner": owner,
                       "rng": None if rng is None else rng_kind(rng)})
     return parts
+
+
+class Target:
+    """The target temperature of one dynamics, held once and read by every part that has one.
+
+    A part with a target temperature keeps its own value until it is bound; the dynamics
+    then gives all such parts one :class:`Target` (:func:`share_target`), so that the
+    thermostat and the barostat never disagree and one :meth:`set_temperature` changes it
+    for all of them.
+
+    Attributes
+    ----------
+    temperature_K : float or None
+        The target (K); None for a dynamics without a part that has one.
+    parts : list
+        The parts that read it; each checks a new value (``checked_temperature``).
+    """
+
+    def __init__(self, temperature_K: float | None = None):
+        self.temperature_K = temperature_K
+        self.parts = []
+
+    def set_temperature(self, temperature_K) -> None:
+        """Change the target (K) for every part; each part checks it first, and a value one
+        of them refuses changes nothing."""
+        if not self.parts:
+            raise ValueError("no part of this dynamics has a target temperature")
+        values = [part.checked_temperature(temperature_K) for part in self.parts]
+        self.temperature_K = values[0]
+
+
+def share_target(couplings) -> Target:
+    """One :class:`Target` for the parts of a dynamics that have a target temperature.
+
+    Called after :func:`check_composition` (which refused parts with different targets);
+    each such part (one with ``checked_temperature``) reads the target from now on.
+    """
+    parts = [part for part in couplings if hasattr(part, "checked_temperature")]
+    target = Target(parts[0].temperature_K if parts else None)
+    for part in parts:
+        part.target = target
+        target.parts.append(part)
+    return target

@@ -44,7 +44,7 @@ from rigidmd.core.checks import (
     check_massless_momenta,
     check_timestep,
 )
-from rigidmd.core.coupling import check_composition, export_parts
+from rigidmd.core.coupling import check_composition, export_parts, share_target
 from rigidmd.core.dof import RigidBodyDOF
 from rigidmd.core.forces import NonFiniteForceError
 from rigidmd.core.link import AtomsSync, BodyLink
@@ -224,6 +224,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self.stress_on_observed_steps = False
         for part in couplings:
             part.bind(self.view)
+        #: The target temperature, held once for every part that has one.
+        self.target = share_target(couplings)
         #: Whether the total momentum is held (FixCom, or a thermostat's fixcm).
         self.holds_momentum = fixcom or any(part.fixcm for part in couplings)
         self.sync = AtomsSync(self.link, self.state, self.record, rigid.body_ids, fixcom,
@@ -275,17 +277,9 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         Every part checks the value before any changes.
         """
         value = self._process_temperature(temperature, temperature_K, "K")
-        parts = [part for part in self.couplings if hasattr(part, "set_temperature")]
-        if not parts:
+        if not self.target.parts:
             raise ValueError(f"{type(self).__name__} has no part with a target temperature")
-        saved = [part.temperature_K for part in parts]
-        try:
-            for part in parts:
-                part.set_temperature(value)
-        except (TypeError, ValueError):
-            for part, old in zip(parts, saved, strict=True):
-                part.temperature_K = old
-            raise
+        self.target.set_temperature(value)  # checked by every part before it changes
         self.step_check.reset()  # the chains' energy jumps with the target: a new reference
 
     # ------------------------------------------------------------ ASE API

@@ -36,6 +36,7 @@ from rigidmd.couplings.base import (
     NoseHooverChain,
     NotExportable,
     Parameter,
+    TargetTemperature,
     check_positive_integer,
     check_rng,
     check_temperature,
@@ -121,7 +122,7 @@ COUPLING = Parameter("couple", "couple", "choice", required=False, default="iso"
                      choices=tuple(COUPLE))
 
 
-class Barostat(Coupling):
+class Barostat(TargetTemperature, Coupling):
     """Shared parts of the barostats: target pressure, cell checks, the molecular pressure."""
 
     section = "barostat"
@@ -130,22 +131,15 @@ class Barostat(Coupling):
     drift_moves_cell = True
 
     def __init__(self, temperature_K, pressure_au, couple):
-        self.temperature_K = self._check_positive(check_temperature(temperature_K))
+        self._temperature_K = self.checked_temperature(temperature_K)
         self.pressure_au = check_pressure(pressure_au)
         self.couple = check_couple(couple)
 
-    def _check_positive(self, temperature_K):
-        if temperature_K == 0:
+    def checked_temperature(self, temperature_K) -> float:
+        value = check_temperature(temperature_K)
+        if value == 0:
             raise ValueError(f"temperature_K = 0: {self.zero_kelvin}")
-        return temperature_K
-
-    def set_temperature(self, temperature_K: float) -> None:
-        """Change the target temperature (K)."""
-        self.temperature_K = self._check_positive(check_temperature(temperature_K))
-
-    @property
-    def kT(self):
-        return units.kB * self.temperature_K
+        return value
 
     def check(self, atoms, model, dt):
         super().check(atoms, model, dt)

@@ -39,8 +39,8 @@ from rigidmd.core.coupling import (
 from rigidmd.couplings import _kernels
 
 __all__ = ["Coupling", "CouplingView", "Parameter", "COUPLINGS", "register", "NotExportable",
-           "LammpsFix", "NoseHooverChain", "Thermostat", "NET_FORCE_FLOOR", "check_rng",
-           "rng_state", "set_rng_state", "rng_kind", "new_rng", "check_composition",
+           "LammpsFix", "NoseHooverChain", "Thermostat", "TargetTemperature", "NET_FORCE_FLOOR",
+           "check_rng", "rng_state", "set_rng_state", "rng_kind", "new_rng", "check_composition",
            "export_parts", "check_temperature", "check_time", "check_flag",
            "check_positive_integer", "TEMPERATURE"]
 
@@ -81,6 +81,43 @@ def check_positive_integer(name, value):
 
 
 TEMPERATURE = Parameter("temperature_K", "temperature", "temperature", example="300 K")
+
+
+class TargetTemperature:
+    """A part with a target temperature: its own until bound, then its dynamics' one.
+
+    The dynamics gives its parts one :class:`rigidmd.core.coupling.Target`
+    (:func:`rigidmd.core.coupling.share_target`); :attr:`temperature_K` reads it, and
+    :meth:`set_temperature` changes it for every part of the dynamics (each part checks
+    the value first, with :meth:`checked_temperature`).
+    """
+
+    #: The dynamics' shared target (:class:`rigidmd.core.coupling.Target`); None until bound.
+    target = None
+    _temperature_K = None
+
+    @property
+    def temperature_K(self) -> float:
+        """The target temperature (K): the dynamics' shared one once bound."""
+        target = self.target
+        return self._temperature_K if target is None else target.temperature_K
+
+    @property
+    def kT(self) -> float:
+        """:math:`k_B T` (eV)."""
+        return units.kB * self.temperature_K
+
+    def checked_temperature(self, temperature_K) -> float:
+        """``temperature_K`` as a float if this part can work at it, or a clear error."""
+        return check_temperature(temperature_K)
+
+    def set_temperature(self, temperature_K) -> None:
+        """Change the target temperature (K), as ASE's thermostats do: for every part of the
+        dynamics once bound (each checks it first)."""
+        if self.target is None:
+            self._temperature_K = self.checked_temperature(temperature_K)
+        else:
+            self.target.set_temperature(temperature_K)
 
 
 class NoseHooverChain:
@@ -189,7 +226,7 @@ def fixcm_parameter(default):
     return Parameter("fixcm", "fixcm", "flag", required=False, default=default)
 
 
-class Thermostat(Coupling):
+class Thermostat(TargetTemperature, Coupling):
     r"""Shared parts of the thermostats: the target temperature and kinetic energies.
 
     With ``fixcm`` the thermostat leaves the total momentum
@@ -214,20 +251,11 @@ class Thermostat(Coupling):
     section = "thermostat"
 
     def __init__(self, temperature_K, fixcm=None):
-        self.temperature_K = check_temperature(temperature_K)
+        self._temperature_K = self.checked_temperature(temperature_K)
         #: What was asked: True, False or None (True unless a barostat moves the cell).
         self.fixcm_option = None if fixcm is None else check_flag("fixcm", fixcm)
         #: Whether the total momentum is kept; None until :meth:`bind` resolves the option.
         self.fixcm = self.fixcm_option
-
-    @property
-    def kT(self):
-        """:math:`k_B T` (eV)."""
-        return units.kB * self.temperature_K
-
-    def set_temperature(self, temperature_K):
-        """Change the target temperature (K), as ASE's thermostats do."""
-        self.temperature_K = check_temperature(temperature_K)
 
     def bind(self, view: CouplingView) -> None:
         super().bind(view)

@@ -309,24 +309,19 @@ class NoseHooverThermostat(Thermostat):
 
     def __init__(self, temperature_K, tdamp, tchain=3, tloop=1, fixcm=None):
         super().__init__(temperature_K, fixcm)
-        self._check_positive(self.temperature_K)
         self.tdamp = check_time("tdamp", tdamp)
         self.tchain = check_positive_integer("tchain", tchain)
         self.tloop = check_positive_integer("tloop", tloop)
         self.chains = ()
 
-    @staticmethod
-    def _check_positive(temperature_K):
-        if temperature_K == 0:
+    def checked_temperature(self, temperature_K) -> float:
+        value = check_temperature(temperature_K)
+        if value == 0:
             raise ValueError(
                 "temperature_K = 0: Nose-Hoover chain masses are N_f k_B T tdamp^2, so a "
                 "chain at 0 K has no mass and cannot act; cool with a Langevin or Bussi "
                 "thermostat, which reach 0 K")
-
-    def set_temperature(self, temperature_K):
-        value = check_temperature(temperature_K)
-        self._check_positive(value)
-        self.temperature_K = value
+        return value
 
     def check_timestep(self, dt):
         if self.tdamp < dt:
