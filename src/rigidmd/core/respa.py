@@ -75,7 +75,9 @@ class SplitRecord(StepRecord):
     ----------
     fast, slow : StepRecord
         Each level's forces, torques, point-particle forces, virial and energy
-        of its last call.
+        of its last call.  The levels describe the dynamics' state: their volume and
+        kinetic sums are kept with that state's versions, so a cell move (a barostat's
+        drift in an inner step, a Monte Carlo move) makes them stale by itself.
     levels_known : bool
         False after restoring a checkpoint that did not store the levels (the next
         outer step evaluates both before it kicks).
