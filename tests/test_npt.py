@@ -448,6 +448,8 @@ def test_one_target_temperature_per_dynamics():
         with pytest.raises(ValueError, match="temperature_K = 0"):
             dyn.thermostat.set_temperature(0)  # Bussi's fine at 0 K, the barostat is not
         assert dyn.thermostat.temperature_K == dyn.barostat.temperature_K == 90
+        dyn.barostat.temperature_K = 95  # an assignment is set_temperature
+        assert dyn.thermostat.temperature_K == dyn.target.temperature_K == 95
 
 
 def test_crescale_at_0_K_is_one_clear_error():

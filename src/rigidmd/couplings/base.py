@@ -98,9 +98,14 @@ class TargetTemperature:
 
     @property
     def temperature_K(self) -> float:
-        """The target temperature (K): the dynamics' shared one once bound."""
+        """The target temperature (K): the dynamics' shared one once bound; assigning it is
+        :meth:`set_temperature`."""
         target = self.target
         return self._temperature_K if target is None else target.temperature_K
+
+    @temperature_K.setter
+    def temperature_K(self, value) -> None:
+        self.set_temperature(value)
 
     @property
     def kT(self) -> float:
