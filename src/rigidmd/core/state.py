@@ -30,7 +30,10 @@ How a change moves the counters:
   summing again.
 
 A counter only grows, so a version is never reused; moving one without a
-change costs a recomputation, never a wrong value.
+change costs a recomputation, never a wrong value.  The body model (masses,
+moments, reference frames) does not change during a run:
+:meth:`rigidmd.core.dynamics.RigidDynamics.set_state` replaces it in place and
+assigns every field of the state, so every counter moves with it.
 """
 
 import numpy as np
