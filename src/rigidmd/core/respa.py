@@ -168,7 +168,7 @@ class SplitForceEvaluator(ForceEvaluator):
         record.levels_known = True
 
 
-@dataclass
+@dataclass(eq=False)
 class _InnerContext(StepContext):
     """An inner step's context: the fast level's record and evaluator; its ``view`` (what
     the parts and the barostat's drift query get) is the dynamics' context."""

@@ -11,7 +11,7 @@ whose drift moves the cell.  The ``apply_*`` functions adapt each operator of
 Nothing here reaches back to the dynamics.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,7 +26,7 @@ from rigidmd.core.state import RigidState
 __all__ = ["StepContext", "fused_no_squish", "fused_baoab", "BAOAB_OPERATORS"]
 
 
-@dataclass
+@dataclass(eq=False)  # compared by identity: it holds arrays, and itself as its view
 class StepContext:
     """One view of a step: what the scheme's operators and the coupling parts read and write.
 
@@ -95,7 +95,7 @@ class StepContext:
     middle: tuple = ()
     step: int = 0
     fixcom: bool = False
-    view: "StepContext | None" = None
+    view: "StepContext | None" = field(default=None, repr=False)
 
     @property
     def packed_model(self) -> tuple:
