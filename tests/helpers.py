@@ -19,6 +19,7 @@ from ase.calculators.tip3p import TIP3P
 from ase.io import write
 
 from rigidmd import rigid_maxwell_boltzmann
+from rigidmd.lammps import _numpy as lammps_numpy
 from rigidmd.run import cli
 from rigidmd.systems import co2_water_mixture, water_cluster
 
@@ -656,3 +657,31 @@ def messages(err):
 def file_bytes(path):
     """The bytes of a project's ``out/md.traj`` and ``out/md.log``."""
     return {name: (path / "out" / name).read_bytes() for name in ("md.traj", "md.log")}
+
+
+# ---------------------------------------------------------------- LAMMPS image flags
+#: LAMMPS's default image packing (``-DLAMMPS_SMALLBIG``): IMGBITS, IMG2BITS, IMGMASK, IMGMAX.
+LAMMPS_IMAGE_BITS = (10, 20, 1023, 512)
+
+
+def lammps_image_case(seed, n, tilt, outside):
+    """A lower-triangular cell, positions given in random images, LAMMPS's packed images.
+
+    Fractional coordinates stay 0.02 away from the integers and from -1/2 and 3/2, where
+    the two formulas (an inverse matrix; back substitution) may round to either side.
+    ``outside``: one atom is put 1.6-3 boxes out in its image (so every atom is shifted).
+    """
+    rng = np.random.default_rng(seed)
+    lengths = rng.uniform(5.0, 30.0, 3)
+    cell = np.diag(lengths)
+    cell[1, 0], cell[2, 0], cell[2, 1] = tilt * rng.uniform(-0.5, 0.5, 3) * lengths[[0, 0, 1]]
+    frac = rng.integers(0, 2, (n, 3)) - 0.5 + rng.uniform(0.02, 0.48, (n, 3))  # [-.48, .98]
+    if outside:
+        frac[rng.integers(n), rng.integers(3)] = rng.choice([-1, 1]) * rng.uniform(1.62, 2.98)
+    frac += np.where(np.abs(frac - np.round(frac)) < 0.02, 0.05, 0.0)
+    flags = rng.integers(-3, 4, (n, 3))
+    order = rng.permutation(n)
+    positions = np.empty((n, 3))
+    positions[order] = (frac + flags) @ cell  # LAMMPS atom i is ASE atom order[i]
+    image = lammps_numpy.pack_images(flags, LAMMPS_IMAGE_BITS).astype(np.int32)
+    return positions, order.astype(np.int64), image, cell

@@ -19,8 +19,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import LAMMPS_IMAGE_BITS as BITS
 from helpers import dimer_fluid, mixture, npt
-from lammps.test_numba import BITS, _case
+from helpers import lammps_image_case as _case
 
 import rigidmd.lammps._numpy  # noqa: F401  (registers the LAMMPS kernels' operations)
 from rigidmd import RigidDynamics
@@ -344,13 +345,11 @@ def _crescale(backend):
     baro.set_state(variables)
     baro._noise = noise
     record = dyn.record
-    record.cell_move = None
-    record.velocities_changed()
+    dyn.view.cell_note = None  # copy_into moved the state's versions: the record sums anew
     A, B, S, note = backend.crescale_drift(baro, dyn.view, record.volume, 0.5 * dyn.dt)
-    record.cell_move = note
-    dyn.state.V[...] = dyn.state.V @ S.T  # the drift's velocities
-    dyn.state.v[...] = dyn.state.v @ S.T
-    record.velocities_changed()
+    dyn.view.cell_note = note
+    dyn.state.V = dyn.state.V @ S.T  # the drift's velocities (assigning moves the version)
+    dyn.state.v = dyn.state.v @ S.T
     return A, B, S, backend.crescale_bookkeeping(baro, dyn.view)
 
 

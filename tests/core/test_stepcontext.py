@@ -62,18 +62,22 @@ def test_pcdm_correct_needs_its_predict(ctx):
     assert "pcdm" not in ctx.record.scratch
 
 
-def test_the_middle_parts_run_and_the_record_forgets_the_kinetic_energy(ctx):
+def test_the_middle_parts_run_on_the_view_and_the_record_follows_their_change(ctx):
     seen = []
 
     class Part:
         def middle(self, view, h):
             seen.append((view, h))
+            ctx.state.V *= 2.0  # an assignment: the momenta's version moves
 
     ctx.middle, ctx.view = (Part(), Part()), "view"
-    K = ctx.record.kinetic_tensor
+    K = ctx.record.kinetic_tensor.copy()
     sc.apply_middle(ctx, 0.5)
     assert seen == [("view", 0.5), ("view", 0.5)]
-    assert ctx.record._kinetic is None and np.allclose(ctx.record.kinetic_tensor, K)
+    # No stale value: the bodies' part of the tensor is 16 times as large, the free atoms'
+    # (whose velocities stayed) as it was.
+    fresh = obs.kinetic_tensor(ctx.state, ctx.model)
+    assert np.allclose(ctx.record.kinetic_tensor, fresh) and not np.allclose(fresh, K)
 
 
 def test_a_cell_move_keeps_the_barostats_note(ctx):
@@ -84,4 +88,4 @@ def test_a_cell_move_keeps_the_barostats_note(ctx):
     ctx.cell_motion = Mover()
     A, B, S = ctx.cell_move(0.25)
     assert np.array_equal(B, np.eye(3) * 0.25)
-    assert ctx.record.cell_move == ("note", 0.25)
+    assert ctx.cell_note == ("note", 0.25)  # kept on the view, not on the record

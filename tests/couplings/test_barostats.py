@@ -440,6 +440,16 @@ def test_one_target_temperature_per_dynamics():
         with pytest.raises(ValueError, match="temperature_K = 0"):
             dyn.set_temperature(temperature_K=0)  # the barostats have no 0 K limit
         assert dyn.thermostat.temperature_K == dyn.barostat.temperature_K == 120
+        # One target held once (issue 46): every part reads it, a part's own
+        # set_temperature changes it for all and is checked by all.
+        assert dyn.thermostat.target is dyn.barostat.target is dyn.target
+        dyn.thermostat.set_temperature(90)
+        assert dyn.barostat.temperature_K == dyn.target.temperature_K == 90
+        with pytest.raises(ValueError, match="temperature_K = 0"):
+            dyn.thermostat.set_temperature(0)  # Bussi's fine at 0 K, the barostat is not
+        assert dyn.thermostat.temperature_K == dyn.barostat.temperature_K == 90
+        dyn.barostat.temperature_K = 95  # an assignment is set_temperature
+        assert dyn.thermostat.temperature_K == dyn.target.temperature_K == 95
 
 
 def test_crescale_at_0_K_is_one_clear_error():

@@ -139,8 +139,7 @@ def both(dyn, part, action):
     results = []
     for backend in (NUMPY, NUMBA):
         start.copy_into(dyn.state)
-        part.set_state(variables)
-        dyn.record.velocities_changed()
+        part.set_state(variables)  # copy_into moved the state's versions: sums anew
         dyn.link.backend = backend  # the one backend object: record, view and parts follow
         assert dyn.view.backend is backend and dyn.record.backend is backend
         assert dyn.record.kinetic_tensor is not None  # summed now: a scaling must update it
@@ -222,12 +221,12 @@ def test_crescale_move_and_bookkeeping_are_the_reference(couple, argon):
 
     def move_and_book(view):
         baro._noise = noise
-        dyn.record.cell_move = None
+        dyn.view.cell_note = None
         A, B, S, note = baro.drift_matrices(view, h)
-        dyn.record.cell_move = note
+        dyn.view.cell_note = note
         dyn.state.V[...] = dyn.state.V @ S.T  # the drift's velocities
         dyn.state.v[...] = dyn.state.v @ S.T
-        dyn.record.velocities_changed()
+        dyn.state.touched(momenta=True)
         baro.second_half(view, h)
         return A, B, S
 

@@ -7,35 +7,11 @@ lower-triangular cells, image flags and permutations (hypothesis).
 """
 
 import numpy as np
+from helpers import LAMMPS_IMAGE_BITS as BITS
+from helpers import lammps_image_case as _case
 from hypothesis_or_skip import given, settings, st
 
 from rigidmd.lammps import _numba, _numpy
-
-#: LAMMPS's default image packing (``-DLAMMPS_SMALLBIG``): IMGBITS, IMG2BITS, IMGMASK, IMGMAX.
-BITS = (10, 20, 1023, 512)
-
-
-def _case(seed, n, tilt, outside):
-    """A lower-triangular cell, positions given in random images, LAMMPS's packed images.
-
-    Fractional coordinates stay 0.02 away from the integers and from -1/2 and 3/2, where
-    the two formulas (an inverse matrix; back substitution) may round to either side.
-    ``outside``: one atom is put 1.6-3 boxes out in its image (so every atom is shifted).
-    """
-    rng = np.random.default_rng(seed)
-    lengths = rng.uniform(5.0, 30.0, 3)
-    cell = np.diag(lengths)
-    cell[1, 0], cell[2, 0], cell[2, 1] = tilt * rng.uniform(-0.5, 0.5, 3) * lengths[[0, 0, 1]]
-    frac = rng.integers(0, 2, (n, 3)) - 0.5 + rng.uniform(0.02, 0.48, (n, 3))  # [-.48, .98]
-    if outside:
-        frac[rng.integers(n), rng.integers(3)] = rng.choice([-1, 1]) * rng.uniform(1.62, 2.98)
-    frac += np.where(np.abs(frac - np.round(frac)) < 0.02, 0.05, 0.0)
-    flags = rng.integers(-3, 4, (n, 3))
-    order = rng.permutation(n)
-    positions = np.empty((n, 3))
-    positions[order] = (frac + flags) @ cell  # LAMMPS atom i is ASE atom order[i]
-    image = _numpy.pack_images(flags, BITS).astype(np.int32)
-    return positions, order.astype(np.int64), image, cell
 
 
 @settings(max_examples=60, deadline=None)
