@@ -684,7 +684,7 @@ def checkpoint_continues(build, calculator, path, before=4, after=4):
     """``build()`` run ``before + after`` steps, and ``build()`` run ``before``, saved in a
     checkpoint at ``path``, loaded with ``calculator`` and run ``after``: asserts the same
     bits (positions, momenta, cell, conserved energy) and the same parts (a checkpoint
-    comes back as a :class:`~rigidmd.RigidDynamics` with them); returns ``(first, resumed)``."""
+    comes back as a :class:`~rigidmd.RigidDynamics` with them); returns ``(reference, resumed)``."""
     from rigidmd import load_checkpoint
 
     reference = build()
@@ -701,7 +701,7 @@ def checkpoint_continues(build, calculator, path, before=4, after=4):
     np.testing.assert_array_equal(resumed.atoms.get_momenta(), reference.atoms.get_momenta())
     np.testing.assert_array_equal(resumed.atoms.cell.array, reference.atoms.cell.array)
     assert resumed.get_conserved_energy() == reference.get_conserved_energy()
-    return first, resumed
+    return reference, resumed
 
 
 def rigid_temperature(atoms, n_bodies):

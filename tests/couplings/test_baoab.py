@@ -156,20 +156,6 @@ def test_one_force_call_per_step_and_one_draw():
     assert rng.bit_generator.state == copy.bit_generator.state
 
 
-def test_friction_or_T_tau():
-    atoms = mixture()
-    dyn = RigidLangevinBAOAB(atoms, 2 * units.fs, 300, T_tau=100 * units.fs, bodies="mol-id")
-    assert dyn.friction == pytest.approx(0.01 / units.fs, rel=1e-15)
-    with pytest.raises(TypeError, match="friction .* or T_tau .*not both"):
-        RigidLangevinBAOAB(mixture(), units.fs, 300, 0.01, T_tau=100.0, bodies="mol-id")
-    with pytest.raises(TypeError, match="missing: friction or T_tau"):
-        RigidLangevinBAOAB(mixture(), units.fs, 300, bodies="mol-id")
-    with pytest.raises(ValueError, match="T_tau must be a positive time"):
-        RigidLangevinBAOAB(mixture(), units.fs, 300, T_tau=-1.0, bodies="mol-id")
-    # No limit on friction * dt: the O step is exact (RigidLangevin refuses > 0.5).
-    RigidLangevinBAOAB(mixture(), 2 * units.fs, 300, 50.0, bodies="mol-id").run(2)
-
-
 def test_the_default_integrator_becomes_baoab_and_others_are_refused():
     part = LangevinBAOABThermostat(300, 0.01 / units.fs)
     dyn = RigidDynamics(mixture(), units.fs, bodies="mol-id", couplings=[part])
