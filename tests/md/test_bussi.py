@@ -5,6 +5,8 @@ canonical ensemble in ``tests/couplings/test_thermostats.py``; here, the class: 
 arguments and refusals, the part it composes, a short run, its checkpoint.
 """
 
+import inspect
+
 import numpy as np
 import pytest
 from ase import units
@@ -99,3 +101,16 @@ def test_checkpoint_continues_bit_for_bit(tmp_path):
     checkpoint_continues(
         lambda: RigidBussi(mixture(), 2 * units.fs, 300, 50 * units.fs, bodies="mol-id",
                            rng=np.random.default_rng(5)), CoulombLJ(), tmp_path / "state.npz")
+
+
+def test_the_positional_arguments_are_ase_s():
+    """``RigidBussi(atoms, dt, T, taut)`` reads as ASE's ``Bussi(atoms, dt, T, taut)``;
+    ``rng``, ASE's fifth, is a keyword here (with ``fixcm``)."""
+    from ase.md.bussi import Bussi
+
+    ours = inspect.signature(RigidBussi.__init__).parameters
+    ase = inspect.signature(Bussi.__init__).parameters
+    positional = [p.name for p in ours.values() if p.kind is p.POSITIONAL_OR_KEYWORD]
+    assert positional == list(ase)[:5] == ["self", "atoms", "timestep", "temperature_K",
+                                           "taut"]
+    assert list(ase)[5] == "rng" and ours["rng"].kind is inspect.Parameter.KEYWORD_ONLY

@@ -7,6 +7,8 @@ the canonical ensemble and is compared with LAMMPS in
 the part it composes, a short run's conserved energy, its checkpoint.
 """
 
+import inspect
+
 import numpy as np
 import pytest
 from ase import units
@@ -95,3 +97,20 @@ def test_checkpoint_continues_bit_for_bit(tmp_path):
     checkpoint_continues(
         lambda: RigidNoseHoover(mixture(), 2 * units.fs, 300, 50 * units.fs, bodies="mol-id"),
         CoulombLJ(), tmp_path / "state.npz")
+
+
+def test_the_positional_arguments_are_ase_s():
+    """``RigidNoseHoover(atoms, dt, T, tdamp, tchain, tloop)`` reads as ASE's
+    ``NoseHooverChainNVT(atoms, dt, T, tdamp, tchain, tloop)``, with its defaults for
+    tchain and tloop (T and tdamp default to None here, for the one-line message)."""
+    from ase.md.nose_hoover_chain import NoseHooverChainNVT
+
+    ours, ase = positional(RigidNoseHoover), positional(NoseHooverChainNVT)
+    assert list(ours) == list(ase)
+    assert (ours["tchain"], ours["tloop"]) == (ase["tchain"], ase["tloop"]) == (3, 1)
+
+
+def positional(cls):
+    """The positional parameters of ``cls`` and their defaults."""
+    parameters = inspect.signature(cls.__init__).parameters.values()
+    return {p.name: p.default for p in parameters if p.kind is p.POSITIONAL_OR_KEYWORD}
