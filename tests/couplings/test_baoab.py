@@ -1,4 +1,7 @@
-"""RigidLangevinBAOAB: its kernels against its operators, its arguments, and its physics.
+"""The BAOAB part (rigidmd.couplings.baoab): its kernels against its operators, its physics.
+
+The class RigidLangevinBAOAB (``friction`` or ``T_tau``, its refusals, its checkpoint) is
+tested in ``tests/md/test_langevinbaoab.py``.
 
 The physics is checked on a system with an exact answer: independent rigid
 water-shaped tops whose atoms are tethered to fixed points by springs

@@ -1,10 +1,11 @@
-"""The Monte Carlo barostat (rigidmd.couplings.montecarlo: MonteCarloBarostat, RigidMCBarostat).
+"""The Monte Carlo barostat (rigidmd.couplings.montecarlo: MonteCarloBarostat and its functions).
 
 Pure functions (proposals, acceptance with its Jacobian, adaptation) are
 checked on their own, and the acceptance rule by a chain of cell moves for an
 ideal gas, whose volume distribution is exact.  The coupling part is checked
 in dynamics of the rigid LJ dimer liquid (:func:`helpers.dimer_fluid`) with
-calculators that hide their stress.
+calculators that hide their stress.  The class RigidMCBarostat (its arguments, the
+parts it composes, its checkpoint) is tested in ``tests/md/test_mcbarostat.py``.
 """
 
 import numpy as np
