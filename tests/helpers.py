@@ -685,3 +685,55 @@ def lammps_image_case(seed, n, tilt, outside):
     positions[order] = (frac + flags) @ cell  # LAMMPS atom i is ASE atom order[i]
     image = lammps_numpy.pack_images(flags, LAMMPS_IMAGE_BITS).astype(np.int32)
     return positions, order.astype(np.int64), image, cell
+
+
+class NoStressLJ(PeriodicLJ):
+    """PeriodicLJ with energy and forces only (as ASE's TIP4P, ML wrappers); counts calls."""
+
+    implemented_properties = ["energy", "forces"]
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.calls = 0
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        self.calls += 1
+        super().calculate(atoms, properties, system_changes)
+        del self.results["stress"]
+
+
+def free_waters(n=8, seed=1, temperature_K=250):
+    """:func:`waters` without interactions (:class:`ZeroForce`): free rigid tops."""
+    atoms = waters(n, seed=seed, temperature_K=temperature_K)
+    atoms.calc = ZeroForce()
+    return atoms
+
+
+def checkpoint_continues(build, calculator, path, before=4, after=4):
+    """``build()`` run ``before + after`` steps, and ``build()`` run ``before``, saved in a
+    checkpoint at ``path``, loaded with ``calculator`` and run ``after``: asserts the same
+    bits (positions, momenta, cell, conserved energy) and the same parts (a checkpoint
+    comes back as a :class:`~rigidmd.RigidDynamics` with them); returns ``(reference, resumed)``."""
+    from rigidmd import load_checkpoint
+
+    reference = build()
+    reference.run(before + after)
+    first = build()
+    first.run(before)
+    first.save_checkpoint(path)
+    resumed = load_checkpoint(path, calculator)
+    assert resumed.nsteps == before
+    assert [type(part) for part in resumed.couplings] == [type(part) for part in first.couplings]
+    assert resumed.todict()["couplings"] == first.todict()["couplings"]
+    resumed.run(after)
+    np.testing.assert_array_equal(resumed.atoms.positions, reference.atoms.positions)
+    np.testing.assert_array_equal(resumed.atoms.get_momenta(), reference.atoms.get_momenta())
+    np.testing.assert_array_equal(resumed.atoms.cell.array, reference.atoms.cell.array)
+    assert resumed.get_conserved_energy() == reference.get_conserved_energy()
+    return reference, resumed
+
+
+def rigid_temperature(atoms, n_bodies):
+    """The temperature of ``n_bodies`` rigid molecules with the total momentum held
+    (6 n_bodies - 3 degrees of freedom), K."""
+    return 2 * atoms.get_kinetic_energy() / ((6 * n_bodies - 3) * units.kB)

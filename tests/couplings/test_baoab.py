@@ -1,4 +1,7 @@
-"""RigidLangevinBAOAB: its kernels against its operators, its arguments, and its physics.
+"""The BAOAB part (rigidmd.couplings.baoab): its kernels against its operators, its physics.
+
+The class RigidLangevinBAOAB (``friction`` or ``T_tau``, its refusals, its checkpoint) is
+tested in ``tests/md/test_langevinbaoab.py``.
 
 The physics is checked on a system with an exact answer: independent rigid
 water-shaped tops whose atoms are tethered to fixed points by springs
@@ -154,20 +157,6 @@ def test_one_force_call_per_step_and_one_draw():
     copy.bit_generator.state = state
     copy.standard_normal(6 * dyn.model.n_bodies + 3 * dyn.model.n_free)
     assert rng.bit_generator.state == copy.bit_generator.state
-
-
-def test_friction_or_T_tau():
-    atoms = mixture()
-    dyn = RigidLangevinBAOAB(atoms, 2 * units.fs, 300, T_tau=100 * units.fs, bodies="mol-id")
-    assert dyn.friction == pytest.approx(0.01 / units.fs, rel=1e-15)
-    with pytest.raises(TypeError, match="friction .* or T_tau .*not both"):
-        RigidLangevinBAOAB(mixture(), units.fs, 300, 0.01, T_tau=100.0, bodies="mol-id")
-    with pytest.raises(TypeError, match="missing: friction or T_tau"):
-        RigidLangevinBAOAB(mixture(), units.fs, 300, bodies="mol-id")
-    with pytest.raises(ValueError, match="T_tau must be a positive time"):
-        RigidLangevinBAOAB(mixture(), units.fs, 300, T_tau=-1.0, bodies="mol-id")
-    # No limit on friction * dt: the O step is exact (RigidLangevin refuses > 0.5).
-    RigidLangevinBAOAB(mixture(), 2 * units.fs, 300, 50.0, bodies="mol-id").run(2)
 
 
 def test_the_default_integrator_becomes_baoab_and_others_are_refused():

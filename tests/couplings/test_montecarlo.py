@@ -1,10 +1,11 @@
-"""The Monte Carlo barostat (rigidmd.couplings.montecarlo: MonteCarloBarostat, RigidMCBarostat).
+"""The Monte Carlo barostat (rigidmd.couplings.montecarlo: MonteCarloBarostat and its functions).
 
 Pure functions (proposals, acceptance with its Jacobian, adaptation) are
 checked on their own, and the acceptance rule by a chain of cell moves for an
 ideal gas, whose volume distribution is exact.  The coupling part is checked
 in dynamics of the rigid LJ dimer liquid (:func:`helpers.dimer_fluid`) with
-calculators that hide their stress.
+calculators that hide their stress.  The class RigidMCBarostat (its arguments, the
+parts it composes, its checkpoint) is tested in ``tests/md/test_mcbarostat.py``.
 """
 
 import numpy as np
@@ -14,6 +15,7 @@ from ase.calculators.calculator import Calculator, all_changes
 from helpers import (
     P_LIQUID,
     T_LIQUID,
+    NoStressLJ,
     PeriodicLJ,
     assert_ideal_gas_volumes,
     block_mean,
@@ -35,24 +37,9 @@ from rigidmd.couplings.montecarlo import (
     n_move_kinds,
     propose_cell,
 )
-from rigidmd.couplings.thermostats import LangevinThermostat, NoseHooverThermostat
+from rigidmd.couplings.thermostats import NoseHooverThermostat
 
 T = 80.0
-
-
-class NoStressLJ(PeriodicLJ):
-    """PeriodicLJ with energy and forces only (as ASE's TIP4P, ML wrappers); counts calls."""
-
-    implemented_properties = ["energy", "forces"]
-
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        self.calls = 0
-
-    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
-        self.calls += 1
-        super().calculate(atoms, properties, system_changes)
-        del self.results["stress"]
 
 
 class IdealGas(Calculator):
@@ -308,16 +295,6 @@ def test_works_with_every_scheme_and_backend(integrator):
     np.testing.assert_allclose(runs[0][1], runs[1][1], atol=1e-11)
 
 
-def test_composes_with_other_thermostats():
-    for thermostat in (LangevinThermostat(T, 0.01 / units.fs, np.random.default_rng(2),
-                                          fixcm=False), NoseHooverThermostat(T, 100 * units.fs)):
-        atoms = liquid()
-        dyn = RigidMCBarostat(atoms, 5 * units.fs, T, 100 * units.bar, thermostat=thermostat,
-                              every=5, rng=np.random.default_rng(1), bodies="tags")
-        dyn.run(50)
-        assert dyn.barostat.attempted.sum() == 10
-
-
 def test_conserved_energy_subtracts_what_the_moves_put_in():
     atoms = liquid()
     dyn = mc(atoms, every=5, step=0.02, adapt_moves=0, pressure=500 * units.bar)
@@ -333,28 +310,6 @@ def test_conserved_energy_subtracts_what_the_moves_put_in():
     # able to fail: a conserved energy that forgot the moves would drift by > 25x the bound.
     assert moved > 0.05
     assert drift < 2e-3
-
-
-def test_continuation_from_a_checkpoint_is_bit_identical(tmp_path):
-    """Random state, move sizes and counters live in the checkpoint (sizes still adapting)."""
-    def build():
-        return mc(liquid(), "tri", every=3, adapt_moves=30)
-
-    reference = build()
-    reference.run(60)
-    first = build()
-    first.run(25)
-    first.save_checkpoint(tmp_path / "state.npz")
-    resumed = load_checkpoint(tmp_path / "state.npz", NoStressLJ(rc=7.0))
-    barostat = next(p for p in resumed.couplings if isinstance(p, MonteCarloBarostat))
-    np.testing.assert_array_equal(barostat.steps, first.barostat.steps)
-    resumed.run(35)
-    np.testing.assert_array_equal(resumed.atoms.positions, reference.atoms.positions)
-    np.testing.assert_array_equal(resumed.atoms.get_momenta(), reference.atoms.get_momenta())
-    np.testing.assert_array_equal(resumed.atoms.cell.array, reference.atoms.cell.array)
-    np.testing.assert_array_equal(barostat.steps, reference.barostat.steps)
-    np.testing.assert_array_equal(barostat.accepted, reference.barostat.accepted)
-    assert resumed.get_conserved_energy() == reference.get_conserved_energy()
 
 
 def test_failed_trial_is_rolled_back_with_the_cell():
@@ -470,12 +425,6 @@ def test_bad_input_is_refused_before_anything_changes():
         mc(atoms, adapt_moves=-1)
     with pytest.raises(ValueError, match=r"step must be in \(0, 0.5\]"):
         mc(atoms, step=0.0)
-    with pytest.raises(TypeError, match="give taut .* or a thermostat part, not both"):
-        RigidMCBarostat(atoms, units.fs, T, units.bar, 100 * units.fs,
-                        thermostat=NoseHooverThermostat(T, 100 * units.fs), bodies="tags")
-    with pytest.raises(ValueError, match="thermostat's temperature .300 K. differs"):
-        RigidMCBarostat(atoms, units.fs, T, units.bar,
-                        thermostat=NoseHooverThermostat(300, 100 * units.fs), bodies="tags")
     cluster = liquid()
     cluster.pbc = [True, True, False]
     with pytest.raises(ValueError, match="periodic cell in all three directions"):

@@ -215,34 +215,6 @@ def test_nose_hoover_against_lammps_fix_rigid_nvt():
     assert lammps_temp > T
 
 
-@pytest.mark.parametrize(
-    "cls, kwargs, error, match",
-    [
-        (RigidLangevin, {"temperature_K": -1, "friction": 0.01}, ValueError, "temperature_K"),
-        # 10 meant as 10/ps is 1/fs in ASE units: friction * dt = 0.98.
-        (RigidLangevin, {"temperature_K": 300, "friction": 10.0}, ValueError,
-         "damps the velocities within one step"),
-        (RigidLangevin, {"temperature_K": 300, "friction": -0.1}, ValueError, "friction"),
-        (RigidLangevin, {"temperature_K": 300}, TypeError, "needs temperature_K"),
-        (RigidBussi, {"temperature_K": 300, "taut": 0}, ValueError, "taut must be a positive"),
-        (RigidNoseHoover, {"temperature_K": 300, "tdamp": 0.0}, ValueError, "tdamp must be"),
-        (RigidNoseHoover, {"temperature_K": 300, "tdamp": 0.5 * units.fs}, ValueError,
-         "shorter than the time step"),
-        (RigidNoseHoover, {"temperature_K": 300, "tdamp": 100, "tchain": 0}, ValueError,
-         "tchain must be a positive integer"),
-        (RigidBussi, {"temperature_K": 300, "taut": 100, "fixcm": "yes"}, TypeError,
-         "fixcm must be True or False"),
-    ],
-)
-def test_bad_parameters(cls, kwargs, error, match):
-    atoms = water_cluster(2)
-    before = atoms.positions.copy()
-    with pytest.raises(error, match=match):
-        cls(atoms, 1 * units.fs, **kwargs)
-    np.testing.assert_array_equal(atoms.positions, before)
-    assert atoms.constraints == []
-
-
 @pytest.mark.parametrize("name", THERMOSTATS)
 def test_fixcm_keeps_the_total_momentum(name):
     """fixcm=True: the thermostat leaves P = sum M V + sum m v unchanged, to roundoff.

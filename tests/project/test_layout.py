@@ -9,9 +9,6 @@ imports the top-level ``rigidmd`` (it only re-exports).
 """
 
 import ast
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 SOURCE = Path(__file__).resolve().parents[2] / "src" / "rigidmd"
@@ -191,24 +188,6 @@ def test_no_two_modules_share_a_basename():
     module (``__init__``, and each package's compiled kernels ``_numba`` and their NumPy
     references ``_numpy``, aside)."""
     assert shared_basenames(modules()) == {}
-
-
-def test_importing_lammps_imports_neither_the_engine_nor_the_reference_runs():
-    """``rigidmd.lammps``'s names are imported on first access (PEP 562): importing the
-    package (the configuration does, to check a section) starts none of the engine's,
-    i-PI's, the reference runs' or the calculator's modules; every name still resolves and
-    ``dir()`` lists each."""
-    script = (
-        "import sys, rigidmd.lammps as lammps\n"
-        "print(sorted(m for m in sys.modules if m.startswith('rigidmd.lammps.')"
-        " or m.startswith('rigidmd.ipi')))\n"
-        "print(sorted(set(lammps.__all__) - set(dir(lammps))))\n"
-        "print(lammps.LAMMPSEngine.__module__, 'rigidmd.lammps.engine' in sys.modules)\n"
-        "print(all(getattr(lammps, name) is not None for name in lammps.__all__))\n")
-    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                         check=True, env={**os.environ, "PYTHONPATH": str(SOURCE.parent)}
-                         ).stdout.splitlines()
-    assert out == ["['rigidmd.lammps.lazy']", "[]", "rigidmd.lammps.engine True", "True"], out
 
 
 def test_the_checks_find_what_they_look_for(tmp_path):
