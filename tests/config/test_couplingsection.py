@@ -24,6 +24,7 @@ def test_a_thermostat_section_becomes_its_part():
 
 @pytest.mark.parametrize("raw, match", [
     ({"kind": "berendsen"}, "thermostat.kind: use langevin, bussi, nose_hoover, langevin_baoab,"
+                            " or module.Class for a thermostat of your own \\(with --trust\\),"
                             " got 'berendsen'"),
     ({"kind": "bussi", "temperature": "300 K"}, "thermostat.taut: missing for bussi"),
     ({"kind": "bussi", "temperature": "-1 K", "taut": "1 ps"},

@@ -129,3 +129,16 @@ def test_the_outputs_section(tmp_path):
                                    tmp_path)
     with pytest.raises(ConfigError, match="outputs.plot: e.txt is not an image file"):
         OutputsSection.from_config({"outputs": {"plot": "e.txt"}}, tmp_path)
+
+
+@pytest.mark.parametrize("field", ["structure", "restart"])
+def test_a_file_field_that_is_no_file_name_is_refused_in_one_line(tmp_path, field):
+    """Found by the configuration fuzz test: a mapping under ``restart:`` became a path of
+    its text, and ``is_file`` raised the system's OSError (file name too long)."""
+    raw = {"structure": {"builtin": "water_cluster", "n_molecules": 2}}
+    for value, match in [([{"a": 1}], f"^{field}: expected a file name, got list$"),
+                         ("x" * 5000, f"^{field}: not a usable file name \\(OSError: "),
+                         ("a\0b", f"^{field}: no such file "),  # pathlib: no such file
+                         ("missing.xyz", f"^{field}: no such file ")]:
+        with pytest.raises(ConfigError, match=match):
+            StructureSection.from_config(raw | {field: value}, tmp_path)

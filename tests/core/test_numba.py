@@ -10,13 +10,6 @@ from rigidmd.core import _numba
 from rigidmd.core import operators as ops
 
 
-def test_the_backend_is_chosen_once():
-    assert _numba.resolve_backend() == "numba"
-    assert _numba.resolve_backend("numpy") == "numpy"
-    with pytest.raises(ValueError, match="backend must be 'numba' or 'numpy', got 'jax'"):
-        _numba.resolve_backend("jax")
-
-
 def test_congruence_and_net_force(rng):
     F, K = rng.normal(size=(3, 3)), rng.normal(size=(3, 3))
     assert np.allclose(_numba.congruence(F, K), F @ K @ F.T, rtol=1e-14, atol=1e-14)

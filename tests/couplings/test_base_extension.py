@@ -87,13 +87,14 @@ def test_the_work_it_books_keeps_the_conserved_energy(berendsen):
     assert abs(dyn.get_conserved_energy() - start) < 0.01 * abs(thermostat.work)
 
 
-def test_it_continues_from_a_checkpoint_bit_for_bit(berendsen, folder):
-    """On the NumPy backend, as the page says: 60 steps, or 25, a checkpoint and 35 more."""
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_it_continues_from_a_checkpoint_bit_for_bit(berendsen, folder, backend):
+    """On both backends, as the page says: 60 steps, or 25, a checkpoint and 35 more."""
     reference = RigidDynamics(cluster(), units.fs, couplings=[berendsen(300, 50 * units.fs)],
-                              backend="numpy")
+                              backend=backend)
     reference.run(60)
     first = RigidDynamics(cluster(), units.fs, couplings=[berendsen(300, 50 * units.fs)],
-                          backend="numpy")
+                          backend=backend)
     first.run(25)
     first.save_checkpoint(folder / "state.npz")
     resumed = load_checkpoint(folder / "state.npz", TIP3P(rc=40.0))

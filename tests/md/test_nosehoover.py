@@ -78,6 +78,9 @@ def test_the_chains_hold_what_the_particles_lose():
     assert dyn.get_conserved_energy() == pytest.approx(E0, abs=2e-4)
     assert dyn.get_conserved_energy() == pytest.approx(
         atoms.get_kinetic_energy() + dyn.chain_energy(), abs=1e-12)
+    # As for the stochastic thermostats: what it put in is the system's energy change.
+    assert dyn.thermostat_work == -dyn.chain_energy()
+    assert atoms.get_kinetic_energy() - E0 == pytest.approx(dyn.thermostat_work, abs=2e-4)
 
 
 def test_free_tops_come_to_the_target_temperature():

@@ -65,6 +65,23 @@ PLOT_FORMATS = ("png", "pdf", "svg", "svgz", "eps", "ps", "jpg", "jpeg", "tif", 
 BODY_RULES = ("connectivity", "mol-id", "tags")
 
 
+def _existing_file(field: str, value, base: Path) -> Path:
+    """The file a field names (relative to the configuration's folder), or one line saying
+    why not: a file name must be text, and a path the system refuses (too long, a NUL)
+    names the field as a missing file does."""
+    if not isinstance(value, str | Path):
+        raise ConfigError(f"{field}: expected a file name, got {type(value).__name__}")
+    path = base / str(value)
+    try:
+        exists = path.is_file()
+    except (OSError, ValueError) as error:  # ENAMETOOLONG, an embedded NUL
+        raise ConfigError(f"{field}: not a usable file name ({error.__class__.__name__}: "
+                          f"{getattr(error, 'strerror', None) or error})") from None
+    if not exists:
+        raise ConfigError(f"{field}: no such file {str(path)!r}")
+    return path
+
+
 @dataclass
 class StructureSection:
     """Where the atoms come from and which of them form bodies.
@@ -101,14 +118,10 @@ class StructureSection:
                                   f"got {source.get('builtin')!r}")
             source = _check_builder(source)
         elif source is not None:
-            source = base / str(source)
-            if not source.is_file():
-                raise ConfigError(f"structure: no such file {str(source)!r}")
+            source = _existing_file("structure", source, base)
         restart = None
         if "restart" in raw:
-            restart = base / str(raw["restart"])
-            if not restart.is_file():
-                raise ConfigError(f"restart: no such file {str(restart)!r}")
+            restart = _existing_file("restart", raw["restart"], base)
         bodies = raw.get("bodies")
         if bodies is not None and bodies not in BODY_RULES:
             raise ConfigError(f"bodies: use connectivity, mol-id or tags, got {bodies!r}")

@@ -316,7 +316,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         try:
             yield from steps
         finally:
-            self.sync.synced = self.link.snapshot()
+            self.sync.finish_run()
 
     def _steps(self, steps):
         """ASE's ``irun`` loop and its calls, in its order: a subclass's overrides are called."""

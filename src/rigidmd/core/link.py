@@ -247,6 +247,10 @@ class AtomsSync:
         self.synced = None        # (positions, momenta, cell) at the end of the last run
         self.changed = None       # (positions, momenta, cell) written before a change
         self.forces_current = False  # forces restored from a checkpoint: no call at a start
+        #: The calculator whose forces the record held when the last run ended (None before
+        #: the first run ends): at the next start its forces are still the record's if it
+        #: holds results for the atoms as they are (:meth:`forces_still_current`).
+        self.calculator = None
         self.reads_only = {}  # observer -> whether it is known to only read the Atoms
 
     def mark_atoms(self) -> None:
@@ -304,10 +308,36 @@ class AtomsSync:
         changed = self.sync(self.synced, evaluate, step, owner)
         if not changed and self.forces_current:
             self.record.r = self.link.place(self.state, self.record.r)  # the restored forces'
-        else:
+        elif changed or not self.forces_still_current():
             evaluate()
         self.forces_current = False
         return changed
+
+    def finish_run(self) -> None:
+        """At a run's end (or its interruption): what was written, and whose forces those are."""
+        self.synced = self.link.snapshot()
+        self.calculator = self.link.atoms.calc
+
+    def forces_still_current(self) -> bool:
+        """Whether the record's forces are those of the calculator for the atoms as they are.
+
+        True when the calculator that computed them at the last run's end is still the
+        atoms' and still holds forces for these atoms (ASE's ``check_state``: positions,
+        cell, numbers, charges): a new calculator, ``calc.reset()``, changed parameters
+        (ASE's ``set`` resets the results) or moved atoms make it False.  Then a run's
+        start need not call the calculator again, as ASE's dynamics ask the calculator,
+        whose cache answers: ``run(10); run(10)`` is ``run(20)`` bit for bit on both
+        backends (a new call, with NumPy's reduction of the forces to the bodies, would
+        differ from the compiled kernel's in the last bit).
+        """
+        calc = self.link.atoms.calc
+        if calc is None or calc is not self.calculator:
+            return False
+        results = getattr(calc, "results", None)
+        check_state = getattr(calc, "check_state", None)
+        if not results or "forces" not in results or check_state is None:
+            return False
+        return not check_state(self.link.atoms)
 
     def watch(self, steps):
         """Pass on the items of ``steps`` (a run's generator), noting changes made between them.

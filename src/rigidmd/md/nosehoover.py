@@ -59,3 +59,9 @@ class RigidNoseHoover(_Thermostatted):
     def chain_energy(self):
         """Energy of the two chains (eV)."""
         return self.thermostat.energy()
+
+    @property
+    def thermostat_work(self):
+        """Energy the thermostat has put into the system so far (eV): what the chains gave,
+        minus their energy (they start with none), as the stochastic thermostats book it."""
+        return -self.chain_energy()
