@@ -29,9 +29,14 @@ The accuracy study the issue asks for (energy conservation and sampling for oute
 would be ``validation/timestep_table.py run`` with the split as its calculator, for
 example with 200 ps per point, three seeds and the grid above.
 
+The full model's neighbour list is rebuilt when an atom has moved half the skin: at outer
+steps of 6-8 fs that is nearly every call with LAMMPS's default 2 Å, and a rebuild costs
+most of a step; ``--skin 3`` is the second set of results.
+
 Writes ``respa_lammps_cost.json`` and ``respa_lammps_cost.txt`` beside this script. Run::
 
-    python validation/respa_lammps_cost.py             # a few minutes on one idle core
+    python validation/respa_lammps_cost.py             # 2-3 minutes on one idle core
+    python validation/respa_lammps_cost.py --skin 3 --out validation/respa_lammps_cost_skin3
     python validation/respa_lammps_cost.py --quick     # one repeat, a few steps: seconds
 """
 
@@ -102,7 +107,7 @@ class Counted:
         self.calls, self.seconds = 0, 0.0
 
 
-def calculators(fast_levels, alpha: float):
+def calculators(fast_levels, alpha: float, skin: float = 2.0):
     """The full model; per fast level its calculator and split (k set per case); counters
     of the full model's calls and of each fast level's."""
     from rigidmd import MultipleTimeStep
@@ -111,7 +116,7 @@ def calculators(fast_levels, alpha: float):
 
     model = water_model("tip4p2005")
     full = LAMMPSCalculator(model.lammps_commands(CUTOFF, "pppm", 1e-5, tail=True),
-                            atom_types=TYPES)
+                            atom_types=TYPES, skin=skin)
     splits, counters = {}, {"full": Counted(full)}
     for r_split, smooth in fast_levels:
         fast = LAMMPSCalculator(model.lammps_short_range_commands(r_split, alpha, smooth),
@@ -177,7 +182,8 @@ def run_case(fast, dt_fs, k, calcs, ps, warmup, seed=1):
 
 def report(result) -> str:
     lines = [__doc__.splitlines()[0], "",
-             f"216 TIP4P/2005 waters; DSF alpha {result['alpha']} 1/Å; {result['ps']} ps per "
+             f"216 TIP4P/2005 waters; DSF alpha {result['alpha']} 1/Å; the full model's "
+             f"neighbour skin {result['skin']:g} Å; {result['ps']} ps per "
              f"run after {result['warmup']} outer steps; best of {result['repeats']} "
              "interleaved repeats (by CPU time); "
              f"load average {result['load_before']:.1f} before, {result['load_after']:.1f} "
@@ -209,6 +215,8 @@ def main(argv=None):
     ap.add_argument("--ps", type=float, default=0.4, help="simulated ps per run")
     ap.add_argument("--warmup", type=int, default=10, help="outer steps before timing")
     ap.add_argument("--alpha", type=float, default=0.2, help="fast level's DSF damping (1/Å)")
+    ap.add_argument("--skin", type=float, default=2.0,
+                    help="the full model's neighbour skin (Å); the fast levels' is 2 Å")
     ap.add_argument("--quick", action="store_true", help="one repeat, 24 fs per run")
     ap.add_argument("--out", type=Path, default=HERE / "respa_lammps_cost")
     args = ap.parse_args(argv)
@@ -216,7 +224,7 @@ def main(argv=None):
         args.repeats, args.ps, args.warmup = 1, 0.024, 1
     cases = [(None, 2.0, None), (None, 4.0, None)] + [
         (fast, dt, k) for fast in FAST for dt, k in SPLITS]
-    calcs = calculators(FAST, args.alpha)
+    calcs = calculators(FAST, args.alpha, args.skin)
     load_before = os.getloadavg()[0]
     runs, best = [], {}
     for rep in range(args.repeats):
@@ -231,7 +239,8 @@ def main(argv=None):
             key = (fast, dt, k)
             if key not in best or r["cpu_ms_per_step"] < best[key]["cpu_ms_per_step"]:
                 best[key] = r
-    result = {"fast_levels": [fast_name(*f) for f in FAST], "alpha": args.alpha, "ps": args.ps,
+    result = {"fast_levels": [fast_name(*f) for f in FAST], "alpha": args.alpha,
+              "skin": args.skin, "ps": args.ps,
               "warmup": args.warmup, "repeats": args.repeats, "cpus": os.cpu_count(),
               "load_before": load_before, "load_after": os.getloadavg()[0],
               "best": [best[case] for case in cases], "runs": runs}
