@@ -12,6 +12,8 @@ level is full less fast.  The quick forms of ``validation/respa_kspace_share.py`
 """
 
 import importlib
+import json
+import subprocess
 import sys
 from pathlib import Path
 
@@ -182,3 +184,16 @@ def test_the_committed_results_are_there():
     for name in ("respa_kspace_share", "respa_lammps_cost", "respa_lammps_cost_skin3"):
         for suffix in (".json", ".txt"):
             assert (ROOT / "validation" / f"{name}{suffix}").stat().st_size > 1000
+
+
+def test_the_timestep_tables_runs_take_a_split(tmp_path):
+    """``timestep_table.py run --substeps 4 --r-split 5``: a point of its own (its name and
+    JSON say the split), run to the end with the split's outer step."""
+    subprocess.run([sys.executable, str(ROOT / "validation" / "timestep_table.py"), "run",
+                    "--code", "rigidmd", "--integrator", "baoab", "--waters", "64",
+                    "--dt-fs", "8", "--substeps", "4", "--r-split", "5", "--ps", "0.016",
+                    "--sample-fs", "8", "--frame-fs", "16", "--blocks", "2",
+                    "--outdir", str(tmp_path)], check=True, capture_output=True, timeout=600)
+    run = json.loads((tmp_path / "tip4p2005_64_rigidmd_baoab_dt8_k4r5_s1.json").read_text())
+    assert run["complete"] and run["steps"] == 2
+    assert (run["point"]["substeps"], run["point"]["r_split"]) == (4, 5.0)
