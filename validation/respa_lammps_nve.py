@@ -134,7 +134,8 @@ def main(argv=None):
             points.append(r)
             print(f"k={k} dt={dt:g} fs: std {r['std_meV_per_water']:.3f} meV/water, drift "
                   f"{r['drift_meV_per_ps_per_water']:+.3f} meV/ps/water", flush=True)
-    result = {"fast": f"{args.r_split:g} Å {'lj/cut' if args.lj_cut else 'smooth'}", "ps": args.ps, "points": points,
+    result = {"fast": f"{args.r_split:g} Å {'lj/cut' if args.lj_cut else 'smooth'}",
+              "ps": args.ps, "points": points,
               "load_average": os.getloadavg()[0]}
     text = report(result)
     print(text)
