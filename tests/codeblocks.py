@@ -1,6 +1,6 @@
 """Run the fenced code blocks of a Markdown page as a reader following it would.
 
-Used by ``tests/test_readme.py`` (README.md) and ``tests/test_docs.py`` (every page
+Used by ``tests/project/test_readme.py`` (README.md) and ``tests/project/test_docs.py`` (every page
 under ``docs/``).  The blocks of one page run in order in one scratch directory:
 
 * ``python`` blocks one after the other in one interpreter (a later block may
@@ -35,26 +35,29 @@ CHECKED_ELSEWHERE = (
     ("pip install", ".ci/run installs and tests a clean checkout"),
     ("python -m venv .venv", ".ci/run makes a fresh virtual environment of its own"),
     ("sphinx", ".ci/run builds the documentation with -W"),
-    ("examples/tip3p_water.py --outdir out", "tests/test_examples.py runs it with --quick"),
-    ("examples/tip4p2005.py --outdir out4", "tests/test_examples.py runs it with --quick"),
-    ("validation/water_models.py --jobs 2", "hours; tests/test_water_properties.py runs its "
-     "--quick form"),
-    ("validation/water_lammps_check.py --models", "needs a finished water_models.py run; "
-     "tests/test_water_properties.py runs its --quick form"),
-    ("validation/water_openmm_check.py --models", "minutes a model; tests/test_water_openmm.py "
+    ("examples/tip3p_water.py --outdir out", "tests/project/test_examples.py runs it with --quick"),
+    ("examples/tip4p2005.py --outdir out4", "tests/project/test_examples.py runs it with --quick"),
+    ("validation/water_models.py --jobs 2", "hours; tests/physics/test_water_properties.py "
      "runs its --quick form"),
+    ("validation/water_lammps_check.py --models", "needs a finished water_models.py run; "
+     "tests/physics/test_water_properties.py runs its --quick form"),
+    ("validation/water_openmm_check.py --models", "minutes a model; "
+     "tests/physics/test_water_openmm.py runs its --quick form"),
     ("validation/water_openmm_nve.py", "an hour and more on 2 cores; "
-     "tests/test_water_openmm.py runs its --quick form and a 27-water tracking check"),
+     "tests/physics/test_water_openmm.py runs its --quick form and a 27-water tracking check"),
     ("validation/water_openmm_long.py", "each run as long as its --budget-s; "
-     "tests/test_water_openmm.py runs its --quick form"),
-    ("validation/timestep_table", "core-days for the full table; tests/test_timestep_table.py "
-     "runs each code for a few steps, a stop and --resume, and the collector"),
-    ("examples/mace_water.py --quick", "tests/test_ml_potential.py runs it where mace-torch "
-     "is installed (the ml extra, not the test extra)"),
+     "tests/physics/test_water_openmm.py runs its --quick form"),
+    ("validation/timestep_table", "core-days for the full table; "
+     "tests/physics/test_timestep_table.py runs each code for a few steps, a stop and "
+     "--resume, and the collector"),
+    ("examples/mace_water.py --quick", "tests/physics/test_ml_potential.py runs it where "
+     "mace-torch is installed (the ml extra, not the test extra)"),
     ("validation/respa_kspace_share.py", "minutes of native LAMMPS runs; "
-     "tests/test_respa_lammps.py runs its --quick form"),
-    ("validation/respa_lammps_cost.py", "minutes; tests/test_respa_lammps.py runs its --quick "
-     "form"),
+     "tests/physics/test_respa_lammps.py runs its --quick form"),
+    ("validation/respa_lammps_cost.py", "minutes; tests/physics/test_respa_lammps.py runs its "
+     "--quick form"),
+    ("validation/respa_lammps_nve.py", "minutes; tests/physics/test_respa_lammps.py runs its "
+     "--quick form"),
     ("benchmarks/", "benchmarks measure speed or physics for minutes to hours; each is run "
      "in its --quick form by the tests of what it measures"),
     ("python -m pytest", "the test command itself"),

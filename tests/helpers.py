@@ -19,6 +19,7 @@ from ase.calculators.tip3p import TIP3P
 from ase.io import write
 
 from rigidmd import rigid_maxwell_boltzmann
+from rigidmd.lammps import _numpy as lammps_numpy
 from rigidmd.run import cli
 from rigidmd.systems import co2_water_mixture, water_cluster
 
@@ -656,3 +657,83 @@ def messages(err):
 def file_bytes(path):
     """The bytes of a project's ``out/md.traj`` and ``out/md.log``."""
     return {name: (path / "out" / name).read_bytes() for name in ("md.traj", "md.log")}
+
+
+# ---------------------------------------------------------------- LAMMPS image flags
+#: LAMMPS's default image packing (``-DLAMMPS_SMALLBIG``): IMGBITS, IMG2BITS, IMGMASK, IMGMAX.
+LAMMPS_IMAGE_BITS = (10, 20, 1023, 512)
+
+
+def lammps_image_case(seed, n, tilt, outside):
+    """A lower-triangular cell, positions given in random images, LAMMPS's packed images.
+
+    Fractional coordinates stay 0.02 away from the integers and from -1/2 and 3/2, where
+    the two formulas (an inverse matrix; back substitution) may round to either side.
+    ``outside``: one atom is put 1.6-3 boxes out in its image (so every atom is shifted).
+    """
+    rng = np.random.default_rng(seed)
+    lengths = rng.uniform(5.0, 30.0, 3)
+    cell = np.diag(lengths)
+    cell[1, 0], cell[2, 0], cell[2, 1] = tilt * rng.uniform(-0.5, 0.5, 3) * lengths[[0, 0, 1]]
+    frac = rng.integers(0, 2, (n, 3)) - 0.5 + rng.uniform(0.02, 0.48, (n, 3))  # [-.48, .98]
+    if outside:
+        frac[rng.integers(n), rng.integers(3)] = rng.choice([-1, 1]) * rng.uniform(1.62, 2.98)
+    frac += np.where(np.abs(frac - np.round(frac)) < 0.02, 0.05, 0.0)
+    flags = rng.integers(-3, 4, (n, 3))
+    order = rng.permutation(n)
+    positions = np.empty((n, 3))
+    positions[order] = (frac + flags) @ cell  # LAMMPS atom i is ASE atom order[i]
+    image = lammps_numpy.pack_images(flags, LAMMPS_IMAGE_BITS).astype(np.int32)
+    return positions, order.astype(np.int64), image, cell
+
+
+class NoStressLJ(PeriodicLJ):
+    """PeriodicLJ with energy and forces only (as ASE's TIP4P, ML wrappers); counts calls."""
+
+    implemented_properties = ["energy", "forces"]
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.calls = 0
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        self.calls += 1
+        super().calculate(atoms, properties, system_changes)
+        del self.results["stress"]
+
+
+def free_waters(n=8, seed=1, temperature_K=250):
+    """:func:`waters` without interactions (:class:`ZeroForce`): free rigid tops."""
+    atoms = waters(n, seed=seed, temperature_K=temperature_K)
+    atoms.calc = ZeroForce()
+    return atoms
+
+
+def checkpoint_continues(build, calculator, path, before=4, after=4):
+    """``build()`` run ``before + after`` steps, and ``build()`` run ``before``, saved in a
+    checkpoint at ``path``, loaded with ``calculator`` and run ``after``: asserts the same
+    bits (positions, momenta, cell, conserved energy) and the same parts (a checkpoint
+    comes back as a :class:`~rigidmd.RigidDynamics` with them); returns ``(reference, resumed)``."""
+    from rigidmd import load_checkpoint
+
+    reference = build()
+    reference.run(before + after)
+    first = build()
+    first.run(before)
+    first.save_checkpoint(path)
+    resumed = load_checkpoint(path, calculator)
+    assert resumed.nsteps == before
+    assert [type(part) for part in resumed.couplings] == [type(part) for part in first.couplings]
+    assert resumed.todict()["couplings"] == first.todict()["couplings"]
+    resumed.run(after)
+    np.testing.assert_array_equal(resumed.atoms.positions, reference.atoms.positions)
+    np.testing.assert_array_equal(resumed.atoms.get_momenta(), reference.atoms.get_momenta())
+    np.testing.assert_array_equal(resumed.atoms.cell.array, reference.atoms.cell.array)
+    assert resumed.get_conserved_energy() == reference.get_conserved_energy()
+    return reference, resumed
+
+
+def rigid_temperature(atoms, n_bodies):
+    """The temperature of ``n_bodies`` rigid molecules with the total momentum held
+    (6 n_bodies - 3 degrees of freedom), K."""
+    return 2 * atoms.get_kinetic_energy() / ((6 * n_bodies - 3) * units.kB)

@@ -4,7 +4,7 @@
 points by springs proportional to their masses: the centres of mass are harmonic
 oscillators of frequency omega = 0.125 / fs and the rotations nearly so, so the
 exact <U> is known (3/2 kT per body for the translation, a quadrature over the
-rotation group for the rotation; tests/test_baoab.py checks both schemes at
+rotation group for the rotation; tests/couplings/test_baoab.py checks both schemes at
 omega dt = 0.5).  Friction 1 / (50 fs), 2 ps of equilibration, 16 ps per point,
 errors from 10 blocks.  T_conf is T <U> / <U>_exact.  Writes
 baoab_tethered_tops.txt; run with ``python validation/baoab_tethered_tops.py``

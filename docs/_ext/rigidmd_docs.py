@@ -11,7 +11,7 @@
 
 Each file is rewritten only when its text changes, so incremental builds stay
 incremental.  The functions are plain Python (no Sphinx needed) so that
-``tests/test_docs.py`` can check what they produce.
+``tests/project/test_docs.py`` can check what they produce.
 """
 
 import ast
@@ -326,7 +326,7 @@ def example_output(script):
     """The committed output of an example (``examples/output/<name>.txt``), or None.
 
     Its first line is the command that printed it (``$ python examples/...``);
-    ``tests/test_examples.py`` runs each command and checks that the text is
+    ``tests/project/test_examples.py`` runs each command and checks that the text is
     still what the script prints, numbers aside (timings and short runs vary).
     """
     path = script.parent / "output" / f"{script.stem}.txt"

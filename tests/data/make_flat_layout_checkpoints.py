@@ -2,7 +2,7 @@
 
 Written by the code at commit 994d68e (every module flat in ``src/rigidmd``),
 before the modules moved into ``rigidmd.core``, ``rigidmd.couplings`` and
-``rigidmd.run``; ``tests/test_checkpoint_layout.py`` loads them with today's code
+``rigidmd.run``; ``tests/core/test_checkpoint_layout.py`` loads them with today's code
 and checks the continuation against the positions the old code reached
 (``checkpoint_flat_reference.npz``).  Two dynamics: a Bussi thermostat on the
 CO2/water/neon droplet (``mixture()``, a random-number generator in the file) and

@@ -6,7 +6,7 @@ mixed case, free atoms) from the same start; the conserved energy after each
 step and the final positions, momenta and cell are stored in
 ``tests/data/trajectory_identity.npz`` together with the versions of the
 packages that decide the floating-point results (Python, NumPy, numba, ASE).
-``tests/test_trajectory_identity.py`` runs the same cases and compares: bit for
+``tests/project/test_trajectory_identity.py`` runs the same cases and compares: bit for
 bit when those versions are the stored ones (the pinned environment,
 ``.ci/pinned.txt``), else within a bound the test explains.
 

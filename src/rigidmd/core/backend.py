@@ -9,7 +9,7 @@ evaluator, the stepper and the coupling parts reach it through the link.  Every
 operation that has a compiled form is a method of the backend with the same
 signature on both, so a call site reads ``backend.kinetic_tensor(state, model)``
 and holds no branch: this module is the only place that tells the two apart
-(``tests/test_backend.py`` walks every other module's syntax tree to keep it so).
+(``tests/core/test_backend.py`` walks every other module's syntax tree to keep it so).
 
 Naming rule.  Each package's compiled kernels live in ``<package>/_numba.py``
 (:mod:`rigidmd.core._numba`, :mod:`rigidmd.couplings._numba`,
@@ -24,7 +24,7 @@ cannot take the same arguments).  The core's own operations are methods of
 :class:`Backend` (calling :mod:`rigidmd.core.operators` and
 :mod:`rigidmd.core.observables`) and :class:`CompiledBackend` (calling
 :mod:`rigidmd.core._numba`), which adapt the arguments.  :func:`operations`
-lists every operation; ``tests/test_backend.py`` runs each on random inputs on
+lists every operation; ``tests/core/test_backend.py`` runs each on random inputs on
 both backends and compares.  (The relaxation's loops, :mod:`rigidmd.relax._numba`,
 have no reference: they are the one implementation, the same without numba.)
 

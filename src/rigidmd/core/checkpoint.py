@@ -36,9 +36,9 @@ from pathlib import Path
 import numpy as np
 from ase import Atoms
 
+from rigidmd.core.coupling import COUPLINGS, Coupling, new_rng
 from rigidmd.core.model import BodyModel
 from rigidmd.core.state import STATE_FIELDS
-from rigidmd.couplings.base import COUPLINGS, Coupling, new_rng
 
 __all__ = ["save_checkpoint", "read_checkpoint", "check_checkpoint", "atomic_write",
            "remove_stale_temporaries", "Checkpoint", "CheckpointError", "FORMAT"]

@@ -32,7 +32,6 @@ The time step is read from :attr:`RigidDynamics.dt` at every step.
 
 import warnings
 
-import numpy as np
 from ase import Atoms
 from ase.md.md import MolecularDynamics
 
@@ -46,6 +45,7 @@ from rigidmd.core.checks import (
     check_massless_momenta,
     check_timestep,
 )
+from rigidmd.core.coupling import check_composition, export_parts, share_target
 from rigidmd.core.dof import RigidBodyDOF
 from rigidmd.core.forces import NonFiniteForceError
 from rigidmd.core.link import AtomsSync, BodyLink
@@ -58,7 +58,6 @@ from rigidmd.core.schemes import BUILTIN_SCHEMES, resolve_scheme, scheme_with_mi
 from rigidmd.core.state import STATE_FIELDS
 from rigidmd.core.stepcontext import StepContext
 from rigidmd.core.stepper import Stepper
-from rigidmd.couplings.base import CouplingView, check_composition, export_parts
 
 __all__ = ["RigidDynamics", "RigidBodyDOF", "NonFiniteForceError",
            "check_timestep"]
@@ -151,7 +150,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         its operators (:mod:`rigidmd.core.operators`, the readable reference
         path).  ``None`` picks numba when it is installed.  Schemes without a
         kernel always run their operators.
-    couplings : sequence of rigidmd.couplings.base.Coupling, optional
+    couplings : sequence of rigidmd.core.coupling.Coupling, optional
         Thermostat and barostat parts, applied in this order before the
         scheme's step and in reverse order after it.
     **kwargs
@@ -217,24 +216,25 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self.evaluator = evaluator_for(split, self.link, self.record,
                                         stress=any(part.needs_stress for part in couplings),
                                         cell_moves=mover is not None)
-        self.view = CouplingView(self.state, model, self.record, self.evaluator, 0, fixcom,
-                                 cell_moves=mover is not None)
+        #: The one view of a step: the scheme's operators and the coupling parts read it.
+        self.view = context = StepContext(
+            self.state, model, self.record, self.evaluator,
+            positions=atoms.arrays["positions"], momenta=atoms.arrays["momenta"],
+            write_momenta=not couplings and not fixcom, cell_motion=mover, middle=middle,
+            fixcom=fixcom)
         #: The stress with the forces when an observer is due (``StressRecorder`` sets it).
         self.stress_on_observed_steps = False
         for part in couplings:
             part.bind(self.view)
+        #: The target temperature, held once for every part that has one.
+        self.target = share_target(couplings)
         #: Whether the total momentum is held (FixCom, or a thermostat's fixcm).
         self.holds_momentum = fixcom or any(part.fixcm for part in couplings)
         self.sync = AtomsSync(self.link, self.state, self.record, rigid.body_ids, fixcom,
                               self.holds_momentum)
         self.sync.mark_atoms()
         store_bodies_in_tags(atoms, rigid.body_ids)
-        context = StepContext(
-            self.state, model, self.record, self.evaluator,
-            positions=atoms.arrays["positions"], momenta=atoms.arrays["momenta"],
-            write_momenta=not couplings and not fixcom, cell_motion=mover, view=self.view,
-            middle=middle)
-        self.stepper = Stepper(respa or scheme, context, couplings, self.view, self.link,
+        self.stepper = Stepper(respa or scheme, context, couplings, self.link,
                                kernel=backend.scheme_kernel(respa or scheme), fixcom=fixcom)
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps
         self.link.read_momenta(self.state, owner=type(self).__name__)
@@ -279,17 +279,9 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         Every part checks the value before any changes.
         """
         value = self._process_temperature(temperature, temperature_K, "K")
-        parts = [part for part in self.couplings if hasattr(part, "set_temperature")]
-        if not parts:
+        if not self.target.parts:
             raise ValueError(f"{type(self).__name__} has no part with a target temperature")
-        saved = [part.temperature_K for part in parts]
-        try:
-            for part in parts:
-                part.set_temperature(value)
-        except (TypeError, ValueError):
-            for part, old in zip(parts, saved, strict=True):
-                part.temperature_K = old
-            raise
+        self.target.set_temperature(value)  # checked by every part before it changes
         self.step_check.reset()  # the chains' energy jumps with the target: a new reference
 
     # ------------------------------------------------------------ ASE API
@@ -405,8 +397,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         used at the next step without a calculator call.
         """
         self.model.update_from(BodyModel(n_atoms=saved["n_atoms"], **saved["model"]))
-        for name in STATE_FIELDS:
-            np.copyto(getattr(self.state, name), saved["state"][name])
+        for name in STATE_FIELDS:  # assignments: the state's versions move
+            setattr(self.state, name, saved["state"][name])
         self.record.set_state(saved["record"])
         self.stepper.set_state({"time": saved["time"],
                                 "couplings": [part["state"] for part in saved["couplings"]]})

@@ -190,7 +190,6 @@ class ForceEvaluator:
                                  f"the barostat's cell at step {self.step + 1} is too small "
                                  "for it; the step was undone")
             atoms.set_cell(state.cell)
-            record.cell_changed()
         together = self.stress or self._energy or self._stress
         results = None  # the calculator's results, when they are known to be this call's
         if together:
@@ -285,7 +284,6 @@ class ForceEvaluator:
         if not np.array_equal(atoms.cell.array, state.cell):
             check_bodies_fit(self.model, state.cell, atoms.pbc, "a trial cell")
             atoms.set_cell(state.cell)
-            self.record.cell_changed()
         energy = float(atoms.get_potential_energy())
         if not np.isfinite(energy):
             raise NonFiniteForceError(f"calculator returned a non-finite energy ({energy}) "
@@ -299,7 +297,6 @@ class ForceEvaluator:
         """
         results, cached, cell = saved
         self.atoms.set_cell(cell)
-        self.record.cell_changed()
         self.record.r = self.link.place(state, self.record.r)
         calc = self.atoms.calc
         if hasattr(calc, "results"):

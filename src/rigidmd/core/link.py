@@ -148,7 +148,7 @@ class BodyLink:
     def read_positions(self, state: RigidState, owner: str = "RigidDynamics") -> None:
         """Refit centres of mass and orientations to the atoms' positions (and the cell)."""
         m, atoms = self.model, self.atoms
-        state.cell[...] = atoms.cell.array
+        state.cell = atoms.cell.array
         x = unwrap_bodies(atoms, m.order, m.starts, m.atom_body)
         if m.n_bodies:
             X, q, residual = ops.fit_bodies(x, m)
@@ -283,14 +283,13 @@ class AtomsSync:
             self.mark_atoms()
         moved, kicked = link.changes_since(written, f"(set after step {step}; nothing was "
                                                     "changed)")
+        # The state's assignments move its versions: the record's sums follow.
         if moved:
             link.read_positions(state, owner=owner)
-            record.cell_changed()
         if moved or kicked:
             link.read_momenta(state, previous=None if moved else written[1], owner=owner)
             if self.fixcom:
                 ops.remove_centre_velocity(state, link.model)
-            record.velocities_changed()
             self.write_atoms()
             record.scratch.clear()
         if moved:

@@ -8,7 +8,7 @@ energy for NVE), the translational and rotational temperatures (``T_tr[K]``,
 :func:`rigidmd.core.observables.kinetic_dof`) and, for a periodic cell, the
 molecular pressure (``P[bar]``, when a barostat runs or ``log_pressure`` asks for it), the volume
 (``V[A^3]``) and the density (``rho[g/cm3]``), then the columns of the coupling
-parts that have any (:attr:`rigidmd.couplings.base.Coupling.log_columns`, e.g.
+parts that have any (:attr:`rigidmd.core.coupling.Coupling.log_columns`, e.g.
 ``MCacc[%]``, a Monte Carlo barostat's acceptance since the start).  Energies
 carry 6 decimals (µeV), so a slow drift shows as a line, not as steps.
 

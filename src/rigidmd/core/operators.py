@@ -140,6 +140,7 @@ def free_rotor(state, inv_moments, h):
     """
     for k, scale in ((2, 0.5), (1, 0.5), (0, 1.0), (1, 0.5), (2, 0.5)):
         no_squish_rotate(state.q, state.p, inv_moments, k, scale * h)
+    state.touched(positions=True, momenta=True)  # written in place
 
 
 def body_angular_momentum(q, p):

@@ -4,11 +4,14 @@ The force evaluator (:mod:`rigidmd.core.forces`) fills a :class:`StepRecord` at
 every force call (body forces and torques, the lab displacements of the body
 atoms, the molecular virial and the potential energy when they were asked
 for); the volume and the kinetic quantities are computed on first request
-and kept until the state they depend on changes.  Coupling parts read the
-record instead of asking again, and tell it how they changed the velocities
-(:meth:`StepRecord.scale_translation`, :meth:`StepRecord.scale_translation_about`,
-:meth:`StepRecord.scale_rotation`) so that a known scaling updates the kinetic
-tensor and the rotational energy instead of recomputing them.
+and kept with the versions of the state they were computed at
+(:attr:`rigidmd.core.state.RigidState.versions`): when the state's positions,
+momenta or cell change, the counter moves and the next request computes the
+quantity again.  Nobody invalidates the record by hand.  Coupling parts read
+the record instead of asking again; a part that scales the velocities in place
+by a known factor says so through :meth:`StepRecord.scaled`, the one mutator
+that moves the momenta's version and carries the kinetic tensor and the
+rotational energy to it, scaled, instead of summing again.
 
 Over one step with a Nosé–Hoover thermostat and the MTK barostat this gives
 one calculator call, one volume, one kinetic tensor, one rotational kinetic
@@ -55,9 +58,6 @@ class StepRecord:
     scratch : dict
         Values an operator hands to a later one (exaDEM's accelerations,
         PCDM's start-of-step values); kept across steps.
-    cell_move : object or None
-        What a barostat's drift query returned during this step (see
-        :meth:`rigidmd.couplings.base.Coupling.drift_matrices`); None before the drift.
     link : rigidmd.core.link.BodyLink or None
         The body link whose backend the record's sums follow (None: NumPy).
     """
@@ -71,10 +71,10 @@ class StepRecord:
         self.virial = None
         self.energy = None
         self.scratch = {}
-        self.cell_move = None
-        self._volume = None
-        self._kinetic = None
-        self._rotational = None
+        # Each derived quantity with the state's version it describes (-1: none yet).
+        self._volume, self._volume_at = None, -1
+        self._kinetic, self._kinetic_at = None, -1
+        self._rotational, self._rotational_at = None, (-1, -1)
 
     @property
     def backend(self) -> Backend:
@@ -83,19 +83,23 @@ class StepRecord:
         link = self.link
         return NUMPY if link is None else link.backend
 
-    # ------------------------------------------------------------ derived, once
+    # ------------------------------------------------------------ derived, once per version
     @property
     def volume(self) -> float:
-        """Volume of ``state.cell`` (Å³), computed once per cell."""
-        if self._volume is None:
-            self._volume = obs.volume(self.state.cell)
+        """Volume of ``state.cell`` (Å³), computed once per version of the cell."""
+        at = self.state.versions[2]
+        if self._volume_at != at:
+            self._volume, self._volume_at = obs.volume(self.state.cell), at
         return self._volume
 
     @property
     def kinetic_tensor(self) -> np.ndarray:
-        """Translational kinetic tensor (eV, 3x3; :func:`.observables.kinetic_tensor`)."""
-        if self._kinetic is None:
+        """Translational kinetic tensor (eV, 3x3; :func:`.observables.kinetic_tensor`),
+        computed once per version of the momenta."""
+        at = self.state.versions[1]
+        if self._kinetic_at != at:
             self._kinetic = self.backend.kinetic_tensor(self.state, self.model)
+            self._kinetic_at = at
         return self._kinetic
 
     @property
@@ -106,54 +110,79 @@ class StepRecord:
 
     @property
     def rotational_energy(self) -> float:
-        """Rotational kinetic energy of the bodies (eV)."""
-        if self._rotational is None:
+        """Rotational kinetic energy of the bodies (eV), computed once per version of the
+        orientations and momenta."""
+        versions = self.state.versions
+        at = (versions[0], versions[1])
+        if self._rotational_at != at:
             self._rotational = self.backend.rotational_energy(self.state, self.model)
+            self._rotational_at = at
         return self._rotational
 
-    # ------------------------------------------------------------ what changed
-    def cell_changed(self) -> None:
-        """The cell moved: the volume is asked again."""
-        self._volume = None
+    def current(self) -> tuple:
+        """``(volume, kinetic tensor, rotational energy)`` as kept for the state's present
+        versions; None for each that is not (it would be computed on request)."""
+        versions = self.state.versions
+        return (self._volume if self._volume_at == versions[2] else None,
+                self._kinetic if self._kinetic_at == versions[1] else None,
+                self._rotational if self._rotational_at == (versions[0], versions[1])
+                else None)
 
-    def velocities_changed(self) -> None:
-        """Velocities or angular momenta changed in a way the record cannot follow."""
-        self._kinetic = None
-        self._rotational = None
+    def adopt(self, volume, kinetic, rotational) -> None:
+        """Keep these values as the state's present ones (None: computed on request).
 
-    def scale_translation(self, factor) -> None:
-        """Every translational velocity was multiplied by ``factor`` (a number or a 3x3 matrix).
-
-        A matrix acts on each velocity as :math:`V \\leftarrow F V`; the kinetic
-        tensor becomes :math:`F K F^\\mathsf{T}` (a number: :math:`s^2 K`) without a
-        new sum over bodies.
+        For a state put back as it was when :meth:`current` gave them (a rollback,
+        a checkpoint): the values describe it bit for bit.
         """
-        K = self._kinetic
-        if K is None:
-            return
-        if isinstance(factor, np.ndarray) and factor.ndim == 2:
-            self._kinetic = self.backend.congruence(factor, K)
-        else:
-            self._kinetic = K * float(factor) ** 2
+        versions = self.state.versions
+        self._volume, self._volume_at = volume, (-1 if volume is None else versions[2])
+        self._kinetic, self._kinetic_at = kinetic, (-1 if kinetic is None else versions[1])
+        self._rotational = rotational
+        self._rotational_at = (-1, -1) if rotational is None else (versions[0], versions[1])
 
-    def scale_translation_about(self, factor: float, centre: np.ndarray, mass: float) -> None:
-        r"""Every translational velocity became :math:`U + s\,(V - U)`, :math:`U = P/M`.
+    # ------------------------------------------------------------ the one scaling mutator
+    def scaled(self, translation=None, rotation=None, about=None) -> None:
+        r"""The velocities were just scaled in place: move the momenta's version, carry the sums.
 
-        With :math:`\sum m (V - U) = 0` the kinetic tensor becomes
-        :math:`M\,U\otimes U + s^2 (K - M\,U\otimes U)`: the centre of mass's part
-        kept, the rest scaled, without a new sum over bodies.  ``centre`` is
-        :math:`U` (Å / ASE time, shape (3,)), ``mass`` :math:`M` (amu), the total.
+        Call it right after writing the scaled arrays in place (``state.V[...] = ...``,
+        ``state.p[...] *= s``, a kernel on ``state.data``: writes that do not move the
+        version themselves); the kinetic tensor and rotational energy kept for the
+        version before the scaling are carried to the new one without a new sum over
+        bodies.  A quantity not kept is computed on request, as always.
+
+        Parameters
+        ----------
+        translation : float, numpy.ndarray of shape (3, 3), or None
+            Every translational velocity became :math:`s V` (a number) or :math:`F V`
+            (a matrix): the kinetic tensor becomes :math:`s^2 K` or
+            :math:`F K F^\mathsf{T}`.  None: the translational velocities did not change.
+        rotation : float or None
+            Every angular momentum was multiplied by it: the rotational energy by its
+            square.  None: the angular momenta did not change.
+        about : tuple (U, M), optional
+            With a number ``translation``: the velocities became :math:`U + s\,(V - U)`,
+            :math:`U = P/M` (Å / ASE time, shape (3,)) and :math:`M` the total mass (amu).
+            With :math:`\sum m (V - U) = 0` the kinetic tensor becomes
+            :math:`M\,U\otimes U + s^2 (K - M\,U\otimes U)`.
         """
-        K = self._kinetic
-        if K is None:
-            return
-        K_cm = mass * np.multiply.outer(centre, centre)
-        self._kinetic = K_cm + float(factor) ** 2 * (K - K_cm)
-
-    def scale_rotation(self, factor: float) -> None:
-        """Every angular momentum was multiplied by ``factor``."""
-        if self._rotational is not None:
-            self._rotational = self._rotational * float(factor) ** 2
+        versions = self.state.versions
+        K = self._kinetic if self._kinetic_at == versions[1] else None
+        R = self._rotational if self._rotational_at == (versions[0], versions[1]) else None
+        versions[1] += 1  # the state's touched(momenta=True), inline
+        if K is not None and translation is not None:
+            if about is not None:
+                centre, mass = about
+                K_cm = mass * np.multiply.outer(centre, centre)
+                K = K_cm + float(translation) ** 2 * (K - K_cm)
+            elif isinstance(translation, np.ndarray) and translation.ndim == 2:
+                K = self.backend.congruence(translation, K)
+            else:
+                K = K * float(translation) ** 2
+        if R is not None and rotation is not None:
+            R = R * float(rotation) ** 2
+        self._kinetic, self._kinetic_at = K, (-1 if K is None else versions[1])
+        self._rotational = R
+        self._rotational_at = (-1, -1) if R is None else (versions[0], versions[1])
 
     def net_force(self) -> tuple[float, float]:
         """``(|sum of the forces|, sum of their magnitudes)`` of the last force call (eV/Å).
@@ -167,28 +196,29 @@ class StepRecord:
     # ------------------------------------------------------------ rollback and checkpoints
     def get_state(self) -> dict:
         """Copies of everything the record holds (for a rollback or a checkpoint)."""
+        volume, kinetic, rotational = self.current()
         return {"F": self.F.copy(), "tau": self.tau.copy(), "f": self.f.copy(),
                 "r": self.r.copy(),
                 "virial": None if self.virial is None else self.virial.copy(),
                 "energy": self.energy, "scratch": dict(self.scratch),
-                "volume": self._volume,
-                "kinetic": None if self._kinetic is None else self._kinetic.copy(),
-                "rotational": self._rotational}
+                "volume": volume,
+                "kinetic": None if kinetic is None else kinetic.copy(),
+                "rotational": rotational}
 
     def set_state(self, saved: dict) -> None:
-        """Restore what :meth:`get_state` returned; absent keys leave a quantity to recompute."""
+        """Restore what :meth:`get_state` returned, for the state as it is now (restored
+        first); absent keys leave a quantity to recompute."""
         for name in _FORCE_FIELDS:
             if saved.get(name) is not None:
                 setattr(self, name, np.array(saved[name], dtype=float))
         self.virial = None if saved.get("virial") is None else np.array(saved["virial"])
         self.energy = saved.get("energy")
         self.scratch = dict(saved.get("scratch", {}))
-        self.cell_move = None
-        volume, kinetic = saved.get("volume"), saved.get("kinetic")
-        self._volume = None if volume is None else float(volume)
-        self._kinetic = None if kinetic is None else np.array(kinetic, dtype=float)
-        rotational = saved.get("rotational")
-        self._rotational = None if rotational is None else float(rotational)
+        volume, kinetic, rotational = (saved.get("volume"), saved.get("kinetic"),
+                                       saved.get("rotational"))
+        self.adopt(None if volume is None else float(volume),
+                   None if kinetic is None else np.array(kinetic, dtype=float),
+                   None if rotational is None else float(rotational))
 
     def backup(self, copy: bool = True) -> tuple:
         """A token for :meth:`restore` within one step.
@@ -198,14 +228,14 @@ class StepRecord:
         after the force call succeeded; a coupling part's second half comes after
         that, so the stepper copies when there are couplings).
         """
+        derived = self.current()
         if copy:
             return (self.F.copy(), self.tau.copy(), self.f.copy(), self.virial, self.energy,
-                    self._volume, self._kinetic, self._rotational, dict(self.scratch))
-        return (self.F, self.tau, self.f, self.virial, self.energy, self._volume,
-                self._kinetic, self._rotational, self.scratch)
+                    derived, dict(self.scratch))
+        return (self.F, self.tau, self.f, self.virial, self.energy, derived, self.scratch)
 
     def restore(self, token: tuple) -> None:
-        """Put back what :meth:`backup` returned (a failed step)."""
-        (self.F, self.tau, self.f, self.virial, self.energy, self._volume, self._kinetic,
-         self._rotational, self.scratch) = token
-        self.cell_move = None
+        """Put back what :meth:`backup` returned (a failed step), for the state as it was
+        then (restored first: the derived values describe it)."""
+        (self.F, self.tau, self.f, self.virial, self.energy, derived, self.scratch) = token
+        self.adopt(*derived)

@@ -76,7 +76,9 @@ class SplitRecord(StepRecord):
     ----------
     fast, slow : StepRecord
         Each level's forces, torques, point-particle forces, virial and energy
-        of its last call.
+        of its last call.  The levels describe the dynamics' state: their volume and
+        kinetic sums are kept with that state's versions, so a cell move (a barostat's
+        drift in an inner step, a Monte Carlo move) makes them stale by itself.
     levels_known : bool
         False after restoring a checkpoint that did not store the levels (the next
         outer step evaluates both before it kicks).
@@ -148,7 +150,6 @@ class SplitForceEvaluator(ForceEvaluator):
     def evaluate_slow(self, state) -> None:
         """The slow level at the atoms the fast level placed last; then the sums."""
         fast, slow = self.fast_record, self.slow_record
-        slow.cell_changed()  # the fast call may have moved the cell
         slow.r = fast.r  # the placement the slow call's molecular virial reads
         forces = self.slow.calculator_forces(state)
         slow.F, slow.tau = ops.reduce_forces(forces, fast.r, self.model)
@@ -165,23 +166,15 @@ class SplitForceEvaluator(ForceEvaluator):
         record.energy = (None if fast.energy is None or slow.energy is None
                          else fast.energy + slow.energy)
         self.energy_known = self.fast.energy_known and self.slow.energy_known
-        record.cell_changed()
         record.levels_known = True
 
 
-@dataclass
+@dataclass(eq=False)
 class _InnerContext(StepContext):
-    """An inner step's context: the fast level's record and evaluator; the barostat's
-    note of its cell move goes to the dynamics' record, where the barostat reads it."""
+    """An inner step's context: the fast level's record and evaluator; its ``view`` (what
+    the parts and the barostat's drift query get) is the dynamics' context."""
 
-    outer: StepRecord = None
     outer_middle: bool = False  # a part acts in the middle of the outer step
-
-    def cell_move(self, h):
-        A, B, S, note = self.cell_motion.drift_matrices(self.view, h)
-        if note is not None:
-            self.outer.cell_move = note
-        return A, B, S
 
 
 class _Stretched:
@@ -191,7 +184,6 @@ class _Stretched:
         self.part, self.factor = part, factor
 
     def middle(self, view, h):
-        view.record.velocities_changed()
         self.part.middle(view, self.factor * h)
 
 
@@ -242,7 +234,7 @@ class RespaStep:
         if self._contexts is None:
             ev = ctx.evaluator
             common = dict(positions=ctx.positions, momenta=ctx.momenta, write_momenta=False,
-                          cell_motion=ctx.cell_motion, view=ctx.view, outer=ctx.record,
+                          cell_motion=ctx.cell_motion, view=ctx.view,
                           outer_middle=bool(ctx.middle))
             plain = _InnerContext(ctx.state, ctx.model, ev.fast_record, ev.fast, **common)
             middle = _InnerContext(ctx.state, ctx.model, ev.fast_record, ev.fast,
@@ -277,7 +269,6 @@ class RespaStep:
             half = 0.5 * dt
             ops.translational_kick(state, slow.F, slow.f, model, half)
             ops.rotational_kick(state, slow.tau, half)
-            record.velocities_changed()
             h, centre = dt / k, k // 2
             acts = bool(ctx.middle)
             energy, stress = ev.asked
@@ -285,11 +276,9 @@ class RespaStep:
                 ev.fast.begin_step(ev.step, *((energy, stress) if j == k - 1 else (False, False)))
                 inside = acts and j == centre  # O between the half drifts of inner step k//2
                 self._inner_step(middle if inside else plain, h, inside)
-                record.velocities_changed()
             ev.evaluate_slow(state)
             ops.translational_kick(state, slow.F, slow.f, model, half)
             ops.rotational_kick(state, slow.tau, half)
-            record.velocities_changed()
         except BaseException:
             ev.fast_record.restore(saved[0])
             slow.restore(saved[1])

@@ -1,16 +1,17 @@
-r"""What a scheme's operators work on during a step, the operators' adapters, the fused driver.
+r"""The one view of a step, the operators' adapters, the fused driver.
 
 :class:`StepContext` hands the operators of a :class:`~rigidmd.core.schemes.Scheme`
-the state, the body model, the per-step record (forces, torques, scratch
-values), a force evaluator and, under a barostat, the part whose drift moves
-the cell.  The ``apply_*`` functions adapt each operator of
+and the coupling parts (as :class:`rigidmd.core.coupling.CouplingView`, the same
+class) the state, the body model, the per-step record (forces, torques, scratch
+values), a force evaluator, the step number and, under a barostat, the part
+whose drift moves the cell.  The ``apply_*`` functions adapt each operator of
 :mod:`rigidmd.core.operators` to that context (``apply_drift(ctx, h)`` runs
 :func:`rigidmd.core.operators.drift` or :func:`rigidmd.core.operators.affine_drift`);
 :func:`fused_no_squish` is the ``no_squish`` scheme as two compiled loops.
 Nothing here reaches back to the dynamics.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -25,57 +26,76 @@ from rigidmd.core.state import RigidState
 __all__ = ["StepContext", "fused_no_squish", "fused_baoab", "BAOAB_OPERATORS"]
 
 
-@dataclass
+@dataclass(eq=False)  # compared by identity: it holds arrays, and itself as its view
 class StepContext:
-    """What operators read and write during a step.
+    """One view of a step: what the scheme's operators and the coupling parts read and write.
 
-    The time step is not stored here: :meth:`rigidmd.core.schemes.Scheme.run`
-    receives it at every step, so a changed ``dyn.dt`` takes effect at once
-    on every path.
+    The scheme's operators get it as ``ctx``, the coupling parts as ``view``
+    (:class:`rigidmd.core.coupling.CouplingView` is this class): the state, the body
+    model, the per-step record, the force evaluator, the step number, and the
+    barostat's cell move (:meth:`cell_move`, whose note :attr:`cell_note` keeps for the
+    barostat's second half).  The time step is not stored here:
+    :meth:`rigidmd.core.schemes.Scheme.run` receives it at every step, so a changed
+    ``dyn.dt`` takes effect at once on every path.
 
     Attributes
     ----------
     state : rigidmd.core.state.RigidState
+        The state the step advances.  Assigning a field (``state.V = ...``) moves its
+        version; a part or a kernel that writes in place calls ``state.touched(...)``,
+        and one that scales the velocities in place by a known factor calls
+        ``record.scaled(...)`` (see :mod:`rigidmd.core.state`).
     model : rigidmd.core.model.BodyModel
     record : rigidmd.core.record.StepRecord
-        Forces ``F``, torques ``tau``, free-atom forces ``f``, lab
-        displacements ``r`` of the last force call, and ``scratch``: values
-        an operator hands to a later one (exaDEM's accelerations, PCDM's
-        start-of-step values), kept across steps.
+        Forces ``F``, torques ``tau``, free-atom forces ``f``, lab displacements ``r``,
+        virial and energy of the last force call; volume, kinetic tensor and rotational
+        energy computed at most once per version of the state; and ``scratch``: values
+        an operator hands to a later one (exaDEM's accelerations, PCDM's start-of-step
+        values), kept across steps.
     evaluator : rigidmd.core.forces.ForceEvaluator
-        ``evaluate(state)`` places the atoms, calls the calculator and fills
-        the record; ``calculator_forces(state)`` calls it on the atoms as the
-        fused kernel placed them.
-    positions, momenta : numpy.ndarray, shape (n_atoms, 3)
-        The Atoms' own position and momentum arrays, written in place.
+        ``evaluate(state)`` places the atoms, calls the calculator and fills the
+        record; ``calculator_forces(state)`` calls it on the atoms as the fused kernel
+        placed them; energy-only questions about trial configurations
+        (``save_results``, ``trial_energy``, ``restore_results``).
+    positions, momenta : numpy.ndarray, shape (n_atoms, 3), or None
+        The Atoms' own position and momentum arrays, written in place by the fused
+        kernels (None for a view made by hand, without a scheme).
     write_momenta : bool
         Whether the scheme writes the atom momenta at the end of its step
         (False when coupling parts act after it; the dynamics then writes them).
-    cell_motion : object or None
-        A barostat: its ``drift_matrices(view, h)`` answers, without changing
-        anything, the matrices ``A, B, S`` of a drift over ``h`` in which the
-        centres of mass, the point particles and the cell move with the cell
-        (:func:`~rigidmd.core.operators.affine_drift`), and a note the context
-        keeps in ``record.cell_move`` for the barostat's second half.
-    view : object or None
-        What ``cell_motion`` and the ``middle`` parts read (a
-        :class:`rigidmd.couplings.base.CouplingView`).
+    cell_motion : Coupling or None
+        The part that moves the cell in the scheme's drift (a barostat), asked
+        through :meth:`cell_move`.
     middle : tuple
         The coupling parts that act in the middle of the step (their
         ``middle(view, h)``, run by the scheme's ``middle`` operator between its
         half drifts: the O of BAOAB).
+    step : int
+        Steps completed before the one being taken.
+    fixcom : bool
+        The total momentum is held at zero (ASE's ``FixCom`` on the atoms).
+    view : StepContext
+        What the coupling parts are given: this context itself, or for an r-RESPA
+        inner step (its own record and evaluator: the fast level's) the dynamics'
+        context.
+    cell_note : object or None
+        What the barostat's drift query returned during this step besides its
+        matrices (see :meth:`rigidmd.core.coupling.Coupling.drift_matrices`); None
+        before the drift.  Kept on :attr:`view`, reset at every step.
     """
 
     state: RigidState
     model: BodyModel
     record: StepRecord
     evaluator: ForceEvaluator
-    positions: np.ndarray
-    momenta: np.ndarray
+    positions: np.ndarray | None = None
+    momenta: np.ndarray | None = None
     write_momenta: bool = True
     cell_motion: object = None
-    view: object = None
     middle: tuple = ()
+    step: int = 0
+    fixcom: bool = False
+    view: "StepContext | None" = field(default=None, repr=False)
 
     @property
     def packed_model(self) -> tuple:
@@ -85,12 +105,29 @@ class StepContext:
     def __post_init__(self):
         # Counts a restore cannot change (BodyModel.update_from refuses other counts).
         self.n_bodies, self.n_free = self.model.n_bodies, self.model.n_free
+        if self.view is None:
+            self.view = self
+        self.cell_note = None
+
+    @property
+    def cell_moves(self) -> bool:
+        """A part of the dynamics moves the cell (a barostat)."""
+        return self.cell_motion is not None
+
+    @property
+    def backend(self):
+        """The backend the parts run on (the record's link's, a
+        :class:`rigidmd.core.backend.Backend`): each operation with a compiled kernel is a
+        method of it, so a part calls ``view.backend.<name>(...)`` with no branch."""
+        return self.record.backend
 
     def cell_move(self, h):
-        """The barostat's drift matrices ``A, B, S`` over ``h``; its note goes to the record."""
-        A, B, S, note = self.cell_motion.drift_matrices(self.view, h)
+        """The barostat's drift matrices ``A, B, S`` over ``h``, asked with the parts'
+        view; its note goes to ``view.cell_note``."""
+        view = self.view
+        A, B, S, note = self.cell_motion.drift_matrices(view, h)
         if note is not None:
-            self.record.cell_move = note
+            view.cell_note = note
         return A, B, S
 
     def omega(self):
@@ -169,9 +206,9 @@ def apply_pcdm_correct(ctx, h):
 
 
 def apply_middle(ctx, h):
+    view = ctx.view
     for part in ctx.middle:
-        part.middle(ctx.view, h)
-    ctx.record.velocities_changed()
+        part.middle(view, h)
 
 
 def apply_compute_force(ctx):
@@ -255,7 +292,7 @@ def fused_no_squish(ctx, dt):
         if ctx.n_free:  # NumPy's 1 µs on empty arrays otherwise
             s.v += half * record.f / m.free_masses[:, None]
         A, B, S = ctx.cell_move(dt)
-        s.cell[...] = s.cell @ A.T
+        s.cell = s.cell @ A.T
         _numba.first_half(s.data, n, np.zeros_like(record.F), record.tau, body, atom, index, dt,
                           record.r, ctx.positions, np.array([A, B, S]), True)
         if ctx.n_free:
@@ -283,8 +320,13 @@ def _force_and_closing_kick(ctx, dt):
     if ctx.n_free:
         evaluator.check_forces(forces)  # before anything is written
     # The body forces and torques are overwritten only after the forces were found finite.
-    if not _numba.second_half(s.data, ctx.n_bodies, record.F, record.tau, body, atom, index,
-                              dt, forces, record.r, ctx.momenta, ctx.write_momenta):
+    written = _numba.second_half(s.data, ctx.n_bodies, record.F, record.tau, body, atom,
+                                 index, dt, forces, record.r, ctx.momenta, ctx.write_momenta)
+    # The kernels wrote the bodies' arrays in place (first_half, second_half or
+    # kick_half_drift, half_drift_place): their versions move once, here (the cell, when
+    # a barostat moved it, was assigned, which moved its version then).
+    s.touched(positions=True, momenta=True)
+    if not written:
         evaluator.check_forces(forces)
         raise NonFiniteForceError(f"calculator returned forces whose sum is not finite after "
                                   f"step {evaluator.step}")
@@ -316,6 +358,7 @@ def fused_baoab(ctx, dt):
     body, atom, index = m.packed
     n, half = ctx.n_bodies, 0.5 * dt
     _numba.kick_half_drift(s.data, n, record.F, record.tau, body, dt)
+    s.touched(positions=True, momenta=True)  # what the middle parts read is summed again
     if ctx.n_free:
         s.v += half * record.f / m.free_masses[:, None]
         s.x += half * s.v

@@ -21,11 +21,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from rigidmd.core.coupling import Coupling
 from rigidmd.core.link import BodyLink
 from rigidmd.core.operators import remove_centre_velocity
 from rigidmd.core.schemes import Scheme
 from rigidmd.core.stepcontext import StepContext
-from rigidmd.couplings.base import Coupling, CouplingView
 
 __all__ = ["Stepper", "remove_centre_velocity"]
 
@@ -37,10 +37,10 @@ class Stepper:
     ----------
     scheme : Scheme
     context : StepContext
+        The one view of the step: the scheme's operators and the parts read it (its
+        ``step`` is set and its ``cell_note`` cleared before each step).
     couplings : sequence of Coupling
         Applied in this order before the scheme and in reverse after it.
-    view : CouplingView
-        What the parts see (its ``step`` is set before each step).
     link : BodyLink
         Writes the momenta once per step, and the atoms back after a rollback.
     kernel : callable or None
@@ -56,13 +56,12 @@ class Stepper:
     """
 
     def __init__(self, scheme: Scheme, context: StepContext, couplings: Sequence[Coupling],
-                 view: CouplingView, link: BodyLink, kernel=None,
-                 fixcom: bool = False):
+                 link: BodyLink, kernel=None, fixcom: bool = False):
         self.scheme, self.context, self.couplings = scheme, context, tuple(couplings)
-        self.view, self.link, self.fixcom = view, link, fixcom
+        self.view, self.link, self.fixcom = context, link, fixcom
         #: The compiled kernel this stepper runs, or None (the scheme's operators).
         self.kernel = kernel
-        self.cell_moves = context.cell_motion is not None
+        self.cell_moves = context.cell_moves
         self.state, self.record = context.state, context.record
         self._backup = self.state.copy()
         self.time = 0.0
@@ -83,18 +82,16 @@ class Stepper:
         saved = record.backup(copy=self.kernel is None or bool(couplings))
         coupled = [part.get_state() for part in couplings] if couplings else ()
         try:
-            record.cell_move = None
+            view.cell_note = None
             view.step = step
             half = 0.5 * dt
             if couplings:
                 for part in couplings:
                     part.first_half(view, half)
-                record.velocities_changed()  # what the scheme's drift may ask is fresh
             if self.kernel is not None:
                 self.kernel(ctx, dt)
             else:
                 self.scheme.run(ctx, dt)
-            record.velocities_changed()
             if self.fixcom:
                 remove_centre_velocity(state, ctx.model)
             if couplings:
@@ -106,6 +103,7 @@ class Stepper:
         except BaseException:
             backup.copy_into(state)
             record.restore(saved)
+            view.cell_note = None
             for part, variables in zip(couplings, coupled, strict=True):
                 part.set_state(variables)
             if self.cell_moves:

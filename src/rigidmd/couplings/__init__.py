@@ -10,31 +10,40 @@ gives it for half a step before and after the deterministic step, and says what 
 is in a LAMMPS deck (:class:`LammpsFix`) or why it is nothing there
 (:class:`NotExportable`).  :doc:`/howto/write-a-thermostat` writes one end to end.
 
-The parts rigidmd ships are in the modules of this package
-(``rigidmd.couplings.thermostats``, ``barostats``, ``montecarlo``, ``baoab``);
-the dynamics users construct from them (:class:`~rigidmd.RigidBussi`, ...) are
-imported from :mod:`rigidmd`.
+The interface itself lives in the core (:mod:`rigidmd.core.coupling`), which imports
+nothing above it; what the thermostats share is :mod:`rigidmd.couplings.base`
+(:class:`Thermostat`, :class:`TargetTemperature`, :class:`NoseHooverChain`, the
+parameter checks).  The parts rigidmd ships are in the modules of this package
+(``rigidmd.couplings.thermostats``, ``barostats``, ``montecarlo``, ``baoab``); the
+dynamics users construct from them (:class:`~rigidmd.RigidBussi`, ...) are imported
+from :mod:`rigidmd`.
 """
 
-from rigidmd.couplings.barostats import Barostat
-from rigidmd.couplings.base import (
+from rigidmd.core.coupling import (
     COUPLINGS,
-    TEMPERATURE,
     Coupling,
     CouplingView,
     LammpsFix,
     NotExportable,
     Parameter,
-    Thermostat,
     check_rng,
-    check_temperature,
-    check_time,
     register,
     rng_state,
     set_rng_state,
 )
+from rigidmd.couplings.barostats import Barostat
+from rigidmd.couplings.base import (
+    TEMPERATURE,
+    NoseHooverChain,
+    TargetTemperature,
+    Thermostat,
+    check_flag,
+    check_positive_integer,
+    check_temperature,
+    check_time,
+)
 
-__all__ = ["Coupling", "CouplingView", "Thermostat", "Barostat", "register", "COUPLINGS",
-           "Parameter", "TEMPERATURE", "LammpsFix", "NotExportable", "check_temperature",
-           "check_time", "check_rng", "rng_state", "set_rng_state"]
-
+__all__ = ["Coupling", "CouplingView", "Thermostat", "Barostat", "TargetTemperature",
+           "NoseHooverChain", "register", "COUPLINGS", "Parameter", "TEMPERATURE", "LammpsFix",
+           "NotExportable", "check_temperature", "check_time", "check_flag",
+           "check_positive_integer", "check_rng", "rng_state", "set_rng_state"]

@@ -10,7 +10,7 @@ backend runs the kernel, ``"numpy"`` the reference.  :func:`crescale_move` and
 references are its NumPy methods (the operations ``crescale_drift`` and
 ``crescale_bookkeeping``); :func:`mtk_momentum_scale` and :func:`scale_translation`
 are parts of :func:`mtk_friction`.  The two agree to roundoff
-(``tests/test_backend.py``, ``tests/test_coupling_kernels.py``, operator by
+(``tests/core/test_backend.py``, ``tests/couplings/test_numba.py``, operator by
 operator).  A Python step of a barostat was about a thousand small NumPy calls;
 with the kernels it is a few dozen calls (``benchmarks/barostat_step.py``).
 

@@ -7,7 +7,7 @@ Each function here is the NumPy reference of the kernel of the same name in
 this module makes each pair an operation of the backends
 (:func:`rigidmd.core.backend.reference_of`): a coupling part calls
 ``view.backend.mtk_kick(...)`` and runs this function on the ``"numpy"``
-backend, the kernel on ``"numba"``.  ``tests/test_backend.py`` runs every pair
+backend, the kernel on ``"numba"``.  ``tests/core/test_backend.py`` runs every pair
 on random inputs and compares.
 
 =========================  ==============================================================

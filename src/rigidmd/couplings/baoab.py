@@ -113,8 +113,8 @@ class LangevinBAOABThermostat(_Stochastic):
         noise = self.rng.standard_normal(6 * n + 3 * nf)
         scales = (1.0 / np.sqrt(m.mass), 1.0 / np.sqrt(m.free_masses), np.sqrt(m.moments))
         view.backend.ornstein_uhlenbeck(s.data, n, nf, c, sigma, *scales, noise)
+        s.touched(momenta=True)  # written in place
         self.set_centre_velocity(view, U)
-        record.velocities_changed()
         self.work += record.translational_energy + record.rotational_energy - before
         self.reported = self.kinetic_energies(view)
 

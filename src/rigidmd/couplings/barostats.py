@@ -37,6 +37,7 @@ from rigidmd.couplings.base import (
     NoseHooverChain,
     NotExportable,
     Parameter,
+    TargetTemperature,
     check_positive_integer,
     check_rng,
     check_temperature,
@@ -90,7 +91,7 @@ COUPLING = Parameter("couple", "couple", "choice", required=False, default="iso"
                      choices=tuple(COUPLE))
 
 
-class Barostat(Coupling):
+class Barostat(TargetTemperature, Coupling):
     """Shared parts of the barostats: target pressure, cell checks, the molecular pressure."""
 
     section = "barostat"
@@ -99,22 +100,15 @@ class Barostat(Coupling):
     drift_moves_cell = True
 
     def __init__(self, temperature_K, pressure_au, couple):
-        self.temperature_K = self._check_positive(check_temperature(temperature_K))
+        self._temperature_K = self.checked_temperature(temperature_K)
         self.pressure_au = check_pressure(pressure_au)
         self.couple = check_couple(couple)
 
-    def _check_positive(self, temperature_K):
-        if temperature_K == 0:
+    def checked_temperature(self, temperature_K) -> float:
+        value = check_temperature(temperature_K)
+        if value == 0:
             raise ValueError(f"temperature_K = 0: {self.zero_kelvin}")
-        return temperature_K
-
-    def set_temperature(self, temperature_K: float) -> None:
-        """Change the target temperature (K)."""
-        self.temperature_K = self._check_positive(check_temperature(temperature_K))
-
-    @property
-    def kT(self):
-        return units.kB * self.temperature_K
+        return value
 
     def check(self, atoms, model, dt):
         super().check(atoms, model, dt)
@@ -257,7 +251,7 @@ class MTKBarostat(Barostat):
         s = view.state
         factor = view.backend.mtk_friction(s.data, len(s.X), len(s.x), self.p_g, self.W,
                                            self.n_f, h)
-        view.record.scale_translation(factor)
+        view.record.scaled(factor)
 
     def first_half(self, view: CouplingView, h: float) -> None:
         self._thermostat(view, h)
@@ -425,7 +419,7 @@ class CRescaleBarostat(Barostat):
     def drift_matrices(self, view: CouplingView, h: float) -> tuple:
         """The cell's move in the step's first drift, from this step's noise; changes nothing."""
         record = view.record
-        if record.cell_move is not None or self._noise is None:  # moved already, or not now
+        if view.cell_note is not None or self._noise is None:  # moved already, or not now
             return _IDENTITY, h * _IDENTITY, _IDENTITY, None
         return view.backend.crescale_drift(self, view, record.volume, h)
 
@@ -478,17 +472,16 @@ class CRescaleBarostat(Barostat):
     register_operation("crescale_drift", _drift_reference, _drift_compiled)
 
     def second_half(self, view: CouplingView, h: float) -> None:
-        record = view.record
-        if record.cell_move is None:
+        if view.cell_note is None:
             return
-        first = record.cell_move[5]
+        first = view.cell_note[5]
         self.work += first
         self.work += view.backend.crescale_bookkeeping(self, view)
 
     def _bookkeeping_reference(self, view):
         """The second half's work (eV) less the first half's, on the NumPy backend."""
         record = view.record
-        step_lambda, step_eta, d_lambda, d_eta, kinetic, _ = record.cell_move
+        step_lambda, step_eta, d_lambda, d_eta, kinetic, _ = view.cell_note
         kT, dt = self.kT, self._span
         volume = record.volume
         # The pressure right after the force call: the velocities as the drift left them.
@@ -502,7 +495,7 @@ class CRescaleBarostat(Barostat):
     def _bookkeeping_compiled(self, view):
         """:meth:`_bookkeeping_reference` in one compiled call (:func:`._numba.crescale_work`)."""
         record = view.record
-        step_lambda, step_eta, d_lambda, d_eta, kinetic, _ = record.cell_move
+        step_lambda, step_eta, d_lambda, d_eta, kinetic, _ = view.cell_note
         return _numba.crescale_work(record.virial, kinetic, record.volume, self.pressure_au,
                                     self.kT, self._span, self.basis, step_lambda, step_eta,
                                     d_lambda, d_eta)

@@ -461,8 +461,7 @@ class MonteCarloBarostat(Barostat):
                                self.kT, self.pressure_au)
         accepted = metropolis(log_a, uniform)
         if accepted:
-            trial.copy_into(state)
-            record.cell_changed()
+            trial.copy_into(state)  # every version of the state moves
             record.scratch = {}  # what a scheme derived from the old forces
             evaluator.evaluate(state)
             self.exchanged += new_energy - energy

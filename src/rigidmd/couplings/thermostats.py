@@ -155,7 +155,7 @@ class LangevinThermostat(_Stochastic):
         noise = sigma * np.sqrt(m.moments) * rng.standard_normal(L_body.shape)
         s.p[...] = ops.conjugate_momentum(s.q, c * L_body + noise)
         self.set_centre_velocity(view, U)
-        record.velocities_changed()
+        s.touched(momenta=True)  # written in place
         self.work += record.translational_energy + record.rotational_energy - before
 
     def lammps_fix(self, time_unit, seed=12345):
@@ -307,24 +307,19 @@ class NoseHooverThermostat(Thermostat):
 
     def __init__(self, temperature_K, tdamp, tchain=3, tloop=1, fixcm=None):
         super().__init__(temperature_K, fixcm)
-        self._check_positive(self.temperature_K)
         self.tdamp = check_time("tdamp", tdamp)
         self.tchain = check_positive_integer("tchain", tchain)
         self.tloop = check_positive_integer("tloop", tloop)
         self.chains = ()
 
-    @staticmethod
-    def _check_positive(temperature_K):
-        if temperature_K == 0:
+    def checked_temperature(self, temperature_K) -> float:
+        value = check_temperature(temperature_K)
+        if value == 0:
             raise ValueError(
                 "temperature_K = 0: Nose-Hoover chain masses are N_f k_B T tdamp^2, so a "
                 "chain at 0 K has no mass and cannot act; cool with a Langevin or Bussi "
                 "thermostat, which reach 0 K")
-
-    def set_temperature(self, temperature_K):
-        value = check_temperature(temperature_K)
-        self._check_positive(value)
-        self.temperature_K = value
+        return value
 
     def check_timestep(self, dt):
         if self.tdamp < dt:
@@ -349,8 +344,7 @@ class NoseHooverThermostat(Thermostat):
                 s.data, len(s.X), len(s.x), translation.xi, translation.eta, translation.ndof,
                 rotation.xi, rotation.eta, rotation.ndof, kT * self.tdamp**2, K_t, K_r, kT, h,
                 self.tloop)
-            record.scale_translation(factors[0])
-            record.scale_rotation(factors[1])
+            record.scaled(factors[0], factors[1])
             return
         self.scale(view, translation.propagate(K_t, kT, h, backend),
                    rotation.propagate(K_r, kT, h, backend))

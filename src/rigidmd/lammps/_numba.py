@@ -9,7 +9,7 @@ barostat.  Compiled, each is one loop: :func:`write_positions` and
 :func:`read_forces`.  Their NumPy references, of the same names and
 arguments, are in :mod:`rigidmd.lammps._numpy` (the path without numba);
 each pair is an operation of the backends (:mod:`rigidmd.core.backend`), and
-``tests/test_lammps_kernels.py`` and ``tests/test_backend.py`` check the two
+``tests/lammps/test_numba.py`` and ``tests/core/test_backend.py`` check the two
 against each other.
 
 Definitions.  LAMMPS's box is lower triangular, rows

@@ -29,13 +29,13 @@ The engine's fix
     LAMMPS's own ``fix ipi`` is used, with what follows.  The data file and
     positions put the cell's origin at LAMMPS's lower box corner, as in
     :class:`~rigidmd.lammps.LAMMPSCalculator`, so energy, forces and stress
-    equal the in-process calculator's to roundoff (``tests/test_lammps_engine_fix.py``).
+    equal the in-process calculator's to roundoff (``tests/lammps/test_engine_fix.py``).
 
 Numbers (``fix ipi``)
     ``fix ipi`` converts with 8-digit Bohr (0.52917721 Å) and Hartree
     (``3.1668152e-06 / boltz``); the same constants convert back here, so
     energy, forces and stress equal the in-process calculator's to roundoff
-    (measured in ``tests/test_lammps_engine.py``).  ``fix ipi`` sends only the
+    (measured in ``tests/lammps/test_engine.py``).  ``fix ipi`` sends only the
     upper triangle of the virial; it is mirrored (see :mod:`rigidmd.ipi`).
     ``fix ipi`` centres the box on the origin; positions are shifted by the
     same amount, so that they sit in the box as in one from the origin (PPPM
@@ -594,7 +594,7 @@ class LAMMPSEngine(IPICalculator):
     def engine_positions(self, cell, positions):
         if self._choose_fix() == "rigidmd/ipi":
             # fix rigidmd/ipi writes each atom in the image nearest to LAMMPS's own copy
-            # of it, whatever image it is sent in (tests/test_lammps_engine_fix.py).
+            # of it, whatever image it is sent in (tests/lammps/test_engine_fix.py).
             return positions
         # fix ipi folds an atom back by one box length at most (LAMMPS's Domain::pbc), and
         # only on a running engine does it image atoms against its neighbour list: atoms

@@ -200,7 +200,6 @@ class RigidFilter(AtomsFacade):
                              "that fitted")
             state.cell = cell
             self.atoms.set_cell(cell, scale_atoms=False)
-            self._record.cell_changed()
         r = self._record.r = self._link.place(state, self._record.r)
         self._key = self._x.tobytes()
         self._placed = (self.atoms.positions.copy(), r, q, D)

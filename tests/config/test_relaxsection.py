@@ -1,0 +1,47 @@
+"""The ``relax:`` section of a run configuration (rigidmd.config.relaxsection)."""
+
+import pytest
+from ase import units
+
+from rigidmd.config import RelaxSection
+from rigidmd.config.quantities import ConfigError
+
+
+def test_absent_means_no_relaxation_and_empty_means_the_defaults():
+    assert RelaxSection.from_config({}) is None
+    assert RelaxSection.from_config({"relax": None}) is None
+    section = RelaxSection.from_config({"relax": {}})
+    assert (section.fmax, section.steps, section.optimizer, section.cell, section.pressure,
+            section.trajectory, section.log) == (0.05, 1000, "RigidLBFGS", False, 0.0,
+                                                 "relax.traj", "relax.log")
+
+
+def test_every_field():
+    section = RelaxSection.from_config({"relax": {
+        "fmax": "0.01 eV/A", "steps": 50, "optimizer": "FIRE", "cell": True,
+        "pressure": "1 GPa", "trajectory": "r.traj", "log": "r.log"}})
+    assert section.fmax == 0.01 and section.steps == 50 and section.optimizer == "FIRE"
+    assert section.cell == "full"  # true is the full cell
+    assert section.pressure == pytest.approx(units.GPa)
+    assert (section.trajectory, section.log) == ("r.traj", "r.log")
+    assert RelaxSection.from_config({"relax": {"fmax": 0.2}}).fmax == 0.2  # eV/Å by default
+
+
+@pytest.mark.parametrize("raw, match", [
+    ({"fmax": 0}, "relax.fmax: must be positive, got 0"),
+    ({"steps": -1}, "relax.steps: expected a whole number >= 0"),
+    ({"optimizer": "SD"}, "relax.optimizer: 'SD' is not one of RigidLBFGS, "),
+    ({"cell": "xy"}, "relax.cell: expected false, true or one of iso, aniso, full, got 'xy'"),
+    ({"pressure": "1 bar"}, "relax.pressure: a target pressure needs relax.cell"),
+    ({"log": ""}, "relax.log: expected a file name, got ''"),
+    ({"trajectory": 3}, "relax.trajectory: expected a file name, got 3"),
+    ({"tol": 1}, "relax.tol: unknown key"),
+])
+def test_mistakes_name_the_field(raw, match):
+    with pytest.raises(ConfigError, match=match):
+        RelaxSection.from_config({"relax": raw})
+
+
+def test_a_restart_is_not_relaxed():
+    with pytest.raises(ConfigError, match="relax: a restart continues a run's dynamics"):
+        RelaxSection.from_config({"relax": {}, "restart": "md.traj"})

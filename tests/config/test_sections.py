@@ -1,0 +1,131 @@
+"""The sections of a run configuration: structure, run, calculator, outputs
+(rigidmd.config.sections)."""
+
+import pytest
+from ase import units
+from ase.io import write
+
+from rigidmd.config.quantities import ConfigError
+from rigidmd.config.sections import (
+    CalculatorSection,
+    OutputsSection,
+    RunSection,
+    StructureSection,
+)
+from rigidmd.systems import water_cluster
+
+
+def test_the_structure_from_a_file_a_builder_or_a_restart(tmp_path):
+    atoms = water_cluster(3, seed=1)
+    write(tmp_path / "start.xyz", atoms)
+    section = StructureSection.from_config({"structure": "start.xyz", "bodies": "connectivity"},
+                                           tmp_path)
+    assert section.source == tmp_path / "start.xyz" and section.restart is None
+    built = section.build_atoms()
+    assert len(built) == 9 and abs(built.positions - atoms.positions).max() < 1e-6
+    assert section.resolve_bodies(built).n_bodies == 3
+    builder = StructureSection.from_config(
+        {"structure": {"builtin": "water_cluster", "n_molecules": 2, "seed": 0}}, tmp_path)
+    assert len(builder.build_atoms()) == 6
+    write(tmp_path / "md.traj", [atoms, atoms])
+    restart = StructureSection.from_config({"restart": "md.traj"}, tmp_path)
+    assert restart.source is None and len(restart.build_atoms()) == 9
+
+
+@pytest.mark.parametrize("raw, match", [
+    ({}, "structure: missing"),
+    ({"structure": "none.xyz"}, "structure: no such file"),
+    ({"structure": {"builtin": "crystal"}}, "structure.builtin: use water_cluster or water_box,"
+                                           " got 'crystal'"),
+    ({"structure": {"builtin": "water_cluster"}}, "structure.n_molecules: missing for builtin "
+                                                  "water_cluster"),
+    ({"structure": {"builtin": "water_cluster", "n": 2}}, "structure.n: unknown key; allowed: "
+                                                          "builtin, jitter, model, n_molecules"),
+    ({"structure": {"builtin": "water_cluster", "n_molecules": 2}, "bodies": "residues"},
+     "bodies: use connectivity, mol-id or tags, got 'residues'"),
+    ({"structure": {"builtin": "water_cluster", "n_molecules": 2}, "restart": "none.traj"},
+     "restart: no such file"),
+])
+def test_structure_mistakes(tmp_path, raw, match):
+    with pytest.raises(ConfigError, match=match):
+        StructureSection.from_config(raw, tmp_path)
+
+
+def test_an_unreadable_file_is_named_without_its_content(tmp_path):
+    (tmp_path / "secret.xyz").write_text("token=abc123\n")
+    section = StructureSection.from_config({"structure": "secret.xyz"}, tmp_path)
+    with pytest.raises(ConfigError, match="structure: cannot read") as err:
+        section.build_atoms()
+    assert "abc123" not in str(err.value)
+
+
+def test_the_run_section(tmp_path):
+    run = RunSection.from_config({"timestep": "2 fs", "steps": 10,
+                                  "velocities": {"temperature": "300 K", "seed": 3}}, tmp_path)
+    assert run.integrator == "no_squish" and run.steps == 10
+    assert run.timestep == pytest.approx(2 * units.fs)
+    assert run.velocities == {"temperature_K": 300.0, "seed": 3}
+    assert RunSection.from_config({"timestep": "1 fs", "steps": 1}, tmp_path).velocities is None
+
+
+@pytest.mark.parametrize("raw, match", [
+    ({"steps": 1}, r"timestep: missing \(e.g. '1 fs'\)"),
+    ({"timestep": "0 fs", "steps": 1}, "timestep: must be positive"),
+    ({"timestep": "1 fs", "steps": 0}, "steps: expected a whole number >= 1"),
+    ({"timestep": "1 fs", "steps": 1, "integrator": "leapfrog"}, "integrator: "),
+    ({"timestep": "1 fs", "steps": 1, "integrator": "none.yaml"}, "integrator"),
+    ({"timestep": "1 fs", "steps": 1, "velocities": {"temperature": "-1 K"}},
+     "velocities.temperature: must be >= 0 K"),
+    ({"timestep": "1 fs", "steps": 1, "velocities": {"temperature": "1 K", "seed": -2}},
+     "velocities.seed: expected a whole number"),
+])
+def test_run_mistakes(tmp_path, raw, match):
+    with pytest.raises(ConfigError, match=match):
+        RunSection.from_config(raw, tmp_path)
+
+
+def test_the_calculator_section(tmp_path):
+    assert CalculatorSection.from_config({}, tmp_path).name == "tip3p"
+    lammps = CalculatorSection.from_config(
+        {"calculator": {"name": "lammps", "pair": "pair_style lj/cut 8\npair_coeff * * 0 1",
+                        "atom_types": {"O": 1, "H": 2}}}, tmp_path)
+    assert lammps.commands == ["pair_style lj/cut 8", "pair_coeff * * 0 1"]
+    water = CalculatorSection.from_config(
+        {"calculator": {"name": "lammps", "water_model": {"name": "tip4p2005", "cutoff": 9.0}}},
+        tmp_path)
+    assert water.water.sites == 4 and water.atom_types == {"O": 1, "H": 2, "X": 3}
+    assert any(c.startswith("pair_style") for c in water.commands)
+
+
+@pytest.mark.parametrize("calc, match", [
+    ({"options": {}}, "calculator.name: missing"),
+    ({"name": 3}, "calculator.name: expected tip3p, tip4p, lammps, ipi or a dotted"),
+    ({"name": "lammps"}, "calculator.commands: the lammps calculator needs LAMMPS commands"),
+    ({"name": "lammps", "commands": ["a"], "pair": ["b"]}, "calculator.pair: give the LAMMPS "
+                                                          "commands once"),
+    ({"name": "lammps", "commands": [1]}, "calculator.commands: expected LAMMPS commands"),
+    ({"name": "tip3p", "water_model": {"name": "spce"}}, "calculator.water_model: goes with "
+                                                         "name: lammps"),
+    ({"name": "lammps", "water_model": {"name": "spce"}, "charges": {"O": -1}},
+     "calculator.charges: water_model gives the commands"),
+])
+def test_calculator_mistakes(tmp_path, calc, match):
+    with pytest.raises(ConfigError, match=match):
+        CalculatorSection.from_config({"calculator": calc}, tmp_path)
+
+
+def test_the_outputs_section(tmp_path):
+    out = OutputsSection.from_config({"outputs": {"directory": "out", "interval": 7,
+                                                  "trajectory": "md.traj", "plot": "e.svg"}},
+                                     tmp_path)
+    assert out.directory == tmp_path / "out" and out.interval == 7
+    assert out.files == {"trajectory": tmp_path / "out" / "md.traj",
+                         "plot": tmp_path / "out" / "e.svg"}
+    assert out.checkpoint == tmp_path / "out" / "checkpoint.npz"
+    assert out.checkpoint_interval == 1001  # 1000 steps rounded up to a frame
+    with pytest.raises(ConfigError, match="outputs.checkpoint_interval: 10 is not a multiple "
+                                          r"of outputs.interval \(7\)"):
+        OutputsSection.from_config({"outputs": {"interval": 7, "checkpoint_interval": 10}},
+                                   tmp_path)
+    with pytest.raises(ConfigError, match="outputs.plot: e.txt is not an image file"):
+        OutputsSection.from_config({"outputs": {"plot": "e.txt"}}, tmp_path)

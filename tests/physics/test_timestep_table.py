@@ -1,0 +1,331 @@
+"""The time-step table's machinery (``validation/timestep_table.py`` and its collector).
+
+A run of a few steps of the committed 64-water TIP4P/2005 start writes every field; a run
+stopped by SIGTERM writes what it has, says so, and ``--resume`` continues it to the same
+series as an uninterrupted run (to LAMMPS's roundoff); the collector's dt → 0 fit
+recovers a known limit from synthetic points and tells integrators that disagree.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import benchmark_module
+
+ROOT = Path(__file__).resolve().parents[2]
+SCRIPT = ROOT / "validation" / "timestep_table.py"
+table = benchmark_module("timestep_table")
+collector = benchmark_module("timestep_table_report")
+
+
+def _run(args, **kwargs):
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    return subprocess.Popen([sys.executable, str(SCRIPT), "run", "--waters", "64",
+                             "--model", "tip4p2005", *args], env=env, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kwargs)
+
+
+def _finish(proc, timeout=300):
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode, out, err
+
+
+@pytest.mark.lammps
+def test_a_run_writes_every_field(tmp_path):
+    rc, out, err = _finish(_run(["--integrator", "baoab", "--dt-fs", "2", "--ps", "0.02",
+                                 "--sample-fs", "4", "--frame-fs", "8", "--outdir",
+                                 str(tmp_path)]))
+    assert rc == 0, err
+    result = json.loads((tmp_path / "tip4p2005_64_rigidmd_baoab_dt2_s1.json").read_text())
+    assert result["complete"] and result["steps"] == 10 and result["stopped_by"] is None
+    for field in table.RESULT_FIELDS:
+        assert field in result
+    # The hook for configurational temperatures: null until an observer gives them.
+    assert result["T_conf_tr"] is None and result["T_conf_rot"] is None
+    # ⟨U⟩/N without LAMMPS's intramolecular k-space constant: liquid TIP4P/2005 is near
+    # -48 kJ/mol (-48.3 measured on this start at 2 fs).
+    assert -55 < result["U"][0] < -40
+    assert 200 < result["T_tr"][0] < 400 and 200 < result["T_rot_end"][0] < 400
+    assert 2.6 < result["rdf_peak_r"] < 3.0  # the O–O first shell
+    assert result["samples"] == 6 and result["frames"] == 3
+    # Analysed again from its series with more of the start left out: t = 0.012, 0.016, 0.02.
+    table.reanalyse([tmp_path / "tip4p2005_64_rigidmd_baoab_dt2_s1.json"], equil_ps=0.01)
+    again = json.loads((tmp_path / "tip4p2005_64_rigidmd_baoab_dt2_s1.json").read_text())
+    assert again["samples"] == 3 and again["point"]["equil_ps"] == 0.01
+    assert again["steps"] == result["steps"] and again["U"] != result["U"]
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("code, integrator", [("lammps", "nvt_small"), ("openmm", "middle")])
+def test_the_other_codes_write_the_same_fields(tmp_path, code, integrator):
+    if code == "openmm":
+        pytest.importorskip("openmm", reason="needs OpenMM (pip install openmm)")
+    rc, _, err = _finish(_run(["--code", code, "--dt-fs", "2", "--ps", "0.02", "--sample-fs",
+                               "4", "--frame-fs", "8", "--piece-ps", "0.01", "--outdir",
+                               str(tmp_path)]))
+    assert rc == 0, err
+    result = json.loads((tmp_path / f"tip4p2005_64_{code}_{integrator}_dt2_s1.json")
+                        .read_text())
+    assert result["complete"] and result["steps"] == 10 and result["samples"] == 6
+    for field in table.RESULT_FIELDS:
+        assert field in result
+    # Each code's energy on one scale: -48.35 (LAMMPS, its molecules' own Coulomb energy
+    # off) and -48.34 kJ/mol (OpenMM) measured at 2 fs over 0.2 ps of this start.
+    assert -55 < result["U"][0] < -40
+    assert 200 < result["T_tr"][0] < 400 and 200 < result["T_rot"][0] < 400
+    assert not list(tmp_path.glob("*.chk*.json"))  # the collector reads every *.json
+
+
+@pytest.mark.lammps
+def test_sigterm_writes_what_it_has_and_resume_continues_exactly(tmp_path):
+    common = ["--integrator", "langevin", "--dt-fs", "2", "--ps", "0.6", "--sample-fs", "4",
+              "--frame-fs", "8", "--save-s", "0"]
+    rc, _, err = _finish(_run([*common, "--outdir", str(tmp_path / "whole")]))
+    assert rc == 0, err
+    name = "tip4p2005_64_rigidmd_langevin_dt2_s1"
+    cut = tmp_path / "cut"
+    proc = _run([*common, "--outdir", str(cut)])
+    deadline = time.monotonic() + 200
+    while not (cut / f"{name}.chk.npz").exists() and proc.poll() is None \
+            and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    rc, out, err = _finish(proc)
+    assert rc == 3, err
+    assert "stopped by SIGTERM" in out and "--resume" in out
+    stopped = json.loads((cut / f"{name}.json").read_text())
+    assert not stopped["complete"] and stopped["stopped_by"] == "SIGTERM"
+    assert 0 < stopped["steps"] < 300
+    # Without --resume the run refuses to start over what is there, in one line.
+    rc, _, err = _finish(_run([*common, "--outdir", str(cut)]))
+    assert rc != 0 and err.strip().count("\n") == 0 and "--resume" in err and name in err
+    rc, _, err = _finish(_run([*common, "--outdir", str(cut), "--resume"]))
+    assert rc == 0, err
+    resumed = json.loads((cut / f"{name}.json").read_text())
+    assert resumed["complete"] and resumed["steps"] == 300
+    assert resumed["resumed_from_step"] == stopped["steps"]  # from the checkpoint, not step 0
+    assert resumed["T_rot_gap"] == [0.0, 0.0]  # RigidLangevin reports its end of step
+    with np.load(tmp_path / "whole" / f"{name}.series.npz") as a, \
+            np.load(cut / f"{name}.series.npz") as b:
+        np.testing.assert_array_equal(a["t_ps"], b["t_ps"])  # no sample lost or repeated
+        # The same trajectory to LAMMPS's roundoff: the resumed run's fresh LAMMPS instance
+        # sums its pairs in another order (measured: 1.3e-13 relative at most over these
+        # 300 steps); a restarted random stream or a lost step would differ at 1e-3.
+        for key in ("U", "T_tr", "T_rot", "com"):
+            np.testing.assert_allclose(a[key], b[key], rtol=1e-10, err_msg=key)
+
+
+@pytest.mark.lammps
+@pytest.mark.parametrize("code", ["lammps", "openmm"])
+def test_the_other_codes_stop_and_resume(tmp_path, code):
+    if code == "openmm":
+        pytest.importorskip("openmm", reason="needs OpenMM (pip install openmm)")
+    args = ["--code", code, "--dt-fs", "2", "--ps", "1.2", "--sample-fs", "4", "--frame-fs",
+            "8", "--save-s", "0", "--piece-ps", "0.1", "--outdir", str(tmp_path)]
+    name = f"tip4p2005_64_{code}_{'nvt_small' if code == 'lammps' else 'middle'}_dt2_s1"
+    proc = _run(args)
+    deadline = time.monotonic() + 200
+    while not list(tmp_path.glob(f"{name}.chk.*.meta")) and proc.poll() is None \
+            and time.monotonic() < deadline:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGTERM)
+    rc, _, err = _finish(proc)
+    assert rc == 3, err
+    stopped = json.loads((tmp_path / f"{name}.json").read_text())
+    assert not stopped["complete"] and 0 < stopped["steps"] < 600
+    rc, _, err = _finish(_run([*args, "--resume"]))
+    assert rc == 0, err
+    resumed = json.loads((tmp_path / f"{name}.json").read_text())
+    assert resumed["complete"] and resumed["steps"] == 600
+    assert resumed["resumed_from_step"] == stopped["steps"]
+    with np.load(tmp_path / f"{name}.series.npz") as d:  # every sample once, in order
+        np.testing.assert_allclose(d["t_ps"], np.arange(301) * 0.004, atol=1e-12)
+        assert len(d["frame_t_ps"]) == 151
+
+
+@pytest.mark.lammps
+def test_a_signal_to_the_jobs_parent_stops_every_run_and_waits_for_them(tmp_path):
+    proc = _run(["--integrator", "langevin", "--dt-fs", "2", "--ps", "2", "--seed", "1", "2",
+                 "--sample-fs", "4", "--frame-fs", "8", "--save-s", "0", "--jobs", "2",
+                 "--outdir", str(tmp_path)])
+    names = [f"tip4p2005_64_rigidmd_langevin_dt2_s{seed}" for seed in (1, 2)]
+    deadline = time.monotonic() + 200
+    while not all((tmp_path / f"{n}.chk.npz").exists() for n in names) \
+            and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    rc, out, err = _finish(proc)
+    assert rc == 3, err
+    assert "2 of 2 runs incomplete (SIGTERM)" in out
+    for n in names:  # each run finished its step and wrote what it had before the parent left
+        result = json.loads((tmp_path / f"{n}.json").read_text())
+        assert result["stopped_by"] == "SIGTERM" and not result["complete"]
+
+
+def _synthetic(path, integrator, dt, seed, U, code="rigidmd"):
+    point = {"model": "tip4p2005", "waters": 216, "code": code, "integrator": integrator,
+             "dt_fs": dt, "seed": seed}
+    run = {"point": point, "complete": True, "ms_per_step": 3.0, "recorded_ps": 200.0,
+           "U": [U, 0.01], "T_tr": [298.0, 0.2], "T_rot": [298.0, 0.2],
+           "T_tr_end": [298.0, 0.2], "T_rot_end": [298.0, 0.2], "rdf_peak_r": 2.76,
+           "rdf_peak_g": 3.2 + 0.01 * dt ** 2, "D_pbc": [2.1, 0.05], "T_conf_tr": None,
+           "T_conf_rot": None}
+    file = path / f"{code}_{integrator}_{dt:g}_{seed}.json"
+    file.write_text(json.dumps(run))
+    return file
+
+
+def test_collector_recovers_a_known_limit_and_flags_disagreement(tmp_path):
+    files = []
+    slopes = {"langevin": 0.06, "baoab": 0.002}
+    for integrator, b in slopes.items():
+        for dt in (0.5, 1.0, 2.0, 4.0):
+            for seed, noise in ((1, 0.004), (2, -0.004)):  # seeds' mean on the line
+                files.append(_synthetic(tmp_path, integrator, dt, seed,
+                                        -47.0 + b * dt ** 2 + noise))
+    points, fits = collector.report(files, tmp_path, "t")
+    shared = fits[("tip4p2005", 216, "rigidmd", "U")]
+    assert shared["shared"]["a"] == pytest.approx(-47.0, abs=1e-9)
+    assert shared["shared"]["b"] == pytest.approx(slopes, abs=1e-9)
+    assert shared["shared"]["points"] == 6  # 4 fs is outside the fit
+    assert shared["agree"] is True
+    assert fits[("tip4p2005", 216, "rigidmd", "rdf_peak_g")]["shared"]["a"] == \
+        pytest.approx(3.2, abs=1e-9)
+    langevin_1fs = next(p for p in points if p["integrator"] == "langevin"
+                        and p["dt_fs"] == 1.0)
+    assert langevin_1fs["runs"] == 2 and langevin_1fs["U"][0] == pytest.approx(-46.94)
+    text = (tmp_path / "t.md").read_text()
+    assert "| tip4p2005 | 216 | rigidmd | langevin | 4 | 2 |" in text and "+0.960" in text
+    assert "—" in text  # T_conf pending, not invented
+    rows = [line for line in (tmp_path / "t.csv").read_text().splitlines()
+            if not line.startswith("#")]
+    assert len(rows) == 1 + 8 and "U_limit" in rows[0]
+    # An integrator whose own limit is 0.5 kJ/mol off the others' is told.
+    for dt in (0.5, 1.0, 2.0):
+        for seed, noise in ((1, 0.004), (2, -0.004)):
+            files.append(_synthetic(tmp_path, "bussi", dt, seed, -46.5 + noise))
+    _, fits = collector.report(files, tmp_path, "t")
+    assert fits[("tip4p2005", 216, "rigidmd", "U")]["agree"] is False
+    assert "| NO |" in (tmp_path / "t.md").read_text()
+
+
+def test_the_collector_leaves_out_stopped_runs(tmp_path):
+    files = [_synthetic(tmp_path, "langevin", dt, 1, -47.0 + 0.05 * dt ** 2)
+             for dt in (0.5, 1.0, 2.0)]
+    stopped = json.loads(files[0].read_text())
+    stopped.update(complete=False, U=[-40.0, 0.5], point=dict(stopped["point"], seed=2))
+    files.append(tmp_path / "stopped.json")
+    files[-1].write_text(json.dumps(stopped))
+    points, fits = collector.report(files, tmp_path, "t")
+    assert fits[("tip4p2005", 216, "rigidmd", "U")]["shared"]["a"] == pytest.approx(-47.0)
+    assert next(p for p in points if p["dt_fs"] == 0.5)["runs"] == 1
+    points, _ = collector.report(files, tmp_path, "t", include_incomplete=True)
+    assert next(p for p in points if p["dt_fs"] == 0.5)["runs"] == 2
+
+
+def test_other_codes_get_their_own_limit(tmp_path):
+    files = [_synthetic(tmp_path, "middle", dt, seed, -46.0 + 0.01 * dt ** 2, code="openmm")
+             for dt in (0.5, 1.0, 2.0) for seed in (1, 2)]
+    files += [_synthetic(tmp_path, "langevin", dt, 1, -47.0 + 0.05 * dt ** 2)
+              for dt in (0.5, 1.0, 2.0)]
+    _, fits = collector.report(files, tmp_path, "t")
+    assert fits[("tip4p2005", 216, "openmm", "U")]["shared"]["a"] == pytest.approx(-46.0)
+    assert fits[("tip4p2005", 216, "rigidmd", "U")]["shared"]["a"] == pytest.approx(-47.0)
+
+
+def test_no_agreement_is_claimed_where_no_limit_could_be_fitted(tmp_path):
+    files = [_synthetic(tmp_path, integrator, 1.0, 1, -47.0)
+             for integrator in ("langevin", "baoab")]  # one step each: no limit
+    _, fits = collector.report(files, tmp_path, "t")
+    assert fits[("tip4p2005", 216, "rigidmd", "U")]["agree"] is None
+    assert "| yes |" not in (tmp_path / "t.md").read_text()
+
+
+def test_fit_limit_needs_enough_points():
+    fit = collector.fit_limit([1.0], [-47.0], [0.01], ["langevin"])
+    assert np.isnan(fit["a"])
+
+
+def test_configurational_temperatures_from_the_hooks_sums(tmp_path):
+    from ase import units
+
+    series = table.Series(tmp_path / "s.npz")
+    rng = np.random.default_rng(1)
+    for i in range(20):
+        den_tr, den_rot = rng.uniform(1, 2, 2)
+        series.add(i * 0.1, -3000.0, (298.0, 298.0), (298.0, 298.0))
+        series.frame(i * 0.1, np.zeros((2, 3)), np.zeros((2, 3)), np.eye(3) * 10,
+                     (300 * units.kB * den_tr, den_tr, 310 * units.kB * den_rot, den_rot))
+    p = {"equil_ps": 0.0, "blocks": 4, "msd_fit_ps": [3, 10], "box_A": 10.0}
+    out = table.analyse(series, p, 2)
+    assert out["T_conf_tr"][0] == pytest.approx(300.0) and out["T_conf_rot"][0] == \
+        pytest.approx(310.0)
+    # Without the hook's sums (None: rigidmd has no observer yet), null, never a number.
+    series.frame(2.0, np.zeros((2, 3)), np.zeros((2, 3)), np.eye(3) * 10, None)
+    assert table.analyse(series, p, 2)["T_conf_tr"] is None
+
+
+def test_start_keeps_the_shared_216_water_states():
+    before = table.start_file("tip4p2005", 216).read_bytes()
+    with pytest.raises(SystemExit, match="--waters 216: the start is water_openmm_long"):
+        table.make_start("tip4p2005", 216)
+    assert table.start_file("tip4p2005", 216).read_bytes() == before
+    with pytest.raises(SystemExit, match="--waters 100: a start is made for a cube number"):
+        table.make_start("tip4p2005", 100)
+
+
+def test_tip4p2005_xml_is_tip4p2005():
+    """OpenMM's TIP4P/2005 from ``validation/tip4p2005.xml`` against OpenMM's TIP4P-Ew system
+    given rigidmd's TIP4P/2005 charges, Lennard-Jones and M weights (``water_openmm_long``):
+    the same energy (measured 7e-10 kJ/mol per molecule apart; the file's weights have 12
+    digits)."""
+    mm = pytest.importorskip("openmm", reason="needs OpenMM (pip install openmm)")
+    from openmm import unit
+
+    from rigidmd.water import water_model
+
+    long = benchmark_module("water_openmm_long")
+    model = water_model("tip4p2005")
+    state = table.load_start("tip4p2005", 64)
+    cutoff = table.cutoff_for(state["cell"])
+    energies = []
+    for system in (table.openmm_water_system(state, model, cutoff),
+                   _reparametrised(long, state, model, cutoff)):
+        context = mm.Context(system, mm.VerletIntegrator(1e-3),
+                             mm.Platform.getPlatformByName("Reference"))
+        context.setPositions(state["positions"] / 10)
+        context.computeVirtualSites()
+        energies.append(context.getState(getEnergy=True).getPotentialEnergy()
+                        .value_in_unit(unit.kilojoule_per_mole) / 64)
+    assert energies[0] == pytest.approx(energies[1], abs=1e-8)
+    assert -49 < energies[0] < -47
+
+
+def _reparametrised(long, state, model, cutoff):
+    old = long.CUTOFF
+    long.CUTOFF = cutoff
+    try:
+        return long.openmm_system(state, model)
+    finally:
+        long.CUTOFF = old
+
+
+def test_block_mean_and_rdf_peak():
+    x = np.repeat([1.0, 2.0, 3.0, 4.0], 5)
+    mean, err = table.block_mean(x, 4)
+    assert mean == 2.5 and err == pytest.approx(np.std([1, 2, 3, 4], ddof=1) / 2)
+    # Two molecules 2.8 Å apart in a 20 Å box: the RDF's only peak is at 2.8 Å.
+    O = np.array([[[1.0, 1.0, 1.0], [3.8, 1.0, 1.0]]])
+    r, g = table.rdf_first_peak(O, np.eye(3) * 20.0, bin_A=0.02)
+    assert abs(r - 2.8) < 0.02 and g > 0
