@@ -52,6 +52,12 @@ CHECKED_ELSEWHERE = (
      "--resume, and the collector"),
     ("examples/mace_water.py --quick", "tests/physics/test_ml_potential.py runs it where "
      "mace-torch is installed (the ml extra, not the test extra)"),
+    ("validation/respa_kspace_share.py", "minutes of native LAMMPS runs; "
+     "tests/physics/test_respa_lammps.py runs its --quick form"),
+    ("validation/respa_lammps_cost.py", "minutes; tests/physics/test_respa_lammps.py runs its "
+     "--quick form"),
+    ("validation/respa_lammps_nve.py", "minutes; tests/physics/test_respa_lammps.py runs its "
+     "--quick form"),
     ("benchmarks/", "benchmarks measure speed or physics for minutes to hours; each is run "
      "in its --quick form by the tests of what it measures"),
     ("python -m pytest", "the test command itself"),

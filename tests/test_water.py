@@ -293,3 +293,20 @@ def test_numpy_and_numba_paths_agree_with_massless_sites(tip4p_pair):
         runs.append((atoms.positions.copy(), atoms.get_momenta()))
     assert np.abs(runs[0][0] - runs[1][0]).max() < 1e-11
     assert not np.any(runs[0][1][3::4]) and not np.any(runs[1][1][3::4])
+
+
+def test_the_short_range_commands_refuse_bad_values_in_one_line():
+    for cutoff, alpha in ((0.0, 0.2), (-1.0, 0.2), (5.0, -0.1), (float("nan"), 0.2)):
+        with pytest.raises(ValueError, match="positive cutoff") as err:
+            water_model("tip4p2005").lammps_short_range_commands(cutoff, alpha)
+        assert "\n" not in str(err.value)
+
+
+def test_the_short_range_commands_are_smooth_or_one_pair_style():
+    model = water_model("tip4p2005")
+    smooth = model.lammps_short_range_commands(5.0)
+    assert smooth[0] == "pair_style hybrid/overlay lj/smooth/linear 5.0 coul/dsf 0.2 5.0"
+    assert f"pair_coeff O O lj/smooth/linear {model.epsilon!r} {model.sigma!r}" in smooth
+    plain = model.lammps_short_range_commands(4.0, alpha=0.25, smooth=False)
+    assert plain[0] == "pair_style lj/cut/coul/dsf 0.25 4.0 4.0"
+    assert plain[-1] == "pair_modify shift yes"

@@ -185,8 +185,9 @@ class Progress:
 
 
 def run_name(p):
+    split = (f"_k{p['substeps']}r{p['r_split']:g}" if p.get("substeps", 1) > 1 else "")
     return (f"{p['model']}_{p['waters']}_{p['code']}_{p['integrator']}_dt{p['dt_fs']:g}"
-            f"_s{p['seed']}")
+            f"{split}_s{p['seed']}")
 
 
 class Series:
@@ -309,10 +310,26 @@ def _rigidmd_dynamics(p, atoms):
                                    fixcm=True)
 
 
+def rigidmd_calculator(p, model, cell):
+    """The model's LAMMPS forces; with ``substeps`` above 1, r-RESPA's split of them: a fast
+    level ``lammps_short_range_commands(r_split)`` and the slow level the model less it
+    (``dt_fs`` is then the outer step)."""
+    from water_openmm_nve import lammps_calculator
+
+    full = lammps_calculator(model, cutoff_for(cell))
+    if p.get("substeps", 1) <= 1:
+        return full
+    from rigidmd import MultipleTimeStep
+    from rigidmd.lammps import LAMMPSCalculator
+
+    fast = LAMMPSCalculator(model.lammps_short_range_commands(p["r_split"]),
+                            atom_types=full.atom_types)
+    return MultipleTimeStep(fast, full=full, substeps=p["substeps"])
+
+
 def run_rigidmd(p, paths, stop, progress, resume):
     """Run (or continue) one rigidmd point; returns (series, steps done, ms/step)."""
     from ase import units
-    from water_openmm_nve import lammps_calculator
 
     from rigidmd import load_checkpoint
     from rigidmd.core.checkpoint import save_checkpoint
@@ -326,10 +343,13 @@ def run_rigidmd(p, paths, stop, progress, resume):
         from rigidmd.core.checkpoint import read_checkpoint
 
         chk = read_checkpoint(paths["chk"])
-        dyn = load_checkpoint(chk, lammps_calculator(model, cutoff_for(state["cell"])))
+        dyn = load_checkpoint(chk, rigidmd_calculator(p, model, state["cell"]))
         series.load(chk.extra["samples"], chk.extra["frames"])
     else:
-        dyn = _rigidmd_dynamics(p, make_atoms(state, model))
+        atoms = make_atoms(state, model)
+        if p.get("substeps", 1) > 1:
+            atoms.calc = rigidmd_calculator(p, model, state["cell"])
+        dyn = _rigidmd_dynamics(p, atoms)
     atoms = dyn.atoms
     kj = units.kJ / units.mol
     sample = max(int(round(p["sample_fs"] / p["dt_fs"])), 1)
@@ -371,7 +391,7 @@ def run_rigidmd(p, paths, stop, progress, resume):
     save()
     steps = dyn.nsteps
     atoms.get_potential_energy()
-    offset = intramolecular_energy(model, atoms.calc)
+    offset = intramolecular_energy(model, getattr(atoms.calc, "full", None) or atoms.calc)
     if hasattr(atoms.calc, "close"):
         atoms.calc.close()
     return series, steps, ms, offset, s0
@@ -700,11 +720,14 @@ def reanalyse(paths, equil_ps=None):
 def points(args):
     integrators = args.integrator if args.integrator else list(INTEGRATORS)
     out = []
-    for code, model, dt, seed in itertools.product(args.code, args.model, args.dt_fs,
-                                                   args.seed):
+    for code, model, dt, seed, k in itertools.product(args.code, args.model, args.dt_fs,
+                                                      args.seed, args.substeps):
+        if k > 1 and code != "rigidmd":
+            continue  # (a split is rigidmd's)
         for integ in (integrators if code == "rigidmd" else
                       ["nvt_small" if code == "lammps" else "middle"]):
-            out.append({"code": code, "integrator": integ, "model": model,
+            split = {"substeps": k, "r_split": args.r_split} if k > 1 else {}
+            out.append({**split, "code": code, "integrator": integ, "model": model,
                         "waters": args.waters, "dt_fs": dt, "seed": seed, "ps": args.ps,
                         "equil_ps": args.equil_ps, "tau_ps": args.tau_ps,
                         "sample_fs": args.sample_fs, "frame_fs": args.frame_fs,
@@ -817,6 +840,10 @@ def parse(argv=None):
     r.add_argument("--piece-ps", type=float, default=10.0, help="LAMMPS: ps per piece")
     r.add_argument("--save-s", type=float, default=300.0, help="checkpoint every, s")
     r.add_argument("--log-s", type=float, default=60.0, help="log line every, s (no terminal)")
+    r.add_argument("--substeps", nargs="+", type=int, default=[1],
+                   help="rigidmd: r-RESPA's inner steps per --dt-fs (the outer step); above 1 "
+                   "the forces are split, the fast level lammps_short_range_commands(--r-split)")
+    r.add_argument("--r-split", type=float, default=5.0, help="the split's fast cut-off, Å")
     r.add_argument("--jobs", type=int, default=1)
     r.add_argument("--resume", action="store_true", help="continue stopped runs")
     r.add_argument("--outdir", type=Path, default=HERE / "timestep_runs")

@@ -72,7 +72,9 @@ def load_points(paths, include_incomplete=False):
                   f"(--include-incomplete takes it)")
             continue
         p = run["point"]
-        key = (p["model"], int(p["waters"]), p["code"], p["integrator"], float(p["dt_fs"]))
+        integrator = p["integrator"] + (  # an r-RESPA split is a point of its own
+            f" k={p['substeps']} r={p['r_split']:g}" if p.get("substeps", 1) > 1 else "")
+        key = (p["model"], int(p["waters"]), p["code"], integrator, float(p["dt_fs"]))
         groups.setdefault(key, []).append(run)
     points = []
     for key in sorted(groups):

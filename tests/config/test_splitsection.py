@@ -1,13 +1,13 @@
 """A force split in the ``calculator:`` section (rigidmd.config.splitsection)."""
 
 import pytest
-from ase.calculators.mixing import LinearCombinationCalculator
 from ase.calculators.tip3p import TIP3P
 
 from rigidmd import MultipleTimeStep
 from rigidmd.config.quantities import ConfigError
 from rigidmd.config.sections import CalculatorSection
 from rigidmd.config.splitsection import SplitCalculatorSection, calculator_section
+from rigidmd.core.split import FullLessFast
 from rigidmd.systems import water_cluster
 
 
@@ -35,7 +35,8 @@ def test_a_split_builds_a_multiple_time_step(tmp_path):
     calc = split.build(atoms, tmp_path / "engine")
     assert isinstance(calc, MultipleTimeStep) and calc.substeps == 2
     assert isinstance(calc.fast, TIP3P)
-    assert isinstance(calc.slow, LinearCombinationCalculator)
+    assert isinstance(calc.slow, FullLessFast) and calc.full is calc.slow.full
+    assert isinstance(calc.full, TIP3P) and calc.slow.fast is calc.fast
 
 
 @pytest.mark.parametrize("calc, match", [

@@ -78,3 +78,85 @@ def test_close_and_checkpoint_state_reach_both_levels():
     assert calc.fast.saved is None and calc.slow.saved == {"who": "x"}
     assert MultipleTimeStep(TIP3P(), TIP3P()).get_checkpoint_state() == {"fast": None,
                                                                           "slow": None}
+
+
+def test_full_makes_the_slow_level_full_less_fast_with_one_call_of_each():
+    """``full=``: the slow level is :class:`FullLessFast`; a dynamics under it follows the
+    same trajectory, bit for bit, as under ASE's ``LinearCombinationCalculator`` of the same
+    models (full - fast rounds alike), and the full model is asked for forces and energy in
+    one call where that one asked twice."""
+    from ase import units
+    from ase.calculators.mixing import LinearCombinationCalculator
+
+    from rigidmd import RigidVerlet
+    from rigidmd.core.split import FullLessFast
+
+    calls = {}
+
+    class Counted(TIP3P):
+        """Keeps only what it was asked for, as LAMMPSCalculator tallies only that."""
+
+        def calculate(self, atoms=None, properties=("energy",), system_changes=()):
+            calls[self.kind] = calls.get(self.kind, 0) + 1
+            super().calculate(atoms, properties, system_changes)
+            self.results = {name: self.results[name] for name in properties}
+
+    def split(kind):
+        fast, full = TIP3P(rc=7.0, width=3.0), Counted(rc=40.0)
+        full.kind = kind
+        if kind == "full":
+            return MultipleTimeStep(fast, full=full, substeps=3)
+        return MultipleTimeStep(fast, LinearCombinationCalculator([full, fast], [1.0, -1.0]),
+                                substeps=3)
+
+    runs = {}
+    for kind in ("full", "mixing"):
+        atoms = water_cluster(4, seed=1)
+        atoms.calc = split(kind)
+        dyn = RigidVerlet(atoms, 2 * units.fs)
+        energies = []
+        dyn.attach(lambda a=atoms, e=energies: e.append(a.get_potential_energy()), interval=1)
+        calls[kind] = 0
+        dyn.run(5)
+        runs[kind] = (atoms.positions.copy(), energies)
+    assert isinstance(split("full").slow, FullLessFast)
+    np.testing.assert_array_equal(runs["full"][0], runs["mixing"][0])
+    assert runs["full"][1] == runs["mixing"][1]
+    assert calls == {"full": 6, "mixing": 12}  # a run's start and 5 steps; twice with mixing
+    assert split("full").todict() == {"fast": "TIP3P", "slow": "FullLessFast",
+                                      "substeps": 3, "full": "Counted"}
+
+
+def test_slow_and_full_are_one_or_the_other():
+    for kwargs, words in (({}, "the slow calculator is missing"),
+                          ({"slow": TIP3P(), "full": TIP3P()}, "not both")):
+        with pytest.raises(TypeError, match=words) as err:
+            MultipleTimeStep(TIP3P(), **kwargs)
+        assert "\n" not in str(err.value)
+    with pytest.raises(TypeError, match="the full calculator must be an ASE calculator"):
+        MultipleTimeStep(TIP3P(), full=object())
+
+
+def test_full_less_fast_closes_and_checkpoints_the_full_model():
+    closed = []
+
+    class Engine(TIP3P):
+        saved = None
+
+        def close(self):
+            closed.append(self)
+
+        def get_checkpoint_state(self):
+            return {"gewald": 0.3}
+
+        def set_checkpoint_state(self, saved):
+            self.saved = saved
+
+    fast, full = Engine(), Engine()
+    calc = MultipleTimeStep(fast, full=full)
+    assert calc.get_checkpoint_state() == {"fast": {"gewald": 0.3}, "slow": {"gewald": 0.3}}
+    calc.set_checkpoint_state({"fast": None, "slow": {"gewald": 0.4}})
+    assert full.saved == {"gewald": 0.4} and fast.saved is None
+    calc.close()
+    assert closed == [fast, full]
+

@@ -5,15 +5,14 @@ supports: ``tip3p``, ``tip4p``, ``lammps``, ``ipi`` or a dotted class path); the
 configured run's calculator is :class:`rigidmd.MultipleTimeStep` of the two, which
 every dynamics integrates by r-RESPA with ``substeps`` inner steps per ``timestep``.
 ``full: {...}`` in place of ``slow`` makes the slow level the full model less the fast
-one (ASE's ``LinearCombinationCalculator``; the fast level's call at the end of each
-outer step is its cache, so the difference costs one call of the full model).
+one (``MultipleTimeStep(fast, full=...)``, :class:`rigidmd.core.split.FullLessFast`: the
+fast level's call at the end of each outer step is its cache, so the difference costs one
+call of the full model).
 :func:`calculator_section` reads either form.
 """
 
 from dataclasses import asdict, dataclass
 from pathlib import Path
-
-from ase.calculators.mixing import LinearCombinationCalculator
 
 from rigidmd.config.quantities import ConfigError, mapping
 from rigidmd.config.sections import CalculatorSection
@@ -119,10 +118,9 @@ class SplitCalculatorSection:
                 built[level] = section.build(atoms, Path(engine_directory) / level)
             except ConfigError as err:
                 raise _renamed(err, level) from None
-        fast = built["fast"]
-        slow = (LinearCombinationCalculator([built["full"], fast], [1.0, -1.0])
-                if self.difference else built["slow"])
-        return MultipleTimeStep(fast, slow, substeps=self.substeps)
+        if self.difference:
+            return MultipleTimeStep(built["fast"], full=built["full"], substeps=self.substeps)
+        return MultipleTimeStep(built["fast"], built["slow"], substeps=self.substeps)
 
     def fingerprint_fields(self, leave_out) -> dict:
         """What the levels compute (not where they run: ``leave_out``), for ``--resume``."""

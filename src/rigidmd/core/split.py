@@ -7,6 +7,8 @@ Every rigidmd dynamics whose atoms carry one integrates it by r-RESPA
 (Tuckerman, Berne & Martyna 1992; :mod:`rigidmd.core.respa`): the dynamics'
 ``timestep`` is the outer step, the slow forces and torques kick for half of it
 on each side of ``k`` NO_SQUISH steps of ``timestep / k`` with the fast forces.
+``MultipleTimeStep(fast, full=model, substeps=k)`` makes the slow level the full
+model less the fast one (:class:`FullLessFast`).
 
 The sums are computed from the two calculators' own results: each keeps its
 cache (ASE's ``check_state``), so asking the split for the energy after a
@@ -30,7 +32,7 @@ from ase.calculators.calculator import (
 
 from rigidmd.core.forces import calculate_together
 
-__all__ = ["MultipleTimeStep", "check_substeps"]
+__all__ = ["MultipleTimeStep", "FullLessFast", "check_substeps"]
 
 _SUMMED = ("energy", "free_energy", "forces", "stress")
 
@@ -64,17 +66,22 @@ class MultipleTimeStep(Calculator):
     fast : ASE calculator
         The rapidly varying forces (bonded, short-range pair): called ``substeps``
         times per outer step of a rigidmd dynamics.
-    slow : ASE calculator
+    slow : ASE calculator, optional
         The slowly varying rest (long-range electrostatics, the difference between
         an expensive model and a cheap one): called once per outer step.
     substeps : int, default 1
         Inner steps per outer step (``k``); the dynamics' ``timestep`` is the
         outer step.  ``1`` is the impulse form of velocity Verlet.
+    full : ASE calculator, optional
+        In place of ``slow``: the full model, whose difference from ``fast`` is the
+        slow level (:class:`FullLessFast`; one call of ``full`` per outer step, and
+        none of ``fast``, whose last inner call is at the same positions).
 
     Raises
     ------
     TypeError
-        A calculator missing or not an ASE calculator, or ``substeps`` not a whole number.
+        A calculator missing or not an ASE calculator, both or neither of ``slow``
+        and ``full``, or ``substeps`` not a whole number.
     ValueError
         ``substeps`` below 1.
 
@@ -88,12 +95,23 @@ class MultipleTimeStep(Calculator):
 
     implemented_properties = list(_SUMMED)
 
-    def __init__(self, fast, slow, substeps: int = 1):
+    def __init__(self, fast, slow=None, substeps: int = 1, *, full=None):
+        if (slow is None) == (full is None):
+            raise TypeError("MultipleTimeStep: give the slow level as slow= or the full model "
+                            "as full= (the slow level is then full less fast), "
+                            + ("not both" if full is not None else "the slow calculator is "
+                               "missing (None)"))
         _check_level("fast", fast)
-        _check_level("slow", slow)
+        if full is not None:
+            _check_level("full", full)
+            slow = FullLessFast(full, fast)
+        else:
+            _check_level("slow", slow)
         k = check_substeps(substeps)
         super().__init__()
         self.fast, self.slow, self._substeps = fast, slow, k
+        #: The full model when the slow level is full less fast (``full=``), else None.
+        self.full = full
         # What both levels compute (a property one lacks is no property of the sum).
         own = [getattr(calc, "implemented_properties", _SUMMED) for calc in (fast, slow)]
         self.implemented_properties = [
@@ -174,8 +192,80 @@ class MultipleTimeStep(Calculator):
                 calc.set_checkpoint_state(saved[level])
 
     def todict(self) -> dict:
-        return {"fast": type(self.fast).__name__, "slow": type(self.slow).__name__,
-                "substeps": self._substeps}
+        out = {"fast": type(self.fast).__name__, "slow": type(self.slow).__name__,
+               "substeps": self._substeps}
+        if self.full is not None:
+            out["full"] = type(self.full).__name__
+        return out
+
+
+class FullLessFast(Calculator):
+    """An ASE calculator: a full model less a fast one, each asked once for everything.
+
+    The slow level of ``MultipleTimeStep(fast, full=model)``.  Each call asks
+    ``full`` for all the properties wanted in one call, then ``fast``, whose cache
+    holds them when its last call was at the same positions (the last inner step of
+    an outer step).  ASE's ``LinearCombinationCalculator`` asks its calculators one
+    property at a time: a calculator that computes only what it is asked for
+    (:class:`~rigidmd.lammps.LAMMPSCalculator` tallies the energy only when asked)
+    was then called twice when the step wanted forces and energy.
+
+    Parameters
+    ----------
+    full, fast : ASE calculators
+    """
+
+    def __init__(self, full, fast):
+        _check_level("full", full)
+        _check_level("fast", fast)
+        super().__init__()
+        self.full, self.fast = full, fast
+        own = [getattr(calc, "implemented_properties", _SUMMED) for calc in (full, fast)]
+        self.implemented_properties = [
+            name for name in _SUMMED
+            if all(name in names or (name == "free_energy" and "energy" in names)
+                   for names in own)]
+
+    def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+        """``full`` less ``fast`` for every property asked (one call of each at most)."""
+        super().calculate(atoms, properties, system_changes)
+        atoms = atoms if atoms is not None else self.atoms
+        wanted = [name for name in properties if name in _SUMMED]
+        values = {}
+        for sign, (level, calc) in ((1.0, ("full", self.full)), (-1.0, ("fast", self.fast))):
+            calculate_together(calc, atoms, [
+                name for name in wanted
+                if name in getattr(calc, "implemented_properties", _SUMMED)])
+            for name in wanted:
+                try:
+                    value = _level_property(calc, name, atoms)
+                except PropertyNotImplementedError:
+                    raise PropertyNotImplementedError(
+                        f"FullLessFast: the {level} calculator {type(calc).__name__} provides "
+                        f"no {name}") from None
+                values[name] = value if sign > 0 else values[name] - value
+        if "energy" in values and "free_energy" not in values:
+            values["free_energy"] = values["energy"]
+        self.results.update(values)
+
+    def close(self) -> None:
+        """Close the full model if it has a ``close`` (the fast level is the split's own)."""
+        close = getattr(self.full, "close", None)
+        if callable(close):
+            close()
+
+    def get_checkpoint_state(self):
+        """The full model's ``get_checkpoint_state()`` (None without one)."""
+        return (self.full.get_checkpoint_state()
+                if hasattr(self.full, "get_checkpoint_state") else None)
+
+    def set_checkpoint_state(self, saved) -> None:
+        """Give the full model what its ``get_checkpoint_state`` gave."""
+        if saved is not None and hasattr(self.full, "set_checkpoint_state"):
+            self.full.set_checkpoint_state(saved)
+
+    def todict(self) -> dict:
+        return {"full": type(self.full).__name__, "fast": type(self.fast).__name__}
 
 
 def _level_property(calc, name: str, atoms):
