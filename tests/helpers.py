@@ -15,13 +15,14 @@ import numba
 import numpy as np
 from ase import Atoms, units
 from ase.calculators.calculator import Calculator, all_changes
-from ase.calculators.tip3p import TIP3P
+from ase.calculators.tip3p import TIP3P, rOH
 from ase.io import write
 
 from rigidmd import rigid_maxwell_boltzmann
 from rigidmd.lammps import _numpy as lammps_numpy
+from rigidmd.lammps import tip3p_charges
 from rigidmd.run import cli
-from rigidmd.systems import co2_water_mixture, water_cluster
+from rigidmd.systems import co2_water_mixture, water_box, water_cluster
 
 #: The tests' data files.
 DATA = Path(__file__).with_name("data")
@@ -737,3 +738,25 @@ def rigid_temperature(atoms, n_bodies):
     """The temperature of ``n_bodies`` rigid molecules with the total momentum held
     (6 n_bodies - 3 degrees of freedom), K."""
     return 2 * atoms.get_kinetic_energy() / ((6 * n_bodies - 3) * units.kB)
+
+
+# ---------------------------------------------------------------- water frames (analysis)
+def water_frames(n_frames=4, seed=0):
+    """A wrapped 8-water box (molecules across the faces) and rigidly moved copies."""
+    atoms = water_box(2, seed=seed, whole=False)
+    atoms.set_initial_charges(tip3p_charges(atoms))
+    rng = np.random.default_rng(seed)
+    frames = [atoms]
+    for _ in range(n_frames - 1):
+        new = frames[-1].copy()
+        new.positions += rng.normal(scale=0.05, size=(1, 3))
+        new.wrap()
+        frames.append(new)
+    return frames
+
+
+def assert_whole_waters(positions, n_water, atol=2e-5):
+    """O–H distances of every water equal TIP3P's (default: float32 precision)."""
+    x = np.asarray(positions, dtype=float).reshape(n_water, 3, 3)
+    d = np.linalg.norm(x[:, 1:] - x[:, :1], axis=2)
+    np.testing.assert_allclose(d, rOH, atol=atol)

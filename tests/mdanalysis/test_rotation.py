@@ -10,7 +10,7 @@ import pytest
 
 mda = pytest.importorskip("MDAnalysis", reason='needs MDAnalysis (pip install "rigidmd[analysis]")')
 from ase import units
-from helpers import ZeroForce
+from helpers import ZeroForce, water_frames
 
 from rigidmd import RigidBodies, RigidVerlet
 from rigidmd.lammps import tip3p_charges
@@ -26,21 +26,6 @@ from rigidmd.systems import water_box
 
 pytestmark = pytest.mark.filterwarnings(
     "ignore:DCDReader currently makes independent timesteps:DeprecationWarning")
-
-
-
-def water_frames(n_frames=4, seed=0):
-    """A wrapped 8-water box (molecules across the faces) and rigidly moved copies."""
-    atoms = water_box(2, seed=seed, whole=False)
-    atoms.set_initial_charges(tip3p_charges(atoms))
-    rng = np.random.default_rng(seed)
-    frames = [atoms]
-    for _ in range(n_frames - 1):
-        new = frames[-1].copy()
-        new.positions += rng.normal(scale=0.05, size=(1, 3))
-        new.wrap()
-        frames.append(new)
-    return frames
 
 
 # ---------------------------------------------------------------------------- rotation

@@ -9,42 +9,18 @@ import pytest
 mda = pytest.importorskip("MDAnalysis", reason='needs MDAnalysis (pip install "rigidmd[analysis]")')
 from ase import units
 from ase.calculators.calculator import Calculator, all_changes
-from ase.calculators.tip3p import TIP3P, rOH
+from ase.calculators.tip3p import TIP3P
 from ase.io import read
-from helpers import ZeroForce
+from helpers import ZeroForce, assert_whole_waters, water_frames
 
 from rigidmd import RigidVerlet
 from rigidmd.lammps import tip3p_charges
 from rigidmd.mdanalysis import PS, MDAWriter
-from rigidmd.systems import water_box
 
 pytestmark = pytest.mark.filterwarnings(
     "ignore:DCDReader currently makes independent timesteps:DeprecationWarning")
 
 DATA = Path(__file__).resolve().parents[1] / "data"
-
-
-
-def water_frames(n_frames=4, seed=0):
-    """A wrapped 8-water box (molecules across the faces) and rigidly moved copies."""
-    atoms = water_box(2, seed=seed, whole=False)
-    atoms.set_initial_charges(tip3p_charges(atoms))
-    rng = np.random.default_rng(seed)
-    frames = [atoms]
-    for _ in range(n_frames - 1):
-        new = frames[-1].copy()
-        new.positions += rng.normal(scale=0.05, size=(1, 3))
-        new.wrap()
-        frames.append(new)
-    return frames
-
-
-
-def assert_whole_waters(positions, n_water, atol=2e-5):
-    """O–H distances of every water equal TIP3P's (default: float32 precision)."""
-    x = np.asarray(positions, dtype=float).reshape(n_water, 3, 3)
-    d = np.linalg.norm(x[:, 1:] - x[:, :1], axis=2)
-    np.testing.assert_allclose(d, rOH, atol=atol)
 
 
 # ---------------------------------------------------------------------------- streaming
