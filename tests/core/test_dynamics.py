@@ -626,3 +626,35 @@ def test_a_subclass_log_is_called_at_every_step_of_a_run():
     assert [n for n, _ in logged] == [0, 1, 2, 3, 4, 5]
     # The log reads the energy of the atoms as they are at that step.
     assert logged[-1][1] == atoms.get_potential_energy()
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+@pytest.mark.parametrize("kind", ["mtk", "crescale"])
+def test_a_state_exported_before_the_first_force_call_continues_exactly(kind, backend):
+    """``get_state()`` of a dynamics that never called its calculator holds no forces (it
+    says so: ``forces_known`` False); restored, the next run's start calls the calculator,
+    as the original's did, so a barostat's first step has its virial and the run is the
+    uninterrupted one bit for bit: restored in a new dynamics, and in one whose calculator
+    holds results for these very positions (a ``run(0)``), which are not the record's."""
+    from helpers import dimer_fluid, npt
+
+    def build():
+        return npt(dimer_fluid(n_side=3, rc=5.0), kind, backend=backend)
+
+    reference = build()
+    reference.run(4)
+    saved = build().get_state()
+    assert saved["record"]["forces_known"] is False and saved["record"]["virial"] is None
+    restored = build()
+    restored.set_state(saved)
+    restored.run(4)
+    assert restored.record.virial is not None and restored.record.forces_known
+    again = build()
+    again.run(0)  # the calculator now holds results for the saved positions
+    again.set_state(saved)
+    again.run(4)
+    for dyn in (restored, again):
+        np.testing.assert_array_equal(dyn.atoms.positions, reference.atoms.positions)
+        np.testing.assert_array_equal(dyn.atoms.get_momenta(), reference.atoms.get_momenta())
+        np.testing.assert_array_equal(dyn.atoms.cell.array, reference.atoms.cell.array)
+        assert dyn.get_state()["record"]["forces_known"] is True
