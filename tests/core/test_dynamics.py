@@ -658,3 +658,38 @@ def test_a_state_exported_before_the_first_force_call_continues_exactly(kind, ba
         np.testing.assert_array_equal(dyn.atoms.get_momenta(), reference.atoms.get_momenta())
         np.testing.assert_array_equal(dyn.atoms.cell.array, reference.atoms.cell.array)
         assert dyn.get_state()["record"]["forces_known"] is True
+
+
+def test_from_parts_builds_the_class_around_ready_parts_and_checks_them():
+    """``cls.from_parts`` gives an instance of ``cls`` holding the very parts (as the class
+    holds them: ``thermostat``, ``barostat``), and refuses parts the class is not built
+    around in one line, before touching the atoms."""
+    from helpers import dimer_fluid
+
+    from rigidmd import RigidBussi, RigidDynamics, RigidNPT
+    from rigidmd.couplings.barostats import MTKBarostat
+    from rigidmd.couplings.thermostats import BussiThermostat, NoseHooverThermostat
+
+    part = BussiThermostat(300, 50 * units.fs)
+    dyn = RigidBussi.from_parts(waters(2), units.fs, [part])
+    assert type(dyn) is RigidBussi and dyn.thermostat is part and dyn.couplings == (part,)
+    assert dyn.taut == 50 * units.fs and dyn.todict()["md-type"] == "RigidBussi"
+    parts = [NoseHooverThermostat(80, 50 * units.fs), MTKBarostat(80, 0.0, 500 * units.fs)]
+    npt = RigidNPT.from_parts(dimer_fluid(n_side=3, rc=5.0), units.fs, parts, bodies="tags")
+    assert (npt.thermostat, npt.barostat) == tuple(parts)
+    plain = RigidDynamics.from_parts(waters(2), units.fs, [BussiThermostat(300, 50 * units.fs)])
+    assert type(plain) is RigidDynamics
+    atoms = waters(2)
+    before = atoms.positions.copy()
+    for cls, given, message in [
+            (RigidVerlet, [part], "RigidVerlet is built around the parts none; got "
+                                  "BussiThermostat"),
+            (RigidBussi, [], "RigidBussi is built around the parts BussiThermostat; got none"),
+            (RigidNPT, [part, parts[1]], "RigidNPT is built around the parts "
+                                         "NoseHooverThermostat, MTKBarostat; got "
+                                         "BussiThermostat, MTKBarostat")]:
+        with pytest.raises(ValueError) as err:
+            cls.from_parts(atoms, units.fs, given)
+        assert str(err.value) == message
+    np.testing.assert_array_equal(atoms.positions, before)
+    assert atoms.constraints == []
