@@ -713,8 +713,9 @@ def free_waters(n=8, seed=1, temperature_K=250):
 def checkpoint_continues(build, calculator, path, before=4, after=4):
     """``build()`` run ``before + after`` steps, and ``build()`` run ``before``, saved in a
     checkpoint at ``path``, loaded with ``calculator`` and run ``after``: asserts the same
-    bits (positions, momenta, cell, conserved energy) and the same parts (a checkpoint
-    comes back as a :class:`~rigidmd.RigidDynamics` with them); returns ``(reference, resumed)``."""
+    bits (positions, momenta, cell, conserved energy), the same class and the same parts
+    (a checkpoint comes back as the class saved, built around them: the same ``todict()``);
+    returns ``(reference, resumed)``."""
     from rigidmd import load_checkpoint
 
     reference = build()
@@ -724,8 +725,9 @@ def checkpoint_continues(build, calculator, path, before=4, after=4):
     first.save_checkpoint(path)
     resumed = load_checkpoint(path, calculator)
     assert resumed.nsteps == before
+    assert type(resumed) is type(first)
     assert [type(part) for part in resumed.couplings] == [type(part) for part in first.couplings]
-    assert resumed.todict()["couplings"] == first.todict()["couplings"]
+    assert resumed.todict() == first.todict()
     resumed.run(after)
     np.testing.assert_array_equal(resumed.atoms.positions, reference.atoms.positions)
     np.testing.assert_array_equal(resumed.atoms.get_momenta(), reference.atoms.get_momenta())

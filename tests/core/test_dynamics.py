@@ -626,3 +626,70 @@ def test_a_subclass_log_is_called_at_every_step_of_a_run():
     assert [n for n, _ in logged] == [0, 1, 2, 3, 4, 5]
     # The log reads the energy of the atoms as they are at that step.
     assert logged[-1][1] == atoms.get_potential_energy()
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+@pytest.mark.parametrize("kind", ["mtk", "crescale"])
+def test_a_state_exported_before_the_first_force_call_continues_exactly(kind, backend):
+    """``get_state()`` of a dynamics that never called its calculator holds no forces (it
+    says so: ``forces_known`` False); restored, the next run's start calls the calculator,
+    as the original's did, so a barostat's first step has its virial and the run is the
+    uninterrupted one bit for bit: restored in a new dynamics, and in one whose calculator
+    holds results for these very positions (a ``run(0)``), which are not the record's."""
+    from helpers import dimer_fluid, npt
+
+    def build():
+        return npt(dimer_fluid(n_side=3, rc=5.0), kind, backend=backend)
+
+    reference = build()
+    reference.run(4)
+    saved = build().get_state()
+    assert saved["record"]["forces_known"] is False and saved["record"]["virial"] is None
+    restored = build()
+    restored.set_state(saved)
+    restored.run(4)
+    assert restored.record.virial is not None and restored.record.forces_known
+    again = build()
+    again.run(0)  # the calculator now holds results for the saved positions
+    again.set_state(saved)
+    again.run(4)
+    for dyn in (restored, again):
+        np.testing.assert_array_equal(dyn.atoms.positions, reference.atoms.positions)
+        np.testing.assert_array_equal(dyn.atoms.get_momenta(), reference.atoms.get_momenta())
+        np.testing.assert_array_equal(dyn.atoms.cell.array, reference.atoms.cell.array)
+        assert dyn.get_state()["record"]["forces_known"] is True
+
+
+def test_from_parts_builds_the_class_around_ready_parts_and_checks_them():
+    """``cls.from_parts`` gives an instance of ``cls`` holding the very parts (as the class
+    holds them: ``thermostat``, ``barostat``), and refuses parts the class is not built
+    around in one line, before touching the atoms."""
+    from helpers import dimer_fluid
+
+    from rigidmd import RigidBussi, RigidDynamics, RigidNPT
+    from rigidmd.couplings.barostats import MTKBarostat
+    from rigidmd.couplings.thermostats import BussiThermostat, NoseHooverThermostat
+
+    part = BussiThermostat(300, 50 * units.fs)
+    dyn = RigidBussi.from_parts(waters(2), units.fs, [part])
+    assert type(dyn) is RigidBussi and dyn.thermostat is part and dyn.couplings == (part,)
+    assert dyn.taut == 50 * units.fs and dyn.todict()["md-type"] == "RigidBussi"
+    parts = [NoseHooverThermostat(80, 50 * units.fs), MTKBarostat(80, 0.0, 500 * units.fs)]
+    npt = RigidNPT.from_parts(dimer_fluid(n_side=3, rc=5.0), units.fs, parts, bodies="tags")
+    assert (npt.thermostat, npt.barostat) == tuple(parts)
+    plain = RigidDynamics.from_parts(waters(2), units.fs, [BussiThermostat(300, 50 * units.fs)])
+    assert type(plain) is RigidDynamics
+    atoms = waters(2)
+    before = atoms.positions.copy()
+    for cls, given, message in [
+            (RigidVerlet, [part], "RigidVerlet is built around the parts none; got "
+                                  "BussiThermostat"),
+            (RigidBussi, [], "RigidBussi is built around the parts BussiThermostat; got none"),
+            (RigidNPT, [part, parts[1]], "RigidNPT is built around the parts "
+                                         "NoseHooverThermostat, MTKBarostat; got "
+                                         "BussiThermostat, MTKBarostat")]:
+        with pytest.raises(ValueError) as err:
+            cls.from_parts(atoms, units.fs, given)
+        assert str(err.value) == message
+    np.testing.assert_array_equal(atoms.positions, before)
+    assert atoms.constraints == []

@@ -104,13 +104,18 @@ def test_checkpoint_continues_bit_for_bit(tmp_path):
 
 
 def test_the_positional_arguments_are_ase_s():
-    """``RigidBussi(atoms, dt, T, taut)`` reads as ASE's ``Bussi(atoms, dt, T, taut)``;
-    ``rng``, ASE's fifth, is a keyword here (with ``fixcm``)."""
+    """``RigidBussi(atoms, dt, T, taut, rng)`` reads as ASE's ``Bussi(atoms, dt, T, taut,
+    rng)``, ``rng`` by keyword as well; ``fixcm``, which ASE's has not, by keyword only."""
     from ase.md.bussi import Bussi
 
     ours = inspect.signature(RigidBussi.__init__).parameters
     ase = inspect.signature(Bussi.__init__).parameters
     positional = [p.name for p in ours.values() if p.kind is p.POSITIONAL_OR_KEYWORD]
-    assert positional == list(ase)[:5] == ["self", "atoms", "timestep", "temperature_K",
-                                           "taut"]
-    assert list(ase)[5] == "rng" and ours["rng"].kind is inspect.Parameter.KEYWORD_ONLY
+    assert positional == [p.name for p in ase.values() if p.kind is p.POSITIONAL_OR_KEYWORD]
+    assert positional == ["self", "atoms", "timestep", "temperature_K", "taut", "rng"]
+    assert ours["rng"].default is ase["rng"].default is None
+    assert ours["fixcm"].kind is inspect.Parameter.KEYWORD_ONLY
+    rng = np.random.default_rng(4)
+    by_position = RigidBussi(waters(2), units.fs, 300, 100 * units.fs, rng)
+    by_name = RigidBussi(waters(2), units.fs, temperature_K=300, taut=100 * units.fs, rng=rng)
+    assert by_position.thermostat.rng is by_name.thermostat.rng is rng

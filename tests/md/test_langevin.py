@@ -6,6 +6,8 @@ arguments and refusals, the part it composes, a short run's energy bookkeeping a
 temperature, its checkpoint.
 """
 
+import inspect
+
 import numpy as np
 import pytest
 from ase import units
@@ -105,3 +107,25 @@ def test_checkpoint_continues_bit_for_bit(tmp_path):
     checkpoint_continues(
         lambda: RigidLangevin(mixture(), 2 * units.fs, 300, 0.01 / units.fs, bodies="mol-id",
                               rng=np.random.default_rng(5)), CoulombLJ(), tmp_path / "state.npz")
+
+
+def test_the_positional_arguments_are_in_ase_s_order():
+    """``RigidLangevin(atoms, dt, T, friction, fixcm)`` in the order of ASE's ``Langevin``
+    (``rng`` by keyword in both); the third is ``temperature_K`` (K) where ASE's
+    positional one is its deprecated ``temperature`` (eV), which the docstring says."""
+    from ase.md.langevin import Langevin
+
+    ours = inspect.signature(RigidLangevin.__init__).parameters
+    ase = inspect.signature(Langevin.__init__).parameters
+
+    def positional(parameters):
+        return [p.name for p in parameters.values() if p.kind is p.POSITIONAL_OR_KEYWORD]
+
+    assert positional(ase) == ["self", "atoms", "timestep", "temperature", "friction", "fixcm"]
+    assert positional(ours) == ["self", "atoms", "timestep", "temperature_K", "friction",
+                                "fixcm"]
+    assert ours["rng"].kind is ase["rng"].kind is inspect.Parameter.KEYWORD_ONLY
+    assert "the third is ``temperature_K``, in K, where ASE's is ``temperature`` in eV" in " ".join(
+        RigidLangevin.__doc__.split())
+    dyn = RigidLangevin(waters(2), units.fs, 300, 0.01 / units.fs, False)
+    assert dyn.thermostat.fixcm is False

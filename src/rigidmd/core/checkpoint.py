@@ -11,16 +11,18 @@ over the target), a NumPy ``.npz`` archive holding
   continuation does not measure them again;
 * the state: centres of mass, velocities, quaternions, NO_SQUISH momenta
   (the axial momentum of linear bodies included), free atoms, cell;
-* the forces, torques and virial of the last force call, and the scheme's
-  scratch values (exaDEM's accelerations);
+* the forces, torques and virial of the last force call (or that there was
+  none yet: a continuation then calls the calculator at its start), and the
+  scheme's scratch values (exaDEM's accelerations);
+* the dynamics' class (``RigidBussi``, ...) and its bases, by name;
 * step count, simulated time, time step, integrator scheme and backend;
 * every coupling part: its kind, parameters and variables (chains, barostat,
   random-number generator states, which parts share a generator);
 * anything the caller adds (the command line records the length of each output).
 
 It only serialises what the dynamics exports (``dyn.get_state()``);
-:func:`rigidmd.load_checkpoint` rebuilds the dynamics with a calculator you
-give (``dyn.set_state(...)``) and continues exactly: with a deterministic
+:func:`rigidmd.load_checkpoint` rebuilds the dynamics, of the class saved, with a
+calculator you give (``dyn.set_state(...)``) and continues exactly: with a deterministic
 calculator the positions after ``n`` more steps are bit-identical to those
 of the run that was never stopped.  (Calculators whose summation order
 depends on history, such as a LAMMPS neighbour list built at another step,
@@ -184,6 +186,9 @@ def save_checkpoint(dyn, path, extra=None):
     meta = {
         "format": FORMAT,
         "class": type(dyn).__name__,
+        # The class's bases down to RigidDynamics: a class rigidmd does not know (the
+        # user's own) is loaded as the nearest one it does.
+        "classes": saved["classes"],
         "nsteps": saved["nsteps"], "time": saved["time"], "dt": saved["dt"],
         "scheme": saved["scheme"], "scheme_name": saved["scheme_name"],
         "backend": saved["backend"], "bodies_rule": saved["bodies_rule"],
@@ -192,7 +197,9 @@ def save_checkpoint(dyn, path, extra=None):
         "scratch": {k: v for k, v in record["scratch"].items() if isinstance(v, np.ndarray)},
         # What the per-step record had computed (the kinetic tensor as the coupling parts
         # updated it): a continuation reads these, not fresh sums that differ in roundoff.
-        "record": {key: record[key] for key in ("volume", "kinetic", "rotational")},
+        # Whether the forces are a call's (False before the first: zeros, called at the start).
+        "record": {key: record[key] for key in ("volume", "kinetic", "rotational",
+                                                 "forces_known")},
         "levels": {level: {"energy": kept["energy"]} for level, kept in levels.items()},
         "info": {k: v for k, v in atoms.info.items() if _is_json(v)},
         "extra": extra or {},
@@ -250,7 +257,9 @@ class Checkpoint:
                         "r": a[f"{level}_r"], "virial": a.get(f"{level}_virial"),
                         "energy": kept["energy"]}
                 for level, kept in meta["levels"].items()}
+        classes = meta.get("classes") or ([meta["class"]] if meta.get("class") else [])
         return {
+            "classes": list(classes),
             "nsteps": meta["nsteps"], "time": meta["time"], "dt": meta["dt"],
             "scheme": meta["scheme"], "scheme_name": meta["scheme_name"],
             "backend": meta["backend"], "bodies_rule": meta["bodies_rule"],

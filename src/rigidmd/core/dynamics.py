@@ -31,6 +31,7 @@ The time step is read from :attr:`RigidDynamics.dt` at every step.
 """
 
 import warnings
+from collections.abc import Sequence
 
 from ase import Atoms
 from ase.md.md import MolecularDynamics
@@ -45,7 +46,7 @@ from rigidmd.core.checks import (
     check_massless_momenta,
     check_timestep,
 )
-from rigidmd.core.coupling import check_composition, export_parts, share_target
+from rigidmd.core.coupling import Coupling, check_composition, export_parts, share_target
 from rigidmd.core.dof import RigidBodyDOF
 from rigidmd.core.forces import NonFiniteForceError
 from rigidmd.core.link import AtomsSync, BodyLink
@@ -249,6 +250,61 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             self.attach(self.closelater(RigidLogger(self, logfile, pressure=pressure)),
                         loginterval)
 
+    #: The coupling parts' types a class is built around, in order (None: any parts);
+    #: :meth:`from_parts` checks them.
+    part_types: tuple | None = None
+
+    @classmethod
+    def from_parts(cls, atoms: Atoms, timestep: float, couplings: Sequence[Coupling] = (),
+                   **kwargs) -> "RigidDynamics":
+        """A dynamics of this class around ready coupling parts (a checkpoint's).
+
+        The class's own constructor builds its parts from ASE-style arguments
+        (``temperature_K``, ``taut``, ...); this builds it around parts that
+        exist, as :func:`rigidmd.load_checkpoint` does, so that the class's
+        methods and properties (``thermostat_work``, ``set_friction``, ...)
+        work on them.
+
+        Parameters
+        ----------
+        atoms : ase.Atoms
+        timestep : float
+            ASE time units.
+        couplings : sequence of rigidmd.core.coupling.Coupling
+            The parts, in the order the class holds them (thermostat, then barostat).
+        **kwargs
+            As for :class:`RigidDynamics` (``bodies``, ``integrator``, ``backend``,
+            ``trajectory``, ...), without ``couplings``.
+
+        Raises
+        ------
+        ValueError
+            The parts are not those the class is built around (:attr:`part_types`).
+        """
+        parts = tuple(couplings)
+        cls.check_parts(parts)
+        dyn = cls.__new__(cls)
+        cls._assemble(dyn, atoms, timestep, parts, **kwargs)
+        return dyn
+
+    @classmethod
+    def check_parts(cls, parts: Sequence[Coupling]) -> None:
+        """Refuse coupling parts that are not those the class is built around (ValueError,
+        one line naming both); any parts for a class whose :attr:`part_types` is None."""
+        expected, parts = cls.part_types, tuple(parts)
+        if expected is None:
+            return
+        if len(parts) != len(expected) or not all(
+                isinstance(part, kind) for part, kind in zip(parts, expected, strict=True)):
+            have = ", ".join(type(part).__name__ for part in parts) or "none"
+            want = ", ".join(kind.__name__ for kind in expected) or "none"
+            raise ValueError(f"{cls.__name__} is built around the parts {want}; got {have}")
+
+    def _assemble(self, atoms, timestep, parts, **kwargs):
+        """Initialise around the ready ``parts`` (:meth:`from_parts`); a base whose
+        constructor takes its parts otherwise overrides it."""
+        RigidDynamics.__init__(self, atoms, timestep, couplings=parts, **kwargs)
+
     # ------------------------------------------------------------ time step
     @property
     def dt(self) -> float:
@@ -368,16 +424,21 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
     def get_state(self) -> dict:
         """Everything an exact continuation needs, as plain data (copies).
 
-        Keys: ``nsteps``, ``time``, ``dt``, ``scheme``, ``scheme_name``,
-        ``backend``, ``bodies_rule``, ``body_ids``, ``model`` (the body
-        model's arrays: the reference frames), ``state`` (the rigid state's
-        arrays), ``record`` (forces, torques, virial, scratch values and the
-        quantities the per-step record holds) and ``couplings`` (each part's
-        kind, parameters, variables and random-number generator).  The atoms
+        Keys: ``classes`` (the names of this dynamics' class and of its bases
+        down to ``RigidDynamics``, most derived first: what
+        :func:`rigidmd.load_checkpoint` rebuilds), ``nsteps``, ``time``, ``dt``,
+        ``scheme``, ``scheme_name``, ``backend``, ``bodies_rule``, ``body_ids``,
+        ``model`` (the body model's arrays: the reference frames), ``state`` (the
+        rigid state's arrays), ``record`` (forces, torques, virial, scratch
+        values, the quantities the per-step record holds, and ``forces_known``:
+        False before the first force call) and ``couplings`` (each part's kind,
+        parameters, variables and random-number generator).  The atoms
         themselves are ``dyn.atoms``.
         """
         model = self.model
         return {
+            "classes": [cls.__name__ for cls in type(self).__mro__
+                        if issubclass(cls, RigidDynamics)],
             "nsteps": int(self.nsteps), "time": float(self.stepper.time), "dt": float(self._dt),
             "scheme": self.scheme.todict(), "scheme_name": self.scheme.name,
             "backend": self.backend, "bodies_rule": self.bodies.rule,
@@ -394,7 +455,10 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
 
         The stored body model and state replace what the constructor
         measured; the atoms are placed from them and the stored forces are
-        used at the next step without a calculator call.
+        used at the next step without a calculator call.  A state exported
+        before the first force call (``record["forces_known"]`` False) has no
+        forces: the next run's start calls the calculator, as the original's
+        would have.
         """
         self.model.update_from(BodyModel(n_atoms=saved["n_atoms"], **saved["model"]))
         for name in STATE_FIELDS:  # assignments: the state's versions move
@@ -406,7 +470,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self.bodies.rule = saved["bodies_rule"]
         self.atoms.set_cell(self.state.cell)
         self.sync.write_atoms()
-        self.sync.forces_current = True
+        self.sync.restored(self.record.forces_known)
 
     def save_checkpoint(self, path, extra: dict | None = None) -> None:
         """Write everything an exact continuation needs to ``path`` (atomically).

@@ -311,7 +311,16 @@ class AtomsSync:
         elif changed or not self.forces_still_current():
             evaluate()
         self.forces_current = False
+        self.record.forces_known = True
         return changed
+
+    def restored(self, forces_known: bool) -> None:
+        """A state was restored (``set_state``), its atoms written: the next start uses its
+        forces when it had them (no calculator call), and calls the calculator when it
+        had none (exported before the first force call), as the original's start would."""
+        self.forces_current = forces_known
+        if not forces_known:
+            self.calculator = None  # whatever the calculator holds is not the record's
 
     def finish_run(self) -> None:
         """At a run's end (or its interruption): what was written, and whose forces those are."""

@@ -60,6 +60,11 @@ class StepRecord:
         PCDM's start-of-step values); kept across steps.
     link : rigidmd.core.link.BodyLink or None
         The body link whose backend the record's sums follow (None: NumPy).
+    forces_known : bool
+        Whether the forces, torques and virial are a calculator call's for the state:
+        False from construction until a run's start has them (a dynamics exported
+        before its first force call holds zeros, and its restored copy calls the
+        calculator at its start, as the original would).
     """
 
     def __init__(self, state: RigidState, model: BodyModel, link: "BodyLink | None" = None):
@@ -71,6 +76,7 @@ class StepRecord:
         self.virial = None
         self.energy = None
         self.scratch = {}
+        self.forces_known = False
         # Each derived quantity with the state's version it describes (-1: none yet).
         self._volume, self._volume_at = None, -1
         self._kinetic, self._kinetic_at = None, -1
@@ -203,17 +209,19 @@ class StepRecord:
                 "energy": self.energy, "scratch": dict(self.scratch),
                 "volume": volume,
                 "kinetic": None if kinetic is None else kinetic.copy(),
-                "rotational": rotational}
+                "rotational": rotational, "forces_known": self.forces_known}
 
     def set_state(self, saved: dict) -> None:
         """Restore what :meth:`get_state` returned, for the state as it is now (restored
-        first); absent keys leave a quantity to recompute."""
+        first); absent keys leave a quantity to recompute (``forces_known`` absent: the
+        forces are taken as known, as a rigidmd that did not store the key did)."""
         for name in _FORCE_FIELDS:
             if saved.get(name) is not None:
                 setattr(self, name, np.array(saved[name], dtype=float))
         self.virial = None if saved.get("virial") is None else np.array(saved["virial"])
         self.energy = saved.get("energy")
         self.scratch = dict(saved.get("scratch", {}))
+        self.forces_known = bool(saved.get("forces_known", True))
         volume, kinetic, rotational = (saved.get("volume"), saved.get("kinetic"),
                                        saved.get("rotational"))
         self.adopt(None if volume is None else float(volume),

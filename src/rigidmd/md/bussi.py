@@ -12,7 +12,9 @@ __all__ = ["RigidBussi"]
 class RigidBussi(_Thermostatted):
     r"""Stochastic velocity rescaling of rigid bodies.
 
-    See :class:`BussiThermostat`.
+    See :class:`BussiThermostat`.  The arguments are ASE's ``Bussi``'s, in its
+    order (``atoms, timestep, temperature_K, taut, rng``), and ``fixcm`` (by
+    keyword), which ASE's has not.
 
     Parameters
     ----------
@@ -24,6 +26,7 @@ class RigidBussi(_Thermostatted):
     taut : float
         Relaxation time (ASE time units), as in ASE's ``Bussi``.
     rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
+        The fifth positional argument, as in ASE's ``Bussi``.
     fixcm : bool or None, default None
         Keep the total momentum (no drift of the whole system) and count 3 fewer
         degrees of freedom; None is True, with a warning at the first step whose
@@ -40,7 +43,9 @@ class RigidBussi(_Thermostatted):
     G. Bussi, D. Donadio and M. Parrinello, J. Chem. Phys. 126, 014101 (2007).
     """
 
-    def __init__(self, atoms, timestep, temperature_K=None, taut=None, *, rng=None,
+    part_types = (BussiThermostat,)
+
+    def __init__(self, atoms, timestep, temperature_K=None, taut=None, rng=None, *,
                  fixcm=None, **kwargs):
         _required("RigidBussi", temperature_K=temperature_K, taut=taut)
         super().__init__(atoms, timestep, BussiThermostat(temperature_K, taut, rng, fixcm),

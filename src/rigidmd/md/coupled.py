@@ -3,10 +3,15 @@
 :class:`_Thermostatted` is a :class:`~rigidmd.core.dynamics.RigidDynamics` with one
 thermostat part (``self.thermostat``), :class:`BarostattedDynamics` one with a
 thermostat part and a barostat part (``self.barostat``); the classes of this
-package (:mod:`rigidmd.md`) build the parts from ASE-style arguments.
+package (:mod:`rigidmd.md`) build the parts from ASE-style arguments, and
+:meth:`~rigidmd.core.dynamics.RigidDynamics.from_parts` builds any of them around
+ready parts (a checkpoint's: :func:`rigidmd.load_checkpoint`), checked against its
+``part_types``.
 """
 
 from rigidmd.core.dynamics import RigidDynamics
+from rigidmd.couplings.barostats import Barostat
+from rigidmd.couplings.base import Thermostat
 
 __all__ = ["BarostattedDynamics"]
 
@@ -14,12 +19,17 @@ __all__ = ["BarostattedDynamics"]
 class _Thermostatted(RigidDynamics):
     """A rigid dynamics with one thermostat part, exposed as ``self.thermostat``."""
 
+    part_types = (Thermostat,)
+
     def __init__(self, atoms, timestep, thermostat, **kwargs):
         if "couplings" in kwargs:
             raise TypeError(f"{type(self).__name__} builds its own thermostat; "
                             "use RigidDynamics(couplings=...) to compose parts")
         self.thermostat = thermostat
         super().__init__(atoms, timestep, couplings=[thermostat], **kwargs)
+
+    def _assemble(self, atoms, timestep, parts, **kwargs):
+        _Thermostatted.__init__(self, atoms, timestep, *parts, **kwargs)
 
     @property
     def temperature_K(self):
@@ -49,12 +59,17 @@ def _required(cls, **values):
 class BarostattedDynamics(RigidDynamics):
     """A rigid dynamics with a thermostat part and a barostat part."""
 
+    part_types = (Thermostat, Barostat)
+
     def __init__(self, atoms, timestep, thermostat, barostat, **kwargs):
         if "couplings" in kwargs:
             raise TypeError(f"{type(self).__name__} builds its own thermostat and barostat; "
                             "use RigidDynamics(couplings=...) to compose parts")
         self.thermostat, self.barostat = thermostat, barostat
         super().__init__(atoms, timestep, couplings=[thermostat, barostat], **kwargs)
+
+    def _assemble(self, atoms, timestep, parts, **kwargs):
+        BarostattedDynamics.__init__(self, atoms, timestep, *parts, **kwargs)
 
     @property
     def temperature_K(self):

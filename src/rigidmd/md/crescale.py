@@ -46,6 +46,8 @@ class RigidCRescale(BarostattedDynamics):
         As for :class:`~rigidmd.core.dynamics.RigidDynamics`.
     """
 
+    part_types = (BussiThermostat, CRescaleBarostat)
+
     def __init__(self, atoms, timestep, temperature_K, pressure_au, taut, taup,
                  compressibility_au, *, couple="iso", rng=None, every=1, **kwargs):
         rng = check_rng(rng)

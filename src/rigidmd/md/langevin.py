@@ -12,7 +12,12 @@ __all__ = ["RigidLangevin"]
 class RigidLangevin(_Thermostatted):
     r"""Langevin dynamics of rigid bodies.
 
-    See :class:`LangevinThermostat`.
+    See :class:`LangevinThermostat`.  The arguments are in the order of ASE's
+    ``Langevin`` (``atoms, timestep, temperature, friction, fixcm``, then ``rng``
+    by keyword) with one difference: the third is ``temperature_K``, in K, where
+    ASE's is ``temperature`` in eV (deprecated there; ``temperature_K`` is a
+    keyword of ASE's).  Pass ``temperature_K=`` by name and a call reads the same
+    for both.
 
     Parameters
     ----------
@@ -24,19 +29,23 @@ class RigidLangevin(_Thermostatted):
     friction : float
         :math:`\gamma`, per ASE time unit (``0.01 / ase.units.fs`` is 0.01 fs⁻¹),
         as in ASE's ``Langevin``.  ``friction * timestep`` must not exceed 0.5.
-    rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
     fixcm : bool or None, default None
-        Keep the total momentum (no drift of the whole system), as ASE's ``Langevin``;
-        None is True, with a warning at the first step whose forces do not conserve the
-        momentum (a wall, an external field: pass False there).
+        Keep the total momentum (no drift of the whole system), as ASE's ``Langevin``
+        (its fifth positional argument there too, default True); None is True, with
+        a warning at the first step whose forces do not conserve the momentum (a
+        wall, an external field: pass False there).
+    rng : numpy.random.Generator, numpy.random.RandomState or numpy.random, optional
+        By keyword, as in ASE's ``Langevin``.
     **kwargs
         ``bodies``, ``integrator``, ``integrator_options``, ``trajectory``,
         ``logfile``, ``loginterval``, ``backend`` as for
         :class:`~rigidmd.core.dynamics.RigidDynamics`.
     """
 
-    def __init__(self, atoms, timestep, temperature_K=None, friction=None, *, rng=None,
-                 fixcm=None, **kwargs):
+    part_types = (LangevinThermostat,)
+
+    def __init__(self, atoms, timestep, temperature_K=None, friction=None, fixcm=None, *,
+                 rng=None, **kwargs):
         _required("RigidLangevin", temperature_K=temperature_K, friction=friction)
         super().__init__(atoms, timestep,
                          LangevinThermostat(temperature_K, friction, rng, fixcm), **kwargs)

@@ -47,6 +47,8 @@ class RigidLangevinBAOAB(_Thermostatted):
     144114 (2015).
     """
 
+    part_types = (LangevinBAOABThermostat,)
+
     def __init__(self, atoms, timestep, temperature_K=None, friction=None, *, T_tau=None,
                  rng=None, fixcm=None, **kwargs):
         if friction is not None and T_tau is not None:

@@ -52,6 +52,8 @@ class RigidMCBarostat(BarostattedDynamics):
         As for :class:`~rigidmd.core.dynamics.RigidDynamics`.
     """
 
+    part_types = (Coupling, MonteCarloBarostat)  # any thermostat part, as the constructor
+
     def __init__(self, atoms, timestep, temperature_K, pressure_au, taut=None, *,
                  thermostat=None, couple="iso", every=25, rng=None, adapt_moves=500,
                  step=0.01, **kwargs):

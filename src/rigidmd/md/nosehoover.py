@@ -13,7 +13,9 @@ __all__ = ["RigidNoseHoover"]
 class RigidNoseHoover(_Thermostatted):
     r"""Nosé–Hoover chains for rigid bodies (LAMMPS ``fix rigid/nvt``).
 
-    See :class:`NoseHooverThermostat`.
+    See :class:`NoseHooverThermostat`.  The positional arguments are ASE's
+    ``NoseHooverChainNVT``'s (``atoms, timestep, temperature_K, tdamp, tchain,
+    tloop``, with its defaults), and ``fixcm`` (by keyword), which ASE's has not.
 
     Parameters
     ----------
@@ -43,6 +45,8 @@ class RigidNoseHoover(_Thermostatted):
     G. J. Martyna, M. E. Tuckerman, D. J. Tobias and M. L. Klein, Mol. Phys. 87,
     1117 (1996).
     """
+
+    part_types = (NoseHooverThermostat,)
 
     def __init__(self, atoms, timestep, temperature_K=None, tdamp=None, tchain=3, tloop=1,
                  *, fixcm=None, **kwargs):

@@ -43,6 +43,8 @@ class RigidNPT(BarostattedDynamics):
         ``integrator``, ``trajectory``, ``logfile``, ...).
     """
 
+    part_types = (NoseHooverThermostat, MTKBarostat)
+
     def __init__(self, atoms, timestep, temperature_K, pressure_au, tdamp, pdamp, *,
                  couple="iso", tchain=3, pchain=3, tloop=1, ploop=1, **kwargs):
         super().__init__(

@@ -25,6 +25,8 @@ class RigidVerlet(RigidDynamics):
     ``couplings``.
     """
 
+    part_types = ()
+
     def __init__(self, atoms, timestep, bodies=None, trajectory=None, logfile=None,
                  loginterval=1, integrator="no_squish", integrator_options=None, backend=None,
                  **kwargs):
