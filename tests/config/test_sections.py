@@ -142,3 +142,19 @@ def test_a_file_field_that_is_no_file_name_is_refused_in_one_line(tmp_path, fiel
                          ("missing.xyz", f"^{field}: no such file ")]:
         with pytest.raises(ConfigError, match=match):
             StructureSection.from_config(raw | {field: value}, tmp_path)
+
+
+def test_the_water_box_builder_takes_whole(tmp_path):
+    """``whole`` is water_box's own argument (molecules whole across the faces, the
+    default, or wrapped atom by atom); the section refused it as an unknown key."""
+    for whole in (True, False):
+        section = StructureSection.from_config(
+            {"structure": {"builtin": "water_box", "n_side": 2, "seed": 1, "whole": whole}},
+            tmp_path)
+        atoms = section.build_atoms()
+        scaled = atoms.get_scaled_positions(wrap=False)
+        inside = bool(((scaled >= 0) & (scaled < 1)).all())
+        assert inside != whole  # whole molecules stick out of the cell; wrapped atoms do not
+    with pytest.raises(ConfigError, match="^structure.whole: use true or false, got 'yes'$"):
+        StructureSection.from_config(
+            {"structure": {"builtin": "water_box", "n_side": 2, "whole": "yes"}}, tmp_path)

@@ -1,6 +1,6 @@
 """The bases of the dynamics classes (:mod:`rigidmd.md.coupled`), through those classes.
 
-``_Thermostatted`` (RigidLangevin, RigidLangevinBAOAB, RigidBussi, RigidNoseHoover) and
+``ThermostattedDynamics`` (RigidLangevin, RigidLangevinBAOAB, RigidBussi, RigidNoseHoover) and
 :class:`~rigidmd.md.coupled.BarostattedDynamics` (RigidNPT, RigidCRescale,
 RigidMCBarostat) build their parts themselves: what they share is tested once here for
 every class, what each adds in ``tests/md/test_<module>.py``.

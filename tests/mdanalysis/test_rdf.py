@@ -77,3 +77,14 @@ def test_rdf_of_random_molecules_tends_to_one():
     assert np.mean(res.rdf[window]) == pytest.approx(1.0, abs=0.03)  # noise ~1 %
     oxygen = RadialDistribution(u, "name OW", r_max=5.0, bin_width=0.5).run().results
     assert np.mean(oxygen.rdf[oxygen.bins > 2.5]) == pytest.approx(1.0, abs=0.05)
+
+
+@pytest.mark.parametrize("kwargs", [{"range": (0.0, 6.0)}, {"nbins": 40},
+                                    {"exclude_same": "residue"}])
+def test_mdanalysis_s_own_binning_arguments_are_named(kwargs):
+    """InterRDF's ``range``/``nbins``/``exclude_same`` are set from ``r_max``, ``bin_width`` and
+    ``exclude_same_residue``: passing them gave Python's 'multiple values' TypeError."""
+    u = to_universe([lattice(3)])
+    with pytest.raises(TypeError, match=f"^RadialDistribution: {next(iter(kwargs))} is "
+                                        "MDAnalysis's InterRDF argument; give r_max"):
+        RadialDistribution(u, "name AR", **kwargs)

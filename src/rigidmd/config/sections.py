@@ -54,7 +54,7 @@ BUILDER_FIELDS = {
                       ("model", "water_model", None, None)),
     "water_box": (("n_side", "int", 1, 46), ("seed", "int", 0, None),
                   ("spacing", "float", 2.0, None), ("jitter", "float", 0.0, 1.0),
-                  ("model", "water_model", None, None)),
+                  ("model", "water_model", None, None), ("whole", "flag", None, None)),
 }
 #: Fields of ``calculator.water_model``.
 WATER_MODEL_FIELDS = ("name", "cutoff", "kspace", "accuracy", "tail")
@@ -210,6 +210,11 @@ def _check_builder(source):
         where = f"structure.{key}"
         if kind == "water_model":
             checked[key] = _water_model(where, value).name
+            continue
+        if kind == "flag":  # water_box's whole: molecules kept whole across the faces
+            if not isinstance(value, bool):
+                raise ConfigError(f"{where}: use true or false, got {value!r}")
+            checked[key] = value
             continue
         if kind == "int":
             whole_number(where, value, minimum=low)

@@ -4,12 +4,12 @@ The part is :class:`~rigidmd.couplings.thermostats.BussiThermostat`.
 """
 
 from rigidmd.couplings.thermostats import BussiThermostat
-from rigidmd.md.coupled import _required, _Thermostatted
+from rigidmd.md.coupled import ThermostattedDynamics, required_arguments
 
 __all__ = ["RigidBussi"]
 
 
-class RigidBussi(_Thermostatted):
+class RigidBussi(ThermostattedDynamics):
     r"""Stochastic velocity rescaling of rigid bodies.
 
     See :class:`BussiThermostat`.  The arguments are ASE's ``Bussi``'s, in its
@@ -47,7 +47,7 @@ class RigidBussi(_Thermostatted):
 
     def __init__(self, atoms, timestep, temperature_K=None, taut=None, rng=None, *,
                  fixcm=None, **kwargs):
-        _required("RigidBussi", temperature_K=temperature_K, taut=taut)
+        required_arguments("RigidBussi", temperature_K=temperature_K, taut=taut)
         super().__init__(atoms, timestep, BussiThermostat(temperature_K, taut, rng, fixcm),
                          **kwargs)
 

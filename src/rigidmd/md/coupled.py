@@ -1,6 +1,6 @@
 """The bases of the dynamics classes built from coupling parts.
 
-:class:`_Thermostatted` is a :class:`~rigidmd.core.dynamics.RigidDynamics` with one
+:class:`ThermostattedDynamics` is a :class:`~rigidmd.core.dynamics.RigidDynamics` with one
 thermostat part (``self.thermostat``), :class:`BarostattedDynamics` one with a
 thermostat part and a barostat part (``self.barostat``); the classes of this
 package (:mod:`rigidmd.md`) build the parts from ASE-style arguments, and
@@ -13,10 +13,10 @@ from rigidmd.core.dynamics import RigidDynamics
 from rigidmd.couplings.barostats import Barostat
 from rigidmd.couplings.base import Thermostat
 
-__all__ = ["BarostattedDynamics"]
+__all__ = ["ThermostattedDynamics", "BarostattedDynamics", "required_arguments", "ARGUMENT_UNITS"]
 
 
-class _Thermostatted(RigidDynamics):
+class ThermostattedDynamics(RigidDynamics):
     """A rigid dynamics with one thermostat part, exposed as ``self.thermostat``."""
 
     part_types = (Thermostat,)
@@ -29,7 +29,7 @@ class _Thermostatted(RigidDynamics):
         super().__init__(atoms, timestep, couplings=[thermostat], **kwargs)
 
     def _assemble(self, atoms, timestep, parts, **kwargs):
-        _Thermostatted.__init__(self, atoms, timestep, *parts, **kwargs)
+        ThermostattedDynamics.__init__(self, atoms, timestep, *parts, **kwargs)
 
     @property
     def temperature_K(self):
@@ -45,14 +45,14 @@ class _Thermostatted(RigidDynamics):
         return super().todict() | self.thermostat.todict()
 
 
-_UNITS = {"temperature_K": "K", "friction": "per ASE time unit", "taut": "ASE time units",
+ARGUMENT_UNITS = {"temperature_K": "K", "friction": "per ASE time unit", "taut": "ASE time units",
           "tdamp": "ASE time units"}
 
 
-def _required(cls, **values):
+def required_arguments(cls, **values):
     missing = [name for name, value in values.items() if value is None]
     if missing:
-        needed = " and ".join(f"{name} ({_UNITS[name]})" for name in values)
+        needed = " and ".join(f"{name} ({ARGUMENT_UNITS[name]})" for name in values)
         raise TypeError(f"{cls} needs {needed}; missing: {', '.join(missing)}")
 
 

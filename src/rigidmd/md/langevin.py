@@ -4,12 +4,12 @@ The part is :class:`~rigidmd.couplings.thermostats.LangevinThermostat`.
 """
 
 from rigidmd.couplings.thermostats import LangevinThermostat
-from rigidmd.md.coupled import _required, _Thermostatted
+from rigidmd.md.coupled import ThermostattedDynamics, required_arguments
 
 __all__ = ["RigidLangevin"]
 
 
-class RigidLangevin(_Thermostatted):
+class RigidLangevin(ThermostattedDynamics):
     r"""Langevin dynamics of rigid bodies.
 
     See :class:`LangevinThermostat`.  The arguments are in the order of ASE's
@@ -46,7 +46,7 @@ class RigidLangevin(_Thermostatted):
 
     def __init__(self, atoms, timestep, temperature_K=None, friction=None, fixcm=None, *,
                  rng=None, **kwargs):
-        _required("RigidLangevin", temperature_K=temperature_K, friction=friction)
+        required_arguments("RigidLangevin", temperature_K=temperature_K, friction=friction)
         super().__init__(atoms, timestep,
                          LangevinThermostat(temperature_K, friction, rng, fixcm), **kwargs)
 

@@ -7,12 +7,12 @@ The part is :class:`~rigidmd.couplings.baoab.LangevinBAOABThermostat`.
 import numpy as np
 
 from rigidmd.couplings.baoab import LangevinBAOABThermostat
-from rigidmd.md.coupled import _Thermostatted
+from rigidmd.md.coupled import ThermostattedDynamics
 
 __all__ = ["RigidLangevinBAOAB"]
 
 
-class RigidLangevinBAOAB(_Thermostatted):
+class RigidLangevinBAOAB(ThermostattedDynamics):
     r"""BAOAB Langevin dynamics of rigid bodies (see :mod:`rigidmd.couplings.baoab`).
 
     The O step sits in the middle of the deterministic step

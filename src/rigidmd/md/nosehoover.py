@@ -5,12 +5,12 @@ The part is :class:`~rigidmd.couplings.thermostats.NoseHooverThermostat`.
 """
 
 from rigidmd.couplings.thermostats import NoseHooverThermostat
-from rigidmd.md.coupled import _required, _Thermostatted
+from rigidmd.md.coupled import ThermostattedDynamics, required_arguments
 
 __all__ = ["RigidNoseHoover"]
 
 
-class RigidNoseHoover(_Thermostatted):
+class RigidNoseHoover(ThermostattedDynamics):
     r"""Nosé–Hoover chains for rigid bodies (LAMMPS ``fix rigid/nvt``).
 
     See :class:`NoseHooverThermostat`.  The positional arguments are ASE's
@@ -50,7 +50,7 @@ class RigidNoseHoover(_Thermostatted):
 
     def __init__(self, atoms, timestep, temperature_K=None, tdamp=None, tchain=3, tloop=1,
                  *, fixcm=None, **kwargs):
-        _required("RigidNoseHoover", temperature_K=temperature_K, tdamp=tdamp)
+        required_arguments("RigidNoseHoover", temperature_K=temperature_K, tdamp=tdamp)
         super().__init__(atoms, timestep,
                          NoseHooverThermostat(temperature_K, tdamp, tchain, tloop, fixcm),
                          **kwargs)

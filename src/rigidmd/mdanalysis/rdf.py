@@ -88,6 +88,10 @@ class RadialDistribution(InterRDF):
 
     def __init__(self, universe, select="name OW", select2=None, r_max=None, bin_width=0.05,
                  exclude_same_residue=True, **kwargs):
+        taken = sorted({"range", "nbins", "exclude_same"} & set(kwargs))
+        if taken:
+            raise TypeError(f"RadialDistribution: {', '.join(taken)} is MDAnalysis's InterRDF "
+                            "argument; give r_max and bin_width (Å) and exclude_same_residue")
         g1 = group_of(universe, select)
         g2 = g1 if select2 is None else group_of(universe, select2)
         box = g1.universe.trajectory.ts.dimensions
