@@ -92,6 +92,9 @@ def test_allowed_calculators_with_options_of_other_names_or_kinds(tmp_path):
     with pytest.raises(ConfigError, match=r"^calculator.options.rc: expected a positive "
                                           r"number, got '9'$"):
         check_config(config(tmp_path, calculator={"name": lj, "options": {"rc": "9"}}))
+    # Found by the fuzz test: an option named by a line break made a two-line message.
+    with pytest.raises(ConfigError, match=r"^calculator.options.'\\n': not an option [^\n]*$"):
+        check_config(config(tmp_path, calculator={"name": "tip3p", "options": {"\n": None}}))
 
 
 def test_what_is_on_the_list_is_accepted(tmp_path):

@@ -70,7 +70,7 @@ import re
 import sys
 from pathlib import Path, PurePath
 
-from rigidmd.config.quantities import ConfigError, parse_address
+from rigidmd.config.quantities import ConfigError, key_name, parse_address
 
 __all__ = ["SAFE_LAMMPS_COMMANDS", "SAFE_LAMMPS_STYLES", "safe_style", "ALLOWED_CALCULATORS",
            "GivenOnCommandLine", "check_lammps_commands", "check_calculator",
@@ -379,11 +379,11 @@ def _check_options(where, name, options, allowed):
         if key not in allowed:
             listed = ", ".join(allowed) or "none"
             why = _WHY.get(key, "")
-            raise ConfigError(f"{where}.{key}: {why}not an option a configuration may pass to "
-                              f"{name} without --trust (allowed: {listed}); {TRUST_HINT}")
+            raise ConfigError(f"{where}.{key_name(key)}: {why}not an option a configuration may "
+                              f"pass to {name} without --trust (allowed: {listed}); {TRUST_HINT}")
         kind, test = allowed[key]
         if not test(value):
-            raise ConfigError(f"{where}.{key}: expected {kind}, got {value!r}")
+            raise ConfigError(f"{where}.{key_name(key)}: expected {kind}, got {value!r}")
     if "commands" in options:
         commands = options["commands"]
         check_lammps_commands(f"{where}.commands",
