@@ -137,25 +137,8 @@ class MultipleTimeStep(Calculator):
         """Sum the levels' properties (each level computes what is asked in one call)."""
         super().calculate(atoms, properties, system_changes)
         atoms = atoms if atoms is not None else self.atoms
-        wanted = [name for name in properties if name in _SUMMED]
-        sums = {}
-        for level, calc in self.levels:
-            names = [name for name in wanted
-                     if name in getattr(calc, "implemented_properties", _SUMMED)]
-            calculate_together(calc, atoms, names)
-            for name in wanted:
-                try:
-                    value = _level_property(calc, name, atoms)
-                except PropertyNotImplementedError:
-                    if name in properties:
-                        raise PropertyNotImplementedError(
-                            f"MultipleTimeStep: the {level} calculator "
-                            f"{type(calc).__name__} provides no {name}") from None
-                    continue
-                sums[name] = value if name not in sums else sums[name] + value
-        if "energy" in sums and "free_energy" not in sums:
-            sums["free_energy"] = sums["energy"]
-        self.results.update(sums)
+        terms = [(level, calc, False) for level, calc in self.levels]
+        self.results.update(_combined("MultipleTimeStep", terms, atoms, properties))
 
     def check_level_properties(self, name: str, needed_by: str) -> None:
         """Refuse in one line a level that lacks ``name`` (e.g. ``"stress"``), naming it."""
@@ -230,23 +213,8 @@ class FullLessFast(Calculator):
         """``full`` less ``fast`` for every property asked (one call of each at most)."""
         super().calculate(atoms, properties, system_changes)
         atoms = atoms if atoms is not None else self.atoms
-        wanted = [name for name in properties if name in _SUMMED]
-        values = {}
-        for sign, (level, calc) in ((1.0, ("full", self.full)), (-1.0, ("fast", self.fast))):
-            calculate_together(calc, atoms, [
-                name for name in wanted
-                if name in getattr(calc, "implemented_properties", _SUMMED)])
-            for name in wanted:
-                try:
-                    value = _level_property(calc, name, atoms)
-                except PropertyNotImplementedError:
-                    raise PropertyNotImplementedError(
-                        f"FullLessFast: the {level} calculator {type(calc).__name__} provides "
-                        f"no {name}") from None
-                values[name] = value if sign > 0 else values[name] - value
-        if "energy" in values and "free_energy" not in values:
-            values["free_energy"] = values["energy"]
-        self.results.update(values)
+        terms = [("full", self.full, False), ("fast", self.fast, True)]
+        self.results.update(_combined("FullLessFast", terms, atoms, properties))
 
     def close(self) -> None:
         """Close the full model if it has a ``close`` (the fast level is the split's own)."""
@@ -266,6 +234,34 @@ class FullLessFast(Calculator):
 
     def todict(self) -> dict:
         return {"full": type(self.full).__name__, "fast": type(self.fast).__name__}
+
+
+def _combined(owner: str, terms, atoms, properties) -> dict:
+    """The sum of the ``terms``' properties asked, each calculator called once for all of them.
+
+    ``terms``: ``(level, calculator, subtract)``, the first added (``subtract`` False).
+    A level without a property asked is refused in one line naming ``owner`` and the level.
+    ``free_energy`` is the energy when no level gives its own.
+    """
+    wanted = [name for name in properties if name in _SUMMED]
+    out = {}
+    for level, calc, subtract in terms:
+        calculate_together(calc, atoms, [
+            name for name in wanted if name in getattr(calc, "implemented_properties", _SUMMED)])
+        for name in wanted:
+            try:
+                value = _level_property(calc, name, atoms)
+            except PropertyNotImplementedError:
+                raise PropertyNotImplementedError(
+                    f"{owner}: the {level} calculator {type(calc).__name__} provides no "
+                    f"{name}") from None
+            if name not in out:
+                out[name] = value
+            else:
+                out[name] = out[name] - value if subtract else out[name] + value
+    if "energy" in out and "free_energy" not in out:
+        out["free_energy"] = out["energy"]
+    return out
 
 
 def _level_property(calc, name: str, atoms):
