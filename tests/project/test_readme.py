@@ -31,6 +31,12 @@ def test_the_readme_is_a_front_door():
     # install, removed when CI ends.
     assert (ci.index("-m venv") < ci.index("/bin/activate")
             < ci.index("pip install -e") < ci.index("pytest"))
+    # Between entering the environment and the README's line, CI runs nothing a user would
+    # not (it upgraded pip, which a new user's environment does not do).
+    commands = [line for line in ci.splitlines() if line and not line.startswith("#")]
+    entered = next(i for i, line in enumerate(commands) if "/bin/activate" in line)
+    assert commands[entered + 1] == ('python -m pip install -e ".[test]" && '
+                                     'python -m pytest -n auto'), commands[entered + 1]
     assert "trap 'rm -rf" in ci
     assert "python -m sphinx -W -b html docs docs/_build/html" in ci
     assert [lang for lang, _ in blocks(text)].count("python") >= 1
