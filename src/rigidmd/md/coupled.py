@@ -45,11 +45,14 @@ class ThermostattedDynamics(RigidDynamics):
         return super().todict() | self.thermostat.todict()
 
 
-ARGUMENT_UNITS = {"temperature_K": "K", "friction": "per ASE time unit", "taut": "ASE time units",
-          "tdamp": "ASE time units"}
+#: The unit of each argument :func:`required_arguments` may name.
+ARGUMENT_UNITS = {"temperature_K": "K", "friction": "per ASE time unit",
+                  "taut": "ASE time units", "tdamp": "ASE time units"}
 
 
-def required_arguments(cls, **values):
+def required_arguments(cls: str, **values) -> None:
+    """Refuse (TypeError, one line naming the class ``cls``, every argument and its unit) when
+    one of ``values`` is None: the ASE-style arguments a dynamics cannot do without."""
     missing = [name for name, value in values.items() if value is None]
     if missing:
         needed = " and ".join(f"{name} ({ARGUMENT_UNITS[name]})" for name in values)
