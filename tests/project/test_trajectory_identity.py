@@ -21,10 +21,11 @@ import make_trajectory_identity as reference  # noqa: E402
 
 STORED = np.load(reference.OUT)
 
-# Measured: moving one coordinate of the start by one ulp changes the final state by at most
-# 6.2e-10 (Å, amu Å/ASE time, eV) after 30 steps (the free-atom case; every other case
-# <= 4e-14).  A new release may change many roundings in every step, so the bound has a
-# margin of about 100 over that growth.
+# Measured (tests/data/make_trajectory_identity.py's cases, both backends): moving one
+# coordinate of the start by one ulp changes the final state by at most 6.2e-10 (Å, amu
+# Å/ASE time, eV) after 30 steps (the free-atom case; every other case <= 4.5e-14).  A new
+# release may change many roundings in every step, so the bound has a margin of about 100
+# over that growth.
 ROUNDOFF_BOUND = 1e-7
 
 
