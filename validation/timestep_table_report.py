@@ -14,8 +14,8 @@ points' errors:
 Writes ``<name>.md`` (the table, Markdown), ``<name>.json`` (points and fits) and
 ``<name>.csv`` (the points with their distance from the limit, for the docs' figure) into
 ``--outdir``.  T_tr and T_rot are as each code reports them (rigidmd's BAOAB: after its O
-step; its end-of-step values are in the JSON and the CSV); T_conf shows "—" until the runs
-carry it.
+step; its end-of-step values are in the JSON and the CSV); T_conf shows "—" for runs that
+carry none (LAMMPS, OpenMM, and rigidmd runs made with ``--tconf-frames 0``).
 
 Run::
 

@@ -51,8 +51,11 @@ def test_a_run_writes_every_field(tmp_path):
     assert result["complete"] and result["steps"] == 10 and result["stopped_by"] is None
     for field in table.RESULT_FIELDS:
         assert field in result
-    # The hook for configurational temperatures: null until an observer gives them.
-    assert result["T_conf_tr"] is None and result["T_conf_rot"] is None
+    # T_conf from the run's own observer, at frames 0 and 2 of 0, 8, 16 fs (every second
+    # frame, the default): two samples of 64 waters scatter by ~10 K (measured: 273 ± 11 K
+    # and 271 ± 10 K in a 0.4 ps run), so only its presence and its order are checked here;
+    # its correctness is tests/core/test_configurational.py's.
+    assert 150 < result["T_conf_tr"][0] < 450 and 150 < result["T_conf_rot"][0] < 450
     # ⟨U⟩/N without LAMMPS's intramolecular k-space constant: liquid TIP4P/2005 is near
     # -48 kJ/mol (-48.3 measured on this start at 2 fs).
     assert -55 < result["U"][0] < -40
@@ -207,7 +210,7 @@ def test_collector_recovers_a_known_limit_and_flags_disagreement(tmp_path):
     assert langevin_1fs["runs"] == 2 and langevin_1fs["U"][0] == pytest.approx(-46.94)
     text = (tmp_path / "t.md").read_text()
     assert "| tip4p2005 | 216 | rigidmd | langevin | 4 | 2 |" in text and "+0.960" in text
-    assert "—" in text  # T_conf pending, not invented
+    assert "—" in text  # runs without T_conf sums show a dash, never a number
     rows = [line for line in (tmp_path / "t.csv").read_text().splitlines()
             if not line.startswith("#")]
     assert len(rows) == 1 + 8 and "U_limit" in rows[0]
@@ -271,9 +274,36 @@ def test_configurational_temperatures_from_the_hooks_sums(tmp_path):
     out = table.analyse(series, p, 2)
     assert out["T_conf_tr"][0] == pytest.approx(300.0) and out["T_conf_rot"][0] == \
         pytest.approx(310.0)
-    # Without the hook's sums (None: rigidmd has no observer yet), null, never a number.
+    # A frame not sampled (``--tconf-frames`` above 1) counts for nothing.
     series.frame(2.0, np.zeros((2, 3)), np.zeros((2, 3)), np.eye(3) * 10, None)
-    assert table.analyse(series, p, 2)["T_conf_tr"] is None
+    assert table.analyse(series, p, 2)["T_conf_tr"][0] == pytest.approx(300.0)
+    # Without any sums (no sampler: LAMMPS, OpenMM, --tconf-frames 0), null, never a number.
+    bare = table.Series(tmp_path / "b.npz")
+    for i in range(5):
+        bare.add(i * 0.1, -3000.0, (298.0, 298.0), (298.0, 298.0))
+        bare.frame(i * 0.1, np.zeros((2, 3)), np.zeros((2, 3)), np.eye(3) * 10, None)
+    assert table.analyse(bare, p, 2)["T_conf_tr"] is None
+
+
+@pytest.mark.lammps
+def test_sampling_tconf_leaves_the_trajectory_alone(tmp_path):
+    """The sampler evaluates its displaced configurations on a LAMMPS instance of its own,
+    so the run with it is the run without it, bit for bit."""
+    runs = {}
+    for frames in (0, 1):
+        out = tmp_path / f"f{frames}"
+        rc, _, err = _finish(_run(["--integrator", "baoab", "--dt-fs", "2", "--ps", "0.04",
+                                   "--sample-fs", "4", "--frame-fs", "8", "--tconf-frames",
+                                   str(frames), "--outdir", str(out)]))
+        assert rc == 0, err
+        runs[frames] = (json.loads((out / "tip4p2005_64_rigidmd_baoab_dt2_s1.json")
+                                   .read_text()),
+                        dict(np.load(out / "tip4p2005_64_rigidmd_baoab_dt2_s1.series.npz")))
+    (plain, plain_series), (sampled, sampled_series) = runs[0], runs[1]
+    assert plain["T_conf_tr"] is None and sampled["T_conf_tr"] is not None
+    for key in ("U", "T_tr", "T_rot", "O", "com"):
+        assert np.array_equal(plain_series[key], sampled_series[key]), key
+    assert np.isfinite(sampled_series["conf"]).all() and np.isnan(plain_series["conf"]).all()
 
 
 def test_start_keeps_the_shared_216_water_states():
