@@ -5,6 +5,7 @@ The periodic liquid is ``tests/data/water_box_27.traj`` (27 TIP3P waters in a
 ``lammps/test_calculator.py``.
 """
 
+import glob
 import os
 import signal
 import subprocess
@@ -21,6 +22,7 @@ from helpers import DATA, PPPM_27, processes_named, start_cli_run, water_box_27
 
 from rigidmd import RigidNPT, RigidVerlet, rigid_maxwell_boltzmann
 from rigidmd.ipi import EngineError, IPICalculator
+from rigidmd.ipi.connection import sweep_stale_sockets
 from rigidmd.ipi.processes import descendants
 from rigidmd.lammps import LAMMPSCalculator
 from rigidmd.lammps.engine import LAMMPSEngine
@@ -218,6 +220,12 @@ def test_sigkill_of_its_python_leaves_no_engine(tmp_path, processes):
                                                "hydra_pmi_proxy", "python")
                 if p in processes_named(name)]
         assert not left, f"processes left: {left}"
+        # A process killed outright cannot remove its socket file; the next calculator's
+        # sweep does (here called directly, as IPICalculator does before it listens).
+        stale = glob.glob(f"/tmp/ipi_rigidmd-{proc.pid}-*")
+        assert len(stale) == 1, stale
+        assert stale[0] in sweep_stale_sockets()
+        assert not os.path.lexists(stale[0])
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -17,12 +17,14 @@ from ase.calculators.calculator import Calculator, PropertyNotImplementedError, 
 from rigidmd.core.checks import copy_atoms, quick_check_state
 from rigidmd.ipi.connection import (
     MSGLEN,
+    OWN_SOCKET,
     EngineError,
     accept,
     check_socket_name,
     close_sockets,
     open_server,
     process_folder,
+    sweep_stale_sockets,
     unlink_if_ours,
     wait_readable,
     word,
@@ -167,6 +169,8 @@ class IPICalculator(Calculator):
             self._listen()
 
     def _listen(self):
+        if self.port is None and OWN_SOCKET.fullmatch(f"ipi_{self.unixsocket}"):
+            sweep_stale_sockets()  # the files of our processes killed outright
         self._server, self._bound = open_server(self.socketfile, self.host, self.port)
 
     @property

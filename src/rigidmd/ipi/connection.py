@@ -3,7 +3,9 @@
 A Unix socket ``/tmp/ipi_<name>`` or a TCP port is opened
 (:func:`open_server`); a stale socket file (its process gone) is replaced, a
 live one refused, and only the file this process bound is removed at the end
-(:func:`unlink_if_ours`).  A Unix socket is bound with mode 0600.  An engine that
+(:func:`unlink_if_ours`); the files of this package's processes killed outright are
+removed by the next one (:func:`sweep_stale_sockets`).  A Unix socket is bound with mode
+0600.  An engine that
 connects is named by its process (Linux's ``SO_PEERCRED`` for a Unix socket,
 ``/proc/net/tcp`` for loopback TCP: :func:`accept`), and another user's process is
 refused.  While an
@@ -24,9 +26,10 @@ import time
 
 from rigidmd.ipi.processes import tcp_peer
 
-__all__ = ["MSGLEN", "SOCKET_NAME_RULE", "WAIT_SLICE", "EngineError", "accept", "add_wait_check",
-           "check_socket_name", "close_sockets", "open_server", "process_folder",
-           "remove_wait_check", "socket_name_ok", "unlink_if_ours", "wait_readable", "word"]
+__all__ = ["MSGLEN", "OWN_SOCKET", "SOCKET_NAME_RULE", "WAIT_SLICE", "EngineError", "accept",
+           "add_wait_check", "check_socket_name", "close_sockets", "open_server", "process_folder",
+           "remove_wait_check", "socket_name_ok", "sweep_stale_sockets", "unlink_if_ours",
+           "wait_readable", "word"]
 
 #: Length of an i-PI header (bytes).
 MSGLEN = 12
@@ -307,14 +310,64 @@ def _bind_unix(server, path):
 def _bind_private(server, path):
     """Bind the Unix socket ``server`` to ``path`` as mode 0600: only this user connects.
 
-    (Linux checks write permission on the socket file at ``connect``; the mode is set by
-    the umask at ``bind``, so the umask is narrowed around it.)
+    Linux checks write permission on the socket file at ``connect``, and the file takes
+    its mode from the socket's inode less the umask at ``bind``: the inode is made 0600
+    first (``fchmod`` of the unbound socket), so the process's umask, shared by its
+    threads, is never changed.  Where ``fchmod`` of a socket is refused, the file is made
+    0600 right after ``bind`` (:func:`accept` refuses another user's process either way).
     """
-    old = os.umask(0o177)
     try:
-        server.bind(path)
-    finally:
-        os.umask(old)
+        os.fchmod(server.fileno(), 0o600)
+        narrowed = True
+    except OSError:
+        narrowed = False
+    server.bind(path)
+    if not narrowed:
+        os.chmod(path, 0o600)
+
+
+#: The socket files :class:`~rigidmd.ipi.IPICalculator` names itself:
+#: ``/tmp/ipi_rigidmd-<pid>-<8 hex digits>``.
+OWN_SOCKET = re.compile(r"ipi_rigidmd-(\d+)-[0-9a-f]{8}")
+
+
+def sweep_stale_sockets(folder="/tmp"):
+    """Remove the socket files this package named whose process is gone.
+
+    A process killed outright (``SIGKILL``, the machine's out-of-memory killer) cannot
+    remove its socket file.  Removed here: files named as :data:`OWN_SOCKET`, sockets,
+    owned by this user, whose process (the pid in the name) no longer exists and which
+    no process listens on.  Anything else is left alone.
+
+    Returns
+    -------
+    list of str
+        The paths removed.
+    """
+    removed = []
+    if not os.path.isdir("/proc/self"):
+        return removed  # this system cannot tell whether a process lives
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return removed
+    for name in names:
+        match = OWN_SOCKET.fullmatch(name)
+        if match is None or os.path.exists(f"/proc/{match.group(1)}"):
+            continue  # not ours, or its process lives
+        path = os.path.join(folder, name)
+        try:
+            info = os.lstat(path)
+        except OSError:
+            continue
+        if not stat.S_ISSOCK(info.st_mode) or info.st_uid != os.getuid() or _served(path):
+            continue
+        try:
+            os.unlink(path)
+            removed.append(path)
+        except OSError:
+            pass
+    return removed
 
 
 def _peer_credentials(conn):
