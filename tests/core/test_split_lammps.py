@@ -129,3 +129,34 @@ def test_nve_energy_fluctuation_falls_as_the_outer_step_squared():
     exponent = np.polyfit(np.log(dts), np.log([spread[4, dt] for dt in dts]), 1)[0]
     assert 1.6 < exponent < 2.3, (exponent, spread)
     assert spread[1, 2.0] / spread[4, 2.0] > 1.5, spread
+
+
+def test_two_engines_are_the_in_process_split_to_roundoff():
+    """Each level a LAMMPSEngine (its own processes, set up once): 20 steps at k = 4 follow
+    the split of two in-process instances (measured 7e-15 Å, the same energy; bound 1e-12 Å,
+    the roundoff growth the engine tests allow), and each engine's processes end with it."""
+    from helpers import processes_named
+
+    from rigidmd.ipi.processes import descendants
+    from rigidmd.lammps import LAMMPSCalculator
+    from rigidmd.lammps.engine import LAMMPSEngine
+
+    full_commands = MODEL.lammps_commands(6.0, "pppm", 1e-5, tail=False) + [
+        "pair_modify shift yes"]
+    fast_commands = MODEL.lammps_short_range_commands(4.0)
+    runs = []
+    for kind in (LAMMPSCalculator, LAMMPSEngine):
+        atoms = start()
+        fast, full = (kind(commands, atom_types=TYPES)
+                      for commands in (fast_commands, full_commands))
+        atoms.calc = MultipleTimeStep(fast, full=full, substeps=4)
+        RigidVerlet(atoms, 4 * units.fs, bodies="tags").run(20)
+        runs.append((atoms.positions.copy(), atoms.get_potential_energy()))
+        if kind is LAMMPSEngine:  # one LAMMPS rank of each engine
+            ranks = [p for engine in (fast, full) for p in descendants(engine.pid)
+                     if p in processes_named("lmp")]
+            assert len(ranks) == 2
+        atoms.calc.close()
+    assert np.abs(runs[0][0] - runs[1][0]).max() < 1e-12
+    assert runs[0][1] == pytest.approx(runs[1][1], abs=1e-9)
+    assert not [p for p in ranks if p in processes_named("lmp")]
