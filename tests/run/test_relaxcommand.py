@@ -311,6 +311,42 @@ def test_export_lammps_starts_from_the_relaxed_structure(tmp_path):
     assert np.abs(positions - unrelaxed).max() > 0.05
 
 
+@pytest.mark.parametrize("signame", ["SIGTERM", "SIGINT"])
+def test_a_signal_just_after_export_lammps_relaxation_is_noted_and_the_deck_written(
+        tmp_path, signame):
+    """A signal in the moment after export-lammps's relaxation converged (its handlers
+    gone, the deck not yet written) killed the command without a word (exit -15, -2), the
+    deck's files maybe half written.  Now it is noted: the deck is written whole, the
+    command says so and exits 0."""
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    script = tmp_path / "late_signal.py"
+    script.write_text(textwrap.dedent(f"""
+        import os, signal, sys
+        from rigidmd.run.relaxstructure import RelaxProgress
+        finish = RelaxProgress.finish
+        def late(self):  # after the relaxation's own handlers are gone
+            finish(self)
+            os.kill(os.getpid(), signal.{signame})
+        RelaxProgress.finish = late
+        from rigidmd.run.cli import main
+        sys.exit(main(["export-lammps", "relax.yaml", "deck"]))
+    """))
+    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "2000"))
+    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                            text=True, timeout=600, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    assert result.returncode == 0, (result.returncode, result.stderr)
+    assert result.stdout.strip().splitlines()[-1] == (
+        f"export-lammps: {signame} arrived after the relaxation had ended; the deck is "
+        "complete")
+    assert "Traceback" not in result.stderr
+    assert (tmp_path / "deck" / "in.rigidmd").stat().st_size > 0
+    assert "Atoms" in (tmp_path / "deck" / "data.rigidmd").read_text()
+
+
 def test_relax_log_continues_its_step_count_on_resume(tmp_path):
     """``rigidmd relax --resume`` appended to relax.log a second header and steps counted
     from 0 again (the initial point logged twice); now the log reads as one relaxation: one

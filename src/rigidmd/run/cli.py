@@ -45,6 +45,7 @@ from rigidmd.run.outputs import OutputError, describe_os_error
 from rigidmd.run.relaxcommand import relax_only
 from rigidmd.run.relaxstructure import RelaxationFailed, RelaxationNotConverged, RelaxationStopped
 from rigidmd.run.runner import Run, RunStopped
+from rigidmd.run.signals import StopSignals
 
 __all__ = ["main"]
 
@@ -92,13 +93,28 @@ def _resume_hint(args):
 
 
 def _export(config, directory, stream=sys.stdout):
-    from rigidmd.lammps import export_lammps, tip3p_charges, tip3p_pair_commands
-
     if config.calculator.name == "multiple_time_step":  # before any file is read or written
         raise ConfigError("calculator: export-lammps cannot write a split (fast, slow, substeps): "
                           "LAMMPS's run_style respa takes fix rigid in NVE only and splits one "
                           "LAMMPS model by its own levels, not two calculators; export one model")
     atoms, bodies = Run(config).start_atoms()
+    # Installed before the relaxation's own handlers and kept until the deck is written: a
+    # signal once the relaxation has ended is noted and the deck finished (a second
+    # Ctrl-C only counted), never a kill without a word halfway through the files.
+    after = StopSignals()
+    after.shielded = True
+    with after:
+        status = _write_deck(config, atoms, bodies, directory, stream)
+    if after.signum is not None:
+        print(f"export-lammps: {signal.Signals(after.signum).name} arrived after the "
+              "relaxation had ended; the deck is complete", file=stream)
+    return status
+
+
+def _write_deck(config, atoms, bodies, directory, stream):
+    """Relax (with a ``relax:`` section) and write the deck: :func:`_export`'s work."""
+    from rigidmd.lammps import export_lammps, tip3p_charges, tip3p_pair_commands
+
     if config.relax is not None:  # the deck starts where `rigidmd run` would start its MD
         from rigidmd.run.relaxcommand import relax_for_export
 
