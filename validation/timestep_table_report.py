@@ -131,9 +131,15 @@ def family(point):
     return (point["model"], point["waters"], point["code"])
 
 
-def fits(points, fit_max_fs, agree_sigma):
+def fits(points, fit_max_fs, agree_sigma, borrow=None):
     """Per family and fitted quantity: the shared fit, each integrator's own, and whether
-    they agree."""
+    they agree.
+
+    ``borrow`` (``{code: other code}``): a family whose own points cannot determine its
+    limit (fewer than two steps at or below ``fit_max_fs``) takes the other code's limit of
+    the same model and size, marked ``"borrowed_from"``; meant for LAMMPS's own integrator
+    against rigidmd's, which use the same LAMMPS forces, never for OpenMM (its long-range
+    and dispersion treatments differ)."""
     out = {}
     for fam in sorted({family(p) for p in points}):
         members = [p for p in points if family(p) == fam and p["dt_fs"] <= fit_max_fs + 1e-9]
@@ -153,6 +159,12 @@ def fits(points, fit_max_fs, agree_sigma):
                     compared += 1
             out[(*fam, key)] = {"shared": shared, "alone": alone,
                                 "agree": agree if compared > 1 else None}
+    for (model, waters, code, key), f in list(out.items()):
+        donor = out.get((model, waters, (borrow or {}).get(code), key))
+        if not np.isfinite(f["shared"]["a"]) and donor is not None and \
+                np.isfinite(donor["shared"]["a"]):
+            out[(model, waters, code, key)] = dict(
+                f, shared=dict(donor["shared"], b={}), borrowed_from=borrow[code])
     return out
 
 
@@ -203,6 +215,109 @@ def table(points, fit_table, fit_max_fs):
     return "\n".join(lines) + "\n"
 
 
+#: The goals of a step (the issue's, for TIP4P/2005 at 4 fs), each ``(tolerance, unit)``:
+#: ⟨U⟩/N from its dt → 0 limit (kJ/mol); T_tr and T_rot as reported from the bath and from
+#: each other (K); T_conf of translation and rotation from the bath (K); the RDF's first
+#: peak height from its limit (relative); D_PBC from its limit (relative).
+GOALS = {"U": 0.05, "T_tr": 1.0, "T_rot": 1.0, "T_tr_rot": 1.0, "T_conf_tr": 2.0,
+         "T_conf_rot": 2.0, "rdf_peak_g": 0.01, "D_pbc": 0.03}
+
+
+def deviations(point, fit_table, bath_K):
+    """Each goal's deviation of ``point`` and its standard error, ``{goal: (dev, err)}``
+    (absent where the point or its limit lacks the quantity).  Relative goals are divided
+    by the limit; the limit's own error is combined with the point's."""
+    out = {}
+
+    def limit(key):
+        f = fit_table.get((*family(point), key))
+        return None if f is None or not np.isfinite(f["shared"]["a"]) else f["shared"]
+
+    for key in ("U", "rdf_peak_g", "D_pbc"):
+        lim = limit(key)
+        if point.get(key) is None or lim is None:
+            continue
+        err = np.hypot(point[key][1], lim["a_err"])
+        dev = point[key][0] - lim["a"]
+        scale = 1.0 if key == "U" else abs(lim["a"])
+        out[key] = (dev / scale, err / scale)
+    for key in ("T_tr", "T_rot", "T_conf_tr", "T_conf_rot"):
+        if point.get(key) is not None:
+            out[key] = (point[key][0] - bath_K, point[key][1])
+    if point.get("T_tr") is not None and point.get("T_rot") is not None:
+        out["T_tr_rot"] = (point["T_tr"][0] - point["T_rot"][0],
+                           float(np.hypot(point["T_tr"][1], point["T_rot"][1])))
+    return out
+
+
+def verdict(dev, err, tolerance, sigmas=2.0):
+    """``"meets"`` when the deviation and ``sigmas`` errors lie within the tolerance,
+    ``"fails"`` when the deviation less ``sigmas`` errors lies beyond it, else
+    ``"unresolved"`` (the errors are too large to tell; a nan error never meets)."""
+    if not np.isfinite(err):
+        return "fails" if abs(dev) > tolerance else "unresolved"
+    if abs(dev) + sigmas * err <= tolerance:
+        return "meets"
+    if abs(dev) - sigmas * err > tolerance:
+        return "fails"
+    return "unresolved"
+
+
+def assess(points, fit_table, bath_K=298.0, goals=GOALS, factor=1.0):
+    """Per point, each goal's deviation, error and verdict (tolerances times ``factor``);
+    per code and integrator, the largest step no goal fails (``"not_excluded_fs"``) and the
+    largest step every goal is shown to meet (``"shown_fs"``, None when none)."""
+    rows, best = [], {}
+    for p in points:
+        devs = deviations(p, fit_table, bath_K)
+        checks = {g: {"dev": d, "err": e, "tolerance": goals[g] * factor,
+                      "verdict": verdict(d, e, goals[g] * factor)}
+                  for g, (d, e) in devs.items() if g in goals}
+        rows.append({**{k: p[k] for k in ("model", "waters", "code", "integrator", "dt_fs")},
+                     "checks": checks})
+        key = (p["model"], p["waters"], p["code"], p["integrator"])
+        entry = best.setdefault(key, {"not_excluded_fs": None, "shown_fs": None,
+                                      "missing": set()})
+        entry["missing"] |= set(goals) - set(checks)
+        if checks and all(c["verdict"] != "fails" for c in checks.values()):
+            entry["not_excluded_fs"] = max(entry["not_excluded_fs"] or 0.0, p["dt_fs"])
+        if checks and set(checks) == set(goals) and \
+                all(c["verdict"] == "meets" for c in checks.values()):
+            entry["shown_fs"] = max(entry["shown_fs"] or 0.0, p["dt_fs"])
+    for entry in best.values():
+        entry["missing"] = sorted(entry["missing"])
+    return rows, best
+
+
+def goals_table(rows, best):
+    """The goals' verdicts per point, and per code and integrator the largest steps."""
+    names = list(GOALS)
+    marks = {"meets": "✓", "fails": "✗", "unresolved": "?"}
+    lines = ["| code | integrator | dt (fs) | " + " | ".join(
+        f"{g} (±{GOALS[g]:g})" for g in names) + " |",
+        "|---|---|---|" + "---|" * len(names)]
+    for r in rows:
+        cells = []
+        for g in names:
+            c = r["checks"].get(g)
+            if c is None:
+                cells.append("—")
+                continue
+            pct = g in ("rdf_peak_g", "D_pbc")
+            dev, err = (100 * c["dev"], 100 * c["err"]) if pct else (c["dev"], c["err"])
+            digits = 3 if g == "U" else 1
+            cells.append(f"{marks[c['verdict']]} {dev:+.{digits}f} ± {err:.{digits}f}"
+                         + ("%" if pct else ""))
+        lines.append(f"| {r['code']} | {r['integrator']} | {r['dt_fs']:g} | "
+                     + " | ".join(cells) + " |")
+    lines += ["", "| code | integrator | largest step no goal fails (fs) | largest step every "
+              "goal is shown to meet (fs) | goals not measured |", "|---|---|---|---|---|"]
+    for (_model, _waters, code, integ), b in sorted(best.items()):
+        lines.append(f"| {code} | {integ} | {b['not_excluded_fs'] or '—'} | "
+                     f"{b['shown_fs'] or '—'} | {', '.join(b['missing']) or '—'} |")
+    return "\n".join(lines) + "\n"
+
+
 def write_csv(points, fit_table, path):
     keys = ("U", "T_tr", "T_rot", "T_tr_end", "T_rot_end", "T_tr_gap", "T_rot_gap",
             "rdf_peak_r", "rdf_peak_g", "D_pbc")
@@ -223,18 +338,33 @@ def write_csv(points, fit_table, path):
 
 
 def report(paths, outdir, name, fit_max_fs=2.0, agree_sigma=2.0, header="",
-           include_incomplete=False):
-    """Read the runs, write ``<name>.md``, ``.json`` and ``.csv``; return (points, fits)."""
+           include_incomplete=False, borrow=None):
+    """Read the runs, write ``<name>.md``, ``.json`` and ``.csv``; return (points, fits).
+
+    The Markdown and the JSON also hold each point's goals (:func:`assess`: deviation, error,
+    verdict) and per code and integrator the largest steps that meet them."""
     points = load_points(paths, include_incomplete)
-    fit_table = fits(points, fit_max_fs, agree_sigma)
+    fit_table = fits(points, fit_max_fs, agree_sigma, borrow)
+    rows, best = assess(points, fit_table)
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    text = (header + "\n\n" if header else "") + table(points, fit_table, fit_max_fs)
+    borrowed = sorted({(k[2], f["borrowed_from"]) for k, f in fit_table.items()
+                       if "borrowed_from" in f})
+    note = "".join(f"\n{code}'s limits are {donor}'s (the same forces; {code} has too few "
+                   f"steps at or below {fit_max_fs:g} fs for its own)\n"
+                   for code, donor in borrowed)
+    text = ((header + "\n\n" if header else "") + table(points, fit_table, fit_max_fs) + note
+            + "\nGoals (✓ shown to meet: deviation and two standard errors within the "
+            "tolerance; ✗ fails: beyond it by more than two; ? unresolved)\n\n"
+            + goals_table(rows, best))
     (outdir / f"{name}.md").write_text(text)
     (outdir / f"{name}.json").write_text(json.dumps(
         {"fit_max_fs": fit_max_fs, "agree_sigma": agree_sigma, "points": points,
          "fits": [{"model": k[0], "waters": k[1], "code": k[2], "quantity": k[3], **v}
-                  for k, v in sorted(fit_table.items())]}, indent=1) + "\n")
+                  for k, v in sorted(fit_table.items())],
+         "goals": GOALS, "assessed": rows,
+         "largest_steps": [{"model": k[0], "waters": k[1], "code": k[2], "integrator": k[3],
+                            **v} for k, v in sorted(best.items())]}, indent=1) + "\n")
     write_csv(points, fit_table, outdir / f"{name}.csv")
     return points, fit_table
 
@@ -249,9 +379,22 @@ def main(argv=None):
     p.add_argument("--header", default="", help="a line written above the table")
     p.add_argument("--include-incomplete", action="store_true",
                    help="also pool runs that were stopped before their length")
+    p.add_argument("--borrow-limit", nargs="*", default=[], metavar="CODE=OTHER",
+                   help="a code without its own dt → 0 limit takes another's (lammps=rigidmd: "
+                        "the same LAMMPS forces)")
     args = p.parse_args(argv)
+    borrow = {}
+    for item in args.borrow_limit:
+        code, sep, donor = item.partition("=")
+        if not sep or code == donor or code not in ("lammps", "rigidmd", "openmm") or \
+                donor not in ("lammps", "rigidmd", "openmm"):
+            p.error(f"--borrow-limit {item!r}: give CODE=OTHER of lammps, rigidmd, openmm")
+        if "openmm" in (code, donor):
+            p.error(f"--borrow-limit {item!r}: OpenMM's long-range and dispersion treatments "
+                    "differ from LAMMPS's, so neither's limit is the other's")
+        borrow[code] = donor
     report(args.files, args.outdir, args.name, args.fit_max_fs, args.agree_sigma, args.header,
-           args.include_incomplete)
+           args.include_incomplete, borrow)
     print((args.outdir / f"{args.name}.md").read_text())
 
 

@@ -255,6 +255,58 @@ def test_no_agreement_is_claimed_where_no_limit_could_be_fitted(tmp_path):
     assert "| yes |" not in (tmp_path / "t.md").read_text()
 
 
+@pytest.mark.parametrize("dev, err, verdict", [
+    (0.02, 0.01, "meets"), (0.04, 0.01, "unresolved"), (0.08, 0.01, "fails"),
+    (-0.08, 0.01, "fails"), (0.0, 0.03, "unresolved"), (0.01, float("nan"), "unresolved"),
+    (0.2, float("nan"), "fails"),
+])
+def test_a_goal_is_met_only_when_its_errors_show_it(dev, err, verdict):
+    assert collector.verdict(dev, err, 0.05) == verdict
+
+
+def test_goals_and_the_largest_steps_from_the_limit(tmp_path):
+    """Synthetic rigidmd points on U = -47 + b·dt² (b = 0.004 kJ/mol/fs²: 0.064 at 4 fs, over
+    the 0.05 goal); RDF peak 3.2 + 0.01·dt² (0.5 % at 4 fs); T 298 K: the largest step no
+    goal fails is 2 fs, and no step shows every goal (T_conf is not measured).  LAMMPS at
+    2 and 4 fs only takes rigidmd's limit when told (the same forces), and says so."""
+    files = []
+    for dt in (0.5, 1.0, 2.0, 4.0):
+        for seed, noise in ((1, 0.002), (2, -0.002)):
+            files.append(_synthetic(tmp_path, "baoab", dt, seed, -47.0 + 0.004 * dt ** 2
+                                    + noise))
+    for dt in (2.0, 4.0):
+        files.append(_synthetic(tmp_path, "nvt_small", dt, 1, -47.0 + 0.03 * dt ** 2,
+                                code="lammps"))
+    points, fit_table = collector.report(files, tmp_path, "g")
+    assert not np.isfinite(fit_table[("tip4p2005", 216, "lammps", "U")]["shared"]["a"])
+    rows, best = collector.assess(points, fit_table)
+    at = {(r["code"], r["dt_fs"]): r["checks"] for r in rows}
+    assert at[("rigidmd", 4.0)]["U"]["dev"] == pytest.approx(0.064, abs=1e-6)
+    assert at[("rigidmd", 4.0)]["U"]["verdict"] == "fails"
+    assert at[("rigidmd", 4.0)]["rdf_peak_g"]["dev"] == pytest.approx(0.16 / 3.2, rel=1e-6)
+    assert at[("rigidmd", 1.0)]["U"]["verdict"] == "meets"
+    assert "U" not in at[("lammps", 4.0)]  # no limit of its own: not judged
+    baoab = best[("tip4p2005", 216, "rigidmd", "baoab")]
+    assert baoab["not_excluded_fs"] == 2.0 and baoab["shown_fs"] is None
+    assert baoab["missing"] == ["T_conf_rot", "T_conf_tr"]
+    points, fit_table = collector.report(files, tmp_path, "g", borrow={"lammps": "rigidmd"})
+    borrowed = fit_table[("tip4p2005", 216, "lammps", "U")]
+    assert borrowed["borrowed_from"] == "rigidmd"
+    assert borrowed["shared"]["a"] == pytest.approx(-47.0, abs=1e-3)
+    text = (tmp_path / "g.md").read_text()
+    assert "lammps's limits are rigidmd's (the same forces" in text
+    lammps_4 = next(r for r in json.loads((tmp_path / "g.json").read_text())["assessed"]
+                    if r["code"] == "lammps" and r["dt_fs"] == 4.0)
+    assert lammps_4["checks"]["U"]["dev"] == pytest.approx(0.48, abs=2e-3)
+    assert lammps_4["checks"]["U"]["verdict"] == "fails"
+
+
+def test_the_collector_refuses_to_borrow_openmm_s_limit(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        collector.main([str(tmp_path / "x.json"), "--borrow-limit", "openmm=rigidmd"])
+    assert "OpenMM's long-range and dispersion treatments differ" in capsys.readouterr().err
+
+
 def test_fit_limit_needs_enough_points():
     fit = collector.fit_limit([1.0], [-47.0], [0.01], ["langevin"])
     assert np.isnan(fit["a"])
