@@ -802,6 +802,29 @@ TABLE_DT_FS = (0.5, 1.0, 2.0, 3.0, 4.0, 5.0)
 TABLE_RUNS, TABLE_PS = 3, 200.0
 
 
+def measure_ms(code, integrator, dt_fs, steps, model, waters, outdir):
+    """CPU and wall ms per step of one code at ``dt_fs`` from the model's start, one thread:
+    a run of ``steps`` less a run of 20 (each with its own set-up), so that the set-up does
+    not count.  The first call of a code in a process also pays its compiling: call it once
+    with ``steps=40`` first.  No T_conf sampling.  Returns ``(cpu_ms, wall_ms)``."""
+    spent = []
+    for n in (20, steps):
+        p = {"code": code, "integrator": integrator, "model": model, "waters": waters,
+             "dt_fs": dt_fs, "seed": 1, "ps": n * dt_fs / 1000, "equil_ps": 0.0,
+             "tau_ps": 1.0, "sample_fs": dt_fs * n, "frame_fs": dt_fs * n, "blocks": 1,
+             "msd_fit_ps": [3, 10], "piece_ps": 1e9, "save_s": 1e9, "log_s": 1e9,
+             "outdir": str(outdir)}
+        name = run_name(p)
+        paths = {"series": Path(outdir) / f"{name}.series.npz",
+                 "chk": Path(outdir) / f"{name}.chk.{'omm' if code == 'openmm' else 'npz'}"}
+        Path(outdir).mkdir(parents=True, exist_ok=True)
+        runner = {"rigidmd": run_rigidmd, "openmm": run_openmm, "lammps": run_lammps}[code]
+        cpu, wall = time.process_time(), time.perf_counter()
+        runner(p, paths, Stop(), Progress(name, p["ps"], 1e9), False)
+        spent.append((time.process_time() - cpu, time.perf_counter() - wall))
+    return tuple(1000 * (spent[1][k] - spent[0][k]) / (steps - 20) for k in (0, 1))
+
+
 def cost(args):
     """ms/step of each code at ``--waters``, one thread: the CPU time of this process (and
     the wall time) of a run of ``--steps`` less that of a run of 20, after a first run of 20
@@ -812,23 +835,9 @@ def cost(args):
     steps_per_code = TABLE_RUNS * sum(TABLE_PS * 1000 / dt for dt in TABLE_DT_FS)
     for code, integ in ([("rigidmd", i) for i in INTEGRATORS]
                         + [("lammps", "nvt_small"), ("openmm", "middle")]):
-        spent = {}
-        for i, steps in enumerate((20, 20, args.steps)):
-            p = {"code": code, "integrator": integ, "model": args.model[0],
-                 "waters": args.waters, "dt_fs": 2.0, "seed": 1, "ps": steps * 2e-3,
-                 "equil_ps": 0.0, "tau_ps": 1.0, "sample_fs": 2.0 * steps,
-                 "frame_fs": 2.0 * steps, "blocks": 1, "msd_fit_ps": [3, 10],
-                 "piece_ps": 1e9, "save_s": 1e9, "log_s": 1e9, "outdir": str(args.outdir)}
-            name = run_name(p)
-            paths = {"series": args.outdir / f"{name}.series.npz",
-                     "chk": args.outdir / f"{name}.chk.{'omm' if code == 'openmm' else 'npz'}"}
-            args.outdir.mkdir(parents=True, exist_ok=True)
-            runner = {"rigidmd": run_rigidmd, "openmm": run_openmm, "lammps": run_lammps}[code]
-            cpu, wall = time.process_time(), time.perf_counter()
-            runner(p, paths, Stop(), Progress(name, p["ps"], 1e9), False)
-            spent[i] = (time.process_time() - cpu, time.perf_counter() - wall)
-        cpu_ms, wall_ms = (1000 * (spent[2][k] - spent[1][k]) / (args.steps - 20)
-                           for k in (0, 1))
+        measure_ms(code, integ, 2.0, 40, args.model[0], args.waters, args.outdir)  # compiles
+        cpu_ms, wall_ms = measure_ms(code, integ, 2.0, args.steps, args.model[0], args.waters,
+                                     args.outdir)
         hours = steps_per_code * cpu_ms / 3.6e6
         rows.append({"code": code, "integrator": integ, "waters": args.waters,
                      "steps": args.steps, "cpu_ms_per_step": cpu_ms,

@@ -411,3 +411,32 @@ def test_block_mean_and_rdf_peak():
     O = np.array([[[1.0, 1.0, 1.0], [3.8, 1.0, 1.0]]])
     r, g = table.rdf_first_peak(O, np.eye(3) * 20.0, bin_A=0.02)
     assert abs(r - 2.8) < 0.02 and g > 0
+
+
+@pytest.mark.lammps
+def test_time_to_solution_measures_each_largest_step(tmp_path):
+    """``time_to_solution.py``: the table's largest steps (and a given point) measured side
+    by side from the 64-water start; ns/day is 86.4·dt/ms and the ratio is to LAMMPS's own
+    integrator at its step."""
+    tts = benchmark_module("time_to_solution")
+    table_json = tmp_path / "table.json"
+    table_json.write_text(json.dumps({"largest_steps": [
+        {"model": "tip4p2005", "waters": 64, "code": "rigidmd", "integrator": "baoab",
+         "not_excluded_fs": 4.0, "shown_fs": 2.0, "missing": []},
+        {"model": "tip4p2005", "waters": 64, "code": "lammps", "integrator": "nvt_small",
+         "not_excluded_fs": 2.0, "shown_fs": None, "missing": []}]}))
+    rows = tts.main([str(table_json), "--extra", "rigidmd:langevin:2", "--steps", "300",
+                     "--rounds", "1", "--outdir", str(tmp_path), "--workdir",
+                     str(tmp_path / "work")])
+    assert [(r["code"], r["integrator"], r["dt_fs"], r["basis"]) for r in rows] == [
+        ("rigidmd", "baoab", 4.0, "not excluded"), ("rigidmd", "baoab", 2.0, "shown"),
+        ("lammps", "nvt_small", 2.0, "not excluded"), ("rigidmd", "langevin", 2.0, "given")]
+    lammps = rows[2]
+    for r in rows:
+        assert r["cpu_ms_per_step"] > 0
+        assert r["ns_per_day"] == pytest.approx(86.4 * r["dt_fs"] / r["cpu_ms_per_step"])
+        assert r["vs_lammps"] == pytest.approx(r["ns_per_day"] / lammps["ns_per_day"])
+    assert "| rigidmd | baoab | 4 | not excluded |" in (tmp_path / "time_to_solution.txt")\
+        .read_text()
+    with pytest.raises(SystemExit):
+        tts.main([str(table_json), "--extra", "openmm:baoab:4"])

@@ -1,0 +1,151 @@
+r"""Time to solution: each code and integrator at its largest accurate step, side by side.
+
+What a user pays for is simulated time at a stated accuracy.  This reads the time-step
+table's collected results (``timestep_table_report.py``'s JSON: per code and integrator the
+largest step no goal fails, ``not_excluded_fs``, and the largest step every goal is shown
+to meet, ``shown_fs``), measures the CPU time of a step of each at those steps, and writes
+ns/day and each one's ratio to LAMMPS's ``fix rigid/nvt/small`` at its own step.
+
+The measurement: one thread, every code from the model's shared thermal start
+(``timestep_table.load_start``), the CPU time of a run of ``--steps`` less that of a run of
+20 (:func:`timestep_table.measure_ms`, so that set-ups do not count; a first run of each
+pays its compiling), the codes interleaved in ``--rounds`` rounds and the best round kept.
+ns/day = 86.4 · dt (fs) / (ms per step).  ``--extra CODE:INTEGRATOR:DT`` adds a point the
+table does not hold (OpenMM's ``middle`` at a step of your choice, say), marked as such.
+
+Run::
+
+    python validation/time_to_solution.py validation/timestep_table_216.json \
+        --extra openmm:middle:4 --rounds 3 --steps 300 --name time_to_solution
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import timestep_table  # noqa: E402
+
+#: The code and integrator every ratio is taken against.
+REFERENCE = ("lammps", "nvt_small")
+
+
+def chosen_points(table, extra=()):
+    """``[(code, integrator, dt_fs, basis)]``: each code and integrator at its largest step
+    no goal fails (``"not excluded"``) and, where it differs, the largest shown to meet
+    every goal (``"shown"``); then the ``extra`` points (``"given"``)."""
+    out = []
+    for row in table["largest_steps"]:
+        if row["not_excluded_fs"]:
+            out.append((row["code"], row["integrator"], float(row["not_excluded_fs"]),
+                        "not excluded"))
+        if row["shown_fs"] and row["shown_fs"] != row["not_excluded_fs"]:
+            out.append((row["code"], row["integrator"], float(row["shown_fs"]), "shown"))
+    for item in extra:
+        code, integrator, dt = item.split(":")
+        out.append((code, integrator, float(dt), "given"))
+    return out
+
+
+def parse_extra(item):
+    """``CODE:INTEGRATOR:DT`` checked, or argparse's error."""
+    parts = item.split(":")
+    codes = {"rigidmd": timestep_table.INTEGRATORS, "lammps": ("nvt_small",),
+             "openmm": ("middle",)}
+    try:
+        ok = len(parts) == 3 and parts[1] in codes[parts[0]] and float(parts[2]) > 0
+    except (KeyError, ValueError):
+        ok = False
+    if not ok:
+        raise argparse.ArgumentTypeError(
+            f"{item!r}: give CODE:INTEGRATOR:DT_FS, e.g. openmm:middle:4 or rigidmd:baoab:4")
+    return item
+
+
+def measure(points, model, waters, steps, rounds, outdir):
+    """Best CPU ms/step of each point over interleaved rounds; returns rows with ns/day."""
+    for code, integrator in dict.fromkeys((c, i) for c, i, _, _ in points):
+        timestep_table.measure_ms(code, integrator, 2.0, 40, model, waters, outdir)  # compiles
+    best = {}
+    for r in range(rounds):
+        for point in points:
+            cpu, wall = timestep_table.measure_ms(*point[:3], steps, model, waters, outdir)
+            if not cpu > 0:
+                raise SystemExit(f"{point[0]} {point[1]} at {point[2]:g} fs: {steps} steps "
+                                 f"took no more CPU time than 20 ({cpu:.3f} ms/step): the "
+                                 "set-up's scatter hides the steps; give more --steps")
+            key = point[:3]
+            if key not in best or cpu < best[key][0]:
+                best[key] = (cpu, wall)
+            print(f"round {r + 1}/{rounds} {point[0]:8} {point[1]:10} {point[2]:g} fs: "
+                  f"{cpu:.2f} ms/step CPU", flush=True)
+    rows = []
+    for code, integrator, dt, basis in points:
+        cpu, wall = best[(code, integrator, dt)]
+        rows.append({"code": code, "integrator": integrator, "dt_fs": dt, "basis": basis,
+                     "cpu_ms_per_step": cpu, "wall_ms_per_step": wall,
+                     "ns_per_day": 86.4 * dt / cpu})
+    reference = [r for r in rows if (r["code"], r["integrator"]) == REFERENCE
+                 and r["basis"] != "given"]
+    for row in rows:
+        row["vs_lammps"] = (row["ns_per_day"] / reference[0]["ns_per_day"]
+                            if reference else None)
+    return rows
+
+
+def text(rows, header):
+    lines = [header, "", "| code | integrator | step (fs) | why this step | CPU ms/step | "
+             "ns/day | × LAMMPS fix rigid/nvt/small |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        ratio = "—" if r["vs_lammps"] is None else f"{r['vs_lammps']:.2f}"
+        lines.append(f"| {r['code']} | {r['integrator']} | {r['dt_fs']:g} | {r['basis']} | "
+                     f"{r['cpu_ms_per_step']:.2f} | {r['ns_per_day']:.1f} | {ratio} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("table", type=Path, help="timestep_table_report.py's JSON")
+    p.add_argument("--extra", nargs="*", type=parse_extra, default=[],
+                   metavar="CODE:INTEGRATOR:DT")
+    p.add_argument("--steps", type=int, default=300)
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--name", default="time_to_solution")
+    p.add_argument("--outdir", type=Path, default=HERE)
+    p.add_argument("--workdir", type=Path, default=Path("/tmp/time_to_solution"))
+    args = p.parse_args(argv)
+    if args.steps <= 20:
+        p.error("--steps must be above 20 (a run of 20 is taken off)")
+    table = json.loads(args.table.read_text())
+    points = chosen_points(table, args.extra)
+    if not points:
+        p.error(f"{args.table}: no code and integrator with a step that meets the goals; "
+                "give --extra points")
+    waters = {row["waters"] for row in table["largest_steps"]} or {216}
+    model = {row["model"] for row in table["largest_steps"]} or {"tip4p2005"}
+    if len(waters) != 1 or len(model) != 1:
+        p.error(f"{args.table}: one model and size at a time (has {sorted(model)}, "
+                f"{sorted(waters)})")
+    model, waters = model.pop(), waters.pop()
+    rows = measure(points, model, waters, args.steps, args.rounds, args.workdir)
+    header = (f"{model}, {waters} waters, one thread, CPU time of {args.steps} steps less 20, "
+              f"best of {args.rounds} interleaved rounds, from one thermal start; steps from "
+              f"{args.table.name}; load average {os.getloadavg()[0]:.1f} on "
+              f"{os.cpu_count()} cores at the end ({time.strftime('%Y-%m-%d')})")
+    args.outdir.mkdir(parents=True, exist_ok=True)
+    (args.outdir / f"{args.name}.txt").write_text(text(rows, header))
+    (args.outdir / f"{args.name}.json").write_text(json.dumps(
+        {"header": header, "model": model, "waters": waters, "rows": rows}, indent=1) + "\n")
+    print(text(rows, header))
+    return rows
+
+
+if __name__ == "__main__":
+    main()
