@@ -238,6 +238,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self.stepper = Stepper(respa or scheme, context, couplings, self.link,
                                kernel=backend.scheme_kernel(respa or scheme), fixcom=fixcom)
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps
+        self._in_run = False  # inside irun (or run): a step by hand starts as a run does
         self.link.read_momenta(self.state, owner=type(self).__name__)
         if fixcom:
             remove_centre_velocity(self.state, model)
@@ -369,9 +370,11 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         steps = self._steps(steps)
         if not self._driven_by_run:  # code runs between the items: watch for its changes
             steps = self.sync.watch(steps)
+        self._in_run = True
         try:
             yield from steps
         finally:
+            self._in_run = False
             self.sync.finish_run()
 
     def _steps(self, steps):
@@ -405,10 +408,28 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         If anything fails (the calculator, an iteration, a coupling part),
         the state, forces, coupling variables and atoms are put back as they
         were at the start of the step.
+
+        Called by hand (``for _ in range(n): dyn.step()``, outside :meth:`run`
+        and :meth:`irun`), each step starts as a run does: it reads what was
+        changed on the Atoms and has forces for the positions it starts from
+        (the calculator is asked only when its results are not those), as
+        ASE's ``step()`` asks for the forces it starts from; ``nsteps`` and the
+        observers are :meth:`irun`'s, as in ASE.
         """
+        if not self._in_run:
+            if self.sync.start(self._evaluate_forces, self.nsteps, type(self).__name__):
+                self.step_check.reset()
+            try:
+                self._advance()
+            finally:
+                self.sync.finish_run()
+            return
         if self.sync.changed is not None and self.sync.before_step(
                 self._evaluate_forces, self.nsteps, type(self).__name__):
             self.step_check.reset()
+        self._advance()
+
+    def _advance(self):
         observed = observed_at(self.observers, self.nsteps + 1)
         self.stepper.step(self._dt, self.nsteps, self.needs_energy or observed,
                           self.stress_on_observed_steps and observed)
