@@ -311,13 +311,9 @@ def test_export_lammps_starts_from_the_relaxed_structure(tmp_path):
     assert np.abs(positions - unrelaxed).max() > 0.05
 
 
-@pytest.mark.parametrize("signame", ["SIGTERM", "SIGINT"])
-def test_a_signal_just_after_export_lammps_relaxation_is_noted_and_the_deck_written(
-        tmp_path, signame):
-    """A signal in the moment after export-lammps's relaxation converged (its handlers
-    gone, the deck not yet written) killed the command without a word (exit -15, -2), the
-    deck's files maybe half written.  Now it is noted: the deck is written whole, the
-    command says so and exits 0."""
+def run_signalled_after_relaxation(tmp_path, signame, argv):
+    """``rigidmd ARGV`` in a process of its own, sent ``signame`` in the moment after the
+    relaxation converged (its own handlers gone, the command not yet ended)."""
     import os
     import subprocess
     import sys
@@ -333,11 +329,22 @@ def test_a_signal_just_after_export_lammps_relaxation_is_noted_and_the_deck_writ
             os.kill(os.getpid(), signal.{signame})
         RelaxProgress.finish = late
         from rigidmd.run.cli import main
-        sys.exit(main(["export-lammps", "relax.yaml", "deck"]))
+        sys.exit(main({argv!r}))
     """))
     (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "2000"))
-    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
-                            text=True, timeout=600, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    return subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=600, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+
+
+@pytest.mark.parametrize("signame", ["SIGTERM", "SIGINT"])
+def test_a_signal_just_after_export_lammps_relaxation_is_noted_and_the_deck_written(
+        tmp_path, signame):
+    """A signal in the moment after export-lammps's relaxation converged (its handlers
+    gone, the deck not yet written) killed the command without a word (exit -15, -2), the
+    deck's files maybe half written.  Now it is noted: the deck is written whole, the
+    command says so and exits 0."""
+    result = run_signalled_after_relaxation(tmp_path, signame, ["export-lammps", "relax.yaml",
+                                                                "deck"])
     assert result.returncode == 0, (result.returncode, result.stderr)
     assert result.stdout.strip().splitlines()[-1] == (
         f"export-lammps: {signame} arrived after the relaxation had ended; the deck is "
@@ -592,26 +599,7 @@ def test_a_signal_just_after_the_relaxation_is_noted_not_a_kill(tmp_path, signam
     """Issue 45 item 21: a signal in the moment after convergence (the relaxation's handlers
     gone, the command not yet ended) killed rigidmd relax without a word (exit -15, -2).
     Now it is noted: the relaxation is complete, and the command says so and exits 0."""
-    import os
-    import subprocess
-    import sys
-    import textwrap
-
-    script = tmp_path / "late_signal.py"
-    script.write_text(textwrap.dedent(f"""
-        import os, signal, sys
-        from rigidmd.run.relaxstructure import RelaxProgress
-        finish = RelaxProgress.finish
-        def late(self):  # after the relaxation's own handlers are gone
-            finish(self)
-            os.kill(os.getpid(), signal.{signame})
-        RelaxProgress.finish = late
-        from rigidmd.run.cli import main
-        sys.exit(main(["relax", "relax.yaml"]))
-    """))
-    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "2000"))
-    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
-                            text=True, timeout=600, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    result = run_signalled_after_relaxation(tmp_path, signame, ["relax", "relax.yaml"])
     assert result.returncode == 0, (result.returncode, result.stderr)
     assert result.stdout.strip().splitlines()[-1] == (
         f"relax: {signame} arrived after the relaxation had ended; it is complete and its "
@@ -624,26 +612,7 @@ def test_a_signal_just_after_a_run_s_relaxation_stops_the_md_with_a_checkpoint(t
     the relaxation converged (its handlers gone, the MD's not yet there), was killed without
     a word (exit -15).  Now the signal is noted and obeyed as in the MD: a checkpoint at its
     start, the command that resumes, exit 143."""
-    import os
-    import subprocess
-    import sys
-    import textwrap
-
-    script = tmp_path / "late_signal.py"
-    script.write_text(textwrap.dedent("""
-        import os, signal, sys
-        from rigidmd.run.relaxstructure import RelaxProgress
-        finish = RelaxProgress.finish
-        def late(self):  # after the relaxation's own handlers are gone
-            finish(self)
-            os.kill(os.getpid(), signal.SIGTERM)
-        RelaxProgress.finish = late
-        from rigidmd.run.cli import main
-        sys.exit(main(["run", "relax.yaml"]))
-    """))
-    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "2000"))
-    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True,
-                            text=True, timeout=600, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    result = run_signalled_after_relaxation(tmp_path, "SIGTERM", ["run", "relax.yaml"])
     assert result.returncode == 143, (result.returncode, result.stderr)
     assert "stopped by SIGTERM after step 0" in result.stdout  # (ASE observes step 0 too)
     assert "continue with: rigidmd run relax.yaml --resume" in result.stdout
