@@ -61,12 +61,20 @@ def pool(runs, key):
     return [float(x[0]), values[0][1]]
 
 
+def read_runs(paths):
+    """``(path, run)`` of each run: a run's JSON, or a bundle of them (a list, as
+    ``--bundle`` writes), in the order given."""
+    for path in paths:
+        data = json.loads(Path(path).read_text())
+        for run in data if isinstance(data, list) else [data]:
+            yield path, run
+
+
 def load_points(paths, include_incomplete=False):
     """Pooled points, one per (model, waters, code, integrator, dt); a run that was stopped
     before its length (``"complete": false``) is left out unless ``include_incomplete``."""
     groups = {}
-    for path in paths:
-        run = json.loads(Path(path).read_text())
+    for path, run in read_runs(paths):
         if not run.get("complete") and not include_incomplete:
             print(f"{Path(path).name}: stopped at {run.get('ps', 0):g} ps, left out "
                   f"(--include-incomplete takes it)")
@@ -379,6 +387,8 @@ def main(argv=None):
     p.add_argument("--header", default="", help="a line written above the table")
     p.add_argument("--include-incomplete", action="store_true",
                    help="also pool runs that were stopped before their length")
+    p.add_argument("--bundle", action="store_true",
+                   help="also write every run read into <name>.runs.json (read again as input)")
     p.add_argument("--borrow-limit", nargs="*", default=[], metavar="CODE=OTHER",
                    help="a code without its own dt → 0 limit takes another's (lammps=rigidmd: "
                         "the same LAMMPS forces)")
@@ -395,6 +405,10 @@ def main(argv=None):
         borrow[code] = donor
     report(args.files, args.outdir, args.name, args.fit_max_fs, args.agree_sigma, args.header,
            args.include_incomplete, borrow)
+    if args.bundle:  # every run read, in one file the collector reads again
+        runs = sorted((run for _, run in read_runs(args.files)),
+                      key=lambda r: json.dumps(r["point"], sort_keys=True))
+        (args.outdir / f"{args.name}.runs.json").write_text(json.dumps(runs, indent=1) + "\n")
     print((args.outdir / f"{args.name}.md").read_text())
 
 

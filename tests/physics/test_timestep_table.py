@@ -440,3 +440,15 @@ def test_time_to_solution_measures_each_largest_step(tmp_path):
         .read_text()
     with pytest.raises(SystemExit):
         tts.main([str(table_json), "--extra", "openmm:baoab:4"])
+
+
+def test_a_bundle_of_runs_gives_the_same_table(tmp_path):
+    """``--bundle`` writes every run read into one file, which the collector reads again to
+    the same table (how the docs' tables are kept with their runs)."""
+    files = [_synthetic(tmp_path, "baoab", dt, seed, -47.0 + 0.01 * seed)
+             for dt in (1.0, 2.0) for seed in (1, 2)]
+    collector.main([*map(str, files), "--outdir", str(tmp_path), "--name", "a", "--bundle"])
+    bundle = json.loads((tmp_path / "a.runs.json").read_text())
+    assert len(bundle) == 4
+    collector.main([str(tmp_path / "a.runs.json"), "--outdir", str(tmp_path), "--name", "b"])
+    assert (tmp_path / "a.md").read_text() == (tmp_path / "b.md").read_text()
