@@ -127,3 +127,45 @@ def test_a_run_start_calls_the_calculator_only_when_its_forces_are_not_current(m
     atoms.calc = ZeroForce()
     dyn.run(0)
     assert not dyn.record.F.any() and not dyn.record.tau.any()
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_a_split_run_in_pieces_is_the_run_in_one_without_asking_its_levels_again(backend):
+    """Under MultipleTimeStep a run's start asked both levels again (the split calculator
+    holds no results of its own), which a level without a cache that answers (LAMMPS asked
+    for more than it holds) computed again; its levels hold the results, so a start now asks
+    neither while both still hold forces for these atoms: ``run(4); run(6)`` is ``run(10)``
+    bit for bit, and the second run asks each level only for its steps.  A level reset is
+    asked again."""
+    from ase.calculators.lj import LennardJones
+
+    from rigidmd import MultipleTimeStep
+
+    def build():
+        atoms = waters(4, seed=3)
+        fast, slow = TIP3P(rc=4.0), LennardJones(sigma=3.0, epsilon=0.005, rc=6.0)
+        asks = {"fast": 0, "slow": 0}
+        for name, calc in (("fast", fast), ("slow", slow)):
+            inner = calc.get_forces
+
+            def counted(*args, _inner=inner, _name=name, **kwargs):
+                asks[_name] += 1
+                return _inner(*args, **kwargs)
+
+            calc.get_forces = counted
+        atoms.calc = MultipleTimeStep(fast, slow, substeps=3)
+        return RigidVerlet(atoms, 2 * units.fs, backend=backend), asks, slow
+
+    whole, _, _ = build()
+    whole.run(10)
+    pieces, asks, slow = build()
+    pieces.run(4)
+    before = dict(asks)
+    pieces.run(6)
+    assert (asks["fast"] - before["fast"], asks["slow"] - before["slow"]) == (18, 6)
+    np.testing.assert_array_equal(pieces.atoms.positions, whole.atoms.positions)
+    np.testing.assert_array_equal(pieces.atoms.get_momenta(), whole.atoms.get_momenta())
+    slow.reset()
+    before = dict(asks)
+    pieces.run(1)  # the start asks both levels, then one step
+    assert (asks["fast"] - before["fast"], asks["slow"] - before["slow"]) == (4, 2)

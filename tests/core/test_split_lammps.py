@@ -97,7 +97,7 @@ def test_each_level_is_one_lammps_instance_set_up_once():
     assert (calls["fast"] - before["fast"], calls["full"] - before["full"]) == (15, 5)
     energies = []
     dyn.attach(lambda: energies.append(dyn.get_conserved_energy()), interval=1)
-    dyn.run(4)  # its start asks both levels for the energy of the present positions
+    dyn.run(4)  # the observer at its start asks the energy of the present positions
     before = dict(calls)
     dyn.run(5)
     assert (calls["fast"] - before["fast"], calls["full"] - before["full"]) == (15, 5)

@@ -342,11 +342,7 @@ class AtomsSync:
         calc = self.link.atoms.calc
         if calc is None or calc is not self.calculator:
             return False
-        results = getattr(calc, "results", None)
-        check_state = getattr(calc, "check_state", None)
-        if not results or "forces" not in results or check_state is None:
-            return False
-        return not check_state(self.link.atoms)
+        return _holds_forces(calc, self.link.atoms)
 
     def watch(self, steps):
         """Pass on the items of ``steps`` (a run's generator), noting changes made between them.
@@ -395,3 +391,22 @@ class AtomsSync:
             return False
         written, self.changed = self.changed, None
         return self.sync(written, evaluate, step, owner)
+
+
+def _holds_forces(calc, atoms) -> bool:
+    """Whether ``calc`` holds forces for ``atoms`` as they are (ASE's ``check_state``).
+
+    A split calculator (:class:`~rigidmd.core.split.MultipleTimeStep`, which has
+    ``levels``) holds no results of its own: the r-RESPA step calls its levels, so it
+    holds them when every level does (for ``full=``, the slow level's own results, those
+    of the full model less the fast one).
+    """
+    levels = getattr(calc, "levels", None)
+    if levels is not None:
+        return all(_holds_forces(level, atoms) for _, level in levels)
+    results = getattr(calc, "results", None)
+    check_state = getattr(calc, "check_state", None)
+    if not results or "forces" not in results or check_state is None:
+        return False
+    return not check_state(atoms)
+
