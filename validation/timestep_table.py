@@ -129,6 +129,33 @@ def load_start(model_name, waters):
     return state
 
 
+#: Integrators whose runs draw no random numbers: their seeds differ by the start's momenta.
+DETERMINISTIC = {("lammps", "nvt_small"), ("rigidmd", "nosehoover")}
+
+
+def start_for(p):
+    """The start of point ``p``: the model's shared state (:func:`load_start`); for an
+    integrator that draws no random numbers (:data:`DETERMINISTIC`) and a seed other than 1,
+    its momenta drawn again (rigid Maxwell–Boltzmann at 298 K from ``3000 + seed``, the
+    centre of mass at rest), or its seeds would be one run repeated."""
+    state = load_start(p["model"], p["waters"])
+    if (p["code"], p["integrator"]) not in DETERMINISTIC or p["seed"] == 1:
+        return state
+    from water_openmm_nve import state_atoms
+
+    from rigidmd import rigid_maxwell_boltzmann
+    from rigidmd.water import water_model
+
+    model = water_model(p["model"])
+    atoms = state_atoms(state, model, cutoff_for(state["cell"]))
+    atoms.set_tags(np.repeat(np.arange(1, len(atoms) // model.sites + 1), model.sites))
+    rigid_maxwell_boltzmann(atoms, TEMPERATURE_K, bodies="tags",
+                            rng=np.random.default_rng(3000 + p["seed"]))
+    masses, momenta = atoms.get_masses(), atoms.get_momenta()
+    momenta -= masses[:, None] * (momenta.sum(axis=0) / masses.sum())
+    return dict(state, momenta=momenta)
+
+
 def cutoff_for(cell):
     return min(CUTOFF, 0.49 * float(np.min(np.diag(cell))))
 
@@ -356,7 +383,7 @@ def run_rigidmd(p, paths, stop, progress, resume):
     from rigidmd.water import water_model
 
     model = water_model(p["model"])
-    state = load_start(p["model"], p["waters"])
+    state = start_for(p)
     series = Series(paths["series"])
     if resume and paths["chk"].exists():
         from rigidmd.core.checkpoint import read_checkpoint
@@ -530,7 +557,7 @@ def run_lammps(p, paths, stop, progress, resume):
     to_nm_ps = units.fs * 100.0  # Å per ASE time unit to nm/ps (amu nm²/ps² is kJ/mol)
 
     model = water_model(p["model"])
-    state = load_start(p["model"], p["waters"])
+    state = start_for(p)
     cutoff = cutoff_for(state["cell"])
     series = Series(paths["series"])
     chk = paths["chk"].with_name(paths["chk"].name + ".meta")

@@ -35,6 +35,9 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 #: The quantities fitted against dt²; the temperatures are compared with the bath instead.
 FITTED = ("U", "rdf_peak_r", "rdf_peak_g", "D_pbc")
+#: Those of the configurations alone, the same under any thermostat (D_PBC is not: it
+#: depends on the thermostat's friction), which a code may take from another's limit.
+STATIC = ("U", "rdf_peak_r", "rdf_peak_g")
 POOLED = ("U", "T_tr", "T_rot", "T_tr_end", "T_rot_end", "T_tr_gap", "T_rot_gap",
           "rdf_peak_r", "rdf_peak_g", "D_pbc", "T_conf_tr", "T_conf_rot")
 
@@ -145,7 +148,8 @@ def fits(points, fit_max_fs, agree_sigma, borrow=None):
 
     ``borrow`` (``{code: other code}``): a family whose own points cannot determine its
     limit (fewer than two steps at or below ``fit_max_fs``) takes the other code's limit of
-    the same model and size, marked ``"borrowed_from"``; meant for LAMMPS's own integrator
+    the same model and size, marked ``"borrowed_from"``, for the static quantities only
+    (:data:`STATIC`; D_PBC depends on the thermostat); meant for LAMMPS's own integrator
     against rigidmd's, which use the same LAMMPS forces, never for OpenMM (its long-range
     and dispersion treatments differ)."""
     out = {}
@@ -168,6 +172,8 @@ def fits(points, fit_max_fs, agree_sigma, borrow=None):
             out[(*fam, key)] = {"shared": shared, "alone": alone,
                                 "agree": agree if compared > 1 else None}
     for (model, waters, code, key), f in list(out.items()):
+        if key not in STATIC:
+            continue  # a dynamical quantity depends on the thermostat: never another's limit
         donor = out.get((model, waters, (borrow or {}).get(code), key))
         if not np.isfinite(f["shared"]["a"]) and donor is not None and \
                 np.isfinite(donor["shared"]["a"]):
@@ -369,8 +375,9 @@ def report(paths, outdir, name, fit_max_fs=2.0, agree_sigma=2.0, header="",
     outdir.mkdir(parents=True, exist_ok=True)
     borrowed = sorted({(k[2], f["borrowed_from"]) for k, f in fit_table.items()
                        if "borrowed_from" in f})
-    note = "".join(f"\n{code}'s limits are {donor}'s (the same forces; {code} has too few "
-                   f"steps at or below {fit_max_fs:g} fs for its own)\n"
+    note = "".join(f"\n{code}'s limits of ⟨U⟩ and the RDF peak are {donor}'s (the same "
+                   f"forces; {code} has too few steps at or below {fit_max_fs:g} fs for its "
+                   "own; D_PBC, which depends on the thermostat, has none)\n"
                    for code, donor in borrowed)
     text = ((header + "\n\n" if header else "") + table(points, fit_table, fit_max_fs) + note
             + "\nGoals (✓ shown to meet: deviation and two standard errors within the "

@@ -268,7 +268,8 @@ def test_goals_and_the_largest_steps_from_the_limit(tmp_path):
     """Synthetic rigidmd points on U = -47 + b·dt² (b = 0.004 kJ/mol/fs²: 0.064 at 4 fs, over
     the 0.05 goal); RDF peak 3.2 + 0.01·dt² (0.5 % at 4 fs); T 298 K: the largest step no
     goal fails is 2 fs, and no step shows every goal (T_conf is not measured).  LAMMPS at
-    2 and 4 fs only takes rigidmd's limit when told (the same forces), and says so."""
+    2 and 4 fs only takes rigidmd's limits of the static quantities when told (the same
+    forces), never D_PBC's (another thermostat), and says so."""
     files = []
     for dt in (0.5, 1.0, 2.0, 4.0):
         for seed, noise in ((1, 0.002), (2, -0.002)):
@@ -297,8 +298,9 @@ def test_goals_and_the_largest_steps_from_the_limit(tmp_path):
     borrowed = fit_table[("tip4p2005", 216, "lammps", "U")]
     assert borrowed["borrowed_from"] == "rigidmd"
     assert borrowed["shared"]["a"] == pytest.approx(-47.0, abs=1e-3)
+    assert "borrowed_from" not in fit_table[("tip4p2005", 216, "lammps", "D_pbc")]
     text = (tmp_path / "g.md").read_text()
-    assert "lammps's limits are rigidmd's (the same forces" in text
+    assert "lammps's limits of ⟨U⟩ and the RDF peak are rigidmd's (the same forces" in text
     lammps_4 = next(r for r in json.loads((tmp_path / "g.json").read_text())["assessed"]
                     if r["code"] == "lammps" and r["dt_fs"] == 4.0)
     assert lammps_4["checks"]["U"]["dev"] == pytest.approx(0.48, abs=2e-3)
@@ -456,3 +458,20 @@ def test_a_bundle_of_runs_gives_the_same_table(tmp_path):
     assert len(bundle) == 4
     collector.main([str(tmp_path / "a.runs.json"), "--outdir", str(tmp_path), "--name", "b"])
     assert (tmp_path / "a.md").read_text() == (tmp_path / "b.md").read_text()
+
+
+def test_seeds_of_a_deterministic_integrator_start_apart():
+    """LAMMPS's Nosé–Hoover chains (and rigidmd's) draw no random numbers, so their seeds
+    were one run repeated (measured: three identical LAMMPS runs).  A seed other than 1
+    now draws the start's momenta again (the centre of mass at rest); a stochastic
+    integrator's seeds share the start."""
+    point = {"model": "tip4p2005", "waters": 64, "code": "lammps", "integrator": "nvt_small"}
+    first, second, third = (table.start_for(dict(point, seed=s))["momenta"] for s in (1, 2, 3))
+    shared = table.load_start("tip4p2005", 64)["momenta"]
+    np.testing.assert_array_equal(first, shared)
+    assert np.abs(second - first).max() > 0.1 and np.abs(third - second).max() > 0.1
+    assert np.abs(second.sum(axis=0)).max() < 1e-10
+    baoab = dict(point, code="rigidmd", integrator="baoab", seed=2)
+    np.testing.assert_array_equal(table.start_for(baoab)["momenta"], shared)
+    nose_hoover = dict(point, code="rigidmd", integrator="nosehoover", seed=2)
+    np.testing.assert_array_equal(table.start_for(nose_hoover)["momenta"], second)
