@@ -52,6 +52,8 @@ CHECKED_ELSEWHERE = (
      "--resume, and the collector"),
     ("examples/mace_water.py --quick", "tests/physics/test_ml_potential.py runs it where "
      "mace-torch is installed (the ml extra, not the test extra)"),
+    ("validation/time_to_solution.py", "minutes on a quiet core; "
+     "tests/physics/test_timestep_table.py runs it on the 64-water start for a few steps"),
     ("validation/respa_kspace_share.py", "minutes of native LAMMPS runs; "
      "tests/physics/test_respa_lammps.py runs its --quick form"),
     ("validation/respa_lammps_cost.py", "minutes; tests/physics/test_respa_lammps.py runs its "

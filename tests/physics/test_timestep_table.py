@@ -280,6 +280,11 @@ def test_goals_and_the_largest_steps_from_the_limit(tmp_path):
                                 code="lammps"))
     for seed, noise in ((1, 0.002), (2, -0.002)):  # 6 fs: judged at twice the tolerances
         files.append(_synthetic(tmp_path, "baoab", 6.0, seed, -47.0 + 0.07 + noise))
+    split = _synthetic(tmp_path, "baoab", 8.0, 1, -47.0 + 0.07)  # an r-RESPA split at 8 fs
+    run = json.loads(split.read_text())
+    run["point"].update(substeps=4, r_split=5.0)
+    split.write_text(json.dumps(run))
+    files.append(split)
     points, fit_table = collector.report(files, tmp_path, "g")
     assert not np.isfinite(fit_table[("tip4p2005", 216, "lammps", "U")]["shared"]["a"])
     rows, best = collector.assess(points, fit_table)
@@ -290,6 +295,8 @@ def test_goals_and_the_largest_steps_from_the_limit(tmp_path):
     assert at[("rigidmd", 1.0)]["U"]["verdict"] == "meets"
     assert at[("rigidmd", 6.0)]["U"]["tolerance"] == 0.1  # 0.07 over: within twice 0.05
     assert at[("rigidmd", 6.0)]["U"]["verdict"] == "meets"
+    # A split competes with the accurate single step: its own tolerances at any outer step.
+    assert at[("rigidmd", 8.0)]["U"]["tolerance"] == 0.05
     assert "U" not in at[("lammps", 4.0)]  # no limit of its own: not judged
     baoab = best[("tip4p2005", 216, "rigidmd", "baoab")]  # 6 fs is a stability step
     assert baoab["not_excluded_fs"] == 2.0 and baoab["shown_fs"] is None
@@ -438,6 +445,7 @@ def test_time_to_solution_measures_each_largest_step(tmp_path):
         ("rigidmd", "baoab", 4.0, "not excluded"), ("rigidmd", "baoab", 2.0, "shown"),
         ("lammps", "nvt_small", 2.0, "not excluded"), ("rigidmd", "langevin", 2.0, "given")]
     lammps = rows[2]
+    assert [r["reference"] for r in rows] == [False, False, True, False]
     for r in rows:
         assert r["cpu_ms_per_step"] > 0
         assert r["ns_per_day"] == pytest.approx(86.4 * r["dt_fs"] / r["cpu_ms_per_step"])
