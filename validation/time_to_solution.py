@@ -38,6 +38,14 @@ import timestep_table  # noqa: E402
 REFERENCE = ("lammps", "nvt_small")
 
 
+def split_of(integrator):
+    """``(integrator, substeps, r_split)`` of a table's integrator name: ``"baoab k=2 r=5"``
+    is an r-RESPA split of ``baoab``; a plain name has one substep."""
+    name, *rest = integrator.split()
+    fields = dict(item.split("=") for item in rest)
+    return name, int(fields.get("k", 1)), float(fields.get("r", 5.0))
+
+
 def chosen_points(table, extra=()):
     """``[(code, integrator, dt_fs, basis)]``: each code and integrator at its largest step
     no goal fails (``"not excluded"``) and, where it differs, the largest shown to meet
@@ -73,11 +81,15 @@ def parse_extra(item):
 def measure(points, model, waters, steps, rounds, outdir):
     """Best CPU ms/step of each point over interleaved rounds; returns rows with ns/day."""
     for code, integrator in dict.fromkeys((c, i) for c, i, _, _ in points):
-        timestep_table.measure_ms(code, integrator, 2.0, 40, model, waters, outdir)  # compiles
+        name, k, r_split = split_of(integrator)
+        timestep_table.measure_ms(code, name, 2.0 * k, 40, model, waters, outdir, k,
+                                  r_split)  # compiles
     best = {}
     for r in range(rounds):
         for point in points:
-            cpu, wall = timestep_table.measure_ms(*point[:3], steps, model, waters, outdir)
+            name, k, r_split = split_of(point[1])
+            cpu, wall = timestep_table.measure_ms(point[0], name, point[2], steps, model,
+                                                  waters, outdir, k, r_split)
             if not cpu > 0:
                 raise SystemExit(f"{point[0]} {point[1]} at {point[2]:g} fs: {steps} steps "
                                  f"took no more CPU time than 20 ({cpu:.3f} ms/step): the "

@@ -829,14 +829,18 @@ TABLE_DT_FS = (0.5, 1.0, 2.0, 3.0, 4.0, 5.0)
 TABLE_RUNS, TABLE_PS = 3, 200.0
 
 
-def measure_ms(code, integrator, dt_fs, steps, model, waters, outdir):
+def measure_ms(code, integrator, dt_fs, steps, model, waters, outdir, substeps=1,
+               r_split=5.0):
     """CPU and wall ms per step of one code at ``dt_fs`` from the model's start, one thread:
     a run of ``steps`` less a run of 20 (each with its own set-up), so that the set-up does
     not count.  The first call of a code in a process also pays its compiling: call it once
-    with ``steps=40`` first.  No T_conf sampling.  Returns ``(cpu_ms, wall_ms)``."""
+    with ``steps=40`` first.  No T_conf sampling.  ``substeps`` above 1: rigidmd's r-RESPA
+    split (``dt_fs`` the outer step, the fast level cut at ``r_split``).  Returns
+    ``(cpu_ms, wall_ms)``."""
     spent = []
+    split = {"substeps": substeps, "r_split": r_split} if substeps > 1 else {}
     for n in (20, steps):
-        p = {"code": code, "integrator": integrator, "model": model, "waters": waters,
+        p = {**split, "code": code, "integrator": integrator, "model": model, "waters": waters,
              "dt_fs": dt_fs, "seed": 1, "ps": n * dt_fs / 1000, "equil_ps": 0.0,
              "tau_ps": 1.0, "sample_fs": dt_fs * n, "frame_fs": dt_fs * n, "blocks": 1,
              "msd_fit_ps": [3, 10], "piece_ps": 1e9, "save_s": 1e9, "log_s": 1e9,

@@ -437,15 +437,20 @@ def test_time_to_solution_measures_each_largest_step(tmp_path):
         {"model": "tip4p2005", "waters": 64, "code": "rigidmd", "integrator": "baoab",
          "not_excluded_fs": 4.0, "shown_fs": 2.0, "missing": []},
         {"model": "tip4p2005", "waters": 64, "code": "lammps", "integrator": "nvt_small",
-         "not_excluded_fs": 2.0, "shown_fs": None, "missing": []}]}))
+         "not_excluded_fs": 2.0, "shown_fs": None, "missing": []},
+        {"model": "tip4p2005", "waters": 64, "code": "rigidmd", "integrator": "baoab k=2 r=4",
+         "not_excluded_fs": 6.0, "shown_fs": None, "missing": []}]}))
     rows = tts.main([str(table_json), "--extra", "rigidmd:langevin:2", "--steps", "300",
                      "--rounds", "1", "--outdir", str(tmp_path), "--workdir",
                      str(tmp_path / "work")])
     assert [(r["code"], r["integrator"], r["dt_fs"], r["basis"]) for r in rows] == [
         ("rigidmd", "baoab", 4.0, "not excluded"), ("rigidmd", "baoab", 2.0, "shown"),
-        ("lammps", "nvt_small", 2.0, "not excluded"), ("rigidmd", "langevin", 2.0, "given")]
+        ("lammps", "nvt_small", 2.0, "not excluded"),
+        ("rigidmd", "baoab k=2 r=4", 6.0, "not excluded"), ("rigidmd", "langevin", 2.0, "given")]
     lammps = rows[2]
-    assert [r["reference"] for r in rows] == [False, False, True, False]
+    assert [r["reference"] for r in rows] == [False, False, True, False, False]
+    # The split's outer step costs more than a single step: two levels, the fast one twice.
+    assert rows[3]["cpu_ms_per_step"] > rows[0]["cpu_ms_per_step"]
     for r in rows:
         assert r["cpu_ms_per_step"] > 0
         assert r["ns_per_day"] == pytest.approx(86.4 * r["dt_fs"] / r["cpu_ms_per_step"])
