@@ -762,3 +762,19 @@ def assert_whole_waters(positions, n_water, atol=2e-5):
     x = np.asarray(positions, dtype=float).reshape(n_water, 3, 3)
     d = np.linalg.norm(x[:, 1:] - x[:, :1], axis=2)
     np.testing.assert_allclose(d, rOH, atol=atol)
+
+
+def count_calls(method: str, **calculators) -> dict:
+    """Wrap ``method`` (``"calculate"``, ``"get_forces"``) of each named calculator so that
+    its calls are counted; returns the counts by name, updated as they are called."""
+    counts = dict.fromkeys(calculators, 0)
+    for name, calc in calculators.items():
+        inner = getattr(calc, method)
+
+        def counted(*args, _inner=inner, _name=name, **kwargs):
+            counts[_name] += 1
+            return _inner(*args, **kwargs)
+
+        setattr(calc, method, counted)
+    return counts
+

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from ase import units
 from ase.calculators.tip3p import TIP3P
-from helpers import ZeroForce, mixture, tip3p_calls, waters
+from helpers import ZeroForce, count_calls, mixture, tip3p_calls, waters
 
 from rigidmd import RigidBussi, RigidVerlet, load_checkpoint
 from rigidmd.core.link import BodyLink
@@ -144,15 +144,7 @@ def test_a_split_run_in_pieces_is_the_run_in_one_without_asking_its_levels_again
     def build():
         atoms = waters(4, seed=3)
         fast, slow = TIP3P(rc=4.0), LennardJones(sigma=3.0, epsilon=0.005, rc=6.0)
-        asks = {"fast": 0, "slow": 0}
-        for name, calc in (("fast", fast), ("slow", slow)):
-            inner = calc.get_forces
-
-            def counted(*args, _inner=inner, _name=name, **kwargs):
-                asks[_name] += 1
-                return _inner(*args, **kwargs)
-
-            calc.get_forces = counted
+        asks = count_calls("get_forces", fast=fast, slow=slow)
         atoms.calc = MultipleTimeStep(fast, slow, substeps=3)
         return RigidVerlet(atoms, 2 * units.fs, backend=backend), asks, slow
 

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ase import Atoms, units
+from helpers import count_calls
 
 from rigidmd import MultipleTimeStep, RigidVerlet
 from rigidmd.water import water_model
@@ -79,15 +80,7 @@ def test_each_level_is_one_lammps_instance_set_up_once():
     it asks one property at a time), and neither sets LAMMPS up again."""
     atoms = start()
     atoms.calc, full, fast = lammps_split(3)
-    calls = {"full": 0, "fast": 0}
-    for name, calc in (("full", full), ("fast", fast)):
-        inner = calc.calculate
-
-        def counted(*args, _inner=inner, _name=name, **kwargs):
-            calls[_name] += 1
-            return _inner(*args, **kwargs)
-
-        calc.calculate = counted
+    calls = count_calls("calculate", full=full, fast=fast)
     dyn = RigidVerlet(atoms, 3 * units.fs)
     dyn.run(1)
     instances = full._instance, fast._instance
