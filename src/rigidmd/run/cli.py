@@ -95,8 +95,10 @@ def _resume_hint(args):
 def _export(config, directory, stream=sys.stdout):
     if config.calculator.name == "multiple_time_step":  # before any file is read or written
         raise ConfigError("calculator: export-lammps cannot write a split (fast, slow, substeps): "
-                          "LAMMPS's run_style respa takes fix rigid in NVE only and splits one "
-                          "LAMMPS model by its own levels, not two calculators; export one model")
+                          "under LAMMPS's run_style respa its rigid fixes kick each inner step "
+                          "with the outer level's forces (not r-RESPA; 8.7e-3 Å off its own "
+                          "Verlet after one step at k = 1), and its levels split one LAMMPS "
+                          "model, not two calculators; export the full model on its own")
     atoms, bodies = Run(config).start_atoms()
     # Installed before the relaxation's own handlers and kept until the deck is written: a
     # signal once the relaxation has ended is noted and the deck finished (a second
