@@ -38,20 +38,23 @@ import timestep_table  # noqa: E402
 REFERENCE = ("lammps", "nvt_small")
 
 
-def split_of(integrator):
-    """``(integrator, substeps, r_split)`` of a table's integrator name: ``"baoab k=2 r=5"``
-    is an r-RESPA split of ``baoab``; a plain name has one substep."""
-    name, *rest = integrator.split()
-    fields = dict(item.split("=") for item in rest)
-    return name, int(fields.get("k", 1)), float(fields.get("r", 5.0))
+def split_of(row):
+    """``(scheme, substeps, r_split)`` of a row of the table's ``largest_steps``: a split's
+    levels are its fields (``substeps`` above 1, ``r_split`` in Å); a row without them is
+    one step of its integrator."""
+    substeps = int(row.get("substeps") or 1)
+    r_split = float(row["r_split"]) if substeps > 1 else 5.0
+    return row.get("scheme", row["integrator"]), substeps, r_split
 
 
 def chosen_points(table, extra=()):
     """``[(code, integrator, dt_fs, basis)]``: each code and integrator at its largest step
     no goal fails (``"not excluded"``) and, where it differs, the largest shown to meet
-    every goal (``"shown"``); then the ``extra`` points (``"given"``)."""
-    out = []
+    every goal (``"shown"``); then the ``extra`` points (``"given"``).  Also
+    ``{integrator: (scheme, substeps, r_split)}`` (:func:`split_of`) for each."""
+    out, levels = [], {}
     for row in table["largest_steps"]:
+        levels[row["integrator"]] = split_of(row)
         if row["not_excluded_fs"]:
             out.append((row["code"], row["integrator"], float(row["not_excluded_fs"]),
                         "not excluded"))
@@ -60,7 +63,8 @@ def chosen_points(table, extra=()):
     for item in extra:
         code, integrator, dt = item.split(":")
         out.append((code, integrator, float(dt), "given"))
-    return out
+        levels.setdefault(integrator, (integrator, 1, 5.0))
+    return out, levels
 
 
 def parse_extra(item):
@@ -78,16 +82,17 @@ def parse_extra(item):
     return item
 
 
-def measure(points, model, waters, steps, rounds, outdir):
-    """Best CPU ms/step of each point over interleaved rounds; returns rows with ns/day."""
+def measure(points, levels, model, waters, steps, rounds, outdir):
+    """Best CPU ms/step of each point over interleaved rounds (``levels``: each
+    integrator's ``(scheme, substeps, r_split)``); returns rows with ns/day."""
     for code, integrator in dict.fromkeys((c, i) for c, i, _, _ in points):
-        name, k, r_split = split_of(integrator)
+        name, k, r_split = levels[integrator]
         timestep_table.measure_ms(code, name, 2.0 * k, 40, model, waters, outdir, k,
                                   r_split)  # compiles
     best = {}
     for r in range(rounds):
         for point in points:
-            name, k, r_split = split_of(point[1])
+            name, k, r_split = levels[point[1]]
             cpu, wall = timestep_table.measure_ms(point[0], name, point[2], steps, model,
                                                   waters, outdir, k, r_split)
             if not cpu > 0:
@@ -142,7 +147,7 @@ def main(argv=None):
     if args.steps <= 20:
         p.error("--steps must be above 20 (a run of 20 is taken off)")
     table = json.loads(args.table.read_text())
-    points = chosen_points(table, args.extra)
+    points, levels = chosen_points(table, args.extra)
     if not points:
         p.error(f"{args.table}: no code and integrator with a step that meets the goals; "
                 "give --extra points")
@@ -152,7 +157,7 @@ def main(argv=None):
         p.error(f"{args.table}: one model and size at a time (has {sorted(model)}, "
                 f"{sorted(waters)})")
     model, waters = model.pop(), waters.pop()
-    rows = measure(points, model, waters, args.steps, args.rounds, args.workdir)
+    rows = measure(points, levels, model, waters, args.steps, args.rounds, args.workdir)
     header = (f"{model}, {waters} waters, one thread, CPU time of {args.steps} steps less 20, "
               f"best of {args.rounds} interleaved rounds, from one thermal start; steps from "
               f"{args.table.name}; load average {os.getloadavg()[0]:.1f} on "

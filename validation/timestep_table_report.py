@@ -91,6 +91,10 @@ def load_points(paths, include_incomplete=False):
     for key in sorted(groups):
         runs = groups[key]
         row = dict(zip(("model", "waters", "code", "integrator", "dt_fs"), key, strict=True))
+        first = runs[0]["point"]  # the split's levels as fields, not only in its name
+        substeps = int(first.get("substeps", 1))
+        row.update(scheme=first["integrator"], substeps=substeps,
+                   r_split=float(first["r_split"]) if substeps > 1 else None)
         row.update(runs=len(runs), seeds=sorted(r["point"]["seed"] for r in runs),
                    ps=float(sum(r.get("recorded_ps", 0.0) for r in runs)),
                    complete=all(r.get("complete") for r in runs),
@@ -291,9 +295,9 @@ def assess(points, fit_table, bath_K=298.0, goals=GOALS, relaxed_from_fs=RELAXED
     rows, best = [], {}
     for p in points:
         devs = deviations(p, fit_table, bath_K)
-        # An r-RESPA split (its integrator "... k=K r=R") is judged at the goals' own
-        # tolerances whatever its outer step: it competes with the accurate single step.
-        split = " k=" in p["integrator"]
+        # An r-RESPA split is judged at the goals' own tolerances whatever its outer step:
+        # it competes with the accurate single step.
+        split = p.get("substeps", 1) > 1
         factor = 2.0 if p["dt_fs"] >= relaxed_from_fs - 1e-9 and not split else 1.0
         checks = {g: {"dev": d, "err": e, "tolerance": goals[g] * factor,
                       "verdict": verdict(d, e, goals[g] * factor)}
@@ -303,8 +307,10 @@ def assess(points, fit_table, bath_K=298.0, goals=GOALS, relaxed_from_fs=RELAXED
         if factor != 1.0:
             continue  # a stability step, not a candidate for the accurate one
         key = (p["model"], p["waters"], p["code"], p["integrator"])
-        entry = best.setdefault(key, {"not_excluded_fs": None, "shown_fs": None,
-                                      "missing": set()})
+        entry = best.setdefault(key, {"scheme": p.get("scheme", p["integrator"]),
+                                      "substeps": p.get("substeps", 1),
+                                      "r_split": p.get("r_split"), "not_excluded_fs": None,
+                                      "shown_fs": None, "missing": set()})
         entry["missing"] |= set(goals) - set(checks)
         if checks and all(c["verdict"] != "fails" for c in checks.values()):
             entry["not_excluded_fs"] = max(entry["not_excluded_fs"] or 0.0, p["dt_fs"])

@@ -297,6 +297,8 @@ def test_goals_and_the_largest_steps_from_the_limit(tmp_path):
     assert at[("rigidmd", 6.0)]["U"]["verdict"] == "meets"
     # A split competes with the accurate single step: its own tolerances at any outer step.
     assert at[("rigidmd", 8.0)]["U"]["tolerance"] == 0.05
+    split = best[("tip4p2005", 216, "rigidmd", "baoab k=4 r=5")]  # its levels as fields
+    assert (split["scheme"], split["substeps"], split["r_split"]) == ("baoab", 4, 5.0)
     assert "U" not in at[("lammps", 4.0)]  # no limit of its own: not judged
     baoab = best[("tip4p2005", 216, "rigidmd", "baoab")]  # 6 fs is a stability step
     assert baoab["not_excluded_fs"] == 2.0 and baoab["shown_fs"] is None
@@ -439,7 +441,8 @@ def test_time_to_solution_measures_each_largest_step(tmp_path):
         {"model": "tip4p2005", "waters": 64, "code": "lammps", "integrator": "nvt_small",
          "not_excluded_fs": 2.0, "shown_fs": None, "missing": []},
         {"model": "tip4p2005", "waters": 64, "code": "rigidmd", "integrator": "baoab k=2 r=4",
-         "not_excluded_fs": 6.0, "shown_fs": None, "missing": []}]}))
+         "scheme": "baoab", "substeps": 2, "r_split": 4.0, "not_excluded_fs": 6.0,
+         "shown_fs": None, "missing": []}]}))
     rows = tts.main([str(table_json), "--extra", "rigidmd:langevin:2", "--steps", "300",
                      "--rounds", "1", "--outdir", str(tmp_path), "--workdir",
                      str(tmp_path / "work")])
