@@ -160,12 +160,13 @@ def cutoff_for(cell):
     return min(CUTOFF, 0.49 * float(np.min(np.diag(cell))))
 
 
-def make_atoms(state, model):
-    """``state``'s atoms with LAMMPS's forces for ``model``, one body per molecule."""
+def make_atoms(state, model, skin=2.0):
+    """``state``'s atoms with LAMMPS's forces for ``model`` (neighbour ``skin``, Å), one body
+    per molecule."""
     from water_openmm_nve import lammps_calculator, state_atoms
 
     atoms = state_atoms(state, model, cutoff_for(state["cell"]))
-    atoms.calc = lammps_calculator(model, cutoff_for(state["cell"]))
+    atoms.calc = lammps_calculator(model, cutoff_for(state["cell"]), skin)
     n = len(atoms) // model.sites
     atoms.set_tags(np.repeat(np.arange(1, n + 1), model.sites))
     return atoms
@@ -359,17 +360,19 @@ def _rigidmd_dynamics(p, atoms):
 def rigidmd_calculator(p, model, cell):
     """The model's LAMMPS forces; with ``substeps`` above 1, r-RESPA's split of them: a fast
     level ``lammps_short_range_commands(r_split)`` and the slow level the model less it
-    (``dt_fs`` is then the outer step)."""
+    (``dt_fs`` is then the outer step).  Every level's neighbour skin is ``p["skin"]`` (Å;
+    LAMMPS's metal default of 2 when absent: it changes the cost, not the forces)."""
     from water_openmm_nve import lammps_calculator
 
-    full = lammps_calculator(model, cutoff_for(cell))
+    skin = p.get("skin", 2.0)
+    full = lammps_calculator(model, cutoff_for(cell), skin)
     if p.get("substeps", 1) <= 1:
         return full
     from rigidmd import MultipleTimeStep
     from rigidmd.lammps import LAMMPSCalculator
 
     fast = LAMMPSCalculator(model.lammps_short_range_commands(p["r_split"]),
-                            atom_types=full.atom_types)
+                            atom_types=full.atom_types, skin=skin)
     return MultipleTimeStep(fast, full=full, substeps=p["substeps"])
 
 
@@ -392,7 +395,7 @@ def run_rigidmd(p, paths, stop, progress, resume):
         dyn = load_checkpoint(chk, rigidmd_calculator(p, model, state["cell"]))
         series.load(chk.extra["samples"], chk.extra["frames"])
     else:
-        atoms = make_atoms(state, model)
+        atoms = make_atoms(state, model, p.get("skin", 2.0))
         if p.get("substeps", 1) > 1:
             atoms.calc = rigidmd_calculator(p, model, state["cell"])
         dyn = _rigidmd_dynamics(p, atoms)
@@ -579,9 +582,10 @@ def run_lammps(p, paths, stop, progress, resume):
     while steps < total and not stop:
         atoms = make_atoms(state, model)
         k = min(piece, total - steps)
+        skin = [f"neighbor {p['skin']:g} bin"] if "skin" in p else []  # else LAMMPS's 2 Å
         ref = run_rigid_reference(
             atoms, np.repeat(np.arange(n), model.sites), model.lammps_commands(
-                cutoff, "pppm", 1e-5, tail=True), p["dt_fs"] * units.fs, k, every=sample,
+                cutoff, "pppm", 1e-5, tail=True) + skin, p["dt_fs"] * units.fs, k, every=sample,
             fix="rigid/nvt/small", temperature_K=TEMPERATURE_K,
             tdamp=p["tau_ps"] * 1000 * units.fs, seed=1000 + p["seed"] + steps)
         loop_s += ref.timing.get("loop_time", float("nan"))
@@ -830,15 +834,18 @@ TABLE_RUNS, TABLE_PS = 3, 200.0
 
 
 def measure_ms(code, integrator, dt_fs, steps, model, waters, outdir, substeps=1,
-               r_split=5.0):
+               r_split=5.0, skin=None):
     """CPU and wall ms per step of one code at ``dt_fs`` from the model's start, one thread:
     a run of ``steps`` less a run of 20 (each with its own set-up), so that the set-up does
     not count.  The first call of a code in a process also pays its compiling: call it once
     with ``steps=40`` first.  No T_conf sampling.  ``substeps`` above 1: rigidmd's r-RESPA
-    split (``dt_fs`` the outer step, the fast level cut at ``r_split``).  Returns
-    ``(cpu_ms, wall_ms)``."""
+    split (``dt_fs`` the outer step, the fast level cut at ``r_split``).  ``skin``: the
+    neighbour skin (Å) of rigidmd's LAMMPS forces and of LAMMPS's own run (None: LAMMPS's
+    metal default, 2 Å; OpenMM has none).  Returns ``(cpu_ms, wall_ms)``."""
     spent = []
     split = {"substeps": substeps, "r_split": r_split} if substeps > 1 else {}
+    if skin is not None:
+        split["skin"] = float(skin)
     for n in (20, steps):
         p = {**split, "code": code, "integrator": integrator, "model": model, "waters": waters,
              "dt_fs": dt_fs, "seed": 1, "ps": n * dt_fs / 1000, "equil_ps": 0.0,

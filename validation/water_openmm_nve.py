@@ -123,15 +123,15 @@ def _units():
 KSPACE = {"solver": "pppm", "accuracy": 1e-5}
 
 
-def lammps_calculator(model, cutoff):
+def lammps_calculator(model, cutoff, skin=2.0):
     """LAMMPS's forces for ``model``: ``lj/cut/coul/long`` at ``cutoff`` (Å), the tail
-    correction, :data:`KSPACE`."""
+    correction, :data:`KSPACE`; neighbour ``skin`` in Å."""
     from rigidmd.lammps import LAMMPSCalculator
 
     types = {"O": 1, "H": 2} if model.sites == 3 else {"O": 1, "H": 2, "X": 3}
     return LAMMPSCalculator(model.lammps_commands(cutoff, KSPACE["solver"],
                                                   KSPACE["accuracy"], tail=True),
-                            atom_types=types)
+                            atom_types=types, skin=skin)
 
 
 def whole(x, cell, sites):

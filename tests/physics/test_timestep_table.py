@@ -445,7 +445,7 @@ def test_time_to_solution_measures_each_largest_step(tmp_path):
          "shown_fs": None, "missing": []}]}))
     rows = tts.main([str(table_json), "--extra", "rigidmd:langevin:2", "--steps", "300",
                      "--rounds", "1", "--outdir", str(tmp_path), "--workdir",
-                     str(tmp_path / "work")])
+                     str(tmp_path / "work"), "--skin", "3"])
     assert [(r["code"], r["integrator"], r["dt_fs"], r["basis"]) for r in rows] == [
         ("rigidmd", "baoab", 4.0, "not excluded"), ("rigidmd", "baoab", 2.0, "shown"),
         ("lammps", "nvt_small", 2.0, "not excluded"),
@@ -458,8 +458,9 @@ def test_time_to_solution_measures_each_largest_step(tmp_path):
         assert r["cpu_ms_per_step"] > 0
         assert r["ns_per_day"] == pytest.approx(86.4 * r["dt_fs"] / r["cpu_ms_per_step"])
         assert r["vs_lammps"] == pytest.approx(r["ns_per_day"] / lammps["ns_per_day"])
-    assert "| rigidmd | baoab | 4 | not excluded |" in (tmp_path / "time_to_solution.txt")\
-        .read_text()
+    written = (tmp_path / "time_to_solution.txt").read_text()
+    assert "| rigidmd | baoab | 4 | not excluded |" in written
+    assert "neighbour skin 3 Å" in written
     with pytest.raises(SystemExit):
         tts.main([str(table_json), "--extra", "openmm:baoab:4"])
 
@@ -491,3 +492,40 @@ def test_seeds_of_a_deterministic_integrator_start_apart():
     np.testing.assert_array_equal(table.start_for(baoab)["momenta"], shared)
     nose_hoover = dict(point, code="rigidmd", integrator="nosehoover", seed=2)
     np.testing.assert_array_equal(table.start_for(nose_hoover)["momenta"], second)
+
+
+def test_the_216_water_pages_show_what_the_committed_runs_give(tmp_path):
+    """The pages' tables are the collector's on the committed runs (``--bundle``), every row
+    of them: a page kept by hand from an older collection, or runs added without their
+    rows, fails here."""
+    bundle = ROOT / "validation" / "timestep_table_216.runs.json"
+    collector.main([str(bundle), "--outdir", str(tmp_path), "--name", "t",
+                    "--borrow-limit", "lammps=rigidmd"])
+    rows = [line for line in (tmp_path / "t.md").read_text().splitlines()
+            if line.startswith("| ") and not line.startswith("| model") and
+            not line.startswith("| code")]
+    pages = "".join((ROOT / "docs" / "validation" / page).read_text()
+                    for page in ("timestep-216.md", "timestep-216-tables.md"))
+    assert len(rows) > 10
+    missing = [row for row in rows if row not in pages]
+    assert not missing, f"rows the pages lack (run the collector again): {missing}"
+
+
+@pytest.mark.lammps
+def test_the_skin_reaches_every_level_and_leaves_the_forces():
+    """``skin`` (time_to_solution's ``--skin``) is every LAMMPS level's neighbour skin, and
+    changes the cost, not the forces: the 64-water start's forces at 2 and 3 Å agree to
+    roundoff (measured 1.2e-15 eV/Å, neighbour order; bound 1e-10 eV/Å)."""
+    from rigidmd.water import water_model
+
+    model = water_model("tip4p2005")
+    state = table.load_start("tip4p2005", 64)
+    point = {"substeps": 2, "r_split": 4.0, "skin": 3.0}
+    split = table.rigidmd_calculator(point, model, state["cell"])
+    assert split.fast.skin == split.full.skin == 3.0
+    forces = []
+    for skin in (2.0, 3.0):
+        atoms = table.make_atoms(state, model, skin)
+        assert atoms.calc.skin == skin
+        forces.append(atoms.get_forces())
+    np.testing.assert_allclose(forces[0], forces[1], rtol=0, atol=1e-10)
