@@ -529,3 +529,26 @@ def test_the_skin_reaches_every_level_and_leaves_the_forces():
         assert atoms.calc.skin == skin
         forces.append(atoms.get_forces())
     np.testing.assert_allclose(forces[0], forces[1], rtol=0, atol=1e-10)
+
+
+def test_diffusion_has_a_limit_per_kind_of_thermostat(tmp_path):
+    """D_PBC under a Langevin friction and under a global thermostat are different
+    quantities (216 waters, 4 fs: Bussi's and Nosé–Hoover's 25–29 % above the Langevin
+    limit), so each kind has its own limit; ⟨U⟩, a static quantity, stays shared."""
+    files = []
+    for integrator, d in (("baoab", 1.8), ("bussi", 2.2), ("nosehoover", 2.2)):
+        for dt in (1.0, 2.0):
+            file = _synthetic(tmp_path, integrator, dt, 1, -47.0)
+            run = json.loads(file.read_text())
+            run["D_pbc"] = [d, 0.02]
+            file.write_text(json.dumps(run))
+            files.append(file)
+    points, fits = collector.report(files, tmp_path, "d")
+    assert fits[("tip4p2005", 216, "rigidmd:friction", "D_pbc")]["shared"]["a"] == \
+        pytest.approx(1.8)
+    assert fits[("tip4p2005", 216, "rigidmd:global", "D_pbc")]["shared"]["a"] == \
+        pytest.approx(2.2)
+    assert fits[("tip4p2005", 216, "rigidmd:global", "D_pbc")]["agree"] is True
+    assert fits[("tip4p2005", 216, "rigidmd", "U")]["shared"]["points"] == 6
+    rows, _ = collector.assess(points, fits)
+    assert all(abs(r["checks"]["D_pbc"]["dev"]) < 1e-9 for r in rows)
