@@ -110,8 +110,9 @@ def fit_limit(dt, y, err, groups):
     Parameters
     ----------
     dt, y, err : array_like, shape (n,)
-        Steps (fs), values and their standard errors (non-finite: weight of the mean error,
-        or 1 when none is finite).
+        Steps (fs), values and their standard errors (non-finite: weight of the mean error;
+        when none is finite, equal weights and ``a_err`` from the scatter about the fit, nan
+        with no degree of freedom left).
     groups : sequence, shape (n,)
         The group of each point; each group gets its own slope.
 
@@ -136,9 +137,12 @@ def fit_limit(dt, y, err, groups):
     coef, *_ = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)
     cov = np.linalg.inv((A * w[:, None]).T @ (A * w[:, None]))
     resid = (y - A @ coef) * w
+    dof = len(y) - A.shape[1]
+    if not ok.any():  # no point has an error (single runs): the scatter's, if it has one
+        cov = cov * (resid @ resid / dof) if dof > 0 else np.full_like(cov, np.nan)
     return {"a": float(coef[0]), "a_err": float(np.sqrt(cov[0, 0])),
             "b": {g: float(coef[1 + i]) for i, g in enumerate(names)},
-            "chi2": float(resid @ resid), "dof": int(len(y) - A.shape[1]), "points": len(y)}
+            "chi2": float(resid @ resid), "dof": int(dof), "points": len(y)}
 
 
 #: rigidmd's thermostats by what they do to diffusion, for D_PBC's limit: a Langevin friction

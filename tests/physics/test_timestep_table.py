@@ -300,8 +300,11 @@ def test_goals_and_the_largest_steps_from_the_limit(tmp_path):
     split = best[("tip4p2005", 216, "rigidmd", "baoab k=4 r=5")]  # its levels as fields
     assert (split["scheme"], split["substeps"], split["r_split"]) == ("baoab", 4, 5.0)
     assert "U" not in at[("lammps", 4.0)]  # no limit of its own: not judged
-    baoab = best[("tip4p2005", 216, "rigidmd", "baoab")]  # 6 fs is a stability step
-    assert baoab["not_excluded_fs"] == 2.0 and baoab["shown_fs"] is None
+    # 6 fs is a stability step; at 2 fs the RDF peak (3.2 + 0.01 dt², no error of its own) is
+    # 1.25 % off its exact limit, which the fit's zero scatter makes a clear ✗.
+    assert at[("rigidmd", 2.0)]["rdf_peak_g"]["verdict"] == "fails"
+    baoab = best[("tip4p2005", 216, "rigidmd", "baoab")]
+    assert baoab["not_excluded_fs"] == 1.0 and baoab["shown_fs"] is None
     assert baoab["missing"] == ["T_conf_rot", "T_conf_tr"]
     points, fit_table = collector.report(files, tmp_path, "g", borrow={"lammps": "rigidmd"})
     borrowed = fit_table[("tip4p2005", 216, "lammps", "U")]
@@ -494,19 +497,23 @@ def test_seeds_of_a_deterministic_integrator_start_apart():
     np.testing.assert_array_equal(table.start_for(nose_hoover)["momenta"], second)
 
 
-def test_the_216_water_pages_show_what_the_committed_runs_give(tmp_path):
+@pytest.mark.parametrize("name, options, pages", [
+    ("timestep_table_216", ["--borrow-limit", "lammps=rigidmd"],
+     ("timestep-216.md", "timestep-216-tables.md")),
+    ("timestep_table_216_spce", [], ("timestep-216-spce.md",)),
+])
+def test_the_216_water_pages_show_what_the_committed_runs_give(tmp_path, name, options,
+                                                               pages):
     """The pages' tables are the collector's on the committed runs (``--bundle``), every row
     of them: a page kept by hand from an older collection, or runs added without their
     rows, fails here."""
-    bundle = ROOT / "validation" / "timestep_table_216.runs.json"
-    collector.main([str(bundle), "--outdir", str(tmp_path), "--name", "t",
-                    "--borrow-limit", "lammps=rigidmd"])
+    bundle = ROOT / "validation" / f"{name}.runs.json"
+    collector.main([str(bundle), "--outdir", str(tmp_path), "--name", "t", *options])
     rows = [line for line in (tmp_path / "t.md").read_text().splitlines()
             if line.startswith("| ") and not line.startswith("| model") and
             not line.startswith("| code")]
-    pages = "".join((ROOT / "docs" / "validation" / page).read_text()
-                    for page in ("timestep-216.md", "timestep-216-tables.md"))
-    assert len(rows) > 10
+    pages = "".join((ROOT / "docs" / "validation" / page).read_text() for page in pages)
+    assert len(rows) > 5
     missing = [row for row in rows if row not in pages]
     assert not missing, f"rows the pages lack (run the collector again): {missing}"
 
@@ -552,3 +559,14 @@ def test_diffusion_has_a_limit_per_kind_of_thermostat(tmp_path):
     assert fits[("tip4p2005", 216, "rigidmd", "U")]["shared"]["points"] == 6
     rows, _ = collector.assess(points, fits)
     assert all(abs(r["checks"]["D_pbc"]["dev"]) < 1e-9 for r in rows)
+
+
+def test_a_limit_from_points_without_errors_has_no_invented_error():
+    """Single runs of a quantity with no error of its own (the RDF peak of one run): the
+    limit's error is the scatter's about the fit, or nan with no degree of freedom left;
+    before, equal weights of 1 gave an error of about 1.4 whatever the values."""
+    exact = collector.fit_limit([1.0, 2.0], [3.17, 3.14], [np.nan, np.nan], ["baoab"] * 2)
+    assert exact["a"] == pytest.approx(3.18) and np.isnan(exact["a_err"])
+    scattered = collector.fit_limit([0.5, 1.0, 2.0], [3.181, 3.169, 3.141],
+                                    [np.nan] * 3, ["baoab"] * 3)
+    assert 0 < scattered["a_err"] < 0.02
