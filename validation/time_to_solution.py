@@ -11,7 +11,8 @@ The measurement: one thread, every code from the model's shared thermal start
 20 (:func:`timestep_table.measure_ms`, so that set-ups do not count; a first run of each
 pays its compiling), the codes interleaved in ``--rounds`` rounds and the best round kept.
 ns/day = 86.4 · dt (fs) / (ms per step).  ``--extra CODE:INTEGRATOR:DT`` adds a point the
-table does not hold (OpenMM's ``middle`` at a step of your choice, say), marked as such.
+table does not hold (OpenMM's ``middle`` at a step of your choice, say), marked as such;
+``rigidmd:INTEGRATOR:DT:SUBSTEPS:R_SPLIT`` is an r-RESPA split at the outer step DT.
 The ratios are to LAMMPS at the step the table judged, or else at a step given.
 ``--skin S`` gives every LAMMPS force (rigidmd's, each level of a split, and LAMMPS's own
 run) a neighbour skin of S Å: LAMMPS's metal default of 2 Å re-neighbours often at steps
@@ -65,24 +66,34 @@ def chosen_points(table, extra=()):
         if row["shown_fs"] and row["shown_fs"] != row["not_excluded_fs"]:
             out.append((row["code"], row["integrator"], float(row["shown_fs"]), "shown"))
     for item in extra:
-        code, integrator, dt = item.split(":")
-        out.append((code, integrator, float(dt), "given"))
-        levels.setdefault(integrator, (integrator, 1, 5.0))
+        code, integrator, dt, *split = item.split(":")
+        if split:  # an r-RESPA split: CODE:INTEGRATOR:DT:SUBSTEPS:R_SPLIT
+            k, r_split = int(split[0]), float(split[1])
+            name = f"{integrator} k={k} r={r_split:g}"
+            levels.setdefault(name, (integrator, k, r_split))
+        else:
+            name = integrator
+            levels.setdefault(name, (integrator, 1, 5.0))
+        out.append((code, name, float(dt), "given"))
     return out, levels
 
 
 def parse_extra(item):
-    """``CODE:INTEGRATOR:DT`` checked, or argparse's error."""
+    """``CODE:INTEGRATOR:DT`` (rigidmd also ``...:SUBSTEPS:R_SPLIT``, an r-RESPA split of
+    outer step DT) checked, or argparse's error."""
     parts = item.split(":")
     codes = {"rigidmd": timestep_table.INTEGRATORS, "lammps": ("nvt_small",),
              "openmm": ("middle",)}
     try:
-        ok = len(parts) == 3 and parts[1] in codes[parts[0]] and float(parts[2]) > 0
+        ok = (len(parts) == 3 or (len(parts) == 5 and parts[0] == "rigidmd"
+                                  and int(parts[3]) >= 2 and float(parts[4]) > 0)) \
+            and parts[1] in codes[parts[0]] and float(parts[2]) > 0
     except (KeyError, ValueError):
         ok = False
     if not ok:
         raise argparse.ArgumentTypeError(
-            f"{item!r}: give CODE:INTEGRATOR:DT_FS, e.g. openmm:middle:4 or rigidmd:baoab:4")
+            f"{item!r}: give CODE:INTEGRATOR:DT_FS, e.g. openmm:middle:4 or rigidmd:baoab:4, "
+            "or a split rigidmd:INTEGRATOR:DT_FS:SUBSTEPS:R_SPLIT, e.g. rigidmd:baoab:6:2:5")
     return item
 
 

@@ -466,6 +466,12 @@ def test_time_to_solution_measures_each_largest_step(tmp_path):
     assert "neighbour skin 3 Å" in written
     with pytest.raises(SystemExit):
         tts.main([str(table_json), "--extra", "openmm:baoab:4"])
+    with pytest.raises(SystemExit):  # a split is rigidmd's, with k >= 2
+        tts.main([str(table_json), "--extra", "rigidmd:baoab:6:1:5"])
+    # A split given: its levels reach the measurement as a table's split row's do.
+    points, levels = tts.chosen_points({"largest_steps": []}, ["rigidmd:baoab:6:2:5"])
+    assert points == [("rigidmd", "baoab k=2 r=5", 6.0, "given")]
+    assert levels == {"baoab k=2 r=5": ("baoab", 2, 5.0)}
 
 
 def test_a_bundle_of_runs_gives_the_same_table(tmp_path):
