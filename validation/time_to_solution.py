@@ -16,8 +16,8 @@ table does not hold (OpenMM's ``middle`` at a step of your choice, say), marked 
 The ratios are to LAMMPS at the step the table judged, or else at a step given.
 ``--skin S`` gives every LAMMPS force (rigidmd's, each level of a split, and LAMMPS's own
 run) a neighbour skin of S Å: LAMMPS's metal default of 2 Å re-neighbours often at steps
-of 4–6 fs, and at 216 waters 3 Å made BAOAB's 4 fs step 12 % cheaper and the split's
-6 fs outer step 12 % cheaper (2 fs: 6 %), the forces unchanged.
+of 3–6 fs, and at 216 waters 3 Å made BAOAB's 3 and 4 fs steps 7 and 13 % cheaper and the
+split's 6 fs outer step 9 % (LAMMPS's own 1 fs step: the same), the forces unchanged.
 
 Run::
 
