@@ -124,7 +124,10 @@ def measure(points, levels, model, waters, steps, rounds, outdir, skin=None):
     rows = []
     for code, integrator, dt, basis in points:
         cpu, wall = best[(code, integrator, dt)]
-        rows.append({"code": code, "integrator": integrator, "dt_fs": dt, "basis": basis,
+        scheme, substeps, r_split = levels[integrator]
+        rows.append({"code": code, "integrator": integrator, "scheme": scheme,
+                     "substeps": substeps, "r_split": r_split if substeps > 1 else None,
+                     "dt_fs": dt, "basis": basis,
                      "cpu_ms_per_step": cpu, "wall_ms_per_step": wall,
                      "ns_per_day": 86.4 * dt / cpu})
     # The reference: LAMMPS's own integrator at the step the table judged, or else at a

@@ -147,8 +147,8 @@ def fit_limit(dt, y, err, groups):
 
 #: rigidmd's thermostats by what they do to diffusion, for D_PBC's limit: a Langevin friction
 #: (1/ps here) slows it; a global thermostat (Bussi, Nosé–Hoover chains; τ = 1 ps) leaves it
-#: close to NVE's.  Measured at 216 waters, 4 fs: Bussi's and Nosé–Hoover's D_PBC 25–29 %
-#: above the Langevin schemes' limit.
+#: close to NVE's.  Measured at 216 waters (dt → 0): 1.88 ± 0.03 against 1.78 ± 0.02
+#: (1e-5 cm²/s), and at 4 fs Bussi's and Nosé–Hoover's 2.20 and 2.24.
 DIFFUSION_KIND = {"langevin": "friction", "baoab": "friction", "bussi": "global",
                   "nosehoover": "global"}
 

@@ -21,13 +21,11 @@ COLOURS = {"not excluded": "C0", "shown": "C2", "given": "0.6"}
 
 
 def label(row):
-    """The row's code and integrator in words; an r-RESPA split ``"baoab k=2 r=5"`` named
-    with its substeps and fast level."""
-    name, *split = row["integrator"].split()
-    text = NAMES[(row["code"], name)]
-    if split:
-        fields = dict(item.split("=") for item in split)
-        text += f" r-RESPA k={fields['k']}, {fields['r']} Å fast"
+    """The row's code and integrator in words; an r-RESPA split named with its substeps and
+    fast level (the row's ``substeps`` and ``r_split``)."""
+    text = NAMES[(row["code"], row["scheme"])]
+    if row["substeps"] > 1:
+        text += f" r-RESPA k={row['substeps']}, {row['r_split']:g} Å fast"
     return f"{text}, {row['dt_fs']:g} fs"
 
 
