@@ -60,6 +60,12 @@ CHECKED_ELSEWHERE = (
      "--quick form"),
     ("validation/respa_lammps_nve.py", "minutes; tests/physics/test_respa_lammps.py runs its "
      "--quick form"),
+    ("validation/respa_chgnet.py", "15 minutes, in CHGNet's own environment (PyTorch, not "
+     "the test extra); tests/physics/test_respa_chgnet.py checks its fitted model and runs "
+     "its --quick form where CHGNet is installed"),
+    ("validation/npt_density.py", "hours for the table's runs; tests/physics/"
+     "test_npt_density.py runs a few steps, a stop and --resume, and the report on the "
+     "committed runs"),
     ("benchmarks/", "benchmarks measure speed or physics for minutes to hours; each is run "
      "in its --quick form by the tests of what it measures"),
     ("python -m pytest", "the test command itself"),

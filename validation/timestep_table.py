@@ -796,18 +796,25 @@ def points(args):
 
 
 def run_many(args):
-    """Run every point, ``--jobs`` at a time, each in its own process; a signal is passed on
-    to the running ones (each finishes its step and writes) and starts no more."""
-    todo = points(args)
-    if len(todo) == 1 and args.jobs == 1:
-        return point_main(todo[0], args.resume)
+    """Run every point, ``--jobs`` at a time, each in its own process (:func:`run_points`)."""
+    return run_points(points(args), __file__, run_name, point_main, args.jobs, args.resume)
+
+
+def run_points(todo, script, name_of, one, jobs, resume):
+    """Run the points ``todo``: with one point and one job here (``one(point, resume)``),
+    else ``jobs`` at a time, each in its own process (``script _point JSON``); a signal is
+    passed on to the running ones (each finishes its step and writes) and starts no more.
+    Returns 0 when every run completed, 3 otherwise (named, by ``name_of(point)``)."""
+    todo = list(todo)
+    if len(todo) == 1 and jobs == 1:
+        return one(todo[0], resume)
     stop = Stop()
     running, status = [], {}
     while (todo and not stop) or running:
-        while todo and not stop and len(running) < args.jobs:
+        while todo and not stop and len(running) < jobs:
             p = todo.pop(0)
-            cmd = [sys.executable, __file__, "_point", json.dumps(p)] + (
-                ["--resume"] if args.resume else [])
+            cmd = [sys.executable, str(script), "_point", json.dumps(p)] + (
+                ["--resume"] if resume else [])
             running.append((p, subprocess.Popen(cmd)))
         for p, proc in list(running):
             if stop:
@@ -818,7 +825,7 @@ def run_many(args):
             rc = proc.poll()
             if rc is not None:
                 running.remove((p, proc))
-                status[run_name(p)] = rc
+                status[name_of(p)] = rc
         time.sleep(0.2)
     bad = {k: v for k, v in status.items() if v}
     if bad or stop:

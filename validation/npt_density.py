@@ -1,0 +1,301 @@
+r"""NPT density of rigid TIP4P/2005 against the step, with the Monte Carlo barostat.
+
+The time-step table's NPT goal: the density at 298 K and 1 atm with ``RigidLangevinBAOAB``'s
+part at 4 fs within 2σ of its value at 0.5 fs, σ ≤ 0.1 %.  One run is one point: 216 waters
+from the table's shared start (``water_openmm_long.start_tip4p2005.npz``), LAMMPS's forces
+as the table's (``lj/cut/coul/long`` 9 Å with the tail correction, PPPM 1e-5, pinned Ewald
+parameter), :class:`rigidmd.RigidMCBarostat` with the thermostat part of ``--integrator``
+(``baoab``: :class:`~rigidmd.couplings.baoab.LangevinBAOABThermostat`; ``langevin``:
+:class:`~rigidmd.couplings.thermostats.LangevinThermostat`; friction 1/ps, ``fixcm=False``
+as every barostat needs), isotropic volume moves every ``--move-fs`` of simulated time
+whatever the step (the same moves per ps at every step; the move size adapts during the
+first 500 moves, which lie inside ``--equil-ps``).  The Monte Carlo barostat reads the
+bath's temperature, not the momenta, so BAOAB's kinetic bias does not reach the density.
+
+A run writes ``<name>.json`` (the density with the standard error of ``--blocks`` block
+means over the part after ``--equil-ps``, ⟨U⟩/N, T_tr, T_rot, the acceptance), its series
+``<name>.series.npz`` (time, density, U, T_tr, T_rot every move) and its checkpoint
+``<name>.chk.npz`` (rigidmd's, exact).  It prints progress (a line on a terminal, a log
+line a minute otherwise), stops on SIGTERM or SIGINT at the end of the move interval it is
+in, writes what it has (``"complete": false``) and ``--resume`` continues it.  ``report``
+compares the steps.  Run::
+
+    python validation/npt_density.py run --dt-fs 0.5 4 --ps 400 --jobs 2 \
+        --outdir validation/npt_runs
+    python validation/npt_density.py run ... --resume     # continue stopped runs
+    python validation/npt_density.py report validation/npt_runs/*.json \
+        --out validation/npt_density
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import numpy as np  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from timestep_table import (  # noqa: E402
+    FRICTION_PER_PS,
+    TEMPERATURE_K,
+    Progress,
+    Stop,
+    block_mean,
+    cutoff_for,
+    intramolecular_energy,
+    load_start,
+    make_atoms,
+    run_points,
+)
+
+PRESSURE_BAR = 1.01325
+MODEL = "tip4p2005"
+INTEGRATORS = ("baoab", "langevin")
+KEYS = ("t_ps", "density", "U", "T_tr", "T_rot")
+
+
+def run_name(p):
+    return f"npt_{MODEL}_{p['waters']}_{p['integrator']}_dt{p['dt_fs']:g}_s{p['seed']}"
+
+
+def dynamics(p, atoms):
+    """``RigidMCBarostat`` with the point's thermostat part, a move every ``move_fs``."""
+    from ase import units
+
+    from rigidmd import RigidMCBarostat
+    from rigidmd.couplings.baoab import LangevinBAOABThermostat
+    from rigidmd.couplings.thermostats import LangevinThermostat
+
+    rng = np.random.default_rng(5000 + p["seed"])
+    friction = FRICTION_PER_PS * 1e-3 / units.fs
+    part = {"baoab": LangevinBAOABThermostat, "langevin": LangevinThermostat}[p["integrator"]]
+    dt = p["dt_fs"] * units.fs
+    # BAOAB's part acts in the middle of the step: the dynamics cuts NO_SQUISH around it
+    return RigidMCBarostat(atoms, dt, TEMPERATURE_K, PRESSURE_BAR * units.bar,
+                           thermostat=part(TEMPERATURE_K, friction, rng, fixcm=False),
+                           every=move_every(p), rng=rng)
+
+
+def move_every(p):
+    """Steps between volume moves: ``move_fs`` of simulated time (at least one step)."""
+    return max(int(round(p["move_fs"] / p["dt_fs"])), 1)
+
+
+def run_point(p, paths, stop, progress, resume):
+    """Run (or continue) one point; returns (series, steps, ms/step, U offset, first step)."""
+    from ase import units
+    from water_openmm_nve import lammps_calculator
+
+    from rigidmd import load_checkpoint
+    from rigidmd.core.checkpoint import read_checkpoint, save_checkpoint
+    from rigidmd.water import water_model
+
+    model = water_model(MODEL)
+    state = load_start(MODEL, p["waters"])
+    series = {k: [] for k in KEYS}
+    if resume and paths["chk"].exists():
+        chk = read_checkpoint(paths["chk"])
+        dyn = load_checkpoint(chk, lammps_calculator(model, cutoff_for(state["cell"])))
+        with np.load(paths["series"]) as d:
+            series = {k: list(d[k][:chk.extra["samples"]]) for k in KEYS}
+    else:
+        dyn = dynamics(p, make_atoms(state, model))
+    atoms = dyn.atoms
+    kj = units.kJ / units.mol
+    every = move_every(p)
+    total = int(round(p["ps"] * 1000 / p["dt_fs"]))
+
+    def observe():
+        t = dyn.nsteps * p["dt_fs"] / 1000
+        if series["t_ps"] and series["t_ps"][-1] >= t:
+            return  # a resumed run's first call: this step is recorded
+        for k, v in zip(KEYS, (t, dyn.get_density(), atoms.get_potential_energy() / kj,
+                               *dyn.get_kinetic_temperatures()), strict=True):
+            series[k].append(float(v))
+
+    def save():
+        tmp = paths["series"].with_name(paths["series"].name + ".tmp.npz")
+        np.savez(tmp, **{k: np.asarray(v, dtype=float) for k, v in series.items()})
+        os.replace(tmp, paths["series"])
+        save_checkpoint(dyn, paths["chk"], extra={"samples": len(series["t_ps"])})
+
+    dyn.attach(observe, interval=every)
+    last_save = time.perf_counter()
+    t0, s0 = time.perf_counter(), dyn.nsteps
+    while dyn.nsteps < total and not stop:
+        dyn.run(min(every, total - dyn.nsteps))
+        progress(dyn.nsteps * p["dt_fs"] / 1000)
+        if time.perf_counter() - last_save > p["save_s"]:
+            save()
+            last_save = time.perf_counter()
+    ms = 1000 * (time.perf_counter() - t0) / max(dyn.nsteps - s0, 1)
+    save()
+    atoms.get_potential_energy()
+    offset = intramolecular_energy(model, atoms.calc)
+    acceptance = float(dyn.barostat.acceptance)
+    if hasattr(atoms.calc, "close"):
+        atoms.calc.close()
+    return series, dyn.nsteps, ms, offset, s0, acceptance
+
+
+def analyse(series, p, offset):
+    """The density (g/cm³), ⟨U⟩/N (kJ/mol, without the intramolecular constant), T_tr and
+    T_rot (K), each with the standard error of ``blocks`` block means after ``equil_ps``."""
+    t = np.asarray(series["t_ps"])
+    keep = t > p["equil_ps"]
+    out = {"recorded_ps": float(t[keep][-1] - t[keep][0]) if keep.sum() > 1 else 0.0,
+           "samples": int(keep.sum())}
+    out["density"] = block_mean(np.asarray(series["density"])[keep], p["blocks"])
+    u = np.asarray(series["U"])[keep] / p["waters"] - offset
+    out["U"] = block_mean(u, p["blocks"])
+    for k in ("T_tr", "T_rot"):
+        out[k] = block_mean(np.asarray(series[k])[keep], p["blocks"])
+    return out
+
+
+def point_main(p, resume):
+    """Run one point and write its JSON; exit status 0 when complete, 3 when stopped."""
+    outdir = Path(p["outdir"])
+    outdir.mkdir(parents=True, exist_ok=True)
+    name = run_name(p)
+    paths = {k: outdir / f"{name}.{k}.npz" for k in ("series", "chk")}
+    paths["json"] = outdir / f"{name}.json"
+    if paths["json"].exists() and not resume:
+        raise SystemExit(f"{paths['json']}: exists; give --resume to continue it or remove it")
+    if resume and paths["json"].exists() and json.loads(paths["json"].read_text()).get(
+            "complete"):
+        print(f"{name}: complete", flush=True)
+        return 0
+    stop = Stop()
+    progress = Progress(name, p["ps"], p["log_s"], shared=p.get("jobs", 1) > 1)
+    wall = time.perf_counter()
+    series, steps, ms, offset, first, acceptance = run_point(p, paths, stop, progress, resume)
+    total = int(round(p["ps"] * 1000 / p["dt_fs"]))
+    out = {"point": {k: v for k, v in p.items() if k != "outdir"}, "name": name,
+           "complete": steps >= total, "steps": steps, "resumed_from_step": first,
+           "ps": steps * p["dt_fs"] / 1000, "stopped_by": stop.signal, "ms_per_step": ms,
+           "wall_s": time.perf_counter() - wall, "molecules": p["waters"],
+           "temperature_K": TEMPERATURE_K, "pressure_bar": PRESSURE_BAR,
+           "friction_per_ps": FRICTION_PER_PS, "move_every_steps": move_every(p),
+           "acceptance": acceptance, "U_offset_per_molecule": offset,
+           **analyse(series, p, offset)}
+    tmp = paths["json"].with_name(paths["json"].name + ".tmp")
+    tmp.write_text(json.dumps(out, indent=1, allow_nan=True) + "\n")
+    os.replace(tmp, paths["json"])
+    progress(out["ps"], force=True)
+    if stop:
+        print(f"{name}: stopped by {stop.signal} at {out['ps']:.3f} ps; written, continue "
+              f"with --resume", flush=True)
+        return 3
+    return 0
+
+
+def run_many(args):
+    """Every point of the values given, ``--jobs`` at a time, each in its own process
+    (:func:`timestep_table.run_points`: a signal is passed on, each run writes what it has)."""
+    base = {k: getattr(args, k) for k in ("waters", "ps", "equil_ps", "move_fs", "blocks",
+                                          "save_s", "log_s", "jobs")}
+    base["outdir"] = str(args.outdir)
+    todo = [dict(base, integrator=i, dt_fs=dt, seed=s)
+            for i, dt, s in itertools.product(args.integrator, args.dt_fs, args.seed)]
+    return run_points(todo, __file__, run_name, point_main, args.jobs, args.resume)
+
+
+def report(files, out=None):
+    """A table of the runs, each step against the smallest step of its integrator; with
+    ``out``, also ``OUT.md``, ``OUT.json`` (the rows) and ``OUT.runs.json`` (every run's JSON,
+    a bundle ``report`` reads again)."""
+    runs = []
+    for f in files:  # a run's JSON, or a bundle of them (a list, ``--out``'s ``.runs.json``)
+        data = json.loads(Path(f).read_text())
+        runs.extend(data if isinstance(data, list) else [data])
+    runs.sort(key=lambda r: (r["point"]["integrator"], r["point"]["dt_fs"], r["point"]["seed"]))
+    first = runs[0]["point"]
+    lines = [f"NPT density of {first['waters']} rigid TIP4P/2005 waters, 298 K, 1 atm, Monte "
+             f"Carlo barostat (a move every {first['move_fs']:g} fs), friction 1/ps; "
+             f"block-average standard errors after the first {first['equil_ps']:g} ps.",
+             "",
+             "| integrator | dt (fs) | seed | ps | density (g/cm³) | σ/ρ (%) | Δρ vs smallest "
+             "step (%) | Δ/σ | ⟨U⟩/N (kJ/mol) | T_tr (K) | T_rot (K) | acceptance | ms/step |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    rows = []
+    for r in runs:
+        p = r["point"]
+        ref = min((q for q in runs if q["point"]["integrator"] == p["integrator"]),
+                  key=lambda q: q["point"]["dt_fs"])
+        rho, err = r["density"]
+        rho0, err0 = ref["density"]
+        diff = 100 * (rho - rho0) / rho0
+        sig = float(np.hypot(err, err0))
+        z = (rho - rho0) / sig if ref is not r and sig > 0 else float("nan")
+        row = {"integrator": p["integrator"], "dt_fs": p["dt_fs"], "seed": p["seed"],
+               "ps": r["ps"], "complete": r["complete"], "density": [rho, err],
+               "rel_err_pct": 100 * err / rho, "diff_pct": diff if ref is not r else 0.0,
+               "z": z, "U": r["U"], "T_tr": r["T_tr"], "T_rot": r["T_rot"],
+               "acceptance": r["acceptance"], "ms_per_step": r["ms_per_step"]}
+        rows.append(row)
+        lines.append(
+            f"| {p['integrator']} | {p['dt_fs']:g} | {p['seed']} | {r['ps']:.0f}"
+            f"{'' if r['complete'] else ' (stopped)'} | {rho:.4f} ± {err:.4f} | "
+            f"{100 * err / rho:.3f} | {row['diff_pct']:+.3f} | "
+            f"{'' if z != z else f'{z:+.1f}'} | {r['U'][0]:.3f} ± {r['U'][1]:.3f} | "
+            f"{r['T_tr'][0]:.1f} ± {r['T_tr'][1]:.1f} | {r['T_rot'][0]:.1f} ± "
+            f"{r['T_rot'][1]:.1f} | {r['acceptance']:.2f} | {r['ms_per_step']:.1f} |")
+    text = "\n".join(lines) + "\n"
+    if out:
+        Path(str(out) + ".md").write_text(text)
+        Path(str(out) + ".json").write_text(json.dumps(rows, indent=1) + "\n")
+        Path(str(out) + ".runs.json").write_text(json.dumps(runs, indent=1) + "\n")
+    return text
+
+
+def parse(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    r = sub.add_parser("run", help="run points")
+    r.add_argument("--integrator", nargs="+", choices=INTEGRATORS, default=["baoab"])
+    r.add_argument("--waters", type=int, default=216,
+                   help="216 (the table's) or a size timestep_table.py start made")
+    r.add_argument("--dt-fs", nargs="+", type=float, required=True)
+    r.add_argument("--seed", nargs="+", type=int, default=[1])
+    r.add_argument("--ps", type=float, required=True, help="length of each run, ps")
+    r.add_argument("--equil-ps", type=float, default=30.0,
+                   help="left out of the averages at the start, ps")
+    r.add_argument("--move-fs", type=float, default=50.0, help="a volume move every, fs")
+    r.add_argument("--blocks", type=int, default=10, help="blocks for the errors")
+    r.add_argument("--save-s", type=float, default=300.0, help="checkpoint every, s")
+    r.add_argument("--log-s", type=float, default=60.0, help="log line every, s (no terminal)")
+    r.add_argument("--jobs", type=int, default=1)
+    r.add_argument("--resume", action="store_true", help="continue stopped runs")
+    r.add_argument("--outdir", type=Path, default=HERE / "npt_runs")
+    pt = sub.add_parser("_point")
+    pt.add_argument("point")
+    pt.add_argument("--resume", action="store_true")
+    rep = sub.add_parser("report", help="the table of finished or stopped runs")
+    rep.add_argument("files", nargs="+", type=Path)
+    rep.add_argument("--out", type=Path, help="also write OUT.md, OUT.json, OUT.runs.json")
+    return ap.parse_args(argv)
+
+
+def main(argv=None):
+    args = parse(argv)
+    if args.command == "run":
+        return run_many(args)
+    if args.command == "_point":
+        return point_main(json.loads(args.point), args.resume)
+    print(report(args.files, args.out), end="")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
