@@ -211,46 +211,72 @@ def run_many(args):
     return run_points(todo, __file__, run_name, point_main, args.jobs, args.resume)
 
 
-def report(files, out=None):
-    """A table of the runs, each step against the smallest step of its integrator; with
-    ``out``, also ``OUT.md``, ``OUT.json`` (the rows) and ``OUT.runs.json`` (every run's JSON,
-    a bundle ``report`` reads again)."""
+def combine(values):
+    """The weighted mean of ``[(mean, error), ...]`` (weights 1/error²) and its error."""
+    x = np.array([v[0] for v in values])
+    w = 1 / np.array([v[1] for v in values]) ** 2
+    return float(np.sum(w * x) / np.sum(w)), float(1 / np.sqrt(np.sum(w)))
+
+
+def report(files, out=None, sigma_goal_pct=0.1):
+    """The runs, then each step's runs combined against the smallest step of the same
+    integrator: Δρ, Δ/σ and the goal (within 2σ, σ/ρ ≤ ``sigma_goal_pct`` at both steps).
+    With ``out``, also ``OUT.md``, ``OUT.json`` (the combined rows) and ``OUT.runs.json``
+    (every run's JSON, a bundle ``report`` reads again)."""
     runs = []
     for f in files:  # a run's JSON, or a bundle of them (a list, ``--out``'s ``.runs.json``)
         data = json.loads(Path(f).read_text())
         runs.extend(data if isinstance(data, list) else [data])
     runs.sort(key=lambda r: (r["point"]["integrator"], r["point"]["dt_fs"], r["point"]["seed"]))
     first = runs[0]["point"]
-    lines = [f"NPT density of {first['waters']} rigid TIP4P/2005 waters, 298 K, 1 atm, Monte "
-             f"Carlo barostat (a move every {first['move_fs']:g} fs), friction 1/ps; "
-             f"block-average standard errors after the first {first['equil_ps']:g} ps.",
-             "",
-             "| integrator | dt (fs) | seed | ps | density (g/cm³) | σ/ρ (%) | Δρ vs smallest "
-             "step (%) | Δ/σ | ⟨U⟩/N (kJ/mol) | T_tr (K) | T_rot (K) | acceptance | ms/step |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    rows = []
+    lines = [f"NPT density of {runs[0]['molecules']} rigid TIP4P/2005 waters, 298 K, 1 atm, Monte "
+             f"Carlo barostat, friction 1/ps; standard errors of block means after the "
+             f"first {first['equil_ps']:g} ps of each run.", "",
+             "| integrator | dt (fs) | seed | ps | density (g/cm³) | σ/ρ (%) | ⟨U⟩/N (kJ/mol) | "
+             "T_tr (K) | T_rot (K) | move every (fs) | acceptance | ms/step |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in runs:
         p = r["point"]
-        ref = min((q for q in runs if q["point"]["integrator"] == p["integrator"]),
-                  key=lambda q: q["point"]["dt_fs"])
         rho, err = r["density"]
-        rho0, err0 = ref["density"]
-        diff = 100 * (rho - rho0) / rho0
-        sig = float(np.hypot(err, err0))
-        z = (rho - rho0) / sig if ref is not r and sig > 0 else float("nan")
-        row = {"integrator": p["integrator"], "dt_fs": p["dt_fs"], "seed": p["seed"],
-               "ps": r["ps"], "complete": r["complete"], "density": [rho, err],
-               "rel_err_pct": 100 * err / rho, "diff_pct": diff if ref is not r else 0.0,
-               "z": z, "U": r["U"], "T_tr": r["T_tr"], "T_rot": r["T_rot"],
-               "acceptance": r["acceptance"], "ms_per_step": r["ms_per_step"]}
-        rows.append(row)
         lines.append(
             f"| {p['integrator']} | {p['dt_fs']:g} | {p['seed']} | {r['ps']:.0f}"
             f"{'' if r['complete'] else ' (stopped)'} | {rho:.4f} ± {err:.4f} | "
-            f"{100 * err / rho:.3f} | {row['diff_pct']:+.3f} | "
-            f"{'' if z != z else f'{z:+.1f}'} | {r['U'][0]:.3f} ± {r['U'][1]:.3f} | "
+            f"{100 * err / rho:.3f} | {r['U'][0]:.3f} ± {r['U'][1]:.3f} | "
             f"{r['T_tr'][0]:.1f} ± {r['T_tr'][1]:.1f} | {r['T_rot'][0]:.1f} ± "
-            f"{r['T_rot'][1]:.1f} | {r['acceptance']:.2f} | {r['ms_per_step']:.1f} |")
+            f"{r['T_rot'][1]:.1f} | {r['move_every_steps'] * p['dt_fs']:g} | "
+            f"{r['acceptance']:.2f} | {r['ms_per_step']:.1f} |")
+    steps = sorted({(r["point"]["integrator"], r["point"]["dt_fs"]) for r in runs})
+    rows = []
+    for integrator, dt in steps:
+        mine = [r for r in runs if (r["point"]["integrator"], r["point"]["dt_fs"]) ==
+                (integrator, dt)]
+        rho, err = combine([r["density"] for r in mine])
+        rows.append({"integrator": integrator, "dt_fs": dt, "runs": len(mine),
+                     "ps": float(sum(r["ps"] for r in mine)), "density": [rho, err],
+                     "rel_err_pct": 100 * err / rho})
+    for row in rows:
+        ref = min((q for q in rows if q["integrator"] == row["integrator"]),
+                  key=lambda q: q["dt_fs"])
+        (rho, err), (rho0, err0) = row["density"], ref["density"]
+        sig = float(np.hypot(err, err0))
+        row["reference_dt_fs"] = ref["dt_fs"]
+        row["diff_pct"] = 100 * (rho - rho0) / rho0
+        row["z"] = (rho - rho0) / sig if ref is not row else float("nan")
+        precise = max(row["rel_err_pct"], ref["rel_err_pct"]) <= sigma_goal_pct
+        row["goal"] = ("—" if ref is row else
+                       ("✗" if abs(row["z"]) > 2 else "✓" if precise else "? (σ above "
+                        f"{sigma_goal_pct:g} %)"))
+    lines += ["", f"Each step's runs combined (weights 1/σ²), against the smallest step of the "
+              f"same integrator; the goal: within 2σ of it, with σ/ρ ≤ {sigma_goal_pct:g} % "
+              "at both steps.", "",
+              "| integrator | dt (fs) | runs | ps | density (g/cm³) | σ/ρ (%) | Δρ (%) | Δ/σ | "
+              "goal |", "|---|---|---|---|---|---|---|---|---|"]
+    for row in rows:
+        rho, err = row["density"]
+        z = "" if row["z"] != row["z"] else f"{row['z']:+.1f}"
+        lines.append(f"| {row['integrator']} | {row['dt_fs']:g} | {row['runs']} | "
+                     f"{row['ps']:.0f} | {rho:.4f} ± {err:.4f} | {row['rel_err_pct']:.3f} | "
+                     f"{row['diff_pct']:+.3f} | {z} | {row['goal']} |")
     text = "\n".join(lines) + "\n"
     if out:
         Path(str(out) + ".md").write_text(text)

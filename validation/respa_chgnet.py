@@ -86,13 +86,17 @@ class FourSite(Calculator):
         M's fraction of the H–O bisector sum (dimensionless).
     e0 : float, default 0
         A constant, eV (the fitted model's energy shift).
+    c12_oh, c6_oh : float, default 0
+        eV Å¹², eV Å⁶: an optional term :math:`c_{12}/r^{12} - c_6/r^6` between each O and
+        the H atoms of the other molecules (the richer fit's two extra parameters).
     """
 
     implemented_properties = ["energy", "forces"]
 
-    def __init__(self, q_h, sigma, epsilon, a, e0=0.0):
+    def __init__(self, q_h, sigma, epsilon, a, e0=0.0, c12_oh=0.0, c6_oh=0.0):
         super().__init__()
         self.q_h, self.sigma, self.epsilon, self.a, self.e0 = q_h, sigma, epsilon, a, e0
+        self.c12_oh, self.c6_oh = c12_oh, c6_oh
 
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         super().calculate(atoms, properties, system_changes)
@@ -121,6 +125,14 @@ class FourSite(Calculator):
         forces = np.zeros((n, 3, 3))
         np.add.at(forces[:, 0], i, flj)
         np.add.at(forces[:, 0], j, -flj)
+        if self.c12_oh or self.c6_oh:  # O of one molecule, H of the other, both ways
+            for first, second in ((i, j), (j, i)):
+                d = o[first][:, None, :] - x[second][:, 1:, :]  # (pairs, 2, 3)
+                r2 = np.sum(d * d, axis=-1)
+                energy += float(np.sum(self.c12_oh / r2**6 - self.c6_oh / r2**3))
+                f = ((12 * self.c12_oh / r2**7 - 6 * self.c6_oh / r2**4)[..., None] * d)
+                np.add.at(forces[:, 0], first, f.sum(axis=1))
+                np.add.at(forces[:, 1:], second, -f)
         forces[:, 1] += fsite[:, 0]
         forces[:, 2] += fsite[:, 1]
         forces[:, 0] += (1 - 2 * self.a) * fsite[:, 2]
@@ -148,21 +160,31 @@ def generalized(atoms, calc):
     return np.concatenate([f.sum(axis=1).ravel(), np.cross(x - centre, f).sum(axis=1).ravel()])
 
 
+def four_site(params):
+    """:class:`FourSite` from ``(q_h, sigma, epsilon, a)`` or, with the O–H terms,
+    ``(q_h, sigma, epsilon, a, c12_oh, c6_oh)`` (no energy constant)."""
+    return FourSite(*params[:4], 0.0, *params[4:])
+
+
 def fit(frames, targets, start):
-    """Least-squares ``(q_h, sigma, epsilon, a)`` from ``start``; returns them and the RMS."""
+    """Least-squares fit from ``start`` (4 parameters, or 6 with the O–H terms: see
+    :func:`four_site`); returns them and the RMS residual."""
     def residual(v):
-        calc = FourSite(v[0], v[1], v[2], v[3])
+        calc = four_site(v)
         return np.concatenate([generalized(a, calc) for a in frames]) - np.concatenate(targets)
 
     from scipy.optimize import least_squares
 
-    result = least_squares(residual, np.asarray(start, dtype=float), x_scale=[0.05, 0.1, 0.002,
-                           0.02], bounds=([0.2, 2.5, 1e-4, 0.0], [1.0, 4.0, 0.05, 0.4]))
+    scale, low, high = [0.05, 0.1, 0.002, 0.02], [0.2, 2.5, 1e-4, 0.0], [1.0, 4.0, 0.05, 0.4]
+    if len(start) == 6:
+        scale, low, high = scale + [100.0, 1.0], low + [0.0, -50.0], high + [1e4, 50.0]
+    result = least_squares(residual, np.asarray(start, dtype=float), x_scale=scale,
+                           bounds=(low, high))
     return tuple(result.x), float(np.sqrt(np.mean(result.fun**2)))
 
 
 def residual_rms(frames, targets, params):
-    calc = FourSite(*params)
+    calc = four_site(params)
     diff = np.concatenate([generalized(a, calc) for a in frames]) - np.concatenate(targets)
     return float(np.sqrt(np.mean(diff**2)))
 
@@ -253,11 +275,16 @@ def main(argv=None):
     t_train, t_test = targets[::2], targets[1::2]
     unrelated = tip4p2005_here((oh, hoh))
     params, train_rms = fit(train, t_train, unrelated)
+    # The richer fit: the four-site model's parameters and an O–H term, from no O–H term
+    params_oh, train_rms_oh = fit(train, t_train, (*params, 0.0, 0.0))
     # The constant: the fitted model's mean energy offset from CHGNet's on the frames
     e_chg = [CHGNetCluster(model).get_potential_energy(a) for a in frames]
-    e_fit = [FourSite(*params).get_potential_energy(a) for a in frames]
+    e_fit = [four_site(params).get_potential_energy(a) for a in frames]
     e0 = float(np.mean(np.subtract(e_chg, e_fit)))
     fitted = (*params, e0)
+    e0_oh = float(np.mean(np.subtract(e_chg, [four_site(params_oh).get_potential_energy(a)
+                                              for a in frames])))
+    fitted_oh = (*params_oh[:4], e0_oh, *params_oh[4:])
     scale = float(np.sqrt(np.mean(np.concatenate(t_test) ** 2)))
     rows = {"geometry": {"OH_A": oh, "HOH_deg": hoh},
             "fit": {"frames_train": len(train), "frames_test": len(test),
@@ -267,15 +294,20 @@ def main(argv=None):
                     "rms_test_tip4p2005": residual_rms(test, t_test, unrelated),
                     "rms_chgnet": scale,
                     "energy_rms_eV": float(np.std(np.subtract(e_chg, e_fit)))},
+            "fit_oh": {"q_h": params_oh[0], "sigma_A": params_oh[1],
+                       "epsilon_eV": params_oh[2], "a": params_oh[3], "e0_eV": e0_oh,
+                       "c12_oh": params_oh[4], "c6_oh": params_oh[5],
+                       "rms_train": train_rms_oh,
+                       "rms_test": residual_rms(test, t_test, params_oh)},
             "nve": []}
-    rows["frequencies"] = frequencies(end, model, FourSite(*fitted),
-                                      steps=50 if args.quick else 200)
+    steps = 50 if args.quick else 200
+    rows["frequencies"] = frequencies(end, model, FourSite(*fitted), steps=steps)
+    rows["frequencies_oh"] = frequencies(end, model, FourSite(*fitted_oh), steps=steps)
+    fasts = {"fit": fitted, "fit_oh": fitted_oh, "tip4p2005": unrelated}
     runs = [(k, dt, "fit") for k in ks for dt in dts]
-    runs += [(4, dt, "tip4p2005") for dt in dts if 4 in ks]
+    runs += [(4, dt, kind) for kind in ("fit_oh", "tip4p2005") for dt in dts if 4 in ks]
     for k, dt, kind in runs:
-        if k == 1 and kind != "fit":
-            continue
-        fast = FourSite(*fitted) if kind == "fit" else FourSite(*unrelated)
+        fast = FourSite(*fasts[kind])
         std, calls = nve(end, model, fast, k, dt, args.ps)
         rows["nve"].append({"k": k, "dt_fs": dt, "fast": kind, "std_eV": std,
                             "chgnet_calls_per_ps": calls})
@@ -291,8 +323,15 @@ def main(argv=None):
     return 0
 
 
+def label(kind, k):
+    """A fast level's name in the report."""
+    if k == 1:
+        return "none (CHGNet alone)"
+    return {"fit": "fitted", "fit_oh": "fitted, with O–H terms", "tip4p2005": "TIP4P/2005"}[kind]
+
+
 def report(rows):
-    f = rows["fit"]
+    f, g = rows["fit"], rows["fit_oh"]
     lines = [
         "CHGNet on the slow level of r-RESPA, a fitted rigid four-site model on the fast one; "
         "8 waters (a cluster), rigid NVE.", "",
@@ -302,9 +341,14 @@ def report(rows):
         "|---|---|---|---|---|---|---|",
         f"| fitted | {f['q_h']:.4f} | {f['sigma_A']:.4f} | {1000 * f['epsilon_eV']:.3f} | "
         f"{f['a']:.4f} | {f['rms_test']:.4f} | {f['rms_chgnet']:.4f} |",
+        f"| fitted, with O–H terms | {g['q_h']:.4f} | {g['sigma_A']:.4f} | "
+        f"{1000 * g['epsilon_eV']:.3f} | {g['a']:.4f} | {g['rms_test']:.4f} | "
+        f"{f['rms_chgnet']:.4f} |",
         f"| TIP4P/2005 (unrelated) | {TIP4P2005[0]} | {TIP4P2005[1]} | "
         f"{1000 * TIP4P2005[2]:.3f} | - | {f['rms_test_tip4p2005']:.4f} | "
         f"{f['rms_chgnet']:.4f} |", "",
+        f"The O–H terms between each O and the other molecules' H: c₁₂ = {g['c12_oh']:.4g} "
+        f"eV Å¹², c₆ = {g['c6_oh']:.4g} eV Å⁶.", "",
         f"Energy: the fitted model's offset from CHGNet's scatters by {f['energy_rms_eV']:.4f} eV "
         "over the frames.", "",
         "How slow is each level? The characteristic frequency of the waters' net forces and "
@@ -315,22 +359,26 @@ def report(rows):
           f"{q['rms_force']:.4f} | {q['rms_torque']:.4f} |"
           for name, q in (("CHGNet", rows["frequencies"]["chgnet"]),
                           ("fitted (fast level)", rows["frequencies"]["fast"]),
-                          ("CHGNet − fitted (slow level)", rows["frequencies"]["slow"]))], "",
+                          ("CHGNet − fitted (slow level)", rows["frequencies"]["slow"]),
+                          ("fitted, with O–H terms", rows["frequencies_oh"]["fast"]),
+                          ("CHGNet − fitted with O–H terms",
+                           rows["frequencies_oh"]["slow"]))], "",
         f"NVE over {rows['ps']:g} ps from the trajectory's end: the conserved energy's std "
         "about a line (eV) and CHGNet's calls per ps:", "",
         "| fast level | k | " + " | ".join(f"{dt:g} fs" for dt in sorted({r['dt_fs'] for r in
                                                                          rows['nve']})) + " |"]
     dts = sorted({r["dt_fs"] for r in rows["nve"]})
     lines.append("|---|---|" + "---|" * len(dts))
-    groups = sorted({(r["fast"], r["k"]) for r in rows["nve"]}, key=lambda g: (g[0] != "fit",
-                                                                               g[1]))
+    order = {"fit": 0, "fit_oh": 1, "tip4p2005": 2}
+    groups = sorted({(r["fast"], r["k"]) for r in rows["nve"]},
+                    key=lambda group: (order[group[0]], group[1]))
     for kind, k in groups:
         cells = []
         for dt in dts:
             r = next((r for r in rows["nve"] if (r["fast"], r["k"], r["dt_fs"]) ==
                       (kind, k, dt)), None)
             cells.append("" if r is None else f"{r['std_eV']:.2e} ({r['chgnet_calls_per_ps']:.0f})")
-        name = "none (CHGNet alone)" if k == 1 else ("fitted" if kind == "fit" else "TIP4P/2005")
+        name = label(kind, k)
         lines.append(f"| {name} | {k} | " + " | ".join(cells) + " |")
     target = next((r["std_eV"] for r in rows["nve"] if r["k"] == 1 and r["dt_fs"] == 1.0), None)
     if target is not None:
@@ -342,12 +390,12 @@ def report(rows):
             if ok:
                 best = max(ok, key=lambda r: r["dt_fs"])
                 calls = best["chgnet_calls_per_ps"]
-                lines.append(f"- {kind}, k = {k}: largest outer step meeting it {best['dt_fs']:g}"
-                             f" fs, {calls:.0f} CHGNet calls per ps (the single step at 1 fs "
-                             f"makes {1000 / calls:.1f}× as many, flexible MD at 0.5 fs "
-                             f"{2000 / calls:.1f}×)")
+                lines.append(f"- {label(kind, k)}, k = {k}: largest outer step meeting it "
+                             f"{best['dt_fs']:g} fs, {calls:.0f} CHGNet calls per ps (the "
+                             f"single step at 1 fs makes {1000 / calls:.1f}× as many, "
+                             f"flexible MD at 0.5 fs {2000 / calls:.1f}×)")
             else:
-                lines.append(f"- {kind}, k = {k}: no outer step of the grid meets it")
+                lines.append(f"- {label(kind, k)}, k = {k}: no outer step of the grid meets it")
     lines.append(f"\nWall time {rows['wall_s'] / 60:.1f} min.")
     return "\n".join(lines) + "\n"
 

@@ -180,3 +180,73 @@ def test_a_loopback_engine_is_named_by_its_process():
         calc.close()
         proc.kill()
         proc.wait(timeout=10)
+
+
+def test_an_engine_from_a_host_not_among_the_peers_is_refused_and_the_wait_goes_on():
+    """Over TCP any host that reaches the port could connect first and answer the forces
+    (the i-PI protocol has no secret).  With ``peers``, a connection from another address
+    is closed with a warning naming it; the run keeps waiting for its engine, and stops
+    at ``connect_timeout`` naming the wait when none comes."""
+    port = free_port()
+    calc = IPICalculator(port=port, timeout=20, connect_timeout=4, peers=["192.0.2.7"])
+    assert calc.peers == frozenset({"192.0.2.7"})
+    calc.listen()
+    proc = intruder(port)  # connects from 127.0.0.1
+    try:
+        atoms = argon()
+        atoms.calc = calc
+        with pytest.warns(RuntimeWarning, match=r"refused a connection from 127\.0\.0\.1:\d+, "
+                          r"not among the peers \(192\.0\.2\.7\); still waiting"), \
+                pytest.raises(EngineError, match="no connection within 4 s"):
+            atoms.get_forces()
+        assert proc.wait(timeout=10) == 0  # it was disconnected, its forces never asked
+    finally:
+        calc.close()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+
+
+def test_an_engine_from_a_peer_is_served():
+    port = free_port()
+    calc = IPICalculator(port=port, timeout=20, peers=["localhost"])
+    assert "127.0.0.1" in calc.peers  # names are resolved when the calculator is made
+    calc.listen()
+    proc = intruder(port)
+    try:
+        atoms = argon()
+        atoms.calc = calc
+        assert abs(atoms.get_forces()).max() == 0  # its zero forces, as asked
+    finally:
+        calc.close()
+        proc.kill()
+        proc.wait(timeout=10)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"unixsocket": "rigidmd-peers-test", "peers": ["localhost"]}, "peers are for TCP"),
+    ({"port": 31999, "peers": ["localhost", ""]}, "peers: '' is not a host name"),
+    ({"port": 31999, "peers": [7]}, "peers: 7 is not a host name"),
+    ({"port": 31999, "peers": []}, "peers: empty"),
+])
+def test_peers_are_checked_when_the_calculator_is_made(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        IPICalculator(timeout=20, **kwargs)
+
+
+def test_peers_may_be_named_in_a_configuration_without_trust(tmp_path):
+    """Peers only narrow who may answer: allowed without ``--trust``, and a run may add or
+    change them when it is continued (not part of what the trajectory is)."""
+    from rigidmd.run.fingerprint import fingerprint
+
+    def raw(**options):
+        return {"structure": {"builtin": "water_cluster", "n_molecules": 2},
+                "calculator": {"name": "ipi", "address": "localhost:31998",
+                               "options": options}, "timestep": "1 fs", "steps": 1,
+                "_base": str(tmp_path)}
+
+    with_peers = check_config(raw(peers=["localhost"]))
+    assert with_peers.calculator.options["peers"] == ["localhost"]
+    assert fingerprint(with_peers) == fingerprint(check_config(raw()))
+    with pytest.raises(ConfigError, match="calculator.options.peers"):
+        check_config(raw(peers="localhost"))  # a list, as the reference says

@@ -86,27 +86,42 @@ def test_sigterm_writes_what_it_has_and_resume_continues_exactly(tmp_path):
 def _result(path, dt, density, err, integrator="baoab", seed=1):
     point = {"waters": 216, "integrator": integrator, "dt_fs": dt, "seed": seed,
              "move_fs": 50.0, "equil_ps": 30.0}
-    out = {"point": point, "ps": 400.0, "complete": True, "density": [density, err],
-           "U": [-47.8, 0.02], "T_tr": [298.0, 0.1], "T_rot": [298.0, 0.1],
-           "acceptance": 0.5, "ms_per_step": 7.0}
+    out = {"point": point, "molecules": 216, "ps": 400.0, "complete": True,
+           "density": [density, err], "U": [-47.8, 0.02], "T_tr": [298.0, 0.1],
+           "T_rot": [298.0, 0.1], "move_every_steps": round(50 / dt), "acceptance": 0.5,
+           "ms_per_step": 7.0}
     path.write_text(json.dumps(out))
     return path
 
 
-def test_the_report_compares_each_step_with_the_smallest(tmp_path):
-    files = [_result(tmp_path / "a.json", 0.5, 0.9950, 0.0006),
-             _result(tmp_path / "b.json", 4.0, 0.9900, 0.0008),
-             _result(tmp_path / "c.json", 1.0, 0.9800, 0.0010, integrator="langevin")]
+def test_the_report_combines_each_step_s_runs_and_judges_the_goal(tmp_path):
+    files = [_result(tmp_path / "a.json", 0.5, 0.9950, 0.0008, seed=1),
+             _result(tmp_path / "b.json", 0.5, 0.9970, 0.0008, seed=2),
+             _result(tmp_path / "c.json", 4.0, 0.9900, 0.0008),
+             _result(tmp_path / "d.json", 2.0, 0.9962, 0.0006),
+             _result(tmp_path / "e.json", 1.0, 0.9800, 0.0010, integrator="langevin")]
     text = npt.report(files, tmp_path / "out")
     rows = json.loads((tmp_path / "out.json").read_text())
     by = {(r["integrator"], r["dt_fs"]): r for r in rows}
-    assert by[("baoab", 0.5)]["diff_pct"] == 0.0 and np.isnan(by[("baoab", 0.5)]["z"])
-    # (0.9900 − 0.9950) / 0.9950 = −0.5025 %; σ = hypot(0.0006, 0.0008) = 0.001: Δ/σ = −5.0
-    assert by[("baoab", 4.0)]["diff_pct"] == pytest.approx(-0.50251, abs=1e-4)
-    assert by[("baoab", 4.0)]["z"] == pytest.approx(-5.0)
-    assert by[("langevin", 1.0)]["diff_pct"] == 0.0  # its own smallest step, not BAOAB's
-    assert "| baoab | 4 | 1 | 400 | 0.9900 ± 0.0008 | 0.081 | -0.503 | -5.0 |" in text
+    # Equal errors: the mean, 0.9960, and the error 0.0008/√2 = 0.000566 (0.057 %).
+    assert by[("baoab", 0.5)]["runs"] == 2 and by[("baoab", 0.5)]["ps"] == 800
+    assert by[("baoab", 0.5)]["density"] == pytest.approx([0.9960, 0.0008 / np.sqrt(2)])
+    assert by[("baoab", 0.5)]["goal"] == "—" and np.isnan(by[("baoab", 0.5)]["z"])
+    # 4 fs: (0.9900 − 0.9960) / hypot(0.0008, 0.000566) = −6.1σ: excluded.
+    assert by[("baoab", 4.0)]["z"] == pytest.approx(-0.006 / np.hypot(0.0008, 0.0008 / 2**0.5))
+    assert by[("baoab", 4.0)]["diff_pct"] == pytest.approx(-0.60241, abs=1e-4)
+    assert by[("baoab", 4.0)]["goal"] == "✗"
+    # 2 fs: +0.2/0.83 σ, σ 0.060 % and 0.057 % ≤ 0.1 %: shown to meet the goal.
+    assert by[("baoab", 2.0)]["goal"] == "✓"
+    assert by[("langevin", 1.0)]["goal"] == "—"  # its own smallest step, not BAOAB's
+    assert "| baoab | 4 | 1 | 400 | 0.9900 ± 0.0008 | 0.081 | -0.602 | -6.1 | ✗ |" in text
+    assert "| baoab | 0.5 | 2 | 400 | 0.9970 ± 0.0008 | 0.080 | -47.800 ± 0.020 |" in text
     assert npt.report([tmp_path / "out.runs.json"]) == text  # the bundle gives the same
+    # Errors above the goal's σ leave the verdict open, however close the means.
+    loose = [_result(tmp_path / "f.json", 0.5, 0.9960, 0.0020),
+             _result(tmp_path / "g.json", 4.0, 0.9961, 0.0020)]
+    npt.report(loose, tmp_path / "loose")
+    assert json.loads((tmp_path / "loose.json").read_text())[1]["goal"].startswith("?")
 
 
 def test_the_npt_page_shows_what_the_committed_runs_give():

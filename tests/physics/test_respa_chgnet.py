@@ -18,9 +18,10 @@ from rigidmd.systems import water_cluster
 respa_chgnet = benchmark_module("respa_chgnet")
 
 
-def test_four_site_forces_are_the_gradient_of_its_energy():
+@pytest.mark.parametrize("oh_terms", [(0.0, 0.0), (300.0, 4.0)])
+def test_four_site_forces_are_the_gradient_of_its_energy(oh_terms):
     atoms = water_cluster(8, seed=3)
-    calc = respa_chgnet.FourSite(0.5564, 3.1589, 0.008, 0.128)
+    calc = respa_chgnet.FourSite(0.5564, 3.1589, 0.008, 0.128, 0.0, *oh_terms)
     atoms.calc = calc
     forces = atoms.get_forces()
     h, worst = 1e-5, 0.0

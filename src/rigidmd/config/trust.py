@@ -220,6 +220,8 @@ _TYPES = ("a mapping of element to LAMMPS type (a whole number >= 1)",
               for k, t in v.items()))
 _COMMANDS = ("LAMMPS commands (a list of strings)", lambda v: isinstance(v, str) or (
     isinstance(v, list) and all(isinstance(c, str) for c in v)))
+_HOSTS = ("a list of host names or IPv4 addresses", lambda v: isinstance(v, list) and v and all(
+    isinstance(x, str) and x.strip() for x in v))
 _KSPACE = ("a kspace_modify command", lambda v: isinstance(v, str) and v.split()[:1] == [
     "kspace_modify"])
 
@@ -235,7 +237,8 @@ _LAMMPS = {"exclude_intramolecular": _FLAG, "ase_constants": _FLAG, "skin": _NON
            "threads": _COUNT, "kspace_parameters": _KSPACE}
 #: Options of a LAMMPS engine in its own process (``name: lammps`` with ``processes``).
 _ENGINE = {"exclude_intramolecular": _FLAG, "ase_constants": _FLAG, "skin": _NON_NEGATIVE,
-           "triclinic": _FLAG, "timeout": _POSITIVE, "connect_timeout": _POSITIVE}
+           "triclinic": _FLAG, "timeout": _POSITIVE, "connect_timeout": _POSITIVE,
+           "peers": _HOSTS}
 _DOTTED_LAMMPS = {"commands": _COMMANDS, "atom_types": _TYPES, "molecule_ids": _WHOLE_LIST}
 
 #: What a configuration may name as ``calculator.name`` without ``--trust``, and the
@@ -244,7 +247,7 @@ ALLOWED_CALCULATORS = {
     "tip3p": _WATER,
     "tip4p": _WATER,
     "lammps": _LAMMPS,
-    "ipi": {"timeout": _POSITIVE, "connect_timeout": _POSITIVE},
+    "ipi": {"timeout": _POSITIVE, "connect_timeout": _POSITIVE, "peers": _HOSTS},
     "ase.calculators.emt.EMT": {"asap_cutoff": _FLAG},
     "ase.calculators.lj.LennardJones": {"sigma": _POSITIVE, "epsilon": _NUMBER,
                                         "rc": _POSITIVE, "ro": _POSITIVE, "smooth": _FLAG},

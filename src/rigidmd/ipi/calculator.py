@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import time
 import uuid
+import warnings
 
 import numpy as np
 from ase import units
@@ -19,10 +20,12 @@ from rigidmd.ipi.connection import (
     MSGLEN,
     OWN_SOCKET,
     EngineError,
+    NotAPeer,
     accept,
     check_socket_name,
     close_sockets,
     open_server,
+    peer_addresses,
     process_folder,
     sweep_stale_sockets,
     unlink_if_ours,
@@ -47,7 +50,13 @@ class IPICalculator(Calculator):
         Interface the TCP server binds to (``""`` or ``"0.0.0.0"``: all of them, without
         a warning).  Any process that can reach the port may connect, and over TCP one
         engine cannot be told from another; a configuration may name only loopback or a
-        Unix socket without ``--trust`` (:doc:`/guide/trust`).
+        Unix socket without ``--trust`` (:doc:`/guide/trust`).  ``peers`` narrows it.
+    peers : sequence of str, optional
+        TCP only: the hosts (names or IPv4 addresses, resolved when the calculator is
+        made) whose engines may connect.  A connection from any other address is closed
+        with a warning naming it, and the wait goes on (within ``connect_timeout``).  The
+        i-PI protocol has no secret to check, so this is the one guard against another
+        host answering the forces; loopback engines must name ``localhost``.
     timeout : float, default 120.0
         Seconds an engine may take to answer one force call (and to connect,
         see ``connect_timeout``) before :class:`EngineError` is raised.
@@ -74,10 +83,13 @@ class IPICalculator(Calculator):
 
     def __init__(self, unixsocket=None, *, port=None, host="localhost", timeout=120.0,
                  connect_timeout=None, bohr=units.Bohr, hartree=units.Hartree,
-                 tally_requests=False, **kwargs):
+                 tally_requests=False, peers=None, **kwargs):
         super().__init__(**kwargs)
         if unixsocket is not None and port is not None:
             raise ValueError("IPICalculator: give unixsocket or port, not both")
+        if peers is not None and port is None:
+            raise ValueError("IPICalculator: peers are for TCP (give port); a Unix socket "
+                             "is checked by its file's owner")
         if port is not None and not (1024 < int(port) < 65536):
             raise ValueError(f"IPICalculator: port {port} is not in 1025-65535")
         if not timeout > 0:
@@ -92,6 +104,8 @@ class IPICalculator(Calculator):
         self.bohr = float(bohr)
         self.hartree = float(hartree)
         self.tally_requests = bool(tally_requests)
+        #: The IPv4 addresses engines may connect from (None: any).
+        self.peers = peer_addresses(peers)
         #: The ``extra`` string the engine sent with its last forces (bytes).
         self.engine_extra = b""
         self._server = self._conn = None
@@ -203,9 +217,15 @@ class IPICalculator(Calculator):
         try:
             self.launch(atoms)
             self._limit = self.connect_timeout
-            self._wait_readable(self._server, time.monotonic() + self.connect_timeout,
-                                "connection")
-            conn, self._peer, self._peer_pid = accept(self._server, self.socketfile)
+            deadline = time.monotonic() + self.connect_timeout
+            while True:
+                self._wait_readable(self._server, deadline, "connection")
+                try:
+                    conn, self._peer, self._peer_pid = accept(self._server, self.socketfile,
+                                                              self.peers)
+                    break
+                except NotAPeer as refused:
+                    warnings.warn(str(refused), RuntimeWarning, stacklevel=2)
             self._peer_folder = None if self._peer_pid is None else process_folder(
                 self._peer_pid)
         except EngineError:

@@ -26,7 +26,8 @@ import time
 
 from rigidmd.ipi.processes import tcp_peer
 
-__all__ = ["MSGLEN", "OWN_SOCKET", "SOCKET_NAME_RULE", "WAIT_SLICE", "EngineError", "accept",
+__all__ = ["MSGLEN", "OWN_SOCKET", "SOCKET_NAME_RULE", "WAIT_SLICE", "EngineError",
+           "NotAPeer", "accept", "peer_addresses",
            "add_wait_check", "check_socket_name", "close_sockets", "open_server", "process_folder",
            "remove_wait_check", "socket_name_ok", "sweep_stale_sockets", "unlink_if_ours",
            "wait_readable", "word"]
@@ -160,7 +161,40 @@ def open_server(socketfile, host, port):
     return server, bound
 
 
-def accept(server, socketfile):
+class NotAPeer(EngineError):
+    """A TCP connection from an address not among the calculator's peers: it is closed and
+    the wait for the engine goes on."""
+
+
+def peer_addresses(peers):
+    """The IPv4 addresses of ``peers`` (host names or addresses), a frozenset; None for None.
+
+    Raises
+    ------
+    ValueError
+        A peer that is not a non-empty string, or a name that does not resolve (named).
+    """
+    if peers is None:
+        return None
+    if isinstance(peers, str):
+        peers = [peers]
+    addresses = set()
+    for peer in peers:
+        if not isinstance(peer, str) or not peer.strip():
+            raise ValueError(f"IPICalculator: peers: {peer!r} is not a host name or an "
+                             "IPv4 address")
+        try:
+            addresses.update(socket.gethostbyname_ex(peer.strip())[2])
+        except OSError as err:
+            raise ValueError(f"IPICalculator: peers: {peer!r} does not resolve to an IPv4 "
+                             f"address ({err.strerror or err})") from None
+    if not addresses:
+        raise ValueError("IPICalculator: peers: empty; give the hosts whose engines may "
+                         "connect, or leave peers out")
+    return frozenset(addresses)
+
+
+def accept(server, socketfile, peers=None):
     """Accept the engine waiting on ``server`` (readable); a blocking connection.
 
     Returns
@@ -173,13 +207,23 @@ def accept(server, socketfile):
         Its process (Linux: ``SO_PEERCRED`` for a Unix socket, ``/proc/net/tcp`` for
         loopback TCP).
 
+    peers : frozenset of str, optional
+        For TCP, the IPv4 addresses an engine may connect from (:func:`peer_addresses`).
+
     Raises
     ------
+    NotAPeer
+        A TCP connection from an address not in ``peers`` (it is disconnected).
     EngineError
         The process that connected is another user's (it is disconnected): on loopback
         any local user can connect first and answer the forces.
     """
     conn, address = server.accept()
+    if conn.family != socket.AF_UNIX and peers is not None and address[0] not in peers:
+        close_sockets(conn, None, say_exit=False)
+        raise NotAPeer(f"IPICalculator: refused a connection from {address[0]}:{address[1]}, "
+                       f"not among the peers ({', '.join(sorted(peers))}); still waiting "
+                       "for the engine")
     if conn.family != socket.AF_UNIX:
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         on = f"at {address[0]}:{address[1]}"

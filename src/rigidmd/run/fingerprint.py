@@ -62,7 +62,11 @@ def _calculator_fields(calculator):
     where = ("calculator_class", "processes", "threads", "address")
     if hasattr(calculator, "fingerprint_fields"):  # a split: each level's fields
         return calculator.fingerprint_fields(where)
-    return {key: value for key, value in asdict(calculator).items() if key not in where}
+    fields = {key: value for key, value in asdict(calculator).items() if key not in where}
+    if isinstance(fields.get("options"), dict) and "peers" in fields["options"]:
+        # nor who may answer at the address
+        fields["options"] = {k: v for k, v in fields["options"].items() if k != "peers"}
+    return fields
 
 
 def calculator_digest(calculator):
