@@ -238,6 +238,11 @@ def report(files, out=None, sigma_goal_pct=0.1):
     for r in runs:
         p = r["point"]
         rho, err = r["density"]
+        if not np.all(np.isfinite(r["density"])):
+            lines.append(f"| {p['integrator']} | {p['dt_fs']:g} | {p['seed']} | {r['ps']:.0f}"
+                         f"{'' if r['complete'] else ' (stopped)'} | none yet: not past the "
+                         f"first {p['equil_ps']:g} ps |" + " |" * 7)
+            continue
         lines.append(
             f"| {p['integrator']} | {p['dt_fs']:g} | {p['seed']} | {r['ps']:.0f}"
             f"{'' if r['complete'] else ' (stopped)'} | {rho:.4f} ± {err:.4f} | "
@@ -249,7 +254,9 @@ def report(files, out=None, sigma_goal_pct=0.1):
     rows = []
     for integrator, dt in steps:
         mine = [r for r in runs if (r["point"]["integrator"], r["point"]["dt_fs"]) ==
-                (integrator, dt)]
+                (integrator, dt) and np.all(np.isfinite(r["density"]))]
+        if not mine:  # (no run of this step got past its equilibration)
+            continue
         rho, err = combine([r["density"] for r in mine])
         rows.append({"integrator": integrator, "dt_fs": dt, "runs": len(mine),
                      "ps": float(sum(r["ps"] for r in mine)), "density": [rho, err],
@@ -263,9 +270,14 @@ def report(files, out=None, sigma_goal_pct=0.1):
         row["diff_pct"] = 100 * (rho - rho0) / rho0
         row["z"] = (rho - rho0) / sig if ref is not row else float("nan")
         precise = max(row["rel_err_pct"], ref["rel_err_pct"]) <= sigma_goal_pct
-        row["goal"] = ("—" if ref is row else
-                       ("✗" if abs(row["z"]) > 2 else "✓" if precise else "? (σ above "
-                        f"{sigma_goal_pct:g} %)"))
+        if ref is row:
+            row["goal"] = "—"
+        elif not np.isfinite(row["z"]):
+            row["goal"] = "?"
+        elif abs(row["z"]) > 2:
+            row["goal"] = "✗"
+        else:
+            row["goal"] = "✓" if precise else f"? (σ above {sigma_goal_pct:g} %)"
     lines += ["", f"Each step's runs combined (weights 1/σ²), against the smallest step of the "
               f"same integrator; the goal: within 2σ of it, with σ/ρ ≤ {sigma_goal_pct:g} % "
               "at both steps.", "",

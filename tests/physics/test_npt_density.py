@@ -122,6 +122,17 @@ def test_the_report_combines_each_step_s_runs_and_judges_the_goal(tmp_path):
              _result(tmp_path / "g.json", 4.0, 0.9961, 0.0020)]
     npt.report(loose, tmp_path / "loose")
     assert json.loads((tmp_path / "loose.json").read_text())[1]["goal"].startswith("?")
+    # A run stopped before its equilibration ended has no density: listed, left out of the
+    # combination (it made every combined value nan, and nan passed as "✓").
+    young = _result(tmp_path / "h.json", 0.5, float("nan"), float("nan"), seed=3)
+    text = npt.report([*files, young], tmp_path / "young")
+    assert "| baoab | 0.5 | 3 | 400 | none yet: not past the first 30 ps |" in text
+    by = {(r["integrator"], r["dt_fs"]): r for r in
+          json.loads((tmp_path / "young.json").read_text())}
+    assert by[("baoab", 0.5)]["runs"] == 2 and by[("baoab", 4.0)]["goal"] == "✗"
+    alone = npt.report([young, _result(tmp_path / "i.json", 4.0, 0.99, 0.0005)],
+                       tmp_path / "alone")
+    assert "✓" not in alone  # no reference step: nothing is shown to meet the goal
 
 
 def test_the_npt_page_shows_what_the_committed_runs_give():
