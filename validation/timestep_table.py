@@ -174,12 +174,24 @@ def make_atoms(state, model, skin=2.0):
 
 # --------------------------------------------------------------------------- one run
 class Stop:
-    """SIGTERM and SIGINT ask the run to stop at the end of its sample interval."""
+    """SIGTERM and SIGINT ask the run to stop at the end of its sample interval.
+
+    The handlers stay for the process (a run's own); as a context manager (a run inside
+    another program, as ``measure_ms``'s) it hands the previous ones back at the end.
+    """
 
     def __init__(self):
         self.signal = None
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            signal.signal(sig, self._handle)
+        self.previous = {sig: signal.signal(sig, self._handle)
+                         for sig in (signal.SIGTERM, signal.SIGINT)}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        for sig, handler in self.previous.items():
+            signal.signal(sig, handler)
+        return False
 
     def _handle(self, signum, frame):
         self.signal = signal.Signals(signum).name
@@ -865,7 +877,8 @@ def measure_ms(code, integrator, dt_fs, steps, model, waters, outdir, substeps=1
         Path(outdir).mkdir(parents=True, exist_ok=True)
         runner = {"rigidmd": run_rigidmd, "openmm": run_openmm, "lammps": run_lammps}[code]
         cpu, wall = time.process_time(), time.perf_counter()
-        runner(p, paths, Stop(), Progress(name, p["ps"], 1e9), False)
+        with Stop() as stop:  # (the caller's handlers back after each run)
+            runner(p, paths, stop, Progress(name, p["ps"], 1e9), False)
         spent.append((time.process_time() - cpu, time.perf_counter() - wall))
     return tuple(1000 * (spent[1][k] - spent[0][k]) / (steps - 20) for k in (0, 1))
 

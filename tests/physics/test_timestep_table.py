@@ -579,3 +579,16 @@ def test_a_limit_from_points_without_errors_has_no_invented_error():
     scattered = collector.fit_limit([0.5, 1.0, 2.0], [3.181, 3.169, 3.141],
                                     [np.nan] * 3, ["baoab"] * 3)
     assert 0 < scattered["a_err"] < 0.02
+
+
+def test_a_stop_in_another_program_hands_its_signal_handlers_back():
+    """``measure_ms`` runs points inside its caller (time_to_solution.py, the tests): its
+    ``Stop`` left SIGINT and SIGTERM to itself, and a later Ctrl-C test in the same test
+    process found no Python handler (three relax tests failed that way under xdist)."""
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGINT)}
+    with table.Stop() as stop:
+        assert signal.getsignal(signal.SIGINT) == stop._handle
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.01)
+        assert stop and stop.signal == "SIGTERM"
+    assert {sig: signal.getsignal(sig) for sig in before} == before
