@@ -618,8 +618,15 @@ def start_by_hand(engine, directory):
     return thread, started
 
 
-def finish(proc):
-    stdout, stderr = proc.communicate(timeout=600)
+def finish(proc, timeout=600):
+    """Wait for ``proc`` (text pipes) and return ``(returncode, stdout, stderr)``; killed
+    and reaped if it outlives ``timeout``."""
+    try:
+        stdout, stderr = proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
     return proc.returncode, stdout, stderr
 
 
@@ -778,3 +785,15 @@ def count_calls(method: str, **calculators) -> dict:
         setattr(calc, method, counted)
     return counts
 
+
+
+def sigterm_once_written(proc, path, timeout=200):
+    """SIGTERM ``proc`` as soon as ``path`` exists (a run's first checkpoint), or when it
+    ended or ``timeout`` passed; returns :func:`finish`'s result."""
+    import signal
+
+    deadline = time.monotonic() + timeout
+    while not Path(path).exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    return finish(proc)

@@ -50,11 +50,14 @@ from timestep_table import (  # noqa: E402
     TEMPERATURE_K,
     Progress,
     Stop,
+    add_run_options,
     block_mean,
+    complete_already,
     cutoff_for,
     intramolecular_energy,
     load_start,
     make_atoms,
+    run_in_pieces,
     run_points,
 )
 
@@ -130,16 +133,7 @@ def run_point(p, paths, stop, progress, resume):
         save_checkpoint(dyn, paths["chk"], extra={"samples": len(series["t_ps"])})
 
     dyn.attach(observe, interval=every)
-    last_save = time.perf_counter()
-    t0, s0 = time.perf_counter(), dyn.nsteps
-    while dyn.nsteps < total and not stop:
-        dyn.run(min(every, total - dyn.nsteps))
-        progress(dyn.nsteps * p["dt_fs"] / 1000)
-        if time.perf_counter() - last_save > p["save_s"]:
-            save()
-            last_save = time.perf_counter()
-    ms = 1000 * (time.perf_counter() - t0) / max(dyn.nsteps - s0, 1)
-    save()
+    ms, s0 = run_in_pieces(dyn, total, every, stop, progress, p, save)
     atoms.get_potential_energy()
     offset = intramolecular_energy(model, atoms.calc)
     acceptance = float(dyn.barostat.acceptance)
@@ -170,11 +164,7 @@ def point_main(p, resume):
     name = run_name(p)
     paths = {k: outdir / f"{name}.{k}.npz" for k in ("series", "chk")}
     paths["json"] = outdir / f"{name}.json"
-    if paths["json"].exists() and not resume:
-        raise SystemExit(f"{paths['json']}: exists; give --resume to continue it or remove it")
-    if resume and paths["json"].exists() and json.loads(paths["json"].read_text()).get(
-            "complete"):
-        print(f"{name}: complete", flush=True)
+    if complete_already(paths["json"], name, resume):
         return 0
     stop = Stop()
     progress = Progress(name, p["ps"], p["log_s"], shared=p.get("jobs", 1) > 1)
@@ -311,14 +301,7 @@ def parse(argv=None):
                    help="left out of the averages at the start, ps")
     r.add_argument("--move-fs", type=float, default=50.0, help="a volume move every, fs")
     r.add_argument("--blocks", type=int, default=10, help="blocks for the errors")
-    r.add_argument("--save-s", type=float, default=300.0, help="checkpoint every, s")
-    r.add_argument("--log-s", type=float, default=60.0, help="log line every, s (no terminal)")
-    r.add_argument("--jobs", type=int, default=1)
-    r.add_argument("--resume", action="store_true", help="continue stopped runs")
-    r.add_argument("--outdir", type=Path, default=HERE / "npt_runs")
-    pt = sub.add_parser("_point")
-    pt.add_argument("point")
-    pt.add_argument("--resume", action="store_true")
+    add_run_options(sub, r, HERE / "npt_runs")
     rep = sub.add_parser("report", help="the table of finished or stopped runs")
     rep.add_argument("files", nargs="+", type=Path)
     rep.add_argument("--out", type=Path, help="also write OUT.md, OUT.json, OUT.runs.json")

@@ -443,16 +443,7 @@ def run_rigidmd(p, paths, stop, progress, resume):
 
     # An observer due at a step gets the energy from the step's own force call.
     dyn.attach(observe, interval=sample)
-    last_save = time.perf_counter()
-    t0, s0 = time.perf_counter(), dyn.nsteps
-    while dyn.nsteps < total and not stop:
-        dyn.run(min(sample, total - dyn.nsteps))
-        progress(dyn.nsteps * p["dt_fs"] / 1000)
-        if time.perf_counter() - last_save > p["save_s"]:
-            save()
-            last_save = time.perf_counter()
-    ms = 1000 * (time.perf_counter() - t0) / max(dyn.nsteps - s0, 1)
-    save()
+    ms, s0 = run_in_pieces(dyn, total, sample, stop, progress, p, save)
     steps = dyn.nsteps
     atoms.get_potential_energy()
     offset = intramolecular_energy(model, getattr(atoms.calc, "full", None) or atoms.calc)
@@ -460,6 +451,23 @@ def run_rigidmd(p, paths, stop, progress, resume):
         if hasattr(calc, "close"):
             calc.close()
     return series, steps, ms, offset, s0
+
+
+def run_in_pieces(dyn, total, piece, stop, progress, p, save):
+    """Run ``dyn`` to step ``total`` in pieces of ``piece`` steps until ``stop``: progress
+    after each piece, ``save()`` every ``p["save_s"]`` seconds and at the end.  Returns the
+    wall ms per step and the step it started from."""
+    last_save = time.perf_counter()
+    t0, s0 = time.perf_counter(), dyn.nsteps
+    while dyn.nsteps < total and not stop:
+        dyn.run(min(piece, total - dyn.nsteps))
+        progress(dyn.nsteps * p["dt_fs"] / 1000)
+        if time.perf_counter() - last_save > p["save_s"]:
+            save()
+            last_save = time.perf_counter()
+    ms = 1000 * (time.perf_counter() - t0) / max(dyn.nsteps - s0, 1)
+    save()
+    return ms, s0
 
 
 def run_openmm(p, paths, stop, progress, resume):
@@ -717,6 +725,17 @@ def analyse(series, p, n, offset=0.0):
 
 
 # --------------------------------------------------------------------------- command line
+def complete_already(path, name, resume):
+    """Whether the run whose JSON is ``path`` is complete (said in a line); without
+    ``resume`` a run that is there is refused (SystemExit, one line), never started over."""
+    if path.exists() and not resume:
+        raise SystemExit(f"{path}: exists; give --resume to continue it or remove it")
+    if resume and path.exists() and json.loads(path.read_text()).get("complete"):
+        print(f"{name}: complete", flush=True)
+        return True
+    return False
+
+
 def point_main(p, resume):
     """Run one point and write its JSON; exit status 0 when complete, 3 when stopped."""
     outdir = Path(p["outdir"])
@@ -724,11 +743,7 @@ def point_main(p, resume):
     name = run_name(p)
     paths = {"json": outdir / f"{name}.json", "series": outdir / f"{name}.series.npz",
              "chk": outdir / (f"{name}.chk.omm" if p["code"] == "openmm" else f"{name}.chk.npz")}
-    if paths["json"].exists() and not resume:
-        raise SystemExit(f"{paths['json']}: exists; give --resume to continue it or remove it")
-    if resume and paths["json"].exists() and json.loads(paths["json"].read_text()).get(
-            "complete"):
-        print(f"{name}: complete", flush=True)
+    if complete_already(paths["json"], name, resume):
         return 0
     if p["code"] == "rigidmd" and p["integrator"] not in INTEGRATORS:
         raise SystemExit(f"--integrator {p['integrator']!r}: rigidmd has {', '.join(INTEGRATORS)}")
@@ -910,6 +925,20 @@ def cost(args):
     return rows
 
 
+def add_run_options(sub, run, outdir):
+    """The options a ``run`` command shares with every script that runs points in processes
+    (:func:`run_points`), and the ``_point`` command those processes run."""
+    run.add_argument("--save-s", type=float, default=300.0, help="checkpoint every, s")
+    run.add_argument("--log-s", type=float, default=60.0,
+                     help="log line every, s (no terminal)")
+    run.add_argument("--jobs", type=int, default=1)
+    run.add_argument("--resume", action="store_true", help="continue stopped runs")
+    run.add_argument("--outdir", type=Path, default=outdir)
+    point = sub.add_parser("_point")
+    point.add_argument("point")
+    point.add_argument("--resume", action="store_true")
+
+
 def parse(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -935,18 +964,11 @@ def parse(argv=None):
                    help="rigidmd: Hutchinson probes per T_conf sample (2 force calls each)")
     r.add_argument("--msd-fit-ps", nargs=2, type=float, default=[3.0, 10.0])
     r.add_argument("--piece-ps", type=float, default=10.0, help="LAMMPS: ps per piece")
-    r.add_argument("--save-s", type=float, default=300.0, help="checkpoint every, s")
-    r.add_argument("--log-s", type=float, default=60.0, help="log line every, s (no terminal)")
     r.add_argument("--substeps", nargs="+", type=int, default=[1],
                    help="rigidmd: r-RESPA's inner steps per --dt-fs (the outer step); above 1 "
                    "the forces are split, the fast level lammps_short_range_commands(--r-split)")
     r.add_argument("--r-split", type=float, default=5.0, help="the split's fast cut-off, Å")
-    r.add_argument("--jobs", type=int, default=1)
-    r.add_argument("--resume", action="store_true", help="continue stopped runs")
-    r.add_argument("--outdir", type=Path, default=HERE / "timestep_runs")
-    pt = sub.add_parser("_point")
-    pt.add_argument("point")
-    pt.add_argument("--resume", action="store_true")
+    add_run_options(sub, r, HERE / "timestep_runs")
     s = sub.add_parser("start", help="make a start state")
     s.add_argument("--model", choices=MODELS, default="tip4p2005")
     s.add_argument("--waters", type=int, default=64)

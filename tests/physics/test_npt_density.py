@@ -8,15 +8,13 @@ random numbers included); the report compares each step with the smallest.
 
 import json
 import os
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import benchmark_module
+from helpers import benchmark_module, finish, sigterm_once_written
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "validation" / "npt_density.py"
@@ -30,16 +28,6 @@ def _run(args):
                             stderr=subprocess.PIPE)
 
 
-def _finish(proc, timeout=300):
-    try:
-        out, err = proc.communicate(timeout=timeout)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    return proc.returncode, out, err
-
-
 COMMON = ["--dt-fs", "2", "--ps", "0.6", "--move-fs", "8", "--equil-ps", "0.1", "--save-s",
           "0"]
 NAME = "npt_tip4p2005_64_baoab_dt2_s1"
@@ -47,7 +35,7 @@ NAME = "npt_tip4p2005_64_baoab_dt2_s1"
 
 @pytest.mark.lammps
 def test_sigterm_writes_what_it_has_and_resume_continues_exactly(tmp_path):
-    rc, _, err = _finish(_run([*COMMON, "--outdir", str(tmp_path / "whole")]))
+    rc, _, err = finish(_run([*COMMON, "--outdir", str(tmp_path / "whole")]))
     assert rc == 0, err
     whole = json.loads((tmp_path / "whole" / f"{NAME}.json").read_text())
     assert whole["complete"] and whole["steps"] == 300 and whole["move_every_steps"] == 4
@@ -56,20 +44,15 @@ def test_sigterm_writes_what_it_has_and_resume_continues_exactly(tmp_path):
     assert 0.9 < whole["density"][0] < 1.1 and whole["density"][1] > 0
     assert 0 < whole["acceptance"] < 1  # moves were tried, some taken, some refused
     cut = tmp_path / "cut"
-    proc = _run([*COMMON, "--outdir", str(cut)])
-    deadline = time.monotonic() + 200
-    while not (cut / f"{NAME}.chk.npz").exists() and proc.poll() is None \
-            and time.monotonic() < deadline:
-        time.sleep(0.05)
-    proc.send_signal(signal.SIGTERM)
-    rc, out, err = _finish(proc)
+    rc, out, err = sigterm_once_written(_run([*COMMON, "--outdir", str(cut)]),
+                                        cut / f"{NAME}.chk.npz")
     assert rc == 3, err
     assert "stopped by SIGTERM" in out and "--resume" in out
     stopped = json.loads((cut / f"{NAME}.json").read_text())
     assert not stopped["complete"] and 0 < stopped["steps"] < 300
-    rc, _, err = _finish(_run([*COMMON, "--outdir", str(cut)]))  # no starting over
+    rc, _, err = finish(_run([*COMMON, "--outdir", str(cut)]))  # no starting over
     assert rc != 0 and err.strip().count("\n") == 0 and "--resume" in err and NAME in err
-    rc, _, err = _finish(_run([*COMMON, "--outdir", str(cut), "--resume"]))
+    rc, _, err = finish(_run([*COMMON, "--outdir", str(cut), "--resume"]))
     assert rc == 0, err
     resumed = json.loads((cut / f"{NAME}.json").read_text())
     assert resumed["complete"] and resumed["resumed_from_step"] == stopped["steps"]

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import benchmark_module
+from helpers import benchmark_module, finish, sigterm_once_written
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "validation" / "timestep_table.py"
@@ -31,19 +31,9 @@ def _run(args, **kwargs):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kwargs)
 
 
-def _finish(proc, timeout=300):
-    try:
-        out, err = proc.communicate(timeout=timeout)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    return proc.returncode, out, err
-
-
 @pytest.mark.lammps
 def test_a_run_writes_every_field(tmp_path):
-    rc, out, err = _finish(_run(["--integrator", "baoab", "--dt-fs", "2", "--ps", "0.02",
+    rc, out, err = finish(_run(["--integrator", "baoab", "--dt-fs", "2", "--ps", "0.02",
                                  "--sample-fs", "4", "--frame-fs", "8", "--outdir",
                                  str(tmp_path)]))
     assert rc == 0, err
@@ -74,7 +64,7 @@ def test_a_run_writes_every_field(tmp_path):
 def test_the_other_codes_write_the_same_fields(tmp_path, code, integrator):
     if code == "openmm":
         pytest.importorskip("openmm", reason="needs OpenMM (pip install openmm)")
-    rc, _, err = _finish(_run(["--code", code, "--dt-fs", "2", "--ps", "0.02", "--sample-fs",
+    rc, _, err = finish(_run(["--code", code, "--dt-fs", "2", "--ps", "0.02", "--sample-fs",
                                "4", "--frame-fs", "8", "--piece-ps", "0.01", "--outdir",
                                str(tmp_path)]))
     assert rc == 0, err
@@ -94,26 +84,21 @@ def test_the_other_codes_write_the_same_fields(tmp_path, code, integrator):
 def test_sigterm_writes_what_it_has_and_resume_continues_exactly(tmp_path):
     common = ["--integrator", "langevin", "--dt-fs", "2", "--ps", "0.6", "--sample-fs", "4",
               "--frame-fs", "8", "--save-s", "0"]
-    rc, _, err = _finish(_run([*common, "--outdir", str(tmp_path / "whole")]))
+    rc, _, err = finish(_run([*common, "--outdir", str(tmp_path / "whole")]))
     assert rc == 0, err
     name = "tip4p2005_64_rigidmd_langevin_dt2_s1"
     cut = tmp_path / "cut"
-    proc = _run([*common, "--outdir", str(cut)])
-    deadline = time.monotonic() + 200
-    while not (cut / f"{name}.chk.npz").exists() and proc.poll() is None \
-            and time.monotonic() < deadline:
-        time.sleep(0.05)
-    proc.send_signal(signal.SIGTERM)
-    rc, out, err = _finish(proc)
+    rc, out, err = sigterm_once_written(_run([*common, "--outdir", str(cut)]),
+                                        cut / f"{name}.chk.npz")
     assert rc == 3, err
     assert "stopped by SIGTERM" in out and "--resume" in out
     stopped = json.loads((cut / f"{name}.json").read_text())
     assert not stopped["complete"] and stopped["stopped_by"] == "SIGTERM"
     assert 0 < stopped["steps"] < 300
     # Without --resume the run refuses to start over what is there, in one line.
-    rc, _, err = _finish(_run([*common, "--outdir", str(cut)]))
+    rc, _, err = finish(_run([*common, "--outdir", str(cut)]))
     assert rc != 0 and err.strip().count("\n") == 0 and "--resume" in err and name in err
-    rc, _, err = _finish(_run([*common, "--outdir", str(cut), "--resume"]))
+    rc, _, err = finish(_run([*common, "--outdir", str(cut), "--resume"]))
     assert rc == 0, err
     resumed = json.loads((cut / f"{name}.json").read_text())
     assert resumed["complete"] and resumed["steps"] == 300
@@ -143,11 +128,11 @@ def test_the_other_codes_stop_and_resume(tmp_path, code):
             and time.monotonic() < deadline:
         time.sleep(0.02)
     proc.send_signal(signal.SIGTERM)
-    rc, _, err = _finish(proc)
+    rc, _, err = finish(proc)
     assert rc == 3, err
     stopped = json.loads((tmp_path / f"{name}.json").read_text())
     assert not stopped["complete"] and 0 < stopped["steps"] < 600
-    rc, _, err = _finish(_run([*args, "--resume"]))
+    rc, _, err = finish(_run([*args, "--resume"]))
     assert rc == 0, err
     resumed = json.loads((tmp_path / f"{name}.json").read_text())
     assert resumed["complete"] and resumed["steps"] == 600
@@ -168,7 +153,7 @@ def test_a_signal_to_the_jobs_parent_stops_every_run_and_waits_for_them(tmp_path
             and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
     proc.send_signal(signal.SIGTERM)
-    rc, out, err = _finish(proc)
+    rc, out, err = finish(proc)
     assert rc == 3, err
     assert "2 of 2 runs incomplete (SIGTERM)" in out
     for n in names:  # each run finished its step and wrote what it had before the parent left
@@ -362,7 +347,7 @@ def test_sampling_tconf_leaves_the_trajectory_alone(tmp_path):
     runs = {}
     for frames in (0, 1):
         out = tmp_path / f"f{frames}"
-        rc, _, err = _finish(_run(["--integrator", "baoab", "--dt-fs", "2", "--ps", "0.04",
+        rc, _, err = finish(_run(["--integrator", "baoab", "--dt-fs", "2", "--ps", "0.04",
                                    "--sample-fs", "4", "--frame-fs", "8", "--tconf-frames",
                                    str(frames), "--outdir", str(out)]))
         assert rc == 0, err
