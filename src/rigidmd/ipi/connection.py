@@ -197,6 +197,14 @@ def peer_addresses(peers):
 def accept(server, socketfile, peers=None):
     """Accept the engine waiting on ``server`` (readable); a blocking connection.
 
+    Parameters
+    ----------
+    server : socket.socket
+    socketfile : str or None
+        The Unix socket's path (None for TCP), to name it.
+    peers : frozenset of str, optional
+        For TCP, the IPv4 addresses an engine may connect from (:func:`peer_addresses`).
+
     Returns
     -------
     conn : socket.socket
@@ -207,9 +215,6 @@ def accept(server, socketfile, peers=None):
         Its process (Linux: ``SO_PEERCRED`` for a Unix socket, ``/proc/net/tcp`` for
         loopback TCP).
 
-    peers : frozenset of str, optional
-        For TCP, the IPv4 addresses an engine may connect from (:func:`peer_addresses`).
-
     Raises
     ------
     NotAPeer
@@ -219,12 +224,12 @@ def accept(server, socketfile, peers=None):
         any local user can connect first and answer the forces.
     """
     conn, address = server.accept()
-    if conn.family != socket.AF_UNIX and peers is not None and address[0] not in peers:
-        close_sockets(conn, None, say_exit=False)
-        raise NotAPeer(f"IPICalculator: refused a connection from {address[0]}:{address[1]}, "
-                       f"not among the peers ({', '.join(sorted(peers))}); still waiting "
-                       "for the engine")
     if conn.family != socket.AF_UNIX:
+        if peers is not None and address[0] not in peers:
+            close_sockets(conn, None, say_exit=False)
+            raise NotAPeer(f"IPICalculator: refused a connection from {address[0]}:"
+                           f"{address[1]}, not among the peers ({', '.join(sorted(peers))}); "
+                           "still waiting for the engine")
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         on = f"at {address[0]}:{address[1]}"
         uid, pid = tcp_peer(conn)

@@ -57,15 +57,19 @@ def _file_digest(path):
     return digest.hexdigest()[:16]
 
 
+#: Calculator options that say where the forces run or who may answer, not what they are.
+WHERE_OPTIONS = ("peers",)
+
+
 def _calculator_fields(calculator):
     # Where the forces run (processes, threads, address) is not what they are.
     where = ("calculator_class", "processes", "threads", "address")
     if hasattr(calculator, "fingerprint_fields"):  # a split: each level's fields
         return calculator.fingerprint_fields(where)
     fields = {key: value for key, value in asdict(calculator).items() if key not in where}
-    if isinstance(fields.get("options"), dict) and "peers" in fields["options"]:
-        # nor who may answer at the address
-        fields["options"] = {k: v for k, v in fields["options"].items() if k != "peers"}
+    if isinstance(fields.get("options"), dict):
+        fields["options"] = {k: v for k, v in fields["options"].items()
+                             if k not in WHERE_OPTIONS}
     return fields
 
 
