@@ -15,8 +15,10 @@ length, started from the model's shared thermal state.  It writes one JSON of re
 - D_PBC from the centre-of-mass MSD (the box's drift removed, a straight line over the
   lags ``--msd-fit-ps``, or a tenth to a third of the run when shorter);
 - ``T_conf_tr``, ``T_conf_rot``: the configurational temperatures of translation and
-  rotation (rigidmd only: :func:`configurational_sampler`, every ``--tconf-frames``-th frame,
-  ``2 * --tconf-probes`` force calls a sample; ``--tconf-frames 0`` leaves them null).
+  rotation, every ``--tconf-frames``-th frame, ``2 * --tconf-probes`` force calls a sample
+  (``--tconf-frames 0`` leaves them null): rigidmd's from its own state
+  (:func:`configurational_sampler`), LAMMPS's and OpenMM's from their frames' positions
+  with LAMMPS's forces of the same model (:class:`FrameConfigurational`).
 
 Codes (``--code``): ``rigidmd`` with ``--integrator langevin`` (:class:`rigidmd.RigidLangevin`),
 ``baoab`` (:class:`rigidmd.RigidLangevinBAOAB`), ``bussi`` (:class:`rigidmd.RigidBussi`),
@@ -338,6 +340,63 @@ def configurational_sampler(p, dyn, model, cell):
                                       calculator=lammps_calculator(model, cutoff_for(cell)))
 
 
+class FrameConfigurational:
+    """The configurational temperatures of another code's frames (LAMMPS, OpenMM).
+
+    Each call takes a frame's positions (Å, every site, OpenMM's massless M site
+    included; a molecule may be broken across the box), fits the rigid bodies (a
+    :class:`rigidmd.RigidVerlet` that never steps) and takes one sample of
+    :class:`rigidmd.core.configurational.ConfigurationalTemperature` with a LAMMPS calculator
+    of the model (PPPM 1e-5 at the run's cut-off, the same as rigidmd's runs) and the
+    probes' random numbers from ``2000 + seed``.  For an OpenMM run that measures how
+    Boltzmann-distributed its configurations are under LAMMPS's forces of the same model:
+    PME and PPPM at 1e-5 part by about 1e-5 of a force, and neither's truncated
+    Lennard-Jones (with its tail correction, which adds no force) differs.  The run's own
+    trajectory is untouched: the frames are copies.  Cost: ``2 * tconf_probes + 1`` force
+    calls and a body fit a sample.
+    """
+
+    def __init__(self, p, model, state):
+        from water_openmm_nve import lammps_calculator
+
+        self.p, self.model = p, model
+        self.state = dict(state, momenta=np.zeros_like(state["positions"]))
+        self.calc = lammps_calculator(model, cutoff_for(state["cell"]))
+        self.rng = np.random.default_rng(2000 + p["seed"])
+
+    def __call__(self, positions):
+        """The sums ``(Σ|F|², Σ∇²U, Σ|τ|², Σ𝓛²U)`` at ``positions`` (shape (n_sites, 3), Å)."""
+        from ase import Atoms, units
+
+        from rigidmd import RigidVerlet
+        from rigidmd.core.configurational import ConfigurationalTemperature
+
+        sites, cell = self.model.sites, self.state["cell"]
+        n = len(positions) // sites
+        atoms = Atoms(numbers=self.state["numbers"], positions=positions, cell=cell, pbc=True,
+                      masses=np.tile(self.model.masses(), n),
+                      charges=self.model.charges(n), tags=np.repeat(np.arange(1, n + 1), sites))
+        atoms.calc = self.calc
+        dyn = RigidVerlet(atoms, units.fs)
+        sampler = ConfigurationalTemperature(dyn, probes=self.p.get("tconf_probes", 4),
+                                             rng=self.rng, calculator=self.calc)
+        return sampler.sample()[:4]
+
+    def due(self, frame):
+        """Whether frame number ``frame`` (from 0) is sampled (every ``tconf_frames``-th)."""
+        every = self.p.get("tconf_frames", 0)
+        return bool(every) and frame % every == 0
+
+    def close(self):
+        if hasattr(self.calc, "close"):
+            self.calc.close()
+
+
+def frame_sampler(p, model, state):
+    """:class:`FrameConfigurational` for ``p``, or None with ``--tconf-frames 0``."""
+    return FrameConfigurational(p, model, state) if p.get("tconf_frames", 0) else None
+
+
 def configurational_temperatures(sampler):
     """One sample's sums ``(Σ|F|², Σ∇²U, Σ|τ|², Σ𝓛²U)`` (eV²/Å², eV/Å², eV², eV) of the
     current state, or None without a sampler (the frame's T_conf columns then stay nan, and
@@ -501,6 +560,7 @@ def run_openmm(p, paths, stop, progress, resume):
     total = int(round(p["ps"] * 1000 / p["dt_fs"]))
     n = len(masses) // model.sites
     cell = state["cell"]
+    conf = frame_sampler(p, model, state)
 
     def observe():
         st = context.getState(getPositions=True, getVelocities=True, getEnergy=True)
@@ -512,8 +572,11 @@ def run_openmm(p, paths, stop, progress, resume):
                    st.getPotentialEnergy().value_in_unit(unit.kilojoule_per_mole), T,
                    (np.nan, np.nan))
         if (steps // sample) % frame_every == 0:
+            x = np.asarray(x) * 10
+            due = conf is not None and conf.due(steps // (sample * frame_every))
             series.frame(steps * p["dt_fs"] / 1000,
-                         *molecule_centres(np.asarray(x) * 10, masses, model.sites, cell), cell)
+                         *molecule_centres(x, masses, model.sites, cell), cell,
+                         conf(x) if due else None)
 
     def save():
         samples, frames = series.counts()
@@ -540,6 +603,8 @@ def run_openmm(p, paths, stop, progress, resume):
             last_save = time.perf_counter()
     ms = 1000 * (time.perf_counter() - t0) / max(steps - s0, 1)
     save()
+    if conf is not None:
+        conf.close()
     return series, steps, ms, 0.0, s0
 
 
@@ -598,6 +663,7 @@ def run_lammps(p, paths, stop, progress, resume):
     kj = units.kJ / units.mol
     n = len(state["numbers"]) // model.sites
     masses = np.tile(model.masses(), n)
+    conf = frame_sampler(p, model, state)
     s0, loop_s = steps, 0.0
     while steps < total and not stop:
         atoms = make_atoms(state, model)
@@ -618,8 +684,10 @@ def run_lammps(p, paths, stop, progress, resume):
                        (2 * kt / ((3 * n - 3) * KB_KJ), 2 * kr / (3 * n * KB_KJ)),
                        (np.nan, np.nan))
             if ((steps + ref.step[f]) // sample) % frame_every == 0:
+                due = conf is not None and conf.due((steps + ref.step[f])
+                                                    // (sample * frame_every))
                 series.frame(t, *molecule_centres(x, masses, model.sites, state["cell"]),
-                             state["cell"])
+                             state["cell"], conf(x) if due else None)
         steps += k
         state = dict(state, positions=ref.positions[-1], momenta=ref.velocities[-1]
                      * masses[:, None])
@@ -628,6 +696,8 @@ def run_lammps(p, paths, stop, progress, resume):
         np.savez(paths["chk"], positions=state["positions"], momenta=state["momenta"])
         chk.write_text(json.dumps({"samples": samples, "frames": frames, "steps": steps}))
         progress(steps * p["dt_fs"] / 1000)
+    if conf is not None:
+        conf.close()
     # LAMMPS's own loop (its start, the data file and the dump's parsing left out)
     ms = 1000 * loop_s / max(steps - s0, 1) if steps > s0 else float("nan")
     return series, steps, ms, coulomb_energy(model), s0
@@ -814,7 +884,7 @@ def points(args):
                         "equil_ps": args.equil_ps, "tau_ps": args.tau_ps,
                         "sample_fs": args.sample_fs, "frame_fs": args.frame_fs,
                         "blocks": args.blocks, "msd_fit_ps": args.msd_fit_ps,
-                        "tconf_frames": args.tconf_frames if code == "rigidmd" else 0,
+                        "tconf_frames": args.tconf_frames,
                         "tconf_probes": args.tconf_probes,
                         "piece_ps": args.piece_ps, "save_s": args.save_s,
                         "log_s": args.log_s, "jobs": args.jobs,

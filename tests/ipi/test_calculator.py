@@ -248,5 +248,17 @@ def test_peers_may_be_named_in_a_configuration_without_trust(tmp_path):
     with_peers = check_config(raw(peers=["localhost"]))
     assert with_peers.calculator.options["peers"] == ["localhost"]
     assert fingerprint(with_peers) == fingerprint(check_config(raw()))
+    # The same for each level of a split (a level is fingerprinted as one calculator is).
+    engine = {"name": "ipi", "address": "localhost:31997"}
+
+    def split(**options):
+        return dict(raw(), calculator={"fast": {"name": "tip3p"}, "substeps": 2, "slow": dict(
+            engine, options=options)})
+
+    assert fingerprint(check_config(split(peers=["localhost"]))) == \
+        fingerprint(check_config(split()))
+    assert fingerprint(check_config(split(peers=["localhost"]))) != \
+        fingerprint(check_config(dict(split(), calculator=dict(split()["calculator"],
+                                                                substeps=3))))
     with pytest.raises(ConfigError, match="calculator.options.peers"):
         check_config(raw(peers="localhost"))  # a list, as the reference says

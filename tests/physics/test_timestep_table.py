@@ -77,7 +77,41 @@ def test_the_other_codes_write_the_same_fields(tmp_path, code, integrator):
     # off) and -48.34 kJ/mol (OpenMM) measured at 2 fs over 0.2 ps of this start.
     assert -55 < result["U"][0] < -40
     assert 200 < result["T_tr"][0] < 400 and 200 < result["T_rot"][0] < 400
+    # T_conf from the frames' positions (frames 0 and 2, as rigidmd's above): present and
+    # of the right order; test_frames_give_rigidmd_s_own_configurational_sums checks it.
+    assert 150 < result["T_conf_tr"][0] < 450 and 150 < result["T_conf_rot"][0] < 450
     assert not list(tmp_path.glob("*.chk*.json"))  # the collector reads every *.json
+
+
+@pytest.mark.lammps
+def test_frames_give_rigidmd_s_own_configurational_sums():
+    """Another code's frame, sampled from its positions alone (molecules broken across the
+    box, OpenMM's M sites as they come), gives the sums rigidmd's own sampler gives at that
+    state with the same probes: the two codes' T_conf are one estimator."""
+    from ase import units
+    from water_openmm_nve import lammps_calculator
+
+    from rigidmd import RigidVerlet
+    from rigidmd.core.configurational import ConfigurationalTemperature
+    from rigidmd.water import water_model
+
+    model = water_model("tip4p2005")
+    state = table.load_start("tip4p2005", 64)
+    p = {"seed": 3, "tconf_frames": 2, "tconf_probes": 2}
+    atoms = table.make_atoms(state, model)
+    calc = lammps_calculator(model, table.cutoff_for(state["cell"]))
+    own = ConfigurationalTemperature(RigidVerlet(atoms, units.fs), probes=2, rng=2003,
+                                     calculator=calc).sample()[:4]
+    broken = state["positions"].copy()
+    broken[1] += state["cell"][0]  # the first molecule's H one box away: the same state
+    frames = table.frame_sampler(p, model, state)
+    sums = frames(broken)
+    frames.close()
+    # The same forces and probes: equal to 2e-16 measured (the body fit's roundoff); 1e-9
+    # leaves room for another BLAS, far below a sample's ~10 % noise.
+    np.testing.assert_allclose(sums, own, rtol=1e-9)
+    assert frames.due(0) and not frames.due(1) and frames.due(4)
+    assert table.frame_sampler(dict(p, tconf_frames=0), model, state) is None
 
 
 @pytest.mark.lammps

@@ -11,7 +11,7 @@ call of the full model).
 :func:`calculator_section` reads either form.
 """
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 from rigidmd.config.quantities import ConfigError, mapping
@@ -122,11 +122,11 @@ class SplitCalculatorSection:
             return MultipleTimeStep(built["fast"], full=built["full"], substeps=self.substeps)
         return MultipleTimeStep(built["fast"], built["slow"], substeps=self.substeps)
 
-    def fingerprint_fields(self, leave_out) -> dict:
-        """What the levels compute (not where they run: ``leave_out``), for ``--resume``."""
+    def fingerprint_fields(self, level_fields) -> dict:
+        """What the levels compute, for ``--resume``: ``level_fields(section)`` gives a
+        level's fields (a single calculator's, without where it runs or who may answer)."""
         return {"substeps": self.substeps, "difference": self.difference,
-                **{level: {key: value for key, value in asdict(section).items()
-                           if key not in leave_out} for level, section in self.levels}}
+                **{level: level_fields(section) for level, section in self.levels}}
 
 
 class CalculatorChoice:

@@ -61,12 +61,15 @@ def _file_digest(path):
 WHERE_OPTIONS = ("peers",)
 
 
+#: Calculator fields that say where the forces run, not what they are.
+WHERE_FIELDS = ("calculator_class", "processes", "threads", "address")
+
+
 def _calculator_fields(calculator):
-    # Where the forces run (processes, threads, address) is not what they are.
-    where = ("calculator_class", "processes", "threads", "address")
     if hasattr(calculator, "fingerprint_fields"):  # a split: each level's fields
-        return calculator.fingerprint_fields(where)
-    fields = {key: value for key, value in asdict(calculator).items() if key not in where}
+        return calculator.fingerprint_fields(_calculator_fields)
+    fields = {key: value for key, value in asdict(calculator).items()
+              if key not in WHERE_FIELDS}
     if isinstance(fields.get("options"), dict):
         fields["options"] = {k: v for k, v in fields["options"].items()
                              if k not in WHERE_OPTIONS}
