@@ -195,11 +195,11 @@ def test_a_signal_to_the_jobs_parent_stops_every_run_and_waits_for_them(tmp_path
         assert result["stopped_by"] == "SIGTERM" and not result["complete"]
 
 
-def _synthetic(path, integrator, dt, seed, U, code="rigidmd"):
+def _synthetic(path, integrator, dt, seed, U, code="rigidmd", U_err=0.01):
     point = {"model": "tip4p2005", "waters": 216, "code": code, "integrator": integrator,
              "dt_fs": dt, "seed": seed}
     run = {"point": point, "complete": True, "ms_per_step": 3.0, "recorded_ps": 200.0,
-           "U": [U, 0.01], "T_tr": [298.0, 0.2], "T_rot": [298.0, 0.2],
+           "U": [U, U_err], "T_tr": [298.0, 0.2], "T_rot": [298.0, 0.2],
            "T_tr_end": [298.0, 0.2], "T_rot_end": [298.0, 0.2], "rdf_peak_r": 2.76,
            "rdf_peak_g": 3.2 + 0.01 * dt ** 2, "D_pbc": [2.1, 0.05], "T_conf_tr": None,
            "T_conf_rot": None}
@@ -283,6 +283,22 @@ def test_a_goal_is_met_only_when_its_errors_show_it(dev, err, verdict):
     assert collector.verdict(dev, err, 0.05) == verdict
 
 
+def test_a_pooled_error_is_never_below_what_the_runs_own_errors_give():
+    """Three runs that agree by chance (scatter 0.01, each ± 0.07) keep the error their own
+    errors give the mean (0.07·√3/3 = 0.040), not the scatter's 0.006; runs that scatter
+    more than their errors say keep the scatter's; one run keeps its own error."""
+    def runs(values, err):
+        return [{"U": [v, err]} for v in values]
+
+    mean, err = collector.pool(runs([-47.68, -47.69, -47.67], 0.07), "U")
+    assert mean == pytest.approx(-47.68) and err == pytest.approx(0.07 / np.sqrt(3))
+    mean, err = collector.pool(runs([-47.5, -47.7, -47.9], 0.01), "U")
+    assert err == pytest.approx(0.2 / np.sqrt(3))  # s = 0.2
+    assert collector.pool(runs([-47.6], 0.03), "U") == [-47.6, 0.03]
+    # A run without an error of its own (one run's RDF peak): the scatter alone.
+    assert collector.pool([{"g": 3.2}, {"g": 3.4}], "g")[1] == pytest.approx(0.1)
+
+
 def test_goals_and_the_largest_steps_from_the_limit(tmp_path):
     """Synthetic rigidmd points on U = -47 + b·dt² (b = 0.004 kJ/mol/fs²: 0.064 at 4 fs, over
     the 0.05 goal); RDF peak 3.2 + 0.01·dt² (0.5 % at 4 fs); T 298 K: the largest step no
@@ -290,15 +306,16 @@ def test_goals_and_the_largest_steps_from_the_limit(tmp_path):
     2 and 4 fs only takes rigidmd's limits of the static quantities when told (the same
     forces), never D_PBC's (another thermostat), and says so."""
     files = []
-    for dt in (0.5, 1.0, 2.0, 4.0):
+    for dt in (0.5, 1.0, 2.0, 4.0):  # each run's own error 0.002: the mean's is too
         for seed, noise in ((1, 0.002), (2, -0.002)):
             files.append(_synthetic(tmp_path, "baoab", dt, seed, -47.0 + 0.004 * dt ** 2
-                                    + noise))
+                                    + noise, U_err=0.002))
     for dt in (2.0, 4.0):
         files.append(_synthetic(tmp_path, "nvt_small", dt, 1, -47.0 + 0.03 * dt ** 2,
                                 code="lammps"))
     for seed, noise in ((1, 0.002), (2, -0.002)):  # 6 fs: judged at twice the tolerances
-        files.append(_synthetic(tmp_path, "baoab", 6.0, seed, -47.0 + 0.07 + noise))
+        files.append(_synthetic(tmp_path, "baoab", 6.0, seed, -47.0 + 0.07 + noise,
+                                U_err=0.002))
     split = _synthetic(tmp_path, "baoab", 8.0, 1, -47.0 + 0.07)  # an r-RESPA split at 8 fs
     run = json.loads(split.read_text())
     run["point"].update(substeps=4, r_split=5.0)
@@ -526,7 +543,7 @@ def test_seeds_of_a_deterministic_integrator_start_apart():
 
 @pytest.mark.parametrize("name, options, pages", [
     ("timestep_table_216", ["--borrow-limit", "lammps=rigidmd"],
-     ("timestep-216.md", "timestep-216-tables.md")),
+     ("timestep-216.md", "timestep-216-tables.md", "timestep-216-runs.md")),
     ("timestep_table_216_spce", [], ("timestep-216-spce.md",)),
 ])
 def test_the_216_water_pages_show_what_the_committed_runs_give(tmp_path, name, options,
