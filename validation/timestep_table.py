@@ -359,8 +359,7 @@ class FrameConfigurational:
     def __init__(self, p, model, state):
         from water_openmm_nve import lammps_calculator
 
-        self.p, self.model = p, model
-        self.state = dict(state, momenta=np.zeros_like(state["positions"]))
+        self.p, self.model, self.state = p, model, state
         self.calc = lammps_calculator(model, cutoff_for(state["cell"]))
         self.rng = np.random.default_rng(2000 + p["seed"])
 
