@@ -60,8 +60,9 @@ def pool(runs, key):
     runs estimates the error with two degrees of freedom: a tenth of the time it falls
     below a third of the true error (:math:`P(\chi^2_2/2 < 0.1) = 0.095`), and such a
     point then outweighs the rest of a fit and its verdicts (found in the 216-water table:
-    three runs of Bussi at 1 fs agreeing to 0.02 kJ/mol in ⟨U⟩/N, each ± 0.06–0.07, pulled
-    rigidmd's shared limit by 0.08).  Block errors can fall short too, so neither alone.
+    two runs of Bussi at 1 fs agreeing to 0.02 kJ/mol in ⟨U⟩/N, each ± 0.07 and ± 0.12,
+    pulled rigidmd's shared limit by 0.08).  Block errors can fall short too, so neither
+    alone.
     """
     values = [_value(r.get(key)) for r in runs]
     values = [v for v in values if v is not None and np.isfinite(v[0])]
