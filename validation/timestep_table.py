@@ -324,8 +324,9 @@ def configurational_sampler(p, dyn, model, cell):
 
     A :class:`rigidmd.core.configurational.ConfigurationalTemperature` with a LAMMPS
     calculator of its own (the same interactions; so the trajectory is the unobserved one
-    bit for bit) and its own random numbers (``2000 + seed``), sampled at every
-    ``tconf_frames``-th frame.  Cost: ``2 * tconf_probes`` force calls a sample (8 by
+    bit for bit) and its own random numbers (seed ``2000 + seed``: a sample's probes depend
+    on that and its step alone, so a resumed run samples as an uninterrupted one), sampled
+    at every ``tconf_frames``-th frame.  Cost: ``2 * tconf_probes`` force calls a sample (8 by
     default; at the default frame of 200 fs and every second frame, 8 calls per 400 fs:
     8 % more calls at 4 fs, 1 % at 0.5 fs).
     """
@@ -351,7 +352,9 @@ class FrameConfigurational:
     probes' random numbers from ``2000 + seed``.  For an OpenMM run that measures how
     Boltzmann-distributed its configurations are under LAMMPS's forces of the same model:
     PME and PPPM at 1e-5 part by about 1e-5 of a force, and neither's truncated
-    Lennard-Jones (with its tail correction, which adds no force) differs.  The run's own
+    Lennard-Jones (with its tail correction, which adds no force) differs.  A sample's
+    probes come from ``(2000 + seed, step)``, as rigidmd's own sampler draws them at that
+    step, so a resumed run samples as an uninterrupted one.  The run's own
     trajectory is untouched: the frames are copies.  Cost: ``2 * tconf_probes + 1`` force
     calls and a body fit a sample.
     """
@@ -361,10 +364,10 @@ class FrameConfigurational:
 
         self.p, self.model, self.state = p, model, state
         self.calc = lammps_calculator(model, cutoff_for(state["cell"]))
-        self.rng = np.random.default_rng(2000 + p["seed"])
 
-    def __call__(self, positions):
-        """The sums ``(Σ|F|², Σ∇²U, Σ|τ|², Σ𝓛²U)`` at ``positions`` (shape (n_sites, 3), Å)."""
+    def __call__(self, positions, step):
+        """The sums ``(Σ|F|², Σ∇²U, Σ|τ|², Σ𝓛²U)`` at ``positions`` (shape (n_sites, 3), Å),
+        the run's step ``step``."""
         from ase import Atoms, units
 
         from rigidmd import RigidVerlet
@@ -377,8 +380,9 @@ class FrameConfigurational:
                       charges=self.model.charges(n), tags=np.repeat(np.arange(1, n + 1), sites))
         atoms.calc = self.calc
         dyn = RigidVerlet(atoms, units.fs)
+        rng = np.random.default_rng((2000 + self.p["seed"], int(step)))
         sampler = ConfigurationalTemperature(dyn, probes=self.p.get("tconf_probes", 4),
-                                             rng=self.rng, calculator=self.calc)
+                                             rng=rng, calculator=self.calc)
         return sampler.sample()[:4]
 
     def due(self, frame):
@@ -575,7 +579,7 @@ def run_openmm(p, paths, stop, progress, resume):
             due = conf is not None and conf.due(steps // (sample * frame_every))
             series.frame(steps * p["dt_fs"] / 1000,
                          *molecule_centres(x, masses, model.sites, cell), cell,
-                         conf(x) if due else None)
+                         conf(x, steps) if due else None)
 
     def save():
         samples, frames = series.counts()
@@ -686,7 +690,7 @@ def run_lammps(p, paths, stop, progress, resume):
                 due = conf is not None and conf.due((steps + ref.step[f])
                                                     // (sample * frame_every))
                 series.frame(t, *molecule_centres(x, masses, model.sites, state["cell"]),
-                             state["cell"], conf(x) if due else None)
+                             state["cell"], conf(x, steps + ref.step[f]) if due else None)
         steps += k
         state = dict(state, positions=ref.positions[-1], momenta=ref.velocities[-1]
                      * masses[:, None])

@@ -233,11 +233,32 @@ def test_block_ratio_errors():
                                            ({"probes": 1.5}, "probes"),
                                            ({"eps_translation": -1e-3}, "eps_translation"),
                                            ({"eps_rotation": float("nan")}, "eps_rotation"),
-                                           ({"eps_rotation": 0.5}, "eps_rotation")])
+                                           ({"eps_rotation": 0.5}, "eps_rotation"),
+                                           ({"rng": 1.5}, "rng"), ({"rng": -1}, "rng")])
 def test_bad_parameters_are_refused_naming_them(kwargs, field):
     dyn, _, _ = _langevin(steps=1)
     with pytest.raises(ValueError, match=field):
         ConfigurationalTemperature(dyn, **kwargs)
+
+
+def test_a_continued_run_takes_the_samples_of_an_uninterrupted_one(tmp_path):
+    """With a seed, a sample's probes depend on the seed and the step alone: a run continued
+    from a checkpoint (with a new observer) takes, at each step, the sample the
+    uninterrupted run takes there, bit for bit.  (A generator given as ``rng`` is drawn from
+    in turn, so there the continued run's probes differ.)"""
+    from rigidmd import load_checkpoint
+
+    whole, tconf, _ = _langevin(observer_every=5, steps=30)
+    cut, before, _ = _langevin(observer_every=5, steps=15)
+    cut.save_checkpoint(tmp_path / "cut.npz")
+    resumed = load_checkpoint(tmp_path / "cut.npz", TIP3P(rc=40.0))
+    again = ConfigurationalTemperature(resumed, probes=2, rng=5)
+    resumed.attach(again, interval=5)
+    resumed.run(15)
+    assert [s[4] for s in again.sums] == [20, 25, 30]  # step 15 was sampled before the cut
+    assert before.sums + again.sums == tconf.sums
+    streamed = ConfigurationalTemperature(resumed, probes=2, rng=np.random.default_rng(5))
+    assert streamed.sample()[3] != again.sums[-1][3]  # the same state, other probes
 
 
 def test_not_a_rigid_dynamics():

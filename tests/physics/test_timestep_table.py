@@ -20,6 +20,10 @@ from helpers import benchmark_module, finish, sigterm_once_written
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "validation" / "timestep_table.py"
+# A resumed run's configurational sums against the uninterrupted run's: 1.2e-13 relative
+# at most, measured (the fresh LAMMPS instance's order of summation, as for U); a restarted
+# random stream parts them by the Hutchinson noise, ~10 %.
+TOL_CONF = 1e-9
 table = benchmark_module("timestep_table")
 collector = benchmark_module("timestep_table_report")
 
@@ -100,16 +104,20 @@ def test_frames_give_rigidmd_s_own_configurational_sums():
     p = {"seed": 3, "tconf_frames": 2, "tconf_probes": 2}
     atoms = table.make_atoms(state, model)
     calc = lammps_calculator(model, table.cutoff_for(state["cell"]))
-    own = ConfigurationalTemperature(RigidVerlet(atoms, units.fs), probes=2, rng=2003,
-                                     calculator=calc).sample()[:4]
+    dyn = RigidVerlet(atoms, units.fs)
+    dyn.nsteps = 700  # the step the frame is of: the probes are those of (2003, 700)
+    own = ConfigurationalTemperature(dyn, probes=2, rng=2003, calculator=calc).sample()[:4]
     broken = state["positions"].copy()
     broken[1] += state["cell"][0]  # the first molecule's H one box away: the same state
     frames = table.frame_sampler(p, model, state)
-    sums = frames(broken)
+    sums, other_step = frames(broken, 700), frames(broken, 701)
     frames.close()
     # The same forces and probes: equal to 2e-16 measured (the body fit's roundoff); 1e-9
     # leaves room for another BLAS, far below a sample's ~10 % noise.
     np.testing.assert_allclose(sums, own, rtol=1e-9)
+    # Another step draws other probes: the Laplacians' estimates differ (by ~10 %).
+    assert other_step[0] == pytest.approx(sums[0], rel=1e-12)  # the forces are the state's
+    assert abs(other_step[3] / sums[3] - 1) > 1e-6
     assert frames.due(0) and not frames.due(1) and frames.due(4)
     assert table.frame_sampler(dict(p, tconf_frames=0), model, state) is None
 
@@ -146,6 +154,10 @@ def test_sigterm_writes_what_it_has_and_resume_continues_exactly(tmp_path):
         # 300 steps); a restarted random stream or a lost step would differ at 1e-3.
         for key in ("U", "T_tr", "T_rot", "com"):
             np.testing.assert_allclose(a[key], b[key], rtol=1e-10, err_msg=key)
+        # The configurational sums too: a sample's probes depend on its step alone, so the
+        # resumed run draws those of the uninterrupted one (TOL_CONF, measured).
+        assert np.isfinite(a["conf"]).all(axis=1).sum() >= 10
+        np.testing.assert_allclose(a["conf"], b["conf"], rtol=TOL_CONF, err_msg="conf")
 
 
 @pytest.mark.lammps

@@ -164,8 +164,12 @@ class ConfigurationalTemperature:
     eps_rotation : float, default 5e-3
         Rotation of the bodies (rad).
     rng : numpy.random.Generator or int, optional
-        The probes' random numbers (a seed, or a generator: anything with
-        numpy's ``choice``; default seed 0).
+        The probes' random numbers.  A seed (default 0): each sample draws
+        from ``numpy.random.default_rng((seed, step))``, so its probes depend
+        on the seed and the dynamics' step alone, and a run continued from a
+        checkpoint takes the samples an uninterrupted one takes at the same
+        steps.  A generator (anything with numpy's ``choice``): the samples
+        draw from it in turn.
     blocks : int, default 5
         Blocks of the jackknife error in :attr:`results`.
     calculator : ase.calculators.calculator.Calculator, optional
@@ -215,9 +219,15 @@ class ConfigurationalTemperature:
         self.dyn = dyn
         self.probes, self.blocks = int(probes), int(blocks)
         self.eps_translation, self.eps_rotation = float(eps_translation), float(eps_rotation)
-        # A generator (anything with numpy's ``choice``), or a seed.
-        self.rng = rng if hasattr(rng, "choice") else np.random.default_rng(
-            0 if rng is None else rng)
+        # A generator (anything with numpy's ``choice``), or a seed of each sample's own.
+        if hasattr(rng, "choice"):
+            self.rng, self.seed = rng, None
+        else:
+            seed = 0 if rng is None else rng
+            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+                raise ValueError(f"ConfigurationalTemperature: rng must be a numpy Generator "
+                                 f"or a whole-number seed >= 0, got {rng!r}")
+            self.rng, self.seed = None, int(seed)
         self.sums = []
         self.force_calls = 0
         #: The calculator of the displaced configurations (None: the dynamics').
@@ -269,8 +279,10 @@ class ConfigurationalTemperature:
                 Fd, taud = ops.reduce_forces(forces, r, model)
                 return np.concatenate([Fd, forces[model.free]]), taud
 
+            rng = self.rng if self.seed is None else np.random.default_rng(
+                (self.seed, int(dyn.nsteps)))
             lap_t, lap_r = hutchinson_laplacians(
-                displaced, nb + model.n_free, nb, self.rng, self.probes,
+                displaced, nb + model.n_free, nb, rng, self.probes,
                 self.eps_translation, self.eps_rotation)
         finally:
             _restore_calculator(calc, saved)
