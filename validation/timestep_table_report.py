@@ -277,9 +277,10 @@ GOALS = {"U": 0.05, "T_tr": 1.0, "T_rot": 1.0, "T_tr_rot": 1.0, "T_conf_tr": 2.0
 
 
 def deviations(point, fit_table, bath_K):
-    """Each goal's deviation of ``point`` and its standard error, ``{goal: (dev, err)}``
-    (absent where the point or its limit lacks the quantity).  Relative goals are divided
-    by the limit; the limit's own error is combined with the point's."""
+    """Each goal's deviation of ``point``, its standard error and the point's own part of
+    that error, ``{goal: (dev, err, point_err)}`` (absent where the point or its limit lacks
+    the quantity).  Relative goals are divided by the limit; the limit's own error is
+    combined with the point's."""
     out = {}
 
     def limit(key):
@@ -293,13 +294,13 @@ def deviations(point, fit_table, bath_K):
         err = np.hypot(point[key][1], lim["a_err"])
         dev = point[key][0] - lim["a"]
         scale = 1.0 if key == "U" else abs(lim["a"])
-        out[key] = (dev / scale, err / scale)
+        out[key] = (dev / scale, err / scale, point[key][1] / scale)
     for key in ("T_tr", "T_rot", "T_conf_tr", "T_conf_rot"):
         if point.get(key) is not None:
-            out[key] = (point[key][0] - bath_K, point[key][1])
+            out[key] = (point[key][0] - bath_K, point[key][1], point[key][1])
     if point.get("T_tr") is not None and point.get("T_rot") is not None:
-        out["T_tr_rot"] = (point["T_tr"][0] - point["T_rot"][0],
-                           float(np.hypot(point["T_tr"][1], point["T_rot"][1])))
+        err = float(np.hypot(point["T_tr"][1], point["T_rot"][1]))
+        out["T_tr_rot"] = (point["T_tr"][0] - point["T_rot"][0], err, err)
     return out
 
 
@@ -315,6 +316,32 @@ def verdict(dev, err, tolerance, sigmas=2.0):
     if abs(dev) - sigmas * err > tolerance:
         return "fails"
     return "unresolved"
+
+
+def runs_to_decide(dev, err, point_err, runs, tolerance, sigmas=2.0):
+    """The runs of a point, in all, that would decide an unresolved goal if its deviation
+    stayed where it is: the point's own error falls as one over the square root of its
+    runs, its limit's (the rest of ``err``) does not.
+
+    The smallest ``m > runs`` with ``sigmas * hypot(point_err * sqrt(runs / m), limit_err)
+    <= | |dev| - tolerance |``; None when no number of runs would do (the deviation sits
+    on the tolerance, or the limit's own error is too large: the limit needs runs, not the
+    point) or the errors are unknown.  A plan, not a promise: the deviation moves with the
+    runs (by about its error).
+    """
+    if not (np.isfinite(err) and np.isfinite(point_err) and point_err > 0):
+        return None
+    limit_var = max(err * err - point_err * point_err, 0.0)
+    half = abs(abs(dev) - tolerance) / sigmas
+    if half * half <= limit_var:
+        return None
+    m = max(int(np.floor(point_err * point_err * runs / (half * half - limit_var))), runs + 1)
+    # The bound decides to roundoff; the verdict itself settles the last run (it is strict
+    # on the side of failing).
+    while verdict(dev, float(np.hypot(point_err * np.sqrt(runs / m), np.sqrt(limit_var))),
+                  tolerance, sigmas) == "unresolved":
+        m += 1
+    return m
 
 
 #: Steps from this one (fs) are judged against twice the tolerances: the issue's goal for a
@@ -336,8 +363,13 @@ def assess(points, fit_table, bath_K=298.0, goals=GOALS, relaxed_from_fs=RELAXED
         factor = 2.0 if p["dt_fs"] >= relaxed_from_fs - 1e-9 and not split else 1.0
         checks = {g: {"dev": d, "err": e, "tolerance": goals[g] * factor,
                       "verdict": verdict(d, e, goals[g] * factor)}
-                  for g, (d, e) in devs.items() if g in goals}
-        rows.append({**{k: p[k] for k in ("model", "waters", "code", "integrator", "dt_fs")},
+                  for g, (d, e, _) in devs.items() if g in goals}
+        for g, c in checks.items():  # (a value without an error of its own: no plan)
+            if c["verdict"] == "unresolved" and np.isfinite(c["err"]) and devs[g][2] > 0:
+                c["runs_to_decide"] = runs_to_decide(c["dev"], c["err"], devs[g][2],
+                                                     p["runs"], c["tolerance"])
+        rows.append({**{k: p[k] for k in ("model", "waters", "code", "integrator", "dt_fs",
+                                          "runs")},
                      "tolerance_factor": factor, "checks": checks})
         if factor != 1.0:
             continue  # a stability step, not a candidate for the accurate one
@@ -379,6 +411,19 @@ def goals_table(rows, best):
         doubled = " (2× tolerances)" if r.get("tolerance_factor", 1.0) != 1.0 else ""
         lines.append(f"| {r['code']} | {r['integrator']} | {r['dt_fs']:g}{doubled} | "
                      + " | ".join(cells) + " |")
+    lines += ["", "Runs that would decide the unresolved goals, in all (now: runs), if the "
+              "deviations stayed as they are (each point's own error falls as 1/√runs, its "
+              "limit's does not; ∞: the deviation sits on the tolerance or the limit's error "
+              "is too large)", "",
+              "| code | integrator | dt (fs) | runs | " + " | ".join(names) + " |",
+              "|---|---|---|---|" + "---|" * len(names)]
+    for r in rows:
+        wanted = {g: c["runs_to_decide"] for g, c in r["checks"].items()
+                  if c["verdict"] == "unresolved" and "runs_to_decide" in c}
+        if wanted:
+            lines.append(f"| {r['code']} | {r['integrator']} | {r['dt_fs']:g} | {r['runs']} | "
+                         + " | ".join("" if g not in wanted else "∞" if wanted[g] is None
+                                      else str(wanted[g]) for g in names) + " |")
     lines += ["", "| code | integrator | largest step no goal fails (fs) | largest step every "
               "goal is shown to meet (fs) | goals not measured |", "|---|---|---|---|---|"]
     for (_model, _waters, code, integ), b in sorted(best.items()):

@@ -295,6 +295,32 @@ def test_a_goal_is_met_only_when_its_errors_show_it(dev, err, verdict):
     assert collector.verdict(dev, err, 0.05) == verdict
 
 
+def test_the_runs_that_would_decide_a_goal():
+    """T_conf,rot +2.8 ± 0.8 K from 6 runs against 2 K: the error must fall to 0.4 and
+    below (a failure is strict: |dev| − 2e > tol), e = 0.8·√(6/m) → 25 runs, checked by
+    judging the deviation at that error.  A point whose limit alone is too uncertain, or
+    whose deviation sits on the tolerance, gets None."""
+    m = collector.runs_to_decide(2.8, 0.8, 0.8, 6, 2.0)
+    assert m == 25
+    assert collector.verdict(2.8, 0.8 * np.sqrt(6 / m), 2.0) == "fails"
+    assert collector.verdict(2.8, 0.8 * np.sqrt(6 / (m - 1)), 2.0) == "unresolved"
+    # ⟨U⟩ 0.0 ± 0.03 against 0.05 with the limit's ± 0.01 in it: 2·hypot(e_p, 0.01) ≤ 0.05
+    # → e_p ≤ 0.0229 from 0.0283 with 3 runs: 4.6, so 5 runs.
+    e_p = np.sqrt(0.03**2 - 0.01**2)
+    m = collector.runs_to_decide(0.0, 0.03, e_p, 3, 0.05)
+    assert m == 5
+    assert collector.verdict(0.0, np.hypot(e_p * np.sqrt(3 / m), 0.01), 0.05) == "meets"
+    assert collector.verdict(0.0, np.hypot(e_p * np.sqrt(3 / (m - 1)), 0.01), 0.05) == \
+        "unresolved"
+    # BAOAB's 4 fs ⟨U⟩, +0.008 ± 0.048 with the shared limit's ± 0.028: 2·0.028 > 0.042,
+    # so no number of runs at 4 fs decides it; the limit needs them.
+    assert collector.runs_to_decide(0.008, 0.048, np.sqrt(0.048**2 - 0.028**2), 6,
+                                    0.05) is None
+    assert collector.runs_to_decide(0.05, 0.01, 0.01, 3, 0.05) is None  # on the tolerance
+    assert collector.runs_to_decide(0.0, float("nan"), float("nan"), 1, 0.05) is None
+    assert collector.runs_to_decide(0.049, 0.0001, 0.0001, 3, 0.05) == 4  # at least one more
+
+
 def test_a_pooled_error_is_never_below_what_the_runs_own_errors_give():
     """Three runs that agree by chance (scatter 0.01, each ± 0.07) keep the error their own
     errors give the mean (0.07·√3/3 = 0.040), not the scatter's 0.006; runs that scatter
@@ -345,6 +371,10 @@ def test_goals_and_the_largest_steps_from_the_limit(tmp_path):
     assert at[("rigidmd", 6.0)]["U"]["verdict"] == "meets"
     # A split competes with the accurate single step: its own tolerances at any outer step.
     assert at[("rigidmd", 8.0)]["U"]["tolerance"] == 0.05
+    # One run at +0.07 against 0.05, unresolved: a second would decide it (were it to stay).
+    assert at[("rigidmd", 8.0)]["U"]["verdict"] == "unresolved"
+    assert at[("rigidmd", 8.0)]["U"]["runs_to_decide"] == 2
+    assert "| rigidmd | baoab k=4 r=5 | 8 | 1 | 2 |" in (tmp_path / "g.md").read_text()
     split = best[("tip4p2005", 216, "rigidmd", "baoab k=4 r=5")]  # its levels as fields
     assert (split["scheme"], split["substeps"], split["r_split"]) == ("baoab", 4, 5.0)
     assert "U" not in at[("lammps", 4.0)]  # no limit of its own: not judged
@@ -555,8 +585,9 @@ def test_seeds_of_a_deterministic_integrator_start_apart():
 
 @pytest.mark.parametrize("name, options, pages", [
     ("timestep_table_216", ["--borrow-limit", "lammps=rigidmd"],
-     ("timestep-216.md", "timestep-216-tables.md", "timestep-216-runs.md")),
-    ("timestep_table_216_spce", [], ("timestep-216-spce.md",)),
+     ("timestep-216.md", "timestep-216-tables.md", "timestep-216-runs.md",
+      "timestep-216-plan.md")),
+    ("timestep_table_216_spce", [], ("timestep-216-spce.md", "timestep-216-plan.md")),
 ])
 def test_the_216_water_pages_show_what_the_committed_runs_give(tmp_path, name, options,
                                                                pages):
