@@ -22,7 +22,7 @@ STYLES = {("rigidmd", "langevin"): ("RigidLangevin", "o-"),
 
 #: The tables drawn, the first found: (file, what the title adds).
 SOURCES = (("timestep_table.json", ""),
-           ("timestep_table_216.json", ": 3 runs of 100 ps a point, not the full table"),
+           ("timestep_table_216.json", ": {runs} runs of 100 ps a point, not the full table"),
            ("timestep_table_small.json", ": the small run, not the table"))
 
 
@@ -82,5 +82,7 @@ def draw(path):
     ax.legend(fontsize=7)
     bx.legend(fontsize=6)
     n = data["points"][0]["waters"] if data["points"] else 0
-    fig.suptitle(f"TIP4P/2005, {n} waters, 298 K{note}")
+    counts = sorted({p["runs"] for p in data["points"] if p["model"] == model})
+    runs = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}–{counts[-1]}"
+    fig.suptitle(f"TIP4P/2005, {n} waters, 298 K{note.format(runs=runs)}")
     save(fig, path)
