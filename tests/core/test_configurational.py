@@ -234,7 +234,11 @@ def test_block_ratio_errors():
                                            ({"eps_translation": -1e-3}, "eps_translation"),
                                            ({"eps_rotation": float("nan")}, "eps_rotation"),
                                            ({"eps_rotation": 0.5}, "eps_rotation"),
-                                           ({"rng": 1.5}, "rng"), ({"rng": -1}, "rng")])
+                                           ({"rng": 1.5}, "rng"), ({"rng": -1}, "rng"),
+                                           ({"rng": (1, -2)}, "rng"), ({"rng": ()}, "rng"),
+                                           ({"eps_translation": True}, "eps_translation"),
+                                           ({"blocks": 1}, "blocks"), ({"blocks": True}, "blocks"),
+                                           ({"blocks": 2.5}, "blocks")])
 def test_bad_parameters_are_refused_naming_them(kwargs, field):
     dyn, _, _ = _langevin(steps=1)
     with pytest.raises(ValueError, match=field):

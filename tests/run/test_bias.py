@@ -128,6 +128,7 @@ def test_the_bias_of_a_trap_against_its_exact_mean(tmp_path):
     ({"barostat": {"kind": "monte_carlo", "pressure": "1 bar", "seed": 1}},
      "barostat: rigidmd bias runs at constant volume"),
     ({"relax": {"fmax": 0.1}}, "relax: rigidmd bias starts both runs"),
+    ({"thermostat": dict(TRAP["thermostat"], friction="0 1/fs")}, "thermostat.friction: 0"),
 ])
 def test_what_it_cannot_estimate_is_refused_in_one_line(tmp_path, change, message):
     raw = {k: v for k, v in dict(TRAP, **change).items() if v is not None}
@@ -147,7 +148,8 @@ def _command(tmp_path, *flags):
     trapped_waters(tmp_path / "trap.xyz")
     import yaml
 
-    (tmp_path / "bias.yaml").write_text(yaml.safe_dump(dict(TRAP, timestep="4 fs")))
+    raw = {k: v for k, v in TRAP.items() if k != "steps"}  # not read by rigidmd bias
+    (tmp_path / "bias.yaml").write_text(yaml.safe_dump(dict(raw, timestep="4 fs")))
     return ["bias", str(tmp_path / "bias.yaml"), "--trust", "--ps", "2", "--equilibrate-ps",
             "0.2", "--outdir", str(tmp_path / "out"), *flags]
 
@@ -159,6 +161,12 @@ def _command(tmp_path, *flags):
     (("--blocks", "1"), "--blocks: expected a whole number >= 2"),
     (("--timestep", "4 parsecs"), "--timestep"),
     (("--sample-fs", "1"), "--sample-fs: 1 fs is less than 1 step"),
+    (("--equilibrate-ps", "0.001"), "--equilibrate-ps: 1 fs is less than 1 step(s) of 4 fs "
+                                    "(0: none)"),
+    (("--ps", "0.02", "--sample-fs", "8"), "--sample-fs: 0.02 ps sampled every 8 fs gives 2 "
+                                           "samples, fewer than the 5 blocks"),
+    (("--ps", "0.2", "--tconf-fs", "100"), "--tconf-fs: 0.2 ps sampled every 100 fs gives 2 "
+                                           "samples"),
     (("--resume",), "--resume: no estimate to continue"),
 ])
 def test_command_mistakes_are_one_line_and_status_2(tmp_path, capsys, flags, message):
@@ -220,16 +228,19 @@ def test_a_stopped_estimate_continues_to_the_same_runs(tmp_path, capsys):
     whole = json.loads((tmp_path / "whole" / "out" / "bias.json").read_text())
     for a, b in zip(resumed["legs_record"], whole["legs_record"], strict=True):
         assert a["samples"] == b["samples"]
+        # The configurational temperatures too: a sample's probes depend on the seed, the
+        # run and the step alone (before, a resume drew new ones: 5-10 % apart here).
+        assert a["tconf_sums"] and a["tconf_sums"] == b["tconf_sums"]
 
 
 def test_a_failed_step_keeps_the_samples_and_resume_takes_them_again(tmp_path, monkeypatch):
-    """A step that fails (non-finite forces) in the second run: the error goes up (the
-    command prints it in one line, status 1), bias.json keeps the first run and what the
-    second had sampled; --resume runs the second again from its start (no checkpoint was
-    written) and samples it once, with no step twice."""
+    """A step that fails (non-finite forces) in the second run: the command stops in one
+    line (RunStopped: status 1) that says how to continue, bias.json keeps the first run and
+    what the second had sampled; --resume runs the second again from its start (no
+    checkpoint was written) and samples it once, with no step twice."""
     import io
 
-    from rigidmd import NonFiniteForceError
+    from rigidmd.run.runner import RunStopped
 
     config = trap_config(tmp_path, timestep="4 fs")
     original, calls = Trap.calculate, []
@@ -243,8 +254,10 @@ def test_a_failed_step_keeps_the_samples_and_resume_takes_them_again(tmp_path, m
     monkeypatch.setattr(Trap, "calculate", failing)
     kwargs = dict(production_ps=1.0, equilibrate_ps=0.2, progress=io.StringIO(),
                   stream=io.StringIO())
-    with pytest.raises(NonFiniteForceError):
-        estimate_bias(config, tmp_path / "out", **kwargs)
+    with pytest.raises(RunStopped, match=r"non-finite .* \(in the run at dt/2\); .*bias.json "
+                       "keeps the samples so far.*--resume") as info:
+        estimate_bias(config, tmp_path / "out", hint="rigidmd bias ... --resume", **kwargs)
+    assert "\n" not in str(info.value)
     saved = json.loads((tmp_path / "out" / "bias.json").read_text())
     first, second = saved["legs_record"]
     assert first["done"] and not second["done"] and second["samples"]["step"]
@@ -254,3 +267,102 @@ def test_a_failed_step_keeps_the_samples_and_resume_takes_them_again(tmp_path, m
     steps = result["legs_record"][1]["samples"]["step"]
     assert steps == sorted(set(steps)) and len(steps) == len(first["samples"]["step"])
     assert result["legs_record"][0]["samples"] == first["samples"]
+
+
+def _stop_at_call(monkeypatch, n, how):
+    """Make :class:`Trap`'s ``n``-th call raise ``how`` (an exception) or send this process
+    the signal ``how``; returns the count of calls."""
+    original, calls = Trap.calculate, []
+
+    def calculate(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        calls.append(1)
+        if len(calls) == n:
+            if isinstance(how, signal.Signals):
+                os.kill(os.getpid(), how)
+            else:
+                raise how
+
+    monkeypatch.setattr(Trap, "calculate", calculate)
+    return calls
+
+
+def test_a_second_ctrl_c_keeps_the_samples_and_says_how_to_continue(tmp_path, monkeypatch):
+    """KeyboardInterrupt inside a step (a second Ctrl-C): status 130 returned (not raised),
+    bias.json records 130 with the samples so far, the message names the run and the
+    command that continues; that command completes it."""
+    import io
+
+    config = trap_config(tmp_path, timestep="4 fs")
+    _stop_at_call(monkeypatch, 200, KeyboardInterrupt())
+    out = io.StringIO()
+    kwargs = dict(production_ps=1.0, equilibrate_ps=0.2, progress=io.StringIO())
+    result = estimate_bias(config, tmp_path / "out", stream=out, hint="HINT --resume", **kwargs)
+    assert result["status"] == 130 and not result["complete"]
+    saved = json.loads((tmp_path / "out" / "bias.json").read_text())
+    assert saved["status"] == 130 and saved["legs_record"][0]["samples"]["step"]
+    assert "second Ctrl-C) in the run at dt" in out.getvalue()
+    assert "continue with: HINT --resume" in out.getvalue()
+    monkeypatch.undo()
+    done = estimate_bias(config, tmp_path / "out", resume=True, stream=io.StringIO(),
+                         **kwargs)
+    assert done["complete"] and done["status"] == 0
+
+
+def test_files_of_another_estimate_are_never_taken_or_overwritten(tmp_path, monkeypatch):
+    """Without --resume a directory holding a stopped run's checkpoint is refused (before,
+    a new estimate continued that run, whatever its step); a directory another live process
+    holds is refused naming it; --resume refuses a checkpoint of another time step and a
+    record whose runs are incomplete, each in one line."""
+    import io
+
+    from rigidmd.run.outputs import LOCK_NAME, OutputError
+
+    config = trap_config(tmp_path, timestep="4 fs")
+    kwargs = dict(production_ps=1.0, equilibrate_ps=0.2, progress=io.StringIO(),
+                  stream=io.StringIO())
+    _stop_at_call(monkeypatch, 100, signal.SIGTERM)  # in the first run: its checkpoint
+    out = tmp_path / "out"
+    assert estimate_bias(config, out, **kwargs)["status"] == 143
+    monkeypatch.undo()
+    assert (out / "leg-dt.npz").exists()
+    (out / "bias.json").rename(tmp_path / "bias.json")  # the checkpoint alone stays
+    with pytest.raises(ConfigError, match=r"--outdir: .* already holds an estimate "
+                                          r"\(leg-dt.npz\); continue it with --resume"):
+        estimate_bias(config, out, **kwargs)
+    (tmp_path / "bias.json").rename(out / "bias.json")
+    # Another live process holds the directory.
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        import socket
+
+        (out / LOCK_NAME).write_text(json.dumps({"pid": holder.pid,
+                                                 "host": socket.gethostname()}))
+        with pytest.raises(OutputError, match=f"--outdir: .* in use by process {holder.pid}"):
+            estimate_bias(config, out, resume=True, **kwargs)
+    finally:
+        holder.kill()
+        holder.wait()
+    # The first run's checkpoint offered as the second's: refused, naming both steps.
+    saved = json.loads((out / "bias.json").read_text())
+    saved["legs_record"][0]["done"] = True
+    (out / "bias.json").write_text(json.dumps(saved))
+    (out / "leg-dt.npz").rename(out / "leg-dt-2.npz")
+    with pytest.raises(ConfigError, match=r"leg-dt-2.npz is a run at 4 fs, not this "
+                                          r"estimate's dt/2 run at 2 fs"):
+        estimate_bias(config, out, resume=True, **kwargs)
+    del saved["legs_record"][1]["samples"]
+    (out / "bias.json").write_text(json.dumps(saved))
+    with pytest.raises(ConfigError, match="is not an estimate rigidmd bias wrote"):
+        estimate_bias(config, out, resume=True, **kwargs)
+
+
+def test_a_time_off_the_step_grid_is_said(tmp_path, capsys):
+    """--sample-fs 10 at 4 fs is 2.5 steps: taken as the nearest whole step, and said."""
+    assert cli.main(_command(tmp_path, "--ps", "0.4", "--sample-fs", "10", "--tconf-fs",
+                             "0")) == 0
+    out = capsys.readouterr().out
+    assert "--sample-fs: 10 fs is not a whole number of 4 fs steps; taken as 3 steps " \
+           "(12 fs)" in out
+    saved = json.loads((tmp_path / "out" / "bias.json").read_text())
+    assert saved["legs_record"][0]["every"] == 3 and saved["legs_record"][1]["every"] == 6

@@ -163,15 +163,16 @@ class ConfigurationalTemperature:
         Displacement of the centres (Å).
     eps_rotation : float, default 5e-3
         Rotation of the bodies (rad).
-    rng : numpy.random.Generator or int, optional
-        The probes' random numbers.  A seed (default 0): each sample draws
-        from ``numpy.random.default_rng((seed, step))``, so its probes depend
-        on the seed and the dynamics' step alone, and a run continued from a
+    rng : numpy.random.Generator, int or tuple of int, optional
+        The probes' random numbers.  A seed (default 0; a tuple of whole
+        numbers is one seed too): each sample draws from
+        ``numpy.random.default_rng((*seed, step))``, so its probes depend on
+        the seed and the dynamics' step alone, and a run continued from a
         checkpoint takes the samples an uninterrupted one takes at the same
         steps.  A generator (anything with numpy's ``choice``): the samples
         draw from it in turn.
     blocks : int, default 5
-        Blocks of the jackknife error in :attr:`results`.
+        Blocks of the jackknife error in :attr:`results` (at least 2).
     calculator : ase.calculators.calculator.Calculator, optional
         Evaluates the displaced configurations (default: the dynamics' own,
         whose results and cached atoms are put back after each sample).  An
@@ -205,8 +206,8 @@ class ConfigurationalTemperature:
                              f"got {probes!r}")
         for name, value in (("eps_translation", eps_translation),
                             ("eps_rotation", eps_rotation)):
-            if not (isinstance(value, (int, float, np.floating)) and np.isfinite(value)
-                    and value > 0):
+            if isinstance(value, bool) or not (isinstance(value, (int, float, np.floating))
+                                               and np.isfinite(value) and value > 0):
                 raise ValueError(f"ConfigurationalTemperature: {name} must be a positive "
                                  f"number, got {value!r}")
         if eps_rotation > 0.1:
@@ -216,6 +217,9 @@ class ConfigurationalTemperature:
             if not hasattr(dyn, name):
                 raise TypeError(f"ConfigurationalTemperature needs a rigidmd dynamics, got "
                                 f"{type(dyn).__name__}")
+        if isinstance(blocks, bool) or not isinstance(blocks, (int, np.integer)) or blocks < 2:
+            raise ValueError(f"ConfigurationalTemperature: blocks must be a whole number >= 2 "
+                             f"(the jackknife's blocks), got {blocks!r}")
         self.dyn = dyn
         self.probes, self.blocks = int(probes), int(blocks)
         self.eps_translation, self.eps_rotation = float(eps_translation), float(eps_rotation)
@@ -223,11 +227,14 @@ class ConfigurationalTemperature:
         if hasattr(rng, "choice"):
             self.rng, self.seed = rng, None
         else:
-            seed = 0 if rng is None else rng
-            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            seed = (0,) if rng is None else tuple(rng) if isinstance(rng, (tuple, list)) \
+                else (rng,)
+            if not seed or any(isinstance(v, bool) or not isinstance(v, (int, np.integer))
+                               or v < 0 for v in seed):
                 raise ValueError(f"ConfigurationalTemperature: rng must be a numpy Generator "
-                                 f"or a whole-number seed >= 0, got {rng!r}")
-            self.rng, self.seed = None, int(seed)
+                                 f"or a seed (a whole number >= 0, or a tuple of them), got "
+                                 f"{rng!r}")
+            self.rng, self.seed = None, tuple(int(v) for v in seed)
         self.sums = []
         self.force_calls = 0
         #: The calculator of the displaced configurations (None: the dynamics').
@@ -259,8 +266,10 @@ class ConfigurationalTemperature:
             self.force_calls += 1
             if not np.isfinite(forces.sum()):
                 raise ValueError(f"ConfigurationalTemperature: the calculator returned "
-                                 f"non-finite forces at a displaced configuration after step "
-                                 f"{dyn.nsteps}; lower eps_translation or eps_rotation")
+                                 f"non-finite forces at a configuration displaced by "
+                                 f"{self.eps_translation:g} Å and {self.eps_rotation:g} rad "
+                                 f"after step {dyn.nsteps} (the arguments eps_translation and "
+                                 f"eps_rotation set them)")
             return forces, r
 
         nb = model.n_bodies
@@ -280,7 +289,7 @@ class ConfigurationalTemperature:
                 return np.concatenate([Fd, forces[model.free]]), taud
 
             rng = self.rng if self.seed is None else np.random.default_rng(
-                (self.seed, int(dyn.nsteps)))
+                (*self.seed, int(dyn.nsteps)))
             lap_t, lap_r = hutchinson_laplacians(
                 displaced, nb + model.n_free, nb, rng, self.probes,
                 self.eps_translation, self.eps_rotation)

@@ -24,13 +24,19 @@ thermostat the temperature itself moves with the step (the energy is what is
 conserved), and under a barostat the density does, so ⟨U⟩ would mix the two
 errors; estimate the bias at the barostat's mean density.
 
-Progress goes to stderr (a bar on a terminal, a line every 1 % otherwise).
-SIGINT, SIGTERM and SIGUSR1 finish the current step, write the run's
-checkpoint and what was sampled (``bias.json``), print the estimate so far
-and the command that continues (``--resume``); the continued estimate is the
-one an uninterrupted command gives, bit for bit in the runs, with the
-configurational temperatures' probes drawn afresh.  Outputs in ``--outdir``:
-``bias.json`` (every sample and number) and ``bias.txt`` (the table).
+Progress goes to stderr (a bar on a terminal; otherwise a line each tenth of
+a run, never two within a minute, and one at its end).  SIGINT, SIGTERM and
+SIGUSR1 finish the current step, write the run's checkpoint and what was
+sampled (``bias.json``), print the estimate so far and the command that
+continues (``--resume``); the continued estimate is the one an uninterrupted
+command gives, bit for bit, the configurational temperatures included (a
+sample's probes depend on the seed, the run and the step alone).  A second
+Ctrl-C stops at once: ``bias.json`` keeps the samples, and ``--resume``
+continues from the run's last checkpoint (or its start).  A failure in a step
+(exit 1) keeps them likewise.  Outputs in ``--outdir``, which one estimate
+holds at a time (a lock): ``bias.json`` (every sample and number) and
+``bias.txt`` (the table).  Times that are not a whole number of steps are
+taken to the nearest step, and the command says so.
 """
 
 import json
@@ -47,7 +53,9 @@ from rigidmd.config.diagnostics import own_calculator
 from rigidmd.core.configurational import ConfigurationalTemperature, block_mean, block_ratio
 from rigidmd.core.observables import kinetic_dof
 from rigidmd.run.fingerprint import fingerprint
+from rigidmd.run.outputs import OutputLock, describe_os_error
 from rigidmd.run.report import Progress
+from rigidmd.run.runner import RunStopped
 from rigidmd.run.signals import EXIT_STATUS, StopRequest, StopSignals
 
 __all__ = ["estimate_bias", "BiasLeg", "check_bias_config", "add_bias_parser", "bias_command"]
@@ -72,6 +80,10 @@ def check_bias_config(config) -> None:
         raise ConfigError("thermostat: rigidmd bias needs a thermostat (at constant energy the "
                           "temperature itself moves with the step); add one, e.g. "
                           "{kind: langevin, temperature: 300 K, friction: 1 1/ps}")
+    if coupling.thermostat.kwargs.get("friction", 1.0) == 0:
+        raise ConfigError("thermostat.friction: 0 leaves the energy constant (no thermostat), "
+                          "and rigidmd bias needs the temperature held; give a friction > 0, "
+                          "e.g. 1 1/ps")
     if config.relax is not None:
         raise ConfigError("relax: rigidmd bias starts both runs from the structure as given; "
                           "relax it first (rigidmd relax) and give the relaxed structure")
@@ -148,29 +160,51 @@ def _scaled(pair, factor):
     return pair[0] * factor, pair[1] * factor
 
 
-def _steps(name, time_span, dt, minimum=1):
-    steps = int(round(time_span / dt))
-    if steps < minimum:
-        raise ConfigError(f"{name}: {time_span / TIME_UNITS['fs']:g} fs is less than "
-                          f"{minimum} step(s) of {dt / TIME_UNITS['fs']:g} fs")
+#: The sampling intervals when none is given (fs): the whole number of steps nearest them.
+SAMPLE_FS, TCONF_FS = 10.0, 100.0
+
+
+def _steps(name, time_span, dt, notes, minimum=1):
+    """Whole steps of ``dt`` nearest ``time_span`` (ASE time); a time that is not a whole
+    number of them adds a line to ``notes`` (None: a default, said nothing of); fewer than
+    ``minimum`` (or none for a time above zero) is refused naming ``name``."""
+    fs = TIME_UNITS["fs"]
+    steps = int(np.floor(time_span / dt + 0.5))
+    if steps < minimum or (time_span > 0 and steps == 0):
+        raise ConfigError(f"{name}: {time_span / fs:g} fs is less than "
+                          f"{max(minimum, 1)} step(s) of {dt / fs:g} fs"
+                          + (" (0: none)" if minimum == 0 else ""))
+    if notes is not None and abs(steps * dt - time_span) > 1e-9 * max(time_span, dt):
+        notes.append(f"{name}: {time_span / fs:g} fs is not a whole number of {dt / fs:g} fs "
+                     f"steps; taken as {steps} steps ({steps * dt / fs:g} fs)")
     return steps
 
 
-def _legs(config, production_ps, equilibrate_ps, sample_fs, tconf_fs):
+def _legs(config, production_ps, equilibrate_ps, sample_fs, tconf_fs, blocks, notes):
+    """The two legs (dt, dt/2), sampled at the same times; refuses, naming the option, a
+    leg that would have fewer samples than ``blocks`` (no error could be given)."""
     dt = config.run.timestep
-    legs = []
-    for name, step in (("dt", dt), ("dt/2", dt / 2)):
-        ps, fs = TIME_UNITS["ps"], TIME_UNITS["fs"]
-        every = _steps("--sample-fs", sample_fs * fs, dt)  # on the coarser grid: both legs
-        every *= 1 if name == "dt" else 2  # sample at the same times
-        tconf = 0 if not tconf_fs else _steps("--tconf-fs", tconf_fs * fs, dt) * (
-            1 if name == "dt" else 2)
-        scale = 1 if name == "dt" else 2
-        legs.append(BiasLeg(name, step, _steps("--equilibrate-ps", equilibrate_ps * ps, dt,
-                                               minimum=0) * scale,
-                            _steps("--ps", production_ps * ps, dt, minimum=5) * scale,
-                            every, tconf))
-    return legs
+    ps, fs = TIME_UNITS["ps"], TIME_UNITS["fs"]
+    # On the coarser grid: both legs sample at the same times.
+    every = max(_steps("--sample-fs", SAMPLE_FS * fs, dt, None, minimum=0), 1) \
+        if sample_fs is None else _steps("--sample-fs", sample_fs * fs, dt, notes)
+    tconf = max(_steps("--tconf-fs", TCONF_FS * fs, dt, None, minimum=0), 1) \
+        if tconf_fs is None else 0 if not tconf_fs else \
+        _steps("--tconf-fs", tconf_fs * fs, dt, notes)
+    equilibrate = _steps("--equilibrate-ps", equilibrate_ps * ps, dt, notes, minimum=0)
+    production = _steps("--ps", production_ps * ps, dt, notes, minimum=5)
+    for option, interval in (("--sample-fs", every), ("--tconf-fs", tconf)):
+        if not interval:
+            continue
+        taken = (equilibrate + production) // interval - equilibrate // interval
+        if taken < blocks:
+            advice = "raise --ps or lower --sample-fs" if option == "--sample-fs" else \
+                "raise --ps or lower --tconf-fs (0: none)"
+            raise ConfigError(f"{option}: {production_ps:g} ps sampled every "
+                              f"{interval * dt / fs:g} fs gives {taken} samples, fewer than "
+                              f"the {blocks} blocks of the errors; {advice}")
+    return [BiasLeg(name, dt / scale, equilibrate * scale, production * scale, every * scale,
+                    tconf * scale) for name, scale in (("dt", 1), ("dt/2", 2))]
 
 
 class _Sampler:
@@ -201,9 +235,10 @@ class _Conf:
 
     def __init__(self, dyn, leg, seed, probes, calculator):
         self.leg = leg
-        # Probes drawn afresh on a resume: (seed, leg, samples already taken).
-        rng = np.random.default_rng([seed, int(leg.name != "dt"), len(leg.tconf_sums)])
-        self.tconf = ConfigurationalTemperature(dyn, probes=probes, rng=rng,
+        # A sample's probes: (seed, leg, step), so a resumed leg draws those of an
+        # uninterrupted one.
+        self.tconf = ConfigurationalTemperature(dyn, probes=probes,
+                                                rng=(seed, int(leg.name != "dt")),
                                                 calculator=calculator)
         self.dyn = dyn
 
@@ -222,7 +257,16 @@ def _dynamics(config, leg, checkpoint, engine):
         from rigidmd.core.checkpoint import read_checkpoint
 
         saved = read_checkpoint(checkpoint)
-        return load_checkpoint(saved, config.calculator.build(saved.atoms(), engine))
+        dyn = load_checkpoint(saved, config.calculator.build(saved.atoms(), engine))
+        if abs(dyn.dt - leg.dt) > 1e-9 * leg.dt:
+            close = getattr(dyn.atoms.calc, "close", None)
+            if callable(close):
+                close()
+            raise ConfigError(f"--resume: {checkpoint} is a run at "
+                              f"{dyn.dt / TIME_UNITS['fs']:g} fs, not this estimate's {leg.name} "
+                              f"run at {leg.dt / TIME_UNITS['fs']:g} fs; start again in another "
+                              "directory")
+        return dyn
     atoms = config.structure.build_atoms()
     bodies = config.structure.resolve_bodies(atoms)
     velocities = config.run.velocities
@@ -237,7 +281,7 @@ def _dynamics(config, leg, checkpoint, engine):
 
 def _run_leg(config, leg, directory, stop, progress, probes, seed):
     """Run (or continue) one leg; returns None when done, else the stop signal's number."""
-    checkpoint = directory / f"leg-{leg.name.replace('/', '-')}.npz"
+    checkpoint = _checkpoint_path(directory, leg)
     dyn = _dynamics(config, leg, checkpoint, directory / "engine")
     own = None  # the configurational temperature's calculator (as rigidmd run gives it)
     # Samples taken after the checkpoint (a failure, a second Ctrl-C) are taken again.
@@ -269,7 +313,7 @@ def _run_leg(config, leg, directory, stop, progress, probes, seed):
 
 
 def estimate_bias(config, directory, *, production_ps=10.0, equilibrate_ps=2.0,
-                  sample_fs=10.0, tconf_fs=100.0, probes=4, seed=0, blocks=5, resume=False,
+                  sample_fs=None, tconf_fs=None, probes=4, seed=0, blocks=5, resume=False,
                   stream=None, progress=None, hint=None) -> dict:
     r"""Estimate the bias of ⟨U⟩/N at the configuration's time step from runs at dt and dt/2.
 
@@ -285,7 +329,10 @@ def estimate_bias(config, directory, *, production_ps=10.0, equilibrate_ps=2.0,
         Checked; a thermostat and no barostat (:func:`check_bias_config`).
     directory : path-like
         Where ``bias.json``, ``bias.txt`` and a stopped run's checkpoints go.
-    production_ps, equilibrate_ps, sample_fs, tconf_fs : float
+    production_ps, equilibrate_ps : float
+    sample_fs, tconf_fs : float, optional
+        Default: the whole number of steps nearest 10 and 100 fs; a time given that is
+        not a whole number of steps is taken to the nearest, and said.
     probes, seed, blocks : int
         Configurational probes per sample, their seed, blocks of the errors.
     resume : bool
@@ -309,9 +356,28 @@ def estimate_bias(config, directory, *, production_ps=10.0, equilibrate_ps=2.0,
     arguments = {"production_ps": production_ps, "equilibrate_ps": equilibrate_ps,
                  "sample_fs": sample_fs, "tconf_fs": tconf_fs, "probes": probes, "seed": seed,
                  "dt_fs": config.run.timestep / TIME_UNITS["fs"]}
-    legs = _legs(config, production_ps, equilibrate_ps, sample_fs, tconf_fs)
+    notes = []
+    legs = _legs(config, production_ps, equilibrate_ps, sample_fs, tconf_fs, blocks, notes)
     record = directory / "bias.json"
     prints = fingerprint(config)
+    if resume and not record.is_file():
+        raise ConfigError(f"--resume: no estimate to continue ({record} does not exist)")
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ConfigError(f"--outdir: {describe_os_error(err)}") from None
+    # One estimate at a time in the directory: a second would overwrite the first's files.
+    with OutputLock(directory, field="--outdir"):
+        _check_directory(directory, record, legs, arguments, prints, resume)
+        for line in notes:
+            print(line, file=stream)
+        return _estimate_in(config, directory, legs, arguments, prints, blocks, probes, seed,
+                            stream, progress, hint)
+
+
+def _check_directory(directory, record, legs, arguments, prints, resume):
+    """With ``resume``, the estimate in ``directory`` is this one (its legs restored from
+    it); without, the directory holds none of an estimate's files."""
     if resume:
         saved = _read_record(record)
         for key, value in arguments.items():
@@ -323,12 +389,30 @@ def estimate_bias(config, directory, *, production_ps=10.0, equilibrate_ps=2.0,
         if changed:
             raise ConfigError(f"{changed[0]}: differs from the configuration of the estimate "
                               f"in {record}; give it as before to continue")
-        for leg, kept in zip(legs, saved["legs"], strict=True):
-            leg.restore(kept)
-    elif record.exists():
-        raise ConfigError(f"--outdir: {directory} already holds an estimate ({record.name}); "
-                          "continue it with --resume or give another directory")
-    directory.mkdir(parents=True, exist_ok=True)
+        try:
+            for leg, kept in zip(legs, saved["legs"], strict=True):
+                leg.restore(kept)
+        except (KeyError, TypeError, ValueError):
+            raise ConfigError(f"--resume: {record} is not an estimate rigidmd bias wrote (its "
+                              "runs' records are incomplete); start again in another "
+                              "directory") from None
+        return
+    held = [path.name for path in (record, *(_checkpoint_path(directory, leg) for leg in legs))
+            if path.exists()]
+    if held:
+        raise ConfigError(f"--outdir: {directory} already holds an estimate "
+                          f"({', '.join(held)}); continue it with --resume or give another "
+                          "directory")
+
+
+def _checkpoint_path(directory, leg):
+    return directory / f"leg-{leg.name.replace('/', '-')}.npz"
+
+
+def _estimate_in(config, directory, legs, arguments, prints, blocks, probes, seed, stream,
+                 progress, hint):
+    """Run the legs not done; the result (see :func:`estimate_bias`)."""
+    record = directory / "bias.json"
     status = 0
     t0 = time.perf_counter()
     def record_now(status):
@@ -339,6 +423,8 @@ def estimate_bias(config, directory, *, production_ps=10.0, equilibrate_ps=2.0,
         _write(directory, result)
         return result
 
+    again = hint or "the same command with --resume"
+    leg = legs[0]
     with StopSignals() as stop:
         try:
             for leg in legs:
@@ -350,18 +436,34 @@ def estimate_bias(config, directory, *, production_ps=10.0, equilibrate_ps=2.0,
                 if signum is not None:
                     status = EXIT_STATUS[signum]
                     break
-        except BaseException:
-            # A failed step, a second Ctrl-C: what was sampled is kept (a --resume takes the
-            # run from its last checkpoint, or from its start, and samples again after it).
+        except KeyboardInterrupt:
+            # A second Ctrl-C, anywhere in a step: what was sampled is kept, and a --resume
+            # takes the run from its last checkpoint (or its start) and samples again after.
+            stop.shielded = True
+            result = record_now(130)
+            print(result["text"], file=stream)
+            print(f"\ninterrupted at once (second Ctrl-C) in the run at {leg.name}: {record} "
+                  "keeps the samples so far, and the run continues from its last checkpoint "
+                  f"(or its start); continue with: {again}", file=stream)
+            return result
+        except Exception as err:
+            # A failed step: kept likewise; the command says so in one line (exit 1).  An
+            # engine's set-up error (the input's fault) stays what it is.
             stop.shielded = True
             record_now(1)
-            raise
+            if getattr(err, "setup", False) or isinstance(err, ConfigError):
+                raise
+            reason = describe_os_error(err) if isinstance(err, OSError) else \
+                " ".join(str(err).split()) or type(err).__name__
+            raise RunStopped(f"{reason} (in the run at {leg.name}); {record} keeps the samples "
+                             "so far, and the run continues from its last checkpoint (or its "
+                             f"start): {again}") from err
         stop.shielded = True  # the record is written whole
         result = record_now(status)
     print(result["text"], file=stream)
     if status:
         print(f"stopped by a signal: {record} and the run's checkpoint hold what was done; "
-              f"continue with: {hint or 'the same command with --resume'}", file=stream)
+              f"continue with: {again}", file=stream)
     return result
 
 
@@ -478,11 +580,13 @@ def add_bias_parser(sub, trust_help):
                       help="sampled picoseconds of each run (default 10)")
     bias.add_argument("--equilibrate-ps", type=float, default=2.0,
                       help="picoseconds each run discards first (default 2)")
-    bias.add_argument("--sample-fs", type=float, default=10.0,
-                      help="femtoseconds between samples of U and the temperatures (default 10)")
-    bias.add_argument("--tconf-fs", type=float, default=100.0,
+    bias.add_argument("--sample-fs", type=float,
+                      help="femtoseconds between samples of U and the temperatures (default: "
+                           "the whole number of steps nearest 10)")
+    bias.add_argument("--tconf-fs", type=float,
                       help="femtoseconds between configurational temperatures (each 2 * probes "
-                           "force calls; 0: none; default 100)")
+                           "force calls; 0: none; default: the whole number of steps nearest "
+                           "100)")
     bias.add_argument("--probes", type=int, default=4, help="Hutchinson probes (default 4)")
     bias.add_argument("--blocks", type=int, default=5, help="blocks of the errors (default 5)")
     bias.add_argument("--outdir", default="rigidmd-bias", help="output directory")
@@ -497,6 +601,8 @@ def bias_command(args, stream=None):
 
     for name in ("ps", "equilibrate_ps", "sample_fs", "tconf_fs"):
         value = getattr(args, name)
+        if value is None:
+            continue  # a default
         if not (np.isfinite(value) and value >= 0) or (name in ("ps", "sample_fs")
                                                         and value == 0):
             raise ConfigError(f"--{name.replace('_', '-')}: expected a positive number of "
@@ -506,6 +612,8 @@ def bias_command(args, stream=None):
             raise ConfigError(f"--{name}: expected a whole number >= {least}, got "
                               f"{getattr(args, name)}")
     raw = load_config(args.config)
+    if isinstance(raw, dict) and raw.get("steps") is None:
+        raw["steps"] = 1  # not read: the runs' lengths are --equilibrate-ps and --ps
     if args.timestep is not None:
         raw["timestep"] = args.timestep
         parse_quantity("--timestep", args.timestep, TIME_UNITS)

@@ -46,6 +46,8 @@ class OutputLock:
     Parameters
     ----------
     directory : pathlib.Path
+    field : str, default "outputs.directory"
+        What the messages name (a command's option, e.g. ``--outdir``).
 
     Attributes
     ----------
@@ -53,8 +55,9 @@ class OutputLock:
         The lock a dead process left behind, when it was taken over.
     """
 
-    def __init__(self, directory):
+    def __init__(self, directory, field="outputs.directory"):
         self.path = Path(directory) / LOCK_NAME
+        self.field = field
         self.stale = None
         self._held = False
 
@@ -68,14 +71,14 @@ class OutputLock:
                 holder = self._holder()
                 if holder is not None and holder.get("host") != socket.gethostname():
                     raise OutputError(
-                        f"outputs.directory: {self.path.parent} is locked by process "
+                        f"{self.field}: {self.path.parent} is locked by process "
                         f"{holder.get('pid')} on host {holder.get('host')!r}, which this "
                         f"machine ({socket.gethostname()!r}) cannot check; wait for that run, "
                         f"or, if it is no longer running on {holder.get('host')}, remove "
                         f"{self.path} and try again") from None
                 if holder is not None and self._lives(holder):
                     raise OutputError(
-                        f"outputs.directory: {self.path.parent} is in use by process "
+                        f"{self.field}: {self.path.parent} is in use by process "
                         f"{holder.get('pid')} on {holder.get('host')} (lock {self.path}); "
                         "wait for it, or choose another directory") from None
                 self.stale = holder
@@ -85,7 +88,7 @@ class OutputLock:
                 json.dump(record, fh)
             self._held = True
             return self
-        raise OutputError(f"outputs.directory: cannot take the lock {self.path}")
+        raise OutputError(f"{self.field}: cannot take the lock {self.path}")
 
     def _holder(self):
         try:
