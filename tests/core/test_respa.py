@@ -564,3 +564,70 @@ def test_a_replaced_calculator_is_refused_in_one_line_and_nothing_moves():
         dyn.run(1)
     assert "\n" not in str(err.value)
     np.testing.assert_array_equal(atoms.positions, before)
+
+
+def test_after_each_outer_step_the_split_holds_the_full_model_at_the_new_positions(tmp_path):
+    """The levels are called directly in a step; the split's own cache then holds their sums
+    at the new positions, so ASE's trajectory writer (which never calculates) writes the
+    energy and forces of every frame, and ``ase.io.write`` the current ones.  Before, the
+    frames carried neither, and extxyz wrote the energy of the positions before the run."""
+    from ase.io import read, write
+
+    atoms = waters(4)
+    atoms.calc = MultipleTimeStep(TIP3P(rc=40), ZeroForce(), substeps=2)
+    atoms.get_potential_energy()  # a cache of the start, which must not survive the run
+    dyn = RigidVerlet(atoms, 2 * units.fs, trajectory=str(tmp_path / "md.traj"),
+                      loginterval=1)
+    dyn.run(3)
+    frames = read(tmp_path / "md.traj", ":")
+    assert len(frames) == 4
+    for frame in frames:
+        model = frame.copy()
+        model.calc = TIP3P(rc=40)
+        # The same model at the same positions: equal to roundoff (the levels' sum adds
+        # ZeroForce's exact zeros).
+        assert frame.get_potential_energy() == pytest.approx(model.get_potential_energy(),
+                                                             abs=1e-12)
+        np.testing.assert_allclose(frame.get_forces(), model.get_forces(), rtol=0, atol=1e-12)
+    write(tmp_path / "now.extxyz", atoms)
+    model = atoms.copy()
+    model.calc = TIP3P(rc=40)
+    assert read(tmp_path / "now.extxyz").get_potential_energy() == pytest.approx(
+        model.get_potential_energy(), abs=1e-12)
+
+
+def test_one_calculator_as_both_levels_is_refused():
+    tip3p = TIP3P(rc=40)
+    with pytest.raises(ValueError, match="fast and slow are the same calculator object"):
+        MultipleTimeStep(tip3p, tip3p, substeps=2)
+    with pytest.raises(ValueError, match="full and fast are the same calculator object"):
+        MultipleTimeStep(tip3p, full=tip3p, substeps=2)
+
+
+def test_a_split_given_after_the_dynamics_was_made_is_refused_and_nothing_moves():
+    """Its r-RESPA steps are set up with the dynamics: a split given later was integrated
+    as a single step, substeps ignored, in silence."""
+    atoms = waters(4)
+    atoms.calc = TIP3P(rc=40)
+    dyn = RigidVerlet(atoms, 2 * units.fs)
+    dyn.run(1)
+    atoms.calc = MultipleTimeStep(TIP3P(rc=40), ZeroForce(), substeps=4)
+    before = atoms.positions.copy()
+    with pytest.raises(ValueError, match="given a split after the RigidVerlet was made") as err:
+        dyn.run(1)
+    assert "\n" not in str(err.value)
+    np.testing.assert_array_equal(atoms.positions, before)
+
+
+def test_the_monte_carlo_barostat_knows_the_cell_a_level_needs():
+    """ASE's TIP3P as a level needs a cell of twice its cut-off, as it does alone: refused
+    in one line at construction, naming the level (before, an AssertionError from TIP3P
+    mid-run, at the first trial cell below it)."""
+    from rigidmd.systems import water_box
+
+    atoms = water_box(3)  # 9.3 Å
+    atoms.calc = MultipleTimeStep(TIP3P(rc=4.7), ZeroForce(), substeps=2)
+    with pytest.raises(ValueError, match=r"at least 9.4 Å .* TIP3P \(rc = 4.7 Å\), the fast "
+                                         "level of MultipleTimeStep") as err:
+        RigidMCBarostat(atoms, 2 * units.fs, 300, 1 * units.bar, 100 * units.fs)
+    assert "\n" not in str(err.value)

@@ -56,6 +56,7 @@ from rigidmd.core.observables import RigidObservables
 from rigidmd.core.operators import remove_centre_velocity
 from rigidmd.core.respa import evaluator_for, record_for, respa_for
 from rigidmd.core.schemes import BUILTIN_SCHEMES, resolve_scheme, scheme_with_middle
+from rigidmd.core.split import MultipleTimeStep
 from rigidmd.core.state import STATE_FIELDS
 from rigidmd.core.stepcontext import StepContext
 from rigidmd.core.stepper import Stepper
@@ -235,6 +236,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
                               self.holds_momentum)
         self.sync.mark_atoms()
         store_bodies_in_tags(atoms, rigid.body_ids)
+        self._split = split  # the MultipleTimeStep the steps integrate by r-RESPA, or None
         self.stepper = Stepper(respa or scheme, context, couplings, self.link,
                                kernel=backend.scheme_kernel(respa or scheme), fixcom=fixcom)
         self._driven_by_run = False  # irun consumed by run(): no caller code between steps
@@ -416,6 +418,10 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         ASE's ``step()`` asks for the forces it starts from; ``nsteps`` and the
         observers are :meth:`irun`'s, as in ASE.
         """
+        if self._split is None and isinstance(self.atoms.calc, MultipleTimeStep):
+            raise ValueError("MultipleTimeStep: the atoms were given a split after the "
+                             f"{type(self).__name__} was made, which sets up its r-RESPA "
+                             "steps; make a new dynamics for it")
         if not self._in_run:
             if self.sync.start(self._evaluate_forces, self.nsteps, type(self).__name__):
                 self.step_check.reset()

@@ -167,6 +167,7 @@ class SplitForceEvaluator(ForceEvaluator):
                          else fast.energy + slow.energy)
         self.energy_known = self.fast.energy_known and self.slow.energy_known
         record.levels_known = True
+        self.split.publish(self.atoms)  # the split's cache: the sums at these positions
 
 
 @dataclass(eq=False)

@@ -88,9 +88,14 @@ class MultipleTimeStep(Calculator):
     Notes
     -----
     Energy, free energy, forces and stress are sums; a property one level lacks
-    (e.g. stress) raises :class:`~ase.calculators.calculator.PropertyNotImplementedError`
-    naming that level.  Outside a rigidmd dynamics (an optimizer, an ASE integrator)
-    the split plays no part: the sum is the model.
+    (e.g. stress) is not in :attr:`implemented_properties`, so ASE's
+    ``get_stress`` raises its :class:`~ase.calculators.calculator.PropertyNotImplementedError`,
+    and a barostat refuses the split in one line naming that level.  Outside a
+    rigidmd dynamics (an optimizer, an ASE integrator) the split plays no part: the
+    sum is the model.  Inside one, the levels are called directly; after each outer
+    step the split holds their sums at the new positions (:meth:`publish`), so what
+    reads the calculator without calling it (ASE's trajectory writer, ``ase.io.write``)
+    finds the full model there.
     """
 
     implemented_properties = list(_SUMMED)
@@ -104,9 +109,18 @@ class MultipleTimeStep(Calculator):
         _check_level("fast", fast)
         if full is not None:
             _check_level("full", full)
+            if full is fast:
+                raise ValueError("MultipleTimeStep: full and fast are the same calculator "
+                                 "object, so the slow level would be zero; give the fast "
+                                 "level a calculator of its own")
             slow = FullLessFast(full, fast)
         else:
             _check_level("slow", slow)
+            if slow is fast:
+                raise ValueError("MultipleTimeStep: fast and slow are the same calculator "
+                                 "object, so the sum would be twice its model; give each "
+                                 "level a calculator of its own (full= for the model less "
+                                 "the fast level)")
         k = check_substeps(substeps)
         super().__init__()
         self.fast, self.slow, self._substeps = fast, slow, k
@@ -132,6 +146,31 @@ class MultipleTimeStep(Calculator):
     def levels(self) -> tuple:
         """``(("fast", fast), ("slow", slow))``."""
         return (("fast", self.fast), ("slow", self.slow))
+
+    @property
+    def orthorhombic_only(self) -> bool:
+        """Whether a level takes only orthorhombic cells (a barostat's check reads it)."""
+        return any(getattr(calc, "orthorhombic_only", False) for _, calc in self.levels)
+
+    def publish(self, atoms) -> None:
+        """Hold, as the split's own results, the levels' sums at ``atoms`` from what the
+        levels hold for those atoms, without calling them.
+
+        The r-RESPA step calls each level itself; this makes the split's cache current
+        after it, so a reader that does not calculate (ASE's trajectory writer,
+        ``ase.io.write``) finds the full model at the current positions, never a
+        previous one.  A property some level does not hold for ``atoms`` is left out (a
+        later ``get_property`` computes it from the levels).
+        """
+        sums = {}
+        for name in _SUMMED:
+            values = [_held_property(calc, name, atoms) for _, calc in self.levels]
+            if all(value is not None for value in values):
+                sums[name] = values[0] + values[1]
+        if "energy" in sums and "free_energy" not in sums:
+            sums["free_energy"] = sums["energy"]
+        self.results = sums
+        self.atoms = atoms.copy()
 
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         """Sum the levels' properties (each level computes what is asked in one call)."""
@@ -216,6 +255,16 @@ class FullLessFast(Calculator):
         terms = [("full", self.full, False), ("fast", self.fast, True)]
         self.results.update(_combined("FullLessFast", terms, atoms, properties))
 
+    @property
+    def levels(self) -> tuple:
+        """``(("full", full), ("fast", fast))``."""
+        return (("full", self.full), ("fast", self.fast))
+
+    @property
+    def orthorhombic_only(self) -> bool:
+        """Whether the full or the fast model takes only orthorhombic cells."""
+        return any(getattr(calc, "orthorhombic_only", False) for _, calc in self.levels)
+
     def close(self) -> None:
         """Close the full model if it has a ``close`` (the fast level is the split's own)."""
         close = getattr(self.full, "close", None)
@@ -262,6 +311,22 @@ def _combined(owner: str, terms, atoms, properties) -> dict:
     if "energy" in out and "free_energy" not in out:
         out["free_energy"] = out["energy"]
     return out
+
+
+def _held_property(calc, name: str, atoms):
+    """A level's ``name`` as it holds it for ``atoms`` (a float or an array), or None when
+    it holds none for them (it is never called)."""
+    if not isinstance(calc, BaseCalculator):
+        return None
+    if name == "free_energy" and "free_energy" not in getattr(calc, "results", {}):
+        name = "energy"
+    try:
+        value = calc.get_property(name, atoms, allow_calculation=False)
+    except PropertyNotImplementedError:
+        return None
+    if value is None:
+        return None
+    return float(value) if name in ("energy", "free_energy") else np.array(value, dtype=float)
 
 
 def _level_property(calc, name: str, atoms):

@@ -260,6 +260,12 @@ def calculator_cell_limits(calc):
     name = type(calc).__name__
     if isinstance(calc, TIP3P):
         return True, 2.0 * float(calc.rc), f"ASE's {name} (rc = {float(calc.rc):g} Å)"
+    levels = getattr(calc, "levels", None)  # a MultipleTimeStep (or its full less fast)
+    if levels:
+        limits = [(calculator_cell_limits(level_calc), level) for level, level_calc in levels]
+        (_, smallest, named), level = max(limits, key=lambda pair: pair[0][1])
+        return (any(limit[0] for limit, _ in limits), smallest,
+                f"{named}, the {level} level of {name}")
     return bool(getattr(calc, "orthorhombic_only", False)), 0.0, name
 
 
