@@ -353,9 +353,12 @@ def assess(points, fit_table, bath_K=298.0, goals=GOALS, relaxed_from_fs=RELAXED
     """Per point, each goal's deviation, error and verdict (the tolerances doubled from
     ``relaxed_from_fs``); per code and integrator, the largest step no goal fails
     (``"not_excluded_fs"``) and the largest step every goal is shown to meet (``"shown_fs"``,
-    None when none), both among the steps judged at the goals' own tolerances."""
+    None when none), both among the steps judged at the goals' own tolerances and below
+    the first step a goal fails (``"first_failing_fs"``): a larger step whose errors are
+    too large to fail it is no accurate step when a smaller one failed."""
     rows, best = [], {}
-    for p in points:
+    order = ("model", "waters", "code", "integrator", "dt_fs")
+    for p in sorted(points, key=lambda p: tuple(p[k] for k in order)):
         devs = deviations(p, fit_table, bath_K)
         # An r-RESPA split is judged at the goals' own tolerances whatever its outer step:
         # it competes with the accurate single step.
@@ -377,12 +380,16 @@ def assess(points, fit_table, bath_K=298.0, goals=GOALS, relaxed_from_fs=RELAXED
         entry = best.setdefault(key, {"scheme": p.get("scheme", p["integrator"]),
                                       "substeps": p.get("substeps", 1),
                                       "r_split": p.get("r_split"), "not_excluded_fs": None,
-                                      "shown_fs": None, "missing": set()})
+                                      "shown_fs": None, "first_failing_fs": None,
+                                      "missing": set()})
         entry["missing"] |= set(goals) - set(checks)
-        if checks and all(c["verdict"] != "fails" for c in checks.values()):
-            entry["not_excluded_fs"] = max(entry["not_excluded_fs"] or 0.0, p["dt_fs"])
-        if checks and set(checks) == set(goals) and \
-                all(c["verdict"] == "meets" for c in checks.values()):
+        if not checks or entry["first_failing_fs"] is not None:
+            continue  # (the points come in order of the step)
+        if any(c["verdict"] == "fails" for c in checks.values()):
+            entry["first_failing_fs"] = p["dt_fs"]
+            continue
+        entry["not_excluded_fs"] = max(entry["not_excluded_fs"] or 0.0, p["dt_fs"])
+        if set(checks) == set(goals) and all(c["verdict"] == "meets" for c in checks.values()):
             entry["shown_fs"] = max(entry["shown_fs"] or 0.0, p["dt_fs"])
     for entry in best.values():
         entry["missing"] = sorted(entry["missing"])

@@ -295,6 +295,21 @@ def test_a_goal_is_met_only_when_its_errors_show_it(dev, err, verdict):
     assert collector.verdict(dev, err, 0.05) == verdict
 
 
+def test_the_largest_accurate_step_stops_at_the_first_that_fails(tmp_path):
+    """One run a step: 3 fs fails ⟨U⟩ (+0.2 ± 0.01 kJ/mol), 4 fs has too large an error to
+    fail anything (± 1): the largest step no goal fails is 2 fs, not 4 (before, the larger
+    step was taken, so a code whose 4 fs was excluded could be timed at 5 fs)."""
+    files = [_synthetic(tmp_path, "baoab", dt, 1, -47.0) for dt in (0.5, 1.0, 2.0)]
+    files.append(_synthetic(tmp_path, "baoab", 3.0, 1, -46.8))
+    files.append(_synthetic(tmp_path, "baoab", 4.0, 1, -47.0, U_err=1.0))
+    points, fit_table = collector.report(files, tmp_path, "s")
+    rows, best = collector.assess(points, fit_table)
+    verdicts = {r["dt_fs"]: {c["verdict"] for c in r["checks"].values()} for r in rows}
+    assert "fails" in verdicts[3.0] and "fails" not in verdicts[4.0]
+    baoab = best[("tip4p2005", 216, "rigidmd", "baoab")]
+    assert baoab["not_excluded_fs"] == 2.0 and baoab["first_failing_fs"] == 3.0
+
+
 def test_the_runs_that_would_decide_a_goal():
     """T_conf,rot +2.8 ± 0.8 K from 6 runs against 2 K: the error must fall to 0.4 and
     below (a failure is strict: |dev| − 2e > tol), e = 0.8·√(6/m) → 25 runs, checked by
