@@ -129,6 +129,25 @@ def test_the_outputs_section(tmp_path):
                                    tmp_path)
     with pytest.raises(ConfigError, match="outputs.plot: e.txt is not an image file"):
         OutputsSection.from_config({"outputs": {"plot": "e.txt"}}, tmp_path)
+    # A run's MDAnalysis trajectory is .xtc, which --resume continues: before, .dcd ran and
+    # could never be resumed, and .pdb failed only when the run began (after a relaxation).
+    with pytest.raises(ConfigError, match="outputs.mdanalysis: md.dcd: a run writes .xtc, "
+                                          "which --resume continues"):
+        OutputsSection.from_config({"outputs": {"mdanalysis": "md.dcd"}}, tmp_path)
+    with pytest.raises(ConfigError, match="outputs.mdanalysis: md.pdb is not an .xtc"):
+        OutputsSection.from_config({"outputs": {"mdanalysis": "md.pdb"}}, tmp_path)
+
+
+def test_tip3p_puts_its_charges_on_the_atoms():
+    """For what reads them (the run's PSF topology, a dielectric constant): before, the
+    topology of a tip3p run had zero charges and ε read 1."""
+    from rigidmd.config import check_config
+
+    config = check_config({"structure": {"builtin": "water_cluster", "n_molecules": 2},
+                           "calculator": {"name": "tip3p"}, "steps": 1, "timestep": "1 fs"})
+    atoms = config.structure.build_atoms()
+    config.calculator.build(atoms)
+    assert list(atoms.get_initial_charges()) == pytest.approx([-0.834, 0.417, 0.417] * 2)
 
 
 @pytest.mark.parametrize("field", ["structure", "restart"])

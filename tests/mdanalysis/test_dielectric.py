@@ -75,3 +75,20 @@ def test_dielectric_takes_the_m_site_charges_from_the_topology():
     expected = model.charges(8) @ d
     assert np.linalg.norm(model.charges(8) @ box.positions - expected) > 1.0  # not whole
     assert np.allclose(res.dipoles[0], expected, atol=1e-4)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"temperature": -5}, "temperature must be a positive number"),
+    ({"blocks": 0}, "blocks must be a whole number >= 2"),
+    ({"charges": 0.0}, "charges are all zero"),
+])
+def test_what_gives_no_dielectric_constant_is_refused(kwargs, match):
+    """A topology without charges gave ε = 1 ± 0 (a tip3p run's PSF had none); a negative
+    temperature ε = −147; blocks = 0 a NaN error, each in silence."""
+    from rigidmd.mdanalysis import DielectricConstant
+
+    u, _ = dipole_fluid(np.random.default_rng(1), n_frames=10)
+    if "charges" in kwargs:
+        u.atoms.charges = np.zeros(len(u.atoms))
+    with pytest.raises(ValueError, match=match):
+        DielectricConstant(u.atoms, **{k: v for k, v in kwargs.items() if k != "charges"})

@@ -105,6 +105,26 @@ def test_diffusion_coefficient_of_a_random_walk():
     assert fixed.results.diffusion_coefficient == pytest.approx(D, rel=0.05)
 
 
+def test_a_fit_range_that_cannot_be_fitted_is_said_as_such():
+    """A reversed or negative range is refused naming fit_range; a range beyond the lag
+    times gives NaN with a warning that says so (before: "MSD grows as t^nan ... not
+    linearly", blaming the physics); too few frames selected are refused in one line (before,
+    an OverflowError)."""
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0, 10, (20, 3)) + np.cumsum(rng.normal(size=(30, 20, 3)), axis=0)
+    u = to_universe([Atoms("Ar20", positions=p) for p in x], dt=0.1,
+                    bodies=np.full(20, -1))
+    for bad in ((0.5, 0.1), (-1.0, 0.5), 0.5, ("a", 1)):
+        with pytest.raises(ValueError, match="fit_range must be"):
+            MeanSquaredDisplacement(u, "all", compound="atoms", fit_range=bad)
+    with pytest.warns(RuntimeWarning, match=r"fit_range \(5, 10\) ps holds 0 of the lag "
+                                            "times"):
+        far = MeanSquaredDisplacement(u, "all", compound="atoms", fit_range=(5, 10)).run()
+    assert np.isnan(far.results.diffusion_coefficient) and not far.results.diffusive
+    with pytest.raises(ValueError, match=r"the frames selected .* are 0; it needs at least 2"):
+        MeanSquaredDisplacement(u, "all", compound="atoms").run(start=50)
+
+
 # --------------------------------------------------- Yeh–Hummer correction
 def test_yeh_hummer_correction():
     """ξ kT/(6πηL): 0.372e-5 cm²/s for real water's η in the 18.6 Å TIP3P box of

@@ -88,3 +88,18 @@ def test_mdanalysis_s_own_binning_arguments_are_named(kwargs):
     with pytest.raises(TypeError, match=f"^RadialDistribution: {next(iter(kwargs))} is "
                                         "MDAnalysis's InterRDF argument; give r_max"):
         RadialDistribution(u, "name AR", **kwargs)
+
+
+def test_an_r_max_beyond_half_the_cell_is_refused():
+    """Beyond half the narrowest width the minimum image stops counting pairs: g(r) fell to
+    zero there in silence; a non-number is named; no frame selected is one line."""
+    u = to_universe([lattice(3)])
+    half = 0.5 * u.dimensions[0]
+    with pytest.raises(ValueError, match=f"r_max 20 Å is beyond half the cell's narrowest "
+                                         f"width \\({half:g} Å"):
+        RadialDistribution(u, "name AR", r_max=20.0)
+    RadialDistribution(u, "name AR", r_max=half)  # at the limit: taken
+    with pytest.raises(ValueError, match="bin_width must be a number of Å, got '0.1'"):
+        RadialDistribution(u, "name AR", bin_width="0.1")
+    with pytest.raises(ValueError, match="the frames selected .* are 0; it needs at least 1"):
+        RadialDistribution(u, "name AR").run(start=5)

@@ -121,3 +121,11 @@ def test_rotational_correlation_needs_charges_for_dipoles(tmp_path):
     assert (tmp_path / "rot.png").stat().st_size > 0
     with pytest.raises(ValueError, match="matches no atoms"):
         RotationalCorrelation(u, select="resname XYZ")
+
+
+def test_a_window_outside_the_correlation_is_refused(spinning_waters):
+    """(0.5, 0.1) gave NaN times in silence."""
+    u = to_universe(spinning_waters[0])
+    for bad in ((0.5, 0.1), (0.0, 0.5), (0.1, 1.5), 0.3):
+        with pytest.raises(ValueError, match="window must be"):
+            RotationalCorrelation(u, window=bad)

@@ -258,3 +258,66 @@ def test_four_site_water_topology(tmp_path):
     u.trajectory[-1]
     com = np.array([r.atoms.center_of_mass() for r in u.residues])
     np.testing.assert_allclose(com, dyn.com_positions, atol=5e-3)
+
+
+def _all_distances(x, box):
+    from MDAnalysis.lib.distances import self_distance_array
+
+    return np.sort(self_distance_array(np.asarray(x, dtype=np.float32), box=box))
+
+
+@pytest.mark.parametrize("turn", ["rotated", "upper"])
+def test_a_cell_oriented_otherwise_is_turned_with_its_positions(tmp_path, turn):
+    """MDAnalysis keeps a cell's lengths and angles only, reading them as a along x and b in
+    the xy plane.  A sheared cell turned 30° about z, and the upper-triangular cell ASE's NPT
+    keeps, gave every minimum-image distance wrong (the first O–O peak at 1.1 Å); written
+    through to_universe and MDAWriter their distances are ASE's."""
+    from ase.geometry import get_distances
+    from scipy.spatial.transform import Rotation
+
+    frames = water_frames(1)
+    atoms = frames[0]
+    cell = atoms.cell.array.copy()
+    cell[1, 0] += 1.2  # sheared
+    atoms.set_cell(cell, scale_atoms=True)
+    if turn == "rotated":
+        turned = Rotation.from_euler("z", 30, degrees=True).as_matrix()
+        atoms.set_cell(atoms.cell.array @ turned.T, scale_atoms=True)
+    else:
+        upper = np.triu(np.array([[6.2, 0.0, 0.0], [1.1, 6.3, 0.0], [0.4, 0.7, 6.1]]).T)
+        atoms.set_cell(upper, scale_atoms=True)
+    _, d = get_distances(atoms.positions, cell=atoms.cell, pbc=True)
+    ase_distances = np.sort(d[np.triu_indices(len(atoms), 1)])
+    u = to_universe(atoms)
+    # float32 coordinates: 1e-5 Å; XTC at 1e-4 nm: 1e-3 Å
+    np.testing.assert_allclose(_all_distances(u.atoms.positions, u.dimensions),
+                               ase_distances, atol=2e-5)
+    with MDAWriter(atoms, tmp_path / "md.xtc") as writer:
+        writer.write()
+    xtc = mda.Universe(str(tmp_path / "md.psf"), str(tmp_path / "md.xtc"))
+    np.testing.assert_allclose(_all_distances(xtc.atoms.positions, xtc.dimensions),
+                               ase_distances, atol=2e-3)
+
+
+def test_a_traj_read_from_a_later_frame_starts_at_its_time(tmp_path):
+    """``index="2:"`` of a .traj with a frame every 5 fs starts at 0.010 ps (before: 0);
+    frames read backwards are refused naming ``index``."""
+    atoms = read(DATA / "water_box_27.traj")
+    atoms.calc = TIP3P(rc=4.5)
+    path = tmp_path / "md.traj"
+    RigidVerlet(atoms, 1 * units.fs, bodies="tags", trajectory=str(path), loginterval=5).run(20)
+    u = to_universe(path, bodies="tags", index="2:")
+    assert [round(ts.time, 9) for ts in u.trajectory] == [0.010, 0.015, 0.020]
+    assert to_universe(path, bodies="tags", index="1::2").trajectory[0].time == \
+        pytest.approx(0.005)
+    assert to_universe(path, bodies="tags", index=-1).trajectory[0].time == pytest.approx(0.020)
+    with pytest.raises(ValueError, match=r"index: '::-1' reads the frames backwards"):
+        to_universe(path, bodies="tags", index="::-1")
+
+
+@pytest.mark.parametrize("precision", [0, 8, 2.7, True, -1])
+def test_an_xtc_precision_outside_what_xtc_holds_is_refused(tmp_path, precision):
+    """8 decimals in nm overflow XTC's integers (positions 200 Å off, in silence)."""
+    with pytest.raises(ValueError, match="precision must be a whole number of decimals"):
+        MDAWriter(water_frames(1)[0], tmp_path / "md.xtc", precision=precision)
+    assert not (tmp_path / "md.xtc").exists()

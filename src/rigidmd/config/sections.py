@@ -453,9 +453,12 @@ class CalculatorSection:
         """
         try:
             if self.name == "tip3p":
-                from ase.calculators.tip3p import TIP3P
+                from ase.calculators.tip3p import TIP3P, qH
 
                 self._check_water(atoms)
+                # The model's charges on its atoms, for what reads them (the PSF topology of
+                # outputs.mdanalysis, a dielectric constant); the forces do not.
+                atoms.set_initial_charges([-2 * qH if z == 8 else qH for z in atoms.numbers])
                 return TIP3P(**self.options)
             if self.name == "tip4p":
                 from ase.calculators.tip4p import TIP4P
@@ -614,6 +617,14 @@ class OutputsSection:
                               f"{', '.join('.' + f for f in PLOT_FORMATS[3:])})")
         files["checkpoint_interval"] = every
         if "mdanalysis" in files:
+            name = files["mdanalysis"].name
+            if files["mdanalysis"].suffix.lower() == ".dcd":
+                raise ConfigError(f"outputs.mdanalysis: {name}: a run writes .xtc, which "
+                                  "--resume continues (a DCD header counts its frames, so a "
+                                  "DCD file cannot be); end its name in .xtc")
+            if files["mdanalysis"].suffix.lower() != ".xtc":
+                raise ConfigError(f"outputs.mdanalysis: {name} is not an .xtc trajectory; "
+                                  "end its name in .xtc")
             try:
                 importlib.import_module("MDAnalysis")
             except ImportError:

@@ -97,9 +97,20 @@ def frame_spacing(times):
         return 1.0
     spacing = (times[-1] - times[0]) / (len(times) - 1)
     roundoff = 8 * np.finfo(np.float32).eps * max(1.0, float(np.abs(times).max()))
-    if spacing <= 0 or np.abs(np.diff(times) - spacing).max() > 1e-3 * spacing + roundoff:
+    if spacing <= 0:
+        raise ValueError("frames must run forward in time (a positive step) for a time "
+                         "correlation")
+    if np.abs(np.diff(times) - spacing).max() > 1e-3 * spacing + roundoff:
         raise ValueError("frames must be evenly spaced in time for a time correlation")
     return float(spacing)
+
+
+def check_frames(owner, n_frames, least):
+    """Refuse in one line a run over fewer than ``least`` frames (``start``, ``stop``,
+    ``step`` or ``frames`` that select too few), naming ``owner``."""
+    if n_frames < least:
+        raise ValueError(f"{owner}: the frames selected (start, stop, step, frames) are "
+                         f"{n_frames}; it needs at least {least}")
 
 
 def autocorrelation(x, max_lag):

@@ -81,6 +81,19 @@ class DielectricConstant(_MDADielectric):
 
     def __init__(self, atomgroup, temperature=300, make_whole=True, blocks=10, **kwargs):
         require_mdanalysis()
+        if isinstance(temperature, bool) or not isinstance(temperature, (int, float,
+                                                                          np.number)) \
+                or not (np.isfinite(temperature) and temperature > 0):
+            raise ValueError(f"DielectricConstant: temperature must be a positive number of "
+                             f"kelvin, got {temperature!r}")
+        if isinstance(blocks, bool) or not isinstance(blocks, (int, np.integer)) or blocks < 2:
+            raise ValueError(f"DielectricConstant: blocks must be a whole number >= 2 (the "
+                             f"jackknife's), got {blocks!r}")
+        charges = getattr(atomgroup, "charges", None)
+        if charges is None or not np.any(np.asarray(charges) != 0):
+            raise ValueError("DielectricConstant: the atoms' charges are all zero (a topology "
+                             "without charges), so ε would read 1; give them, e.g. "
+                             "to_universe(..., charges=...) or the atoms' initial charges")
         super().__init__(atomgroup, temperature=temperature, make_whole=make_whole, **kwargs)
         self.blocks = int(blocks)
 

@@ -9,6 +9,7 @@ from rigidmd.mdanalysis._base import (
     AnalysisBase,
     ResidueLayout,
     autocorrelation,
+    check_frames,
     finish_figure,
     frame_spacing,
     group_of,
@@ -182,10 +183,21 @@ class MeanSquaredDisplacement(AnalysisBase):
         self.dim_fac = len(self._AXES[msd_type])
         self.unwrap = bool(unwrap)
         self.remove_com_motion = bool(remove_com_motion)
+        if fit_range is not None:
+            try:
+                lo, hi = (float(v) for v in fit_range)
+            except (TypeError, ValueError):
+                raise ValueError(f"MeanSquaredDisplacement: fit_range must be two lag times "
+                                 f"(ps), (start, end), got {fit_range!r}") from None
+            if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo < hi):
+                raise ValueError(f"MeanSquaredDisplacement: fit_range must be lag times with "
+                                 f"0 <= start < end (ps), got {fit_range!r}")
+            fit_range = (lo, hi)
         self.fit_range = fit_range
         self._layout = ResidueLayout(group) if compound == "residues" else None
 
     def _prepare(self):
+        check_frames("MeanSquaredDisplacement", self.n_frames, 2)
         n = self._layout.n if self._layout is not None else len(self.group)
         self._x = np.zeros((self.n_frames, n, 3))
         self._boxes = np.zeros((self.n_frames, 6))
@@ -220,6 +232,16 @@ class MeanSquaredDisplacement(AnalysisBase):
         lo, hi = (0.1 * t_max, 0.4 * t_max) if self.fit_range is None else self.fit_range
         res.fit_range = (float(lo), float(hi))
         window = (res.lagtimes >= lo) & (res.lagtimes <= hi)
+        if self.fit_range is not None and np.count_nonzero(window) < 2:
+            warnings.warn(
+                f"MeanSquaredDisplacement: fit_range ({lo:g}, {hi:g}) ps holds "
+                f"{np.count_nonzero(window)} of the lag times (0 to {t_max:g} ps every "
+                f"{spacing:g} ps), so the diffusion coefficient is NaN; give a fit_range "
+                "within them", RuntimeWarning, stacklevel=2)
+            res.fit_slope = res.fit_intercept = res.msd_exponent = float("nan")
+            res.diffusive = False
+            res.diffusion_coefficient = res.diffusion_coefficient_cm2_s = float("nan")
+            return
         if np.count_nonzero(window) >= 2:
             slope, intercept = np.polyfit(res.lagtimes[window], res.timeseries[window], 1)
         else:
@@ -252,7 +274,10 @@ class MeanSquaredDisplacement(AnalysisBase):
         boxes = self._boxes
         if not self._has_box:
             raise ValueError("finite_size_corrected: the trajectory has no periodic box")
-        length = float(np.mean(np.prod(boxes[:, :3], axis=1) ** (1 / 3)))
+        from ase.geometry import cellpar_to_cell
+
+        volumes = [abs(np.linalg.det(cellpar_to_cell(box))) for box in boxes]
+        length = float(np.mean(np.cbrt(volumes)))
         return self.results.diffusion_coefficient + yeh_hummer_correction(
             temperature_K, viscosity_mPa_s, length)
 

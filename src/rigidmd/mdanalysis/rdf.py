@@ -3,7 +3,13 @@
 import numpy as np
 
 from rigidmd.core.bodies import cell_widths
-from rigidmd.mdanalysis._base import InterRDF, finish_figure, group_of, new_figure
+from rigidmd.mdanalysis._base import (
+    InterRDF,
+    check_frames,
+    finish_figure,
+    group_of,
+    new_figure,
+)
 
 
 def _first_shell(bins, rdf, cumulative):
@@ -98,20 +104,32 @@ class RadialDistribution(InterRDF):
         if box is None:
             raise ValueError("RadialDistribution: g(r) needs a periodic cell (its normalisation "
                              "is the number density), and the first frame has none")
-        if r_max is None:
-            from ase.cell import Cell
+        from ase.cell import Cell
 
-            cell = Cell.fromcellpar(box).array
-            r_max = min(10.0, 0.5 * float(cell_widths(cell).min()))
+        half = 0.5 * float(cell_widths(Cell.fromcellpar(box).array).min())
+        if r_max is None:
+            r_max = min(10.0, half)
+        for name, value in (("r_max", r_max), ("bin_width", bin_width)):
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+                raise ValueError(f"RadialDistribution: {name} must be a number of Å, got "
+                                 f"{value!r}")
         r_max = float(r_max)
         if not (r_max > 0 and bin_width > 0):
             raise ValueError("r_max and bin_width must be positive (Å)")
+        if r_max > half * (1 + 1e-9):
+            raise ValueError(f"RadialDistribution: r_max {r_max:g} Å is beyond half the cell's "
+                             f"narrowest width ({half:g} Å in the first frame), where the "
+                             "minimum image stops counting pairs; give r_max <= that")
         # Whole bins of the requested width, not beyond r_max (the minimum image
         # counts every pair only up to half the box).
         nbins = max(int(np.floor(r_max / bin_width + 1e-9)), 1)
         self._exclude = bool(exclude_same_residue)
         super().__init__(g1, g2, nbins=nbins, range=(0.0, nbins * bin_width),
                          exclude_same="residue" if self._exclude else None, **kwargs)
+
+    def _prepare(self):
+        check_frames("RadialDistribution", self.n_frames, 1)
+        super()._prepare()
 
     def _single_frame(self):
         if self._ts.dimensions is None:

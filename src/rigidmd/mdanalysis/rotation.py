@@ -7,6 +7,7 @@ from rigidmd.mdanalysis._base import (
     AnalysisBase,
     ResidueLayout,
     autocorrelation,
+    check_frames,
     finish_figure,
     frame_spacing,
     group_of,
@@ -194,9 +195,18 @@ class RotationalCorrelation(AnalysisBase):
                              "(pass charges to to_universe or use vector='bisector')")
         self.vector = vector
         self.max_lag = max_lag
-        self.window = window
+        try:
+            low, high = (float(v) for v in window)
+        except (TypeError, ValueError):
+            raise ValueError(f"RotationalCorrelation: window must be two correlation values "
+                             f"(low, high), got {window!r}") from None
+        if not 0 < low < high <= 1:
+            raise ValueError(f"RotationalCorrelation: window must be correlation values with "
+                             f"0 < low < high <= 1, got {window!r}")
+        self.window = (low, high)
 
     def _prepare(self):
+        check_frames("RotationalCorrelation", self.n_frames, 2)
         self._u = np.zeros((self.n_frames, self._layout.n, 3))
 
     def _single_frame(self):

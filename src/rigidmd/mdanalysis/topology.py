@@ -213,6 +213,37 @@ def dimensions(atoms):
     return cell_to_cellpar(atoms.cell.array)
 
 
+def mdanalysis_orientation(cell):
+    r"""The rotation that takes positions into MDAnalysis's orientation of ``cell``.
+
+    MDAnalysis (and XTC, DCD) keep only a cell's lengths and angles and read
+    them as the cell with :math:`\mathbf a` along x and :math:`\mathbf b` in the
+    xy plane (lower-triangular rows).  Positions in a cell oriented otherwise
+    (a rotated or upper-triangular one, as ASE's NPT keeps) must be turned with
+    it, or every distance MDAnalysis computes is wrong.  Returns ``Q``, shape
+    (3, 3), with ``cell @ Q`` that cell, so that positions (rows) go to
+    ``positions @ Q``; None when ``cell`` is in that form already (any
+    orthorhombic cell: positions are written as they are) or not full.  For a
+    left-handed cell ``Q`` also reflects (distances are kept).
+    """
+    from ase.geometry import cellpar_to_cell
+
+    cell = np.asarray(cell, dtype=float)
+    if abs(np.linalg.det(cell)) < 1e-12:
+        return None
+    if cell[0, 1] == cell[0, 2] == cell[1, 2] == 0.0 and np.all(np.diag(cell) > 0):
+        return None
+    return np.linalg.solve(cell, cellpar_to_cell(cell_to_cellpar(cell)))
+
+
+def mdanalysis_positions(atoms, rigid):
+    """Positions (Å) with every body whole, in MDAnalysis's orientation of the cell
+    (:func:`mdanalysis_orientation`), shape (n_atoms, 3)."""
+    positions = whole_positions(atoms, rigid)
+    turn = mdanalysis_orientation(atoms.cell.array) if atoms.cell.rank == 3 else None
+    return positions if turn is None else positions @ turn
+
+
 def whole_positions(atoms, rigid):
     """Positions with every body whole (Å), shape (n_atoms, 3)."""
     if atoms.pbc.any() and rigid.n_bodies:
@@ -226,26 +257,36 @@ def is_dynamics(obj):
 
 
 def _read_traj(path, index):
-    """Frames of a trajectory file and, for an ASE ``.traj``, the time between frames (ps)."""
+    """Frames of a trajectory file and, for an ASE ``.traj`` written by ASE molecular
+    dynamics, the time between the frames read and the time of the first (ps); else
+    ``(frames, None, 0.0)``.  Frames read backwards are refused (times run forward)."""
     from ase.io import read
     from ase.io.formats import string2index
 
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no trajectory file {str(path)!r}")
+    selection = string2index(index) if isinstance(index, str) else index
+    if isinstance(selection, slice) and selection.step is not None and selection.step < 0:
+        raise ValueError(f"index: {index!r} reads the frames backwards; times run forward, "
+                         "so give a positive step")
     frames = read(path, index=index)
     frames = [frames] if isinstance(frames, Atoms) else list(frames)
-    dt = None
+    dt, first = None, 0.0
     if path.suffix == ".traj":
         from ase.io.trajectory import Trajectory
 
         with Trajectory(path) as traj:
             desc = getattr(traj, "description", None) or {}
+            count = len(traj)
         if "timestep" in desc and "interval" in desc:
-            selection = string2index(index) if isinstance(index, str) else index
-            stride = selection.step if isinstance(selection, slice) and selection.step else 1
-            dt = float(desc["timestep"]) * int(desc["interval"]) * stride / PS
-    return frames, dt
+            frame_dt = float(desc["timestep"]) * int(desc["interval"]) / PS
+            if isinstance(selection, slice):
+                start, _, stride = selection.indices(count)
+            else:
+                start, stride = int(selection) % count if count else 0, 1
+            dt, first = frame_dt * stride, frame_dt * start
+    return frames, dt, first
 
 
 def to_universe(run, *, bodies=None, charges=None, dt=None, index=":", water_resname="SOL"):
@@ -287,9 +328,11 @@ def to_universe(run, *, bodies=None, charges=None, dt=None, index=":", water_res
     -------
     MDAnalysis.Universe
         In-memory coordinates (:class:`~MDAnalysis.coordinates.memory.MemoryReader`,
-        float32, Å) with every body whole, dimensions per frame (``None``
-        when a frame has no full cell), times in ps.  Residues are numbered from
-        1 in order of their first atom.
+        float32, Å) with every body whole, in MDAnalysis's orientation of the cell
+        (:func:`mdanalysis_orientation`: a cell oriented otherwise is turned, with
+        its positions), dimensions per frame (``None`` when a frame has no full
+        cell), times in ps (a ``.traj`` read from a later frame starts at that
+        frame's time).  Residues are numbered from 1 in order of their first atom.
 
     Raises
     ------
@@ -306,14 +349,14 @@ def to_universe(run, *, bodies=None, charges=None, dt=None, index=":", water_res
         bodies = dyn.bodies
         traj = getattr(dyn, "trajectory", None)
         if isinstance(traj, (str, os.PathLike)) and Path(traj).exists():
-            frames, file_dt = _read_traj(traj, index)
+            frames, file_dt, time_offset = _read_traj(traj, index)
         else:
             frames = [dyn.atoms]
             file_dt = float(dyn.dt) / PS
             time_offset = float(dyn.get_time()) / PS
         dt = file_dt if dt is None else dt
     elif isinstance(run, (str, os.PathLike)):
-        frames, file_dt = _read_traj(run, index)
+        frames, file_dt, time_offset = _read_traj(run, index)
         dt = file_dt if dt is None else dt
     elif isinstance(run, Atoms):
         frames = [run]
@@ -333,7 +376,7 @@ def to_universe(run, *, bodies=None, charges=None, dt=None, index=":", water_res
     dims = np.zeros((len(frames), 6), dtype=np.float32)
     for k, atoms in enumerate(frames):
         topo.check(atoms, f"frame {k}")
-        coords[k] = whole_positions(atoms, topo.bodies)
+        coords[k] = mdanalysis_positions(atoms, topo.bodies)
         box = dimensions(atoms)
         if box is not None:
             dims[k] = box

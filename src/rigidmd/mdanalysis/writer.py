@@ -14,7 +14,7 @@ from rigidmd.mdanalysis.topology import (
     check_contiguous,
     dimensions,
     is_dynamics,
-    whole_positions,
+    mdanalysis_positions,
     write_psf,
 )
 
@@ -81,8 +81,8 @@ class MDAWriter:
     dt : float, default 1.0
         Time between frames (ps) when ``source`` is Atoms.
     precision : int, default 4
-        XTC precision: decimal places in nm (4 → 1e-3 Å resolution; GROMACS
-        uses 3, 1e-2 Å).
+        XTC precision: decimal places in nm, 1 to 7 (4 → 1e-3 Å resolution;
+        GROMACS uses 3, 1e-2 Å).
     water_resname : str, default "SOL"
     append : bool, default False
         Continue an existing ``.xtc`` file (a resumed run) instead of
@@ -91,9 +91,16 @@ class MDAWriter:
     Raises
     ------
     ValueError
-        Unknown extensions, or a body whose atoms are not consecutive (the
-        topology file would split it into several residues): reorder the
-        atoms first.  Nothing is written.
+        Unknown extensions, a precision outside 1 to 7, or a body whose atoms
+        are not consecutive (the topology file would split it into several
+        residues): reorder the atoms first.  Nothing is written.
+
+    Notes
+    -----
+    Positions are written with every body whole, in MDAnalysis's orientation of
+    the cell (:func:`~rigidmd.mdanalysis.topology.mdanalysis_orientation`): as
+    they are for an orthorhombic or lower-triangular cell, turned with the cell
+    otherwise (MDAnalysis keeps only its lengths and angles).
 
     Attributes
     ----------
@@ -146,6 +153,11 @@ class MDAWriter:
         self.dt = float(dt)
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"dt must be a positive time in ps, got {dt!r}")
+        if isinstance(precision, bool) or not isinstance(precision, (int, np.integer)) or \
+                not 1 <= precision <= 7:
+            raise ValueError(f"MDAWriter: precision must be a whole number of decimals in nm "
+                             f"from 1 to 7 (XTC's 32-bit integers overflow beyond), got "
+                             f"{precision!r}")
         self.precision = int(precision)
         self.atoms = atoms
         self._topology = Topology(atoms, bodies, charges=charges, water_resname=water_resname)
@@ -183,7 +195,7 @@ class MDAWriter:
     def _frame(self):
         atoms = self.atoms
         self._topology.check(atoms, "the atoms")
-        positions = whole_positions(atoms, self._topology.bodies)
+        positions = mdanalysis_positions(atoms, self._topology.bodies)
         dims = dimensions(atoms)
         if self.dynamics is not None:
             time = float(self.dynamics.get_time()) / PS
