@@ -94,3 +94,72 @@ def test_a_barostatted_class_is_a_dynamics_with_a_thermostat_and_a_barostat(name
     assert described["thermostat"] == dyn.thermostat.todict()
     assert described["barostat"] == dyn.barostat.todict()
     assert described["couplings"] == [dyn.thermostat.todict(), dyn.barostat.todict()]
+
+
+THERMOSTATS = {
+    "RigidLangevinBAOAB": lambda a, **kw: RigidLangevinBAOAB(
+        a, 2 * units.fs, temperature_K=300, friction=0.01, rng=np.random.default_rng(1), **kw),
+    "RigidLangevin": lambda a, **kw: RigidLangevin(
+        a, 2 * units.fs, temperature_K=300, friction=0.01, rng=np.random.default_rng(1), **kw),
+    "RigidBussi": lambda a, **kw: RigidBussi(
+        a, 2 * units.fs, temperature_K=300, taut=50 * units.fs, rng=np.random.default_rng(1),
+        **kw),
+    "RigidNoseHoover": lambda a, **kw: RigidNoseHoover(
+        a, 2 * units.fs, temperature_K=300, tdamp=50 * units.fs, **kw),
+}
+
+
+@pytest.mark.parametrize("name", sorted(THERMOSTATS))
+def test_readings_follow_momenta_changed_between_steps(name):
+    """New momenta given to the Atoms between runs (or by an observer) are read at the next
+    step; until then the kinetic readings are theirs.  Before, T_tr and T_rot (and the
+    reported T under a thermostat that holds the momentum or reports after its O step) were
+    those of the last step: 210 and 244 K for waters set to 20 K, while the log's Econs
+    used the new ones.  Without a change, BAOAB still reports after its O step."""
+    from rigidmd import rigid_maxwell_boltzmann
+    from rigidmd.core.observables import kinetic_dof, kinetic_temperatures
+
+    atoms = waters(6)
+    dyn = THERMOSTATS[name](atoms)
+    dyn.run(10)
+    if name == "RigidLangevinBAOAB":  # after O, not the end of the step's momenta
+        end = kinetic_temperatures(dyn.get_translational_kinetic_energy(),
+                                   dyn.get_rotational_kinetic_energy(),
+                                   kinetic_dof(dyn.model, dyn.holds_momentum))
+        assert not np.allclose(dyn.get_kinetic_temperatures(), end, rtol=1e-6)
+    rigid_maxwell_boltzmann(atoms, 20, rng=np.random.default_rng(5))
+    fresh = THERMOSTATS[name](atoms.copy())  # reads those momenta at its construction
+    fresh.atoms.calc = atoms.calc
+    np.testing.assert_allclose(dyn.get_kinetic_temperatures(), fresh.get_kinetic_temperatures(),
+                               rtol=1e-9)
+    np.testing.assert_allclose(dyn.get_reported_kinetic_energy(),
+                               fresh.get_reported_kinetic_energy(), rtol=1e-9)
+    assert max(dyn.get_kinetic_temperatures()) < 60
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda a: RigidLangevinBAOAB(a, units.fs, temperature_K=True, friction=0.01),
+     "temperature_K must be a number"),
+    (lambda a: RigidLangevinBAOAB(a, units.fs, temperature_K=300, friction=True),
+     "friction must be a number"),
+    (lambda a: RigidLangevinBAOAB(a, units.fs, temperature_K=300, T_tau=True),
+     "T_tau must be a time"),
+    (lambda a: RigidLangevinBAOAB(a, units.fs, temperature_K=300, T_tau=1e-320),
+     "T_tau 1e-320 .ASE units. is too small: its inverse, the friction"),
+    (lambda a: RigidBussi(a, units.fs, temperature_K=300, taut=True), "taut must be a time"),
+    (lambda a: RigidNoseHoover(a, units.fs, temperature_K=300, tdamp=True),
+     "tdamp must be a time"),
+    (lambda a: RigidLangevin(a, units.fs, temperature_K=300, friction=0.01).set_temperature(
+        temperature=0.0258), "give temperature_K= .K., not temperature="),
+    (lambda a: RigidLangevin(a, units.fs, temperature_K=300, friction=0.01).set_temperature(
+        True), "temperature_K must be a number"),
+    (lambda a: RigidLangevin(a, units.fs, temperature_K=300, friction=0.01).set_friction(
+        True), "friction must be a number"),
+])
+def test_a_bool_or_an_ambiguous_temperature_is_refused(make, message):
+    """A bool was read as 1 (1 K, a friction of 1 per ASE time, a T_tau of 1); ASE's
+    thermostats read ``set_temperature(temperature=x)`` in eV (Langevin) or K
+    (NVTBerendsen), and rigidmd read K: refused, naming ``temperature_K``."""
+    with pytest.raises((TypeError, ValueError), match=message) as err:
+        make(waters(3))
+    assert "\n" not in str(err.value)

@@ -331,13 +331,23 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         """Simulated time (ASE units): the sum of the steps taken (not ``nsteps * dt``)."""
         return self.stepper.time
 
-    def set_temperature(self, temperature=None, *, temperature_K=None) -> None:
+    def set_temperature(self, temperature_K=None, *, temperature=None) -> None:
         """Change the target temperature of every part that has one (``temperature_K`` in K).
 
-        As ASE's thermostats; a thermostat and a barostat keep one target.
-        Every part checks the value before any changes.
+        ``temperature_K`` by name or first, as ASE's ``LangevinBAOAB`` and ``Andersen``
+        take it; a thermostat and a barostat keep one target.  Every part checks the
+        value before any changes.  ``temperature=`` is refused: ASE's thermostats read
+        it in eV (``Langevin``) or in K (``NVTBerendsen``), and a ported call would be
+        read wrong by a factor of 11604 either way.
         """
-        value = self._process_temperature(temperature, temperature_K, "K")
+        if temperature is not None:
+            raise TypeError(f"{type(self).__name__}.set_temperature: give temperature_K= "
+                            f"(K), not temperature= (ASE's thermostats read that in eV or in "
+                            f"K, depending on the class)")
+        if temperature_K is None:
+            raise TypeError(f"{type(self).__name__}.set_temperature: temperature_K (K) is "
+                            "missing")
+        value = temperature_K
         if not self.target.parts:
             raise ValueError(f"{type(self).__name__} has no part with a target temperature")
         self.target.set_temperature(value)  # checked by every part before it changes

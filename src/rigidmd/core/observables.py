@@ -18,6 +18,8 @@ every step goes into the record too, computed by the function here.  Units
 are ASE's: Å, eV, amu and ASE time.
 """
 
+import warnings
+
 import numpy as np
 from ase import units
 
@@ -369,19 +371,54 @@ class RigidObservables:
         distribution (:class:`~rigidmd.RigidLangevinBAOAB`: right after its O step,
         see :mod:`rigidmd.couplings.baoab`), else the state's at the end of the
         step; the translational part relative to the centre of mass when the total
-        momentum is held.
+        momentum is held.  When code between steps (an observer, the caller of
+        ``irun``, a user between runs) has changed the Atoms' momenta or positions
+        since the dynamics wrote them, those of the Atoms (read onto the bodies as
+        the next step will read them): no step has acted on them yet.
         """
-        for part in self.couplings:
-            values = part.reported_kinetic_energies(self.view)
-            if values is not None:
-                return float(values[0]), float(values[1])
-        K_tr = self.get_translational_kinetic_energy()
+        s = self._state_the_atoms_hold()
+        if s is None:
+            for part in self.couplings:
+                values = part.reported_kinetic_energies(self.view)
+                if values is not None:
+                    return float(values[0]), float(values[1])
+            s = self.state
+        m = self.model
+        K_tr = float(translational_kinetic_energies(s, m).sum() + free_kinetic_energy(s, m))
         if self.holds_momentum:
-            s, m = self.state, self.model
             M = m.mass.sum() + m.free_masses.sum()
             P = m.mass @ s.V + m.free_masses @ s.v
             K_tr -= 0.5 * float(P @ P) / M if M > 0 else 0.0
-        return K_tr, self.get_rotational_kinetic_energy()
+        return K_tr, rotational_kinetic_energy(s, m)
+
+    def _state_the_atoms_hold(self):
+        """The state read from the Atoms when their positions or momenta are no longer those
+        the dynamics' state gives (changed between steps; the next step reads them), else
+        None.  Compared to 1e-9 of their size: the compiled and NumPy placements part by
+        roundoff, a change a user makes does not."""
+        link, state, m = self.link, self.state, self.model
+        atoms = link.atoms
+        positions = np.empty_like(atoms.arrays["positions"])
+        momenta = np.empty_like(atoms.arrays["momenta"])
+        positions[m.free], momenta[m.free] = state.x, m.free_masses[:, None] * state.v
+        r = link.backend.place(state, m, None, positions)
+        link.backend.write_momenta(state, m, r, momenta)
+
+        def same(mine, theirs):
+            scale = max(float(np.abs(theirs).max(initial=0.0)), 1e-300)
+            return float(np.abs(mine - theirs).max(initial=0.0)) <= 1e-9 * scale
+
+        moved = not (same(positions, atoms.arrays["positions"])
+                     and same(np.asarray(state.cell), atoms.cell.array))
+        if not moved and same(momenta, atoms.arrays["momenta"]):
+            return None
+        held = state.copy()
+        with warnings.catch_warnings():  # the next step reads them, and warns, as it does
+            warnings.simplefilter("ignore")
+            if moved:
+                link.read_positions(held)
+            link.read_momenta(held)
+        return held
 
     def get_kinetic_temperatures(self) -> tuple[float, float]:
         """(T_tr, T_rot) in K: :meth:`get_kinetic_energies` over :func:`kinetic_dof`."""

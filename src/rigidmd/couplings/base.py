@@ -48,6 +48,8 @@ __all__ = ["Coupling", "CouplingView", "Parameter", "COUPLINGS", "register", "No
 
 def check_temperature(temperature_K):
     """``temperature_K`` as a float, >= 0 and finite, or a clear error."""
+    if isinstance(temperature_K, (bool, np.bool_)):
+        raise TypeError(f"temperature_K must be a number (K), got {temperature_K!r}")
     try:
         value = float(temperature_K)
     except (TypeError, ValueError):
@@ -59,6 +61,8 @@ def check_temperature(temperature_K):
 
 def check_time(name, value):
     """A positive finite time (ASE units) as a float, or a clear error naming ``name``."""
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a time in ASE units, got {value!r}")
     try:
         value = float(value)
     except (TypeError, ValueError):

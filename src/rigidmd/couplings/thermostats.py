@@ -73,6 +73,8 @@ class _Stochastic(Thermostat):
 
 def check_friction(friction) -> float:
     """A friction (per ASE time unit) as a float >= 0, or one clear line."""
+    if isinstance(friction, (bool, np.bool_)):
+        raise TypeError(f"friction must be a number per ASE time unit, got {friction!r}")
     try:
         gamma = float(friction)
     except (TypeError, ValueError):

@@ -56,11 +56,16 @@ class RigidLangevinBAOAB(ThermostattedDynamics):
                             "(its time, friction = 1 / T_tau), not both")
         if T_tau is not None:
             try:
-                tau = float(T_tau)
+                tau = float(T_tau) if not isinstance(T_tau, (bool, np.bool_)) else None
             except (TypeError, ValueError):
-                raise TypeError(f"T_tau must be a time in ASE units, got {T_tau!r}") from None
+                tau = None
+            if tau is None:
+                raise TypeError(f"T_tau must be a time in ASE units, got {T_tau!r}")
             if not (np.isfinite(tau) and tau > 0):
                 raise ValueError(f"T_tau must be a positive time (ASE units), got {T_tau!r}")
+            if not np.isfinite(1.0 / tau):
+                raise ValueError(f"T_tau {T_tau!r} (ASE units) is too small: its inverse, the "
+                                 "friction, is not a finite number")
             friction = 1.0 / tau
         if temperature_K is None or friction is None:
             missing = ", ".join(name for name, value in (("temperature_K", temperature_K),
