@@ -116,10 +116,12 @@ def test_calculator_mistakes(tmp_path, calc, match):
 
 def test_the_outputs_section(tmp_path):
     out = OutputsSection.from_config({"outputs": {"directory": "out", "interval": 7,
-                                                  "trajectory": "md.traj", "plot": "e.svg"}},
+                                                  "trajectory": "md.traj", "log": "md.log",
+                                                  "plot": "e.svg"}},
                                      tmp_path)
     assert out.directory == tmp_path / "out" and out.interval == 7
     assert out.files == {"trajectory": tmp_path / "out" / "md.traj",
+                         "log": tmp_path / "out" / "md.log",
                          "plot": tmp_path / "out" / "e.svg"}
     assert out.checkpoint == tmp_path / "out" / "checkpoint.npz"
     assert out.checkpoint_interval == 1001  # 1000 steps rounded up to a frame
@@ -136,6 +138,25 @@ def test_the_outputs_section(tmp_path):
         OutputsSection.from_config({"outputs": {"mdanalysis": "md.dcd"}}, tmp_path)
     with pytest.raises(ConfigError, match="outputs.mdanalysis: md.pdb is not an .xtc"):
         OutputsSection.from_config({"outputs": {"mdanalysis": "md.pdb"}}, tmp_path)
+    # A plot without the log it is drawn from ran, and said "wrote" a file it never wrote.
+    with pytest.raises(ConfigError, match="outputs.plot: e.png is drawn from the MD log"):
+        OutputsSection.from_config({"outputs": {"plot": "e.png", "log": None}}, tmp_path)
+
+
+@pytest.mark.parametrize("field", ["charges: {O: -2.0, H: 1.0}", "atom_types: {O: 1, H: 2}",
+                                   "commands: ['pair_style zero 1.0']"])
+def test_lammps_fields_of_another_calculator_are_refused(field):
+    """They change nothing for tip3p, and were ignored in silence (charges too)."""
+    import yaml
+
+    from rigidmd.config import check_config
+
+    raw = {"structure": {"builtin": "water_cluster", "n_molecules": 2}, "steps": 1,
+           "timestep": "1 fs", "calculator": {"name": "tip3p", **yaml.safe_load(field)}}
+    name = field.split(":")[0]
+    with pytest.raises(ConfigError, match=f"calculator.{name}: goes with name: lammps, not "
+                                          "'tip3p'"):
+        check_config(raw)
 
 
 def test_tip3p_puts_its_charges_on_the_atoms():

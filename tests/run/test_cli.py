@@ -300,6 +300,9 @@ def test_export_lammps_round_trip(project, monkeypatch):
      "BAOAB splitting, which no LAMMPS rigid fix runs"),
     ("integrator: pcdm", "export-lammps writes fix rigid/nve/small"),
     ("calculator: {name: tip3p, options: {rc: 5.0}}", "switches off each molecule pair"),
+    # Oxygens within rc - width (5.4 Å against 5.5) but atoms 7.0 Å apart, beyond rc: the
+    # deck's pair style cut those pairs (E -2.94 eV against ASE's -1.83 in an 8-water case).
+    ("calculator: {name: tip3p, options: {rc: 6.0, width: 0.5}}", "atoms within rc"),
 ])
 def test_export_refuses_what_lammps_cannot_do(project, change, message):
     (project / "bad.yaml").write_text(with_change(PLAIN, change))
@@ -519,3 +522,66 @@ def test_the_console_script_is_the_launcher():
 
     (script,) = [e for e in entry_points(group="console_scripts") if e.name == "rigidmd"]
     assert script.value == "rigidmd_launcher:main"
+
+
+def test_export_never_writes_over_a_deck_or_an_input(project):
+    """A second export into a directory holding a deck is refused (before, it replaced a
+    hand-edited in.rigidmd in silence) unless --overwrite; a directory that is a file, and a
+    configuration named in.rigidmd inside the directory, are refused before anything runs."""
+    (project / "nve.yaml").write_text(with_change(PLAIN, "thermostat: null"))
+    assert rigidmd("export-lammps", "nve.yaml", "deck", cwd=project).returncode == 0
+    (project / "deck" / "in.rigidmd").write_text("# edited by hand\n")
+    again = rigidmd("export-lammps", "nve.yaml", "deck", cwd=project)
+    assert again.returncode == 2 and "already holds in.rigidmd and data.rigidmd" in again.stderr
+    assert (project / "deck" / "in.rigidmd").read_text() == "# edited by hand\n"
+    assert rigidmd("export-lammps", "nve.yaml", "deck", "--overwrite",
+                   cwd=project).returncode == 0
+    assert "rigid/nve/small" in (project / "deck" / "in.rigidmd").read_text()
+    result = rigidmd("export-lammps", "nve.yaml", "nve.yaml", cwd=project)
+    assert result.returncode == 2 and "is a file; give a directory" in result.stderr
+    (project / "d2").mkdir()
+    (project / "d2" / "in.rigidmd").write_text((project / "nve.yaml").read_text())
+    result = rigidmd("export-lammps", "d2/in.rigidmd", "d2", "--overwrite", cwd=project)
+    assert result.returncode == 2 and "is the configuration being exported" in result.stderr
+
+
+def test_a_restart_says_what_it_does_not_use(project):
+    """``--restart`` starts from the trajectory's last frame, positions and momenta: the
+    configuration's structure and velocities are not used, and the run says so (before, in
+    silence: a run "at 250 K" started at the frame's temperature)."""
+    (project / "plain.yaml").write_text(PLAIN)
+    assert rigidmd("run", "plain.yaml", "--outdir", "first", cwd=project).returncode == 0
+    result = rigidmd("run", "plain.yaml", "--restart", "first/md.traj", "--outdir", "second",
+                     cwd=project)
+    assert result.returncode == 0, result.stderr
+    assert ("restart: the run starts from the last frame of md.traj, its positions and "
+            "momenta; structure: and velocities: not used") in result.stdout
+
+
+def test_a_stopped_demo_says_the_command_that_works(tmp_path):
+    """It printed ``rigidmd run CONFIG ... --resume``: there is no CONFIG, and a demo has no
+    --resume; the command given now starts it again."""
+    import signal
+    import time
+
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "rigidmd.run.cli", "demo", "--steps",
+                             "200000", "--outdir", "dm"], cwd=tmp_path, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (tmp_path / "dm" / "demo-checkpoint.npz").exists() and \
+                time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    hint = out.split("continue with: ")[1].splitlines()[0]
+    assert hint.startswith("rigidmd demo --outdir ") and "CONFIG" not in hint
+    assert "a demo is not continued: it starts again" in hint
+    assert "not drawn:" in out and "wrote " + str(tmp_path / "dm" / "demo-energy.png") not in out

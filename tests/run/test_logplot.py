@@ -34,6 +34,19 @@ def test_a_rigid_log_is_read_by_column(tmp_path):
         "T", "T_tr (translation)", "T_rot (rotation)"]
 
 
+def test_a_line_cut_short_is_left_out_and_the_columns_kept(tmp_path):
+    """The last line of a killed run's log may be cut mid-number: before, every row was cut
+    to it, the energy columns went, and ``rigidmd plot`` ended in a KeyError."""
+    write_log(tmp_path / "md.log")
+    with open(tmp_path / "md.log", "a") as fh:
+        fh.write("0.0050  -0.51")
+    columns = read_log(tmp_path / "md.log")
+    assert "Epot[eV]" in columns and "T_rot[K]" in columns
+    assert len(columns["Time[ps]"]) == 5  # the five whole lines
+    plot_log(tmp_path / "md.log", tmp_path / "md.png")
+    assert (tmp_path / "md.png").stat().st_size > 0
+
+
 def test_ases_log_has_one_temperature(tmp_path):
     write_log(tmp_path / "ase.log", logger=MDLogger)
     columns = read_log(tmp_path / "ase.log")

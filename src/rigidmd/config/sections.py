@@ -408,6 +408,10 @@ class CalculatorSection:
         if not isinstance(commands, list) or not all(isinstance(c, str) for c in commands):
             raise ConfigError(f"calculator.{key}: expected LAMMPS commands (a list of strings "
                               f"or one string), got {commands!r}")
+        for own in ("commands", "pair", "charges", "atom_types"):
+            if own in calc and calc["name"] != "lammps":
+                raise ConfigError(f"calculator.{own}: goes with name: lammps, not "
+                                  f"{calc['name']!r}, whose model it would not change")
         charges = dict(mapping("calculator.charges", calc.get("charges", {})))
         atom_types = dict(mapping("calculator.atom_types", calc.get("atom_types", {})))
         water = None
@@ -615,6 +619,9 @@ class OutputsSection:
             raise ConfigError(f"outputs.plot: {plot.name} is not an image file the plot can "
                               f"write; end its name in .png, .pdf or .svg (or "
                               f"{', '.join('.' + f for f in PLOT_FORMATS[3:])})")
+        if plot is not None and "log" not in files:
+            raise ConfigError(f"outputs.plot: {plot.name} is drawn from the MD log; give "
+                              "outputs.log too (e.g. md.log)")
         files["checkpoint_interval"] = every
         if "mdanalysis" in files:
             name = files["mdanalysis"].name

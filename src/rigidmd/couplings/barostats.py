@@ -284,9 +284,13 @@ class MTKBarostat(Barostat):
         if self.couple == "tri":
             raise NotExportable("barostat.couple: LAMMPS's rigid barostats (fix rigid/npt) "
                                 "handle orthogonal boxes only; couple 'tri' has no equivalent")
+        if self.ploop != 1:
+            raise NotExportable(f"barostat.ploop: LAMMPS's fix rigid/npt has no ploop (its "
+                                f"barostat's chain is integrated once a step); export works "
+                                f"with ploop 1, not {self.ploop}")
         bar = self.pressure_au / units.bar
         args = f"{self.couple} {bar!r} {bar!r} {self.pdamp / time_unit!r}"
-        if self.pchain != 3 or self.ploop != 1:
+        if self.pchain != 3:
             args += f" pchain {self.pchain}"
         return LammpsFix("npt", args)
 

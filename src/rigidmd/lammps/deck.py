@@ -141,7 +141,10 @@ def coupling_fix(couplings=(), time_unit=1.0, seed=12345, free_atoms=False):
         raise NotExportable("barostat: LAMMPS's fix rigid/npt/small does not move atoms in no "
                             "body with the box; export works for systems of bodies only")
     if thermostat is None:
-        return LammpsFix("nph", barostat.body_keywords)
+        raise NotExportable("barostat: without a thermostat rigidmd's barostat still holds "
+                            "its temperature (its chain's and the cell's), which LAMMPS's "
+                            "fix rigid/nph/small has no keyword for; export works with a "
+                            "nose_hoover thermostat (fix rigid/npt/small)")
     return LammpsFix("npt", f"{thermostat.body_keywords} {barostat.body_keywords}",
                      notes=thermostat.notes)
 

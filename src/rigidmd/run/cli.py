@@ -92,6 +92,27 @@ def _resume_hint(args):
     return resume_command(args.config, args.outdir, flags)
 
 
+#: The files export-lammps writes in its directory (LAMMPS writes frames.dump when run).
+DECK_FILES = ("in.rigidmd", "data.rigidmd")
+
+
+def _check_deck_directory(directory, config_path, overwrite):
+    """Refuse, in one line and before anything is read or written, a directory that is a
+    file, one holding a deck (without ``overwrite``), or a deck file that is the
+    configuration itself."""
+    if directory.exists() and not directory.is_dir():
+        raise ConfigError(f"directory: {directory} is a file; give a directory for the deck")
+    for name in DECK_FILES:
+        path = directory / name
+        if path.exists() and config_path.exists() and path.resolve() == config_path.resolve():
+            raise ConfigError(f"directory: {path} is the configuration being exported; give "
+                              "another directory")
+    held = [name for name in DECK_FILES if (directory / name).exists()]
+    if held and not overwrite:
+        raise ConfigError(f"directory: {directory} already holds {' and '.join(held)}; give "
+                          "another directory, or --overwrite to replace them")
+
+
 def _export(config, directory, stream=sys.stdout):
     if config.calculator.name == "multiple_time_step":  # before any file is read or written
         raise ConfigError("calculator: export-lammps cannot write a split (fast, slow, substeps): "
@@ -128,12 +149,18 @@ def _write_deck(config, atoms, bodies, directory, stream):
         width = calc.options.get("width", 1.0)
         oxygens = atoms.positions[atoms.numbers == 8]
         span = np.linalg.norm(oxygens[:, None] - oxygens[None], axis=-1).max()
-        if atoms.pbc.any() or span >= rc - width:
+        # The deck's pair style cuts each atom pair at rc, where ASE's TIP3P takes every
+        # atom pair of two molecules whose oxygens are within its switch: every atom pair
+        # must lie within rc too.
+        atom_span = np.linalg.norm(atoms.positions[:, None] - atoms.positions[None],
+                                   axis=-1).max()
+        if atoms.pbc.any() or span >= rc - width or atom_span >= rc:
             raise ConfigError(
                 "calculator: ASE's TIP3P switches off each molecule pair smoothly near rc, "
-                "which no LAMMPS pair style reproduces; export works for a cluster within "
-                f"rc - width (here {span:.1f} Å >= {rc - width:g} Å) or with the lammps "
-                "calculator")
+                "which no LAMMPS pair style reproduces; export works for a cluster whose "
+                f"oxygens lie within rc - width and atoms within rc (here {span:.1f} Å "
+                f"against {rc - width:g} Å, {atom_span:.1f} Å against {rc:g} Å) or with the "
+                "lammps calculator")
         pair, charges = tip3p_pair_commands(rc), tip3p_charges(atoms)
     elif calc.name == "lammps":
         pair = list(calc.commands)
@@ -224,6 +251,8 @@ def _parser():
     export.add_argument("config", help="YAML configuration of the run to export")
     export.add_argument("directory", help="directory for data.rigidmd and in.rigidmd")
     export.add_argument("--steps", type=int, help="number of steps in the deck")
+    export.add_argument("--overwrite", action="store_true",
+                        help="replace a deck (in.rigidmd, data.rigidmd) already in the directory")
     export.add_argument("--trust", action="store_true", help=trust_help)
     return parser
 
@@ -300,7 +329,9 @@ def main(argv=None):
             return bias_command(args)
         if args.command == "export-lammps":
             config = _apply_flags(load_config(args.config), args)
-            return _export(check_config(config, trust=args.trust), Path(args.directory))
+            directory = Path(args.directory)
+            _check_deck_directory(directory, Path(args.config), args.overwrite)
+            return _export(check_config(config, trust=args.trust), directory)
     except (ConfigError, OutputError, LogError) as err:
         print(f"rigidmd: error: {err}", file=sys.stderr)
         return 2

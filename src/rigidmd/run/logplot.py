@@ -43,7 +43,12 @@ def read_log(path):
                if name not in names]
     if missing:
         raise LogError(f"log: {path} is not an MD log (no {missing[0]} column)")
-    width = min(len(row) for row in rows)
+    # A line cut short (the last one of a killed run) is left out, not every column with it.
+    whole = [row for row in rows if len(row) == len(names)]
+    if whole:
+        rows, width = whole, len(names)
+    else:
+        width = min(len(row) for row in rows)
     data = np.array([row[:width] for row in rows])
     return {name: data[:, i] for i, name in enumerate(names[:width])}
 

@@ -37,6 +37,7 @@
 """
 
 import os
+import shlex
 import signal
 import sys
 import time
@@ -114,6 +115,10 @@ class Run:
     def _resume_hint(self):
         if self.resume_hint is not None:
             return self.resume_hint
+        if self.mode == "demo":  # no configuration to continue: the demo starts again
+            return (shlex.join(["rigidmd", "demo", "--outdir",
+                                str(Path(self.outputs.directory).resolve())])
+                    + " (a demo is not continued: it starts again)")
         return resume_command(self.config_path or "CONFIG", self.outputs.directory)
 
     # ------------------------------------------------------------ set-up
@@ -135,7 +140,16 @@ class Run:
         from rigidmd.core.velocities import rigid_maxwell_boltzmann
 
         velocities = self.config.run.velocities
-        if velocities is not None and self.config.structure.restart is None:
+        structure = self.config.structure
+        if structure.restart is not None:
+            unused = [name for name, given in (("structure:", structure.source is not None),
+                                               ("velocities:", velocities is not None)) if given]
+            if unused:  # said, not silent: the restart's frame is the start
+                print(f"restart: the run starts from the last frame of {structure.restart.name}, "
+                      f"its positions and momenta; {' and '.join(unused)} not used",
+                      file=self.stream)
+            return
+        if velocities is not None:
             rigid_maxwell_boltzmann(atoms, velocities["temperature_K"], bodies=bodies,
                                     rng=np.random.default_rng(velocities["seed"]))
 
@@ -372,8 +386,12 @@ class Run:
                 plot_log(out.log, out.plot)
             except OSError as err:
                 raise self._stopped(dyn, describe_os_error(err)) from None
-        for path in out.files.values():
-            print(f"wrote {path}", file=self.stream)
+        for key, path in out.files.items():
+            if key == "plot" and status:  # not drawn for a run that stopped: say so
+                print(f"not drawn: {path} (the run stopped; rigidmd plot {out.log} draws "
+                      "what it has)", file=self.stream)
+            elif Path(path).exists():
+                print(f"wrote {path}", file=self.stream)
         return status
 
     def _steps(self, dyn, remaining, writer):
