@@ -326,8 +326,9 @@ class NoseHooverThermostat(Thermostat):
     def check_timestep(self, dt):
         if self.tdamp < dt:
             raise ValueError(
-                f"tdamp = {self.tdamp:g} is shorter than the time step {dt:g}: "
-                "the chain cannot be integrated (100 time steps is typical)"
+                f"tdamp: {self.tdamp / units.fs:g} fs is shorter than the time step "
+                f"{dt / units.fs:g} fs: the chain cannot be integrated (100 time steps is "
+                "typical)"
             )
 
     def bind(self, view: CouplingView) -> None:
