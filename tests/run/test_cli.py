@@ -585,3 +585,19 @@ def test_a_stopped_demo_says_the_command_that_works(tmp_path):
     assert hint.startswith("rigidmd demo --outdir ") and "CONFIG" not in hint
     assert "a demo is not continued: it starts again" in hint
     assert "not drawn:" in out and "wrote " + str(tmp_path / "dm" / "demo-energy.png") not in out
+
+
+def test_a_cell_relaxation_of_a_cluster_is_refused_before_any_file(project):
+    """Before, the run wrote its step-0 checkpoint and an empty relax.log, then failed in
+    the filter (naming cell='full', not the field), and the corrected configuration was
+    refused for the files left behind."""
+    (project / "c.yaml").write_text(PLAIN + "relax: {cell: true}\n")
+    for command in (["run", "c.yaml"], ["relax", "c.yaml"], ["export-lammps", "c.yaml", "deck"]):
+        result = rigidmd(*command, cwd=project)
+        assert result.returncode == 2, (command, result.stderr)
+        assert "relax.cell: full relaxes the cell, which needs a structure periodic in all " \
+               "three directions" in result.stderr
+        assert not (project / "out").exists() and not (project / "deck").exists()
+    (project / "z.yaml").write_text(PLAIN + "relax: {steps: 0}\n")
+    result = rigidmd("run", "z.yaml", cwd=project)
+    assert result.returncode == 2 and "relax.steps: expected a whole number >= 1" in result.stderr

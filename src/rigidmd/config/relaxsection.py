@@ -80,7 +80,7 @@ class RelaxSection:
             if not out.fmax > 0:
                 raise ConfigError(f"relax.fmax: must be positive, got {section['fmax']!r}")
         if "steps" in section:
-            out.steps = whole_number("relax.steps", section["steps"])
+            out.steps = whole_number("relax.steps", section["steps"], minimum=1)
         if "optimizer" in section:
             if section["optimizer"] not in OPTIMIZERS:
                 raise ConfigError(f"relax.optimizer: {section['optimizer']!r} is not one of "
@@ -107,3 +107,20 @@ class RelaxSection:
                     raise ConfigError(f"relax.{key}: expected a file name, got {name!r}")
                 setattr(out, key, name)
         return out
+
+    def check_structure(self, atoms) -> None:
+        """Refuse in one line, before anything is written, a cell relaxation the structure
+        cannot have: its cell not periodic in all three directions, or (with a calculator
+        on the atoms) no stress."""
+        if self.cell is False:
+            return
+        if not atoms.pbc.all():
+            raise ConfigError(f"relax.cell: {self.cell} relaxes the cell, which needs a "
+                              f"structure periodic in all three directions (its pbc is "
+                              f"{atoms.pbc.tolist()}); give relax.cell: false")
+        calc = atoms.calc
+        if calc is not None and "stress" not in getattr(calc, "implemented_properties",
+                                                        ("stress",)):
+            raise ConfigError(f"relax.cell: {self.cell} relaxes the cell, which needs the "
+                              f"stress, and the calculator {type(calc).__name__} gives none; "
+                              "give relax.cell: false or a calculator with stress")

@@ -70,6 +70,7 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     section = RelaxSection.from_config(raw, base) or RelaxSection()
     atoms = structure.build_atoms()  # every input is read before any output is touched
     bodies = structure.resolve_bodies(atoms)
+    section.check_structure(atoms)
     directory = outputs.directory
     trajectory, log = directory / section.trajectory, directory / section.log
     state = state_path(trajectory)
@@ -152,6 +153,7 @@ def relax_for_export(config, atoms, bodies, directory, stream=sys.stdout):
     """
     from rigidmd.core.velocities import rigid_maxwell_boltzmann
 
+    config.relax.check_structure(atoms)  # before the directory is made
     directory.mkdir(parents=True, exist_ok=True)
     atoms.calc = config.calculator.build(atoms, directory / "engine")
     try:

@@ -173,6 +173,8 @@ class Run:
 
         atoms, bodies = self.start_atoms()
         atoms.calc = self.config.calculator.build(atoms, self.outputs.directory / "engine")
+        if self.config.relax is not None:  # what it cannot relax, before anything is written
+            self.config.relax.check_structure(atoms)
         probe = atoms.copy()
         probe.calc = atoms.calc
         with warnings.catch_warnings():
