@@ -43,6 +43,20 @@ def test_the_fields_that_define_the_trajectory(tmp_path):
     assert differing_fields(first, fingerprint(config(tmp_path))) == ["structure"]
 
 
+def test_what_a_relaxation_relaxes_to_counts_and_its_steps_do_not(tmp_path):
+    """A continued relaxation with another fmax or optimizer was accepted (half one
+    relaxation, half another); relax.steps may be raised.  A record written before the
+    fingerprint had the field is not refused for it."""
+    write(tmp_path / "start.xyz", water_cluster(2, seed=1))
+    relaxed = fingerprint(config(tmp_path, relax={"fmax": 0.05}))
+    assert fingerprint(config(tmp_path, relax={"fmax": 0.05, "steps": 5000})) == relaxed
+    other = fingerprint(config(tmp_path, relax={"fmax": 0.2, "optimizer": "FIRE"}))
+    assert differing_fields(relaxed, other) == ["relax"]
+    older = {k: v for k, v in relaxed.items() if k != "relax"}
+    assert differing_fields(older, other) == []
+    assert "relax" not in fingerprint(config(tmp_path))
+
+
 def test_where_the_forces_run_is_not_what_they_are(tmp_path):
     write(tmp_path / "start.xyz", water_cluster(2, seed=1))
     water = {"name": "lammps", "water_model": {"name": "tip3p", "cutoff": 8.0}}

@@ -111,14 +111,23 @@ def fingerprint(config):
     for section in ("thermostat", "barostat"):
         spec = getattr(config.coupling, section)
         fields[section] = None if spec is None else [spec.kind, spec.kwargs, spec.seed]
+    relax = getattr(config, "relax", None)
+    if relax is not None:  # what it relaxes to; relax.steps may be raised, as steps may
+        fields["relax"] = [relax.fmax, relax.optimizer, relax.cell, relax.pressure]
     return {name: _digest(value) for name, value in fields.items()}
+
+
+#: Fields a fingerprint gained after checkpoints were written without them: a record that
+#: lacks one is not refused for it (its run could not have been compared on it).
+LATER_FIELDS = ("relax",)
 
 
 def differing_fields(recorded, current):
     """The configuration fields whose digests differ (all of them for an old record)."""
     if not isinstance(recorded, dict):
         return None
-    return [name for name in current if recorded.get(name) != current[name]]
+    return [name for name in current if recorded.get(name) != current[name]
+            and not (name in LATER_FIELDS and name not in recorded)]
 
 
 def _plain(value):
