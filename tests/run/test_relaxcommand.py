@@ -63,7 +63,8 @@ def test_relaxation_short_of_its_steps_is_one_line_and_keeps_the_structure(tmp_p
     ("{optimizer: Newton}", "relax.optimizer: 'Newton' is not one of"),
     ("{cell: cubic}", "relax.cell: expected false, true or one of"),
     ("{pressure: 1 bar}", "relax.pressure: a target pressure needs relax.cell"),
-    ("{cell: iso}", "cell='iso' needs a cell periodic in all three directions"),
+    ("{cell: iso}", "relax.cell: iso relaxes the cell, which needs a structure periodic in all "
+                    "three directions"),
     ("{tol: 1}", "relax.tol: unknown key"),
 ])
 def test_relax_section_errors_are_one_line(tmp_path, relax_section, message):
