@@ -227,6 +227,14 @@ def _pm(v, digits):
     return f"{v[0]:.{digits}f} ± {v[1]:.{digits}f}"
 
 
+def _gap_pm(v):
+    """A reported − end-of-step gap: "—" where the integrator reports its end of step
+    (exactly zero: the NO_SQUISH thermostats), else as :func:`_pm`."""
+    if v is not None and v[0] == 0 and (v[1] == 0 or not np.isfinite(v[1])):
+        return "—"
+    return _pm(v, 2)
+
+
 def _gap(point, key, fit_table, digits):
     f = fit_table.get((*family(point, key), key))
     if f is None or point[key] is None or not np.isfinite(f["shared"]["a"]):
@@ -246,7 +254,7 @@ def table(points, fit_table, fit_max_fs):
             f"| {p['model']} | {p['waters']} | {p['code']} | {p['integrator']} | "
             f"{p['dt_fs']:g} | {p['runs']} | {p['ps']:.0f} | {_pm(p['U'], 3)} | "
             f"{_gap(p, 'U', fit_table, 3)} | {_pm(p['T_tr'], 1)} | {_pm(p['T_rot'], 1)} | "
-            f"{_pm(p.get('T_tr_gap'), 2)} / {_pm(p.get('T_rot_gap'), 2)} | {conf} | "
+            f"{_gap_pm(p.get('T_tr_gap'))} / {_gap_pm(p.get('T_rot_gap'))} | {conf} | "
             f"{_pm(p['rdf_peak_r'], 3)} | {_pm(p['rdf_peak_g'], 2)} | "
             f"{_pm(p['D_pbc'], 2)} | {_gap(p, 'D_pbc', fit_table, 2)} |")
     lines += ["", f"dt → 0 limits (a + b·dt² over dt ≤ {fit_max_fs:g} fs; rigidmd's "

@@ -601,7 +601,7 @@ def test_seeds_of_a_deterministic_integrator_start_apart():
 @pytest.mark.parametrize("name, options, pages", [
     ("timestep_table_216", ["--borrow-limit", "lammps=rigidmd"],
      ("timestep-216.md", "timestep-216-goals.md", "timestep-216-tables.md",
-      "timestep-216-runs.md", "timestep-216-plan.md")),
+      "timestep-216-codes.md", "timestep-216-runs.md", "timestep-216-plan.md")),
     ("timestep_table_216_spce", [], ("timestep-216-spce.md", "timestep-216-plan.md")),
 ])
 def test_the_216_water_pages_show_what_the_committed_runs_give(tmp_path, name, options,
