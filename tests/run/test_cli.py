@@ -560,27 +560,16 @@ def test_a_restart_says_what_it_does_not_use(project):
 
 def test_a_stopped_demo_says_the_command_that_works(tmp_path):
     """It printed ``rigidmd run CONFIG ... --resume``: there is no CONFIG, and a demo has no
-    --resume; the command given now starts it again."""
-    import signal
-    import time
+    --resume; the command given now starts it again, and the plot it did not draw is not
+    said to be written."""
+    from helpers import sigterm_once_written
 
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     proc = subprocess.Popen([sys.executable, "-m", "rigidmd.run.cli", "demo", "--steps",
                              "200000", "--outdir", "dm"], cwd=tmp_path, env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.monotonic() + 120
-        while not (tmp_path / "dm" / "demo-checkpoint.npz").exists() and \
-                time.monotonic() < deadline:
-            time.sleep(0.05)
-        time.sleep(0.5)
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert proc.returncode == 130, err
+    rc, out, err = sigterm_once_written(proc, tmp_path / "dm" / "demo-checkpoint.npz")
+    assert rc == 143, err
     hint = out.split("continue with: ")[1].splitlines()[0]
     assert hint.startswith("rigidmd demo --outdir ") and "CONFIG" not in hint
     assert "a demo is not continued: it starts again" in hint

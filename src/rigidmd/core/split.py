@@ -58,7 +58,17 @@ def _check_level(name: str, calc) -> None:
                         f"(with get_forces), got {type(calc).__name__}")
 
 
-class MultipleTimeStep(Calculator):
+class _Levels:
+    """What a calculator of two levels (``levels``: ``((name, calculator), ...)``) tells a
+    barostat's checks of the cell."""
+
+    @property
+    def orthorhombic_only(self) -> bool:
+        """Whether a level takes only orthorhombic cells (a barostat's check reads it)."""
+        return any(getattr(calc, "orthorhombic_only", False) for _, calc in self.levels)
+
+
+class MultipleTimeStep(_Levels, Calculator):
     """An ASE calculator: the sum of a fast and a slow calculator, integrated by r-RESPA.
 
     Parameters
@@ -147,11 +157,6 @@ class MultipleTimeStep(Calculator):
         """``(("fast", fast), ("slow", slow))``."""
         return (("fast", self.fast), ("slow", self.slow))
 
-    @property
-    def orthorhombic_only(self) -> bool:
-        """Whether a level takes only orthorhombic cells (a barostat's check reads it)."""
-        return any(getattr(calc, "orthorhombic_only", False) for _, calc in self.levels)
-
     def publish(self, atoms) -> None:
         """Hold, as the split's own results, the levels' sums at ``atoms`` from what the
         levels hold for those atoms, without calling them.
@@ -221,7 +226,7 @@ class MultipleTimeStep(Calculator):
         return out
 
 
-class FullLessFast(Calculator):
+class FullLessFast(_Levels, Calculator):
     """An ASE calculator: a full model less a fast one, each asked once for everything.
 
     The slow level of ``MultipleTimeStep(fast, full=model)``.  Each call asks
@@ -259,11 +264,6 @@ class FullLessFast(Calculator):
     def levels(self) -> tuple:
         """``(("full", full), ("fast", fast))``."""
         return (("full", self.full), ("fast", self.fast))
-
-    @property
-    def orthorhombic_only(self) -> bool:
-        """Whether the full or the fast model takes only orthorhombic cells."""
-        return any(getattr(calc, "orthorhombic_only", False) for _, calc in self.levels)
 
     def close(self) -> None:
         """Close the full model if it has a ``close`` (the fast level is the split's own)."""
