@@ -590,14 +590,3 @@ def test_a_cell_relaxation_of_a_cluster_is_refused_before_any_file(project):
     (project / "z.yaml").write_text(PLAIN + "relax: {steps: 0}\n")
     result = rigidmd("run", "z.yaml", cwd=project)
     assert result.returncode == 2 and "relax.steps: expected a whole number >= 1" in result.stderr
-
-
-def test_a_demo_beside_another_run_is_refused(project):
-    """The docs say another run's files stop a demo; it wrote its own beside them."""
-    (project / "plain.yaml").write_text(PLAIN)
-    assert rigidmd("run", "plain.yaml", "--outdir", "busy", cwd=project).returncode == 0
-    before = sorted(p.name for p in (project / "busy").iterdir())
-    result = rigidmd("demo", "--steps", "10", "--outdir", "busy", cwd=project)
-    assert result.returncode == 2 and "holds another run's checkpoint (checkpoint.npz)" in \
-        result.stderr
-    assert sorted(p.name for p in (project / "busy").iterdir()) == before

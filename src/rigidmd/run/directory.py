@@ -179,13 +179,6 @@ class RunFiles:
             raise ConfigError(
                 f"outputs: {self.outputs.directory} holds {names}, which are not an earlier "
                 "demo's; give the demo another --outdir")
-        if self.mode == "demo":  # another run's checkpoint: its outputs would mix with ours
-            others = sorted(q.name for q in self.outputs.directory.glob("*.npz")
-                            if q != self.outputs.checkpoint)
-            if others:
-                raise ConfigError(
-                    f"outputs: {self.outputs.directory} holds another run's checkpoint "
-                    f"({', '.join(others)}); give the demo another --outdir")
         # No other run writes here (the lock is ours): a temporary file is a killed write's.
         stale = remove_stale_temporaries(self.outputs.checkpoint)
         if stale:
