@@ -29,7 +29,7 @@ def test_every_field():
 
 @pytest.mark.parametrize("raw, match", [
     ({"fmax": 0}, "relax.fmax: must be positive, got 0"),
-    ({"steps": -1}, "relax.steps: expected a whole number >= 0"),
+    ({"steps": -1}, "relax.steps: expected a whole number >= 1"),
     ({"optimizer": "SD"}, "relax.optimizer: 'SD' is not one of RigidLBFGS, "),
     ({"cell": "xy"}, "relax.cell: expected false, true or one of iso, aniso, full, got 'xy'"),
     ({"pressure": "1 bar"}, "relax.pressure: a target pressure needs relax.cell"),
