@@ -20,10 +20,12 @@ from helpers import benchmark_module, finish, sigterm_once_written
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "validation" / "timestep_table.py"
-# A resumed run's configurational sums against the uninterrupted run's: 1.2e-13 relative
-# at most, measured (the fresh LAMMPS instance's order of summation, as for U); a restarted
-# random stream parts them by the Hutchinson noise, ~10 %.
-TOL_CONF = 1e-9
+# A resumed run's configurational sums against the uninterrupted run's: measured 1.2e-13
+# relative in one run and 4.1e-9 in another (one rotational Laplacian: its central second
+# difference over eps_rotation² = 2.5e-5 rad² amplifies the 1e-13 roundoff by which the
+# fresh LAMMPS instance's trajectory parts, as for U); 1e-6 bounds that with room, while a
+# restarted random stream parts them by the Hutchinson noise, 18 % measured.
+TOL_CONF = 1e-6
 table = benchmark_module("timestep_table")
 collector = benchmark_module("timestep_table_report")
 
