@@ -95,13 +95,6 @@ class MDAWriter:
         are not consecutive (the topology file would split it into several
         residues): reorder the atoms first.  Nothing is written.
 
-    Notes
-    -----
-    Positions are written with every body whole, in MDAnalysis's orientation of
-    the cell (:func:`~rigidmd.mdanalysis.topology.mdanalysis_orientation`): as
-    they are for an orthorhombic or lower-triangular cell, turned with the cell
-    otherwise (MDAnalysis keeps only its lengths and angles).
-
     Attributes
     ----------
     n_frames : int
@@ -116,6 +109,11 @@ class MDAWriter:
     instead of a time per frame, so the file is opened at the second frame
     (the first is held until then, or written at :meth:`close`).  Frames
     must be evenly spaced; a warning says when they are not.
+
+    Positions are written with every body whole, in MDAnalysis's orientation of
+    the cell (:func:`~rigidmd.mdanalysis.topology.mdanalysis_orientation`): as
+    they are for an orthorhombic or lower-triangular cell, turned with the cell
+    otherwise (MDAnalysis keeps only its lengths and angles).
     """
 
     _FORMATS = ("XTC", "DCD")
