@@ -542,7 +542,8 @@ def test_export_never_writes_over_a_deck_or_an_input(project):
     (project / "d2").mkdir()
     (project / "d2" / "in.rigidmd").write_text((project / "nve.yaml").read_text())
     result = rigidmd("export-lammps", "d2/in.rigidmd", "d2", "--overwrite", cwd=project)
-    assert result.returncode == 2 and "is the configuration being exported" in result.stderr
+    assert result.returncode == 2 and "is also the configuration this run reads" in \
+        result.stderr
 
 
 def test_a_restart_says_what_it_does_not_use(project):

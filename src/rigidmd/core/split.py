@@ -167,13 +167,12 @@ class MultipleTimeStep(_Levels, Calculator):
         previous one.  A property some level does not hold for ``atoms`` is left out (a
         later ``get_property`` computes it from the levels).
         """
-        sums = {}
-        for name in _SUMMED:
-            values = [_held_property(calc, name, atoms) for _, calc in self.levels]
-            if all(value is not None for value in values):
-                sums[name] = values[0] + values[1]
-        if "energy" in sums and "free_energy" not in sums:
-            sums["free_energy"] = sums["energy"]
+        held = [_held_results(calc, atoms) for _, calc in self.levels]
+        sums = {name: np.add(held[0][name], held[1][name]) for name in _SUMMED
+                if name in held[0] and name in held[1]}
+        if "energy" in sums:
+            sums["energy"] = float(sums["energy"])
+            sums["free_energy"] = float(sums.get("free_energy", sums["energy"]))
         self.results = sums
         self.atoms = atoms.copy()
 
@@ -313,20 +312,19 @@ def _combined(owner: str, terms, atoms, properties) -> dict:
     return out
 
 
-def _held_property(calc, name: str, atoms):
-    """A level's ``name`` as it holds it for ``atoms`` (a float or an array), or None when
-    it holds none for them (it is never called)."""
-    if not isinstance(calc, BaseCalculator):
-        return None
-    if name == "free_energy" and "free_energy" not in getattr(calc, "results", {}):
-        name = "energy"
-    try:
-        value = calc.get_property(name, atoms, allow_calculation=False)
-    except PropertyNotImplementedError:
-        return None
-    if value is None:
-        return None
-    return float(value) if name in ("energy", "free_energy") else np.array(value, dtype=float)
+def _held_results(calc, atoms) -> dict:
+    """What a level holds for ``atoms`` (its results, ``free_energy`` the energy when it has
+    none of its own), or nothing when it holds none for them; its cache is checked once
+    (ASE's ``check_state``) and it is never called."""
+    results = getattr(calc, "results", None)
+    check_state = getattr(calc, "check_state", None)
+    if not isinstance(calc, BaseCalculator) or not results or check_state is None \
+            or check_state(atoms):
+        return {}
+    held = {name: results[name] for name in _SUMMED if name in results}
+    if "energy" in held:
+        held.setdefault("free_energy", held["energy"])
+    return held
 
 
 def _level_property(calc, name: str, atoms):

@@ -7,6 +7,7 @@ The part is :class:`~rigidmd.couplings.baoab.LangevinBAOABThermostat`.
 import numpy as np
 
 from rigidmd.couplings.baoab import LangevinBAOABThermostat
+from rigidmd.couplings.base import check_time
 from rigidmd.md.coupled import ThermostattedDynamics
 
 __all__ = ["RigidLangevinBAOAB"]
@@ -55,14 +56,7 @@ class RigidLangevinBAOAB(ThermostattedDynamics):
             raise TypeError("RigidLangevinBAOAB takes friction (per ASE time unit) or T_tau "
                             "(its time, friction = 1 / T_tau), not both")
         if T_tau is not None:
-            try:
-                tau = float(T_tau) if not isinstance(T_tau, (bool, np.bool_)) else None
-            except (TypeError, ValueError):
-                tau = None
-            if tau is None:
-                raise TypeError(f"T_tau must be a time in ASE units, got {T_tau!r}")
-            if not (np.isfinite(tau) and tau > 0):
-                raise ValueError(f"T_tau must be a positive time (ASE units), got {T_tau!r}")
+            tau = check_time("T_tau", T_tau)
             if not np.isfinite(1.0 / tau):
                 raise ValueError(f"T_tau {T_tau!r} (ASE units) is too small: its inverse, the "
                                  "friction, is not a finite number")

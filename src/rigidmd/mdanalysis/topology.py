@@ -221,19 +221,18 @@ def mdanalysis_orientation(cell):
     xy plane (lower-triangular rows).  Positions in a cell oriented otherwise
     (a rotated or upper-triangular one, as ASE's NPT keeps) must be turned with
     it, or every distance MDAnalysis computes is wrong.  Returns ``Q``, shape
-    (3, 3), with ``cell @ Q`` that cell, so that positions (rows) go to
-    ``positions @ Q``; None when ``cell`` is in that form already (any
-    orthorhombic cell: positions are written as they are) or not full.  For a
-    left-handed cell ``Q`` also reflects (distances are kept).
+    (3, 3), with ``cell @ Q`` that cell (ASE's ``Cell.standard_form``), so that
+    positions (rows) go to ``positions @ Q``; None when ``cell`` is in that form
+    already (any orthorhombic cell: positions are written as they are) or not full.
     """
-    from ase.geometry import cellpar_to_cell
+    from ase.cell import Cell
 
     cell = np.asarray(cell, dtype=float)
     if abs(np.linalg.det(cell)) < 1e-12:
         return None
     if cell[0, 1] == cell[0, 2] == cell[1, 2] == 0.0 and np.all(np.diag(cell) > 0):
         return None
-    return np.linalg.solve(cell, cellpar_to_cell(cell_to_cellpar(cell)))
+    return Cell(cell).standard_form()[1].T
 
 
 def mdanalysis_positions(atoms, rigid):

@@ -41,7 +41,7 @@ from rigidmd.lammps.library import LammpsError
 from rigidmd.run.bias import add_bias_parser, bias_command
 from rigidmd.run.fingerprint import resume_command
 from rigidmd.run.logplot import LogError, plot_log
-from rigidmd.run.outputs import OutputError, describe_os_error
+from rigidmd.run.outputs import OutputError, check_apart_from_inputs, describe_os_error
 from rigidmd.run.relaxcommand import relax_only
 from rigidmd.run.relaxstructure import RelaxationFailed, RelaxationNotConverged, RelaxationStopped
 from rigidmd.run.runner import Run, RunStopped
@@ -102,11 +102,8 @@ def _check_deck_directory(directory, config_path, overwrite):
     configuration itself."""
     if directory.exists() and not directory.is_dir():
         raise ConfigError(f"directory: {directory} is a file; give a directory for the deck")
-    for name in DECK_FILES:
-        path = directory / name
-        if path.exists() and config_path.exists() and path.resolve() == config_path.resolve():
-            raise ConfigError(f"directory: {path} is the configuration being exported; give "
-                              "another directory")
+    check_apart_from_inputs({name: directory / name for name in DECK_FILES},
+                            {"configuration": config_path})
     held = [name for name in DECK_FILES if (directory / name).exists()]
     if held and not overwrite:
         raise ConfigError(f"directory: {directory} already holds {' and '.join(held)}; give "
