@@ -494,3 +494,22 @@ def test_a_split_level_s_engine_folder_is_not_a_link_outside(tmp_path, level):
              "slow": engine if level == "slow" else other, "substeps": 2}
     raw = config(tmp_path, calculator=split)
     assert "symbolic link" in refused(raw, f"calculator.{level}.address")
+
+
+@pytest.mark.parametrize("outputs, field", [
+    ({"checkpoint": "."}, "outputs.checkpoint"),
+    ({"directory": "out", "log": "."}, "outputs.log"),
+    ({"directory": "out", "trajectory": "./"}, "outputs.trajectory"),
+    ({"directory": "out", "trajectory": "sub"}, "outputs.trajectory"),  # a folder in it
+])
+def test_an_output_file_that_is_the_directory_says_so(tmp_path, outputs, field):
+    """``outputs: {checkpoint: .}`` was refused as leading outside the run's directory
+    "through a symbolic link" where there was none: it is the directory itself (a folder,
+    which --trust does not change)."""
+    (tmp_path / "out" / "sub").mkdir(parents=True)
+    for trust in (False, True):
+        with pytest.raises(ConfigError) as err:
+            check_config(config(tmp_path, outputs=outputs), trust=trust)
+        message = str(err.value)
+        assert message.startswith(f"{field}: ") and "give a file name" in message, message
+        assert "symbolic link" not in message and "\n" not in message, message

@@ -36,9 +36,12 @@ def test_substeps_and_missing_properties():
     assert calc.substeps == 1
     calc.substeps = 3
     assert calc.substeps == 3
-    for bad in (0, 1.5, True):
+    for bad in (0, 1.5, True, 1001, 10**20):
         with pytest.raises((TypeError, ValueError), match="substeps"):
             calc.substeps = bad
+    calc.substeps = 1000  # the largest allowed (MAX_SUBSTEPS)
+    with pytest.raises(ValueError, match="substeps must be at most 1000"):
+        MultipleTimeStep(TIP3P(), EMT(), substeps=10**20)
     assert "stress" not in calc.implemented_properties  # TIP3P has no stress
     with pytest.raises(ValueError, match="MultipleTimeStep: the fast calculator TIP3P provides "
                                          "no stress .* which the barostat needs"):

@@ -657,3 +657,47 @@ def test_a_damaged_trajectory_continues_from_the_state_file(tmp_path, monkeypatc
     # counts the trajectory's frames, continues the log's count.
     log = (tmp_path / "out" / "relax.log").read_text().splitlines()
     assert int(log[-1].split()[1]) == len(read(traj, ":")) - 1
+
+
+@pytest.mark.parametrize("change, field", [
+    ({"cell": False, "pressure": None}, "relax.cell"),  # (a pressure needs a cell)
+    ({"pressure": "1000 bar"}, "relax.pressure"),
+])
+def test_rigidmd_relax_resume_refuses_another_cell_or_pressure(tmp_path, change, field):
+    """``rigidmd relax --resume`` compared only the calculator: a cell relaxation continued
+    with a fixed cell (or another pressure) appended frames of another surface in silence.
+    Now refused in one line, nothing written; a tighter fmax continues."""
+    import io
+
+    from rigidmd.config.quantities import ConfigError
+    from rigidmd.run.relaxcommand import relax_only
+    from rigidmd.run.relaxstructure import RelaxationNotConverged
+
+    text = RELAX_CONFIG.replace(
+        "{builtin: water_cluster, n_molecules: 6, seed: 2}", "{builtin: water_box, n_side: 2}"
+    ).replace("{name: tip3p, options: {rc: 40.0}}",
+              "{name: ase.calculators.lj.LennardJones, "
+              "options: {sigma: 2.5, epsilon: 0.005, rc: 6.0}}").replace(
+        "{fmax: 0.01, steps: STEPS, optimizer: FIRE}",
+        "{fmax: 0.001, steps: 3, cell: iso, pressure: 0 bar}")
+    (tmp_path / "relax.yaml").write_text(text)
+    from rigidmd.config import load_config
+
+    raw = load_config(tmp_path / "relax.yaml")
+    with pytest.raises(RelaxationNotConverged):  # 3 steps: the state is written
+        relax_only(raw, io.StringIO())
+    files = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
+    assert "relax.state.npz" in files
+    other = dict(raw, relax={key: value for key, value in {**raw["relax"], **change}.items()
+                             if value is not None})
+    with pytest.raises(ConfigError, match=rf"^--resume: the {field} differs from the "
+                                          rf"relaxation's \(.*relax.state.npz records {field} "
+                                          rf".*, the configuration gives {field} .*\); "
+                                          r"restore it, or start anew with --overwrite$"):
+        relax_only(other, io.StringIO(), mode="resume")
+    assert {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()} == files
+    tighter = dict(raw, relax=dict(raw["relax"], fmax=0.0005, steps=5))
+    out = io.StringIO()
+    with pytest.raises(RelaxationNotConverged):
+        relax_only(tighter, out, mode="resume")
+    assert "continuing with the optimizer's memory" in out.getvalue(), out.getvalue()

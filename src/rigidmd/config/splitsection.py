@@ -16,7 +16,7 @@ from pathlib import Path
 
 from rigidmd.config.quantities import ConfigError, mapping
 from rigidmd.config.sections import CalculatorSection
-from rigidmd.core.split import MultipleTimeStep
+from rigidmd.core.split import MAX_SUBSTEPS, MultipleTimeStep
 
 __all__ = ["SplitCalculatorSection", "calculator_section"]
 
@@ -85,9 +85,10 @@ class SplitCalculatorSection:
                         else "a calculator section, e.g. {name: tip3p}")
                 raise ConfigError(f"calculator.{key}: missing ({what})")
         substeps = calc["substeps"]
-        if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
-            raise ConfigError(f"calculator.substeps: expected a whole number >= 1 (inner steps "
-                              f"per timestep), got {substeps!r}")
+        if (isinstance(substeps, bool) or not isinstance(substeps, int)
+                or not 1 <= substeps <= MAX_SUBSTEPS):
+            raise ConfigError(f"calculator.substeps: expected a whole number from 1 to "
+                              f"{MAX_SUBSTEPS} (inner steps per timestep), got {substeps!r}")
         levels = {}
         for level in ("fast", "full" if difference else "slow"):
             spec = calc[level]

@@ -513,6 +513,9 @@ def _resolved_inside(field_name, value, path, root, may_be_root=False):
     """Refuse ``path`` if, with its symbolic links followed, it is not inside ``root``
     (or ``root`` itself, for a folder: ``may_be_root``)."""
     resolved = Path(path).resolve()
+    if resolved == root and not may_be_root:
+        raise ConfigError(f"{field_name}: {str(value)!r} is the run's directory itself, a folder; "
+                          "give a file name")
     if not (may_be_root and resolved == root) and root not in resolved.parents:
         raise ConfigError(f"{field_name}: {str(value)!r} leads outside the run's directory "
                           f"through a symbolic link (to {str(resolved)!r}); a configuration "

@@ -32,18 +32,29 @@ from ase.calculators.calculator import (
 
 from rigidmd.core.forces import calculate_together
 
-__all__ = ["MultipleTimeStep", "FullLessFast", "check_substeps"]
+__all__ = ["MultipleTimeStep", "FullLessFast", "check_substeps", "MAX_SUBSTEPS"]
+
+#: The most inner steps per outer step.  An outer step is never interrupted (a stop
+#: signal waits for it), so a mistyped ``substeps`` (10**20) would hang the first step with
+#: no way out but a kill; the r-RESPA literature and OpenMM's examples use 2-8, distilled
+#: ML inner levels up to ~20, and 1000 inner steps are already 1000 fast calls per step.
+MAX_SUBSTEPS = 1000
 
 _SUMMED = ("energy", "free_energy", "forces", "stress")
 
 
 def check_substeps(substeps) -> int:
-    """``substeps`` as an int of at least 1; a TypeError or ValueError in one line otherwise."""
+    """``substeps`` as an int from 1 to :data:`MAX_SUBSTEPS`; a TypeError or ValueError in
+    one line otherwise."""
     if isinstance(substeps, bool) or not isinstance(substeps, Integral):
         raise TypeError(f"MultipleTimeStep: substeps must be a whole number of inner steps "
                         f"per outer step, got {substeps!r}")
     if substeps < 1:
         raise ValueError(f"MultipleTimeStep: substeps must be at least 1, got {substeps}")
+    if substeps > MAX_SUBSTEPS:
+        raise ValueError(f"MultipleTimeStep: substeps must be at most {MAX_SUBSTEPS} (an outer "
+                         f"step is never interrupted; {substeps} inner steps would hold a stop "
+                         f"signal for {substeps} fast calls), got {substeps}")
     return int(substeps)
 
 
@@ -93,7 +104,7 @@ class MultipleTimeStep(_Levels, Calculator):
         A calculator missing or not an ASE calculator, both or neither of ``slow``
         and ``full``, or ``substeps`` not a whole number.
     ValueError
-        ``substeps`` below 1.
+        ``substeps`` below 1 or above :data:`MAX_SUBSTEPS` (1000).
 
     Notes
     -----

@@ -17,6 +17,7 @@ from rigidmd.run.relaxstructure import (
     RelaxationStopped,
     continue_from,
     relax_structure,
+    relaxation_label,
     state_path,
 )
 from rigidmd.run.runner import StopSignals
@@ -106,7 +107,8 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
             with after:
                 relax_structure(atoms, bodies, section, directory, stream,
                                 resume=mode == "resume", done=done, stop=StopSignals(),
-                                label=f"calculator {calculator_digest(calculator)}",
+                                label=relaxation_label(calculator_digest(calculator),
+                                                       section),
                                 hint=resume_command(config_path or "CONFIG", directory,
                                                     ["--trust"] if trust else [],
                                                     command="relax"))

@@ -37,7 +37,7 @@ from rigidmd.core.forces import NonFiniteForceError
 from rigidmd.relax.filter import Relaxation, RelaxationFailed, RigidFilter, relax
 
 __all__ = ["relax_structure", "RelaxationNotConverged", "RelaxationStopped", "RelaxProgress",
-           "RelaxationFailed", "continue_from", "state_path"]
+           "RelaxationFailed", "continue_from", "relaxation_label", "state_path"]
 
 
 def state_path(trajectory):
@@ -320,9 +320,27 @@ def _written_file(err, trajectory, log, state_file):
     return log
 
 
+def relaxation_label(digest, section):
+    """What a continued ``rigidmd relax`` must share with the relaxation it continues: the
+    calculator (its digest) and the surface it descends (``relax.cell``, and
+    ``relax.pressure`` when the cell moves), as ``"calculator D; relax.cell C; ..."``.
+    ``relax.fmax``, ``relax.steps`` and ``relax.optimizer`` may change (a tighter fmax
+    continues; another optimizer starts its memory afresh, and says so)."""
+    parts = [f"calculator {digest}", f"relax.cell {section.cell}"]
+    if section.cell:
+        parts.append(f"relax.pressure {section.pressure!r}")
+    return "; ".join(parts)
+
+
+def _label_fields(label):
+    """``{"calculator": D, "relax.cell": C, ...}`` from :func:`relaxation_label`'s text (a
+    state of an earlier release records the calculator only)."""
+    return dict(part.partition(" ")[::2] for part in str(label).split("; "))
+
+
 def _check_label(state_file, label):
     """Refuse to continue a relaxation whose state file records another ``label`` (another
-    calculator): its frames and the new ones would be of two energy surfaces."""
+    calculator, cell or pressure): its frames and the new ones would be of two surfaces."""
     from rigidmd.config.quantities import ConfigError
     from rigidmd.relax.optimizerstate import read_state
 
@@ -333,11 +351,15 @@ def _check_label(state_file, label):
     except ValueError:
         return  # a damaged state: the memory starts afresh, and says why
     recorded = None if state is None else state.get("label")
-    if recorded is not None and str(recorded) != label:
-        field = label.split()[0]
-        raise ConfigError(f"--resume: the {field} differs from the relaxation's ({state_file} "
-                          f"records {recorded}, the configuration gives {label}); restore it, "
-                          "or start anew with --overwrite")
+    if recorded is None:
+        return
+    before, now = _label_fields(recorded), _label_fields(label)
+    for field, value in now.items():
+        if field in before and before[field] != value:
+            raise ConfigError(f"--resume: the {field} differs from the relaxation's "
+                              f"({state_file} records {field} {before[field]}, the "
+                              f"configuration gives {field} {value}); restore it, or start "
+                              "anew with --overwrite")
 
 
 def _can_continue_exactly(state_file, atoms, optimizer, label=None):
