@@ -69,6 +69,28 @@ def test_waiting_ends_on_data_a_deadline_a_dead_engine_or_a_check():
         b.close()
 
 
+def test_waiting_on_a_descriptor_past_1024():
+    """select() refused descriptors numbered 1024 or more ("filedescriptor out of range in
+    select()"): a process with many files open could not use an engine at all."""
+    import resource
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if hard != resource.RLIM_INFINITY and hard < 1100:
+        pytest.skip(f"this machine allows {hard} open files; the test needs 1100")
+    resource.setrlimit(resource.RLIMIT_NOFILE, (max(soft, 1100), hard))
+    a, b = socket.socketpair()
+    high = os.dup2(a.fileno(), 1050)
+    try:
+        far = socket.socket(fileno=high)
+        b.sendall(word("READY"))
+        assert wait_readable(far, time.monotonic() + 5, lambda: None) is None
+        far.close()
+    finally:
+        a.close()
+        b.close()
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+
+
 def _dead_pid():
     """A process id that no process has now (a child that has exited)."""
     child = subprocess.Popen([sys.executable, "-c", "pass"])

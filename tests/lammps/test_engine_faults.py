@@ -528,3 +528,195 @@ def test_rigidmd_run_checkpoints_the_undone_step_when_its_engine_dies(tmp_path):
     from rigidmd.core.checkpoint import read_checkpoint
 
     assert read_checkpoint(tmp_path / "out" / "checkpoint.npz").nsteps == step
+
+
+# ------------------------------------------------------------ outside pass, 2026-11-29
+
+def engine_and_reference(**options):
+    """27 waters with an engine, and a copy with LAMMPSCalculator: the same options."""
+    atoms, other = water_box_27(), water_box_27()
+    atoms.calc = LAMMPSEngine(PPPM_27, atom_types={"O": 1, "H": 2}, timeout=60, **options)
+    other.calc = LAMMPSCalculator(PPPM_27, atom_types={"O": 1, "H": 2}, **options)
+    return atoms, other
+
+
+def test_other_molecules_charges_or_atoms_are_another_system_for_the_engine():
+    """The engine's signature had no molecules and kept the first system's k-space
+    parameters: an H swapped with an H of another water, tags with it, gave -159.42 eV
+    against the in-process -156.23 (the old exclusions), charges scaled by 0.9 -126.29
+    against -123.81, and 216 waters after 27 kept PPPM's mesh for 27.  Now each is a new
+    engine with the parameters LAMMPSCalculator chooses, equal to it."""
+    from ase.build import make_supercell
+
+    first = water_box_27()
+    assert len(set(first.get_tags()[[1, 4]])) == 2  # H of two waters
+    order = np.arange(len(first))
+    order[[1, 4]] = order[[4, 1]]
+    scaled = first.copy()
+    scaled.set_initial_charges(0.9 * first.get_initial_charges())
+    systems = {"swap": first[order], "charges": scaled,
+               "bigger": make_supercell(first, 2 * np.eye(3))}
+    engine = LAMMPSEngine(PPPM_27, atom_types={"O": 1, "H": 2}, timeout=60)
+    try:
+        first.calc = engine
+        first.get_potential_energy()
+        for name, atoms in systems.items():
+            reference = atoms.copy()
+            reference.calc = LAMMPSCalculator(PPPM_27, atom_types={"O": 1, "H": 2})
+            atoms.calc = engine
+            assert atoms.get_potential_energy() == pytest.approx(
+                reference.get_potential_energy(), rel=1e-10), name
+            np.testing.assert_allclose(atoms.get_forces(), reference.get_forces(), atol=1e-9)
+            assert engine.kspace_parameters == reference.calc.kspace_parameters, name
+    finally:
+        engine.close()
+
+
+def test_engine_kspace_parameters_given_or_set_are_used_and_checked():
+    """``LAMMPSEngine(kspace_parameters=K)`` was accepted as an ASE parameter and ignored
+    (-156.23 eV against LAMMPSCalculator's -139.27 with K), setting it on a running engine
+    did nothing until a later restart (a jump of 17 eV), "garbage" was taken, and any
+    misspelt keyword (``proceses=2``) was kept silently."""
+    given = "kspace_modify gewald 0.6 mesh 12 12 12 order 5"
+    atoms, reference = engine_and_reference(kspace_parameters=given)
+    try:
+        assert atoms.get_potential_energy() == pytest.approx(
+            reference.get_potential_energy(), rel=1e-10)
+        atoms.calc.kspace_parameters = None  # set on a running engine: the next call uses it
+        reference.calc.kspace_parameters = None
+        atoms.positions[0] += 0.01
+        reference.positions = atoms.positions
+        assert atoms.get_potential_energy() == pytest.approx(
+            reference.get_potential_energy(), rel=1e-10)
+        assert atoms.calc.kspace_parameters == reference.calc.kspace_parameters != given
+    finally:
+        atoms.calc.close()
+    with pytest.raises(ValueError, match="LAMMPSEngine: kspace_parameters must be one "
+                                         "'kspace_modify gewald ...' command"):
+        LAMMPSEngine(PPPM_27, kspace_parameters="garbage")
+    for misspelt in ("proceses", "thread"):
+        with pytest.raises(TypeError, match=f"^LAMMPSEngine: unknown argument '{misspelt}'$"):
+            LAMMPSEngine(PPPM_27, **{misspelt: 2})
+
+
+def test_a_dropped_engine_stops_at_once_and_a_fork_leaves_the_parents_engine():
+    """ASE's Calculator set a bound method on each instance (a reference cycle): an engine
+    dropped without close() ran on, spinning a core, until the garbage collector came.  A
+    forked child that exited stopped the parent's engine and removed its folder."""
+    import gc
+
+    atoms = water_box_27()
+    gc.disable()
+    try:
+        atoms.calc = LAMMPSEngine(PPPM_27, atom_types={"O": 1, "H": 2}, timeout=60)
+        atoms.get_potential_energy()
+        watchdog, folder = atoms.calc.pid, atoms.calc.log.parent
+        atoms.calc = None  # the last reference
+        assert not Path(folder).exists()
+        assert not os.path.exists(f"/proc/{watchdog}") or \
+            open(f"/proc/{watchdog}/stat").read().split()[2] == "Z"
+    finally:
+        gc.enable()
+    atoms.calc = LAMMPSEngine(PPPM_27, atom_types={"O": 1, "H": 2}, timeout=60)
+    try:
+        energy = atoms.get_potential_energy()
+        folder, socketfile = atoms.calc.log.parent, atoms.calc.socketfile
+        child = os.fork()
+        if child == 0:  # the child ends as a program does: its objects are collected
+            atoms.calc.close()
+            os._exit(0)
+        os.waitpid(child, 0)
+        assert folder.exists() and os.path.exists(socketfile)
+        atoms.positions[0] += 0.01
+        assert atoms.get_potential_energy() != energy  # the engine still answers
+    finally:
+        atoms.calc.close()
+
+
+def test_relative_files_plugin_path_with_a_space_host_and_non_finite_answers(
+        tmp_path, monkeypatch):
+    """A launched engine ran in its temporary folder: ``include coeffs.lmp`` worked
+    in-process and killed the engine.  A plugin path with a space split in LAMMPS's input
+    ("Unrecognized fix style").  ``host=""`` wrote no host into the fix line.  A first
+    answer of inf (two atoms on one spot) was called an impostor engine."""
+    import rigidmd.lammps.engine as engine_module
+
+    (tmp_path / "coeffs.lmp").write_text("pair_coeff O O 0.0065956819 3.15061\n")
+    monkeypatch.chdir(tmp_path)
+    commands = [c for c in PPPM_27 if not c.startswith("pair_coeff O O")] + [
+        "include coeffs.lmp"]
+    atoms, reference = water_box_27(), water_box_27()
+    reference.calc = LAMMPSCalculator(commands, atom_types={"O": 1, "H": 2})
+    library = engine_module.engine_plugin()
+    if library is not None:
+        spaced = tmp_path / "plugin dir" / Path(library).name
+        spaced.parent.mkdir()
+        spaced.write_bytes(Path(library).read_bytes())
+        monkeypatch.setattr(engine_module, "engine_plugin", lambda: str(spaced))
+    with LAMMPSEngine(commands, atom_types={"O": 1, "H": 2}, timeout=60, port=free_port(),
+                      host="") as engine:
+        atoms.calc = engine
+        assert atoms.get_potential_energy() == pytest.approx(
+            reference.get_potential_energy(), rel=1e-10)
+        assert " localhost " in (engine.log.parent / "in.engine").read_text()
+    overlap = water_box_27()
+    overlap.positions[3] = overlap.positions[0]
+    with LAMMPSEngine(PPPM_27, atom_types={"O": 1, "H": 2}, timeout=60) as engine:
+        overlap.calc = engine
+        assert overlap.get_potential_energy() == np.inf  # as LAMMPSCalculator's
+
+
+def free_port():
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def test_a_later_engine_in_a_given_workdir_keeps_the_failed_ones_log(tmp_path):
+    """The next engine in a user's ``workdir`` wrote over ``log.lammps``, the log the failed
+    engine's error named."""
+    atoms = water_box_27()
+    with LAMMPSEngine(PPPM_27, atom_types={"O": 1, "H": 2}, timeout=60,
+                      workdir=tmp_path) as engine:
+        atoms.calc = engine
+        atoms.get_potential_energy()
+        first = engine.log
+        for pid in descendants_named(engine.pid, "lmp"):
+            os.kill(pid, signal.SIGKILL)
+        atoms.positions[0] += 0.01
+        with pytest.raises(EngineError, match=re.escape(f"see LAMMPS's log {first}")):
+            atoms.get_potential_energy()
+        text = first.read_text()
+        atoms.get_potential_energy()  # a new engine
+        assert engine.log == tmp_path / "log-2.lammps" and first.read_text() == text
+
+
+def test_stale_engine_folders_of_killed_processes_are_swept(tmp_path):
+    """A process killed outright left its engine's temporary folder for ever (279 of them
+    in /tmp here); the next engine removes those whose process is gone, never a live
+    process's, another user's or a failed engine's (kept for its log)."""
+    from rigidmd.lammps.engine import sweep_stale_workdirs
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    folders = {name: tmp_path / f"rigidmd-lammps-{pid}-abc" for name, pid in
+               (("dead", dead.pid), ("alive", os.getpid()), ("parent", os.getppid()))}
+    folders["kept"] = tmp_path / f"rigidmd-lammps-{dead.pid}-kept"
+    for folder in folders.values():
+        folder.mkdir()
+        (folder / "log.lammps").write_text("x")
+    (folders["kept"] / "KEPT-FOR-ITS-LOG").write_text("x")
+    sweep_stale_workdirs(tmp_path)
+    assert not folders["dead"].exists()
+    assert all(folders[name].exists() for name in ("alive", "parent", "kept"))
+
+
+def test_an_ipi_calculator_refuses_bad_ports_and_timeouts_in_one_line():
+    for options, match in (({"port": 31415.7}, "port must be a whole number in 1025-65535"),
+                           ({"port": "abc"}, "port must be a whole number in 1025-65535"),
+                           ({"port": True}, "port must be a whole number"),
+                           ({"connect_timeout": -1}, "connect_timeout must be a positive"),
+                           ({"timeout": float("nan")}, "timeout must be a positive")):
+        with pytest.raises(ValueError, match=f"^IPICalculator: {match}"):
+            IPICalculator(**options)
+    assert IPICalculator(port=31415).get_spin_polarized() is False

@@ -10,6 +10,7 @@ import os
 import time
 import uuid
 import warnings
+from numbers import Integral, Real
 
 import numpy as np
 from ase import units
@@ -84,16 +85,25 @@ class IPICalculator(Calculator):
     def __init__(self, unixsocket=None, *, port=None, host="localhost", timeout=120.0,
                  connect_timeout=None, bohr=units.Bohr, hartree=units.Hartree,
                  tally_requests=False, peers=None, **kwargs):
+        name = type(self).__name__
+        unknown = sorted(set(kwargs) - _ASE_CALCULATOR_ARGUMENTS)
+        if unknown:  # ASE's Calculator would keep them as parameters and use none
+            raise TypeError(f"{name}: unknown argument {unknown[0]!r}")
         super().__init__(**kwargs)
+        self._owner = os.getpid()  # a forked child must not stop this process's engine
         if unixsocket is not None and port is not None:
             raise ValueError("IPICalculator: give unixsocket or port, not both")
         if peers is not None and port is None:
             raise ValueError("IPICalculator: peers are for TCP (give port); a Unix socket "
                              "is checked by its file's owner")
-        if port is not None and not (1024 < int(port) < 65536):
-            raise ValueError(f"IPICalculator: port {port} is not in 1025-65535")
-        if not timeout > 0:
-            raise ValueError(f"IPICalculator: timeout must be positive, got {timeout!r}")
+        if port is not None and (isinstance(port, bool) or not isinstance(port, Integral)
+                                 or not 1024 < port < 65536):
+            raise ValueError(f"{name}: port must be a whole number in 1025-65535, got {port!r}")
+        for field, value in (("timeout", timeout), ("connect_timeout", connect_timeout)):
+            if value is not None and (isinstance(value, bool) or not isinstance(value, Real)
+                                      or not 0 < value < float("inf")):
+                raise ValueError(f"{name}: {field} must be a positive number of seconds, "
+                                 f"got {value!r}")
         if port is None and unixsocket is None:
             unixsocket = f"rigidmd-{os.getpid()}-{uuid.uuid4().hex[:8]}"
         self.unixsocket = check_socket_name(unixsocket)
@@ -380,9 +390,26 @@ class IPICalculator(Calculator):
         else:  # the same atoms asked for more: keep what was there
             self.results.update(results)
 
+    def get_spin_polarized(self):
+        """False: an i-PI engine sends no spin.  (Defined here, ASE's ``Calculator`` sets
+        a deprecated stand-in on each instance, a reference cycle that kept a dropped
+        calculator, and so its engine, alive until the garbage collector ran.)"""
+        return False
+
     def close(self):
-        """Close the connection, stop the engine and remove the socket file."""
+        """Close the connection, stop the engine and remove the socket file.
+
+        In a process forked from the one that made the calculator it only forgets them:
+        the engine, its socket and its files are the parent's.
+        """
+        if os.getpid() != self._owner:
+            self._conn = self._server = self._bound = None
+            self._forget_engine()
+            return
         self._shutdown(keep_files=False)
+
+    def _forget_engine(self):
+        """Drop the references to an engine without stopping it (a forked child's close)."""
 
     def _shutdown(self, keep_files):
         close_sockets(self._conn, self._server, say_exit=not keep_files)
@@ -405,6 +432,11 @@ class IPICalculator(Calculator):
             self.close()
         except Exception:  # noqa: BLE001 - nothing to report to at interpreter exit
             pass
+
+
+#: The keyword arguments of ASE's ``Calculator`` an i-PI calculator passes on.
+_ASE_CALCULATOR_ARGUMENTS = frozenset({"restart", "ignore_bad_restart_file", "label", "atoms",
+                                       "directory"})
 
 
 def _posdata_message(cell, n, bohr, tally=b""):

@@ -110,8 +110,11 @@ def wait_readable(sock, deadline, engine_failure):
         left = deadline - time.monotonic()
         if left <= 0:
             return "timeout"
-        ready, _, _ = select.select([sock], [], [], min(left, WAIT_SLICE))
-        if ready:
+        # poll, not select: select refuses a descriptor numbered 1024 or more ("filedescriptor
+        # out of range"), which a process with many files open gets for every new socket.
+        poller = select.poll()
+        poller.register(sock, select.POLLIN | select.POLLPRI)
+        if poller.poll(max(1, int(1000 * min(left, WAIT_SLICE)))):
             return None
         for check in list(_wait_checks):
             check()  # a stop request ends the wait (see add_wait_check)

@@ -77,6 +77,8 @@ from __future__ import annotations
 
 import os
 import shutil
+import socket
+import stat
 import subprocess
 import sys
 import tempfile
@@ -90,13 +92,15 @@ from ase.calculators.calculator import all_changes
 from rigidmd.core.checks import check_finite
 from rigidmd.ipi import IPICalculator
 from rigidmd.ipi.processes import descends_from as _descends_from
+from rigidmd.lammps.atomtypes import molecules_of
 from rigidmd.lammps.box import reduce_tilt
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
-from rigidmd.lammps.inprocess import LAMMPSCalculator, lower_triangular
+from rigidmd.lammps.inprocess import LAMMPSCalculator, check_kspace_parameters, lower_triangular
 from rigidmd.lammps.library import check_atom_types, flatten, mpich_prefix
 
 __all__ = ["LAMMPSEngine", "LAMMPS_IPI_BOHR", "LAMMPS_IPI_HARTREE", "answer_mismatch",
-           "default_poll_us", "lammps_executable", "reduce_tilt", "wrap_into_cell"]
+           "default_poll_us", "lammps_executable", "reduce_tilt", "sweep_stale_workdirs",
+           "wrap_into_cell"]
 
 #: Bohr (Å) in LAMMPS's ``fix ipi`` (``posconv`` for ``units metal``).
 LAMMPS_IPI_BOHR = 0.52917721
@@ -157,15 +161,23 @@ def wrap_into_cell(cell, positions):
 FIRST_ANSWER_RTOL = 1e-8
 
 
+def _same(a, b):
+    """Equal, or both NaN (an overlap's inf - inf), elementwise."""
+    return (a == b) | (np.isnan(a) & np.isnan(b))
+
+
 def answer_mismatch(energy, forces, ref_energy, ref_forces):
     """Why ``energy`` (eV; None: not computed) and ``forces`` (eV/Å) are not those of the
     reference, or None."""
     scale = max(abs(ref_energy), 1.0)
-    if energy is not None and not abs(energy - ref_energy) <= FIRST_ANSWER_RTOL * scale:
+    if energy is not None and not _same(energy, ref_energy) \
+            and not abs(energy - ref_energy) <= FIRST_ANSWER_RTOL * scale:
         return (f"its energy {energy:.10g} eV differs from {ref_energy:.10g} eV, LAMMPS's in "
                 "this process for the same atoms")
-    gap = np.abs(forces - ref_forces).max(axis=1)
-    bad = np.flatnonzero(~(gap <= FIRST_ANSWER_RTOL * max(np.abs(ref_forces).max(), 1.0)))
+    with np.errstate(invalid="ignore"):  # equal infinities (and NaNs) are equal answers
+        gap = np.where(_same(forces, ref_forces), 0.0, np.abs(forces - ref_forces)).max(axis=1)
+    finite = np.abs(ref_forces[np.isfinite(ref_forces)])
+    bad = np.flatnonzero(~(gap <= FIRST_ANSWER_RTOL * max(finite.max(initial=0.0), 1.0)))
     if bad.size:
         zero = int(np.count_nonzero(~np.any(forces, axis=1)))
         extra = f"; it gave zero force on {zero} of {len(forces)} atoms" if zero else ""
@@ -277,16 +289,41 @@ def _extra_number(extra, name):
         return None
 
 
-def _checked_signature(atoms):
+def _checked_signature(atoms, molecules):
     """What makes ``atoms`` another system for an engine, once they are checked: a periodic
     cell, and finite positions and cell (a NaN or infinity killed a running engine with
-    "Out of range atoms": refused here first, as LAMMPSCalculator refuses it)."""
+    "Out of range atoms": refused here first, as LAMMPSCalculator refuses it).  As
+    LAMMPSCalculator's: the number, kinds and charges of the atoms, and their molecules
+    (``molecules``: as :func:`~rigidmd.lammps.atomtypes.molecules_of` found them, or None),
+    which decide the pairs excluded."""
     if not atoms.pbc.all():
         raise ValueError(f"LAMMPSEngine: needs a periodic cell in all directions (pbc "
                          f"{atoms.pbc.tolist()}); use LAMMPSCalculator for a cluster")
     check_finite(atoms.positions, "position", "Å", "given to LAMMPSEngine")
     check_finite(atoms.cell.array, "cell", "Å", "given to LAMMPSEngine")
-    return len(atoms), atoms.numbers.tobytes(), atoms.get_initial_charges().tobytes()
+    return (len(atoms), atoms.numbers.tobytes(), atoms.get_initial_charges().tobytes(),
+            None if molecules is None else molecules.tobytes())
+
+
+def _frame_rotation(cell):
+    return lower_triangular(cell)[0]
+
+
+def _reduced_lower(cell):
+    return np.tril(reduce_tilt(cell)[0])
+
+
+def _lattice(cell):
+    return reduce_tilt(lower_triangular(cell)[1])
+
+
+def _lammps_path(path, field):
+    """``path`` as one word of a LAMMPS input line (quoted: a space would split it)."""
+    text = str(path)
+    if '"' in text:
+        raise ValueError(f"LAMMPSEngine: {field} {text!r} has a double quote, which a LAMMPS "
+                         "input line cannot carry; use another folder")
+    return f'"{text}"'
 
 
 class _PerCell:
@@ -307,14 +344,18 @@ class _PerCell:
         return self.value
 
 
-def _engine_input(commands, options, kspace_parameters, fix, triclinic_box):
+def _engine_input(commands, options, kspace_parameters, fix, triclinic_box,
+                  data="engine.data"):
     """The lines of ``in.engine``: box and data file, neighbour settings, interactions,
     the k-space parameters, the engine's fix (``fix``: its lines) and the long run.
 
-    ``triclinic_box``: turn an orthogonal box of the data file triclinic.
+    ``triclinic_box``: turn an orthogonal box of the data file triclinic.  ``data``: the
+    data file as the engine reads it (an absolute path, quoted, for an engine launched
+    here, which runs in this process's folder so that the commands' own relative paths
+    read what LAMMPSCalculator reads).
     """
     lines = ["units metal", "atom_style full", "atom_modify map array",
-             "boundary p p p", "read_data engine.data"]
+             "boundary p p p", f"read_data {data}"]
     if triclinic_box:
         lines.append("change_box all triclinic")
     lines += [f"neighbor {options['skin']:.17g} bin", "neigh_modify every 1 delay 0 check yes"]
@@ -325,6 +366,44 @@ def _engine_input(commands, options, kspace_parameters, fix, triclinic_box):
         lines.append(kspace_parameters)
     return lines + ["thermo_style custom step pe", "thermo_modify norm no lost error flush yes",
                     "thermo 0", *fix, f"run {_RUN_STEPS}"]
+
+
+_WORKDIR_PREFIX = "rigidmd-lammps-"
+_KEPT = "KEPT-FOR-ITS-LOG"
+
+
+def _fresh_log(workdir):
+    """``log.lammps`` in ``workdir``, or ``log-2.lammps``, ... when an earlier engine's is
+    there (a failed engine's log, which its error named, is never written over)."""
+    log, n = Path(workdir) / "log.lammps", 1
+    while log.exists():
+        n += 1
+        log = Path(workdir) / f"log-{n}.lammps"
+    return log
+
+
+def sweep_stale_workdirs(tmp=None):
+    """Remove the temporary folders of engines whose process was killed (SIGKILL leaves
+    them: nothing runs to remove them), this user's only; a failed engine's folder,
+    which its error named, is kept.  The folders are ``rigidmd-lammps-<pid>-*`` in the
+    temporary directory; the process ``pid`` is checked to be gone."""
+    tmp = Path(tmp or tempfile.gettempdir())
+    uid = os.getuid()
+    for folder in tmp.glob(f"{_WORKDIR_PREFIX}*-*"):
+        pid = folder.name[len(_WORKDIR_PREFIX):].split("-")[0]
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            info = folder.lstat()
+            os.kill(int(pid), 0)
+            continue  # alive
+        except ProcessLookupError:
+            pass
+        except OSError:
+            continue  # another user's process, or the folder is gone
+        if (info.st_uid == uid and stat.S_ISDIR(info.st_mode)
+                and not (folder / _KEPT).exists()):
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 class LAMMPSEngine(IPICalculator):
@@ -338,7 +417,7 @@ class LAMMPSEngine(IPICalculator):
         MPI ranks: ``mpirun -np processes lmp`` (the ``mpich`` wheel's).
     threads : int, optional
         OpenMP threads per rank (``-sf omp -pk omp threads``).
-    atom_types, molecule_ids, exclude_intramolecular, ase_constants, skin
+    atom_types, molecule_ids, exclude_intramolecular, ase_constants, skin, kspace_parameters
         As for :class:`~rigidmd.lammps.LAMMPSCalculator`.
     triclinic : bool, optional
         Start LAMMPS with a triclinic box even when the first cell is
@@ -348,13 +427,19 @@ class LAMMPSEngine(IPICalculator):
         Start the engine here.  With False, the input (``in.engine``) and data
         file are written to ``workdir`` and the engine, started elsewhere
         (``[mpirun -np N] lmp -in in.engine``, from that folder), must
-        connect within ``connect_timeout``.
+        connect within ``connect_timeout``.  A launched engine runs in this
+        process's current folder (relative file names in ``commands`` read what
+        LAMMPSCalculator reads), its input, data file and log in ``workdir``.
     unixsocket, port, host, timeout, connect_timeout
         See :class:`~rigidmd.ipi.IPICalculator`; ``host`` is also the name the
         engine connects to.  Default: a fresh Unix socket.
     workdir : path, optional
         Where the input, data file and LAMMPS's log go (default: a new
-        temporary directory, removed by :meth:`close` unless the engine failed).
+        temporary directory, removed by :meth:`close` unless the engine failed;
+        one left by a process that was killed is removed by the next engine).
+        A later engine in the same ``workdir`` writes its log beside the earlier
+        ones (``log.lammps``, ``log-2.lammps``, ...): a failed engine's log,
+        which its error names, is kept.
     poll_us : int, optional
         With ``fix rigidmd/ipi``: the longest nap (microseconds) of a rank
         other than 0 waiting for the next call (it naps to three quarters of
@@ -373,14 +458,16 @@ class LAMMPSEngine(IPICalculator):
     counts LAMMPS's neighbour-list builds, :attr:`broadcast_us` what the
     waiting ranks' naps cost a call (``fix rigidmd/ipi`` only).  The
     k-space parameters are those LAMMPS chooses for the first cell, fixed
-    (:attr:`kspace_parameters`) and kept by every later engine of this object.
+    (:attr:`kspace_parameters`) and kept by every later engine of this object
+    for the same atoms; other atoms (another number, kind, charges or
+    molecules) get their own, unless they were given, as LAMMPSCalculator's.
     """
 
     def __init__(self, commands, *, processes=1, threads=None, atom_types=None,
                  molecule_ids=None, exclude_intramolecular=True, ase_constants=False,
                  skin=2.0, triclinic=None, launch=True, unixsocket=None, port=None,
                  host="localhost", timeout=120.0, connect_timeout=None, workdir=None,
-                 poll_us=None, **kwargs):
+                 poll_us=None, kspace_parameters=None, **kwargs):
         super().__init__(unixsocket, port=port, host=host, timeout=timeout,
                          connect_timeout=connect_timeout, bohr=LAMMPS_IPI_BOHR,
                          hartree=LAMMPS_IPI_HARTREE, **kwargs)
@@ -403,8 +490,9 @@ class LAMMPSEngine(IPICalculator):
         #: The engine's fix: ``"rigidmd/ipi"`` or ``"ipi"`` (None before the first input).
         self.engine_fix = None
         self._library = None
-        #: The ``kspace_modify`` command fixing the k-space parameters (None before).
-        self.kspace_parameters = None
+        self._kspace_parameters = None
+        self._pinned_for = None  # the system whose first cell chose the k-space parameters
+        self.kspace_parameters = kspace_parameters
         #: LAMMPS's log of the current (or last failed) engine.
         self.log = None
         self._intruder = None  # a process check_peer refused
@@ -412,11 +500,32 @@ class LAMMPSEngine(IPICalculator):
         self._workdir = None
         self._engine_triclinic = None
         self._signature = None
+        self._grouping_checked = None
         self._flips = None
         self._reference = None  # (energy, forces) of the in-process probe at the first call
-        self._frame = _PerCell(lambda c: lower_triangular(c)[0])
-        self._engine_cell = _PerCell(lambda c: np.tril(reduce_tilt(c)[0]))
-        self._lattice = _PerCell(lambda c: reduce_tilt(lower_triangular(c)[1]))
+        self._frame = _PerCell(_frame_rotation)
+        self._engine_cell = _PerCell(_reduced_lower)
+        self._lattice = _PerCell(_lattice)
+
+    @property
+    def kspace_parameters(self):
+        """The ``kspace_modify`` command fixing the k-space parameters (str or None).
+
+        Chosen by LAMMPS for the first cell of the atoms (in this process, before the
+        engine starts) and kept for them; other atoms get their own.  Set (here or to the
+        constructor): kept for any atoms, and a running engine is stopped, so that the
+        next call starts one with them (as :attr:`LAMMPSCalculator.kspace_parameters
+        <rigidmd.lammps.LAMMPSCalculator.kspace_parameters>`).
+        """
+        return self._kspace_parameters
+
+    @kspace_parameters.setter
+    def kspace_parameters(self, value):
+        check_kspace_parameters(value, "LAMMPSEngine")
+        if value != self._kspace_parameters and self.connected:
+            self.close()  # the next call starts an engine with these parameters
+        self._kspace_parameters = value
+        self._pinned_for = None  # given: kept for any system
 
     # ------------------------------------------------------------ the input
     def _choose_fix(self):
@@ -436,11 +545,14 @@ class LAMMPSEngine(IPICalculator):
         return self.engine_fix
 
     def _fix_ipi(self):
-        address = f"{self.unixsocket} 0 unix" if self.port is None else f"{self.host} {self.port}"
+        host = self.host
+        if host in ("", "0.0.0.0"):  # the server listens on every interface: the engine
+            host = "localhost" if self.launch_engine else socket.gethostname()  # needs a name
+        address = f"{self.unixsocket} 0 unix" if self.port is None else f"{host} {self.port}"
         if self._choose_fix() == "ipi":
             return [f"fix rmd_ipi all ipi {address}"]
         library = self._library
-        return [f"plugin load {library}",
+        return [f"plugin load {_lammps_path(library, 'the plugin library')}",
                 f"fix rmd_ipi all rigidmd/ipi {address} bohr {units.Bohr!r} hartree "
                 f"{units.Hartree!r} poll {self.poll_us}"]
 
@@ -480,23 +592,30 @@ class LAMMPSEngine(IPICalculator):
             # (one LAMMPS call: LAMMPSCalculator computes the forces with the energy)
             self._reference = (probe.get_potential_energy(atoms), probe.get_forces(atoms).copy())
             probe.write_data(atoms, directory / "engine.data")
-            if self.kspace_parameters is None:
-                self.kspace_parameters = probe.kspace_parameters
+            if self.kspace_parameters is None and probe.kspace_parameters is not None:
+                self._kspace_parameters = probe.kspace_parameters
+                self._pinned_for = self._signature  # chosen for these atoms
         finally:
             del probe
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
         self._engine_triclinic = bool(self.triclinic) or tilted
+        data = (_lammps_path((directory / "engine.data").resolve(), "workdir")
+                if self.launch_engine else "engine.data")
         lines = _engine_input(self.commands, self.calculator_options, self.kspace_parameters,
-                             self._fix_ipi(), self._engine_triclinic and not tilted)
+                             self._fix_ipi(), self._engine_triclinic and not tilted, data)
         path = directory / "in.engine"
         path.write_text("\n".join(lines) + "\n")
         return path
 
-    def command_line(self):
-        """The engine's command line (``[mpirun -np N] lmp -in in.engine ...``) and env."""
+    def command_line(self, folder=None, log="log.lammps"):
+        """The engine's command line (``[mpirun -np N] lmp -in in.engine ...``) and env.
+
+        ``folder``: where the input is and the log goes, for an engine run elsewhere
+        (None: names relative to the folder it runs in)."""
         lmp, env = lammps_executable()
-        cmd = [str(lmp), "-in", "in.engine", "-log", "log.lammps", "-screen", "none",
-               "-nocite"]
+        where = Path(folder).resolve() if folder is not None else Path()
+        cmd = [str(lmp), "-in", str(where / "in.engine"), "-log", str(where / log),
+               "-screen", "none", "-nocite"]
         if self.threads is not None:
             cmd += ["-sf", "omp", "-pk", "omp", str(self.threads)]
         env["OMP_NUM_THREADS"] = str(self.threads or 1)
@@ -509,7 +628,8 @@ class LAMMPSEngine(IPICalculator):
         if self.workdir is not None:
             workdir = self.workdir
         else:
-            workdir = Path(tempfile.mkdtemp(prefix="rigidmd-lammps-"))
+            sweep_stale_workdirs()
+            workdir = Path(tempfile.mkdtemp(prefix=f"{_WORKDIR_PREFIX}{os.getpid()}-"))
         self._workdir = workdir
         try:
             self.write_input(atoms, workdir)
@@ -517,8 +637,8 @@ class LAMMPSEngine(IPICalculator):
             # Nothing ran in the folder (the error names what is wrong): not left behind.
             self._remove_workdir()
             raise
-        self.log = workdir / "log.lammps"
-        cmd, env = self.command_line()
+        self.log = _fresh_log(workdir)
+        cmd, env = self.command_line(workdir if self.launch_engine else None, self.log.name)
         if self.launch_engine:
             warn_oversubscription(self.processes, self.threads)
         if not self.launch_engine:
@@ -528,7 +648,7 @@ class LAMMPSEngine(IPICalculator):
         with open(workdir / "engine.err", "wb") as err:
             self._proc = subprocess.Popen([sys.executable, str(_WATCHDOG)] + cmd,
                                           stdin=subprocess.PIPE, stdout=err, stderr=err,
-                                          cwd=workdir, env=env)
+                                          env=env)
 
     def _remove_workdir(self):
         """Remove the engine's temporary folder (never a ``workdir`` given by the user)."""
@@ -641,6 +761,13 @@ class LAMMPSEngine(IPICalculator):
                 proc.wait()
         if not keep_files:
             self._remove_workdir()
+        elif self.workdir is None and self._workdir is not None and self._workdir.exists():
+            (self._workdir / _KEPT).write_text("this engine failed; its error named this "
+                                              "folder, kept for its log\n")
+        self._workdir = None
+
+    def _forget_engine(self):
+        self._proc = None  # (the parent's: its watchdog and folder stay the parent's)
         self._workdir = None
 
     def get_checkpoint_state(self):
@@ -663,7 +790,9 @@ class LAMMPSEngine(IPICalculator):
     # ------------------------------------------------------------ ASE
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         target = atoms if atoms is not None else self.atoms
-        signature = _checked_signature(target)
+        molecules, source, self._grouping_checked = molecules_of(
+            target, self.calculator_options["molecule_ids"], self._grouping_checked)
+        signature = _checked_signature(target, None if source is None else molecules)
         cell, flips = self._lattice(target.cell.array)
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
         # (at a flip fix rigidmd/ipi re-maps the atoms on up to 2 ranks; fix ipi cannot)
@@ -675,5 +804,9 @@ class LAMMPSEngine(IPICalculator):
             self.close()
             if tilted:
                 self.triclinic = True
+        if self._pinned_for is not None and self._pinned_for != signature:
+            # Other atoms: LAMMPS chooses their k-space parameters anew (LAMMPSCalculator's
+            # rule), as it did for the first ones.
+            self._kspace_parameters = self._pinned_for = None
         self._signature = signature
         super().calculate(atoms, properties, system_changes)

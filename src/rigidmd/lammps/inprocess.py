@@ -66,7 +66,7 @@ from rigidmd.lammps.library import (
     load_lammps,
 )
 
-__all__ = ["LAMMPSCalculator", "lower_triangular"]
+__all__ = ["LAMMPSCalculator", "check_kspace_parameters", "lower_triangular"]
 
 _COULOMB = ("coul", "kspace_style", "tip4p")
 #: LAMMPS's pressure components (xx yy zz xy xz yz) in ASE's Voigt order (xx yy zz yz xz xy).
@@ -78,6 +78,15 @@ def _threads(threads):
         raise ValueError(f"LAMMPSCalculator: threads must be a positive whole number, got "
                          f"{threads!r}")
     return int(threads)
+
+
+def check_kspace_parameters(value, owner):
+    """Refuse ``value`` unless it is one ``kspace_modify gewald ...`` command or None
+    (``owner``: the class named in the message)."""
+    if value is not None and (not isinstance(value, str) or "\n" in value
+                              or value.split()[:2] != ["kspace_modify", "gewald"]):
+        raise ValueError(f"{owner}: kspace_parameters must be one "
+                         f"'kspace_modify gewald ...' command or None, got {value!r}")
 
 
 class LAMMPSCalculator(Calculator):
@@ -182,10 +191,7 @@ class LAMMPSCalculator(Calculator):
 
     @kspace_parameters.setter
     def kspace_parameters(self, value):
-        if value is not None and (not isinstance(value, str) or "\n" in value
-                                  or value.split()[:2] != ["kspace_modify", "gewald"]):
-            raise ValueError("LAMMPSCalculator: kspace_parameters must be one "
-                             f"'kspace_modify gewald ...' command or None, got {value!r}")
+        check_kspace_parameters(value, "LAMMPSCalculator")
         if value != self._kspace_parameters:
             self._close()  # the next call sets up LAMMPS with these parameters
         self._kspace_parameters = value
