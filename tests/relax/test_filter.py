@@ -395,3 +395,54 @@ def test_a_degenerate_cell_is_one_line_of_rigidmd_s(cell, said, cell_mode):
         relax(atoms, cell=cell_mode, steps=2)
     assert "\n" not in str(err.value)
     np.testing.assert_array_equal(atoms.positions, before)
+
+
+def test_atoms_moved_from_outside_are_refused_not_put_back():
+    """A body moved through ``atoms.positions`` after the filter placed it was moved back
+    by the filter's next call, with the energy of the old places (-0.80 eV against -0.35
+    for the atoms as set): now refused in one line naming the atom."""
+    from ase.optimize import BFGS
+
+    atoms = water_cluster(4, seed=1)
+    atoms.calc = TIP3P(rc=40.0)
+    view = RigidFilter(atoms, bodies="tags")
+    BFGS(view, logfile=None).run(fmax=0.05, steps=3)
+    atoms.positions[:3] += [5.0, 0.0, 0.0]
+    with pytest.raises(ValueError, match=r"^RigidFilter: the atoms were moved since the "
+                                         r"filter placed them \(atom 0 by 5 Å\); .*make a new "
+                                         r"RigidFilter for the moved atoms$"):
+        view.get_forces()
+    np.testing.assert_allclose(RigidFilter(atoms, bodies="tags").get_potential_energy(),
+                               atoms.get_potential_energy())  # a new filter reads them
+    fresh = water_cluster(4, seed=1)
+    fresh.calc = TIP3P(rc=40.0)
+    view = RigidFilter(fresh, bodies="tags")
+    fresh.positions[4, 0] += 0.1  # before the first call too
+    with pytest.raises(ValueError, match=r"\(atom 4 by 0.1 Å\)"):
+        view.get_potential_energy()
+
+
+def test_cell_filters_pressure_without_cell_no_atoms_and_fmax_are_one_line():
+    """ASE's FrechetCellFilter around the filter failed with "no attribute 'copy'";
+    ``scalar_pressure`` without ``cell`` was ignored in silence; no atoms gave a numpy
+    reduction error mid-relaxation, ``fmax="0.05"`` numpy's TypeError."""
+    from ase.filters import FrechetCellFilter, UnitCellFilter
+
+    atoms = water_cluster(2, seed=1)
+    atoms.calc = TIP3P(rc=40.0)
+    for wrapper in (FrechetCellFilter, UnitCellFilter):
+        with pytest.raises(TypeError, match=r"^RigidFilter: ASE's cell filters "
+                                            r"\(FrechetCellFilter, UnitCellFilter\) cannot wrap "
+                                            r"it; relax the cell with RigidFilter\(atoms, "
+                                            r"bodies, cell='full'\)"):
+            wrapper(RigidFilter(atoms, bodies="tags"))
+    with pytest.raises(ValueError, match=r"^RigidFilter: scalar_pressure=1.0 eV/Å³ acts only "
+                                         r"on a relaxing cell; give cell"):
+        relax(atoms, "tags", scalar_pressure=1.0)
+    empty = Atoms()
+    empty.calc = TIP3P()
+    with pytest.raises(ValueError, match="^RigidFilter: no atoms to relax$"):
+        relax(empty)
+    for fmax in ("0.05", True, float("nan"), 0.0):
+        with pytest.raises(ValueError, match=r"^relax: fmax=.* must be a positive number"):
+            relax(atoms, "tags", fmax=fmax)

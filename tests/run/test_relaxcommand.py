@@ -432,7 +432,8 @@ def test_an_optimizer_s_exception_is_one_line_with_the_structure_reached(
         assert main([command, str(config), "--overwrite"]) == 1
         err = capsys.readouterr().err.strip().splitlines()[-1]
         trajectory = tmp_path / "out" / "relax.traj"
-        assert err == (f"rigidmd: run stopped: relax: PreconLBFGS failed after step 3 "
+        said = "relax stopped:" if command == "relax" else "run stopped: relax:"
+        assert err == (f"rigidmd: {said} PreconLBFGS failed after step 3 "
                        f"(RuntimeError: LineSearch failed!); the atoms are back at the "
                        f"structure of step 3, the last frame of {trajectory}; continue with: "
                        f"rigidmd {command} {config}{outdir[command]} --resume"), err
@@ -570,7 +571,7 @@ def test_a_full_disk_while_relaxing_names_the_file(tmp_path, monkeypatch, capsys
     assert main(["relax", str(config)]) == 1  # as a failed write of rigidmd run
     err = capsys.readouterr().err.strip().splitlines()[-1]
     path = tmp_path / "out" / ("relax.traj" if where == "trajectory" else "relax.log")
-    assert err.startswith(f"rigidmd: run stopped: relax: cannot write {path}: the disk is full; "
+    assert err.startswith(f"rigidmd: relax stopped: cannot write {path}: the disk is full; "
                           f"continue with: rigidmd relax {config}"), err
 
 
@@ -701,3 +702,90 @@ def test_rigidmd_relax_resume_refuses_another_cell_or_pressure(tmp_path, change,
     with pytest.raises(RelaxationNotConverged):
         relax_only(tighter, out, mode="resume")
     assert "continuing with the optimizer's memory" in out.getvalue(), out.getvalue()
+
+
+@pytest.mark.parametrize("relax, outputs, message", [
+    ("trajectory: relax.log", "", "relax.log: relax.log is also relax.trajectory"),
+    ("log: relax.state.npz", "", "relax.log: relax.state.npz is also the relaxation's state "
+                                 "file (beside relax.trajectory)"),
+    ("trajectory: md.traj", "", "relax.trajectory: md.traj is also outputs.trajectory"),
+    ("log: md.log", "", "relax.log: md.log is also outputs.log"),
+    ("trajectory: checkpoint.npz", "", "relax.trajectory: checkpoint.npz is also "
+                                       "outputs.checkpoint"),
+    ("trajectory: sub/x.traj", "", "relax.trajectory: the folder"),
+    ("log: .rigidmd.lock", "", "relax.log: .rigidmd.lock is also the lock file"),
+])
+def test_relaxation_outputs_on_one_path_are_refused_before_anything_is_written(
+        tmp_path, relax, outputs, message):
+    """Nothing checked the relaxation's outputs against each other or the run's: the
+    trajectory replaced the log, the MD trajectory replaced the relaxation's frames, a log
+    named as the state file was deleted at convergence (all with exit status 0), and a
+    trajectory in a missing folder failed after the log was created."""
+    text = RELAX_CONFIG.replace("STEPS", "50").replace("optimizer: FIRE}",
+                                                        f"optimizer: FIRE, {relax}}}")
+    (tmp_path / "relax.yaml").write_text(text)
+    for command in ("run", "relax"):
+        if command == "relax" and "outputs." in message:
+            continue  # rigidmd relax writes no MD outputs
+        result = rigidmd(command, "relax.yaml", cwd=tmp_path)
+        assert result.returncode == 2, (command, result.stderr)
+        assert result.stderr.strip() == f"rigidmd: error: {message}" or \
+            result.stderr.strip().startswith(f"rigidmd: error: {message}"), result.stderr
+        assert len(result.stderr.strip().splitlines()) == 1
+        assert not (tmp_path / "out").exists()
+
+
+def test_relax_overwrite_keeps_the_earlier_relaxation_when_the_new_one_is_refused(tmp_path):
+    """``rigidmd relax --overwrite`` deleted the earlier relaxation, then refused the new
+    one (a cell relaxation without stress; a FixAtoms holding part of a body), leaving an
+    empty relax.log; and without --overwrite it made the directory and an empty log."""
+    from ase.constraints import FixAtoms
+    from ase.io import write
+
+    (tmp_path / "relax.yaml").write_text(RELAX_CONFIG.replace("STEPS", "5"))
+    result = rigidmd("relax", "relax.yaml", cwd=tmp_path)
+    assert result.returncode == 1, result.stderr  # 5 steps: not converged, frames kept
+    before = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
+    assert "relax.traj" in before
+    start = water_cluster(6, seed=2)
+    start.set_constraint(FixAtoms(indices=[0, 1]))  # part of body 0
+    write(tmp_path / "fixed.traj", start)
+    for structure, message in (
+            (None, None),
+            ("fixed.traj", "relax: RigidFilter: FixAtoms holds some but not all atoms of "
+                           "body 0")):
+        text = RELAX_CONFIG.replace("STEPS", "5")
+        if structure:
+            text = text.replace("{builtin: water_cluster, n_molecules: 6, seed: 2}", structure)
+        else:
+            text = text.replace("{builtin: water_cluster, n_molecules: 6, seed: 2}",
+                                "{builtin: water_box, n_side: 2}").replace(
+                "optimizer: FIRE}", "optimizer: FIRE, cell: iso}").replace("rc: 40.0", "rc: 3.0")
+            message = "relax.cell: iso relaxes the cell, which needs the stress"
+        (tmp_path / "other.yaml").write_text(text)
+        for flags in (["--overwrite"], ["--outdir", "new"]):
+            result = rigidmd("relax", "other.yaml", *flags, cwd=tmp_path)
+            assert result.returncode == 2 and message in result.stderr, result.stderr
+            assert {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()} == before
+            assert not (tmp_path / "new").exists()
+
+
+def test_the_relaxation_log_keeps_up_with_its_trajectory(tmp_path, monkeypatch):
+    """relax.log was block-buffered: a relaxation killed outright (103 frames written) left
+    it empty.  Each step's line is in the file when the step's frame is."""
+    import io
+
+    from rigidmd.run.relaxcommand import relax_only
+
+    seen = []
+    original = RigidFilter.get_forces
+
+    def get_forces(self, *args, **kwargs):
+        log = tmp_path / "out" / "relax.log"
+        if log.exists():
+            seen.append(len(log.read_text().splitlines()))
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(RigidFilter, "get_forces", get_forces)
+    assert relax_only(relax_config(tmp_path, steps=2000), io.StringIO()) == 0
+    assert max(seen) > 10  # lines were on disk while the relaxation ran

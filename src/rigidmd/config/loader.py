@@ -290,4 +290,12 @@ def check_config(config, trust=False):
     checked = RunConfig(**{name: section.from_config(config, base)
                            for name, section in _SECTIONS.items()})
     checked.calculator.check_trust(trust)
+    if checked.relax is not None:
+        outputs = checked.outputs
+        others = {f"outputs.{key}": getattr(outputs, key)
+                  for key in ("trajectory", "log", "plot", "mdanalysis", "checkpoint")
+                  if getattr(outputs, key) is not None}
+        if outputs.mdanalysis is not None:
+            others["the MDAnalysis topology"] = outputs.mdanalysis.with_suffix(".psf")
+        checked.relax.check_paths(outputs.directory, others)
     return checked

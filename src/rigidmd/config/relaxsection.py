@@ -18,6 +18,7 @@ resume), then draws velocities and runs MD from the relaxed structure;
 """
 
 from dataclasses import dataclass
+from pathlib import Path
 
 from rigidmd.config.quantities import (
     PRESSURE_UNITS,
@@ -107,6 +108,40 @@ class RelaxSection:
                     raise ConfigError(f"relax.{key}: expected a file name, got {name!r}")
                 setattr(out, key, name)
         return out
+
+    def check_paths(self, directory, others=None) -> None:
+        """Refuse in one line, before anything is written, relaxation outputs that would
+        overwrite each other or another output (``others``: field -> path, the run's), a
+        folder given as a file, or a folder that does not exist.
+
+        The relaxation writes ``trajectory``, ``log`` and, beside the trajectory, its
+        state file (``relax.traj`` -> ``relax.state.npz``) in ``directory``, which also
+        holds the lock file.
+        """
+        from rigidmd.config.sections import LOCK_NAME
+
+        directory = Path(directory)
+        claimed = {(directory / LOCK_NAME).resolve(): "the lock file"}
+        for name, path in (others or {}).items():
+            claimed.setdefault(Path(path).resolve(), name)
+        trajectory = directory / self.trajectory
+        paths = (("relax.trajectory", "relax.trajectory", trajectory),
+                 ("relax.trajectory", "the relaxation's state file (beside "
+                  "relax.trajectory)", trajectory.with_suffix(".state.npz")),
+                 ("relax.log", "relax.log", directory / self.log))
+        for field_name, what, path in paths:
+            resolved = path.resolve()
+            if resolved in claimed:
+                own = "its state file " if what.startswith("the relaxation's") else ""
+                raise ConfigError(f"{field_name}: {own}{path.name} is also "
+                                  f"{claimed[resolved]}; give each output its own file")
+            claimed[resolved] = what
+            if path.is_dir():
+                raise ConfigError(f"{field_name}: {path} is a folder; give a file name")
+            parent = resolved.parent
+            if parent != directory.resolve() and not parent.is_dir():
+                raise ConfigError(f"{field_name}: the folder {parent} does not exist; create "
+                                  "it, or put the file in outputs.directory")
 
     def check_structure(self, atoms) -> None:
         """Refuse in one line, before anything is written, a cell relaxation the structure

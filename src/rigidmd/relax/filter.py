@@ -42,6 +42,7 @@ rigidly with their body and the force on them enters its force and torque.
 """
 
 from dataclasses import dataclass
+from numbers import Real
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +68,11 @@ __all__ = ["RigidFilter", "relax", "Relaxation", "RelaxationFailed", "OPTIMIZERS
 
 #: Rotation (rad) beyond which a body's reference orientation is moved to its current one.
 ANCHOR_ANGLE = 2.5
+
+
+_NOT_IN_A_CELL_FILTER = ("RigidFilter: ASE's cell filters (FrechetCellFilter, UnitCellFilter) "
+                         "cannot wrap it; relax the cell with RigidFilter(atoms, bodies, "
+                         "cell='full') (or 'iso', 'aniso')")
 
 
 class RigidFilter(AtomsFacade):
@@ -109,10 +115,16 @@ class RigidFilter(AtomsFacade):
                  cell_factor=None):
         if atoms.calc is None:
             raise ValueError("RigidFilter: the atoms have no calculator")
+        if len(atoms) == 0:
+            raise ValueError("RigidFilter: no atoms to relax")
         mode = relaxcell.cell_mode(cell)
-        if not np.isfinite(scalar_pressure):
+        if isinstance(scalar_pressure, bool) or not isinstance(scalar_pressure, Real) \
+                or not np.isfinite(scalar_pressure):
             raise ValueError(f"RigidFilter: scalar_pressure={scalar_pressure!r} eV/Å³ is not "
-                             "finite")
+                             "a finite number")
+        if mode is None and scalar_pressure != 0:
+            raise ValueError(f"RigidFilter: scalar_pressure={scalar_pressure!r} eV/Å³ acts "
+                             "only on a relaxing cell; give cell (iso, aniso or full)")
         if mode is not None:
             if not atoms.pbc.all():
                 raise ValueError(f"RigidFilter: cell={cell!r} needs a cell periodic in all "
@@ -162,6 +174,7 @@ class RigidFilter(AtomsFacade):
         self._rows = {"translation_rows": np.concatenate([t, f]), "rotation_rows": r,
                       "rotation_centre": np.arange(len(r)), "cell_rows": c, "n_rows": len(x)}
         self._placed = None  # (positions array, r) last written, to notice outside moves
+        self._start_positions = atoms.positions.copy()  # (the same, before the first)
         self._results = {}  # coordinates (bytes) -> {energy, free_energy, forces}, at most 2
         self.constraints = []
         self.info = atoms.info
@@ -227,6 +240,16 @@ class RigidFilter(AtomsFacade):
             block = self._x[rows]
             block[mask] = fixed[rows][mask]
         self._place()
+
+    def copy(self):
+        """Refused: ASE's cell filters (``FrechetCellFilter``, ``UnitCellFilter``) copy the
+        atoms they wrap, and a filter holds coordinates no copy could keep."""
+        raise TypeError(_NOT_IN_A_CELL_FILTER)
+
+    @property
+    def arrays(self):
+        """Refused, as :meth:`copy` (ASE's cell filters take the wrapped atoms' arrays)."""
+        raise TypeError(_NOT_IN_A_CELL_FILTER)
 
     def _reanchor(self):
         if not self.model.n_bodies:
@@ -319,8 +342,24 @@ class RigidFilter(AtomsFacade):
         return mask
 
     def _current(self):
-        """The placement of the current coordinates, placing them first if needed."""
-        if self._placed is None or not np.array_equal(self._placed[0], self.atoms.positions):
+        """The placement of the current coordinates, placing them first if needed.
+
+        Atoms moved from outside since the filter placed them (or since it was made) are
+        refused: the filter holds the bodies' coordinates and would put the atoms back in
+        silence (a body moved by 5 Å was moved back, with the energy of the old places).
+        """
+        last = self._start_positions if self._placed is None else self._placed[0]
+        positions = self.atoms.positions
+        if last.shape != positions.shape or not np.array_equal(last, positions):
+            if last.shape != positions.shape:
+                where = f"{len(positions)} atoms where it had {len(last)}"
+            else:
+                moved = np.linalg.norm(positions - last, axis=1)
+                where = f"atom {int(np.argmax(moved))} by {moved.max():.3g} Å"
+            raise ValueError(f"RigidFilter: the atoms were moved since the filter placed them "
+                             f"({where}); it holds the bodies' coordinates and would put them "
+                             "back: make a new RigidFilter for the moved atoms")
+        if self._placed is None:
             self._place()
         return self._placed
 
@@ -610,9 +649,11 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
     rigidmd.core.forces.NonFiniteForceError
         The calculator returned NaN or infinite forces; the atoms as above.
     """
-    if not (np.isfinite(fmax) and fmax > 0):
-        raise ValueError(f"relax: fmax={fmax!r} eV/Å must be positive")
-    if int(steps) != steps or steps < 0:
+    if isinstance(fmax, bool) or not isinstance(fmax, Real) or not (np.isfinite(fmax)
+                                                                   and fmax > 0):
+        raise ValueError(f"relax: fmax={fmax!r} must be a positive number (eV/Å)")
+    if isinstance(steps, bool) or not isinstance(steps, Real) or int(steps) != steps \
+            or steps < 0:
         raise ValueError(f"relax: steps={steps!r} must be a whole number >= 0")
     if int(first_step) != first_step or first_step < 0:
         raise ValueError(f"relax: first_step={first_step!r} must be a whole number >= 0")

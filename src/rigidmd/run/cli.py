@@ -282,6 +282,15 @@ def _further_ctrl_c_ignored():
             signal.signal(signal.SIGINT, previous)
 
 
+def _stopped(command, err):
+    """The line for a command that started and stopped: ``rigidmd: run stopped: ...``, or
+    ``rigidmd: relax stopped: ...`` for ``rigidmd relax`` (whose messages say ``relax:``)."""
+    if command != "relax":
+        return f"rigidmd: run stopped: {err}"
+    text = str(err)
+    return f"rigidmd: relax stopped: {text.removeprefix('relax: ')}"
+
+
 def main(argv=None):
     """Entry point of the ``rigidmd`` console script; returns the exit status."""
     args = _parser().parse_args(argv)
@@ -342,7 +351,7 @@ def main(argv=None):
     except RunStopped as err:
         # The run started and stopped: a failed write, a failure in a step.  The message
         # names the step and the checkpoint to continue from.
-        print(f"rigidmd: run stopped: {err}", file=sys.stderr)
+        print(_stopped(args.command, err), file=sys.stderr)
         return 1
     except LammpsError as err:
         if os.environ.get("RIGIDMD_DEBUG"):
@@ -363,7 +372,7 @@ def main(argv=None):
     except (NonFiniteForceError, ConvergenceError, RelaxationNotConverged,
             RelaxationFailed) as err:
         # The run stopped; its outputs and checkpoint hold every step before the failure.
-        print(f"rigidmd: run stopped: {err}", file=sys.stderr)
+        print(_stopped(args.command, err), file=sys.stderr)
         return 1
     except OSError as err:
         if os.environ.get("RIGIDMD_DEBUG"):

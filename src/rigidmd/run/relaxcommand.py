@@ -71,8 +71,14 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     section = RelaxSection.from_config(raw, base) or RelaxSection()
     atoms = structure.build_atoms()  # every input is read before any output is touched
     bodies = structure.resolve_bodies(atoms)
-    section.check_structure(atoms)
     directory = outputs.directory
+    section.check_paths(directory)
+    # The calculator before any output is touched: the checks that need it (a cell
+    # relaxation's stress, the constraints on the bodies) refuse here, never after an
+    # earlier relaxation was replaced.  (An engine starts at the first force call.)
+    atoms.calc = calculator.build(atoms, directory / "engine")
+    section.check_structure(atoms)
+    _check_relaxable(atoms, bodies, section)
     trajectory, log = directory / section.trajectory, directory / section.log
     state = state_path(trajectory)
     source = structure.source if isinstance(structure.source, Path) else None
@@ -97,7 +103,6 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
                                   "continue it with --resume or replace it with --overwrite")
             for path in existing:
                 path.unlink()
-        atoms.calc = calculator.build(atoms, directory / "engine")
         # Installed before the relaxation's own handlers and kept after them: a signal once
         # the relaxation has ended is noted, never a kill without a word (exit -15).
         after = StopSignals()
@@ -124,6 +129,20 @@ def relax_only(raw, stream=sys.stdout, trust=False, mode="new", config_path=None
     finally:
         lock.release()
     return 0
+
+
+def _check_relaxable(atoms, bodies, section):
+    """What the relaxation's filter refuses (a constraint holding part of a body, a cell
+    relaxation without stress), refused now, on a copy, before any output is touched."""
+    from rigidmd.config.quantities import ConfigError
+    from rigidmd.relax.filter import RigidFilter
+
+    probe = atoms.copy()
+    probe.calc = atoms.calc
+    try:
+        RigidFilter(probe, bodies, cell=section.cell, scalar_pressure=section.pressure)
+    except ValueError as err:
+        raise ConfigError(f"relax: {err}") from None
 
 
 def _close(calc):
@@ -155,10 +174,12 @@ def relax_for_export(config, atoms, bodies, directory, stream=sys.stdout):
     """
     from rigidmd.core.velocities import rigid_maxwell_boltzmann
 
-    config.relax.check_structure(atoms)  # before the directory is made
-    directory.mkdir(parents=True, exist_ok=True)
+    config.relax.check_paths(directory)
     atoms.calc = config.calculator.build(atoms, directory / "engine")
     try:
+        config.relax.check_structure(atoms)  # before the directory is made
+        _check_relaxable(atoms, bodies, config.relax)
+        directory.mkdir(parents=True, exist_ok=True)
         relax_structure(atoms, bodies, config.relax, directory, stream,
                         hint="rigidmd export-lammps CONFIG DIRECTORY (it relaxes again)",
                         stop=StopSignals())

@@ -260,7 +260,9 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     # start frame, so its steps count from 0 again (a later --resume counts its frames).
     first_step = done if resume and trajectory.exists() else 0
     try:
-        with stop or nullcontext(), open(log, "a" if resume else "w",
+        # Line-buffered: a relaxation killed outright keeps the log of every step its
+        # trajectory has (block-buffered, the log of 103 steps was empty).
+        with stop or nullcontext(), open(log, "a" if resume else "w", buffering=1,
                                          encoding="utf-8") as logfile:
             result = relax(atoms, bodies, fmax=section.fmax, steps=left,
                            optimizer=section.optimizer, cell=section.cell,
