@@ -720,3 +720,19 @@ def test_an_ipi_calculator_refuses_bad_ports_and_timeouts_in_one_line():
         with pytest.raises(ValueError, match=f"^IPICalculator: {match}"):
             IPICalculator(**options)
     assert IPICalculator(port=31415).get_spin_polarized() is False
+
+
+def test_what_the_engine_cannot_take_is_named_as_the_engine():
+    """Errors about the engine's atoms said ``LAMMPSCalculator:`` (its in-process probe),
+    and a cell of zero volume was called "left-handed (negative determinant)"."""
+    flat = water_box_27()
+    flat.cell[2] = flat.cell[0]  # linearly dependent
+    with LAMMPSEngine(PPPM_27, atom_types={"O": 1, "H": 2}, timeout=60) as engine:
+        flat.calc = engine
+        with pytest.raises(ValueError, match=r"^LAMMPSEngine: the cell has zero volume"):
+            flat.get_potential_energy()
+        uncharged = water_box_27()
+        uncharged.set_initial_charges(None)
+        uncharged.calc = engine
+        with pytest.raises(ValueError, match=r"^LAMMPSEngine: the commands have Coulomb "):
+            uncharged.get_potential_energy()

@@ -28,7 +28,11 @@ def lower_triangular(cell):
     (xx, xy, xz), (_, yy, yz), (_, _, zz) = cell.tolist()  # (floats: a barostat's every step)
     if xy == 0 and xz == 0 and yz == 0 and xx > 0 and yy > 0 and zz > 0:
         return None, cell
-    if np.linalg.det(cell) <= 0:
+    det = np.linalg.det(cell)
+    if det == 0:
+        raise ValueError("LAMMPSCalculator: the cell has zero volume (its vectors are "
+                         "linearly dependent); LAMMPS needs a right-handed cell")
+    if det < 0:
         raise ValueError("LAMMPSCalculator: the cell is left-handed (negative determinant); "
                          "LAMMPS needs a right-handed cell")
     Q, R = np.linalg.qr(cell.T)

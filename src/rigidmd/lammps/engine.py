@@ -590,7 +590,12 @@ class LAMMPSEngine(IPICalculator):
         try:
             # energy and forces too: the engine's first answer must equal them
             # (one LAMMPS call: LAMMPSCalculator computes the forces with the energy)
-            self._reference = (probe.get_potential_energy(atoms), probe.get_forces(atoms).copy())
+            try:
+                self._reference = (probe.get_potential_energy(atoms),
+                                   probe.get_forces(atoms).copy())
+            except ValueError as err:  # what the atoms cannot be, as this class says it
+                raise ValueError(str(err).replace("LAMMPSCalculator:", "LAMMPSEngine:", 1)) \
+                    from None
             probe.write_data(atoms, directory / "engine.data")
             if self.kspace_parameters is None and probe.kspace_parameters is not None:
                 self._kspace_parameters = probe.kspace_parameters
@@ -793,7 +798,11 @@ class LAMMPSEngine(IPICalculator):
         molecules, source, self._grouping_checked = molecules_of(
             target, self.calculator_options["molecule_ids"], self._grouping_checked)
         signature = _checked_signature(target, None if source is None else molecules)
-        cell, flips = self._lattice(target.cell.array)
+        try:
+            cell, flips = self._lattice(target.cell.array)
+        except ValueError as err:  # (LAMMPSCalculator's check of the cell: named as ours)
+            raise ValueError(str(err).replace("LAMMPSCalculator:", "LAMMPSEngine:", 1)) \
+                from None
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
         # (at a flip fix rigidmd/ipi re-maps the atoms on up to 2 ranks; fix ipi cannot)
         restart_at_flip = self.engine_fix != "rigidmd/ipi" or self.processes > 2
