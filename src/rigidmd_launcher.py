@@ -16,4 +16,6 @@ def main() -> int:
         print("rigidmd: interrupted while starting; nothing was run or written",
               file=sys.stderr)
         return 130
-    return command_line()
+    from rigidmd.run.signals import run_command
+
+    return run_command(command_line)

@@ -389,4 +389,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    from rigidmd.run.signals import run_command
+
+    sys.exit(run_command(main))

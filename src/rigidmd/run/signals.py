@@ -5,11 +5,13 @@ step's outputs are written; :data:`EXIT_STATUS` is the status a run stopped by
 each signal exits with.
 """
 
+import os
 import signal
+import sys
 
 from rigidmd.ipi import add_wait_check, remove_wait_check
 
-__all__ = ["EXIT_STATUS", "StopRequest", "StopSignals"]
+__all__ = ["EXIT_STATUS", "StopRequest", "StopSignals", "run_command"]
 
 #: Exit status of a run stopped by each signal (128 + signal number).
 EXIT_STATUS = {signal.SIGINT: 130, signal.SIGTERM: 143, signal.SIGUSR1: 138}
@@ -65,3 +67,33 @@ class StopSignals:
             signal.signal(signum, handler)
         return False
 
+
+
+def run_command(command_line, stream=None) -> int:
+    """Run ``command_line()`` (a command's whole life, returning its exit status) with the
+    stop signals' default actions until it returns, and noted after: a signal arriving
+    once the command has ended and said so (its outputs whole) is said in one line, and
+    the status stays the command's, never a kill without a word (exit 143).
+
+    A command's own :class:`StopSignals` give these handlers back when they end, so that
+    no moment is left with the default action.  Before the command ends the handler does
+    what the default does: SIGINT raises ``KeyboardInterrupt``, the others end the
+    process by the signal.
+    """
+    ended = []
+
+    def handler(signum, frame):
+        if ended:
+            print(f"rigidmd: {signal.Signals(signum).name} arrived after the command had "
+                  "ended; its outputs are whole", file=stream or sys.stderr, flush=True)
+            return
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
+
+    for signum in (*EXIT_STATUS, signal.SIGHUP):
+        signal.signal(signum, handler)
+    status = command_line()
+    ended.append(True)
+    return status
