@@ -205,6 +205,20 @@ def test_a_compressibility_in_inverse_pascal(tmp_path):
      "calculator.commands: expected LAMMPS commands"),
     ("calculator: {name: lammps, commands: [null]}",  # was the command 'None'
      "calculator.commands: expected LAMMPS commands"),
+    # The outside pass of 2026-11-29: each was taken, or failed without its field.
+    ("_base: /tmp/elsewhere", "_base: unknown key"),  # wrote outside without --trust
+    ("thermostat: {kind: nose_hoover, temperature: 300 K, tdamp: 100 fs, "
+     "tchain: 100000000000}",  # 745 GiB asked for at the first step
+     "thermostat.tchain: expected a whole number from 1 to 100"),
+    ("thermostat: {kind: nose_hoover, temperature: 300 K, tdamp: 100 fs, tloop: 1000000000}",
+     "thermostat.tloop: expected a whole number from 1 to 100"),  # 570 s a step
+    ('outputs: {directory: out, log: "md\\0.log"}',  # "embedded null byte", no field
+     "outputs.log: contains a NUL character"),
+    ("thermostat: {kind: langevin, temperature: 300 K, friction: 1 1/fs}",  # "not in 1/fs"
+     "thermostat: friction 1/fs times the time step 1 fs is 1, above 0.5"),
+    ("structure: null", "structure: missing"),  # was "cannot read 'None'"
+    ("anchors: &a {kind: bussi}\nthermostat: {<<: *a, temperature: 300 K, taut: 1 ps}",
+     "config: "),  # "could not determine a constructor for the tag ...merge"
 ])
 def test_quirks_the_fuzzing_found(tmp_path, line, message):
     """Found by the fuzzing above or while reading the reader.  Each was read as something
@@ -212,13 +226,16 @@ def test_quirks_the_fuzzing_found(tmp_path, line, message):
     file 'None', a number or a list as a file name), overflowed to infinity, crashed (a
     list as the name: TypeError), or gave a message without its field (an empty or
     multi-line key)."""
-    text = yaml.safe_dump({k: v for k, v in BASES[0].items() if k != line.split(":")[0]})
+    names = {part.split(":")[0] for part in line.split("\n")}
+    text = yaml.safe_dump({k: v for k, v in BASES[0].items() if k not in names})
     path = tmp_path / "quirk.yaml"
     path.write_text(text + line + "\n")
     with pytest.raises(ConfigError) as err:
         check_config(load_config(path))
     assert str(err.value).startswith(message), str(err.value)
     assert_one_clear_line(err.value)
+    if "<<" in line:
+        assert "YAML merge keys (<<) are not supported" in str(err.value)
 
 
 # ---------------------------------------------------------------- what the outside pass used

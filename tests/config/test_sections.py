@@ -198,3 +198,26 @@ def test_the_water_box_builder_takes_whole(tmp_path):
     with pytest.raises(ConfigError, match="^structure.whole: use true or false, got 'yes'$"):
         StructureSection.from_config(
             {"structure": {"builtin": "water_box", "n_side": 2, "whole": "yes"}}, tmp_path)
+
+
+def test_an_empty_frame_selection_and_a_missing_atom_type_are_named(tmp_path):
+    """``read_options: {index: "5:"}`` on a 3-frame file failed with IndexError (a
+    traceback); LAMMPS ``atom_types`` without H stopped the run at step 0 (exit 1) where
+    the same mistake in ``charges`` is a configuration error (exit 2)."""
+    from rigidmd.config import check_config
+
+    frames = [water_cluster(2, seed=s) for s in range(3)]
+    write(tmp_path / "three.xyz", frames)
+    section = StructureSection.from_config(
+        {"structure": "three.xyz", "read_options": {"index": "5:"}}, tmp_path)
+    with pytest.raises(ConfigError, match=r"^read_options.index: '5:' selects no frame of "):
+        section.build_atoms()
+    raw = {"structure": {"builtin": "water_cluster", "n_molecules": 2}, "timestep": "1 fs",
+           "steps": 2, "_base": str(tmp_path),
+           "calculator": {"name": "lammps", "commands": ["pair_style lj/cut 4.0",
+                                                         "pair_coeff * * 0.0 1.0"],
+                          "atom_types": {"O": 1}}}
+    checked = check_config(raw)
+    atoms = checked.structure.build_atoms()
+    with pytest.raises(ConfigError, match=r"^calculator.atom_types: no LAMMPS type for H"):
+        checked.calculator.build(atoms)

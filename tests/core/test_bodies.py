@@ -300,3 +300,18 @@ def test_the_body_frame_comes_from_the_atoms_not_from_lapack(kind, monkeypatch):
         np.testing.assert_allclose(reconstruct(geometry), moved.positions[model.order],
                                    atol=1e-12)
         assert np.linalg.det(quat.to_matrix(geometry.quaternions[0])) == pytest.approx(1.0)
+
+
+def test_the_tags_rule_refuses_atoms_without_tags():
+    """``bodies='tags'`` on atoms whose tags were never set (all 0) made every atom one
+    rigid body in silence: 4 waters glued into one body of 6 degrees of freedom."""
+    from rigidmd.core.bodies import RigidBodies
+    from rigidmd.systems import water_cluster
+
+    atoms = water_cluster(4, seed=1)
+    atoms.set_tags(0)
+    with pytest.raises(ValueError, match=r"^bodies='tags' but every atom has tag 0 .* all 12 "
+                                         r"atoms one rigid body"):
+        RigidBodies.resolve(atoms, "tags")
+    single = atoms[:3]  # one molecule: the connectivity rule makes it one body
+    assert RigidBodies.resolve(single, "connectivity").n_bodies == 1

@@ -255,3 +255,190 @@ def test_loaded_atoms_have_the_arrays_the_saved_ones_had(tmp_path, masses, charg
         assert (name in loaded.arrays) == (name in dyn.atoms.arrays), name
     np.testing.assert_array_equal(loaded.get_masses(), dyn.atoms.get_masses())
     np.testing.assert_array_equal(loaded.get_initial_charges(), dyn.atoms.get_initial_charges())
+
+
+# ------------------------------------------------------------ outside pass, 2026-11-29
+
+def test_a_checkpoint_after_atoms_were_changed_holds_the_change(tmp_path):
+    """Momenta doubled (or positions moved) between runs, then a checkpoint: its
+    continuation went on from the state before the change (0.136 Å apart; a shift of
+    0.3 Å was lost whole).  The state now reads the Atoms first, as the next step does."""
+    for change in ("momenta", "positions"):
+        runs = []
+        for save in (False, True):
+            dyn = build("bussi")
+            dyn.run(5)
+            if change == "momenta":
+                dyn.atoms.set_momenta(2 * dyn.atoms.get_momenta())
+            else:
+                dyn.atoms.positions = dyn.atoms.positions + [0.3, 0.0, 0.0]
+            if save:
+                dyn.save_checkpoint(tmp_path / "state.npz")
+                dyn = load_checkpoint(tmp_path / "state.npz", calculator("bussi"))
+            dyn.run(5)
+            runs.append(dyn.atoms.positions.copy())
+        np.testing.assert_array_equal(runs[1], runs[0])
+
+
+def test_set_state_refuses_a_state_of_another_dynamics_before_changing_anything():
+    """set_state took a Bussi state into a Langevin (with Bussi's random stream), another
+    time step or temperature, other masses (D2O atoms, H2O masses: NVE spread 0.095 eV
+    against 2.6e-4), and a Verlet or Nosé-Hoover failed half-way (zip(), KeyError) with
+    its model, state and clock already replaced."""
+    saved = build("bussi")
+    saved.run(3)
+    state = saved.get_state()
+    cases = {
+        "langevin": (build("langevin"), "the state is of a RigidBussi"),
+        "verlet": (build("nve"), "the state is of a RigidBussi"),
+        "nosehoover": (build("nosehoover"), "the state is of a RigidBussi"),
+    }
+    other_dt = build("bussi")
+    other_dt.set_timestep(1 * units.fs)
+    cases["dt"] = (other_dt, "the state's time step is 2 fs, this dynamics' 1 fs")
+    hotter = build("bussi")
+    hotter.set_temperature(500)
+    cases["temperature"] = (hotter, "temperature_K is 500.0 here and 300.0 in the state")
+    cases["scheme"] = (build("bussi", integrator="richardson"),
+                       "the state is of the no_squish scheme")
+    heavier = mixture()
+    masses = heavier.get_masses()
+    masses[heavier.numbers == 1] *= 2
+    heavier.set_masses(masses)
+    cases["masses"] = (RigidBussi(heavier, 2 * units.fs, 300, 50 * units.fs,
+                                  rng=np.random.default_rng(5), bodies="mol-id"),
+                       "weighs")
+    for name, (dyn, message) in cases.items():
+        before = dyn.get_state()
+        with pytest.raises(ValueError, match=message):
+            dyn.set_state(state)
+        after = dyn.get_state()
+        for key in ("state", "model"):
+            for field, value in before[key].items():
+                np.testing.assert_array_equal(after[key][field], value, err_msg=name)
+        assert after["time"] == before["time"] and after["nsteps"] == before["nsteps"], name
+    same = build("bussi")
+    same.set_state(state)  # the same dynamics: continues
+    same.run(2)
+    saved.run(2)
+    np.testing.assert_array_equal(same.atoms.positions, saved.atoms.positions)
+
+
+def test_an_exadem_checkpoint_without_free_atoms_continues(tmp_path):
+    """Its empty (0, 3) scratch came back as (0,) from the metadata: the continuation
+    failed with a broadcasting error."""
+    from ase.calculators.tip3p import TIP3P
+
+    from rigidmd import rigid_maxwell_boltzmann
+    from rigidmd.systems import water_cluster
+
+    runs = []
+    for save in (False, True):
+        atoms = water_cluster(4)
+        atoms.calc = TIP3P(rc=20.0)
+        rigid_maxwell_boltzmann(atoms, 300, rng=np.random.default_rng(0))
+        dyn = RigidVerlet(atoms, units.fs, integrator="exadem")
+        dyn.run(2)
+        if save:
+            dyn.save_checkpoint(tmp_path / "exadem.npz")
+            dyn = load_checkpoint(tmp_path / "exadem.npz", TIP3P(rc=20.0))
+        dyn.run(2)
+        runs.append(dyn.atoms.positions.copy())
+    np.testing.assert_array_equal(runs[1], runs[0])
+
+
+def test_changed_checkpoint_contents_and_other_files_are_one_line(tmp_path):
+    """Negative masses, nsteps -5, couplings: 5, a part without its random state were taken
+    or failed with KeyError/TypeError; a file that is not an archive of arrays was refused
+    with NumPy's advice to load it with pickle."""
+    import json
+
+    dyn = build("bussi")
+    dyn.run(2)
+    dyn.save_checkpoint(tmp_path / "good.npz")
+    with np.load(tmp_path / "good.npz") as data:
+        arrays = {key: data[key] for key in data.files}
+    meta = json.loads(str(arrays["meta"]))
+
+    def changed(name, **edits):
+        new_meta = dict(meta, **edits.pop("meta", {}))
+        new = dict(arrays, **edits, meta=np.array(json.dumps(new_meta)))
+        path = tmp_path / f"{name}.npz"
+        np.savez(path, **new)
+        return path
+
+    for path, message in (
+            (changed("mass", model_mass=-arrays["model_mass"]), "model_mass holds a mass of"),
+            (changed("nsteps", meta={"nsteps": -5}), "nsteps is -5, not a whole number"),
+            (changed("couplings", meta={"couplings": 5}), "couplings is 5, not a list"),
+            (changed("rng", meta={"couplings": [
+                {k: v for k, v in meta["couplings"][0].items() if k != "rng"}]}),
+             "coupling part 0 lacks 'rng'")):
+        with pytest.raises(CheckpointError, match=message):
+            load_checkpoint(path, calculator("bussi"))
+    np.save(tmp_path / "objects.npy", np.array([object()]), allow_pickle=True)
+    with pytest.raises(CheckpointError) as err:
+        read_checkpoint(tmp_path / "objects.npy")
+    assert "pickle" not in str(err.value) and "not a NumPy archive of arrays" in str(err.value)
+
+
+def test_closing_takes_the_marker_off_and_a_refused_constructor_changes_nothing(tmp_path):
+    """The RigidBodyDOF stayed on the Atoms after close() (ASE's Bussi then aimed at 24
+    degrees of freedom for 4 waters, not 36); a logfile in a missing folder was refused only
+    after the momenta, tags and constraints had changed and the trajectory was replaced."""
+    from ase.calculators.tip3p import TIP3P
+    from ase.io import Trajectory
+
+    from rigidmd import rigid_maxwell_boltzmann
+    from rigidmd.core.dof import RigidBodyDOF
+    from rigidmd.systems import water_cluster
+
+    atoms = water_cluster(4)
+    atoms.calc = TIP3P(rc=20.0)
+    with RigidVerlet(atoms, units.fs) as dyn:
+        dyn.run(2)
+        assert any(isinstance(c, RigidBodyDOF) for c in atoms.constraints)
+    assert not any(isinstance(c, RigidBodyDOF) for c in atoms.constraints)
+    dyn.run(1)  # a later run puts it back
+    assert any(isinstance(c, RigidBodyDOF) for c in atoms.constraints)
+    dyn.close()
+    fresh = water_cluster(4)
+    fresh.calc = TIP3P(rc=20.0)
+    fresh.set_tags(0)
+    rigid_maxwell_boltzmann(fresh, 300, rng=np.random.default_rng(0), bodies="connectivity")
+    fresh.set_momenta(fresh.get_momenta() + 0.01)  # not a rigid motion: would be projected
+    with Trajectory(tmp_path / "md.traj", "w") as traj:
+        traj.write(fresh)
+    before = (fresh.get_momenta().copy(), fresh.get_tags().copy(), list(fresh.constraints),
+              (tmp_path / "md.traj").read_bytes())
+    with pytest.raises(FileNotFoundError, match="^logfile: the folder .*nowhere does not"):
+        RigidVerlet(fresh, units.fs, bodies="connectivity", trajectory=str(tmp_path / "md.traj"),
+                    logfile=str(tmp_path / "nowhere" / "md.log"))
+    np.testing.assert_array_equal(fresh.get_momenta(), before[0])
+    np.testing.assert_array_equal(fresh.get_tags(), before[1])
+    assert fresh.constraints == before[2]
+    assert (tmp_path / "md.traj").read_bytes() == before[3]
+
+
+def test_ase_style_arguments_that_would_be_misread_are_refused(tmp_path):
+    """``timestep=True`` or ``"1"`` ran at 1 ASE time unit (about 10 fs); load_checkpoint
+    with ``timestep=`` failed with "got multiple values"; ASE's LangevinBAOAB NPT arguments
+    on RigidLangevinBAOAB failed in ASE's base class; a non-JSON ``extra`` did not name it."""
+    from rigidmd.md.langevinbaoab import RigidLangevinBAOAB as BAOAB
+
+    for bad in (True, "1", b"1"):
+        with pytest.raises(TypeError, match="timestep must be a number of ASE time units"):
+            RigidVerlet(mixture(), bad, bodies="mol-id")
+    dyn = build("nve")
+    with pytest.raises(TypeError, match="timestep must be a number of ASE time units"):
+        dyn.dt = "2"
+    dyn.save_checkpoint(tmp_path / "state.npz")
+    for name in ("timestep", "integrator", "bodies"):
+        with pytest.raises(TypeError, match=f"^load_checkpoint: {name} is the checkpoint's"):
+            load_checkpoint(tmp_path / "state.npz", calculator("nve"), **{name: 1})
+    for name in ("externalstress", "P_tau", "hydrostatic"):
+        with pytest.raises(TypeError, match=f"^RigidLangevinBAOAB: {name} is for ASE's "):
+            BAOAB(mixture(), units.fs, 300, 0.01 / units.fs, bodies="mol-id", **{name: 1})
+    with pytest.raises(TypeError, match="^save_checkpoint: extra must be a dict of JSON"):
+        dyn.save_checkpoint(tmp_path / "other.npz", extra={"x": object()})
+    assert not (tmp_path / "other.npz").exists()

@@ -22,7 +22,7 @@ def test_time_steps():
     for bad in (0, -1.0, np.inf, np.nan):
         with pytest.raises(ValueError, match="timestep must be positive and finite"):
             check_timestep(bad)
-    with pytest.raises(TypeError, match="timestep must be a number, got '1 fs'"):
+    with pytest.raises(TypeError, match="timestep must be a number of ASE time units"):
         check_timestep("1 fs")
 
 

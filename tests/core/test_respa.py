@@ -442,8 +442,8 @@ def test_a_configured_split_runs_and_resumes_exactly(split_project, monkeypatch,
 
 
 @pytest.mark.parametrize("change, field", [
-    ("  substeps: 0\n", "calculator.substeps: expected a whole number >= 1"),
-    ("  substeps: 2.5\n", "calculator.substeps: expected a whole number >= 1"),
+    ("  substeps: 0\n", "calculator.substeps: expected a whole number from 1 to 1000"),
+    ("  substeps: 2.5\n", "calculator.substeps: expected a whole number from 1 to 1000"),
     ("", "calculator.substeps: missing"),
     ("  substeps: 2\n  name: tip3p\n", "calculator.name: unknown key"),
     ("  substeps: 2\n  full: {name: tip3p}\n", "calculator.full: the slow level is full less"),

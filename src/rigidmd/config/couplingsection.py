@@ -67,7 +67,7 @@ def parse_coupling(section, raw, defaults=None):
     -------
     CouplingSpec
     """
-    from rigidmd.couplings.base import COUPLINGS
+    from rigidmd.couplings.base import COUPLINGS, INTEGER_LIMITS
 
     raw = mapping(section, raw)
     defaults = defaults or {}
@@ -96,6 +96,10 @@ def parse_coupling(section, raw, defaults=None):
             kwargs[p.name] = parsed
         elif p.quantity == "integer":
             kwargs[p.name] = whole_number(name, value, minimum=1)
+            most = INTEGER_LIMITS.get(p.name)
+            if most is not None and value > most:
+                raise ConfigError(f"{name}: expected a whole number from 1 to {most} (a step "
+                                  f"does each in turn), got {value!r}")
         elif p.quantity == "seed":
             seed = whole_number(name, value)
         elif p.quantity == "flag":

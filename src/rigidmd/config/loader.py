@@ -249,11 +249,31 @@ def load_config(path):
         where = getattr(err, "problem_mark", None)
         line = f" at line {where.line + 1}" if where is not None else ""
         problem = getattr(err, "problem", None) or " ".join(str(err).split())
+        if "yaml.org,2002:merge" in problem:
+            raise ConfigError(f"config: {path}{line}: YAML merge keys (<<) are not supported "
+                              "in a configuration; write the values out") from None
         raise ConfigError(f"config: {path} is not valid YAML{line} ({problem})") from None
     if not isinstance(data, dict):
         raise ConfigError(f"config: {path} must hold a mapping of settings")
-    data.setdefault("_base", str(path.resolve().parent))
+    if "_base" in data:  # the folder paths are read from: the file's own, never the file's say
+        raise ConfigError("_base: unknown key (paths are relative to the configuration's "
+                          "folder)")
+    _refuse_nul(data)
+    data["_base"] = str(path.resolve().parent)
     return data
+
+
+def _refuse_nul(value, where=""):
+    """Refuse a NUL character in any text of the configuration, naming the field (the
+    operating system refuses it in a path with a message that names none)."""
+    if isinstance(value, dict):
+        for key, item in value.items():
+            _refuse_nul(item, f"{where}.{key}" if where else str(key))
+    elif isinstance(value, list):
+        for i, item in enumerate(value):
+            _refuse_nul(item, f"{where}[{i}]")
+    elif isinstance(value, str) and "\0" in value:
+        raise ConfigError(f"{where}: contains a NUL character (\\0); remove it")
 
 
 def check_config(config, trust=False):
@@ -276,6 +296,7 @@ def check_config(config, trust=False):
     """
     config = dict(config)
     base = Path(config.pop("_base", "."))
+    _refuse_nul(config)
     known = known_keys()
     unknown = sorted(set(config) - known, key=str)
     if unknown:
@@ -290,6 +311,11 @@ def check_config(config, trust=False):
     checked = RunConfig(**{name: section.from_config(config, base)
                            for name, section in _SECTIONS.items()})
     checked.calculator.check_trust(trust)
+    for spec in checked.coupling.specs:  # what a part refuses for the step: named here
+        try:
+            spec.part().check_timestep(checked.run.timestep)
+        except ValueError as err:
+            raise ConfigError(f"{spec.section}: {err}") from None
     if checked.relax is not None:
         outputs = checked.outputs
         others = {f"outputs.{key}": getattr(outputs, key)

@@ -108,7 +108,7 @@ class StructureSection:
 
     @classmethod
     def from_config(cls, raw, base):
-        if "structure" not in raw and "restart" not in raw:
+        if raw.get("structure") is None and raw.get("restart") is None:
             raise ConfigError("structure: missing (a file name or {builtin: water_cluster, ...})")
         source = raw.get("structure")
         if isinstance(source, dict):
@@ -152,6 +152,9 @@ class StructureSection:
         except Exception as err:  # noqa: BLE001 - any reader failure is a config mistake
             raise unreadable("structure", self.source, err, self.read_options) from None
         if isinstance(atoms, list):
+            if not atoms:
+                raise ConfigError(f"read_options.index: {self.read_options.get('index')!r} "
+                                  f"selects no frame of {self.source}")
             atoms = atoms[-1]
         return atoms
 
@@ -527,6 +530,12 @@ class CalculatorSection:
             if missing:
                 raise ConfigError(f"calculator.charges: no charge for {missing[0]}")
             atoms.set_initial_charges([self.charges[s] for s in atoms.get_chemical_symbols()])
+        if self.atom_types:  # every element needs a type: else the run stopped at step 0
+            missing = sorted(set(atoms.get_chemical_symbols()) - {str(k) for k in
+                                                                  self.atom_types})
+            if missing:
+                raise ConfigError(f"calculator.atom_types: no LAMMPS type for {missing[0]} "
+                                  f"(types given for {', '.join(map(str, self.atom_types))})")
         if self.processes is None and self.address is None:
             if self.threads is not None:
                 self.options.setdefault("threads", self.threads)

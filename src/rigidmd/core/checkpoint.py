@@ -123,8 +123,9 @@ def remove_stale_temporaries(path):
 
 def _jsonable(value):
     """Arrays to tagged lists (exact: JSON keeps every float digit), recursively."""
-    if isinstance(value, np.ndarray):
-        return {"__array__": value.tolist(), "dtype": str(value.dtype)}
+    if isinstance(value, np.ndarray):  # the shape too: an empty (0, 3) array lists as []
+        return {"__array__": value.tolist(), "dtype": str(value.dtype),
+                "shape": list(value.shape)}
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, dict):
@@ -137,7 +138,9 @@ def _jsonable(value):
 def _from_json(value):
     if isinstance(value, dict):
         if "__array__" in value:
-            return np.array(value["__array__"], dtype=value["dtype"])
+            array = np.array(value["__array__"], dtype=value["dtype"])
+            shape = value.get("shape")  # (files of earlier releases have none)
+            return array if shape is None or array.size else array.reshape(shape)
         return {k: _from_json(v) for k, v in value.items()}
     if isinstance(value, list):
         return [_from_json(v) for v in value]
@@ -162,6 +165,9 @@ def save_checkpoint(dyn, path, extra=None):
     extra : dict, optional
         JSON-serialisable data stored alongside (e.g. output file lengths).
     """
+    if extra is not None and (not isinstance(extra, dict) or not _is_json(extra)):
+        raise TypeError(f"save_checkpoint: extra must be a dict of JSON data (numbers, "
+                        f"strings, lists, dicts), got {extra!r:.80}")
     atoms, saved = dyn.atoms, dyn.get_state()
     record = saved["record"]
     arrays = {
@@ -314,6 +320,8 @@ def read_checkpoint(path):
         reason = " ".join(str(err).split()) or type(err).__name__
         if path.is_file() and path.stat().st_size == 0:
             reason = "the file is empty"
+        elif "pickle" in reason:  # NumPy's advice to load it unsafely: never for a checkpoint
+            reason = "not a NumPy archive of arrays"
         raise CheckpointError(f"checkpoint: {str(path)!r} is not a readable checkpoint "
                               f"({reason})") from None
     if "meta" not in arrays:
@@ -404,6 +412,38 @@ def check_checkpoint(meta, arrays, path="checkpoint"):
         values = np.asarray(values)
         if values.dtype.kind == "f" and not np.isfinite(values).all():
             raise CheckpointError(f"{where}: {name} holds a non-finite number")
+    for name, what in (("model_mass", "mass"), ("model_atom_masses", "atom mass")):
+        values = np.asarray(arrays[name], dtype=float)
+        if values.size and not (values > 0).all():
+            i = int(np.flatnonzero(~(values > 0))[0])
+            raise CheckpointError(f"{where}: {name} holds a {what} of {values[i]:g} amu (entry "
+                                  f"{i}); masses are positive: the file was changed")
+    moments = np.asarray(arrays["model_moments"], dtype=float)
+    if moments.size and (moments < 0).any():
+        b = int(np.flatnonzero((moments < 0).any(axis=1))[0])
+        raise CheckpointError(f"{where}: body {b} has a negative principal moment; the file "
+                              "was changed")
+    for name in ("nsteps",):
+        value = meta[name]
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise CheckpointError(f"{where}: {name} is {value!r}, not a whole number >= 0")
+    for name in ("time", "dt"):
+        value = meta[name]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value \
+                or value < 0 or (name == "dt" and value == 0):
+            raise CheckpointError(f"{where}: {name} is {value!r}, not a "
+                                  f"{'positive' if name == 'dt' else 'non-negative'} number")
+    couplings = meta["couplings"]
+    if not isinstance(couplings, list):
+        raise CheckpointError(f"{where}: couplings is {couplings!r}, not a list of parts")
+    for i, entry in enumerate(couplings):
+        missing = [key for key in ("class", "parameters", "state", "rng", "rng_owner")
+                   if not isinstance(entry, dict) or key not in entry]
+        if missing:
+            raise CheckpointError(f"{where}: coupling part {i} lacks {missing[0]!r}; the file "
+                                  "was changed")
+        if not isinstance(entry["parameters"], dict) or "kind" not in entry["parameters"]:
+            raise CheckpointError(f"{where}: coupling part {i} has no kind in its parameters")
     norms = np.linalg.norm(arrays["state_q"], axis=1)
     bad = np.flatnonzero(np.abs(norms - 1.0) > QUATERNION_NORM_TOLERANCE)
     if bad.size:

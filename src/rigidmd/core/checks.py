@@ -19,7 +19,13 @@ __all__ = ["check_finite", "check_massless_momenta", "check_timestep", "check_co
 
 
 def check_timestep(timestep: float) -> float:
-    """``timestep`` as a positive finite float (ASE time units), or a clear error."""
+    """``timestep`` as a positive finite float (ASE time units), or a clear error.
+
+    A bool or a string is refused (``"1"`` and ``True`` read as 1 ASE time unit, about
+    10 fs), as ASE's ``timestep`` is a number of ASE time units."""
+    if isinstance(timestep, (bool, str, bytes)):
+        raise TypeError(f"timestep must be a number of ASE time units (1 * ase.units.fs for "
+                        f"1 fs), got {timestep!r}")
     try:
         dt = float(timestep)
     except (TypeError, ValueError):

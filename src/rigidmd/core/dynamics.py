@@ -30,10 +30,13 @@ The time step is read from :attr:`RigidDynamics.dt` at every step.
 :mod:`rigidmd.core.checkpoint` wrote.
 """
 
+import os
 import warnings
 from collections.abc import Sequence
+from pathlib import Path
 
-from ase import Atoms
+import numpy as np
+from ase import Atoms, units
 from ase.md.md import MolecularDynamics
 
 from rigidmd.core.backend import resolve_backend
@@ -99,8 +102,9 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
     the next step, keeping each body's reference frame (positions are fitted
     by the best rigid rotation).
 
-    While the dynamics exists, ``atoms.constraints`` holds a
-    :class:`RigidBodyDOF`, so ``atoms.get_temperature()`` and the MD logger
+    Until the dynamics is closed (:meth:`close`, or the end of its ``with``
+    block), ``atoms.constraints`` holds a :class:`RigidBodyDOF`, so
+    ``atoms.get_temperature()`` and the MD logger
     count rigid degrees of freedom (6 per body, 5 per linear body, 3 per
     point particle), less 3 when the total momentum is held: by a
     thermostat's ``fixcm=True`` or by ASE's :class:`ase.constraints.FixCom`
@@ -198,6 +202,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
                                                                    couplings)
         for part in couplings:
             part.check(atoms, model, self._dt)
+        for name, path in (("trajectory", trajectory), ("logfile", logfile)):
+            check_output_file(name, path)
         # -- from here on the atoms and files change --
         with warnings.catch_warnings():  # ASE warns of massless atoms: ours are carried sites
             warnings.filterwarnings("ignore", message="Zero mass encountered in atoms")
@@ -252,6 +258,17 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             pressure = self.evaluator.stress if log_pressure is None else log_pressure
             self.attach(self.closelater(RigidLogger(self, logfile, pressure=pressure)),
                         loginterval)
+
+    def close(self) -> None:
+        """Close the trajectory and log (ASE's ``close``) and take the :class:`RigidBodyDOF`
+        marker off the Atoms: an ASE dynamics run on them afterwards counts their own
+        degrees of freedom (with the marker, ASE's ``Bussi`` aimed at 24 instead of 36 for
+        4 waters).  A later run of this dynamics puts it back."""
+        super().close()
+        atoms = self.atoms
+        kept = [c for c in atoms.constraints if not isinstance(c, RigidBodyDOF)]
+        if len(kept) != len(atoms.constraints):
+            atoms.constraints = kept
 
     #: The coupling parts' types a class is built around, in order (None: any parts);
     #: :meth:`from_parts` checks them.
@@ -471,7 +488,17 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         False before the first force call) and ``couplings`` (each part's kind,
         parameters, variables and random-number generator).  The atoms
         themselves are ``dyn.atoms``.
+
+        Changes made to the Atoms since the last step (momenta set, positions moved) are
+        read first, as the next step would read them: the state holds them.
         """
+        name = type(self).__name__
+        if self._in_run:  # (an observer's checkpoint: a change noted at this step)
+            changed = self.sync.before_step(self._evaluate_forces, self.nsteps, name)
+        else:
+            changed = self.sync.sync(self.sync.synced, self._evaluate_forces, self.nsteps, name)
+        if changed:
+            self.step_check.reset()
         model = self.model
         return {
             "classes": [cls.__name__ for cls in type(self).__mro__
@@ -496,7 +523,12 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         before the first force call (``record["forces_known"]`` False) has no
         forces: the next run's start calls the calculator, as the original's
         would have.
+
+        Refused in one line, before anything changes, when the state is not of this
+        dynamics: another class, scheme or time step, other coupling parts or
+        parameters (a target temperature set since), other bodies or masses.
         """
+        self._check_restorable(saved)
         self.model.update_from(BodyModel(n_atoms=saved["n_atoms"], **saved["model"]))
         for name in STATE_FIELDS:  # assignments: the state's versions move
             setattr(self.state, name, saved["state"][name])
@@ -509,9 +541,85 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         self.sync.write_atoms()
         self.sync.restored(self.record.forces_known)
 
+    def _check_restorable(self, saved: dict) -> None:
+        """Refuse a state :meth:`set_state` would continue wrongly (ValueError, one line)."""
+        name = type(self).__name__
+        where = f"{name}.set_state"
+        try:
+            classes, kind = list(saved["classes"]), saved["classes"][0]
+            parts = [(part["class"], part["parameters"]) for part in saved["couplings"]]
+            dt, scheme = float(saved["dt"]), saved["scheme_name"]
+            body_ids = np.asarray(saved["body_ids"])
+            masses = np.asarray(saved["model"]["mass"], dtype=float)
+        except (KeyError, TypeError, IndexError, ValueError) as err:
+            raise ValueError(f"{where}: not a state of a rigidmd dynamics (no {err})") from None
+        # The same class, or one of the two derived from the other (a user's subclass, as
+        # load_checkpoint's dynamics_class= gives it): the parts decide below.
+        if name not in classes and kind not in {cls.__name__ for cls in type(self).__mro__}:
+            raise ValueError(f"{where}: the state is of a {kind}; continue it with "
+                             f"rigidmd.load_checkpoint or a {kind}")
+        mine = [(type(part).__name__, part.todict()) for part in self.couplings]
+        if [p[0] for p in parts] != [p[0] for p in mine]:
+            raise ValueError(f"{where}: the state's coupling parts are "
+                             f"{', '.join(p[0] for p in parts) or 'none'}, this dynamics' "
+                             f"{', '.join(p[0] for p in mine) or 'none'}")
+        for (part, stored), (_, own) in zip(parts, mine, strict=True):
+            for key in sorted(set(stored) | set(own)):
+                if not _same_value(stored.get(key), own.get(key)):
+                    raise ValueError(f"{where}: the {part}'s {key} is {own.get(key)!r} here "
+                                     f"and {stored.get(key)!r} in the state; set it back, or "
+                                     "continue with rigidmd.load_checkpoint")
+        if scheme != self.scheme.name:
+            raise ValueError(f"{where}: the state is of the {scheme} scheme, this dynamics "
+                             f"integrates with {self.scheme.name}")
+        if dt != self._dt:
+            raise ValueError(f"{where}: the state's time step is {dt / units.fs:.10g} fs, "
+                             f"this dynamics' {self._dt / units.fs:.10g} fs; set_timestep "
+                             "back first")
+        if body_ids.shape != self.bodies.body_ids.shape or not np.array_equal(
+                body_ids, self.bodies.body_ids):
+            raise ValueError(f"{where}: the state's bodies are not this dynamics' (another "
+                             "number of atoms, or atoms in other bodies)")
+        if masses.shape != self.model.mass.shape or not np.allclose(
+                masses, self.model.mass, rtol=1e-12, atol=0):
+            body = int(np.argmax(np.abs(masses - self.model.mass))) \
+                if masses.shape == self.model.mass.shape else 0
+            raise ValueError(f"{where}: body {body} weighs {masses[body]:.6g} amu in the "
+                             f"state and {self.model.mass[body]:.6g} amu on these atoms")
+
     def save_checkpoint(self, path, extra: dict | None = None) -> None:
         """Write everything an exact continuation needs to ``path`` (atomically).
 
         See :mod:`rigidmd.core.checkpoint`; :func:`rigidmd.load_checkpoint` continues.
         """
         save_checkpoint(self, path, extra)
+
+
+def _same_value(a, b) -> bool:
+    """Whether two parameters (numbers, strings, arrays, nested lists and dicts) are equal."""
+    if isinstance(a, dict) or isinstance(b, dict):
+        return (isinstance(a, dict) and isinstance(b, dict) and a.keys() == b.keys()
+                and all(_same_value(a[k], b[k]) for k in a))
+    if isinstance(a, (list, tuple, np.ndarray)) or isinstance(b, (list, tuple, np.ndarray)):
+        try:
+            return bool(np.array_equal(np.asarray(a, dtype=object), np.asarray(b, dtype=object)))
+        except (ValueError, TypeError):
+            return False
+    return a == b or (a != a and b != b)  # (NaN parameters are equal to themselves)
+
+
+def check_output_file(name: str, path) -> None:
+    """Refuse a ``trajectory`` or ``logfile`` path that cannot be written (a folder that does
+    not exist, one not writable, a folder given as the file), before the constructor changes
+    anything: it used to fail after the atoms' momenta, tags and constraints had changed
+    and ASE had already replaced the trajectory file.  Open files and ``"-"`` pass."""
+    if not isinstance(path, (str, os.PathLike)) or str(path) == "-":
+        return
+    path = Path(path)
+    folder = path.parent
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{name}: the folder {folder} does not exist (for {path})")
+    if path.is_dir():
+        raise IsADirectoryError(f"{name}: {path} is a folder; give a file name")
+    if not os.access(path if path.exists() else folder, os.W_OK):
+        raise PermissionError(f"{name}: {path} cannot be written (permission denied)")

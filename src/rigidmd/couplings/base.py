@@ -79,9 +79,20 @@ def check_flag(name, value):
     return bool(value)
 
 
+#: The largest chain lengths and loop counts: a step does the work of each in turn and is
+#: never interrupted (``tloop: 10**9`` took 570 s a step, ``tchain: 10**11`` asked for
+#: 745 GiB); ASE's and LAMMPS's defaults are 3 and 1.
+INTEGER_LIMITS = {"tchain": 100, "pchain": 100, "tloop": 100, "ploop": 100}
+
+
 def check_positive_integer(name, value):
+    """``value`` as an int from 1 to :data:`INTEGER_LIMITS` ``[name]`` (no limit when
+    absent), else a ValueError naming ``name``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    most = INTEGER_LIMITS.get(name)
+    if most is not None and value > most:
+        raise ValueError(f"{name} must be at most {most}, got {value!r}")
     return int(value)
 
 

@@ -128,9 +128,10 @@ class LangevinThermostat(_Stochastic):
         # velocities forget themselves within a step.
         if self.friction * dt > 0.5:
             raise ValueError(
-                f"friction = {self.friction:g} per ASE time unit damps the velocities within "
-                f"one step of {dt:g}: friction is in 1/(ASE time), e.g. "
-                f"0.01 / ase.units.fs = {0.01 / units.fs:.4g}, not in 1/fs or 1/ps"
+                f"friction {self.friction * units.fs:.4g}/fs times the time step "
+                f"{dt / units.fs:.4g} fs is {self.friction * dt:.3g}, above 0.5: the velocities "
+                "would forget themselves within a step; lower the friction (in Python it is "
+                f"per ASE time unit: 0.01 / ase.units.fs = {0.01 / units.fs:.4g} for 0.01/fs)"
             )
 
     def set_friction(self, friction: float, timestep: float | None = None) -> None:

@@ -52,6 +52,12 @@ class RigidLangevinBAOAB(ThermostattedDynamics):
 
     def __init__(self, atoms, timestep, temperature_K=None, friction=None, *, T_tau=None,
                  rng=None, fixcm=None, **kwargs):
+        npt = sorted(set(kwargs) & {"externalstress", "P_tau", "hydrostatic",
+                                    "disable_cell_langevin", "mask"})
+        if npt:  # ASE's LangevinBAOAB arguments for its NPT
+            raise TypeError(f"RigidLangevinBAOAB: {npt[0]} is for ASE's LangevinBAOAB NPT; "
+                            "this class is NVT: for NPT compose its thermostat part with "
+                            "RigidMCBarostat (see the thermostats guide, NPT)")
         if friction is not None and T_tau is not None:
             raise TypeError("RigidLangevinBAOAB takes friction (per ASE time unit) or T_tau "
                             "(its time, friction = 1 / T_tau), not both")

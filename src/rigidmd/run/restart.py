@@ -38,6 +38,11 @@ def saved_class(classes: list[str]) -> tuple[type, str | None]:
     return RigidDynamics, (classes[0] if classes else None)
 
 
+#: Keywords of the dynamics a checkpoint's continuation takes from the checkpoint.
+_DECIDED_BY_THE_CHECKPOINT = frozenset({"timestep", "integrator", "integrator_options",
+                                        "bodies", "backend", "couplings"})
+
+
 def load_checkpoint(path, calculator, dynamics_class: type | None = None,
                     **kwargs) -> RigidDynamics:
     """Rebuild a rigid dynamics from a checkpoint, of the class saved, ready to continue exactly.
@@ -77,7 +82,15 @@ def load_checkpoint(path, calculator, dynamics_class: type | None = None,
     ------
     rigidmd.core.checkpoint.CheckpointError
         The file cannot be read, or its parts are not those of the class it names.
+    TypeError
+        A keyword the checkpoint decides (``timestep``, ``integrator``, ``bodies``,
+        ``backend``, ``couplings``): the continuation is the run saved.
     """
+    decided = sorted(set(kwargs) & _DECIDED_BY_THE_CHECKPOINT)
+    if decided:
+        raise TypeError(f"load_checkpoint: {decided[0]} is the checkpoint's (the continuation "
+                        "is the run saved); change it after loading where a setter allows "
+                        "(set_timestep, set_temperature), or start a new run")
     checkpoint = path if isinstance(path, Checkpoint) else read_checkpoint(path)
     saved = checkpoint.dynamics_state()
     if dynamics_class is not None:
