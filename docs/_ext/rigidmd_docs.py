@@ -157,7 +157,7 @@ def configuration_reference():
     )
     from rigidmd.config.trust import SAFE_LAMMPS_COMMANDS
     from rigidmd.core.schemes import BUILTIN_SCHEMES
-    from rigidmd.couplings.base import COUPLINGS
+    from rigidmd.couplings.base import COUPLINGS, INTEGER_LIMITS
     from rigidmd.relax.cell import CELL_MODES
     from rigidmd.relax.filter import OPTIMIZERS
     from rigidmd.water import WATER_MODELS
@@ -195,6 +195,8 @@ def configuration_reference():
     for builder, fields in BUILDER_FIELDS.items():
         for name, kind, low, high in fields:
             allowed = ", ".join(WATER_MODELS) if kind == "water_model" else kind
+            if name in ("spacing", "jitter"):
+                allowed = f"{kind} (Å)"
             req = "yes" if REQUIRED_BUILDER_FIELD.get(builder) == name else "no"
             add(f"| `{builder}` | `{name}` | {allowed} | {'' if low is None else low} | "
                 f"{'' if high is None else high} | {req} |\n")
@@ -234,8 +236,8 @@ def configuration_reference():
     add("A force split for multiple time steps (the guide's Multiple time steps page) "
         "gives `fast` (a calculator section as above), `slow` (another) or `full` (the slow "
         "level is `full` less `fast`), and `substeps` (inner steps per `timestep`, a whole "
-        "number >= 1): `calculator: {fast: {name: tip3p, options: {rc: 7.0, width: 3.0}}, "
-        "full: {name: tip3p, options: {rc: 40.0}}, substeps: 4}`.\n\n")
+        "number from 1 to 1000): `calculator: {fast: {name: tip3p, options: {rc: 7.0, "
+        "width: 3.0}}, full: {name: tip3p, options: {rc: 40.0}}, substeps: 4}`.\n\n")
 
     add("## `thermostat` and `barostat`\n\nEach names a `kind`; the other fields are the "
         "kind's parameters.  A barostat takes the thermostat's temperature unless it "
@@ -255,7 +257,8 @@ def configuration_reference():
                 unit = _units(table) if table else ""
                 allowed = ", ".join(f"`{c}`" for c in p.choices)
                 if p.quantity == "integer":
-                    allowed = "≥ 1"
+                    most = INTEGER_LIMITS.get(p.name)
+                    allowed = "≥ 1" if most is None else f"1 to {most}"
                 if p.quantity == "flag":
                     allowed = "`true`, `false`"
                 if p.quantity == "seed":

@@ -281,9 +281,11 @@ class RunSection:
         A built-in name, a YAML path (resolved) or a list of operators.
     integrator_options : dict
     timestep : float
+        Given with its unit (``timestep: 1 fs``; a bare number is refused), held in
         ASE time units.
     steps : int
     velocities : dict or None
+        Given as ``velocities: {temperature: 300 K, seed: 1}``; held as
         ``{"temperature_K": float, "seed": int or None}``.
     """
 
