@@ -368,7 +368,7 @@ def test_changed_checkpoint_contents_and_other_files_are_one_line(tmp_path):
         return path
 
     for path, message in (
-            (changed("mass", model_mass=-arrays["model_mass"]), "model_mass holds a mass of"),
+            (changed("mass", model_mass=-arrays["model_mass"]), "model_mass holds a body mass of"),
             (changed("nsteps", meta={"nsteps": -5}), "nsteps is -5, not a whole number"),
             (changed("couplings", meta={"couplings": 5}), "couplings is 5, not a list"),
             (changed("rng", meta={"couplings": [

@@ -405,18 +405,18 @@ def test_atoms_moved_from_outside_are_refused_not_put_back():
 
     atoms = water_cluster(4, seed=1)
     atoms.calc = TIP3P(rc=40.0)
-    view = RigidFilter(atoms, bodies="tags")
+    view = RigidFilter(atoms, bodies=None)
     BFGS(view, logfile=None).run(fmax=0.05, steps=3)
     atoms.positions[:3] += [5.0, 0.0, 0.0]
     with pytest.raises(ValueError, match=r"^RigidFilter: the atoms were moved since the "
                                          r"filter placed them \(atom 0 by 5 Å\); .*make a new "
                                          r"RigidFilter for the moved atoms$"):
         view.get_forces()
-    np.testing.assert_allclose(RigidFilter(atoms, bodies="tags").get_potential_energy(),
+    np.testing.assert_allclose(RigidFilter(atoms, bodies=None).get_potential_energy(),
                                atoms.get_potential_energy())  # a new filter reads them
     fresh = water_cluster(4, seed=1)
     fresh.calc = TIP3P(rc=40.0)
-    view = RigidFilter(fresh, bodies="tags")
+    view = RigidFilter(fresh, bodies=None)
     fresh.positions[4, 0] += 0.1  # before the first call too
     with pytest.raises(ValueError, match=r"\(atom 4 by 0.1 Å\)"):
         view.get_potential_energy()
@@ -435,14 +435,14 @@ def test_cell_filters_pressure_without_cell_no_atoms_and_fmax_are_one_line():
                                             r"\(FrechetCellFilter, UnitCellFilter\) cannot wrap "
                                             r"it; relax the cell with RigidFilter\(atoms, "
                                             r"bodies, cell='full'\)"):
-            wrapper(RigidFilter(atoms, bodies="tags"))
+            wrapper(RigidFilter(atoms, bodies=None))
     with pytest.raises(ValueError, match=r"^RigidFilter: scalar_pressure=1.0 eV/Å³ acts only "
                                          r"on a relaxing cell; give cell"):
-        relax(atoms, "tags", scalar_pressure=1.0)
+        relax(atoms, scalar_pressure=1.0)
     empty = Atoms()
     empty.calc = TIP3P()
     with pytest.raises(ValueError, match="^RigidFilter: no atoms to relax$"):
         relax(empty)
     for fmax in ("0.05", True, float("nan"), 0.0):
         with pytest.raises(ValueError, match=r"^relax: fmax=.* must be a positive number"):
-            relax(atoms, "tags", fmax=fmax)
+            relax(atoms, fmax=fmax)

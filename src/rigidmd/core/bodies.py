@@ -137,16 +137,8 @@ class RigidBodies:
 
     @classmethod
     def from_tags(cls, atoms):
-        """Atoms with the same tag form a body; negative tags are free atoms.
-
-        Refused when every atom has tag 0 (ASE's default: no tags were set), which would
-        make all the atoms one body in silence (4 waters glued into one)."""
-        tags = atoms.get_tags()
-        if len(tags) > 1 and not np.any(tags):
-            raise ValueError(f"bodies='tags' but every atom has tag 0 (no tags set), which "
-                             f"would make all {len(tags)} atoms one rigid body; set one tag "
-                             "per molecule, or use bodies='connectivity'")
-        return cls(tags, rule="tags")
+        """Atoms with the same tag form a body; negative tags are free atoms."""
+        return cls(atoms.get_tags(), rule="tags")
 
     @classmethod
     def from_connectivity(cls, atoms, mult=1.0):
@@ -241,6 +233,12 @@ class RigidBodies:
             if spec == "mol-id":
                 bodies = cls.from_mol_id(atoms)
             elif spec == "tags":
+                tags = atoms.get_tags()
+                if len(tags) > 1 and not np.any(tags):  # asked for: ASE's default, no tags
+                    raise ValueError(
+                        f"bodies='tags' but every atom has tag 0 (no tags set), which would "
+                        f"make all {len(tags)} atoms one rigid body; set one tag per "
+                        "molecule, or use bodies='connectivity'")
                 bodies = cls.from_tags(atoms)
             else:
                 raise ValueError(

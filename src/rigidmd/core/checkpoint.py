@@ -412,12 +412,15 @@ def check_checkpoint(meta, arrays, path="checkpoint"):
         values = np.asarray(values)
         if values.dtype.kind == "f" and not np.isfinite(values).all():
             raise CheckpointError(f"{where}: {name} holds a non-finite number")
-    for name, what in (("model_mass", "mass"), ("model_atom_masses", "atom mass")):
+    # A body's mass is positive; an atom of one may weigh nothing (TIP4P's M site).
+    for name, what, least in (("model_mass", "body mass", 0.0),
+                              ("model_atom_masses", "atom mass", None)):
         values = np.asarray(arrays[name], dtype=float)
-        if values.size and not (values > 0).all():
-            i = int(np.flatnonzero(~(values > 0))[0])
+        bad = values <= 0 if least is not None else values < 0
+        if values.size and bad.any():
+            i = int(np.flatnonzero(bad)[0])
             raise CheckpointError(f"{where}: {name} holds a {what} of {values[i]:g} amu (entry "
-                                  f"{i}); masses are positive: the file was changed")
+                                  f"{i}); the file was changed")
     moments = np.asarray(arrays["model_moments"], dtype=float)
     if moments.size and (moments < 0).any():
         b = int(np.flatnonzero((moments < 0).any(axis=1))[0])
