@@ -245,6 +245,10 @@ def test_trust_lets_a_configuration_run_lammps_shell_commands(project):
 
 @pytest.mark.parametrize("text, message", [
     (b"steps: 5\nsteps: 10\n", "steps: given twice (lines 1 and 2); keep one"),
+    (b"thermostat: {kind: bussi, taut: 1 ps, taut: 2 ps}\n",  # was "taut: ... lines 1 and 1"
+     "thermostat.taut: given twice (line 1, columns 27 and 39); keep one"),
+    (b"outputs:\n  directory: out\n  log: a.log\n  log: b.log\n",
+     "outputs.log: given twice (lines 3 and 4); keep one"),
     (bytes(range(256)), "config: bad.yaml is not a text (UTF-8) file"),
     (b"steps: [1,\n", "config: bad.yaml is not valid YAML at line 2"),
 ])

@@ -164,6 +164,26 @@ def _check_aliases(root):
                        f"{MAX_ALIAS_NODES}; write the values out")
 
 
+def _mapping_paths(root):
+    """``id(mapping node) -> "thermostat"``: where each mapping of the document sits, by its
+    keys from the top (the first place, for a mapping an alias repeats)."""
+    import yaml
+
+    paths, stack = {}, [(root, "")]
+    while stack:
+        node, path = stack.pop()
+        if isinstance(node, yaml.MappingNode):
+            if id(node) in paths:
+                continue
+            paths[id(node)] = path
+            for key, value in node.value:
+                name = key.value if isinstance(key, yaml.ScalarNode) else "?"
+                stack.append((value, f"{path}.{name}" if path else str(name)))
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend((item, f"{path}[{i}]") for i, item in enumerate(node.value))
+    return paths
+
+
 def _children(node):
     import yaml
 
@@ -199,6 +219,7 @@ def _strict_loader():
         def compose_document(self):
             node = super().compose_document()
             _check_aliases(node)
+            self.mapping_paths = _mapping_paths(node)  # for the messages, "thermostat.taut"
             return node
 
     numbers = ("tag:yaml.org,2002:int", "tag:yaml.org,2002:float")
@@ -214,10 +235,15 @@ def _strict_loader():
         for key_node, _ in node.value:
             key = loader.construct_object(key_node, deep=deep)
             if key in seen:
-                raise ConfigError(
-                    f"{key}: given twice (lines {seen[key] + 1} and "
-                    f"{key_node.start_mark.line + 1}); keep one")
-            seen[key] = key_node.start_mark.line
+                path = getattr(loader, "mapping_paths", {}).get(id(node), "")
+                first, again = seen[key], key_node.start_mark
+                where = (f"lines {first.line + 1} and {again.line + 1}"
+                         if first.line != again.line else
+                         f"line {again.line + 1}, columns {first.column + 1} and "
+                         f"{again.column + 1}")
+                raise ConfigError(f"{path + '.' if path else ''}{key}: given twice ({where}); "
+                                  "keep one")
+            seen[key] = key_node.start_mark
         return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
 
     StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
