@@ -221,3 +221,15 @@ def test_an_empty_frame_selection_and_a_missing_atom_type_are_named(tmp_path):
     atoms = checked.structure.build_atoms()
     with pytest.raises(ConfigError, match=r"^calculator.atom_types: no LAMMPS type for H"):
         checked.calculator.build(atoms)
+
+
+def test_read_options_mistakes_name_the_option(tmp_path):
+    """``read_options: {fromat: xyz}`` said "ASE's reader ... failed with TypeError: not a
+    structure in that format?"; ``{format: 5}`` said to give a format."""
+    write(tmp_path / "w.xyz", water_cluster(2, seed=1))
+    for options, message in (({"fromat": "xyz"}, r"^read_options.fromat: not an option of "),
+                             ({"format": 5}, r"^read_options.format: expected a format name")):
+        section = StructureSection.from_config({"structure": "w.xyz", "read_options": options},
+                                               tmp_path)
+        with pytest.raises(ConfigError, match=message):
+            section.build_atoms()

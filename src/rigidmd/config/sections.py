@@ -19,6 +19,7 @@ coupling section lives in :mod:`rigidmd.config.couplingsection`.
 """
 
 import importlib
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -183,6 +184,14 @@ def unreadable(field_name, path, err, read_options=None):
     from ase.io.formats import UnknownFileTypeError
 
     given = (read_options or {}).get("format")
+    unexpected = re.search(r"unexpected keyword argument '(\w+)'", str(err)) \
+        if isinstance(err, TypeError) else None
+    if unexpected and unexpected.group(1) in (read_options or {}):  # (a name, no content)
+        return ConfigError(f"read_options.{unexpected.group(1)}: not an option of ase.io.read "
+                           "or of the format's reader")
+    if given is not None and not isinstance(given, str):
+        return ConfigError(f"read_options.format: expected a format name such as xyz, got "
+                           f"{given!r}")
     if isinstance(err, OSError) and err.strerror:
         reason = err.strerror
     elif isinstance(err, UnknownFileTypeError):
