@@ -798,14 +798,30 @@ def analyse(series, p, n, offset=0.0):
 
 
 # --------------------------------------------------------------------------- command line
-def complete_already(path, name, resume):
-    """Whether the run whose JSON is ``path`` is complete (said in a line); without
-    ``resume`` a run that is there is refused (SystemExit, one line), never started over."""
-    if path.exists() and not resume:
-        raise SystemExit(f"{path}: exists; give --resume to continue it or remove it")
-    if resume and path.exists() and json.loads(path.read_text()).get("complete"):
+def complete_already(path, name, resume, point=None, checkpoint=None):
+    """Whether the run whose JSON is ``path`` is complete (said in a line).
+
+    Refused (SystemExit, one line), never started over: without ``resume`` a run that is
+    there (its JSON, or the checkpoint a killed run left); with ``resume`` a run made with
+    other arguments than ``point`` (each but :data:`RESUME_MAY_CHANGE`), or one whose JSON
+    says it stopped while its ``checkpoint`` is gone."""
+    left = [p for p in (path, checkpoint) if p is not None and p.exists()]
+    if left and not resume:
+        raise SystemExit(f"{left[0]}: exists; give --resume to continue it or remove it")
+    if not (resume and path.exists()):
+        return False
+    run = json.loads(path.read_text())
+    stored = run.get("point", {})
+    for key, value in (point or {}).items():
+        if key in stored and key not in RESUME_MAY_CHANGE and stored[key] != value:
+            raise SystemExit(f"{name}: --resume with {key} {value!r}, but the run was made "
+                             f"with {stored[key]!r}; give the run's arguments")
+    if run.get("complete"):
         print(f"{name}: complete", flush=True)
         return True
+    if checkpoint is not None and not checkpoint.exists() and run.get("steps", 0) > 0:
+        raise SystemExit(f"{name}: stopped at {run.get('ps', 0):g} ps but {checkpoint} is "
+                         "gone; remove its JSON to start it again")
     return False
 
 
@@ -816,7 +832,8 @@ def point_main(p, resume):
     name = run_name(p)
     paths = {"json": outdir / f"{name}.json", "series": outdir / f"{name}.series.npz",
              "chk": outdir / (f"{name}.chk.omm" if p["code"] == "openmm" else f"{name}.chk.npz")}
-    if complete_already(paths["json"], name, resume):
+    if complete_already(paths["json"], name, resume,
+                        {k: v for k, v in p.items() if k != "outdir"}, paths["chk"]):
         return 0
     if p["code"] == "rigidmd" and p["integrator"] not in INTEGRATORS:
         raise SystemExit(f"--integrator {p['integrator']!r}: rigidmd has {', '.join(INTEGRATORS)}")
@@ -897,6 +914,7 @@ def points(args):
 
 def run_many(args):
     """Run every point, ``--jobs`` at a time, each in its own process (:func:`run_points`)."""
+    check_run_arguments(args)
     return run_points(points(args), __file__, run_name, point_main, args.jobs, args.resume)
 
 
@@ -998,13 +1016,63 @@ def cost(args):
     return rows
 
 
+def positive(text):
+    """An argparse type: a positive finite number."""
+    value = float(text)
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
+    return value
+
+
+def at_least_zero(text):
+    """An argparse type: a finite number >= 0."""
+    value = float(text)
+    if not 0 <= value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text}")
+    return value
+
+
+def whole(least):
+    """An argparse type: a whole number >= ``least``."""
+    def parse_whole(text):
+        value = int(text)
+        if value < least:
+            raise argparse.ArgumentTypeError(f"expected a whole number >= {least}, got {text}")
+        return value
+    parse_whole.__name__ = f"whole number >= {least}"
+    return parse_whole
+
+
+def check_run_arguments(args):
+    """What argparse cannot see alone: lengths against each other, points that would not run
+    or would run twice (one line, SystemExit, before anything is written)."""
+    if args.equil_ps >= args.ps:
+        raise SystemExit(f"--equil-ps {args.equil_ps:g}: leaves nothing of --ps {args.ps:g}")
+    low, high = args.msd_fit_ps
+    if not low < high:
+        raise SystemExit(f"--msd-fit-ps {low:g} {high:g}: the fit's window must rise")
+    for option in ("seed", "dt_fs", "substeps", "code", "model"):
+        values = getattr(args, option)
+        if len(set(values)) != len(values):
+            raise SystemExit(f"--{option.replace('_', '-')}: a value given twice ({values})")
+    if max(args.substeps) > 1 and "rigidmd" not in args.code:
+        raise SystemExit("--substeps: a force split is rigidmd's; with --code "
+                         f"{' '.join(args.code)} nothing would run")
+    if args.integrator and "rigidmd" not in args.code:
+        raise SystemExit(f"--integrator: rigidmd's; --code {' '.join(args.code)} has its own")
+
+
+#: The parts of a point a continued run may change (how often it saves and says so).
+RESUME_MAY_CHANGE = ("save_s", "log_s", "jobs", "outdir", "box_A", "cutoff_A")
+
+
 def add_run_options(sub, run, outdir):
     """The options a ``run`` command shares with every script that runs points in processes
     (:func:`run_points`), and the ``_point`` command those processes run."""
-    run.add_argument("--save-s", type=float, default=300.0, help="checkpoint every, s")
-    run.add_argument("--log-s", type=float, default=60.0,
+    run.add_argument("--save-s", type=at_least_zero, default=300.0, help="checkpoint every, s")
+    run.add_argument("--log-s", type=at_least_zero, default=60.0,
                      help="log line every, s (no terminal)")
-    run.add_argument("--jobs", type=int, default=1)
+    run.add_argument("--jobs", type=whole(1), default=1)
     run.add_argument("--resume", action="store_true", help="continue stopped runs")
     run.add_argument("--outdir", type=Path, default=outdir)
     point = sub.add_parser("_point")
@@ -1020,33 +1088,35 @@ def parse(argv=None):
     r.add_argument("--integrator", nargs="+", choices=INTEGRATORS,
                    help="rigidmd's integrators (default all)")
     r.add_argument("--model", nargs="+", choices=MODELS, default=["tip4p2005"])
-    r.add_argument("--waters", type=int, default=216)
-    r.add_argument("--dt-fs", nargs="+", type=float, required=True)
-    r.add_argument("--seed", nargs="+", type=int, default=[1])
-    r.add_argument("--ps", type=float, required=True, help="length of each run, ps")
-    r.add_argument("--equil-ps", type=float, default=0.0,
+    r.add_argument("--waters", type=whole(1), default=216)
+    r.add_argument("--dt-fs", nargs="+", type=positive, required=True)
+    r.add_argument("--seed", nargs="+", type=whole(0), default=[1])
+    r.add_argument("--ps", type=positive, required=True, help="length of each run, ps")
+    r.add_argument("--equil-ps", type=at_least_zero, default=0.0,
                    help="ps left out of the analysis at the start")
-    r.add_argument("--tau-ps", type=float, default=1.0,
+    r.add_argument("--tau-ps", type=positive, default=1.0,
                    help="Bussi's τ and the Nosé–Hoover chains' damping time, ps")
-    r.add_argument("--sample-fs", type=float, default=20.0, help="U and T every this, fs")
-    r.add_argument("--frame-fs", type=float, default=200.0, help="frames (RDF, MSD), fs")
-    r.add_argument("--blocks", type=int, default=10, help="blocks for the errors")
-    r.add_argument("--tconf-frames", type=int, default=2,
+    r.add_argument("--sample-fs", type=positive, default=20.0, help="U and T every this, fs")
+    r.add_argument("--frame-fs", type=positive, default=200.0, help="frames (RDF, MSD), fs")
+    r.add_argument("--blocks", type=whole(2), default=10, help="blocks for the errors")
+    r.add_argument("--tconf-frames", type=whole(0), default=2,
                    help="rigidmd: a T_conf sample every this many frames (0: none)")
-    r.add_argument("--tconf-probes", type=int, default=4,
+    r.add_argument("--tconf-probes", type=whole(1), default=4,
                    help="rigidmd: Hutchinson probes per T_conf sample (2 force calls each)")
-    r.add_argument("--msd-fit-ps", nargs=2, type=float, default=[3.0, 10.0])
-    r.add_argument("--piece-ps", type=float, default=10.0, help="LAMMPS: ps per piece")
-    r.add_argument("--substeps", nargs="+", type=int, default=[1],
+    r.add_argument("--msd-fit-ps", nargs=2, type=at_least_zero, default=[3.0, 10.0])
+    r.add_argument("--piece-ps", type=positive, default=10.0, help="LAMMPS: ps per piece")
+    r.add_argument("--substeps", nargs="+", type=whole(1), default=[1],
                    help="rigidmd: r-RESPA's inner steps per --dt-fs (the outer step); above 1 "
                    "the forces are split, the fast level lammps_short_range_commands(--r-split)")
-    r.add_argument("--r-split", type=float, default=5.0, help="the split's fast cut-off, Å")
+    r.add_argument("--r-split", type=positive, default=5.0, help="the split's fast cut-off, Å")
     add_run_options(sub, r, HERE / "timestep_runs")
     s = sub.add_parser("start", help="make a start state")
     s.add_argument("--model", choices=MODELS, default="tip4p2005")
     s.add_argument("--waters", type=int, default=64)
     s.add_argument("--seed", type=int, default=1)
-    s.add_argument("--eq-ps", type=float, default=5.0)
+    s.add_argument("--eq-ps", type=positive, default=5.0)
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace the committed start of this size")
     a = sub.add_parser("analyse", help="analyse runs again from their series")
     a.add_argument("files", nargs="+", type=Path, help="the runs' JSONs")
     a.add_argument("--equil-ps", type=float, help="another length left out at the start")
@@ -1064,6 +1134,10 @@ def main(argv=None):
     if args.command == "_point":
         return point_main(json.loads(args.point), args.resume)
     if args.command == "start":
+        existing = start_file(args.model, args.waters)
+        if existing.exists() and not args.overwrite:  # every run of this size came from it
+            raise SystemExit(f"{existing}: exists (the start of every {args.waters}-water run "
+                             "made so far); give --overwrite to make it again")
         print(make_start(args.model, args.waters, args.seed, args.eq_ps))
         return 0
     if args.command == "analyse":

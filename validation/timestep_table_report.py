@@ -78,20 +78,47 @@ def pool(runs, key):
     return [float(x.mean()), float(error)]
 
 
+def _positive(text):
+    """An argparse type: a positive finite number."""
+    value = float(text)
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
+    return value
+
+
 def read_runs(paths):
     """``(path, run)`` of each run: a run's JSON, or a bundle of them (a list, as
     ``--bundle`` writes), in the order given."""
     for path in paths:
-        data = json.loads(Path(path).read_text())
+        try:
+            data = json.loads(Path(path).read_text())
+        except (OSError, ValueError) as err:
+            raise SystemExit(f"{path}: not a readable run or bundle ({err})") from None
         for run in data if isinstance(data, list) else [data]:
+            if not isinstance(run, dict) or not isinstance(run.get("point"), dict):
+                raise SystemExit(f"{path}: holds something that is not a table run (no "
+                                 "point)")
             yield path, run
+
+
+#: What the runs pooled into one point must share beyond the point's key (a run of other
+#: length, equilibration, sampling or thermostat time is another measurement).
+SAME_IN_A_POINT = ("ps", "equil_ps", "sample_fs", "frame_fs", "tau_ps", "blocks")
 
 
 def load_points(paths, include_incomplete=False):
     """Pooled points, one per (model, waters, code, integrator, dt); a run that was stopped
     before its length (``"complete": false``) is left out unless ``include_incomplete``."""
-    groups = {}
+    groups, seen = {}, {}
     for path, run in read_runs(paths):
+        p = run["point"]
+        which = tuple(p.get(k) for k in ("model", "waters", "code", "integrator", "dt_fs",
+                                         "seed", "substeps", "r_split"))
+        if which in seen:  # a file given twice, or a bundle with its own inputs
+            raise SystemExit(f"{path}: the run {run.get('name', which)} is also in "
+                             f"{seen[which]}; give each run once (a bundle, and new runs "
+                             "not in it)")
+        seen[which] = path
         if not run.get("complete") and not include_incomplete:
             print(f"{Path(path).name}: stopped at {run.get('ps', 0):g} ps, left out "
                   f"(--include-incomplete takes it)")
@@ -104,6 +131,11 @@ def load_points(paths, include_incomplete=False):
     points = []
     for key in sorted(groups):
         runs = groups[key]
+        for field in SAME_IN_A_POINT:
+            values = {json.dumps(r["point"].get(field)) for r in runs}
+            if len(values) > 1:
+                raise SystemExit(f"{' '.join(map(str, key))} fs: its runs differ in {field} "
+                                 f"({', '.join(sorted(values))}); pool only runs made alike")
         row = dict(zip(("model", "waters", "code", "integrator", "dt_fs"), key, strict=True))
         first = runs[0]["point"]  # the split's levels as fields, not only in its name
         substeps = int(first.get("substeps", 1))
@@ -504,8 +536,8 @@ def main(argv=None):
     p.add_argument("files", nargs="+", type=Path)
     p.add_argument("--name", default="timestep_table")
     p.add_argument("--outdir", type=Path, default=HERE)
-    p.add_argument("--fit-max-fs", type=float, default=2.0)
-    p.add_argument("--agree-sigma", type=float, default=2.0)
+    p.add_argument("--fit-max-fs", type=_positive, default=2.0)
+    p.add_argument("--agree-sigma", type=_positive, default=2.0)
     p.add_argument("--header", default="", help="a line written above the table")
     p.add_argument("--include-incomplete", action="store_true",
                    help="also pool runs that were stopped before their length")

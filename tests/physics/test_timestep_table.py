@@ -688,3 +688,67 @@ def test_a_stop_in_another_program_hands_its_signal_handlers_back():
         time.sleep(0.01)
         assert stop and stop.signal == "SIGTERM"
     assert {sig: signal.getsignal(sig) for sig in before} == before
+
+
+# ------------------------------------------------------------ outside pass, 2026-11-29
+
+def test_the_collector_refuses_a_run_twice_and_runs_made_unalike(tmp_path):
+    """The same file twice (or a bundle with its own inputs) was pooled as more runs (U's
+    error 0.069 for 0.108), and runs of 0.4 and 2 ps, or of other equilibration, were pooled
+    as one point, all without a word."""
+    files = [_synthetic(tmp_path, "baoab", dt, seed, -47.0 + 0.01 * seed)
+             for dt in (1.0, 2.0) for seed in (1, 2)]
+    with pytest.raises(SystemExit, match=r"is also in .*give each run once"):
+        collector.report([*files, files[0]], tmp_path, "t")
+    longer = json.loads(files[1].read_text())
+    longer["point"].update(seed=3, ps=2.0)
+    other = tmp_path / "longer.json"
+    other.write_text(json.dumps(longer))
+    with pytest.raises(SystemExit, match=r"its runs differ in ps \(2.0, null\)"):
+        collector.report([*files, other], tmp_path, "t")
+    (tmp_path / "broken.json").write_text('{"a": ')
+    with pytest.raises(SystemExit, match=r"broken.json: not a readable run or bundle"):
+        collector.report([*files, tmp_path / "broken.json"], tmp_path, "t")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--jobs", "0"], "--jobs: expected a whole number >= 1"),  # waited for ever
+    (["--ps", "0"], "--ps: expected a positive number"),  # wrote a complete run of NaN
+    (["--dt-fs", "0"], "--dt-fs: expected a positive number"),
+    (["--sample-fs", "0"], "--sample-fs: expected a positive number"),  # ZeroDivisionError
+    (["--blocks", "1"], "--blocks: expected a whole number >= 2"),  # failed after the run
+    (["--equil-ps", "5"], "--equil-ps 5: leaves nothing of --ps 0.1"),
+    (["--seed", "1", "1"], "--seed: a value given twice"),
+    (["--code", "openmm", "--substeps", "2"], "--substeps: a force split is rigidmd's"),
+    (["--code", "lammps", "--integrator", "baoab"], "--integrator: rigidmd's"),
+])
+def test_run_arguments_that_would_not_run_are_refused_first(tmp_path, args, message):
+    given = dict(zip(["--dt-fs", "--ps"], ["2", "0.1"], strict=True))
+    for option in args[::2]:
+        given.pop(option, None)
+    rc, _, err = finish(_run([*[x for kv in given.items() for x in kv], *args,
+                              "--outdir", str(tmp_path / "out")]))
+    assert rc != 0 and message in err, err
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_a_run_left_by_a_kill_or_resumed_otherwise_is_refused(tmp_path):
+    """A killed run (checkpoint, no JSON) was started over by the same command without
+    --resume; --resume with other arguments mixed the series and labelled them with the new
+    ones; --resume of a run whose checkpoint was gone started from step 0 in silence."""
+    point = {"code": "rigidmd", "integrator": "langevin", "model": "tip4p2005",
+             "waters": 64, "dt_fs": 2.0, "seed": 1, "ps": 0.4, "sample_fs": 20.0}
+    json_path, chk = tmp_path / "run.json", tmp_path / "run.chk.npz"
+    chk.write_bytes(b"x")
+    with pytest.raises(SystemExit, match=r"run.chk.npz: exists; give --resume"):
+        table.complete_already(json_path, "run", False, point, chk)
+    json_path.write_text(json.dumps({"point": dict(point, save_s=300.0), "complete": False,
+                                     "steps": 50, "ps": 0.1}))
+    with pytest.raises(SystemExit, match=r"--resume with sample_fs 100.0, but the run was "
+                                         r"made with 20.0"):
+        table.complete_already(json_path, "run", True, dict(point, sample_fs=100.0), chk)
+    assert table.complete_already(json_path, "run", True, dict(point, save_s=10.0), chk) \
+        is False  # how often it saves may change
+    chk.unlink()
+    with pytest.raises(SystemExit, match=r"stopped at 0.1 ps but .*run.chk.npz is gone"):
+        table.complete_already(json_path, "run", True, point, chk)
