@@ -552,6 +552,11 @@ def run_openmm(p, paths, stop, progress, resume):
     if resume and paths["chk"].exists() and meta_path.exists():
         context.loadCheckpoint(paths["chk"].read_bytes())
         extra = json.loads(meta_path.read_text())
+        held = context.getStepCount()
+        if held != extra["steps"]:  # killed between the checkpoint and its record
+            raise SystemExit(f"{paths['chk']}: holds step {held}, its record {meta_path.name} "
+                             f"step {extra['steps']} (stopped between the two writes); remove "
+                             "the run's files to start it again")
         series.load(extra["samples"], extra["frames"])
         steps = extra["steps"]
     else:
@@ -587,8 +592,9 @@ def run_openmm(p, paths, stop, progress, resume):
         tmp = paths["chk"].with_name(paths["chk"].name + ".tmp")
         tmp.write_bytes(context.createCheckpoint())
         os.replace(tmp, paths["chk"])
-        meta_path.write_text(json.dumps({"samples": samples, "frames": frames,
-                                         "steps": steps}))
+        record = meta_path.with_name(meta_path.name + ".tmp")
+        record.write_text(json.dumps({"samples": samples, "frames": frames, "steps": steps}))
+        os.replace(record, meta_path)
 
     if steps == 0:
         observe()
@@ -655,10 +661,12 @@ def run_lammps(p, paths, stop, progress, resume):
     steps = 0
     if resume and chk.exists():
         saved = json.loads(chk.read_text())
-        series.load(saved["samples"], saved["frames"])
-        steps = saved["steps"]
         with np.load(paths["chk"]) as d:
             state = dict(state, positions=d["positions"], momenta=d["momenta"])
+            if "steps" in d:  # the record inside the checkpoint: written with it, at once
+                saved = {key: int(d[key]) for key in ("samples", "frames", "steps")}
+        series.load(saved["samples"], saved["frames"])
+        steps = saved["steps"]
     sample = max(int(round(p["sample_fs"] / p["dt_fs"])), 1)
     frame_every = max(int(round(p["frame_fs"] / p["sample_fs"])), 1)
     total = int(round(p["ps"] * 1000 / p["dt_fs"]))
@@ -696,8 +704,15 @@ def run_lammps(p, paths, stop, progress, resume):
                      * masses[:, None])
         samples, frames = series.counts()
         series.save()
-        np.savez(paths["chk"], positions=state["positions"], momenta=state["momenta"])
-        chk.write_text(json.dumps({"samples": samples, "frames": frames, "steps": steps}))
+        # The checkpoint carries its own record (a kill between two files left the record
+        # of the step before: 0.4 ps skipped on --resume), written whole or not at all.
+        tmp = paths["chk"].with_name(paths["chk"].name + ".tmp.npz")
+        np.savez(tmp, positions=state["positions"], momenta=state["momenta"],
+                 samples=samples, frames=frames, steps=steps)
+        os.replace(tmp, paths["chk"])
+        record = chk.with_name(chk.name + ".tmp")
+        record.write_text(json.dumps({"samples": samples, "frames": frames, "steps": steps}))
+        os.replace(record, chk)
         progress(steps * p["dt_fs"] / 1000)
     if conf is not None:
         conf.close()
