@@ -933,6 +933,16 @@ def run_many(args):
     return run_points(points(args), __file__, run_name, point_main, args.jobs, args.resume)
 
 
+def _ends_with_parent():
+    """In a point's process, before it runs: SIGTERM when the parent dies (Linux's
+    PR_SET_PDEATHSIG), so that a parent killed outright (SIGKILL, a hang-up) leaves no run
+    computing on (it writes what it has and stops, as after a SIGTERM to the parent)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG = 1
+
+
 def run_points(todo, script, name_of, one, jobs, resume):
     """Run the points ``todo``: with one point and one job here (``one(point, resume)``),
     else ``jobs`` at a time, each in its own process (``script _point JSON``); a signal is
@@ -948,7 +958,7 @@ def run_points(todo, script, name_of, one, jobs, resume):
             p = todo.pop(0)
             cmd = [sys.executable, str(script), "_point", json.dumps(p)] + (
                 ["--resume"] if resume else [])
-            running.append((p, subprocess.Popen(cmd)))
+            running.append((p, subprocess.Popen(cmd, preexec_fn=_ends_with_parent)))
         for p, proc in list(running):
             if stop:
                 try:
@@ -982,6 +992,9 @@ def measure_ms(code, integrator, dt_fs, steps, model, waters, outdir, substeps=1
     split (``dt_fs`` the outer step, the fast level cut at ``r_split``).  ``skin``: the
     neighbour skin (Å) of rigidmd's LAMMPS forces and of LAMMPS's own run (None: LAMMPS's
     metal default, 2 Å; OpenMM has none).  Returns ``(cpu_ms, wall_ms)``."""
+    if steps <= 20:
+        raise SystemExit(f"--steps {steps}: must be above 20 (a run of 20 steps is subtracted "
+                         "from it)")
     spent = []
     split = {"substeps": substeps, "r_split": r_split} if substeps > 1 else {}
     if skin is not None:
@@ -1000,6 +1013,9 @@ def measure_ms(code, integrator, dt_fs, steps, model, waters, outdir, substeps=1
         cpu, wall = time.process_time(), time.perf_counter()
         with Stop() as stop:  # (the caller's handlers back after each run)
             runner(p, paths, stop, Progress(name, p["ps"], 1e9), False)
+        if stop:  # a measurement cut short measures nothing: said, and nothing written
+            raise SystemExit(f"stopped by {stop.signal} while measuring {code} {integrator} "
+                             f"at {dt_fs:g} fs; nothing of this benchmark was written")
         spent.append((time.process_time() - cpu, time.perf_counter() - wall))
     return tuple(1000 * (spent[1][k] - spent[0][k]) / (steps - 20) for k in (0, 1))
 

@@ -76,6 +76,9 @@ def plan_page():
 
 
 if __name__ == "__main__":
+    import argparse
+
+    argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0]).parse_args()
     for name, pages in PAGES.items():
         put(name, pages)
     plan_page()

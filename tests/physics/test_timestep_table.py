@@ -763,3 +763,42 @@ def test_a_run_left_by_a_kill_or_resumed_otherwise_is_refused(tmp_path):
     chk.unlink()
     with pytest.raises(SystemExit, match=r"stopped at 0.1 ps but .*run.chk.npz is gone"):
         table.complete_already(json_path, "run", True, point, chk)
+
+
+@pytest.mark.lammps
+def test_a_parent_killed_outright_takes_its_runs_with_it(tmp_path):
+    """After SIGKILL of the parent (or a hang-up) its ``_point`` processes ran on, orphans;
+    each now gets SIGTERM when its parent dies, and writes what it has."""
+    proc = _run(["--integrator", "langevin", "--dt-fs", "2", "--ps", "2", "--seed", "1", "2",
+                 "--jobs", "1", "--save-s", "0", "--outdir", str(tmp_path)])
+    name = "tip4p2005_64_rigidmd_langevin_dt2_s1"
+    deadline = time.monotonic() + 200
+    while not (tmp_path / f"{name}.chk.npz").exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    children = [int(pid) for pid in subprocess.run(
+        ["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout.split()]
+    assert children, "no run process"
+    proc.kill()
+    proc.wait()
+    deadline = time.monotonic() + 60
+    while any(os.path.exists(f"/proc/{pid}") and
+              open(f"/proc/{pid}/stat").read().split(") ")[1][0] != "Z" for pid in children):
+        assert time.monotonic() < deadline, "a run outlived its parent"
+        time.sleep(0.1)
+    result = json.loads((tmp_path / f"{name}.json").read_text())
+    assert result["stopped_by"] == "SIGTERM" and not result["complete"]
+
+
+def test_benchmark_and_page_arguments_are_checked_first(tmp_path):
+    """``cost --steps 10`` printed a plausible ms/step from (t10 - t20) / (10 - 20), 20 a
+    ZeroDivisionError; ``timestep_table_pages.py --help`` rewrote the pages."""
+    with pytest.raises(SystemExit, match=r"--steps 10: must be above 20"):
+        table.measure_ms("rigidmd", "langevin", 2.0, 10, "tip4p2005", 64, tmp_path)
+    pages = sorted((ROOT / "docs" / "validation").glob("timestep-216*.md"))
+    before = {p: p.stat().st_mtime_ns for p in pages}
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    result = subprocess.run([sys.executable, str(ROOT / "validation" /
+                                                 "timestep_table_pages.py"), "--help"],
+                            env=env, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0 and "usage:" in result.stdout
+    assert {p: p.stat().st_mtime_ns for p in pages} == before
