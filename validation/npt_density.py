@@ -51,14 +51,17 @@ from timestep_table import (  # noqa: E402
     Progress,
     Stop,
     add_run_options,
+    at_least_zero,
     block_mean,
     complete_already,
     cutoff_for,
     intramolecular_energy,
     load_start,
     make_atoms,
+    positive,
     run_in_pieces,
     run_points,
+    whole,
 )
 
 PRESSURE_BAR = 1.01325
@@ -164,7 +167,8 @@ def point_main(p, resume):
     name = run_name(p)
     paths = {k: outdir / f"{name}.{k}.npz" for k in ("series", "chk")}
     paths["json"] = outdir / f"{name}.json"
-    if complete_already(paths["json"], name, resume):
+    if complete_already(paths["json"], name, resume,
+                        {k: v for k, v in p.items() if k != "outdir"}, paths["chk"]):
         return 0
     stop = Stop()
     progress = Progress(name, p["ps"], p["log_s"], shared=p.get("jobs", 1) > 1)
@@ -193,6 +197,12 @@ def point_main(p, resume):
 def run_many(args):
     """Every point of the values given, ``--jobs`` at a time, each in its own process
     (:func:`timestep_table.run_points`: a signal is passed on, each run writes what it has)."""
+    if args.equil_ps >= args.ps:
+        raise SystemExit(f"--equil-ps {args.equil_ps:g}: leaves nothing of --ps {args.ps:g}")
+    for option in ("integrator", "dt_fs", "seed"):
+        values = getattr(args, option)
+        if len(set(values)) != len(values):
+            raise SystemExit(f"--{option.replace('_', '-')}: a value given twice ({values})")
     base = {k: getattr(args, k) for k in ("waters", "ps", "equil_ps", "move_fs", "blocks",
                                           "save_s", "log_s", "jobs")}
     base["outdir"] = str(args.outdir)
@@ -292,15 +302,15 @@ def parse(argv=None):
     sub = ap.add_subparsers(dest="command", required=True)
     r = sub.add_parser("run", help="run points")
     r.add_argument("--integrator", nargs="+", choices=INTEGRATORS, default=["baoab"])
-    r.add_argument("--waters", type=int, default=216,
+    r.add_argument("--waters", type=whole(1), default=216,
                    help="216 (the table's) or a size timestep_table.py start made")
-    r.add_argument("--dt-fs", nargs="+", type=float, required=True)
-    r.add_argument("--seed", nargs="+", type=int, default=[1])
-    r.add_argument("--ps", type=float, required=True, help="length of each run, ps")
-    r.add_argument("--equil-ps", type=float, default=30.0,
+    r.add_argument("--dt-fs", nargs="+", type=positive, required=True)
+    r.add_argument("--seed", nargs="+", type=whole(0), default=[1])
+    r.add_argument("--ps", type=positive, required=True, help="length of each run, ps")
+    r.add_argument("--equil-ps", type=at_least_zero, default=30.0,
                    help="left out of the averages at the start, ps")
-    r.add_argument("--move-fs", type=float, default=50.0, help="a volume move every, fs")
-    r.add_argument("--blocks", type=int, default=10, help="blocks for the errors")
+    r.add_argument("--move-fs", type=positive, default=50.0, help="a volume move every, fs")
+    r.add_argument("--blocks", type=whole(2), default=10, help="blocks for the errors")
     add_run_options(sub, r, HERE / "npt_runs")
     rep = sub.add_parser("report", help="the table of finished or stopped runs")
     rep.add_argument("files", nargs="+", type=Path)

@@ -128,3 +128,19 @@ def test_the_npt_page_shows_what_the_committed_runs_give():
     assert len(rows) >= 3
     missing = [row for row in rows if row not in page]
     assert not missing, f"rows the page lacks (run the report again): {missing}"
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--dt-fs", "0", "--ps", "1"], "--dt-fs: expected a positive number"),  # ZeroDivision
+    (["--dt-fs", "2", "--ps", "0"], "--ps: expected a positive number"),  # a NaN "complete"
+    (["--dt-fs", "2", "--ps", "1", "--equil-ps", "5"], "--equil-ps 5: leaves nothing"),
+    (["--dt-fs", "2", "--ps", "1", "--blocks", "0"], "--blocks: expected a whole number"),
+    (["--dt-fs", "2", "2", "--ps", "1", "--equil-ps", "0"], "--dt-fs: a value given twice"),
+])
+def test_npt_run_arguments_are_checked_first(tmp_path, args, message):
+    """Each was a traceback, a failure after the whole run, or a run of NaN marked
+    complete (an outside pass, 2026-11-29)."""
+    proc = _run([*args, "--outdir", str(tmp_path / "out")])
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode != 0 and message in err, err
+    assert not (tmp_path / "out").exists()
