@@ -20,11 +20,15 @@ Results: ``configurational_eps.txt``.  Run (a minute on one core)::
 """
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # (arguments.py, beside this script)
+from arguments import whole  # noqa: E402
+
 EPS = (1e-5, 1e-4, 1e-3, 5e-3, 2e-2, 5e-2, 1e-1)
 REFERENCE = 1e-3
 
@@ -52,8 +56,8 @@ def main(argv=None):
     from rigidmd.core.configurational import ConfigurationalTemperature
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=4)
-    parser.add_argument("--probes", type=int, default=16)
+    parser.add_argument("--frames", type=whole(1), default=4)
+    parser.add_argument("--probes", type=whole(2), default=16)
     parser.add_argument("--outdir", default=str(HERE))
     args = parser.parse_args(argv)
     rows = {eps: [] for eps in EPS}  # per frame: (lap_t, lap_r) as the mean of the probes

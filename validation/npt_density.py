@@ -45,23 +45,21 @@ import numpy as np  # noqa: E402
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
+from arguments import at_least_zero, positive, whole  # noqa: E402
 from timestep_table import (  # noqa: E402
     FRICTION_PER_PS,
     TEMPERATURE_K,
     Progress,
     Stop,
     add_run_options,
-    at_least_zero,
     block_mean,
     complete_already,
     cutoff_for,
     intramolecular_energy,
     load_start,
     make_atoms,
-    positive,
     run_in_pieces,
     run_points,
-    whole,
 )
 
 PRESSURE_BAR = 1.01325

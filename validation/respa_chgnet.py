@@ -47,8 +47,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "benchmarks"))
-
+sys.path.insert(0, str(HERE))  # (arguments.py, beside this script)
 import numpy as np  # noqa: E402
+from arguments import positive  # noqa: E402
 from ase import units  # noqa: E402
 from ase.calculators.calculator import Calculator, all_changes  # noqa: E402
 
@@ -252,7 +253,7 @@ def nve(start, model, fast, k, dt_fs, ps):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--fit-ps", type=float, default=1.0, help="CHGNet trajectory for the fit")
-    ap.add_argument("--ps", type=float, default=0.5, help="each NVE run, ps")
+    ap.add_argument("--ps", type=positive, default=0.5, help="each NVE run, ps")
     ap.add_argument("--quick", action="store_true", help="a short look: k = 1, 4; 1, 4 fs")
     ap.add_argument("--out", type=Path, default=HERE / "respa_chgnet")
     args = ap.parse_args(argv)

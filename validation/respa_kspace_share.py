@@ -51,6 +51,9 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # (arguments.py, beside this script)
+from arguments import whole  # noqa: E402
+
 START = HERE / "water_openmm_long.start_tip4p2005.npz"
 SECTIONS = ("Pair", "Bond", "Kspace", "Neigh", "Comm", "Output", "Modify", "Other")
 CUTOFFS = (9.0, 7.0, 6.0, 5.0)
@@ -259,7 +262,7 @@ def rewrite(out: Path) -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=whole(1), default=3)
     ap.add_argument("--sizes", type=int, nargs="+", default=list(SIZES))
     ap.add_argument("--cutoffs", type=float, nargs="+", default=list(CUTOFFS))
     ap.add_argument("--quick", action="store_true", help="one repeat, 216 waters, few steps")

@@ -46,6 +46,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -55,6 +56,9 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_
 import numpy as np  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # (arguments.py, beside this script)
+from arguments import positive, whole  # noqa: E402
+
 START = HERE / "water_openmm_long.start_tip4p2005.npz"
 TYPES = {"O": 1, "H": 2, "X": 3}
 CUTOFF = 9.0
@@ -212,8 +216,8 @@ def report(result) -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--ps", type=float, default=0.4, help="simulated ps per run")
+    ap.add_argument("--repeats", type=whole(1), default=3)
+    ap.add_argument("--ps", type=positive, default=0.4, help="simulated ps per run")
     ap.add_argument("--warmup", type=int, default=10, help="outer steps before timing")
     ap.add_argument("--alpha", type=float, default=0.2, help="fast level's DSF damping (1/Å)")
     ap.add_argument("--skin", type=float, default=2.0,

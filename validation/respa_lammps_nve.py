@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -34,6 +35,9 @@ import numpy as np  # noqa: E402
 from respa_lammps_cost import calculators, start_atoms  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # (arguments.py, beside this script)
+from arguments import positive  # noqa: E402
+
 DT_FS = (1.0, 2.0, 4.0, 6.0, 8.0)
 KS = (1, 2, 4, 8)
 
@@ -116,7 +120,7 @@ def report(result) -> str:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--ps", type=float, default=0.5, help="simulated ps per point")
+    ap.add_argument("--ps", type=positive, default=0.5, help="simulated ps per point")
     ap.add_argument("--r-split", type=float, default=5.0)
     ap.add_argument("--lj-cut", action="store_true",
                     help="the fast level's Lennard-Jones cut, not smooth (lj/cut/coul/dsf)")

@@ -36,8 +36,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-
 import timestep_table  # noqa: E402
+from arguments import whole  # noqa: E402
 
 #: The code and integrator every ratio is taken against.
 REFERENCE = ("lammps", "nvt_small")
@@ -159,7 +159,7 @@ def main(argv=None):
     p.add_argument("--extra", nargs="*", type=parse_extra, default=[],
                    metavar="CODE:INTEGRATOR:DT")
     p.add_argument("--steps", type=int, default=300)
-    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--rounds", type=whole(1), default=3)
     p.add_argument("--name", default="time_to_solution")
     p.add_argument("--outdir", type=Path, default=HERE)
     p.add_argument("--workdir", type=Path, default=Path("/tmp/time_to_solution"))

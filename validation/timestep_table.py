@@ -74,6 +74,7 @@ import numpy as np  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+from arguments import at_least_zero, positive, whole  # noqa: E402
 
 TEMPERATURE_K = 298.0
 KB_KJ = 0.0083144626  # kJ/mol/K
@@ -1045,33 +1046,6 @@ def cost(args):
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1) + "\n")
     return rows
-
-
-def positive(text):
-    """An argparse type: a positive finite number."""
-    value = float(text)
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
-    return value
-
-
-def at_least_zero(text):
-    """An argparse type: a finite number >= 0."""
-    value = float(text)
-    if not 0 <= value < float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text}")
-    return value
-
-
-def whole(least):
-    """An argparse type: a whole number >= ``least``."""
-    def parse_whole(text):
-        value = int(text)
-        if value < least:
-            raise argparse.ArgumentTypeError(f"expected a whole number >= {least}, got {text}")
-        return value
-    parse_whole.__name__ = f"whole number >= {least}"
-    return parse_whole
 
 
 def check_run_arguments(args):
