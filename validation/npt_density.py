@@ -221,10 +221,29 @@ def report(files, out=None, sigma_goal_pct=0.1):
     integrator: Δρ, Δ/σ and the goal (within 2σ, σ/ρ ≤ ``sigma_goal_pct`` at both steps).
     With ``out``, also ``OUT.md``, ``OUT.json`` (the combined rows) and ``OUT.runs.json``
     (every run's JSON, a bundle ``report`` reads again)."""
-    runs = []
+    runs, seen = [], {}
     for f in files:  # a run's JSON, or a bundle of them (a list, ``--out``'s ``.runs.json``)
-        data = json.loads(Path(f).read_text())
-        runs.extend(data if isinstance(data, list) else [data])
+        try:
+            data = json.loads(Path(f).read_text())
+        except (OSError, ValueError) as err:
+            raise SystemExit(f"{f}: not a readable run or bundle ({err})") from None
+        for run in data if isinstance(data, list) else [data]:
+            if not isinstance(run, dict) or "density" not in run or "point" not in run:
+                raise SystemExit(f"{f}: holds something that is not an NPT run (no density)")
+            p = run["point"]
+            which = (p.get("integrator"), p.get("dt_fs"), p.get("seed"), run.get("molecules"))
+            if which in seen:  # a run given twice: its σ would fall by √2
+                raise SystemExit(f"{f}: the run {run.get('name', which)} is also in "
+                                 f"{seen[which]}; give each run once")
+            seen[which] = f
+            runs.append(run)
+    if not runs:
+        raise SystemExit("report: no runs given")
+    for field in ("molecules", "equil_ps", "move_fs"):  # one header says them for all
+        values = sorted({str(r.get(field, r["point"].get(field))) for r in runs})
+        if len(values) > 1:
+            raise SystemExit(f"report: the runs differ in {field} ({', '.join(values)}); "
+                             "report runs made alike")
     runs.sort(key=lambda r: (r["point"]["integrator"], r["point"]["dt_fs"], r["point"]["seed"]))
     first = runs[0]["point"]
     lines = [f"NPT density of {runs[0]['molecules']} rigid TIP4P/2005 waters, 298 K, 1 atm, Monte "

@@ -144,3 +144,18 @@ def test_npt_run_arguments_are_checked_first(tmp_path, args, message):
     _, err = proc.communicate(timeout=120)
     assert proc.returncode != 0 and message in err, err
     assert not (tmp_path / "out").exists()
+
+
+def test_the_report_refuses_a_run_twice_or_runs_made_unalike(tmp_path):
+    """The same JSON twice was two runs (σ down by √2); 64 and 216 waters, or other
+    equilibrations, were combined under a header naming the first run's (an outside pass,
+    2026-11-29)."""
+    bundle = ROOT / "validation" / "npt_density_216.runs.json"
+    runs = json.loads(bundle.read_text())
+    with pytest.raises(SystemExit, match=r"is also in .*give each run once"):
+        npt.report([bundle, bundle])
+    smaller = dict(runs[0], name="other", molecules=64)  # (another size: another run)
+    (tmp_path / "other.json").write_text(json.dumps(smaller))
+    with pytest.raises(SystemExit, match=r"the runs differ in molecules \(216, 64\)"):
+        npt.report([bundle, tmp_path / "other.json"])
+    npt.report([bundle])  # the committed runs, alike
