@@ -546,7 +546,9 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         name = type(self).__name__
         where = f"{name}.set_state"
         try:
-            classes, kind = list(saved["classes"]), saved["classes"][0]
+            # (a checkpoint written before the class was stored names none: any class)
+            classes = list(saved.get("classes") or [name])
+            kind = classes[0]
             parts = [(part["class"], part["parameters"]) for part in saved["couplings"]]
             dt, scheme = float(saved["dt"]), saved["scheme_name"]
             body_ids = np.asarray(saved["body_ids"])
