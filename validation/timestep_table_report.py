@@ -28,11 +28,15 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # (arguments.py, beside this script)
+from arguments import positive  # noqa: E402
+
 #: The quantities fitted against dt²; the temperatures are compared with the bath instead.
 FITTED = ("U", "rdf_peak_r", "rdf_peak_g", "D_pbc")
 #: Those of the configurations alone, the same under any thermostat (D_PBC is not: it
@@ -76,14 +80,6 @@ def pool(runs, key):
     if np.isfinite(own).all():
         error = max(error, float(np.sqrt(np.sum(own ** 2))) / len(x))
     return [float(x.mean()), float(error)]
-
-
-def _positive(text):
-    """An argparse type: a positive finite number."""
-    value = float(text)
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
-    return value
 
 
 def read_runs(paths):
@@ -536,8 +532,8 @@ def main(argv=None):
     p.add_argument("files", nargs="+", type=Path)
     p.add_argument("--name", default="timestep_table")
     p.add_argument("--outdir", type=Path, default=HERE)
-    p.add_argument("--fit-max-fs", type=_positive, default=2.0)
-    p.add_argument("--agree-sigma", type=_positive, default=2.0)
+    p.add_argument("--fit-max-fs", type=positive, default=2.0)
+    p.add_argument("--agree-sigma", type=positive, default=2.0)
     p.add_argument("--header", default="", help="a line written above the table")
     p.add_argument("--include-incomplete", action="store_true",
                    help="also pool runs that were stopped before their length")
