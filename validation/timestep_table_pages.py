@@ -2,9 +2,10 @@
 
 The collector (``timestep_table_report.py``) writes ``validation/<name>.md``; this puts each
 of its tables on the pages that show it, replacing the table with the same header row, so
-the pages are the collected runs and nothing kept by hand.  The points table is shown in
-two parts (a page holds at most 2000 words): rigidmd's points on ``timestep-216-tables.md``,
-LAMMPS's and OpenMM's on ``timestep-216-codes.md``.  The plan page (the runs that would
+the pages are the collected runs and nothing kept by hand.  The points and goals tables
+are shown in two parts each (a page holds at most 2000 words): rigidmd's rows on
+``timestep-216-tables.md`` and ``timestep-216-goals.md``, LAMMPS's and OpenMM's on
+``timestep-216-codes.md``.  The plan page (the runs that would
 decide each unresolved goal) is written whole, for TIP4P/2005 and SPC/E.  A test
 (``tests/physics/test_timestep_table.py``) checks that every row is on a page.  Run::
 
@@ -18,15 +19,19 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs" / "validation"
 POINTS = "| model | N | code | integrator | dt (fs) | runs | ps |"
+GOALS = "| code | integrator | dt (fs) | U (±"
 PLAN = "| code | integrator | dt (fs) | runs | U |"
-#: Page -> which rows of the points table it shows (every other table: all of its rows).
+_OTHER_CODES = {POINTS: ("| tip4p2005 | 216 | lammps |", "| tip4p2005 | 216 | openmm |"),
+                GOALS: ("| lammps |", "| openmm |")}
+#: Page -> {table header -> the rows of that table it shows}; a table not named: all rows.
+#: The points and goals tables are each shown in two parts, rigidmd's and the other codes'.
 PAGES = {
-    "timestep_table_216": {"timestep-216.md": None, "timestep-216-goals.md": None,
-                           "timestep-216-tables.md": "| tip4p2005 | 216 | rigidmd |",
-                           "timestep-216-codes.md": ("| tip4p2005 | 216 | lammps |",
-                                                     "| tip4p2005 | 216 | openmm |"),
-                           "timestep-216-runs.md": None},
-    "timestep_table_216_spce": {"timestep-216-spce.md": None},
+    "timestep_table_216": {"timestep-216.md": {},
+                           "timestep-216-goals.md": {GOALS: ("| rigidmd |",)},
+                           "timestep-216-tables.md": {POINTS: ("| tip4p2005 | 216 | rigidmd |",)},
+                           "timestep-216-codes.md": _OTHER_CODES,
+                           "timestep-216-runs.md": {}},
+    "timestep_table_216_spce": {"timestep-216-spce.md": {}},
 }
 
 
@@ -54,8 +59,10 @@ def put(name, pages):
             table = new.get(old[0])
             if table is None or table[0].startswith(PLAN):
                 continue
-            if rows is not None and table[0].startswith(POINTS):
-                table = table[:2] + [r for r in table[2:] if r.startswith(rows)]
+            shown = next((kept for header, kept in rows.items()
+                          if table[0].startswith(header)), None)
+            if shown is not None:
+                table = table[:2] + [r for r in table[2:] if r.startswith(shown)]
             lines[start:start + len(old)] = table
         path.write_text("\n".join(lines) + "\n")
 
