@@ -118,30 +118,16 @@ class RelaxSection:
         state file (``relax.traj`` -> ``relax.state.npz``) in ``directory``, which also
         holds the lock file.
         """
-        from rigidmd.config.sections import LOCK_NAME
+        from rigidmd.config.sections import check_output_files
 
         directory = Path(directory)
-        claimed = {(directory / LOCK_NAME).resolve(): "the lock file"}
-        for name, path in (others or {}).items():
-            claimed.setdefault(Path(path).resolve(), name)
         trajectory = directory / self.trajectory
-        paths = (("relax.trajectory", "relax.trajectory", trajectory),
-                 ("relax.trajectory", "the relaxation's state file (beside "
-                  "relax.trajectory)", trajectory.with_suffix(".state.npz")),
-                 ("relax.log", "relax.log", directory / self.log))
-        for field_name, what, path in paths:
-            resolved = path.resolve()
-            if resolved in claimed:
-                own = "its state file " if what.startswith("the relaxation's") else ""
-                raise ConfigError(f"{field_name}: {own}{path.name} is also "
-                                  f"{claimed[resolved]}; give each output its own file")
-            claimed[resolved] = what
-            if path.is_dir():
-                raise ConfigError(f"{field_name}: {path} is a folder; give a file name")
-            parent = resolved.parent
-            if parent != directory.resolve() and not parent.is_dir():
-                raise ConfigError(f"{field_name}: the folder {parent} does not exist; create "
-                                  "it, or put the file in outputs.directory")
+        check_output_files(directory, [
+            ("relax.trajectory", "relax.trajectory", trajectory),
+            ("relax.trajectory", "the relaxation's state file (beside relax.trajectory)",
+             trajectory.with_suffix(".state.npz")),
+            ("relax.log", "relax.log", directory / self.log)],
+            {Path(path).resolve(): name for name, path in (others or {}).items()})
 
     def check_structure(self, atoms) -> None:
         """Refuse in one line, before anything is written, a cell relaxation the structure

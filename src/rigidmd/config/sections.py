@@ -562,29 +562,37 @@ class CalculatorSection:
                             **where, **self.options)
 
 
-def _check_output_paths(directory, files):
+def check_output_files(directory, outputs, claimed=None):
     """Every output its own file, in a folder that exists (or is the output directory).
 
-    Two outputs on one path would overwrite each other (the MDAnalysis output
-    also writes its topology, ``.psf``, and the directory holds the lock file).
+    Two outputs on one path would overwrite each other (the MDAnalysis output also
+    writes its topology, ``.psf``, a relaxation its state file, and the directory holds
+    the lock file).
+
+    Parameters
+    ----------
+    directory : pathlib.Path
+        The run's output directory.
+    outputs : iterable of (str, str, pathlib.Path)
+        Each output's field (named in a refusal), how another output's refusal names it,
+        and its path.
+    claimed : dict, optional
+        Paths (resolved) already taken -> how a refusal names them; the lock file's is
+        added.
     """
-    claimed = {(directory / LOCK_NAME).resolve(): "the lock file"}
-    paths = dict(files)
-    if "mdanalysis" in files:
-        paths["mdanalysis topology"] = files["mdanalysis"].with_suffix(".psf")
-    for name, path in paths.items():
-        field_name = f"outputs.{name.split()[0]}"
+    claimed = dict(claimed or {})
+    claimed.setdefault((directory / LOCK_NAME).resolve(), "the lock file")
+    for field_name, what, path in outputs:
         resolved = path.resolve()
         if resolved in claimed:
             raise ConfigError(f"{field_name}: {path.name} is also {claimed[resolved]}; give "
                               "each output its own file")
-        claimed[resolved] = f"outputs.{name}" if " " not in name else f"the {name}"
+        claimed[resolved] = what
         if path.is_dir():
             raise ConfigError(f"{field_name}: {path} is a folder; give a file name")
-        parent = path.parent
-        if parent.resolve() != directory.resolve() and not parent.is_dir():
-            raise ConfigError(f"{field_name}: the folder {parent} does not exist; create it, "
-                              "or put the file in outputs.directory")
+        if resolved.parent != directory.resolve() and not resolved.parent.is_dir():
+            raise ConfigError(f"{field_name}: the folder {resolved.parent} does not exist; "
+                              "create it, or put the file in outputs.directory")
 
 
 @dataclass
@@ -633,7 +641,11 @@ class OutputsSection:
         if every % interval:
             raise ConfigError(f"outputs.checkpoint_interval: {every} is not a multiple of "
                               f"outputs.interval ({interval}): a checkpoint must fall on a frame")
-        _check_output_paths(directory, files)
+        outputs = [(f"outputs.{key}", f"outputs.{key}", path) for key, path in files.items()]
+        if "mdanalysis" in files:
+            outputs.append(("outputs.mdanalysis", "the mdanalysis topology",
+                            files["mdanalysis"].with_suffix(".psf")))
+        check_output_files(directory, outputs)
         plot = files.get("plot")
         if plot is not None and plot.suffix.lower().lstrip(".") not in PLOT_FORMATS:
             raise ConfigError(f"outputs.plot: {plot.name} is not an image file the plot can "

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from rigidmd.config.quantities import ConfigError, mapping
 from rigidmd.config.sections import CalculatorSection
-from rigidmd.core.split import MAX_SUBSTEPS, MultipleTimeStep
+from rigidmd.core.split import MAX_SUBSTEPS, MultipleTimeStep, check_substeps
 
 __all__ = ["SplitCalculatorSection", "calculator_section"]
 
@@ -85,10 +85,12 @@ class SplitCalculatorSection:
                         else "a calculator section, e.g. {name: tip3p}")
                 raise ConfigError(f"calculator.{key}: missing ({what})")
         substeps = calc["substeps"]
-        if (isinstance(substeps, bool) or not isinstance(substeps, int)
-                or not 1 <= substeps <= MAX_SUBSTEPS):
+        try:
+            check_substeps(substeps)  # the calculator's own rule
+        except (TypeError, ValueError):
             raise ConfigError(f"calculator.substeps: expected a whole number from 1 to "
-                              f"{MAX_SUBSTEPS} (inner steps per timestep), got {substeps!r}")
+                              f"{MAX_SUBSTEPS} (inner steps per timestep), got {substeps!r}"
+                              ) from None
         levels = {}
         for level in ("fast", "full" if difference else "slow"):
             spec = calc[level]

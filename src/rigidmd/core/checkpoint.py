@@ -426,10 +426,9 @@ def check_checkpoint(meta, arrays, path="checkpoint"):
         b = int(np.flatnonzero((moments < 0).any(axis=1))[0])
         raise CheckpointError(f"{where}: body {b} has a negative principal moment; the file "
                               "was changed")
-    for name in ("nsteps",):
-        value = meta[name]
-        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-            raise CheckpointError(f"{where}: {name} is {value!r}, not a whole number >= 0")
+    steps = meta["nsteps"]
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
+        raise CheckpointError(f"{where}: nsteps is {steps!r}, not a whole number >= 0")
     for name in ("time", "dt"):
         value = meta[name]
         if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value \

@@ -5,7 +5,9 @@ vector or the parameter at fault.
 """
 
 import copy
+import os
 import warnings
+from pathlib import Path
 
 import numpy as np
 from ase import Atoms, units
@@ -14,8 +16,9 @@ from ase.constraints import FixCom
 from rigidmd.core.backend import resolve_backend
 from rigidmd.core.dof import RigidBodyDOF, kinetic_energy
 
-__all__ = ["check_finite", "check_massless_momenta", "check_timestep", "check_constraints",
-           "changed_properties", "StepSizeCheck", "MAX_ROTATION_PER_STEP", "MAX_ENERGY_CHANGE"]
+__all__ = ["check_finite", "check_output_file", "check_massless_momenta", "check_timestep",
+           "check_constraints", "changed_properties", "StepSizeCheck", "MAX_ROTATION_PER_STEP",
+           "MAX_ENERGY_CHANGE"]
 
 
 def check_timestep(timestep: float) -> float:
@@ -243,3 +246,20 @@ class StepSizeCheck:
             what = "time step" if split is None else f"inner step (timestep / {split.substeps})"
             warnings.warn(f"{type(dyn).__name__}: {message}: the {what} "
                           f"{dt / units.fs:g} fs is probably too large", stacklevel=5)
+
+
+def check_output_file(name: str, path) -> None:
+    """Refuse a ``trajectory`` or ``logfile`` path that cannot be written (a folder that does
+    not exist, one not writable, a folder given as the file), before the constructor changes
+    anything: it used to fail after the atoms' momenta, tags and constraints had changed
+    and ASE had already replaced the trajectory file.  Open files and ``"-"`` pass."""
+    if not isinstance(path, (str, os.PathLike)) or str(path) == "-":
+        return
+    path = Path(path)
+    folder = path.parent
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{name}: the folder {folder} does not exist (for {path})")
+    if path.is_dir():
+        raise IsADirectoryError(f"{name}: {path} is a folder; give a file name")
+    if not os.access(path if path.exists() else folder, os.W_OK):
+        raise PermissionError(f"{name}: {path} cannot be written (permission denied)")

@@ -30,10 +30,8 @@ The time step is read from :attr:`RigidDynamics.dt` at every step.
 :mod:`rigidmd.core.checkpoint` wrote.
 """
 
-import os
 import warnings
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 from ase import Atoms, units
@@ -47,6 +45,7 @@ from rigidmd.core.checks import (
     check_constraints,
     check_finite,
     check_massless_momenta,
+    check_output_file,
     check_timestep,
 )
 from rigidmd.core.coupling import Coupling, check_composition, export_parts, share_target
@@ -582,10 +581,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
                 body_ids, self.bodies.body_ids):
             raise ValueError(f"{where}: the state's bodies are not this dynamics' (another "
                              "number of atoms, or atoms in other bodies)")
-        if masses.shape != self.model.mass.shape or not np.allclose(
-                masses, self.model.mass, rtol=1e-12, atol=0):
-            body = int(np.argmax(np.abs(masses - self.model.mass))) \
-                if masses.shape == self.model.mass.shape else 0
+        if not np.allclose(masses, self.model.mass, rtol=1e-12, atol=0):
+            body = int(np.argmax(np.abs(masses - self.model.mass)))  # (same bodies: shapes)
             raise ValueError(f"{where}: body {body} weighs {masses[body]:.6g} amu in the "
                              f"state and {self.model.mass[body]:.6g} amu on these atoms")
 
@@ -609,19 +606,3 @@ def _same_value(a, b) -> bool:
             return False
     return a == b or (a != a and b != b)  # (NaN parameters are equal to themselves)
 
-
-def check_output_file(name: str, path) -> None:
-    """Refuse a ``trajectory`` or ``logfile`` path that cannot be written (a folder that does
-    not exist, one not writable, a folder given as the file), before the constructor changes
-    anything: it used to fail after the atoms' momenta, tags and constraints had changed
-    and ASE had already replaced the trajectory file.  Open files and ``"-"`` pass."""
-    if not isinstance(path, (str, os.PathLike)) or str(path) == "-":
-        return
-    path = Path(path)
-    folder = path.parent
-    if not folder.is_dir():
-        raise FileNotFoundError(f"{name}: the folder {folder} does not exist (for {path})")
-    if path.is_dir():
-        raise IsADirectoryError(f"{name}: {path} is a folder; give a file name")
-    if not os.access(path if path.exists() else folder, os.W_OK):
-        raise PermissionError(f"{name}: {path} cannot be written (permission denied)")
