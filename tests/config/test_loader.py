@@ -214,6 +214,10 @@ def test_a_compressibility_in_inverse_pascal(tmp_path):
      "thermostat.tloop: expected a whole number from 1 to 100"),  # 570 s a step
     ('outputs: {directory: out, log: "md\\0.log"}',  # "embedded null byte", no field
      "outputs.log: contains a NUL character"),
+    ('x:\n  "a\\nb": "\\0"',  # CI's fuzzing, 2026-11-29: the key's newline split the line
+     "x.'a\\nb': contains a NUL character"),
+    ('outputs: {directory: out, "md\\nlog": 1, "md\\nlog": 2}',
+     "outputs.'md\\nlog': given twice"),
     ("thermostat: {kind: langevin, temperature: 300 K, friction: 1 1/fs}",  # "not in 1/fs"
      "thermostat: friction 1/fs times the time step 1 fs is 1, above 0.5"),
     ("structure: null", "structure: missing"),  # was "cannot read 'None'"

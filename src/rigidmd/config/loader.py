@@ -178,7 +178,8 @@ def _mapping_paths(root):
             paths[id(node)] = path
             for key, value in node.value:
                 name = key.value if isinstance(key, yaml.ScalarNode) else "?"
-                stack.append((value, f"{path}.{name}" if path else str(name)))
+                name = key_name(name)
+                stack.append((value, f"{path}.{name}" if path else name))
         elif isinstance(node, yaml.SequenceNode):
             stack.extend((item, f"{path}[{i}]") for i, item in enumerate(node.value))
     return paths
@@ -241,8 +242,8 @@ def _strict_loader():
                          if first.line != again.line else
                          f"line {again.line + 1}, columns {first.column + 1} and "
                          f"{again.column + 1}")
-                raise ConfigError(f"{path + '.' if path else ''}{key}: given twice ({where}); "
-                                  "keep one")
+                raise ConfigError(f"{path + '.' if path else ''}{key_name(key)}: given twice "
+                                  f"({where}); keep one")
             seen[key] = key_node.start_mark
         return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
 
@@ -294,7 +295,7 @@ def _refuse_nul(value, where=""):
     operating system refuses it in a path with a message that names none)."""
     if isinstance(value, dict):
         for key, item in value.items():
-            _refuse_nul(item, f"{where}.{key}" if where else str(key))
+            _refuse_nul(item, f"{where}.{key_name(key)}" if where else key_name(key))
     elif isinstance(value, list):
         for i, item in enumerate(value):
             _refuse_nul(item, f"{where}[{i}]")

@@ -413,7 +413,7 @@ def check_calculator(section, trust=False):
         for element, value in getattr(section, field_name).items():
             if not test(value):
                 kind = "a number (e)" if field_name == "charges" else "a whole number >= 1"
-                raise ConfigError(f"calculator.{field_name}.{element}: expected {kind}, "
+                raise ConfigError(f"calculator.{field_name}.{key_name(element)}: expected {kind}, "
                                   f"got {value!r}")
     name = section.name
     if section.address is not None and not trust:
