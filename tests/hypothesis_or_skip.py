@@ -3,14 +3,30 @@
 Hypothesis comes with the test extra (``pip install -e ".[test]"``).  Without it a
 property test (one under ``@given``) is collected and skipped with the reason, and the
 other tests of its module run: ``from hypothesis_or_skip import given, settings, st``.
+
+The test suite draws the same examples on every run (hypothesis's ``derandomize``), so a
+commit passes or fails the same way on every machine: a random draw in CI once failed a
+commit for a fault in code the commit had not touched.  Searching for new faults is a
+separate, deliberate run with fresh random examples, as many times more as asked::
+
+    FUZZ_RANDOM=1 FUZZ_SCALE=20 python -m pytest -n auto tests
+
+A fault it finds goes into a test of its own (each module keeps a list of the cases its
+fuzzing found), so the fixed draw keeps it.
 """
+
+import os
 
 import pytest
 
 REASON = 'needs hypothesis (pip install hypothesis; the test extra ".[test]" has it)'
 
+FUZZ_RANDOM = os.environ.get("FUZZ_RANDOM", "") not in ("", "0")
+FUZZ_SCALE = float(os.environ.get("FUZZ_SCALE", "1"))
+
 try:
-    from hypothesis import HealthCheck, given, settings
+    import hypothesis
+    from hypothesis import HealthCheck, given
     from hypothesis import strategies as st
 except ImportError:
     class _Anything:
@@ -41,4 +57,17 @@ except ImportError:
             return skipped
         return skipped_property_test
 
-__all__ = ["HealthCheck", "given", "settings", "st", "REASON"]
+else:
+    hypothesis.settings.register_profile(
+        "rigidmd", derandomize=not FUZZ_RANDOM, print_blob=True,
+        database=hypothesis.database.DirectoryBasedExampleDatabase(".hypothesis/examples")
+        if FUZZ_RANDOM else None)
+    hypothesis.settings.load_profile("rigidmd")
+
+    def settings(*args, max_examples=None, **kwargs):
+        """Hypothesis's settings, the number of examples times ``FUZZ_SCALE``."""
+        if max_examples is not None:
+            kwargs["max_examples"] = max(1, round(max_examples * FUZZ_SCALE))
+        return hypothesis.settings(*args, **kwargs)
+
+__all__ = ["HealthCheck", "given", "settings", "st", "REASON", "FUZZ_RANDOM", "FUZZ_SCALE"]

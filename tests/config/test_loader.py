@@ -19,7 +19,7 @@ from hypothesis_or_skip import HealthCheck, given, settings, st
 from rigidmd.config import ConfigError, check_config, load_config
 from rigidmd.config.quantities import UNIT_TABLES
 
-FAST = settings(max_examples=int(os.environ.get("FUZZ_EXAMPLES", 150)), deadline=None,
+FAST = settings(max_examples=150, deadline=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture])
 
 #: Valid starting points: NVT, NPT (C-rescale, with a compressibility), Monte Carlo, relax.
