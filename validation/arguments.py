@@ -4,8 +4,10 @@ of 0 ps marked complete, --jobs 0 waiting for ever, --repeats 0 writing empty ta
 committed ones)."""
 
 import argparse
+import json
+from pathlib import Path
 
-__all__ = ["positive", "at_least_zero", "whole"]
+__all__ = ["positive", "at_least_zero", "whole", "existing_file", "read_json"]
 
 
 def positive(text):
@@ -33,3 +35,21 @@ def whole(least):
         return value
     parse_whole.__name__ = f"whole number >= {least}"
     return parse_whole
+
+
+def existing_file(text):
+    """An argparse type: the path of a file that is there (a missing one is refused in
+    argparse's line, not as a traceback when it is read)."""
+    path = Path(text)
+    if not path.is_file():
+        raise argparse.ArgumentTypeError(f"no such file {text!r}")
+    return path
+
+
+def read_json(path):
+    """The JSON in ``path``, or SystemExit in one line naming the file (missing, unreadable
+    or not JSON)."""
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise SystemExit(f"{path}: not a readable JSON file ({err})") from None

@@ -52,7 +52,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # (arguments.py, beside this script)
-from arguments import whole  # noqa: E402
+from arguments import read_json, whole  # noqa: E402
 
 START = HERE / "water_openmm_long.start_tip4p2005.npz"
 SECTIONS = ("Pair", "Bond", "Kspace", "Neigh", "Comm", "Output", "Modify", "Other")
@@ -254,7 +254,7 @@ def report(result: dict) -> str:
 
 def rewrite(out: Path) -> str:
     """The tables again from a results file (``--report``), without measuring."""
-    result = json.loads(out.with_suffix(".json").read_text())
+    result = read_json(out.with_suffix(".json"))
     text = report(result)
     out.with_suffix(".txt").write_text(text)
     return text

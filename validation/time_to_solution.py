@@ -37,7 +37,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import timestep_table  # noqa: E402
-from arguments import whole  # noqa: E402
+from arguments import existing_file, read_json, whole  # noqa: E402
 
 #: The code and integrator every ratio is taken against.
 REFERENCE = ("lammps", "nvt_small")
@@ -155,7 +155,7 @@ def text(rows, header):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("table", type=Path, help="timestep_table_report.py's JSON")
+    p.add_argument("table", type=existing_file, help="timestep_table_report.py's JSON")
     p.add_argument("--extra", nargs="*", type=parse_extra, default=[],
                    metavar="CODE:INTEGRATOR:DT")
     p.add_argument("--steps", type=int, default=300)
@@ -169,7 +169,9 @@ def main(argv=None):
     args = p.parse_args(argv)
     if args.steps <= 20:
         p.error("--steps must be above 20 (a run of 20 is taken off)")
-    table = json.loads(args.table.read_text())
+    table = read_json(args.table)
+    if not (isinstance(table, dict) and isinstance(table.get("largest_steps"), list)):
+        p.error(f"{args.table}: not the JSON of timestep_table_report.py (no largest_steps)")
     points, levels = chosen_points(table, args.extra)
     if not points:
         p.error(f"{args.table}: no code and integrator with a step that meets the goals; "

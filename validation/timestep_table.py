@@ -74,7 +74,7 @@ import numpy as np  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from arguments import at_least_zero, positive, whole  # noqa: E402
+from arguments import at_least_zero, existing_file, positive, read_json, whole  # noqa: E402
 
 TEMPERATURE_K = 298.0
 KB_KJ = 0.0083144626  # kJ/mol/K
@@ -791,7 +791,16 @@ def analyse(series, p, n, offset=0.0):
                                                                              length / 3)
     cell = np.diag([p["box_A"]] * 3)
     if keep_f.sum() >= 1:
-        out["rdf_peak_r"], out["rdf_peak_g"] = rdf_first_peak(fr["O"][keep_f], cell)
+        # The peak of all frames, with the standard error of the blocks' peaks: a run's
+        # scatter alone (three runs) gave limits that disagreed by 3 of their errors.
+        O = fr["O"][keep_f]
+        whole = rdf_first_peak(O, cell)
+        parts = np.array([rdf_first_peak(b, cell)
+                          for b in np.array_split(O, min(p["blocks"], len(O))) if len(b)])
+        err = (np.std(parts, axis=0, ddof=1) / np.sqrt(len(parts)) if len(parts) > 1
+               else [np.nan, np.nan])
+        out["rdf_peak_r"], out["rdf_peak_g"] = ([float(v), float(e)]
+                                                for v, e in zip(whole, err, strict=True))
     else:
         out["rdf_peak_r"] = out["rdf_peak_g"] = float("nan")
     out["D_pbc"] = msd_diffusion(fr["com"][keep_f], fr["frame_t_ps"][keep_f], fit) \
@@ -889,7 +898,12 @@ def reanalyse(paths, equil_ps=None):
     each JSON keeps its run's record and gets the new results."""
     for path in paths:
         path = Path(path)
-        out = json.loads(path.read_text())
+        out = read_json(path)
+        if not (isinstance(out, dict) and isinstance(out.get("point"), dict)
+                and "name" in out and "molecules" in out):
+            raise SystemExit(f"{path}: not a run's JSON (no point, name or molecules)")
+        if not path.with_name(out["name"] + ".series.npz").is_file():
+            raise SystemExit(f"{path}: its series {out['name']}.series.npz is not beside it")
         p = dict(out["point"])
         if equil_ps is not None:
             p["equil_ps"] = equil_ps
@@ -1123,7 +1137,7 @@ def parse(argv=None):
     s.add_argument("--overwrite", action="store_true",
                    help="replace the committed start of this size")
     a = sub.add_parser("analyse", help="analyse runs again from their series")
-    a.add_argument("files", nargs="+", type=Path, help="the runs' JSONs")
+    a.add_argument("files", nargs="+", type=existing_file, help="the runs' JSONs")
     a.add_argument("--equil-ps", type=float, help="another length left out at the start")
     c = sub.add_parser("cost", help="ms/step of every code")
     c.add_argument("--model", nargs=1, choices=MODELS, default=["tip4p2005"])

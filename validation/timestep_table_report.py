@@ -142,6 +142,10 @@ def load_points(paths, include_incomplete=False):
                    complete=all(r.get("complete") for r in runs),
                    ms_per_step=float(np.mean([r["ms_per_step"] for r in runs])))
         row.update({k: pool(runs, k) for k in POOLED})
+        # How many runs each quantity pools (T_conf: only the runs that sampled it, fewer
+        # than the point's runs where earlier runs did not), for the tables and the plan.
+        row["runs_of"] = {k: sum(1 for r in runs if (v := _value(r.get(k))) is not None
+                                 and np.isfinite(v[0])) for k in POOLED}
         points.append(row)
     return points
 
@@ -278,6 +282,9 @@ def table(points, fit_table, fit_max_fs):
     for p in points:
         conf = "—" if p["T_conf_tr"] is None else \
             f"{_pm(p['T_conf_tr'], 1)} / {_pm(p['T_conf_rot'], 1)}"
+        sampled = p.get("runs_of", {}).get("T_conf_tr", p["runs"])
+        if p["T_conf_tr"] is not None and sampled < p["runs"]:
+            conf += f" ({sampled} of {p['runs']} runs)"
         lines.append(
             f"| {p['model']} | {p['waters']} | {p['code']} | {p['integrator']} | "
             f"{p['dt_fs']:g} | {p['runs']} | {p['ps']:.0f} | {_pm(p['U'], 3)} | "
@@ -405,8 +412,12 @@ def assess(points, fit_table, bath_K=298.0, goals=GOALS, relaxed_from_fs=RELAXED
                   for g, (d, e, _) in devs.items() if g in goals}
         for g, c in checks.items():  # (a value without an error of its own: no plan)
             if c["verdict"] == "unresolved" and np.isfinite(c["err"]) and devs[g][2] > 0:
-                c["runs_to_decide"] = runs_to_decide(c["dev"], c["err"], devs[g][2],
-                                                     p["runs"], c["tolerance"])
+                # (in all: the point's runs that did not sample the quantity count too)
+                sampled = p.get("runs_of", {}).get("T_tr" if g == "T_tr_rot" else g,
+                                                   p["runs"])
+                need = runs_to_decide(c["dev"], c["err"], devs[g][2], sampled,
+                                      c["tolerance"])
+                c["runs_to_decide"] = None if need is None else need + p["runs"] - sampled
         rows.append({**{k: p[k] for k in ("model", "waters", "code", "integrator", "dt_fs",
                                           "runs")},
                      "tolerance_factor": factor, "checks": checks})

@@ -67,6 +67,7 @@ import numpy as np  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+from arguments import existing_file  # noqa: E402
 from water_openmm_nve import (  # noqa: E402
     CUTOFF,  # every model here (one box, one set-up for both codes)
     KB_KJ,
@@ -563,7 +564,7 @@ def parse(argv=None):
                    help="at most this fraction of the budget goes to --skip-ps")
     r.add_argument("--out", type=Path, required=True)
     s = sub.add_parser("report", help="pool and analyse runs")
-    s.add_argument("files", nargs="+", type=Path)
+    s.add_argument("files", nargs="+", type=existing_file)
     s.add_argument("--name", default="water_openmm_long")
     st = sub.add_parser("starts", help="make the TIP4P/2005 and SPC/E start states")
     st.add_argument("--eq-ps", type=float, default=5.0)

@@ -56,7 +56,9 @@ def test_a_run_writes_every_field(tmp_path):
     # -48 kJ/mol (-48.3 measured on this start at 2 fs).
     assert -55 < result["U"][0] < -40
     assert 200 < result["T_tr"][0] < 400 and 200 < result["T_rot_end"][0] < 400
-    assert 2.6 < result["rdf_peak_r"] < 3.0  # the O–O first shell
+    assert 2.6 < result["rdf_peak_r"][0] < 3.0  # the O–O first shell
+    # The peak's errors from the blocks' peaks (three frames, three blocks): finite.
+    assert result["rdf_peak_r"][1] >= 0 and np.isfinite(result["rdf_peak_g"][1])
     assert result["samples"] == 6 and result["frames"] == 3
     # Analysed again from its series with more of the start left out: t = 0.012, 0.016, 0.02.
     table.reanalyse([tmp_path / "tip4p2005_64_rigidmd_baoab_dt2_s1.json"], equil_ps=0.01)
@@ -802,3 +804,48 @@ def test_benchmark_and_page_arguments_are_checked_first(tmp_path):
                             env=env, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0 and "usage:" in result.stdout
     assert {p: p.stat().st_mtime_ns for p in pages} == before
+
+
+@pytest.mark.parametrize("script, args, message", [
+    ("timestep_table", ["analyse", "{missing}"], "argument files: no such file"),
+    ("timestep_table", ["analyse", "{empty}"], "not a run's JSON (no point, name or molecules)"),
+    ("time_to_solution", ["{missing}"], "argument table: no such file"),
+    ("time_to_solution", ["{empty}"], "not the JSON of timestep_table_report.py"),
+    ("respa_kspace_share", ["--report", "--out", "{missing_stem}"],
+     "missing.json: not a readable JSON file"),
+    ("water_openmm_long", ["report", "{missing}"], "argument files: no such file"),
+])
+def test_a_missing_or_foreign_input_file_is_one_line(tmp_path, script, args, message):
+    """Each printed a FileNotFoundError's or a KeyError's traceback."""
+    (tmp_path / "empty.json").write_text("{}")
+    names = {"missing": tmp_path / "missing.json", "empty": tmp_path / "empty.json",
+             "missing_stem": tmp_path / "missing"}
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    result = subprocess.run([sys.executable, str(ROOT / "validation" / f"{script}.py"),
+                             *[a.format(**names) for a in args]],
+                            env=env, capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert result.returncode != 0 and message in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.json"]
+
+
+def test_a_quantity_only_some_runs_sampled_is_counted_as_such(tmp_path):
+    """T_conf pooled from the one run of three that sampled it was shown beside the point's
+    three runs, and the plan counted three runs' worth of its error."""
+    files = [_synthetic(tmp_path, "baoab", dt, seed, -47.0) for dt in (0.5, 1.0, 2.0)
+             for seed in (1, 2)]
+    for seed in (1, 2, 3):
+        files.append(_synthetic(tmp_path, "baoab", 4.0, seed, -47.0))
+    run = json.loads(files[-1].read_text())
+    run.update(T_conf_tr=[301.0, 1.0], T_conf_rot=[298.0, 1.0])  # the third run's only
+    files[-1].write_text(json.dumps(run))
+    points, fit_table = collector.report(files, tmp_path, "c")
+    four = next(p for p in points if p["dt_fs"] == 4.0)
+    assert four["runs"] == 3 and four["runs_of"]["T_conf_tr"] == 1
+    assert "301.0 ± 1.0 / 298.0 ± 1.0 (1 of 3 runs)" in (tmp_path / "c.md").read_text()
+    rows, _ = collector.assess(points, fit_table)
+    check = next(r for r in rows if r["dt_fs"] == 4.0)["checks"]["T_conf_tr"]
+    # +3.0 ± 1.0 against 2 K, unresolved; one run's error 1.0 fails it once 3 - 2/√m > 2,
+    # at m = 5 runs that sample it: those and the two that did not, 7 in all (5 if all
+    # three had counted).
+    assert check["verdict"] == "unresolved" and check["runs_to_decide"] == 7
