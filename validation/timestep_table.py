@@ -1079,6 +1079,14 @@ def check_run_arguments(args):
                          f"{' '.join(args.code)} nothing would run")
     if args.integrator and "rigidmd" not in args.code:
         raise SystemExit(f"--integrator: rigidmd's; --code {' '.join(args.code)} has its own")
+    for model in args.model:  # (each point failed alone, after starting its process)
+        if not start_file(model, args.waters).exists():
+            side = round(args.waters ** (1 / 3))
+            how = (f"make it with 'timestep_table.py start --model {model} --waters "
+                   f"{args.waters}'" if side ** 3 == args.waters else
+                   f"starts are made for cube numbers of waters ({side ** 3}, ...)")
+            raise SystemExit(f"--waters {args.waters}: no start state "
+                             f"{start_file(model, args.waters).name}; {how}")
 
 
 #: The parts of a point a continued run may change (how often it saves and says so).

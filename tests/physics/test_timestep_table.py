@@ -734,6 +734,8 @@ def test_the_collector_refuses_a_run_twice_and_runs_made_unalike(tmp_path):
     (["--seed", "1", "1"], "--seed: a value given twice"),
     (["--code", "openmm", "--substeps", "2"], "--substeps: a force split is rigidmd's"),
     (["--code", "lammps", "--integrator", "baoab"], "--integrator: rigidmd's"),
+    # each point failed in its own process, the hint repeated per point
+    (["--waters", "100"], "--waters 100: no start state timestep_table.start_tip4p2005_100"),
 ])
 def test_run_arguments_that_would_not_run_are_refused_first(tmp_path, args, message):
     given = dict(zip(["--dt-fs", "--ps"], ["2", "0.1"], strict=True))
