@@ -213,9 +213,13 @@ class Progress:
         self.last = time.perf_counter()
         self.t0, self.ps0 = self.last, None
 
+    def begin(self, ps):
+        """The run starts (or continues) at ``ps``: the rate counts from here."""
+        self.t0, self.ps0 = time.perf_counter(), ps
+
     def __call__(self, ps, force=False):
         now = time.perf_counter()
-        if self.ps0 is None:  # the rate counts from the first report (a resumed run's too)
+        if self.ps0 is None:  # without begin(): from the first report
             self.t0, self.ps0 = now, ps
         if not force and now - self.last < (1.0 if self.tty else self.every):
             return
@@ -522,6 +526,7 @@ def run_in_pieces(dyn, total, piece, stop, progress, p, save):
     wall ms per step and the step it started from."""
     last_save = time.perf_counter()
     t0, s0 = time.perf_counter(), dyn.nsteps
+    progress.begin(s0 * p["dt_fs"] / 1000)
     while dyn.nsteps < total and not stop:
         dyn.run(min(piece, total - dyn.nsteps))
         progress(dyn.nsteps * p["dt_fs"] / 1000)
@@ -601,6 +606,7 @@ def run_openmm(p, paths, stop, progress, resume):
         observe()
     last_save = time.perf_counter()
     t0, s0 = time.perf_counter(), steps
+    progress.begin(s0 * p["dt_fs"] / 1000)
     while steps < total and not stop:
         k = min(sample, total - steps)
         integrator.step(k)
@@ -677,6 +683,7 @@ def run_lammps(p, paths, stop, progress, resume):
     masses = np.tile(model.masses(), n)
     conf = frame_sampler(p, model, state)
     s0, loop_s = steps, 0.0
+    progress.begin(s0 * p["dt_fs"] / 1000)  # (the first piece's report had 0.00 ns/day)
     while steps < total and not stop:
         atoms = make_atoms(state, model)
         k = min(piece, total - steps)

@@ -851,3 +851,15 @@ def test_a_quantity_only_some_runs_sampled_is_counted_as_such(tmp_path):
     # at m = 5 runs that sample it: those and the two that did not, 7 in all (5 if all
     # three had counted).
     assert check["verdict"] == "unresolved" and check["runs_to_decide"] == 7
+
+
+def test_progress_counts_from_the_run_s_start(capsys):
+    """A LAMMPS run's first report (after its first piece) said 0.00 ns/day: the rate
+    counted from that report itself."""
+    progress = table.Progress("run", 1.0, every_s=0.0, shared=True)
+    progress.begin(0.25)  # a resumed run
+    time.sleep(0.05)
+    progress(0.5, force=True)
+    line = capsys.readouterr().out
+    rate = float(line.split("(")[1].split()[0])
+    assert "run: 0.50 / 1 ps" in line and 0 < rate < 0.25 / 0.05 * 86.4  # ns/day
