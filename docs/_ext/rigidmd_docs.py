@@ -214,7 +214,9 @@ def configuration_reference():
         add(f"| `{key}` | {_cell(kind)}{unit} | {defaults.get(key, '')} | {_cell(text)} |\n")
     add(f"\n`integrator` allows {', '.join(f'`{s}`' for s in BUILTIN_SCHEMES)}, a YAML "
         "file of operators, or a list of operators.  `velocities` takes `temperature` "
-        f"({_units(UNIT_TABLES['temperature'])}) and an optional integer `seed`.\n\n")
+        f"({_units(UNIT_TABLES['temperature'])}), an optional integer `seed` and "
+        "`stationary` (default `true`: the total momentum zeroed after the draw, as "
+        "LAMMPS's `velocity create ... mom yes`).\n\n")
 
     add("## `calculator`\n\n")
     docs = _attribute_docs(CalculatorSection)

@@ -216,6 +216,11 @@ def test_a_compressibility_in_inverse_pascal(tmp_path):
      "outputs.log: contains a NUL character"),
     ('x:\n  "a\\nb": "\\0"',  # CI's fuzzing, 2026-11-29: the key's newline split the line
      "x.'a\\nb': contains a NUL character"),
+    # The new-user pass of 2026-11-29: an ASE .traj written under an .xyz name.
+    ("outputs: {directory: out, trajectory: md.xyz}",
+     "outputs.trajectory: md.xyz would hold an ASE trajectory under another format's name"),
+    ("velocities: {temperature: 300 K, stationary: 0}",
+     "velocities.stationary: expected true or false, got 0"),
     ('outputs: {directory: out, "md\\nlog": 1, "md\\nlog": 2}',
      "outputs.'md\\nlog': given twice"),
     ("thermostat: {kind: langevin, temperature: 300 K, friction: 1 1/fs}",  # "not in 1/fs"

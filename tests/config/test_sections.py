@@ -64,7 +64,7 @@ def test_the_run_section(tmp_path):
                                   "velocities": {"temperature": "300 K", "seed": 3}}, tmp_path)
     assert run.integrator == "no_squish" and run.steps == 10
     assert run.timestep == pytest.approx(2 * units.fs)
-    assert run.velocities == {"temperature_K": 300.0, "seed": 3}
+    assert run.velocities == {"temperature_K": 300.0, "seed": 3, "stationary": True}
     assert RunSection.from_config({"timestep": "1 fs", "steps": 1}, tmp_path).velocities is None
 
 

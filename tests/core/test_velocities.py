@@ -106,3 +106,22 @@ def test_ase_stationary_between_steps_on_four_site_water_is_reported():
         Stationary(atoms)
     with pytest.warns(UserWarning, match="rigidmd.rigid_stationary"):
         dyn.run(1)
+
+
+def test_a_stationary_draw_has_no_total_momentum_and_its_kinetic_energy():
+    """A draw carries a thermal drift (0.32 Å/ps for 216 waters, which a thermostat with
+    fixcm=True then kept for the whole run); ``stationary=True`` zeroes it, as LAMMPS's
+    ``velocity create ... mom yes``, and keeps the draw's kinetic energy and rigidity."""
+    from rigidmd import kinetic_energy
+    from rigidmd.systems import water_cluster
+
+    drifting, still = (water_cluster(8, model="tip4p2005", seed=2) for _ in range(2))
+    rigid_maxwell_boltzmann(drifting, 300, rng=np.random.default_rng(5))
+    rigid_maxwell_boltzmann(still, 300, rng=np.random.default_rng(5), stationary=True)
+    masses = drifting.get_masses()
+    drift = np.linalg.norm(drifting.get_momenta().sum(axis=0)) / masses.sum()
+    assert drift > 1e-3  # Å per ASE time unit: a thermal drift, ~ sqrt(kT / M)
+    np.testing.assert_allclose(still.get_momenta().sum(axis=0), 0, atol=1e-12)
+    assert kinetic_energy(still) == pytest.approx(kinetic_energy(drifting), rel=1e-12)
+    dyn = RigidVerlet(still, units.fs)
+    assert abs(dyn.removed_kinetic_energy) < 1e-12  # still rigid

@@ -86,6 +86,10 @@ def test_run_restart_and_plot(project):
     assert "conserved energy" in result.stdout
     frames = read(project / "out" / "md.traj", ":")
     assert len(frames) == 6
+    # velocities: drawn with no total momentum (stationary: true, the default), which the
+    # thermostat (fixcm) then keeps: a drawn drift stayed for the whole run.
+    for frame in frames:
+        np.testing.assert_allclose(frame.get_momenta().sum(axis=0), 0, atol=1e-9)
     import MDAnalysis as mda
 
     universe = mda.Universe(str(project / "out" / "md.psf"), str(project / "out" / "md.xtc"))
@@ -313,6 +317,18 @@ def test_export_refuses_what_lammps_cannot_do(project, change, message):
     result = rigidmd("export-lammps", "bad.yaml", "deck", cwd=project)
     assert result.returncode == 2
     assert message in result.stderr and "Traceback" not in result.stderr
+
+
+def test_export_refuses_a_thermostat_before_relaxing(project):
+    """The new-user pass: a configuration with relax: and a Bussi thermostat was relaxed in
+    full, relax.traj and relax.log written into the deck's folder, then refused."""
+    text = with_change(with_change(PLAIN, "relax: {fmax: 0.05, steps: 200}"),
+                       "thermostat: {kind: bussi, temperature: 300 K, taut: 100 fs}")
+    (project / "bad.yaml").write_text(text)
+    result = rigidmd("export-lammps", "bad.yaml", "deck", cwd=project)
+    assert result.returncode == 2 and "no Bussi thermostat" in result.stderr
+    assert "relax" not in result.stdout + result.stderr.replace("relax:", "")
+    assert not (project / "deck").exists() or not any((project / "deck").iterdir())
 
 
 @pytest.mark.parametrize("calculator", [

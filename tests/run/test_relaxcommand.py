@@ -708,13 +708,14 @@ def test_rigidmd_relax_resume_refuses_another_cell_or_pressure(tmp_path, change,
 
 
 @pytest.mark.parametrize("relax, outputs, message", [
-    ("trajectory: relax.log", "", "relax.log: relax.log is also relax.trajectory"),
+    ("log: relax.traj", "", "relax.log: relax.traj is also relax.trajectory"),
     ("log: relax.state.npz", "", "relax.log: relax.state.npz is also the relaxation's state "
                                  "file (beside relax.trajectory)"),
     ("trajectory: md.traj", "", "relax.trajectory: md.traj is also outputs.trajectory"),
     ("log: md.log", "", "relax.log: md.log is also outputs.log"),
-    ("trajectory: checkpoint.npz", "", "relax.trajectory: checkpoint.npz is also "
-                                       "outputs.checkpoint"),
+    # (an ASE trajectory under another format's name is refused first: the new-user pass)
+    ("trajectory: checkpoint.npz", "", "relax.trajectory: checkpoint.npz would hold an ASE "
+                                       "trajectory under another format's name"),
     ("trajectory: sub/x.traj", "", "relax.trajectory: the folder"),
     ("log: .rigidmd.lock", "", "relax.log: .rigidmd.lock is also the lock file"),
 ])

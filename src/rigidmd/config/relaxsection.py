@@ -106,6 +106,9 @@ class RelaxSection:
                 name = section[key]
                 if not isinstance(name, str) or not name:
                     raise ConfigError(f"relax.{key}: expected a file name, got {name!r}")
+                if key == "trajectory" and not name.lower().endswith(".traj"):
+                    raise ConfigError(f"relax.trajectory: {name} would hold an ASE trajectory "
+                                      "under another format's name; end it in .traj")
                 setattr(out, key, name)
         return out
 

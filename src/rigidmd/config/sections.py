@@ -295,7 +295,11 @@ class RunSection:
     steps : int
     velocities : dict or None
         Given as ``velocities: {temperature: 300 K, seed: 1}``; held as
-        ``{"temperature_K": float, "seed": int or None}``.
+        ``{"temperature_K": float, "seed": int or None, "stationary": bool}``.  Rigid
+        velocities drawn at the temperature, then (``stationary: true``, the default, as
+        LAMMPS's ``velocity create ... mom yes``) the total momentum zeroed and the
+        kinetic energy scaled back: the thermostats keep the total momentum
+        (``fixcm``), so a drift drawn at the start would stay for the whole run.
     """
 
     KEYS = ("integrator", "integrator_options", "timestep", "steps", "velocities")
@@ -333,7 +337,8 @@ class RunSection:
         steps = whole_number("steps", raw.get("steps"), minimum=1)
         velocities = None
         if "velocities" in raw:
-            vel = mapping("velocities", raw["velocities"], {"temperature", "seed"})
+            vel = mapping("velocities", raw["velocities"], {"temperature", "seed",
+                                                            "stationary"})
             temperature = parse_quantity("velocities.temperature", vel.get("temperature"),
                                          TEMPERATURE_UNITS)
             if temperature < 0:
@@ -342,7 +347,12 @@ class RunSection:
             seed = vel.get("seed")
             if seed is not None:
                 whole_number("velocities.seed", seed)
-            velocities = {"temperature_K": temperature, "seed": seed}
+            stationary = vel.get("stationary", True)
+            if not isinstance(stationary, bool):
+                raise ConfigError(f"velocities.stationary: expected true or false, got "
+                                  f"{stationary!r}")
+            velocities = {"temperature_K": temperature, "seed": seed,
+                          "stationary": stationary}
         return cls(integrator, options, timestep, steps, velocities)
 
 
@@ -655,6 +665,11 @@ class OutputsSection:
             raise ConfigError(f"outputs.plot: {plot.name} is drawn from the MD log; give "
                               "outputs.log too (e.g. md.log)")
         files["checkpoint_interval"] = every
+        trajectory = files.get("trajectory")
+        if trajectory is not None and trajectory.suffix.lower() != ".traj":
+            raise ConfigError(f"outputs.trajectory: {trajectory.name} would hold an ASE "
+                              "trajectory under another format's name; end it in .traj "
+                              "(outputs.mdanalysis writes .xtc)")
         if "mdanalysis" in files:
             name = files["mdanalysis"].name
             if files["mdanalysis"].suffix.lower() == ".dcd":

@@ -15,7 +15,7 @@ __all__ = ["rigid_maxwell_boltzmann", "rigid_temperature", "rigid_velocities",
            "rigid_stationary", "rigid_zero_rotation"]
 
 
-def rigid_maxwell_boltzmann(atoms, temperature_K, bodies=None, rng=None):
+def rigid_maxwell_boltzmann(atoms, temperature_K, bodies=None, rng=None, stationary=False):
     r"""Give the atoms rigid-body velocities drawn at a temperature.
 
     Each body gets a centre-of-mass velocity with components drawn from
@@ -35,6 +35,12 @@ def rigid_maxwell_boltzmann(atoms, temperature_K, bodies=None, rng=None):
         Body specification, as for :class:`~rigidmd.RigidVerlet`.
     rng : numpy.random.Generator, optional
         Source of random numbers (``numpy.random.default_rng()`` if omitted).
+    stationary : bool, default False
+        Then zero the total momentum and scale the kinetic energy back
+        (:func:`rigid_stationary`), as LAMMPS's ``velocity create ... mom yes``
+        does.  False draws as ASE's ``MaxwellBoltzmannDistribution`` does: the
+        whole system keeps a thermal drift (about 0.3 Å/ps for 216 waters),
+        which a thermostat with ``fixcm=True`` then keeps for the whole run.
     """
     if not (np.isfinite(temperature_K) and temperature_K >= 0):
         raise ValueError(f"temperature_K must be finite and >= 0, got {temperature_K!r}")
@@ -53,6 +59,8 @@ def rigid_maxwell_boltzmann(atoms, temperature_K, bodies=None, rng=None):
     momenta[model.free] = rng.normal(size=(model.n_free, 3)) * np.sqrt(
         kT * model.free_masses)[:, None]
     atoms.set_momenta(momenta, apply_constraint=False)
+    if stationary:
+        rigid_stationary(atoms)
 
 
 def rigid_velocities(atoms, bodies=None):

@@ -1,4 +1,4 @@
-r"""Barostats as coupling parts: Martyna–Tuckerman–Klein and stochastic cell rescaling.
+r"""Barostats as coupling parts: Martyna–Tobias–Klein (MTK) and stochastic cell rescaling.
 
 Rigid molecules feel the pressure through their centres of mass: the
 molecular pressure tensor is
@@ -155,7 +155,7 @@ class Barostat(TargetTemperature, Coupling):
 
 @register
 class MTKBarostat(Barostat):
-    r"""Martyna–Tuckerman–Klein barostat on the centres of mass, with its own Nosé–Hoover chain.
+    r"""Martyna–Tobias–Klein barostat on the centres of mass, with its own Nosé–Hoover chain.
 
     The cell momentum :math:`p_g` (a symmetric 3x3 matrix, restricted by
     ``couple``) drives the centres of mass and point particles

@@ -272,7 +272,8 @@ def _dynamics(config, leg, checkpoint, engine):
     velocities = config.run.velocities
     if velocities is not None and config.structure.restart is None:
         rigid_maxwell_boltzmann(atoms, velocities["temperature_K"], bodies=bodies,
-                                rng=np.random.default_rng(velocities["seed"]))
+                                rng=np.random.default_rng(velocities["seed"]),
+                                stationary=velocities.get("stationary", True))
     atoms.calc = config.calculator.build(atoms, engine)
     return RigidDynamics(atoms, leg.dt, bodies=bodies, couplings=config.coupling.parts(),
                          integrator=config.run.integrator,

@@ -118,6 +118,7 @@ def _export(config, directory, stream=sys.stdout):
                           "Verlet after one step at k = 1), and its levels split one LAMMPS "
                           "model, not two calculators; export the full model on its own")
     atoms, bodies = Run(config).start_atoms()
+    _check_exportable(config, bodies)  # before a relaxation spends its time and writes
     # Installed before the relaxation's own handlers and kept until the deck is written: a
     # signal once the relaxation has ended is noted and the deck finished (a second
     # Ctrl-C only counted), never a kill without a word halfway through the files.
@@ -129,6 +130,25 @@ def _export(config, directory, stream=sys.stdout):
         print(f"export-lammps: {signal.Signals(after.signum).name} arrived after the "
               "relaxation had ended; the deck is complete", file=stream)
     return status
+
+
+def _check_exportable(config, bodies):
+    """Refuse, in one line, a calculator, integrator or coupling LAMMPS has no equivalent
+    for: what does not depend on where the relaxation leaves the atoms."""
+    from rigidmd.couplings.base import NotExportable
+    from rigidmd.lammps.deck import coupling_fix
+
+    if config.calculator.name not in ("tip3p", "lammps"):
+        raise ConfigError(f"calculator.name: {config.calculator.name!r} has no LAMMPS "
+                          "equivalent; export-lammps supports tip3p and lammps")
+    if config.run.integrator != "no_squish":
+        raise ConfigError(f"integrator: export-lammps writes fix rigid/nve/small (no_squish), "
+                          f"not {config.run.integrator!r}")
+    try:
+        coupling_fix(config.coupling.parts(),
+                     free_atoms=bool(np.any(np.asarray(bodies.body_ids) < 0)))
+    except NotExportable as err:
+        raise ConfigError(str(err)) from None
 
 
 def _write_deck(config, atoms, bodies, directory, stream):
@@ -159,7 +179,7 @@ def _write_deck(config, atoms, bodies, directory, stream):
                 f"against {rc - width:g} Å, {atom_span:.1f} Å against {rc:g} Å) or with the "
                 "lammps calculator")
         pair, charges = tip3p_pair_commands(rc), tip3p_charges(atoms)
-    elif calc.name == "lammps":
+    else:  # "lammps" (_check_exportable refused the others)
         pair = list(calc.commands)
         if calc.options.get("exclude_intramolecular", True):
             pair.append("neigh_modify exclude molecule/intra all")  # as the calculator does
@@ -167,13 +187,6 @@ def _write_deck(config, atoms, bodies, directory, stream):
             calc.build(atoms)  # checks the molecules against the model, sets its charges
         charges = (np.array([calc.charges.get(s, 0.0) for s in atoms.get_chemical_symbols()])
                    if calc.charges else atoms.get_initial_charges())
-    else:
-        raise ConfigError(f"calculator.name: {calc.name!r} has no LAMMPS equivalent; "
-                          "export-lammps supports tip3p and lammps")
-    integrator = config.run.integrator
-    if integrator != "no_squish":
-        raise ConfigError(f"integrator: export-lammps writes fix rigid/nve/small (no_squish), "
-                          f"not {integrator!r}")
     couplings = config.coupling.parts()
     seeds = [spec.seed for spec in config.coupling.specs if spec.seed is not None]
     seed = seeds[0] if seeds else 12345

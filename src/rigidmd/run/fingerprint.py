@@ -105,7 +105,7 @@ def fingerprint(config):
         "structure": source, "read_options": structure.read_options,
         "bodies": structure.bodies, "calculator": _calculator_fields(config.calculator),
         "integrator": integrator, "integrator_options": config.run.integrator_options,
-        "timestep": config.run.timestep, "velocities": config.run.velocities,
+        "timestep": config.run.timestep, "velocities": _velocities(config.run.velocities),
         "outputs.interval": config.outputs.interval,
     }
     for section in ("thermostat", "barostat"):
@@ -115,6 +115,15 @@ def fingerprint(config):
     if relax is not None:  # what it relaxes to; relax.steps may be raised, as steps may
         fields["relax"] = [relax.fmax, relax.optimizer, relax.cell, relax.pressure]
     return {name: _digest(value) for name, value in fields.items()}
+
+
+def _velocities(velocities):
+    """The start velocities as a fingerprint holds them: ``stationary`` only when it is not
+    the default (it came later, and a resumed run draws no velocities: a run begun before
+    it continues)."""
+    if velocities is None or velocities.get("stationary", True) is not True:
+        return velocities
+    return {k: v for k, v in velocities.items() if k != "stationary"}
 
 
 #: Fields a fingerprint gained after checkpoints were written without them: a record that

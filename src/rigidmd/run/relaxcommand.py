@@ -191,4 +191,5 @@ def relax_for_export(config, atoms, bodies, directory, stream=sys.stdout):
     velocities = config.run.velocities
     if velocities is not None and config.structure.restart is None:
         rigid_maxwell_boltzmann(atoms, velocities["temperature_K"], bodies=bodies,
-                                rng=np.random.default_rng(velocities["seed"]))
+                                rng=np.random.default_rng(velocities["seed"]),
+                                stationary=velocities.get("stationary", True))

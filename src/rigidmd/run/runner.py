@@ -151,7 +151,8 @@ class Run:
             return
         if velocities is not None:
             rigid_maxwell_boltzmann(atoms, velocities["temperature_K"], bodies=bodies,
-                                    rng=np.random.default_rng(velocities["seed"]))
+                                    rng=np.random.default_rng(velocities["seed"]),
+                                    stationary=velocities.get("stationary", True))
 
     def _dynamics_arguments(self):
         return dict(integrator=self.config.run.integrator,
