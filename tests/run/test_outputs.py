@@ -57,7 +57,7 @@ def test_outputs_are_cut_back_to_their_checkpoint(tmp_path):
         traj.write(water_cluster(2, seed=1))
     files["log"].write_text("line 1\n")
     lengths = output_lengths(files)
-    assert set(lengths) == {"trajectory", "log"}  # later.txt does not exist yet
+    assert lengths["later"] == {"size": 0}  # later.txt does not exist yet
     assert lengths["log"] == {"size": 7} and lengths["trajectory"]["nitems"] == 1
     with Trajectory(files["trajectory"], "a") as traj:
         traj.write(water_cluster(2, seed=2))
@@ -70,6 +70,18 @@ def test_outputs_are_cut_back_to_their_checkpoint(tmp_path):
     with pytest.raises(OutputError, match=r"outputs.log: .* is shorter than at the checkpoint "
                                           r"\(0 < 7 bytes\).*or copy it back"):
         trim_outputs(files, lengths, advice="or copy it back")
+
+
+def test_an_output_the_checkpoint_did_not_write_is_kept_and_refused(tmp_path):
+    """The MDAnalysis pass: an output left out of the configuration for one resumed segment
+    and given again was deleted on the next --resume, with the frames before the gap."""
+    files = {"log": tmp_path / "md.log"}
+    files["log"].write_text("line 1\n")
+    lengths = output_lengths({})  # a checkpoint of a segment run without outputs.log
+    with pytest.raises(OutputError, match=r"outputs.log: .*md.log was not written up to the "
+                                          r"checkpoint \(outputs.log was not given"):
+        trim_outputs(files, lengths)
+    assert files["log"].read_text() == "line 1\n"
 
 
 def test_an_output_on_an_input_is_refused(tmp_path):

@@ -154,12 +154,15 @@ def output_lengths(files):
     -------
     dict
         Name -> ``{"size": bytes}`` (plus ``"nitems"`` and ``"pos0"`` for a
-        ``.traj``); files that do not exist yet are left out.
+        ``.traj``); a file that does not exist yet has size 0: every output of
+        the run is named, so that a resumed run tells an output it wrote from one
+        it was not asked for then (:func:`trim_outputs`).
     """
     lengths = {}
     for name, path in files.items():
         path = Path(path)
         if not path.exists():
+            lengths[name] = {"size": 0}
             continue
         entry = {"size": path.stat().st_size}
         if name == "trajectory" and entry["size"] > 0:
@@ -172,7 +175,10 @@ def trim_outputs(files, lengths, advice="start it again with --overwrite"):
     """Cut each output file back to its recorded length (before a resumed run appends).
 
     A file shorter than recorded (lost after the checkpoint) is an error:
-    the run cannot continue it, and ``advice`` says what to do instead.
+    the run cannot continue it, and ``advice`` says what to do instead.  So
+    is a file the checkpoint does not name (the output was not asked for when
+    it was written): its frames stop where that output was left out, and
+    appending would hide the gap (deleting it lost the frames before it).
     Returns the names of the files trimmed.
     """
     trimmed = []
@@ -181,7 +187,14 @@ def trim_outputs(files, lengths, advice="start it again with --overwrite"):
         recorded = lengths.get(name)
         if recorded is None:
             if path.exists() and path.stat().st_size > 0:
-                # Written after the checkpoint only: start it again.
+                raise OutputError(
+                    f"outputs.{name}: {path} was not written up to the checkpoint "
+                    f"(outputs.{name} was not given when it was taken), so it lacks the "
+                    f"frames since; move it away to start it afresh from here, or leave "
+                    f"outputs.{name} out")
+            continue
+        if recorded["size"] == 0:  # asked for, not yet written at the checkpoint
+            if path.exists():  # written after it only: start it again
                 path.unlink()
                 trimmed.append(name)
             continue
