@@ -34,13 +34,16 @@ Asking for less (rigidmd's extension, for engines that know it)
     understands it; an engine that does not (``fix ipi``, ASE's client, i-PI
     drivers) would stop at the unknown header, so the flag is off by default.
     An engine's ``extra`` string (after the virial) is kept in
-    :attr:`IPICalculator.engine_extra`.
+    :attr:`IPICalculator.engine_extra`; a length below 0 or past 16 MiB (1 kB an
+    atom for more than 16384 atoms) is refused as a broken answer.
 
 The virial ``W = -V σ`` (eV) gives the stress.  LAMMPS's ``fix ipi`` fills
 only the upper triangle (xy, xz, yz) and leaves the lower one zero (ASE's own
 server would symmetrise that with the zeros and halve every shear stress):
 here a zero lower (or upper) triangle is mirrored from the other, and a full
-virial is symmetrised.
+virial is symmetrised.  A virial of nine exact zeros is one the engine did not
+compute (ASE's ``SocketClient`` sends it unless ``run(..., use_stress=True)``): no
+stress is made from it, and asking for the stress raises :class:`EngineError`.
 """
 
 from rigidmd.ipi.calculator import IPICalculator, symmetric_virial

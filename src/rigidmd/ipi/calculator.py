@@ -31,6 +31,7 @@ from rigidmd.ipi.connection import (
     sweep_stale_sockets,
     unlink_if_ours,
     wait_readable,
+    wait_writable,
     word,
 )
 
@@ -59,8 +60,9 @@ class IPICalculator(Calculator):
         i-PI protocol has no secret to check, so this is the one guard against another
         host answering the forces; loopback engines must name ``localhost``.
     timeout : float, default 120.0
-        Seconds an engine may take to answer one force call (and to connect,
-        see ``connect_timeout``) before :class:`EngineError` is raised.
+        Seconds an engine may take to answer one force call, taking the positions
+        included (and to connect, see ``connect_timeout``) before :class:`EngineError`
+        is raised.
     connect_timeout : float, optional
         Seconds to wait for the engine to connect (default ``timeout``).
     bohr, hartree : float
@@ -74,8 +76,10 @@ class IPICalculator(Calculator):
     -----
     Properties: ``energy`` (``free_energy``), ``forces`` and, for a periodic
     cell, ``stress`` (from the virial; see :mod:`rigidmd.ipi`).  Every call
-    computes all of them (the protocol has no cheaper call).  An engine that
-    closes the connection, or does not answer within ``timeout``, raises
+    computes all of them (the protocol has no cheaper call).  An engine that sends an
+    all-zero virial has not computed one (ASE's ``SocketClient`` unless
+    ``use_stress=True``): asking for the stress then raises :class:`EngineError`.  An
+    engine that closes the connection, or does not answer within ``timeout``, raises
     :class:`EngineError`; the connection is dropped, and the next call waits
     for a new engine (subclasses start one).
     """
@@ -258,11 +262,25 @@ class IPICalculator(Calculator):
             time.sleep(0.05)
         self._fail(f"closed the connection{detail}")
 
-    def _send(self, *parts):
-        try:
-            self._conn.sendall(parts[0] if len(parts) == 1 else b"".join(parts))
-        except OSError as err:
-            self._closed(f" ({err.strerror})")
+    def _send(self, data, deadline, what):
+        """Send ``data`` by ``deadline``: an engine that stops reading (its socket's buffer
+        full) is waited for as a read is (:func:`~rigidmd.ipi.connection.wait_writable`:
+        the timeout and the stop checks apply), never in a blocking send."""
+        view = memoryview(data)
+        sent = 0
+        while sent < len(view):  # a message that fits the buffer goes out in one send, unpolled
+            try:
+                sent += self._conn.send(view[sent:])
+                continue
+            except BlockingIOError:
+                pass
+            except OSError as err:
+                self._closed(f" ({err.strerror})")
+            trouble = wait_writable(self._conn, deadline, self.engine_failure)
+            if trouble == "timeout":
+                self._fail(f"took no {what} within {self._limit:g} s (it stopped reading)")
+            if trouble == "died":
+                self._fail(f"died before taking its {what}")
 
     def _recv(self, nbytes, deadline, what):
         buf = bytearray(nbytes)
@@ -272,6 +290,8 @@ class IPICalculator(Calculator):
             self._wait_readable(self._conn, deadline, what)
             try:
                 n = self._conn.recv_into(view[got:])
+            except BlockingIOError:
+                continue  # readable, yet nothing there after all: wait again
             except OSError as err:
                 self._closed(f" ({err.strerror})")
             if n == 0:
@@ -283,11 +303,12 @@ class IPICalculator(Calculator):
         return self._recv(MSGLEN, deadline, what).decode("ascii", "replace").strip()
 
     def _handshake(self, deadline):
-        self._send(word("STATUS"))
+        self._send(word("STATUS"), deadline, "status request")
         status = self._header(deadline, "status")
         if status == "NEEDINIT":
-            self._send(word("INIT"), np.array([0, 1], np.int32).tobytes(), b"\0")
-            self._send(word("STATUS"))
+            self._send(word("INIT") + np.array([0, 1], np.int32).tobytes() + b"\0", deadline,
+                       "INIT")
+            self._send(word("STATUS"), deadline, "status request")
             status = self._header(deadline, "status")
         if status != "READY":
             self._fail(f"answered STATUS with {status!r}, expected READY")
@@ -309,7 +330,7 @@ class IPICalculator(Calculator):
         message = self._message[1]  # the positions written into it in Bohr, no copies:
         np.divide(positions, bohr, out=np.frombuffer(
             message, np.float64, 3 * n, len(message) - 24 * n - MSGLEN).reshape(n, 3))
-        self._send(message)
+        self._send(message, deadline, "positions")
         while True:
             header = self._header(deadline, "forces")
             if header != "HAVEDATA":  # an engine may still answer a poll
@@ -325,6 +346,9 @@ class IPICalculator(Calculator):
         forces = np.frombuffer(body, np.float64, 3 * n).reshape(n, 3)
         virial = np.frombuffer(body, np.float64, 9, 24 * n).reshape(3, 3)
         extra = int(np.frombuffer(body, np.int32, 1, 24 * n + 72)[0])
+        if not 0 <= extra <= max(_MAX_EXTRA, _MAX_EXTRA_PER_ATOM * n):
+            self._fail(f"sent an extra string of {extra} bytes (expected 0 to "
+                       f"{max(_MAX_EXTRA, _MAX_EXTRA_PER_ATOM * n)}): not an i-PI answer")
         self.engine_extra = bytes(self._recv(extra, deadline, "forces")) if extra else b""
         hartree = self.hartree
         return energy * hartree, forces * (hartree / bohr), virial * hartree
@@ -370,6 +394,9 @@ class IPICalculator(Calculator):
             # finished, so the engine cannot be asked again.  The next call starts anew.
             self._shutdown(keep_files=False)
             raise
+        # An all-zero virial is one the engine did not compute (ASE's SocketClient sends
+        # zeros unless run(..., use_stress=True)), never a stress of exactly zero.
+        no_virial = want_stress and not virial.any()
         virial = symmetric_virial(virial) if want_stress else virial
         if rotation is not None:
             forces = forces @ rotation.T
@@ -379,10 +406,14 @@ class IPICalculator(Calculator):
             if why is not None:
                 self._fail(f"is not this calculator's engine: {why}")
             self._verified = True
+        if no_virial and "stress" in properties:
+            raise EngineError(f"{self.describe_engine()}: sent no virial (all nine components "
+                              "exactly zero), so no stress for this periodic cell; have it "
+                              "send one (ASE's SocketClient: run(..., use_stress=True))")
         results = {"forces": forces}  # a new array (the exchange scaled what it read)
         if want_energy:
             results.update(energy=energy, free_energy=energy)
-        if want_stress:
+        if want_stress and not no_virial:  # else a later stress call asks, and says why not
             stress = -virial / abs(np.linalg.det(atoms.cell.array))
             results["stress"] = stress[[0, 1, 2, 1, 0, 0], [0, 1, 2, 2, 2, 1]]
         if system_changes:
@@ -433,6 +464,14 @@ class IPICalculator(Calculator):
         except Exception:  # noqa: BLE001 - nothing to report to at interpreter exit
             pass
 
+
+# The longest ``extra`` string an engine may send (bytes), read into memory before it is
+# looked at: 16 MiB, or 1 kB an atom if more.  Real ones are far shorter (LAMMPS's
+# fix rigidmd/ipi: a few counters, under 100 bytes; i-PI drivers: JSON of a few
+# per-atom numbers, well under 1 kB an atom); a length past it is a broken stream,
+# not a string to allocate (2**28 once took 256 MB before the call timed out).
+_MAX_EXTRA = 1 << 24
+_MAX_EXTRA_PER_ATOM = 1024
 
 #: The keyword arguments of ASE's ``Calculator`` an i-PI calculator passes on.
 _ASE_CALCULATOR_ARGUMENTS = frozenset({"restart", "ignore_bad_restart_file", "label", "atoms",

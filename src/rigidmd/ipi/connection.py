@@ -9,8 +9,9 @@ removed by the next one (:func:`sweep_stale_sockets`).  A Unix socket is bound w
 connects is named by its process (Linux's ``SO_PEERCRED`` for a Unix socket,
 ``/proc/net/tcp`` for loopback TCP: :func:`accept`), and another user's process is
 refused.  While an
-engine is awaited, the checks of :func:`add_wait_check` run every
-:data:`WAIT_SLICE` seconds (:func:`wait_readable`).
+engine is awaited, or sent a message while it has stopped reading, the checks of
+:func:`add_wait_check` run every :data:`WAIT_SLICE` seconds (:func:`wait_readable`,
+:func:`wait_writable`).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ __all__ = ["MSGLEN", "OWN_SOCKET", "SOCKET_NAME_RULE", "WAIT_SLICE", "EngineErro
            "NotAPeer", "accept", "peer_addresses",
            "add_wait_check", "check_socket_name", "close_sockets", "open_server", "process_folder",
            "remove_wait_check", "socket_name_ok", "sweep_stale_sockets", "unlink_if_ours",
-           "wait_readable", "word"]
+           "wait_readable", "wait_writable", "word"]
 
 #: Length of an i-PI header (bytes).
 MSGLEN = 12
@@ -106,6 +107,25 @@ def wait_readable(sock, deadline, engine_failure):
         None when readable, ``"timeout"`` past the deadline, ``"died"`` when
         ``engine_failure`` says so.
     """
+    return _wait(sock, select.POLLIN | select.POLLPRI, deadline, engine_failure)
+
+
+def wait_writable(sock, deadline, engine_failure):
+    """Wait until ``sock`` takes more bytes, running :func:`add_wait_check`'s checks meanwhile.
+
+    As :func:`wait_readable`, for an engine that has stopped reading while the socket's
+    buffer is full (a closed or reset connection counts as writable: the next send says so).
+
+    Returns
+    -------
+    str or None
+        None when writable, ``"timeout"`` past the deadline, ``"died"`` when
+        ``engine_failure`` says so.
+    """
+    return _wait(sock, select.POLLOUT, deadline, engine_failure)
+
+
+def _wait(sock, events, deadline, engine_failure):
     while True:
         left = deadline - time.monotonic()
         if left <= 0:
@@ -113,7 +133,7 @@ def wait_readable(sock, deadline, engine_failure):
         # poll, not select: select refuses a descriptor numbered 1024 or more ("filedescriptor
         # out of range"), which a process with many files open gets for every new socket.
         poller = select.poll()
-        poller.register(sock, select.POLLIN | select.POLLPRI)
+        poller.register(sock, events)
         if poller.poll(max(1, int(1000 * min(left, WAIT_SLICE)))):
             return None
         for check in list(_wait_checks):
@@ -198,7 +218,11 @@ def peer_addresses(peers):
 
 
 def accept(server, socketfile, peers=None):
-    """Accept the engine waiting on ``server`` (readable); a blocking connection.
+    """Accept the engine waiting on ``server`` (readable); a non-blocking connection.
+
+    Non-blocking, so that a send to an engine that has stopped reading waits with a
+    deadline (:func:`wait_writable`) instead of in the kernel, where neither the
+    timeout nor a stop request can end it.
 
     Parameters
     ----------
@@ -250,7 +274,7 @@ def accept(server, socketfile, peers=None):
         shown = f"process {pid}" if pid is not None else "a process"
         raise EngineError(f"IPICalculator: {shown} of another user (uid {uid}) connected "
                           f"{on} first; its forces are not used (refused, the run stops)")
-    conn.setblocking(True)
+    conn.setblocking(False)
     return conn, peer, pid
 
 
