@@ -129,6 +129,9 @@ def test_the_bias_of_a_trap_against_its_exact_mean(tmp_path):
      "barostat: rigidmd bias runs at constant volume"),
     ({"relax": {"fmax": 0.1}}, "relax: rigidmd bias starts both runs"),
     ({"thermostat": dict(TRAP["thermostat"], friction="0 1/fs")}, "thermostat.friction: 0"),
+    # ran both runs, then ZeroDivisionError and nothing written (the bias/ipi pass)
+    ({"thermostat": dict(TRAP["thermostat"], temperature="0 K")},
+     "thermostat.temperature: 0 K; rigidmd bias needs a bath above 0 K"),
 ])
 def test_what_it_cannot_estimate_is_refused_in_one_line(tmp_path, change, message):
     raw = {k: v for k, v in dict(TRAP, **change).items() if v is not None}
@@ -168,6 +171,7 @@ def _command(tmp_path, *flags):
     (("--ps", "0.2", "--tconf-fs", "100"), "--tconf-fs: 0.2 ps sampled every 100 fs gives 2 "
                                            "samples"),
     (("--resume",), "--resume: no estimate to continue"),
+    (("--outdir", ""), "--outdir: empty"),  # wrote into the current folder
 ])
 def test_command_mistakes_are_one_line_and_status_2(tmp_path, capsys, flags, message):
     assert cli.main(_command(tmp_path, *flags)) == 2
@@ -366,3 +370,52 @@ def test_a_time_off_the_step_grid_is_said(tmp_path, capsys):
            "(12 fs)" in out
     saved = json.loads((tmp_path / "out" / "bias.json").read_text())
     assert saved["legs_record"][0]["every"] == 3 and saved["legs_record"][1]["every"] == 6
+
+
+class Killed(BaseException):
+    """What no handler sees (SIGKILL, the out-of-memory killer): the process ends here."""
+
+
+def test_a_kill_keeps_the_finished_run_and_the_last_save(tmp_path, monkeypatch):
+    """The bias/ipi pass: SIGKILL in the second run lost everything (bias.json was written
+    only at the end or after a stop), the finished first run included.  Now the record is
+    written when a run ends and every SAVE_EVERY_S (here every step) before the run's
+    checkpoint; --resume then completes it with the samples of an uninterrupted estimate."""
+    import io
+
+    from rigidmd.run import bias
+
+    monkeypatch.setattr(bias, "SAVE_EVERY_S", 0.0)
+    config = trap_config(tmp_path, timestep="4 fs")
+    kwargs = dict(production_ps=1.0, equilibrate_ps=0.2, progress=io.StringIO(),
+                  stream=io.StringIO())
+    original = Trap.calculate
+    _stop_at_call(monkeypatch, 500, Killed())  # in the second run (the first: ~360 calls)
+    with pytest.raises(Killed):
+        estimate_bias(config, tmp_path / "out", **kwargs)
+    saved = json.loads((tmp_path / "out" / "bias.json").read_text())
+    first, second = saved["legs_record"]
+    assert first["done"] and not second["done"] and second["samples"]["step"]
+    assert saved["status"] is None  # written while running
+    assert (tmp_path / "out" / "leg-dt-2.npz").exists()
+    monkeypatch.setattr(Trap, "calculate", original)
+    resumed = estimate_bias(config, tmp_path / "out", resume=True, **kwargs)
+    whole = estimate_bias(config, tmp_path / "whole", **kwargs)
+    assert resumed["complete"] and resumed["status"] == 0
+    for a, b in zip(resumed["legs_record"], whole["legs_record"], strict=True):
+        assert a["samples"] == b["samples"]
+
+
+def test_the_command_that_continues_works_from_any_folder(tmp_path, monkeypatch):
+    """The configuration was given as typed (relative), --outdir resolved: from another
+    folder the printed command failed with "no such file"."""
+    from rigidmd.run import bias
+
+    args = _command(tmp_path)
+    args[1] = "bias.yaml"
+    monkeypatch.chdir(tmp_path)
+    hints = []
+    monkeypatch.setattr(bias, "estimate_bias", lambda *a, hint=None, **k: hints.append(hint)
+                        or {"status": 0})
+    assert cli.main(args) == 0
+    assert f"rigidmd bias {tmp_path / 'bias.yaml'} " in hints[0]

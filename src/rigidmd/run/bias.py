@@ -80,6 +80,10 @@ def check_bias_config(config) -> None:
         raise ConfigError("thermostat: rigidmd bias needs a thermostat (at constant energy the "
                           "temperature itself moves with the step); add one, e.g. "
                           "{kind: langevin, temperature: 300 K, friction: 1 1/ps}")
+    bath = coupling.thermostat.kwargs.get("temperature_K")
+    if bath is not None and not bath > 0:
+        raise ConfigError(f"thermostat.temperature: {bath:g} K; rigidmd bias needs a bath above "
+                          "0 K (the bias in kelvin divides by the fluctuations of U at it)")
     if coupling.thermostat.kwargs.get("friction", 1.0) == 0:
         raise ConfigError("thermostat.friction: 0 leaves the energy constant (no thermostat), "
                           "and rigidmd bias needs the temperature held; give a friction > 0, "
@@ -280,8 +284,31 @@ def _dynamics(config, leg, checkpoint, engine):
                          integrator_options=config.run.integrator_options)
 
 
-def _run_leg(config, leg, directory, stop, progress, probes, seed):
-    """Run (or continue) one leg; returns None when done, else the stop signal's number."""
+#: Wall seconds between a leg's saves (its samples in ``bias.json``, then its checkpoint):
+#: what a kill that no handler sees (SIGKILL, the out-of-memory killer) can lose.
+SAVE_EVERY_S = 300.0
+
+
+class _Saver:
+    """Every ``every_s`` wall seconds: the record (``save_record()``), then the checkpoint.
+    In that order, so that a kill between the two leaves samples past the checkpoint, which
+    a resumed leg drops and takes again (:meth:`BiasLeg.trim`), never a gap."""
+
+    def __init__(self, dyn, checkpoint, save_record, every_s):
+        self.dyn, self.checkpoint, self.save_record = dyn, checkpoint, save_record
+        self.every_s, self.last = every_s, time.monotonic()
+
+    def __call__(self):
+        if time.monotonic() - self.last >= self.every_s:
+            self.save_record()
+            self.dyn.save_checkpoint(self.checkpoint)
+            self.last = time.monotonic()
+
+
+def _run_leg(config, leg, directory, stop, progress, probes, seed, save_record=None):
+    """Run (or continue) one leg; returns None when done, else the stop signal's number.
+    ``save_record()`` writes ``bias.json`` (every :data:`SAVE_EVERY_S` and when the leg is
+    done, before its checkpoint goes)."""
     checkpoint = _checkpoint_path(directory, leg)
     dyn = _dynamics(config, leg, checkpoint, directory / "engine")
     own = None  # the configurational temperature's calculator (as rigidmd run gives it)
@@ -297,6 +324,8 @@ def _run_leg(config, leg, directory, stop, progress, probes, seed):
             dyn.attach(_Conf(dyn, leg, seed, probes, own), interval=leg.tconf_every)
         dyn.attach(Progress(dyn, remaining, stream=progress),
                    interval=max(1, remaining // 1000))
+        if save_record is not None:  # after the step's samples
+            dyn.attach(_Saver(dyn, checkpoint, save_record, SAVE_EVERY_S), interval=1)
         dyn.attach(stop.check, interval=1)  # last: after the step's samples
         try:
             dyn.run(remaining)
@@ -304,6 +333,8 @@ def _run_leg(config, leg, directory, stop, progress, probes, seed):
             dyn.save_checkpoint(checkpoint)
             return request.signum
         leg.done = True
+        if save_record is not None:
+            save_record()  # the finished leg on record before its checkpoint goes
         checkpoint.unlink(missing_ok=True)
         return None
     finally:
@@ -417,6 +448,7 @@ def _estimate_in(config, directory, legs, arguments, prints, blocks, probes, see
     status = 0
     t0 = time.perf_counter()
     def record_now(status):
+        """``bias.json`` and ``bias.txt`` now (``status`` None: running)."""
         result = _estimate(legs, blocks, config)
         result.update(status=status, arguments=arguments, fingerprint=prints,
                       legs_record=[leg.todict() for leg in legs],
@@ -433,7 +465,13 @@ def _estimate_in(config, directory, legs, arguments, prints, blocks, probes, see
                     continue
                 print(f"run at {leg.name} = {leg.dt / TIME_UNITS['fs']:g} fs: {leg.total} "
                       f"steps ({leg.equilibrate} to equilibrate)", file=stream)
-                signum = _run_leg(config, leg, directory, stop, progress, probes, seed)
+                if config.calculator.name == "ipi":
+                    print(f"the run at {leg.name} waits for an engine at "
+                          f"{config.calculator.address or 'the configured address'}; each run "
+                          "connects anew, and an engine started by hand ends with the run it "
+                          "served (EXIT): start it again for this one", file=stream)
+                signum = _run_leg(config, leg, directory, stop, progress, probes, seed,
+                                  save_record=lambda: record_now(None))
                 if signum is not None:
                     status = EXIT_STATUS[signum]
                     break
@@ -497,7 +535,7 @@ def _estimate(legs, blocks, config):
         error = 4 / 3 * np.hypot(a["U"][1], b["U"][1]) / n / KJ_MOL
         bias = (value, error)
         kT2 = (config.coupling.thermostat.kwargs["temperature_K"] * units.kB) ** 2
-        slope = b["var_U"] / kT2 * units.kB  # d<U>/dT (eV/K), the whole system
+        slope = b["var_U"] / kT2 * units.kB if kT2 > 0 else 0.0  # d<U>/dT (eV/K), all
         if slope > 0:
             bias_k = (value * n * KJ_MOL / slope, error * n * KJ_MOL / slope)
     text = _table(legs, per, n, bias, bias_k, complete, config)
@@ -612,6 +650,8 @@ def bias_command(args, stream=None):
         if getattr(args, name) < least:
             raise ConfigError(f"--{name}: expected a whole number >= {least}, got "
                               f"{getattr(args, name)}")
+    if not args.outdir.strip():
+        raise ConfigError("--outdir: empty; give a directory (default rigidmd-bias)")
     raw = load_config(args.config)
     if isinstance(raw, dict) and raw.get("steps") is None:
         raw["steps"] = 1  # not read: the runs' lengths are --equilibrate-ps and --ps
@@ -620,7 +660,7 @@ def bias_command(args, stream=None):
         parse_quantity("--timestep", args.timestep, TIME_UNITS)
     config = check_config(raw, trust=args.trust)
     check_bias_config(config)
-    words = ["rigidmd", "bias", args.config]
+    words = ["rigidmd", "bias", str(Path(args.config).resolve())]  # from any folder
     for name in ("timestep", "ps", "equilibrate_ps", "sample_fs", "tconf_fs", "probes",
                  "blocks"):
         words += [f"--{name.replace('_', '-')}", str(getattr(args, name))] if getattr(
