@@ -219,6 +219,8 @@ def test_a_compressibility_in_inverse_pascal(tmp_path):
     # The new-user pass of 2026-11-29: an ASE .traj written under an .xyz name.
     ("outputs: {directory: out, trajectory: md.xyz}",
      "outputs.trajectory: md.xyz would hold an ASE trajectory under another format's name"),
+    ("steps: 1e3", "steps: expected a whole number >= 1, got 1000.0 (a number with a "
+                   "decimal point or exponent; write 1000)"),  # read as 1000.0: "got 1000.0"
     ("velocities: {temperature: 300 K, stationary: 0}",
      "velocities.stationary: expected true or false, got 0"),
     ('outputs: {directory: out, "md\\nlog": 1, "md\\nlog": 2}',

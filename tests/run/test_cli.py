@@ -605,8 +605,8 @@ def test_a_cell_relaxation_of_a_cluster_is_refused_before_any_file(project):
     for command in (["run", "c.yaml"], ["relax", "c.yaml"], ["export-lammps", "c.yaml", "deck"]):
         result = rigidmd(*command, cwd=project)
         assert result.returncode == 2, (command, result.stderr)
-        assert "relax.cell: full relaxes the cell, which needs a structure periodic in all " \
-               "three directions" in result.stderr
+        assert "relax.cell: true (full) relaxes the cell, which needs a structure periodic " \
+               "in all three directions" in result.stderr
         assert not (project / "out").exists() and not (project / "deck").exists()
     (project / "z.yaml").write_text(PLAIN + "relax: {steps: 0}\n")
     result = rigidmd("run", "z.yaml", cwd=project)

@@ -34,6 +34,11 @@ def test_relax_command_and_relax_section_before_md(tmp_path):
     assert np.linalg.norm(generalized, axis=1).max() < 0.01
     assert "FIRE:" in (tmp_path / "out" / "relax.log").read_text()
     assert not (tmp_path / "out" / "md.traj").exists()
+    # Into the relaxation's folder without a flag: --resume is not offered (it only refused:
+    # no checkpoint), --overwrite is (the new-user pass).
+    result = rigidmd("run", "relax.yaml", cwd=tmp_path)
+    assert result.returncode == 2 and "nothing there can be continued (no checkpoint: a " \
+        "relaxation by rigidmd relax" in result.stderr and "--resume" not in result.stderr
     # rigidmd run: relaxes, then MD from the relaxed structure.
     result = rigidmd("run", "relax.yaml", "--overwrite", cwd=tmp_path)
     assert result.returncode == 0, result.stderr

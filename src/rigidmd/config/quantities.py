@@ -96,7 +96,12 @@ def mapping(field, value, allowed=None):
 def whole_number(field, value, minimum=0):
     """``value`` as an int >= ``minimum``, else a ConfigError naming ``field``."""
     if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise ConfigError(f"{field}: expected a whole number >= {minimum}, got {value!r}")
+        how = ""
+        if isinstance(value, float) and value.is_integer() and value >= minimum:
+            # 1e3 is read as the float 1000.0: a whole value, not an integer
+            how = f" (a number with a decimal point or exponent; write {int(value)})"
+        raise ConfigError(f"{field}: expected a whole number >= {minimum}, got "
+                          f"{value!r}{how}")
     return value
 
 

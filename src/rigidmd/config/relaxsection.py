@@ -138,13 +138,14 @@ class RelaxSection:
         on the atoms) no stress."""
         if self.cell is False:
             return
+        given = "true (full)" if self.cell == "full" else self.cell  # as either was written
         if not atoms.pbc.all():
-            raise ConfigError(f"relax.cell: {self.cell} relaxes the cell, which needs a "
+            raise ConfigError(f"relax.cell: {given} relaxes the cell, which needs a "
                               f"structure periodic in all three directions (its pbc is "
                               f"{atoms.pbc.tolist()}); give relax.cell: false")
         calc = atoms.calc
         if calc is not None and "stress" not in getattr(calc, "implemented_properties",
                                                         ("stress",)):
-            raise ConfigError(f"relax.cell: {self.cell} relaxes the cell, which needs the "
+            raise ConfigError(f"relax.cell: {given} relaxes the cell, which needs the "
                               f"stress, and the calculator {type(calc).__name__} gives none; "
                               "give relax.cell: false or a calculator with stress")

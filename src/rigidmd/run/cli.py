@@ -1,4 +1,4 @@
-"""The ``rigidmd`` command: ``demo``, ``run``, ``relax``, ``plot`` and ``export-lammps``.
+"""The ``rigidmd`` command: ``demo``, ``run``, ``relax``, ``bias``, ``plot`` and ``export-lammps``.
 
 ``rigidmd demo``                      a TIP3P water cluster, 2 ps, with plots
 ``rigidmd run CONFIG.yaml [flags]``   any system from a configuration file
@@ -207,7 +207,7 @@ def _write_deck(config, atoms, bodies, directory, stream):
 DEMO_NOTE = ("rigidmd demo: 32 rigid TIP3P waters, built on a lattice and not relaxed, "
              "velocities drawn at 250 K, no thermostat (NVE). As the cluster settles, its "
              "potential energy becomes kinetic: the temperature climbs from about 230 K to "
-             "350-430 K within 0.4 ps while the total energy stays constant. For a steady "
+             "300-420 K within 0.4 ps while the total energy stays constant. For a steady "
              "temperature, relax first and add a thermostat (relax: and thermostat: in a "
              "configuration for rigidmd run).")
 
@@ -237,8 +237,10 @@ def _parser():
     run.add_argument("--structure", help="structure file (any ASE-readable format)")
     run.add_argument("--steps", type=int, help="total number of steps of the run")
     run.add_argument("--timestep", help="time step with unit, e.g. '2 fs'")
-    run.add_argument("--integrator", help="no_squish (default), richardson, "
-                                          "rozmanov_kusalik, pcdm, exadem or a scheme .yaml")
+    from rigidmd.core.schemes import BUILTIN_SCHEMES
+
+    run.add_argument("--integrator", help=f"{', '.join(BUILTIN_SCHEMES)} (default no_squish) "
+                                          "or a scheme .yaml")
     run.add_argument("--bodies", help="connectivity, mol-id or tags")
     run.add_argument("--restart", help="start a new run from the last frame of this "
                                        "trajectory (to continue a run exactly, use --resume)")

@@ -171,10 +171,16 @@ class RunFiles:
 
         existing = [p for p in self.all() if p.exists() and p not in keep]
         names = ", ".join(p.name for p in existing)
-        if self.mode == "new" and existing:
+        if self.mode == "new" and existing and self.outputs.checkpoint.exists():
             raise ConfigError(
                 f"outputs: {self.outputs.directory} already holds {names} from an earlier run; "
                 "continue it with --resume, or replace it with --overwrite")
+        if self.mode == "new" and existing:  # (--resume would only refuse)
+            raise ConfigError(
+                f"outputs: {self.outputs.directory} already holds {names} from an earlier run; "
+                "nothing there can be continued (no checkpoint: a relaxation by rigidmd "
+                "relax, or a run stopped before its first checkpoint); replace it with "
+                "--overwrite, or give another directory")
         if self.mode == "demo" and existing and not earlier_demo():
             raise ConfigError(
                 f"outputs: {self.outputs.directory} holds {names}, which are not an earlier "

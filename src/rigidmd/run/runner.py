@@ -133,6 +133,14 @@ class Run:
         config = self.config
         atoms = config.structure.build_atoms()
         bodies = config.structure.resolve_bodies(atoms)
+        source = config.structure.source
+        if isinstance(source, dict) and config.relax is None and \
+                config.structure.restart is None and self.mode != "demo":  # (the demo says so)
+            # A lattice: 64 TIP3P waters went from 300 to 1,130 K in 20 fs under NPT, unsaid.
+            print(f"structure: the built-in {source['builtin']} is a lattice, not relaxed: its "
+                  "potential energy turns into heat in the first steps (hundreds of kelvin); "
+                  "add relax: {fmax: 0.05, optimizer: FIRE} to start from the model's minimum",
+                  file=self.stream)
         self._draw_velocities(atoms, bodies)
         return atoms, bodies
 
