@@ -170,7 +170,7 @@ def production(atoms, args, outdir, log):
     energies = []
     dyn.attach(lambda: energies.append(atoms.get_total_energy()), interval=every)
     start = time.perf_counter()
-    with MDAWriter(dyn, outdir / "tip3p.xtc") as writer:
+    with MDAWriter(dyn, outdir / "tip3p.xtc", overwrite=True) as writer:
         dyn.attach(writer, interval=every)
         dyn.run(steps)
     elapsed = time.perf_counter() - start

@@ -136,3 +136,28 @@ def test_yeh_hummer_correction():
                                                                                rel=2e-3)
     with pytest.raises(ValueError, match="positive"):
         yeh_hummer_correction(298.0, 0.0, 18.6)
+
+
+def test_the_msd_of_massless_sites_is_refused():
+    """The M sites of TIP4P/2005 (``"name MW"``, mass 0) have no centre of mass: the MSD was
+    all NaN, with a warning blaming the physics ("MSD grows as t^nan")."""
+    frames = []
+    for k in range(6):
+        atoms = water_box(2, model="tip4p2005")
+        atoms.positions += 0.1 * k  # every site moves by (0.1, 0.1, 0.1) Å per frame
+        frames.append(atoms)
+    u = to_universe(frames, bodies=[list(range(4 * i, 4 * i + 4)) for i in range(8)], dt=0.1)
+    with pytest.raises(ValueError, match=r"^MeanSquaredDisplacement: the selection 'name MW' "
+                                         r"holds no mass in residue 1 \(SOL\)"):
+        MeanSquaredDisplacement(u, "name MW")
+    with pytest.raises(ValueError, match=r"^MeanSquaredDisplacement: the selection 'name MW' "
+                                         "has no mass, so remove_com_motion"):
+        MeanSquaredDisplacement(u, "name MW", compound="atoms", remove_com_motion=True)
+    # The sites themselves, and the molecules' centres of mass, move 3 * 0.01 Å² per frame².
+    expected = 0.03 * np.arange(6) ** 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # ballistic: no D, as it should be
+        for select, compound in (("name MW", "atoms"), ("resname SOL", "residues")):
+            msd = MeanSquaredDisplacement(u, select, compound=compound).run()
+            # float32 positions of 6 Å: 5e-7 Å, so 1e-5 Å² on these MSDs (measured 2e-6)
+            np.testing.assert_allclose(msd.results.timeseries, expected, atol=1e-5)

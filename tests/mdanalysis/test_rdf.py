@@ -103,3 +103,15 @@ def test_an_r_max_beyond_half_the_cell_is_refused():
         RadialDistribution(u, "name AR", bin_width="0.1")
     with pytest.raises(ValueError, match="the frames selected .* are 0; it needs at least 1"):
         RadialDistribution(u, "name AR").run(start=5)
+
+
+def test_a_bin_wider_than_r_max_is_refused():
+    """``r_max=3, bin_width=5`` histogrammed to 5 Å, past half the 6.2 Å box (3.1 Å)."""
+    from rigidmd.systems import water_box
+
+    u = to_universe([water_box(2)])
+    with pytest.raises(ValueError, match="^RadialDistribution: bin_width 5 Å is wider than "
+                                         "r_max 3 Å"):
+        RadialDistribution(u, "name OW", r_max=3.0, bin_width=5.0)
+    edges = RadialDistribution(u, "name OW", r_max=3.0, bin_width=3.0).run().results.edges
+    np.testing.assert_allclose(edges, [0.0, 3.0])  # one bin: taken

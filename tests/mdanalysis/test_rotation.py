@@ -129,3 +129,17 @@ def test_a_window_outside_the_correlation_is_refused(spinning_waters):
     for bad in ((0.5, 0.1), (0.0, 0.5), (0.1, 1.5), 0.3):
         with pytest.raises(ValueError, match="window must be"):
             RotationalCorrelation(u, window=bad)
+
+
+def test_max_lag_must_be_a_positive_time():
+    """``max_lag=-3.0`` gave one lag and τ NaN in silence; ``"0.2 ps"`` a bare TypeError."""
+    u = to_universe(water_frames(6), dt=0.1)
+    for bad in (-3.0, "0.2 ps", float("nan"), float("inf"), True, 0):
+        with pytest.raises(ValueError, match=r"^RotationalCorrelation: max_lag must be a "
+                                             "positive time in ps"):
+            RotationalCorrelation(u, vector="bisector", max_lag=bad)
+    with pytest.raises(ValueError, match=r"^RotationalCorrelation: max_lag 0.02 ps is shorter "
+                                         r"than the time between the frames analysed \(0.1 ps"):
+        RotationalCorrelation(u, vector="bisector", max_lag=0.02).run()
+    rot = RotationalCorrelation(u, vector="bisector", max_lag=0.2).run()
+    np.testing.assert_allclose(rot.results.times, [0.0, 0.1, 0.2], rtol=1e-6)

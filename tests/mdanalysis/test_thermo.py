@@ -81,3 +81,19 @@ def test_bad_inputs_are_refused():
         block_average([1.0, 2.0])
     with pytest.raises(ValueError, match="longer than twice max_lag_ps"):
         ShearViscosity(np.zeros((100, 6)), 1000.0, 300.0, 0.01).run()
+
+
+def test_a_water_model_given_by_name_gets_its_correction():
+    """``model="spce"`` left out the polarisation correction in silence (None), and
+    ``n_molecules=215.6`` was taken as 215 (ΔH 49.4 instead of 49.2 kJ/mol)."""
+    energies = np.full(100, -46.7 * 216 * KJ_PER_MOL)
+    by_model = HeatOfVaporization(energies, 216, 298.0, model=SPCE).run().results
+    by_name = HeatOfVaporization(energies, 216.0, 298.0, model="SPC/E").run().results
+    assert by_name.delta_h_corrected_kj_mol == by_model.delta_h_corrected_kj_mol
+    assert by_name.correction_reference == by_model.correction_reference is not None
+    with pytest.raises(ValueError, match=r"^HeatOfVaporization: model: unknown water model "
+                                         "'spc-x'"):
+        HeatOfVaporization(energies, 216, 298.0, model="spc-x")
+    for bad in (215.6, "216", True, float("nan"), 0):
+        with pytest.raises(ValueError, match="n_molecules must be a positive whole number"):
+            HeatOfVaporization(energies, bad, 298.0)

@@ -321,3 +321,69 @@ def test_an_xtc_precision_outside_what_xtc_holds_is_refused(tmp_path, precision)
     with pytest.raises(ValueError, match="precision must be a whole number of decimals"):
         MDAWriter(water_frames(1)[0], tmp_path / "md.xtc", precision=precision)
     assert not (tmp_path / "md.xtc").exists()
+
+
+def test_a_dynamics_writing_through_a_trajectory_object_gives_its_frames(tmp_path):
+    """``trajectory=Trajectory(path, "w", atoms)`` (an open writer, not a file name) gave only
+    the current state, one frame, in silence; a writer on an open file is refused."""
+    from ase.io.trajectory import Trajectory
+
+    atoms = read(DATA / "water_box_27.traj")
+    atoms.calc = ZeroForce()
+    path = tmp_path / "md.traj"
+    with Trajectory(path, "w", atoms) as traj:
+        dyn = RigidVerlet(atoms, 2 * units.fs, bodies="tags", trajectory=traj, loginterval=5)
+        dyn.run(20)
+        u = to_universe(dyn)
+    assert u.trajectory.n_frames == 5
+    np.testing.assert_allclose([ts.time for ts in u.trajectory], [0, 0.01, 0.02, 0.03, 0.04],
+                               atol=1e-12)
+    np.testing.assert_allclose(u.trajectory[-1].positions, atoms.positions, atol=1e-5)  # float32
+    with open(tmp_path / "fh.traj", "wb") as fh:
+        dyn = RigidVerlet(atoms, 2 * units.fs, bodies="tags",
+                          trajectory=Trajectory(fh, "w", atoms), loginterval=5)
+        dyn.run(5)
+        with pytest.raises(ValueError, match="^run: the dynamics writes its trajectory through "
+                                             "a TrajectoryWriter whose file cannot be read back"):
+            to_universe(dyn)
+
+
+def test_a_time_step_changed_during_the_run_is_refused(tmp_path):
+    """After ``set_timestep`` the times came from the .traj header's first time step: the
+    frames at 0.02 and 0.03 ps were said to be at 0.015 and 0.02 ps."""
+    atoms = read(DATA / "water_box_27.traj")
+    atoms.calc = ZeroForce()
+    dyn = RigidVerlet(atoms, 1 * units.fs, bodies="tags", trajectory=str(tmp_path / "md.traj"),
+                      loginterval=5)
+    dyn.run(10)
+    assert to_universe(dyn).trajectory.n_frames == 3  # one time step: taken
+    dyn.set_timestep(2 * units.fs)
+    dyn.run(10)
+    with pytest.raises(ValueError, match=r"^run: the dynamics' time step is 2 fs, but its "
+                                         r"trajectory '.*md.traj' was started at 1 fs"):
+        to_universe(dyn)
+
+
+def test_an_xtc_is_read_with_its_topology(tmp_path):
+    """``to_universe("md.xtc")`` failed with only ``UnknownFileTypeError: 'xtc'``."""
+    with MDAWriter(water_frames(1)[0], tmp_path / "md.xtc") as writer:
+        writer.write()
+    with pytest.raises(ValueError, match=r"^run: '.*md.xtc' holds coordinates only .* "
+                                         r"MDAnalysis.Universe\('.*md.psf', '.*md.xtc'\)"):
+        to_universe(tmp_path / "md.xtc")
+
+
+@pytest.mark.parametrize("name", ["", "MY WAT", "WATERMOLECULE", 3])
+def test_a_water_resname_a_psf_cannot_hold_is_refused(tmp_path, name):
+    """"" shifted the columns of a PSF written from the Universe (24 residues read back, the
+    masses as charges) and "MY WAT" made it unreadable; write_psf refuses such names from
+    any Universe, nothing written."""
+    with pytest.raises(ValueError, match=r"^water_resname"):
+        to_universe(water_frames(1)[0], water_resname=name)
+    if name in ("", "MY WAT"):
+        u = to_universe(water_frames(1)[0])
+        u.residues.resnames = [name] * len(u.residues)
+        with pytest.raises(ValueError, match=rf"^write_psf .*the residue name '{name}' is "
+                                             "empty or holds a blank"):
+            write_psf(u, tmp_path / "md.psf")
+        assert not (tmp_path / "md.psf").exists()

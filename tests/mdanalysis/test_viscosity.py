@@ -70,3 +70,14 @@ def test_stress_recorder_costs_no_second_calculator_call():
     assert len(recorder.stress) == 21
     assert len(calls) == 21, len(calls)
     assert np.array_equal(recorder.stress[-1], dyn.get_stress())
+
+
+def test_a_plateau_between_the_lag_times_is_refused():
+    """With a frame every 1 ps, ``plateau_ps=(2.2, 2.8)`` holds no lag time: the viscosity was
+    NaN with only NumPy's "Mean of empty slice"."""
+    stress = np.random.default_rng(0).normal(size=(5000, 6))
+    with pytest.raises(ValueError, match=r"^ShearViscosity: plateau_ps \(2.2, 2.8\) holds none "
+                                         r"of the lag times \(0 to 10 ps every 1 ps\)"):
+        ShearViscosity(stress, 1000.0, 300.0, 1.0, max_lag_ps=10.0, plateau_ps=(2.2, 2.8))
+    one = ShearViscosity(stress, 1000.0, 300.0, 1.0, max_lag_ps=10.0, plateau_ps=(2.2, 3.0))
+    assert np.isfinite(one.run().results.viscosity_mPa_s)  # one lag time, 3 ps: taken

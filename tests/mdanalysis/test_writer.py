@@ -1,6 +1,7 @@
 """Streaming a dynamics to XTC/DCD with whole molecules (rigidmd.mdanalysis.writer).
 """
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -125,3 +126,172 @@ def test_writer_from_atoms_and_dcd_spacing(tmp_path):
     with MDAWriter(frames[0], tmp_path / "c.dcd") as writer:
         writer()
     assert mda.Universe(str(tmp_path / "c.psf"), str(tmp_path / "c.dcd")).trajectory.n_frames == 1
+
+
+# ---------------------------------------------------------------------------- refusals
+
+
+def _shifted_box(shift, molecule_shift=0.0):
+    """27 waters (81 atoms: compressed XTC) moved by ``shift`` Å, the second by
+    ``molecule_shift`` more."""
+    from rigidmd.systems import water_box
+
+    atoms = water_box(3)
+    atoms.positions += shift
+    atoms.positions[3:6] += molecule_shift
+    return atoms
+
+
+def test_an_xtc_coordinate_beyond_the_precision_is_refused(tmp_path):
+    """XTC stores round(x[nm] * 10**precision) as 32-bit integers: at precision=7 a molecule
+    2500 Å out (an unwrapped run) was written as garbage (read back 4650 Å off), with only
+    "Internal overflow compressing coordinates." on stderr."""
+    path = tmp_path / "md.xtc"
+    with pytest.raises(ValueError, match=r"^MDAWriter precision: atom \d+ is at z = 2507.\d+ Å, "
+                                         r"beyond the ±2147.48 Å that XTC holds at precision=7 "
+                                         r".*lower the precision \(precision=6 holds it\)"):
+        MDAWriter(_shifted_box(2500.0), path, precision=7).write()
+    # Nothing of the frame is written (the topology goes with the first frame).
+    assert not path.exists() and not (tmp_path / "md.psf").exists()
+    # Each coordinate within the limit, but a spread along z beyond it overflows too.
+    with pytest.raises(ValueError, match=r"atoms 1 and 5 are 2164.\d+ Å apart along z, beyond "
+                                         r"the 2147.48 Å span"):
+        MDAWriter(_shifted_box(-1000.0, 2160.0), path, precision=7).write()
+    assert not path.exists()
+    # The same frames one decimal coarser, and frames just inside the limit, read back.
+    for atoms, precision in ((_shifted_box(2500.0), 6), (_shifted_box(-1000.0, 2130.0), 7)):
+        with MDAWriter(atoms, path, precision=precision, overwrite=True) as writer:
+            writer.write()
+        u = mda.Universe(str(tmp_path / "md.psf"), str(path))
+        # float32 near 2500 Å is 2.4e-4 Å apart; measured 3.6e-4 Å at most.
+        assert np.abs(u.atoms.positions - atoms.positions).max() < 1e-3
+    # Up to 9 atoms XTC stores floats: no integer limit.
+    small = _shifted_box(2500.0)[:9]
+    with MDAWriter(small, tmp_path / "small.xtc", precision=7) as writer:
+        writer.write()
+    u = mda.Universe(str(tmp_path / "small.psf"), str(tmp_path / "small.xtc"))
+    np.testing.assert_allclose(u.atoms.positions, small.positions, atol=1e-3)  # float32
+
+
+def _xtc(path):
+    u = mda.Universe(str(path.with_suffix(".psf")), str(path))
+    return [(round(ts.time, 6), int(ts.data["step"])) for ts in u.trajectory]
+
+
+def test_append_refuses_another_system_and_goes_on_in_time(tmp_path):
+    """append=True took 81-atom frames after 24-atom ones (MDAnalysis then read 24 atoms of
+    every frame), and with Atoms as the source the times and steps began again at 0."""
+    from rigidmd.systems import water_box
+
+    path = tmp_path / "md.xtc"
+    with MDAWriter(water_box(2), path, dt=0.5) as writer:
+        writer.write()
+        writer.write()
+    size = path.stat().st_size
+    with pytest.raises(ValueError, match=r"^append: '.*md.xtc' holds frames of 24 atoms, the "
+                                         "atoms written are 81"):
+        MDAWriter(water_box(3), path, append=True)
+    assert path.stat().st_size == size
+    with MDAWriter(water_box(2), path, dt=0.5, append=True) as writer:
+        writer.write()
+        writer.write()
+    assert _xtc(path) == [(0.0, 0), (0.5, 1), (1.0, 2), (1.5, 3)]
+    # The topology kept on append must be this system's too.
+    with MDAWriter(water_box(3), tmp_path / "big.xtc") as writer:
+        writer.write()
+    with pytest.raises(ValueError, match=r"^append: the topology '.*big.psf' kept for the "
+                                         "continued trajectory has 81 atoms, the atoms written "
+                                         "are 24"):
+        MDAWriter(water_box(2), tmp_path / "new.xtc", topology=tmp_path / "big.psf",
+                  append=True)
+    assert not (tmp_path / "new.xtc").exists()
+
+
+@pytest.mark.parametrize("damage", ["cut", "tail", "first"])
+def test_append_refuses_a_trajectory_whose_last_frame_is_incomplete(tmp_path, damage):
+    """A run killed while writing leaves part of a frame; frames appended after it made the
+    whole file unreadable ("XTC couldn't calculate offsets").  The refusal says how to cut
+    the file back, and that works."""
+    from rigidmd.systems import water_box
+
+    atoms = water_box(2)
+    path = tmp_path / "md.xtc"
+    with MDAWriter(atoms, path) as writer:
+        writer.write()
+    frame = path.stat().st_size  # 212 bytes for 24 atoms
+    with MDAWriter(atoms, path, overwrite=True) as writer:
+        for _ in range(3):
+            writer.write()
+    if damage == "cut":  # half of the last frame
+        os.truncate(path, 3 * frame - 50)
+        whole = 2
+    elif damage == "tail":  # the start of a fourth frame's header
+        with open(path, "ab") as fh:
+            fh.write(b"\x00\x00\x07\xcb\x00")
+        whole = 3
+    else:  # the first frame cut in its header
+        os.truncate(path, 10)
+        whole = 0
+    size = path.stat().st_size
+    with pytest.raises(ValueError, match=rf"^append: the last frame of '.*md.xtc' is incomplete "
+                                         rf".*its {whole} whole frames with "
+                                         rf"os.truncate\('.*md.xtc', {whole * frame}\)"):
+        MDAWriter(atoms, path, append=True)
+    assert path.stat().st_size == size
+    os.truncate(path, whole * frame)  # as the message says
+    with MDAWriter(atoms, path, append=True) as writer:
+        writer.write()
+    assert _xtc(path) == [(float(k), k) for k in range(whole + 1)]
+
+
+def test_small_frames_are_appended_too(tmp_path):
+    """Up to 9 atoms an XTC frame holds floats (a header of another length)."""
+    from rigidmd.systems import water_box
+
+    path = tmp_path / "md.xtc"
+    with MDAWriter(water_box(1), path, dt=0.5) as writer:
+        writer.write()
+        writer.write()
+    with MDAWriter(water_box(1), path, dt=0.5, append=True) as writer:
+        writer.write()
+    assert _xtc(path) == [(0.0, 0), (0.5, 1), (1.0, 2)]
+
+
+def test_existing_files_are_replaced_only_when_asked(tmp_path):
+    """MDAWriter(atoms, "system.xtc") replaced a system.psf of one's own without a word."""
+    atoms = water_frames(1)[0]
+    own = tmp_path / "system.psf"
+    own.write_text("PSF\n\n       1 !NTITLE\n REMARKS my own topology\n")
+    with pytest.raises(FileExistsError, match=r"^MDAWriter topology: '.*system.psf' exists; "
+                                              "give overwrite=True"):
+        MDAWriter(atoms, tmp_path / "system.xtc")
+    assert own.read_text().endswith("my own topology\n")
+    assert not (tmp_path / "system.xtc").exists()
+    (tmp_path / "md.xtc").write_bytes(b"not mine to replace")
+    with pytest.raises(FileExistsError, match=r"^MDAWriter filename: '.*md.xtc' exists"):
+        MDAWriter(atoms, tmp_path / "md.xtc")
+    with pytest.raises(ValueError, match="give one of the two"):
+        MDAWriter(atoms, tmp_path / "md.xtc", append=True, overwrite=True)
+    with MDAWriter(atoms, tmp_path / "system.xtc", overwrite=True) as writer:
+        writer.write()
+    assert len(mda.Universe(str(own), str(tmp_path / "system.xtc")).residues) == 8
+
+
+@pytest.mark.parametrize("name, topology, match", [
+    ("", "md.psf", "without blanks"),
+    ("MY WAT", "md.psf", "without blanks"),
+    ("WATERMOLECULE", "md.psf", "has 13 characters; a PSF topology .* holds 8"),
+    ("WATER", "md.pdb", "has 5 characters; a PDB topology .* holds 4"),
+    ("WATERS", "md.gro", "has 6 characters; a GRO topology .* holds 5"),
+])
+def test_a_water_resname_the_topology_cannot_hold_is_refused(tmp_path, name, topology, match):
+    """"" shifted the PSF's columns (24 residues read back, the masses as charges), "MY WAT"
+    made it unreadable, and PDB and GRO cut long names without a word."""
+    with pytest.raises(ValueError, match=rf"^water_resname.*{match}"):
+        MDAWriter(water_frames(1)[0], tmp_path / "md.xtc", topology=tmp_path / topology,
+                  water_resname=name)
+    assert not any(tmp_path.iterdir())
+    with MDAWriter(water_frames(1)[0], tmp_path / "md.xtc", water_resname="WATERMOL") as writer:
+        writer.write()
+    u = mda.Universe(str(tmp_path / "md.psf"), str(tmp_path / "md.xtc"))
+    assert set(u.residues.resnames) == {"WATERMOL"} and len(u.residues) == 8

@@ -142,6 +142,13 @@ class MeanSquaredDisplacement(AnalysisBase):
     **kwargs
         Passed to :class:`~MDAnalysis.analysis.base.AnalysisBase`.
 
+    Raises
+    ------
+    ValueError
+        A selection whose residues (``compound="residues"``) or whose atoms
+        (``remove_com_motion=True``) have no mass, such as the massless M
+        sites of a four-site water (``"name MW"``): no centre of mass.
+
     Attributes
     ----------
     results.lagtimes : numpy.ndarray, shape (n_frames,)
@@ -195,6 +202,18 @@ class MeanSquaredDisplacement(AnalysisBase):
             fit_range = (lo, hi)
         self.fit_range = fit_range
         self._layout = ResidueLayout(group) if compound == "residues" else None
+        if self._layout is not None and np.any(self._layout.mass <= 0):
+            k = int(np.flatnonzero(self._layout.mass <= 0)[0])
+            residue = group.residues[k]
+            raise ValueError(
+                f"MeanSquaredDisplacement: the selection {select!r} holds no mass in residue "
+                f"{residue.resid} ({residue.resname}), whose centre of mass is then undefined; "
+                "select atoms with mass (e.g. the whole molecules) or give compound='atoms'")
+        if self.remove_com_motion and self._layout is None and not np.sum(group.masses) > 0:
+            raise ValueError(
+                f"MeanSquaredDisplacement: the selection {select!r} has no mass, so "
+                "remove_com_motion has no centre of mass to remove; select atoms with mass "
+                "or give remove_com_motion=False")
 
     def _prepare(self):
         check_frames("MeanSquaredDisplacement", self.n_frames, 2)

@@ -60,7 +60,7 @@ class RadialDistribution(InterRDF):
         Largest distance (Å); default 10 Å or half the narrowest width of the
         first frame's box, whichever is smaller.  Rounded down to whole bins.
     bin_width : float, default 0.05
-        Å.
+        Å; at most ``r_max``.
     exclude_same_residue : bool, default True
     **kwargs
         Passed to :class:`~MDAnalysis.analysis.base.AnalysisBase` (e.g. ``verbose``).
@@ -69,7 +69,8 @@ class RadialDistribution(InterRDF):
     ------
     ValueError
         A frame without a periodic cell (a cluster has no number density to
-        normalise by), or an empty selection.
+        normalise by), an empty selection, an ``r_max`` beyond half the cell's
+        narrowest width, or a ``bin_width`` wider than ``r_max``.
 
     Attributes
     ----------
@@ -116,6 +117,10 @@ class RadialDistribution(InterRDF):
         r_max = float(r_max)
         if not (r_max > 0 and bin_width > 0):
             raise ValueError("r_max and bin_width must be positive (Å)")
+        if bin_width > r_max:
+            raise ValueError(f"RadialDistribution: bin_width {bin_width:g} Å is wider than "
+                             f"r_max {r_max:g} Å, so its one bin would reach past r_max; give "
+                             "bin_width <= r_max")
         if r_max > half * (1 + 1e-9):
             raise ValueError(f"RadialDistribution: r_max {r_max:g} Å is beyond half the cell's "
                              f"narrowest width ({half:g} Å in the first frame), where the "

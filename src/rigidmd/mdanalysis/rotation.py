@@ -143,7 +143,7 @@ class RotationalCorrelation(AnalysisBase):
         ``"auto"``: dipole if every residue has charges giving a nonzero
         dipole, else bisector.
     max_lag : float, optional
-        Longest lag (ps); default half the analysed time.
+        Longest lag (ps), positive; default half the analysed time.
     window : (float, float), default (0.1, 0.5)
         Correlation values fitted by an exponential (see :func:`relaxation_time`).
     **kwargs
@@ -194,6 +194,11 @@ class RotationalCorrelation(AnalysisBase):
             raise ValueError("vector='dipole' needs charges; the atoms have none "
                              "(pass charges to to_universe or use vector='bisector')")
         self.vector = vector
+        if max_lag is not None and (
+                isinstance(max_lag, bool) or not isinstance(max_lag, (int, float, np.number))
+                or not np.isfinite(max_lag) or max_lag <= 0):
+            raise ValueError(f"RotationalCorrelation: max_lag must be a positive time in ps, "
+                             f"got {max_lag!r}")
         self.max_lag = max_lag
         try:
             low, high = (float(v) for v in window)
@@ -218,6 +223,10 @@ class RotationalCorrelation(AnalysisBase):
         spacing = frame_spacing(self.times)
         n = self.n_frames
         lag = (n - 1) // 2 if self.max_lag is None else int(round(self.max_lag / spacing))
+        if self.max_lag is not None and lag < 1:
+            raise ValueError(f"RotationalCorrelation: max_lag {self.max_lag:g} ps is shorter "
+                             f"than the time between the frames analysed ({spacing:g} ps); "
+                             "give at least that")
         res.c1, res.c2 = orientational_correlation(self._u, max(lag, 0))
         res.times = np.arange(len(res.c1)) * spacing
         res.tau1, res.tau1_integral, res.amplitude1 = relaxation_time(res.times, res.c1,

@@ -170,9 +170,11 @@ class HeatOfVaporization:
         The liquid's potential energy (eV) along an equilibrium run (NPT at
         the pressure of interest).
     n_molecules : int
+        A whole number (216.0 is taken as 216; 215.6 is refused).
     temperature_K : float
-    model : rigidmd.water.WaterModel, optional
-        For the polarisation correction.
+    model : rigidmd.water.WaterModel or str, optional
+        For the polarisation correction; a name (``"spce"``) is looked up
+        with :func:`rigidmd.water.water_model`.
     energy_offset : float, default 0
         :math:`U_0`, eV, taken off every energy: what the energies hold
         beyond the intermolecular energy (:func:`excluded_kspace_energy` for
@@ -193,8 +195,18 @@ class HeatOfVaporization:
     def __init__(self, potential_energies, n_molecules, temperature_K, model=None,
                  energy_offset=0.0, blocks=10):
         self.energies = np.asarray(potential_energies, dtype=float).ravel()
-        if int(n_molecules) < 1:
-            raise ValueError(f"HeatOfVaporization: n_molecules must be positive, got {n_molecules}")
+        if isinstance(n_molecules, bool) or not isinstance(n_molecules, (int, float, np.number)) \
+                or not np.isfinite(n_molecules) or n_molecules != int(n_molecules) \
+                or n_molecules < 1:
+            raise ValueError(f"HeatOfVaporization: n_molecules must be a positive whole number "
+                             f"of molecules, got {n_molecules!r}")
+        if isinstance(model, str):
+            from rigidmd.water import water_model
+
+            try:
+                model = water_model(model)
+            except ValueError as err:
+                raise ValueError(f"HeatOfVaporization: model: {err}") from None
         if not temperature_K > 0:
             raise ValueError(f"HeatOfVaporization: temperature_K must be positive, "
                              f"got {temperature_K}")

@@ -10,7 +10,7 @@ import os
 from pathlib import Path
 
 import numpy as np
-from ase import Atoms
+from ase import Atoms, units
 from ase.formula import Formula
 from ase.geometry import cell_to_cellpar
 
@@ -40,6 +40,7 @@ class Topology:
     """
 
     def __init__(self, atoms, bodies, charges=None, water_resname="SOL"):
+        check_resname(water_resname)
         n = len(atoms)
         if n == 0:
             raise ValueError("cannot build a topology for zero atoms")
@@ -86,6 +87,27 @@ class Topology:
                 f"{where}: atom {i} is element {atoms.numbers[i]}, "
                 f"in the first frame {self.numbers[i]}; all frames must hold the same atoms"
             )
+
+
+#: Characters of a residue name in a PSF (the EXT format's A8 column), a GRO file and a PDB
+#: file (MDAnalysis cuts longer names to these without a word).
+RESNAME_WIDTH = {".psf": 8, ".gro": 5, ".pdb": 4}
+
+
+def check_resname(name, width=RESNAME_WIDTH[".psf"], where="a PSF"):
+    """Refuse a water residue name that topology files cannot hold, naming ``water_resname``.
+
+    An empty name shifts a PSF's columns (its readers take the atom names for
+    residue names, the masses for charges), a blank inside one splits it, and
+    a name longer than ``width`` does not fit ``where``'s column.
+    """
+    if not isinstance(name, str) or not name or any(c.isspace() for c in name) or \
+            not name.isprintable():
+        raise ValueError(f"water_resname must be a residue name without blanks, such as 'SOL' "
+                         f"or 'WAT', got {name!r}")
+    if len(name) > width:
+        raise ValueError(f"water_resname {name!r} has {len(name)} characters; {where} holds "
+                         f"{width}: give a shorter name, such as 'SOL' or 'WAT'")
 
 
 def _residue_index(body_ids):
@@ -255,16 +277,27 @@ def is_dynamics(obj):
             and hasattr(obj, "get_time"))
 
 
-def _read_traj(path, index):
+#: Trajectory formats of coordinates without atoms, which ASE cannot read.
+_COORDINATES_ONLY = (".xtc", ".dcd", ".trr")
+
+
+def _read_traj(path, index, timestep=None):
     """Frames of a trajectory file and, for an ASE ``.traj`` written by ASE molecular
     dynamics, the time between the frames read and the time of the first (ps); else
-    ``(frames, None, 0.0)``.  Frames read backwards are refused (times run forward)."""
+    ``(frames, None, 0.0)``.  Frames read backwards are refused (times run forward), and
+    so is a file whose recorded time step is not ``timestep`` (ASE units; the time step of
+    the dynamics writing it, changed by ``set_timestep`` after the file was started)."""
     from ase.io import read
     from ase.io.formats import string2index
 
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"no trajectory file {str(path)!r}")
+    if path.suffix.lower() in _COORDINATES_ONLY:
+        raise ValueError(
+            f"run: {str(path)!r} holds coordinates only (no elements, charges or bodies); read "
+            f"it with its topology: MDAnalysis.Universe({str(path.with_suffix('.psf'))!r}, "
+            f"{str(path)!r})")
     selection = string2index(index) if isinstance(index, str) else index
     if isinstance(selection, slice) and selection.step is not None and selection.step < 0:
         raise ValueError(f"index: {index!r} reads the frames backwards; times run forward, "
@@ -279,6 +312,14 @@ def _read_traj(path, index):
             desc = getattr(traj, "description", None) or {}
             count = len(traj)
         if "timestep" in desc and "interval" in desc:
+            if timestep is not None and not np.isclose(float(desc["timestep"]), timestep,
+                                                       rtol=1e-9, atol=0.0):
+                raise ValueError(
+                    f"run: the dynamics' time step is {timestep / units.fs:g} fs, but its "
+                    f"trajectory {str(path)!r} was started at "
+                    f"{float(desc['timestep']) / units.fs:g} fs (set_timestep since?), so "
+                    "the times of its frames are unknown; read the frames of one time step and "
+                    "give their spacing: to_universe(ase.io.read(file, index), dt=...)")
             frame_dt = float(desc["timestep"]) * int(desc["interval"]) / PS
             if isinstance(selection, slice):
                 start, _, stride = selection.indices(count)
@@ -286,6 +327,27 @@ def _read_traj(path, index):
                 start, stride = int(selection) % count if count else 0, 1
             dt, first = frame_dt * stride, frame_dt * start
     return frames, dt, first
+
+
+def _trajectory_file(dyn):
+    """The file a dynamics writes its trajectory to (None without a trajectory).
+
+    ASE keeps a file name (str or Path) or the open writer it was given: an
+    :class:`ase.io.trajectory.TrajectoryWriter` is read through its file name;
+    any other writer is refused (its frames cannot be read back).
+    """
+    from ase.io.trajectory import TrajectoryWriter
+
+    traj = getattr(dyn, "trajectory", None)
+    if traj is None or isinstance(traj, (str, os.PathLike)):
+        return traj
+    name = getattr(traj, "filename", None) if isinstance(traj, TrajectoryWriter) else None
+    if isinstance(name, (str, os.PathLike)):
+        return name
+    raise ValueError(
+        f"run: the dynamics writes its trajectory through a {type(traj).__name__} whose file "
+        "cannot be read back; pass that file (to_universe('md.traj', bodies=dyn.bodies)) or "
+        "give the dynamics a file name (trajectory='md.traj')")
 
 
 def to_universe(run, *, bodies=None, charges=None, dt=None, index=":", water_resname="SOL"):
@@ -300,8 +362,9 @@ def to_universe(run, *, bodies=None, charges=None, dt=None, index=":", water_res
         * a trajectory file that :func:`ase.io.read` reads, e.g. the ``.traj``
           written by ``RigidVerlet(..., trajectory=...)``;
         * a :class:`~rigidmd.RigidVerlet` (or a thermostat): the frames of its
-          trajectory file if it writes one, else its current state as one
-          frame; its bodies are used.
+          trajectory file if it writes one (given as a file name or as an
+          :class:`ase.io.Trajectory` opened for writing), else its current
+          state as one frame; its bodies are used.
     bodies : optional
         Which atoms form a body (a residue), as for :class:`~rigidmd.RigidVerlet`
         (default: covalent connectivity of the first frame; ignored for a
@@ -321,7 +384,8 @@ def to_universe(run, *, bodies=None, charges=None, dt=None, index=":", water_res
     index : str or slice, default ":"
         Which frames of a trajectory file to read (as :func:`ase.io.read`).
     water_resname : str, default "SOL"
-        Residue name of water molecules.
+        Residue name of water molecules: up to 8 characters (a PSF's column),
+        no blanks.
 
     Returns
     -------
@@ -338,17 +402,23 @@ def to_universe(run, *, bodies=None, charges=None, dt=None, index=":", water_res
     ImportError
         MDAnalysis is not installed.
     ValueError
-        No frames, frames with different atoms, charges of the wrong shape, or
-        a body definition that does not fit the atoms.
+        No frames, frames with different atoms, charges of the wrong shape, a
+        body definition that does not fit the atoms, an empty ``water_resname``
+        or one with blanks or of more than 8 characters (a PSF's column), an
+        XTC, DCD or TRR file (coordinates only: read it with its topology,
+        ``MDAnalysis.Universe("md.psf", "md.xtc")``), a dynamics whose time
+        step changed (``set_timestep``) after its ``.traj`` was started (the
+        times of its frames are unknown), or one that writes its trajectory
+        through a writer whose file cannot be read back.
     """
     require_mdanalysis()
     time_offset = 0.0
     if is_dynamics(run):
         dyn = run
         bodies = dyn.bodies
-        traj = getattr(dyn, "trajectory", None)
-        if isinstance(traj, (str, os.PathLike)) and Path(traj).exists():
-            frames, file_dt, time_offset = _read_traj(traj, index)
+        traj = _trajectory_file(dyn)
+        if traj is not None and Path(traj).exists():
+            frames, file_dt, time_offset = _read_traj(traj, index, float(dyn.dt))
         else:
             frames = [dyn.atoms]
             file_dt = float(dyn.dt) / PS
@@ -405,11 +475,19 @@ def write_psf(universe, path, title="written by rigidmd.mdanalysis"):
     Raises
     ------
     ValueError
-        The atoms of a residue are not consecutive (nothing is written).
+        The atoms of a residue are not consecutive, or a residue name, atom
+        name or type is empty or holds a blank (nothing is written).
     """
     require_mdanalysis()
     ag = universe.atoms
     check_contiguous(ag.resindices, f"write_psf {str(path)!r}")
+    for label, values in (("residue name", ag.residues.resnames), ("atom name", ag.names),
+                          ("atom type", ag.types)):
+        for value in np.unique(np.asarray(values, dtype=str)).tolist():  # a few distinct names
+            if not value or any(c.isspace() for c in value):
+                raise ValueError(f"write_psf {str(path)!r}: the {label} {value!r} is empty or "
+                                 "holds a blank, which shifts the PSF's columns (readers "
+                                 "would take one field for the next); rename it")
     n = len(ag)
     segids = ag.segids if hasattr(ag, "segids") else np.full(n, "SYS")
     lines = ["PSF EXT NAMD", "", f"{1:10d} !NTITLE", f" REMARKS {title}", "",

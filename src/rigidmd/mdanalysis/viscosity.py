@@ -133,7 +133,8 @@ class ShearViscosity:
     max_lag_ps : float, default 10
         Longest lag of the correlation function and its integral.
     plateau_ps : (float, float), default (2, 4)
-        Window of the running integral whose mean is the viscosity.
+        Window of the running integral whose mean is the viscosity; it must
+        hold at least one lag time (a multiple of ``dt_ps``).
     blocks : int, default 5
         Independent stretches for the error (each much longer than
         ``max_lag_ps``).
@@ -165,6 +166,11 @@ class ShearViscosity:
             raise ValueError(f"ShearViscosity: plateau_ps {plateau_ps} must lie in "
                              f"[0, max_lag_ps = {max_lag_ps}] with its start before its end")
         self.max_lag = int(round(max_lag_ps / self.dt_ps))
+        lags = np.arange(self.max_lag + 1) * self.dt_ps
+        if not np.any((lags >= lo) & (lags <= hi)):
+            raise ValueError(f"ShearViscosity: plateau_ps {plateau_ps} holds none of the lag "
+                             f"times (0 to {lags[-1]:g} ps every {self.dt_ps:g} ps), so there "
+                             "is no plateau to average; widen it or record the stress more often")
         self.plateau_ps = (lo, hi)
         self.blocks = int(blocks)
         n = len(self.components)

@@ -10,19 +10,86 @@ from ase import Atoms
 
 from rigidmd.mdanalysis._base import PS, mda, require_mdanalysis
 from rigidmd.mdanalysis.topology import (
+    RESNAME_WIDTH,
     Topology,
     check_contiguous,
+    check_resname,
     dimensions,
     is_dynamics,
     mdanalysis_positions,
     write_psf,
 )
 
+#: The largest integer XTC compresses (nm × 10**precision, the xdrfile library's INT_MAX - 2),
+#: less a margin for the library's float32 arithmetic (1e-4 Å at precision 7).
+XTC_INT_LIMIT = 2**31 - 3 - 1024
+#: XTC stores frames of up to this many atoms as plain floats (no integer limit).
+XTC_FLOAT_ATOMS = 9
+_XTC_MAGIC = 1995
+
 
 def _drop_offset_cache(path):
     """Remove MDAnalysis's cached frame offsets of a file about to be overwritten."""
     for suffix in ("_offsets.npz", "_offsets.lock"):
         Path(path).with_name(f".{Path(path).name}{suffix}").unlink(missing_ok=True)
+
+
+def _xtc_last_frame(path):
+    """``(n_atoms, time, step)`` of the last frame of an XTC file; None when it holds none.
+
+    Raises ValueError, naming the file and how to repair it, when the file is
+    not an XTC or ends in an incomplete frame (a run killed while writing):
+    nothing can be appended after it.
+    """
+    from MDAnalysis.lib.formats.libmdaxdr import XTCFile
+
+    size = path.stat().st_size
+    if size == 0:
+        return None
+    with open(path, "rb") as fh:
+        magic = int.from_bytes(fh.read(4), "big")
+    whole, n_whole = 0, 0
+    if magic == _XTC_MAGIC:
+        try:
+            with XTCFile(str(path)) as xtc:
+                offsets = np.asarray(xtc.offsets)
+                whole, n_whole = int(offsets[-1]), len(offsets) - 1
+                xtc.seek(len(offsets) - 1)
+                frame = xtc.read()  # fails on a cut frame
+                n_atoms = int(xtc.n_atoms)
+        except OSError:
+            pass
+        else:
+            with open(path, "rb") as fh:  # the frame's length, from its header
+                fh.seek(whole)
+                head = fh.read(92)
+            if n_atoms <= XTC_FLOAT_ATOMS:
+                end = whole + 56 + 12 * n_atoms
+            else:
+                end = whole + 92 + -(-int.from_bytes(head[88:92], "big") // 4) * 4
+            if end == size:
+                return n_atoms, float(frame.time), int(frame.step)
+            whole, n_whole = end, n_whole + 1  # bytes after the last whole frame
+    elif size >= 4:
+        raise ValueError(f"append: {str(path)!r} is not an XTC file (it does not start as "
+                         "one); give another file name, or overwrite=True to replace it")
+    raise ValueError(
+        f"append: the last frame of {str(path)!r} is incomplete (a run killed while writing "
+        f"it?), so nothing can follow it; cut the file back to its {n_whole} whole frames "
+        f"with os.truncate({str(path)!r}, {whole}), or write a new file")
+
+
+def _topology_atoms(path):
+    """Number of atoms of a topology file (PSF, PDB or GRO), read by MDAnalysis."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return len(mda.Universe(str(path)).atoms)
+    except Exception as err:  # any reader error: say which file, in one line
+        raise ValueError(f"append: cannot read the topology {str(path)!r} kept for the "
+                         f"continued trajectory ({type(err).__name__}: "
+                         f"{str(err).splitlines()[0] if str(err) else ''}); give topology= "
+                         "another file or remove it") from None
 
 
 class _Handle:
@@ -83,17 +150,35 @@ class MDAWriter:
     precision : int, default 4
         XTC precision: decimal places in nm, 1 to 7 (4 → 1e-3 Å resolution;
         GROMACS uses 3, 1e-2 Å).
+        A frame with a coordinate beyond what XTC's 32-bit integers hold
+        (:math:`2^{31}` units of :math:`10^{-p}` nm: 2147 Å at 7, 21 474 Å at
+        6) is refused (frames of up to 9 atoms are stored as floats).
     water_resname : str, default "SOL"
+        Residue name of water molecules: no blanks, and as many characters
+        as the topology file holds (PSF 8, GRO 5, PDB 4).
     append : bool, default False
         Continue an existing ``.xtc`` file (a resumed run) instead of
-        starting it anew; the topology file is kept if it exists.
+        starting it anew; the topology file is kept if it exists.  Both must
+        hold as many atoms as ``source``, and the file must end in a whole
+        frame.  With Atoms as ``source`` the times and steps go on from the
+        file's last frame (``dt`` later, one step on).
+    overwrite : bool, default False
+        Replace an existing trajectory or topology file; without it (and
+        without ``append``) an existing one is refused, so that a
+        topology of one's own next to the trajectory is never replaced.
 
     Raises
     ------
     ValueError
-        Unknown extensions, a precision outside 1 to 7, or a body whose atoms
-        are not consecutive (the topology file would split it into several
-        residues): reorder the atoms first.  Nothing is written.
+        Unknown extensions, a precision outside 1 to 7, a ``water_resname``
+        the topology file cannot hold, a body whose atoms are not consecutive
+        (the topology file would split it into several residues: reorder the
+        atoms first), ``append`` onto a file of another number of atoms or
+        one that ends in an incomplete frame, or ``append`` with
+        ``overwrite``.  Nothing is written.
+    FileExistsError
+        The trajectory or topology file exists (give ``overwrite=True``, or
+        ``append=True`` to continue it).
 
     Attributes
     ----------
@@ -121,7 +206,7 @@ class MDAWriter:
     modifies_atoms = False
 
     def __init__(self, source, filename, topology=None, *, bodies=None, charges=None, dt=1.0,
-                 precision=4, water_resname="SOL", append=False):
+                 precision=4, water_resname="SOL", append=False, overwrite=False):
         require_mdanalysis()
         if is_dynamics(source):
             self.dynamics, atoms, bodies = source, source.atoms, source.bodies
@@ -157,10 +242,26 @@ class MDAWriter:
                              f"from 1 to 7 (XTC's 32-bit integers overflow beyond), got "
                              f"{precision!r}")
         self.precision = int(precision)
+        suffix = self.topology_filename.suffix.lower()
+        check_resname(water_resname, RESNAME_WIDTH[suffix],
+                      f"a {suffix[1:].upper()} topology ({str(self.topology_filename)!r})")
+        if self.append and overwrite:
+            raise ValueError("MDAWriter: append=True continues the files and overwrite=True "
+                             "replaces them; give one of the two")
         self.atoms = atoms
         self._topology = Topology(atoms, bodies, charges=charges, water_resname=water_resname)
         check_contiguous(self._topology.resindex,
                          f"MDAWriter topology {str(self.topology_filename)!r}")
+        self._time0, self._step0 = 0.0, 0  # of the first frame written (Atoms as source)
+        if self.append:
+            self._check_continued(len(atoms))
+        elif not overwrite:
+            for name, path in (("filename", self.filename),
+                               ("topology", self.topology_filename)):
+                if path.exists():
+                    raise FileExistsError(
+                        f"MDAWriter {name}: {str(path)!r} exists; give overwrite=True to "
+                        "replace it, append=True to continue it, or another file name")
         self.universe = self._topology.universe()
         from MDAnalysis.coordinates.memory import MemoryReader
 
@@ -173,6 +274,25 @@ class MDAWriter:
         self._closed = False
         self._handle = _Handle()
         self._finalizer = weakref.finalize(self, self._handle.close)
+
+    def _check_continued(self, n_atoms):
+        """Refuse to continue files of another system or a trajectory cut mid-frame."""
+        if self.filename.exists():
+            last = _xtc_last_frame(self.filename)
+            if last is not None:
+                if last[0] != n_atoms:
+                    raise ValueError(
+                        f"append: {str(self.filename)!r} holds frames of {last[0]} atoms, the "
+                        f"atoms written are {n_atoms}; continue only the same system (or "
+                        "write another file)")
+                self._time0, self._step0 = last[1] + self.dt, last[2] + 1
+        if self.topology_filename.exists():
+            kept = _topology_atoms(self.topology_filename)
+            if kept != n_atoms:
+                raise ValueError(
+                    f"append: the topology {str(self.topology_filename)!r} kept for the "
+                    f"continued trajectory has {kept} atoms, the atoms written are {n_atoms}; "
+                    "give topology= the file of this system")
 
     # -------------------------------------------------------------- protocol
     def __call__(self):
@@ -199,8 +319,43 @@ class MDAWriter:
             time = float(self.dynamics.get_time()) / PS
             step = int(self.dynamics.nsteps)
         else:
-            time, step = self.n_frames * self.dt, self.n_frames
+            time, step = self._time0 + self.n_frames * self.dt, self._step0 + self.n_frames
         return positions, dims, time, step
+
+    def _check_xtc_range(self, positions):
+        """Refuse a frame whose coordinates XTC's 32-bit integers cannot hold.
+
+        XTC stores ``round(x[nm] * 10**precision)`` and its spread along each
+        axis as 32-bit integers; beyond them the library writes garbage (with
+        only a message on stderr).
+        """
+        if len(positions) <= XTC_FLOAT_ATOMS:
+            return
+        scale = 10.0 ** self.precision
+        ints = np.rint((np.asarray(positions, dtype=np.float32) / 10.0).astype(np.float64)
+                       * scale)
+        largest = np.abs(ints).max(axis=0)
+        spread = ints.max(axis=0) - ints.min(axis=0)
+        if largest.max() <= XTC_INT_LIMIT and spread.max() <= XTC_INT_LIMIT:
+            return
+        limit = XTC_INT_LIMIT / scale * 10.0  # Å
+        axis = int(np.argmax(np.maximum(largest, spread)))
+        if largest[axis] >= spread[axis]:
+            atom = int(np.argmax(np.abs(ints[:, axis])))
+            where = (f"atom {atom} is at {'xyz'[axis]} = {positions[atom, axis]:.6g} Å, beyond "
+                     f"the ±{limit:.6g} Å")
+            need = largest[axis] / scale
+        else:
+            hi, lo = int(np.argmax(ints[:, axis])), int(np.argmin(ints[:, axis]))
+            where = (f"atoms {lo} and {hi} are {positions[hi, axis] - positions[lo, axis]:.6g} "
+                     f"Å apart along {'xyz'[axis]}, beyond the {limit:.6g} Å span")
+            need = spread[axis] / scale
+        fits = int(np.floor(np.log10(XTC_INT_LIMIT / need)))
+        fix = (f"precision={fits} holds it" if fits >= 1 else "no precision holds it")
+        raise ValueError(
+            f"MDAWriter precision: {where} that XTC holds at precision={self.precision} "
+            f"(32-bit integers of nm × 10^{self.precision}); the frame was not written: lower "
+            f"the precision ({fix}) or wrap the molecules into the cell")
 
     def _load(self, positions, dims, time, step):
         ts = self.universe.trajectory.ts
@@ -215,11 +370,15 @@ class MDAWriter:
         Raises
         ------
         ValueError
-            The writer is closed, or the atoms changed in number or elements.
+            The writer is closed, the atoms changed in number or elements, or
+            (XTC) a coordinate is beyond what the precision holds; nothing of
+            the frame is written.
         """
         if self._closed:
             raise ValueError(f"{self!r} is closed")
         frame = self._frame()
+        if self.format == "XTC":
+            self._check_xtc_range(frame[0])
         self._load(*frame)
         if self.n_frames == 0 and not (self.append and self.topology_filename.exists()):
             self._write_topology()
