@@ -116,20 +116,25 @@ def test_a_send_to_an_engine_that_stopped_reading_ends_at_the_timeout():
     measured 1.0 s for ``timeout=1``; bound 4 s (the engine here stays 20 s, and the
     old code waited for it to go)."""
     calc = IPICalculator(timeout=1)
-    fake = served(calc, stall=True)
-    atoms = many_atoms()
+    fails_within(calc, served(calc, stall=True), many_atoms(), 4,
+                 r"^i-PI engine process \d+ .*: took no positions within 1 s \(it stopped "
+                 r"reading\)$")
+    assert not os.path.exists(calc.socketfile)
+
+
+def fails_within(calc, fake, atoms, seconds, message):
+    """A force call through ``calc`` to ``fake`` raises EngineError ``message`` within
+    ``seconds`` and drops the engine; the fake engine is stopped either way."""
     atoms.calc = calc
     try:
         start = time.monotonic()
-        with pytest.raises(EngineError, match=r"^i-PI engine process \d+ .*: took no "
-                           r"positions within 1 s \(it stopped reading\)$"):
+        with pytest.raises(EngineError, match=message):
             atoms.get_forces()
-        assert time.monotonic() - start < 4
+        assert time.monotonic() - start < seconds
         assert not calc.connected
     finally:
         calc.close()
         fake.stop()
-    assert not os.path.exists(calc.socketfile)
 
 
 class Stop(Exception):
@@ -302,19 +307,10 @@ def test_a_broken_extra_length_is_named(length):
     one of 2**28 made the calculator allocate 256 MB, then time out.  Both are a broken
     answer, named at once (measured 0.005 s; bound 1 s, the timeout 10 s)."""
     calc = IPICalculator(timeout=10)
-    fake = served(calc, extra_length=length)
-    atoms = Atoms("Ar2", positions=[[0, 0, 0], [0, 0, 3.0]])
-    atoms.calc = calc
-    try:
-        start = time.monotonic()
-        with pytest.raises(EngineError, match=rf"^i-PI engine process \d+ .*: sent an extra "
-                           rf"string of {length} bytes \(expected 0 to 16777216\)"):
-            atoms.get_forces()
-        assert time.monotonic() - start < 1
-        assert not calc.connected
-    finally:
-        calc.close()
-        fake.stop()
+    fails_within(calc, served(calc, extra_length=length),
+                 Atoms("Ar2", positions=[[0, 0, 0], [0, 0, 3.0]]), 1,
+                 rf"^i-PI engine process \d+ .*: sent an extra string of {length} bytes "
+                 rf"\(expected 0 to 16777216\)")
 
 
 def test_an_extra_string_is_kept():
