@@ -53,6 +53,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # (arguments.py, beside this script)
 from arguments import read_json, whole  # noqa: E402
+from children import ends_with_parent  # noqa: E402
 
 START = HERE / "water_openmm_long.start_tip4p2005.npz"
 SECTIONS = ("Pair", "Bond", "Kspace", "Neigh", "Comm", "Output", "Modify", "Other")
@@ -169,7 +170,7 @@ def run_case(workdir: Path, n: int, cutoff: float, steps: int, warmup: int) -> d
     env = dict(os.environ, OMP_NUM_THREADS="1")
     lmp = Path(sys.executable).with_name("lmp")
     subprocess.run([str(lmp), "-in", str(inp), "-log", str(log), "-screen", "none"],
-                   check=True, env=env, cwd=workdir)
+                   check=True, env=env, cwd=workdir, preexec_fn=ends_with_parent)
     return parse_log(log.read_text())
 
 

@@ -75,6 +75,7 @@ import numpy as np  # noqa: E402
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from arguments import at_least_zero, existing_file, positive, read_json, whole  # noqa: E402
+from children import ends_with_parent  # noqa: E402
 
 TEMPERATURE_K = 298.0
 KB_KJ = 0.0083144626  # kJ/mol/K
@@ -955,16 +956,6 @@ def run_many(args):
     return run_points(points(args), __file__, run_name, point_main, args.jobs, args.resume)
 
 
-def _ends_with_parent():
-    """In a point's process, before it runs: SIGTERM when the parent dies (Linux's
-    PR_SET_PDEATHSIG), so that a parent killed outright (SIGKILL, a hang-up) leaves no run
-    computing on (it writes what it has and stops, as after a SIGTERM to the parent)."""
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG = 1
-
-
 def run_points(todo, script, name_of, one, jobs, resume):
     """Run the points ``todo``: with one point and one job here (``one(point, resume)``),
     else ``jobs`` at a time, each in its own process (``script _point JSON``); a signal is
@@ -980,7 +971,7 @@ def run_points(todo, script, name_of, one, jobs, resume):
             p = todo.pop(0)
             cmd = [sys.executable, str(script), "_point", json.dumps(p)] + (
                 ["--resume"] if resume else [])
-            running.append((p, subprocess.Popen(cmd, preexec_fn=_ends_with_parent)))
+            running.append((p, subprocess.Popen(cmd, preexec_fn=ends_with_parent)))
         for p, proc in list(running):
             if stop:
                 try:

@@ -863,3 +863,26 @@ def test_progress_counts_from_the_run_s_start(capsys):
     line = capsys.readouterr().out
     rate = float(line.split("(")[1].split()[0])
     assert "run: 0.50 / 1 ps" in line and 0 < rate < 0.25 / 0.05 * 86.4  # ns/day
+
+
+def test_a_native_lammps_run_ends_with_the_script_that_started_it(tmp_path):
+    """respa_kspace_share.py's ``lmp`` ran on after the script was stopped (its default
+    SIGTERM, or SIGKILL): its children now get SIGTERM when it dies (the same
+    ``ends_with_parent`` the table's points use)."""
+    script = tmp_path / "parent.py"
+    script.write_text(
+        "import subprocess, sys, time\n"
+        f"sys.path.insert(0, {str(ROOT / 'validation')!r})\n"
+        "from children import ends_with_parent\n"
+        "child = subprocess.Popen(['sleep', '60'], preexec_fn=ends_with_parent)\n"
+        "print(child.pid, flush=True)\n"
+        "time.sleep(60)\n")
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    child = int(parent.stdout.readline())
+    parent.kill()
+    parent.wait()
+    deadline = time.monotonic() + 10  # measured: gone within 0.01 s
+    while os.path.exists(f"/proc/{child}") and \
+            open(f"/proc/{child}/stat").read().split(") ")[1][0] != "Z":
+        assert time.monotonic() < deadline, "the child outlived its parent"
+        time.sleep(0.01)
