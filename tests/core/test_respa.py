@@ -7,6 +7,8 @@ long-range rest); their sum is TIP3P at ``rc=40``.  For barostats a periodic liq
 dimers cut the same way (shifted-force LJ at 5 Å fast, the 7 Å model less it slow).
 """
 
+import warnings
+
 import numpy as np
 import pytest
 from ase import units
@@ -631,3 +633,29 @@ def test_the_monte_carlo_barostat_knows_the_cell_a_level_needs():
                                          "level of MultipleTimeStep") as err:
         RigidMCBarostat(atoms, 2 * units.fs, 300, 1 * units.bar, 100 * units.fs)
     assert "\n" not in str(err.value)
+
+
+def test_a_state_of_a_run_split_otherwise_is_continued_and_said(tmp_path):
+    """The MTS pass: a k=3 checkpoint continued with k=1, or with the full model alone,
+    ended 1.9e-4 Å off the original continuation after 20 steps, in silence (a changed time
+    step is refused).  Allowed, as substeps may change between runs, and now said; the same
+    split continues bit for bit."""
+    atoms = dimer_fluid(n_side=4, spacing=4.4, temperature_K=80)
+    atoms.calc = MultipleTimeStep(PeriodicLJ(rc=7.0), ZeroStress(), substeps=3)
+    dyn = RigidVerlet(atoms, 6 * units.fs)
+    dyn.run(3)
+    path = tmp_path / "split.npz"
+    dyn.save_checkpoint(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the same split: nothing to say
+        same = load_checkpoint(path, MultipleTimeStep(PeriodicLJ(rc=7.0), ZeroStress(),
+                                                      substeps=3))
+    dyn.run(2)
+    same.run(2)
+    np.testing.assert_array_equal(same.atoms.positions, dyn.atoms.positions)
+    for calculator, said in ((MultipleTimeStep(PeriodicLJ(rc=7.0), ZeroStress(), substeps=1),
+                              "split by r-RESPA with 1 substeps"),
+                             (PeriodicLJ(rc=7.0), "not split")):
+        with pytest.warns(UserWarning, match=r"the state's run was split by r-RESPA with 3 "
+                                             rf"substeps, this dynamics' is {said}"):
+            load_checkpoint(path, calculator)

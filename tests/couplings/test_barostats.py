@@ -32,7 +32,8 @@ from helpers import (
 
 from rigidmd import RigidCRescale, RigidNPT, RigidVerlet
 from rigidmd.core import quaternion as quat
-from rigidmd.couplings.barostats import BarostatError
+from rigidmd.couplings.barostats import BarostatError, CRescaleBarostat, MTKBarostat
+from rigidmd.couplings.thermostats import BussiThermostat, LangevinThermostat
 
 T = 80.0
 
@@ -592,3 +593,22 @@ def test_a_part_that_needs_the_energy_reads_it_from_every_force_call():
     dyn.run(3)
     assert None not in watcher.seen and len(watcher.seen) == 6
     assert watcher.seen[2::2] == energies[1:3]  # first halves: the previous step's energy
+
+
+@pytest.mark.parametrize("build, message", [
+    # pressure_au=True passed the unit guard (|1.0| is not > 1) as 1 eV/Å³, 160 GPa
+    (lambda: MTKBarostat(T, True, 1000 * units.fs), "pressure_au must be a number"),
+    (lambda: MTKBarostat(T, False, 1000 * units.fs), "pressure_au must be a number"),
+    (lambda: MTKBarostat(T, "1e-6", 1000 * units.fs), "pressure_au must be a number"),
+    (lambda: CRescaleBarostat(T, units.bar, 100 * units.fs, True),
+     "compressibility_au must be a number"),  # 1.0 Å³/eV
+    (lambda: CRescaleBarostat(T, units.bar, 100 * units.fs, "4.5e-5"),
+     "compressibility_au must be a number"),
+    (lambda: BussiThermostat(T, "100"), "taut must be a time in ASE units"),
+    (lambda: LangevinThermostat(T, "0.01"), "friction must be a number per ASE time unit"),
+])
+def test_booleans_and_text_are_not_numbers(build, message):
+    """The MTS and couplings pass: float() took True, False and text, where the thermostats'
+    other checks refused True."""
+    with pytest.raises(TypeError, match=f"^{message}"):
+        build()

@@ -674,3 +674,31 @@ def test_tri_moves_through_a_flip_of_the_basis_keep_one_lammps_engine():
     in_process_flips, reference = run(LAMMPSCalculator(PPPM_27))
     assert in_process_flips == flips
     np.testing.assert_allclose(energies, reference, rtol=0, atol=1e-9)
+
+
+class ForcesOnly(Calculator):
+    """Forces without an energy (as some ML calculators are configured)."""
+
+    implemented_properties = ["forces"]
+
+    def calculate(self, atoms=None, properties=("forces",), system_changes=all_changes):
+        super().calculate(atoms, properties, system_changes)
+        self.results = {"forces": np.zeros((len(self.atoms), 3))}
+
+
+def test_a_calculator_or_level_without_energy_is_refused_at_construction():
+    """The MTS pass: construction succeeded and the first move failed with ASE's bare
+    "energy property not implemented", naming neither the calculator nor the barostat."""
+    from rigidmd import MultipleTimeStep
+
+    atoms = liquid()
+    atoms.calc = ForcesOnly()
+    with pytest.raises(ValueError, match=r"^the calculator ForcesOnly provides no energy \(it "
+                                         r"implements forces\), which the monte_carlo "
+                                         r"barostat needs$"):
+        mc(atoms)
+    atoms.calc = MultipleTimeStep(NoStressLJ(rc=7.0), ForcesOnly(), substeps=2)
+    with pytest.raises(ValueError, match=r"MultipleTimeStep: the slow calculator ForcesOnly "
+                                         r"provides no energy .*which the monte_carlo barostat"):
+        mc(atoms)
+    assert atoms.constraints == []

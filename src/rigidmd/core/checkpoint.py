@@ -207,6 +207,7 @@ def save_checkpoint(dyn, path, extra=None):
         "record": {key: record[key] for key in ("volume", "kinetic", "rotational",
                                                  "forces_known")},
         "levels": {level: {"energy": kept["energy"]} for level, kept in levels.items()},
+        "split": saved["split"],
         "info": {k: v for k, v in atoms.info.items() if _is_json(v)},
         "extra": extra or {},
         "atoms_arrays": sorted(atoms.arrays),  # which arrays the Atoms had set
@@ -273,6 +274,7 @@ class Checkpoint:
             "model": {name: a[f"model_{name}"] for name in BodyModel.STORED},
             "state": {name: a[f"state_{name}"] for name in STATE_FIELDS},
             "record": record, "couplings": meta["couplings"],
+            **({"split": meta["split"]} if "split" in meta else {}),  # (older: none stored)
         }
 
     def couplings(self) -> list[Coupling]:

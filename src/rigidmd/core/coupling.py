@@ -399,10 +399,13 @@ def check_composition(couplings, fixcom: bool):
     Changes nothing: a thermostat's ``fixcm=None`` is resolved when it is bound
     (True, or False when a part moves the cell).
     """
-    for part in couplings:
+    for i, part in enumerate(couplings):
         if not isinstance(part, Coupling):
             raise TypeError(f"couplings must be coupling parts (rigidmd.couplings.base), "
                             f"got {type(part).__name__}")
+        if any(part is other for other in couplings[:i]):  # it would act twice a half step
+            raise ValueError(f"couplings: the same {part.kind} part is given twice; give each "
+                             "part once")
     movers = [part for part in couplings if part.moves_cell]
     if len(movers) > 1:
         raise ValueError(f"two parts move the cell ({movers[0].kind}, {movers[1].kind}); "

@@ -485,8 +485,9 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         rigid state's arrays), ``record`` (forces, torques, virial, scratch
         values, the quantities the per-step record holds, and ``forces_known``:
         False before the first force call) and ``couplings`` (each part's kind,
-        parameters, variables and random-number generator).  The atoms
-        themselves are ``dyn.atoms``.
+        parameters, variables and random-number generator), ``split`` (``None``,
+        or ``{"substeps": k}`` for a :class:`~rigidmd.MultipleTimeStep`).  The
+        atoms themselves are ``dyn.atoms``.
 
         Changes made to the Atoms since the last step (momenta set, positions moved) are
         read first, as the next step would read them: the state holds them.
@@ -511,6 +512,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             "state": {name: getattr(self.state, name).copy() for name in STATE_FIELDS},
             "record": self.record.get_state(),
             "couplings": export_parts(self.couplings),
+            # r-RESPA's inner steps per step, or None: a continuation splits alike
+            "split": None if self._split is None else {"substeps": int(self._split.substeps)},
         }
 
     def set_state(self, saved: dict) -> None:
@@ -525,7 +528,9 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
 
         Refused in one line, before anything changes, when the state is not of this
         dynamics: another class, scheme or time step, other coupling parts or
-        parameters (a target temperature set since), other bodies or masses.
+        parameters (a target temperature set since), other bodies or masses.  A
+        state of a run split otherwise (another ``substeps``, a split or none) is
+        continued, with a warning: a split's ``substeps`` may change between runs.
         """
         self._check_restorable(saved)
         self.model.update_from(BodyModel(n_atoms=saved["n_atoms"], **saved["model"]))
@@ -577,6 +582,16 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
             raise ValueError(f"{where}: the state's time step is {dt / units.fs:.10g} fs, "
                              f"this dynamics' {self._dt / units.fs:.10g} fs; set_timestep "
                              "back first")
+        if "split" in saved:  # (states written before it was stored: not said)
+            stored = saved["split"] and int(saved["split"]["substeps"])
+            own = self._split and int(self._split.substeps)
+            if stored != own:  # allowed, as substeps may change between runs: said
+                def said(k):
+                    return f"split by r-RESPA with {k} substeps" if k else "not split"
+
+                warnings.warn(f"{where}: the state's run was {said(stored)}, this dynamics' "
+                              f"is {said(own)}: it continues with other forces per step than "
+                              "it was made with", stacklevel=3)
         if body_ids.shape != self.bodies.body_ids.shape or not np.array_equal(
                 body_ids, self.bodies.body_ids):
             raise ValueError(f"{where}: the state's bodies are not this dynamics' (another "

@@ -42,6 +42,7 @@ from rigidmd.couplings.base import (
     check_rng,
     check_temperature,
     check_time,
+    real_number,
     register,
     rng_state,
     set_rng_state,
@@ -72,10 +73,7 @@ def check_couple(couple):
 
 
 def check_pressure(pressure_au):
-    try:
-        value = float(pressure_au)
-    except (TypeError, ValueError):
-        raise TypeError(f"pressure_au must be a number (eV/Å³), got {pressure_au!r}") from None
+    value = real_number("pressure_au", pressure_au, "a number (eV/Å³)")
     if not np.isfinite(value):
         raise ValueError(f"pressure_au must be finite, got {pressure_au!r}")
     # 1 bar is 6.2e-7 eV/Å³; above 1 eV/Å³ (1.6 Mbar) the unit is almost surely wrong.
@@ -383,11 +381,7 @@ class CRescaleBarostat(Barostat):
         super().__init__(temperature_K, pressure_au, couple)
         self.every = check_positive_integer("every", every)
         self.taup = check_time("taup", taup)
-        try:
-            beta = float(compressibility_au)
-        except (TypeError, ValueError):
-            raise TypeError(f"compressibility_au must be a number (Å³/eV), got "
-                            f"{compressibility_au!r}") from None
+        beta = real_number("compressibility_au", compressibility_au, "a number (Å³/eV)")
         if not (np.isfinite(beta) and beta > 0):
             raise ValueError(f"compressibility_au must be positive (Å³/eV), got "
                              f"{compressibility_au!r}")

@@ -43,17 +43,25 @@ __all__ = ["Coupling", "CouplingView", "Parameter", "COUPLINGS", "register", "No
            "LammpsFix", "NoseHooverChain", "Thermostat", "TargetTemperature", "NET_FORCE_FLOOR",
            "check_rng", "rng_state", "set_rng_state", "rng_kind", "new_rng", "check_composition",
            "export_parts", "check_temperature", "check_time", "check_flag",
-           "check_positive_integer", "TEMPERATURE"]
+           "check_positive_integer", "real_number", "TEMPERATURE"]
+
+
+def real_number(name, value, what):
+    """``value`` as a float, or a TypeError naming ``name`` and ``what`` it must be.
+
+    ``True`` (1.0), ``False`` and text (``"1e-6"``) are refused: Python's ``float`` takes
+    them, and ``pressure_au=True`` was read as 1 eV/Å³ (160 GPa)."""
+    if isinstance(value, (bool, np.bool_, str, bytes)):
+        raise TypeError(f"{name} must be {what}, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be {what}, got {value!r}") from None
 
 
 def check_temperature(temperature_K):
     """``temperature_K`` as a float, >= 0 and finite, or a clear error."""
-    if isinstance(temperature_K, (bool, np.bool_)):
-        raise TypeError(f"temperature_K must be a number (K), got {temperature_K!r}")
-    try:
-        value = float(temperature_K)
-    except (TypeError, ValueError):
-        raise TypeError(f"temperature_K must be a number (K), got {temperature_K!r}") from None
+    value = real_number("temperature_K", temperature_K, "a number (K)")
     if not (np.isfinite(value) and value >= 0):
         raise ValueError(f"temperature_K must be >= 0 K, got {temperature_K!r}")
     return value
@@ -61,12 +69,7 @@ def check_temperature(temperature_K):
 
 def check_time(name, value):
     """A positive finite time (ASE units) as a float, or a clear error naming ``name``."""
-    if isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be a time in ASE units, got {value!r}")
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a time in ASE units, got {value!r}") from None
+    value = real_number(name, value, "a time in ASE units")
     if not (np.isfinite(value) and value > 0):
         raise ValueError(f"{name} must be a positive time (ASE units), got {value!r}")
     return value

@@ -39,6 +39,7 @@ from rigidmd.couplings.base import (
     check_temperature,
     check_time,
     fixcm_parameter,
+    real_number,
     register,
     rng_state,
     set_rng_state,
@@ -73,13 +74,7 @@ class _Stochastic(Thermostat):
 
 def check_friction(friction) -> float:
     """A friction (per ASE time unit) as a float >= 0, or one clear line."""
-    if isinstance(friction, (bool, np.bool_)):
-        raise TypeError(f"friction must be a number per ASE time unit, got {friction!r}")
-    try:
-        gamma = float(friction)
-    except (TypeError, ValueError):
-        raise TypeError(f"friction must be a number per ASE time unit, got {friction!r}"
-                        ) from None
+    gamma = real_number("friction", friction, "a number per ASE time unit")
     if not (np.isfinite(gamma) and gamma >= 0):
         raise ValueError(f"friction must be >= 0 (per ASE time unit), got {friction!r}")
     return gamma
