@@ -310,3 +310,153 @@ def test_the_short_range_commands_are_smooth_or_one_pair_style():
     plain = model.lammps_short_range_commands(4.0, alpha=0.25, smooth=False)
     assert plain[0] == "pair_style lj/cut/coul/dsf 0.25 4.0 4.0"
     assert plain[-1] == "pair_modify shift yes"
+
+
+def _reflect_m_across_o_h1(atoms):
+    """A copy with every M reflected across its O–H1 line, in the molecule's plane.
+
+    O–M and H1–M keep their lengths; H2–M does not (1.101 Å against 0.871 for
+    TIP4P/2005), and M moves by 0.20–0.25 Å.
+    """
+    bad = atoms.copy()
+    x = bad.positions.reshape(-1, 4, 3)
+    u = x[:, 1] - x[:, 0]
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = x[:, 3] - x[:, 0]
+    along = np.sum(v * u, axis=1, keepdims=True) * u
+    x[:, 3] = x[:, 0] + along - (v - along)
+    bad.positions = x.reshape(-1, 3)
+    return bad
+
+
+@pytest.mark.parametrize("name", ["tip4p2005", "opc", "tip4pew"])
+def test_check_refuses_an_m_site_in_the_wrong_place(name):
+    """Only the O–M and H1–M distances were compared: an M reflected across the O–H1 line
+    passed (a 27-water TIP4P/2005 box so built: -263.931 eV in LAMMPS against -274.880 eV),
+    and so did one out of the plane.  Every site is now compared with its place after the
+    best superposition.  Measured, for the three models: the reflected M is 0.146–0.186 Å
+    from its place, and one moved 0.01 Å out of the plane 0.0061–0.0065 Å (its distances
+    change at second order, O–M by 3.1e-4–4.0e-4 Å, below the 1e-3 Å tolerance)."""
+    model = water_model(name)
+    box = water_box(3, seed=0, model=name)
+    model.check(box)
+    with pytest.raises(ValueError, match=r"molecule 0 \(atoms 0-3\) is not in this model's "
+                                         r"geometry \(atom 3 is 0.1[4-8]\d* Å from"):
+        model.check(_reflect_m_across_o_h1(box))
+    lifted = box.copy()
+    x = lifted.positions.reshape(-1, 4, 3)
+    normal = np.cross(x[5, 1] - x[5, 0], x[5, 2] - x[5, 0])
+    lifted.positions[23] += 0.01 * normal / np.linalg.norm(normal)  # M of molecule 5
+    assert abs(np.linalg.norm(lifted.positions[23] - x[5, 0]) - model.d_om) < 1e-3
+    with pytest.raises(ValueError, match=r"molecule 5 \(atoms 20-23\) .* \(atom 23 is "
+                                         r"0.00[5-9]\d* Å from"):
+        model.check(lifted)
+
+
+def test_check_tolerance_passes_rounded_positions_and_refuses_the_nearest_model():
+    """The 1e-3 Å tolerance: positions rounded to four decimals move a site by at most
+    8e-5 Å (measured, 216 waters), three decimals 8e-4 Å; TIP4P's geometry is 3.45e-3 Å
+    from TIP4P/2005's (O–M 0.15 against 0.1546 Å), the closest pair of models."""
+    model = water_model("tip4p2005")
+    box = water_box(6, seed=3, model="tip4p2005")
+    for decimals in (3, 4):
+        rounded = box.copy()
+        rounded.positions = box.positions.round(decimals)
+        model.check(rounded)
+    with pytest.raises(ValueError, match=r"atom 3 is 0.00345 Å from the model's place"):
+        model.check(water_box(2, model="tip4p"))
+    with pytest.raises(ValueError, match="tolerance must be a finite number > 0, got nan"):
+        model.check(box, tolerance=float("nan"))
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf])
+def test_check_refuses_a_position_that_is_not_finite(value):
+    """NaN > tolerance is False: a NaN position passed the check."""
+    box = water_box(2, seed=0)
+    box.positions[4, 1] = value
+    with pytest.raises(ValueError, match=r"^tip3p: atom 4 \(H\) has the position \[.*"
+                                         r"(nan|inf).*\]; positions must be finite$"):
+        water_model("tip3p").check(box)
+
+
+def test_charges_take_whole_counts_only():
+    """``charges(2.5)`` gave two molecules' charges and ``charges(-1)`` none."""
+    model = water_model("tip4p2005")
+    assert model.charges(0).shape == (0,)
+    assert np.array_equal(model.charges(2.0), model.charges(2))
+    assert model.charges(np.int64(3)).shape == (12,)
+    for bad, error in ((2.5, ValueError), (-1, ValueError), (np.nan, ValueError),
+                       ("2", TypeError), (True, TypeError)):
+        with pytest.raises(error, match=r"^tip4p2005: n_molecules must be a whole number >= "
+                                        r"0, got "):
+            model.charges(bad)
+
+
+def test_the_tail_correction_comes_with_k_space_only():
+    """With ``kspace=None`` (a cluster) ``tail`` stayed True: LAMMPS warned and the energy
+    of an 8-water cluster moved by -0.094 eV with the box it drew.  ``tail=None`` (the
+    default) means with k-space; ``tail=True`` without it is refused."""
+    model = water_model("tip4p2005")
+    eps, sigma = model.epsilon, model.sigma
+    assert model.lammps_commands(4.5) == [
+        "pair_style lj/cut/coul/long 4.5", "pair_coeff * * 0.0 1.0",
+        f"pair_coeff O O {eps!r} {sigma!r}", "pair_modify tail yes", "kspace_style pppm 1e-05"]
+    assert model.lammps_commands(4.5, "ewald", 1e-6, tail=False) == [
+        "pair_style lj/cut/coul/long 4.5", "pair_coeff * * 0.0 1.0",
+        f"pair_coeff O O {eps!r} {sigma!r}", "kspace_style ewald 1e-06"]
+    cluster = ["pair_style lj/cut/coul/cut 40.0", "pair_coeff * * 0.0 1.0",
+               f"pair_coeff O O {eps!r} {sigma!r}"]
+    assert model.lammps_commands(40.0, None) == cluster
+    assert model.lammps_commands(40.0, None, tail=False) == cluster
+    with pytest.raises(ValueError, match=r"^tip4p2005: tail=True needs k-space"):
+        model.lammps_commands(40.0, None, tail=True)
+
+
+@pytest.mark.parametrize("options, error, message", [
+    ({"cutoff": -3.0}, ValueError, "cutoff must be a finite number > 0 Å, got -3.0"),
+    ({"cutoff": 0.0}, ValueError, "cutoff must be a finite number > 0 Å, got 0.0"),
+    ({"cutoff": np.inf}, ValueError, "cutoff must be a finite number > 0 Å, got inf"),
+    ({"cutoff": "4.5"}, TypeError, "cutoff must be a finite number > 0 Å, got '4.5'"),
+    ({"kspace": "PPPM"}, ValueError, "kspace must be one of pppm, ewald or None .* got 'PPPM'"),
+    ({"kspace": "pppm/tip4p"}, ValueError, "kspace must be one of pppm, ewald or None"),
+    ({"accuracy": -1e-5}, ValueError, "accuracy must be a finite number > 0, got -1e-05"),
+    ({"accuracy": 1.0}, ValueError, "accuracy is a relative force accuracy, between 0 and 1"),
+    ({"tail": "no"}, TypeError, "tail must be True, False or None .* got 'no'"),
+    ({"tail": 1}, TypeError, "tail must be True, False or None .* got 1"),
+])
+def test_the_lammps_commands_refuse_bad_values_in_one_line(options, error, message):
+    """They were passed on: ``tail="no"`` wrote ``pair_modify tail yes``, a negative
+    accuracy ran, and a negative cut-off or ``PPPM`` failed inside LAMMPS."""
+    arguments = {"cutoff": 4.5} | options
+    with pytest.raises(error, match=f"^spce: {message}") as err:
+        water_model("spce").lammps_commands(**arguments)
+    assert "\n" not in str(err.value)
+
+
+def test_without_k_space_the_accuracy_is_not_read():
+    model = water_model("spce")
+    assert model.lammps_commands(9.0, None, None) == model.lammps_commands(9.0, None)
+
+
+def test_water_model_takes_a_model_as_well_as_a_name():
+    opc = WATER_MODELS["opc"]
+    assert water_model(opc) is opc
+    with pytest.raises(ValueError, match="^unknown water model None; use one of tip3p"):
+        water_model(None)
+
+
+def test_the_modules_table_shows_the_models_parameters():
+    """The table gave TIP4P's σ as 3.15365 Å; the model (ASE's) has 3.153578."""
+    import rigidmd.water
+
+    rows = [line.split() for line in rigidmd.water.__doc__.splitlines()
+            if line.startswith("``") and len(line.split()) == 7]
+    assert [row[0].strip("`") for row in rows] == list(WATER_MODELS)
+    kj = units.kJ / units.mol
+    for row in rows:
+        model = WATER_MODELS[row[0].strip("`")]
+        values = (model.r_oh, model.angle_hoh, model.d_om, model.q_h, model.sigma,
+                  model.epsilon / kj)
+        for shown, value in zip(row[1:], values, strict=True):
+            decimals = len(shown.partition(".")[2])
+            assert abs(float(shown) - value) <= 0.5 * 10.0**-decimals, (row[0], shown, value)

@@ -28,6 +28,7 @@ import numpy as np
 from ase import units
 
 from rigidmd.core.bodies import cell_widths
+from rigidmd.water import real_argument, water_model, whole_argument
 
 __all__ = ["FORCE_FIELD_FILES", "water_topology", "water_system", "real_atom_forces"]
 
@@ -48,20 +49,29 @@ def water_topology(model, n_molecules, cell):
 
     Parameters
     ----------
-    model : rigidmd.water.WaterModel
+    model : str or rigidmd.water.WaterModel
+        The model or its name (:func:`rigidmd.water.water_model`).
     n_molecules : int
+        A whole number >= 0.
     cell : array_like, shape (3, 3)
         Periodic cell, Å (rows are the cell vectors).
 
     Returns
     -------
     openmm.app.Topology
+
+    Raises
+    ------
+    TypeError, ValueError
+        An unknown ``model``, ``n_molecules`` not a whole number >= 0.
     """
     from openmm import app, unit
 
+    model = water_model(model)
+    n_molecules = whole_argument("rigidmd.openmm", "n_molecules", n_molecules, 0)
     top = app.Topology()
     chain = top.addChain()
-    for _ in range(int(n_molecules)):
+    for _ in range(n_molecules):
         res = top.addResidue("HOH", chain)
         oxygen = top.addAtom("O", app.element.oxygen, res)
         for name in ("H1", "H2"):
@@ -93,19 +103,22 @@ def _check_reduced_cell(cell):
 
     That is a along x, b in the xy plane (lower-triangular, positive diagonal)
     and each tilt at most half the length below it: ``|b_x| <= a_x/2``,
-    ``|c_x| <= a_x/2``, ``|c_y| <= b_y/2``.
+    ``|c_x| <= a_x/2``, ``|c_y| <= b_y/2``.  OpenMM checks these exactly
+    (``System::setDefaultPeriodicBoxVectors``: ``a_y``, ``a_z`` and ``b_z``
+    must be 0, ``a_x >= 2 |b_x|`` and so on), so they are checked here exactly
+    too; the Å to nm conversion (a division by 10, rounded alike on both
+    sides) keeps them.
     """
     cell = np.asarray(cell, dtype=float)
-    scale = np.abs(cell).max()
-    lower = np.all(np.abs(cell[[0, 0, 1], [1, 2, 2]]) <= 1e-12 * scale)
+    lower = np.all(cell[[0, 0, 1], [1, 2, 2]] == 0)
     tilts = [(1, 0, 0), (2, 0, 0), (2, 1, 1)]
     reduced = lower and np.all(np.diag(cell) > 0) and all(
-        abs(cell[row, column]) <= 0.5 * cell[length, length] * (1 + 1e-12)
-        for row, column, length in tilts)
+        2 * abs(cell[row, column]) <= cell[length, length] for row, column, length in tilts)
     if not reduced:
         raise ValueError(
             f"rigidmd.openmm: OpenMM takes a cell in its reduced form (a along x, b in the xy "
-            f"plane, each tilt at most half the length below it), not {cell.round(4).tolist()}; "
+            f"plane, exact zeros above the diagonal, each tilt at most half the length below "
+            f"it), not {cell.tolist()}; "
             "give the atoms that cell first (ase.cell.Cell.standard_form rotates it, "
             "ase.geometry.minkowski_reduce reduces the tilts)")
 
@@ -118,8 +131,8 @@ def water_system(atoms, model, cutoff, *, tail=True, parameters="file",
     ----------
     atoms : ase.Atoms
         Whole molecules of ``model`` in its order (O, H, H, M), periodic.
-    model : rigidmd.water.WaterModel
-        One of :data:`FORCE_FIELD_FILES`.
+    model : str or rigidmd.water.WaterModel
+        One of :data:`FORCE_FIELD_FILES`, or its name.
     cutoff : float
         Real-space cut-off of Lennard-Jones and Coulomb, Å, at most half the
         cell's smallest width.
@@ -138,13 +151,17 @@ def water_system(atoms, model, cutoff, *, tail=True, parameters="file",
 
     Raises
     ------
+    TypeError
+        ``cutoff`` not a number.
     ValueError
-        A model OpenMM has no file for, atoms that are not whole molecules of
-        it, a cut-off beyond half the cell, an unknown ``parameters``.
+        An unknown model or one OpenMM has no file for, atoms that are not
+        whole molecules of it, a cut-off beyond half the cell, an unknown
+        ``parameters``.
     """
     import openmm
     from openmm import app, unit
 
+    model = water_model(model)
     name = _file(model)
     if parameters not in ("file", "rigidmd"):
         raise ValueError(f"rigidmd.openmm: parameters must be 'file' or 'rigidmd', "
@@ -153,7 +170,8 @@ def water_system(atoms, model, cutoff, *, tail=True, parameters="file",
         raise ValueError("rigidmd.openmm: the atoms need a periodic cell (PME)")
     _check_reduced_cell(atoms.cell.array)
     half = cell_widths(atoms.cell).min() / 2
-    if not 0 < cutoff <= half:
+    cutoff = real_argument("rigidmd.openmm", "cutoff", cutoff, unit=" Å")
+    if not cutoff <= half:
         raise ValueError(f"rigidmd.openmm: cutoff {cutoff} Å must be positive and at most "
                          f"half the cell's smallest width ({half:.3f} Å)")
     _check_whole(atoms, model)

@@ -461,3 +461,18 @@ def test_a_water_model_cutoff_that_is_no_length_is_named(tmp_path, cutoff, messa
         check_config(raw)
     assert str(err.value).startswith(message), str(err.value)
     assert_one_clear_line(err.value)
+
+
+def test_a_cluster_water_model_has_no_tail_correction(tmp_path):
+    """The water pass: kspace: null kept tail: true, and a cluster's energy then depended on
+    the box LAMMPS draws around it (-0.094 eV for 8 TIP4P/2005 waters at 8 Å)."""
+    raw = yaml.safe_load(yaml.safe_dump(BASES[1]))
+    raw["calculator"]["water_model"]["kspace"] = None
+    raw["_base"] = str(tmp_path)
+    commands = check_config(raw).calculator.commands
+    assert not any("tail" in command for command in commands)
+    raw["calculator"]["water_model"]["tail"] = True
+    with pytest.raises(ConfigError, match=r"^calculator.water_model.tail: the tail correction "
+                                          r"is for a periodic box") as err:
+        check_config(raw)
+    assert_one_clear_line(err.value)

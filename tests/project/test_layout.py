@@ -30,7 +30,7 @@ LAYERS = {
     "systems": _BASE + ("water",),
     "ipi": _BASE,
     "openmm": _BASE + ("water",),
-    "mdanalysis": _BASE,
+    "mdanalysis": _BASE + ("water",),  # (a water model named for its corrections)
     "lammps": _BASE + _LIBRARIES,
     "relax": ("core",),  # a library: the relax: section and command are run's
     "config": _BASE + _LIBRARIES + ("lammps", "relax"),

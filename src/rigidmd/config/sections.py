@@ -274,9 +274,12 @@ def _water_commands(raw):
             0 < accuracy < 1):
         raise ConfigError(f"calculator.water_model.accuracy: expected a relative accuracy "
                           f"between 0 and 1, got {accuracy!r}")
-    tail = spec.get("tail", True)
+    tail = spec.get("tail", kspace is not None)  # the tail correction is a periodic box's
     if not isinstance(tail, bool):
         raise ConfigError(f"calculator.water_model.tail: expected true or false, got {tail!r}")
+    if tail and kspace is None:  # (a cluster's energy then depended on LAMMPS's box)
+        raise ConfigError("calculator.water_model.tail: the tail correction is for a "
+                          "periodic box with k-space; with kspace: null leave it out")
     return model, model.lammps_commands(float(cutoff), kspace, float(accuracy), tail)
 
 

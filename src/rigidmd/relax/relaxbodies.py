@@ -34,7 +34,9 @@ class BodyRelaxation:
         (no momenta, no calculator).
     templates : dict
         Relaxed isolated molecule (:class:`ase.Atoms`) per kind, keyed by
-        the kind's chemical symbols in atom order (``"OHH"`` for water).
+        the kind's chemical symbols in atom order (``"OHH"`` for water),
+        followed by its masses in brackets where they are not ASE's defaults
+        (``"OHH[15.999, 2.014, 2.014]"`` for D2O).
     strain_energies : dict
         Per kind: energy of the isolated molecule as given minus relaxed (eV),
         what each rigid body of that kind would have carried.
@@ -74,12 +76,16 @@ def _kabsch(reference, target, weights):
 def relax_bodies(atoms, calculator, bodies=None, *, fmax=1e-3, steps=500, optimizer=BFGS):
     """Give every body the geometry ``calculator`` relaxes its molecule to.
 
-    Bodies are grouped into kinds by their atoms' chemical symbols in order
-    (every water O, H, H is one kind).  One body of each kind is cut out,
+    Bodies are grouped into kinds by their atoms' chemical symbols and
+    masses in order (every water O, H, H is one kind; a D2O, its hydrogens
+    given 2.014 amu, another).  One body of each kind is cut out,
     made whole, relaxed in vacuum with ``calculator`` (``optimizer`` to
     ``fmax``), and the relaxed molecule is superposed on every body of that
     kind: its centre of mass where the body's was, rotated to the best fit
-    of the body's atoms (mass-weighted).  Free atoms are left where they are.
+    of the body's atoms (mass-weighted).  Each body comes back whole, about
+    its centre of mass as :meth:`~rigidmd.RigidBodies.whole_positions` places
+    it (its first atom's side of a periodic boundary); nothing is wrapped
+    into the cell, and free atoms are left where they are.
 
     Parameters
     ----------
@@ -119,6 +125,7 @@ def relax_bodies(atoms, calculator, bodies=None, *, fmax=1e-3, steps=500, optimi
                          "model's rule")
     whole = rigid.whole_positions(atoms)
     numbers = atoms.numbers
+    masses = atoms.get_masses()
     out = atoms.copy()
     out.calc = None
     if "momenta" in out.arrays:
@@ -126,13 +133,16 @@ def relax_bodies(atoms, calculator, bodies=None, *, fmax=1e-3, steps=500, optimi
     result = BodyRelaxation(out)
     kinds = {}
     for b in range(model.n_bodies):
-        kinds.setdefault(tuple(numbers[model.atoms_of(b)]), []).append(b)
+        index = model.atoms_of(b)
+        kinds.setdefault((tuple(numbers[index]), tuple(masses[index])), []).append(b)
     positions = out.positions
-    for key, members in kinds.items():
+    for (symbols, kind_masses), members in kinds.items():
         first = model.atoms_of(members[0])
-        molecule = Atoms(numbers=list(key), positions=whole[first],
-                         masses=atoms.get_masses()[first])
+        molecule = Atoms(numbers=list(symbols), positions=whole[first],
+                         masses=list(kind_masses))
         name = molecule.get_chemical_formula(mode="all")
+        if not np.array_equal(molecule.get_masses(), Atoms(numbers=list(symbols)).get_masses()):
+            name += f"[{', '.join(repr(float(m)) for m in kind_masses)}]"
         molecule.calc = calculator
         before = molecule.get_potential_energy()
         opt = optimizer(molecule, logfile=None)
@@ -146,14 +156,12 @@ def relax_bodies(atoms, calculator, bodies=None, *, fmax=1e-3, steps=500, optimi
         result.bodies[name] = list(members)
         # Superpose the relaxed molecule on every body of this kind at once.
         index = np.array([model.atoms_of(b) for b in members])  # (n, k)
-        masses = molecule.get_masses()
+        weights = molecule.get_masses()
         template = molecule.positions - molecule.get_center_of_mass()
         target = whole[index]
-        com = np.einsum("k,nki->ni", masses, target) / masses.sum()
+        com = np.einsum("k,nki->ni", weights, target) / weights.sum()
         rotation = _kabsch(np.broadcast_to(template, target.shape), target - com[:, None],
-                           masses)
+                           weights)
         positions[index] = com[:, None] + np.einsum("nij,kj->nki", rotation, template)
     out.positions = positions
-    if out.pbc.any():
-        out.wrap()
     return result

@@ -12,7 +12,7 @@ from ase import Atoms, units
 from ase.calculators.tip3p import epsilon0, qH, sigma0
 
 from rigidmd.core import quaternion as quat
-from rigidmd.water import water_model
+from rigidmd.water import real_argument, water_model, whole_argument
 
 __all__ = ["water_molecule", "co2_molecule", "water_cluster", "water_box",
            "co2_water_mixture", "random_quaternions", "ice_ih"]
@@ -22,7 +22,8 @@ R_CO = 1.16
 
 
 def water_molecule(model="tip3p"):
-    """One water of ``model`` (:data:`rigidmd.water.WATER_MODELS`), oxygen at the origin.
+    """One water of ``model`` (a :data:`rigidmd.water.WATER_MODELS` name or a
+    :class:`~rigidmd.water.WaterModel`), oxygen at the origin.
 
     O, H, H (, M) in the xy plane; see :meth:`rigidmd.water.WaterModel.molecule`.
     """
@@ -92,17 +93,28 @@ def water_cluster(n_molecules, seed=0, spacing=3.1, jitter=0.1, tries=64, model=
         Å.
     tries : int
         Orientations tried per molecule; 1 gives uniformly random orientations.
-    model : str, default "tip3p"
-        Water model (:data:`rigidmd.water.WATER_MODELS`); orientations are
-        chosen by the TIP3P energy of the O, H, H sites whatever the model.
+    model : str or rigidmd.water.WaterModel, default "tip3p"
+        Water model (a :data:`rigidmd.water.WATER_MODELS` name or the model);
+        orientations are chosen by the TIP3P energy of the O, H, H sites
+        whatever the model.
+
+    Raises
+    ------
+    TypeError, ValueError
+        ``n_molecules`` or ``tries`` not a whole number >= 1, ``spacing`` not
+        positive and finite, ``jitter`` negative, an unknown ``model``.
     """
+    n_molecules = whole_argument("water_cluster", "n_molecules", n_molecules, 1)
+    tries = whole_argument("water_cluster", "tries", tries, 1)
+    spacing = real_argument("water_cluster", "spacing", spacing, unit=" Å")
+    jitter = real_argument("water_cluster", "jitter", jitter, strict=False, unit=" Å")
+    template = water_molecule(model)
     rng = np.random.default_rng(seed)
     n_side = int(np.ceil(n_molecules ** (1 / 3)))
     sites = _lattice(n_side, spacing)
     centre = sites.mean(axis=0)
     sites = sites[np.argsort(np.linalg.norm(sites - centre, axis=1), kind="stable")]
     sites = sites[:n_molecules] + rng.uniform(-jitter, jitter, (n_molecules, 3))
-    template = water_molecule(model)
     k = len(template)
     local = template.positions - template.get_center_of_mass()
     placed = np.zeros((0, k, 3))
@@ -132,12 +144,23 @@ def water_box(n_side=3, seed=0, spacing=3.1, jitter=0.1, model="tip3p", whole=Tr
     the boundaries: ASE's ``TIP3P`` then counts the split molecules' charges
     across the box (+192 eV for ``water_box(4)`` with ``rc=6``, against
     +0.70 eV whole).  ``model`` names the water model
-    (:data:`rigidmd.water.WATER_MODELS`; four-site models carry M explicitly).
+    (a :data:`rigidmd.water.WATER_MODELS` name or a
+    :class:`~rigidmd.water.WaterModel`; four-site models carry M explicitly).
+
+    Raises
+    ------
+    TypeError, ValueError
+        ``n_side`` not a whole number >= 1, ``spacing`` not positive and
+        finite, ``jitter`` negative, an unknown ``model``.
     """
+    n_side = whole_argument("water_box", "n_side", n_side, 1)
+    spacing = real_argument("water_box", "spacing", spacing, unit=" Å")
+    jitter = real_argument("water_box", "jitter", jitter, strict=False, unit=" Å")
+    molecule = water_molecule(model)
     rng = np.random.default_rng(seed)
     n = n_side**3
     sites = _lattice(n_side, spacing) + rng.uniform(-jitter, jitter, (n, 3))
-    atoms = _place([water_molecule(model)] * n, sites, rng)
+    atoms = _place([molecule] * n, sites, rng)
     atoms.cell = np.eye(3) * n_side * spacing
     atoms.pbc = True
     if not whole:
@@ -151,12 +174,24 @@ def co2_water_mixture(n_co2=4, n_water=4, seed=0, spacing=3.6, box=None):
     Parameters
     ----------
     n_co2, n_water : int
+        Molecules of each kind, whole numbers >= 0, at least one in all.
     seed : int
     spacing : float
         Lattice spacing (Å).
     box : bool, optional
         If true, a periodic cubic cell of the lattice's size, atoms wrapped.
+
+    Raises
+    ------
+    TypeError, ValueError
+        ``n_co2`` or ``n_water`` not a whole number >= 0, or both 0;
+        ``spacing`` not positive and finite.
     """
+    n_co2 = whole_argument("co2_water_mixture", "n_co2", n_co2, 0)
+    n_water = whole_argument("co2_water_mixture", "n_water", n_water, 0)
+    if n_co2 + n_water == 0:
+        raise ValueError("co2_water_mixture: n_co2 + n_water must be at least 1, got 0 and 0")
+    spacing = real_argument("co2_water_mixture", "spacing", spacing, unit=" Å")
     rng = np.random.default_rng(seed)
     n = n_co2 + n_water
     n_side = int(np.ceil(n ** (1 / 3)))
@@ -184,11 +219,15 @@ def _hydrogen_bonds(oxygens, distance):
     from ase.neighborlist import neighbor_list
 
     # The next shell of the wurtzite lattice is 1.63 times as far as the first.
+    n = len(oxygens)
     i, j, d = neighbor_list("ijD", oxygens, 1.3 * distance)
     keep = i < j
     i, j, d = i[keep], j[keep], d[keep]
-    counts = np.bincount(np.concatenate([i, j]), minlength=len(oxygens))
-    if np.any(counts != 4):
+    counts = np.bincount(np.concatenate([i, j]), minlength=n)
+    # In a cell one lattice cell thick, two bonds join one pair of oxygens (two images).
+    pairs = np.unique(i * n + j)
+    distinct = np.bincount(np.concatenate([pairs // n, pairs % n]), minlength=n)
+    if np.any(counts != 4) or np.any(distinct != 4):
         raise ValueError("ice_ih: the cell is too small for four distinct neighbours per "
                          "oxygen; repeat it more")
     return i, j, d
@@ -220,8 +259,11 @@ def ice_ih(repeat=(3, 2, 2), seed=0, a=4.50, c=7.33, model="tip4p2005", sweeps=2
 
     Parameters
     ----------
-    repeat : tuple of int
-        Orthorhombic cells along x, y, z (8 molecules each).
+    repeat : tuple of int, or int
+        Orthorhombic cells along x, y, z (8 molecules each), whole numbers
+        >= 1; one number repeats alike along all three.  One repeat along x
+        (4.5 Å at the default ``a``) gives oxygens two bonds to one neighbour
+        (two of its images), and is refused.
     seed : int
     a, c : float
         Hexagonal lattice constants (Å); the oxygen-oxygen distance is
@@ -238,10 +280,22 @@ def ice_ih(repeat=(3, 2, 2), seed=0, a=4.50, c=7.33, model="tip4p2005", sweeps=2
 
     Raises
     ------
-    ValueError
-        A cell too small for four distinct neighbours per oxygen, or a
-        dipole that the loop moves did not bring to zero.
+    TypeError, ValueError
+        A ``repeat`` that is not three whole numbers >= 1, ``a`` or ``c`` not
+        positive and finite, an unknown ``model``, a cell too small for four
+        distinct neighbours per oxygen, or a dipole that the loop moves did
+        not bring to zero.
     """
+    counts = np.ravel(np.array(repeat, dtype=object))
+    if counts.size == 1:
+        counts = np.repeat(counts, 3)
+    if counts.size != 3:
+        raise ValueError(f"ice_ih: repeat must be three whole numbers >= 1 (or one), "
+                         f"got {repeat!r}")
+    repeat = tuple(whole_argument("ice_ih", "repeat", r, 1) for r in counts)
+    a = real_argument("ice_ih", "a", a, unit=" Å")
+    c = real_argument("ice_ih", "c", c, unit=" Å")
+    water = water_model(model)
     rng = np.random.default_rng(seed)
     oxygens = _ice_oxygens(repeat, a, c)
     n = len(oxygens)
@@ -302,7 +356,6 @@ def ice_ih(repeat=(3, 2, 2), seed=0, a=4.50, c=7.33, model="tip4p2005", sweeps=2
     directions = sign[:, None] * unit  # from donor to acceptor
     order = np.argsort(donor, kind="stable")
     pairs = directions[order].reshape(n, 2, 3)
-    water = water_model(model)
     bisector = pairs.sum(axis=1)
     bisector /= np.linalg.norm(bisector, axis=1, keepdims=True)
     across = pairs[:, 0] - pairs[:, 1]
