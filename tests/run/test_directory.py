@@ -33,12 +33,19 @@ def test_a_new_run_refuses_an_earlier_runs_outputs(tmp_path):
     lock = files.open()
     assert files.made_directory and (tmp_path / "out" / LOCK_NAME).exists()
     (tmp_path / "out" / "md.log").write_text("earlier\n")
-    with pytest.raises(ConfigError, match="already holds md.log from an earlier run; continue "
-                                          "it with --resume, or replace it with --overwrite"):
+    # No checkpoint beside it: --resume could only refuse, so it is not offered.
+    with pytest.raises(ConfigError, match="already holds md.log from an earlier run; nothing "
+                                          "there can be continued"):
+        files.prepare(earlier_demo=lambda: False)
+    (tmp_path / "out" / "checkpoint.npz").write_bytes(b"a run's")
+    with pytest.raises(ConfigError, match="already holds md.log, checkpoint.npz from an earlier "
+                                          "run; continue it with --resume, or replace it with "
+                                          "--overwrite"):
         files.prepare(earlier_demo=lambda: False)
     lock.release()
     demo = RunFiles(outputs(tmp_path), "demo", io.StringIO())
-    with pytest.raises(ConfigError, match="holds md.log, which are not an earlier demo's"):
+    with pytest.raises(ConfigError, match="holds md.log, checkpoint.npz, which are not an earlier "
+                                          "demo's"):
         demo.prepare(earlier_demo=lambda: False)
 
 

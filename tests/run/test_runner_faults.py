@@ -258,7 +258,7 @@ def test_plot_of_a_binary_file_says_it_is_not_a_log(tmp_path, monkeypatch, capsy
 def test_help_names_every_command(capsys):
     with pytest.raises(SystemExit):
         cli.main(["--help"])
-    assert "demo, run, relax, plot and export-lammps" in capsys.readouterr().out
+    assert "demo, run, relax, bias, plot and export-lammps" in capsys.readouterr().out
 
 
 def rewrite_checkpoint(path, change):
@@ -418,8 +418,9 @@ def test_openmm_water_system_refuses_a_cell_openmm_cannot_take_in_one_line(cell)
         atoms.set_cell(tilted)
     before = atoms.positions.copy()
     with pytest.raises(ValueError, match=r"^rigidmd.openmm: OpenMM takes a cell in its reduced "
-                                         r"form \(a along x, b in the xy plane, each tilt at most "
-                                         r"half the length below it\), not \[\["):
+                                         r"form \(a along x, b in the xy plane, exact zeros above "
+                                         r"the diagonal, each tilt at most half the length below "
+                                         r"it\), not \[\["):
         water_system(atoms, water_model("tip4pew"), 3.5)
     np.testing.assert_array_equal(atoms.positions, before)
 
