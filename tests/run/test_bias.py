@@ -164,8 +164,12 @@ def _command(tmp_path, *flags):
     (("--blocks", "1"), "--blocks: expected a whole number >= 2"),
     (("--timestep", "4 parsecs"), "--timestep"),
     (("--sample-fs", "1"), "--sample-fs: 1 fs is less than 1 step"),
-    (("--equilibrate-ps", "0.001"), "--equilibrate-ps: 1 fs is less than 1 step(s) of 4 fs "
-                                    "(0: none)"),
+    (("--equilibrate-ps", "0.001"), "--equilibrate-ps: 0.001 ps is less than 1 step(s) of "
+                                    "4 fs (0: none)"),  # (was "1 fs" for a ps option)
+    (("--ps", "1e-6"), "--ps: 1e-06 ps is less than 5 step(s) of 4 fs"),
+    (("--blocks", "100000"), "--sample-fs: 2 ps sampled every 12 fs gives 167 samples, fewer "
+                             "than the 100000 blocks of the errors; raise --ps, or lower "
+                             "--sample-fs or --blocks"),
     (("--ps", "0.02", "--sample-fs", "8"), "--sample-fs: 0.02 ps sampled every 8 fs gives 2 "
                                            "samples, fewer than the 5 blocks"),
     (("--ps", "0.2", "--tconf-fs", "100"), "--tconf-fs: 0.2 ps sampled every 100 fs gives 2 "

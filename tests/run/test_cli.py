@@ -611,3 +611,24 @@ def test_a_cell_relaxation_of_a_cluster_is_refused_before_any_file(project):
     (project / "z.yaml").write_text(PLAIN + "relax: {steps: 0}\n")
     result = rigidmd("run", "z.yaml", cwd=project)
     assert result.returncode == 2 and "relax.steps: expected a whole number >= 1" in result.stderr
+
+
+def test_bodies_whose_atoms_are_apart_are_refused_for_mdanalysis_before_any_file(tmp_path):
+    """The MDAnalysis pass: atoms ordered O..O H..H H..H were refused only after the run had
+    opened its log (then removed), naming "MDAWriter topology" and giving Python advice."""
+    pytest.importorskip("MDAnalysis", reason="needs MDAnalysis (pip install MDAnalysis)")
+    atoms = water_cluster(8, seed=4)
+    atoms.set_tags(np.repeat(np.arange(1, 9), 3))
+    order = np.r_[0:24:3, 1:24:3, 2:24:3]
+    write(tmp_path / "apart.traj", atoms[order])
+    text = CONFIG.replace("structure: cluster.xyz\nread_options: {format: extxyz}\n"
+                          "bodies: mol-id", "structure: apart.traj\nbodies: tags")
+    text = with_change(text, "calculator: {name: ase.calculators.lj.LennardJones, options: "
+                             "{sigma: 2.0, epsilon: 0.001, rc: 3.0}}")
+    (tmp_path / "run.yaml").write_text(with_change(text, "steps: 10"))
+    result = rigidmd("run", "run.yaml", cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stderr.startswith("rigidmd: error: outputs.mdanalysis: atom 8 belongs to "
+                                    "residue 1"), result.stderr
+    assert "leave outputs.mdanalysis out" in result.stderr and result.stderr.count("\n") == 1
+    assert not (tmp_path / "out").exists()

@@ -189,7 +189,19 @@ def _atom_names(resindex, numbers, symbols, water):
     return names.astype(str)
 
 
-def check_contiguous(resindex, what):
+#: How to put each body's atoms together, in Python.
+REORDER_ADVICE = ("reorder the atoms so that each body's atoms follow each other, e.g. "
+                  "atoms[np.argsort(RigidBodies.resolve(atoms, bodies).body_ids, "
+                  "kind='stable')]")
+
+
+def check_bodies_contiguous(body_ids, what, advice=REORDER_ADVICE):
+    """:func:`check_contiguous` on the residues the bodies ``body_ids`` give (a free atom
+    is a residue of its own), before anything is written."""
+    check_contiguous(_residue_index(np.asarray(body_ids)), what, advice)
+
+
+def check_contiguous(resindex, what, advice=REORDER_ADVICE):
     """Refuse residues whose atoms are not consecutive (``what`` names the file written).
 
     PSF, PDB and GRO readers start a new residue wherever the residue id
@@ -211,9 +223,7 @@ def check_contiguous(resindex, what):
     raise ValueError(
         f"{what}: atom {atom} belongs to residue {int(resindex[atom]) + 1} (a rigid body) "
         f"whose atoms are not consecutive, so readers would see {n_runs} residues instead "
-        f"of {n_residues}; reorder the atoms so that each body's atoms follow each other, "
-        "e.g. atoms[np.argsort(RigidBodies.resolve(atoms, bodies).body_ids, kind='stable')]"
-    )
+        f"of {n_residues}; {advice}")
 
 
 def _body_bonds(atoms, body_ids):

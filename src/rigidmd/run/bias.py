@@ -173,9 +173,10 @@ def _steps(name, time_span, dt, notes, minimum=1):
     number of them adds a line to ``notes`` (None: a default, said nothing of); fewer than
     ``minimum`` (or none for a time above zero) is refused naming ``name``."""
     fs = TIME_UNITS["fs"]
+    unit = "ps" if name.endswith("-ps") else "fs"  # as the option is given
     steps = int(np.floor(time_span / dt + 0.5))
     if steps < minimum or (time_span > 0 and steps == 0):
-        raise ConfigError(f"{name}: {time_span / fs:g} fs is less than "
+        raise ConfigError(f"{name}: {time_span / TIME_UNITS[unit]:g} {unit} is less than "
                           f"{max(minimum, 1)} step(s) of {dt / fs:g} fs"
                           + (" (0: none)" if minimum == 0 else ""))
     if notes is not None and abs(steps * dt - time_span) > 1e-9 * max(time_span, dt):
@@ -202,8 +203,9 @@ def _legs(config, production_ps, equilibrate_ps, sample_fs, tconf_fs, blocks, no
             continue
         taken = (equilibrate + production) // interval - equilibrate // interval
         if taken < blocks:
-            advice = "raise --ps or lower --sample-fs" if option == "--sample-fs" else \
-                "raise --ps or lower --tconf-fs (0: none)"
+            advice = "raise --ps, or lower --sample-fs or --blocks" \
+                if option == "--sample-fs" else \
+                "raise --ps, or lower --tconf-fs (0: none) or --blocks"
             raise ConfigError(f"{option}: {production_ps:g} ps sampled every "
                               f"{interval * dt / fs:g} fs gives {taken} samples, fewer than "
                               f"the {blocks} blocks of the errors; {advice}")

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rigidmd.config import TIME_UNITS
+from rigidmd.config import TIME_UNITS, ConfigError
 from rigidmd.config.diagnostics import own_calculator
 from rigidmd.ipi import EngineError
 from rigidmd.run.checkpointing import RunCheckpoints
@@ -191,6 +191,16 @@ class Run:
             start = RigidDynamics(probe, self.config.run.timestep, bodies=bodies,
                                   couplings=self.config.coupling.parts(),
                                   **self._dynamics_arguments())
+        if self.outputs.mdanalysis is not None:  # (it was refused after the log was opened)
+            from rigidmd.mdanalysis.topology import check_bodies_contiguous
+
+            try:
+                check_bodies_contiguous(start.bodies.body_ids, "outputs.mdanalysis",
+                                        "give a structure whose bodies' atoms follow each "
+                                        "other (molecule by molecule), or leave "
+                                        "outputs.mdanalysis out")
+            except ValueError as err:
+                raise ConfigError(str(err)) from None
         keep = self.files.relaxation + [self.outputs.checkpoint] if relaxation else ()
         self.files.prepare(self.checkpoints.is_earlier_demo, replace, keep)
         # Nothing of this run's is in the directory now (but a relaxation it continues):
