@@ -58,6 +58,8 @@ from ase.calculators import tip4p as ase_tip4p
 from ase.data import atomic_masses
 from ase.geometry import find_mic
 
+from rigidmd.core.checks import real_number
+
 __all__ = ["WaterModel", "WATER_MODELS", "water_model", "M_SYMBOL", "tip3p_pair_commands",
            "tip3p_charges"]
 
@@ -94,16 +96,16 @@ def real_argument(where, name, value, minimum=0.0, strict=True, unit=""):
     Raises
     ------
     TypeError
-        Not a number (a bool is not one).
+        Not a number (:func:`rigidmd.core.checks.real_number`'s rule: bools and text are
+        not).
     ValueError
         Not finite, or below the bound.
     """
     bound = f"{'>' if strict else '>='} {minimum:g}{unit}"
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise TypeError(f"{where}: {name} must be a finite number {bound}, got {value!r}")
-    if not (np.isfinite(value) and (value > minimum if strict else value >= minimum)):
+    number = real_number(f"{where}: {name}", value, f"a finite number {bound}")
+    if not (np.isfinite(number) and (number > minimum if strict else number >= minimum)):
         raise ValueError(f"{where}: {name} must be a finite number {bound}, got {value!r}")
-    return float(value)
+    return number
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ from rigidmd.core.checks import (
     check_massless_momenta,
     check_timestep,
     copy_atoms,
+    real_number,
 )
 from rigidmd.core.dof import RigidBodyDOF
 
@@ -24,6 +25,23 @@ def test_time_steps():
             check_timestep(bad)
     with pytest.raises(TypeError, match="timestep must be a number of ASE time units"):
         check_timestep("1 fs")
+
+
+def test_one_number_rule_for_every_argument():
+    """Bools and text are refused though ``float`` takes them; numpy scalars, 0-d arrays
+    and fractions are read; the bound is each caller's."""
+    from fractions import Fraction
+
+    for good, value in ((3, 3.0), (np.float32(0.5), 0.5), (np.array(2.0), 2.0),
+                        (Fraction(1, 4), 0.25), (-np.inf, -np.inf)):
+        assert real_number("x", good, "a number") == value
+    for bad in (True, np.bool_(False), "1e-6", b"1", None, [1.0], np.ones(2)):
+        with pytest.raises(TypeError, match=r"^friction must be a number per ASE time unit, "
+                                            r"got "):
+            real_number("friction", bad, "a number per ASE time unit")
+    for bad in (True, "2"):
+        with pytest.raises(TypeError, match="^timestep must be a number of ASE time units"):
+            check_timestep(bad)
 
 
 def test_the_first_non_finite_atom_is_named():

@@ -52,6 +52,38 @@ def test_substeps_and_missing_properties():
         atoms.get_stress()
 
 
+def test_what_the_parts_read_is_asked_of_the_calculator_or_each_level():
+    """A barostat's stress and a Monte Carlo barostat's energy: each level of a split is
+    asked for both; a plain calculator for the energy it declares it lacks (its stress
+    is looked for at the first call)."""
+    from types import SimpleNamespace
+
+    from ase.calculators.calculator import Calculator
+
+    from rigidmd.core.split import check_calculator_properties
+
+    def part(stress=False, energy=False):
+        return SimpleNamespace(needs_stress=stress, needs_energy=energy, kind="barostat",
+                               section="monte_carlo")
+
+    class ForcesOnly(Calculator):
+        implemented_properties = ("forces",)
+
+    check_calculator_properties(TIP3P(), [part(stress=True, energy=True)])  # stress: later
+    check_calculator_properties(ForcesOnly(), [part(stress=True)])
+    with pytest.raises(ValueError, match=r"^the calculator ForcesOnly provides no energy "
+                                         r"\(it implements forces\), which the barostat "
+                                         r"monte_carlo needs$"):
+        check_calculator_properties(ForcesOnly(), [part(), part(energy=True)])
+    check_calculator_properties(MultipleTimeStep(EMT(), EMT()), [part(True, True)])
+    with pytest.raises(ValueError, match=r"^MultipleTimeStep: the slow calculator ForcesOnly "
+                                         r"provides no energy"):
+        check_calculator_properties(MultipleTimeStep(EMT(), ForcesOnly()), [part(energy=True)])
+    with pytest.raises(ValueError, match=r"^MultipleTimeStep: the fast calculator TIP3P "
+                                         r"provides no stress .* the barostat monte_carlo"):
+        check_calculator_properties(MultipleTimeStep(TIP3P(), EMT()), [part(stress=True)])
+
+
 def test_close_and_checkpoint_state_reach_both_levels():
     calls = []
 

@@ -16,9 +16,39 @@ from ase.constraints import FixCom
 from rigidmd.core.backend import resolve_backend
 from rigidmd.core.dof import RigidBodyDOF, kinetic_energy
 
-__all__ = ["check_finite", "check_output_file", "check_massless_momenta", "check_timestep",
-           "check_constraints", "changed_properties", "StepSizeCheck", "MAX_ROTATION_PER_STEP",
-           "MAX_ENERGY_CHANGE"]
+__all__ = ["real_number", "check_finite", "check_output_file", "check_massless_momenta",
+           "check_timestep", "check_constraints", "changed_properties", "StepSizeCheck",
+           "MAX_ROTATION_PER_STEP", "MAX_ENERGY_CHANGE"]
+
+
+def real_number(name: str, value, what: str) -> float:
+    """``value`` as a float, or one TypeError naming ``name`` and ``what`` it must be.
+
+    The one type rule for every number a user hands rigidmd's classes and functions (the
+    configuration file has its own, :mod:`rigidmd.config.quantities`): whatever Python's
+    ``float`` takes, except ``True``/``False`` and text, which ``float`` also takes
+    (``pressure_au=True`` would read as 1 eV/Å³, 160 GPa; ``timestep="1"`` as 1 ASE time
+    unit, about 10 fs).
+
+    Parameters
+    ----------
+    name : str
+        The argument's name as the message shows it, e.g. ``"temperature_K"``.
+    value : object
+    what : str
+        What it must be, e.g. ``"a number (K)"``.
+
+    Returns
+    -------
+    float
+        Not checked for finiteness or sign: each caller states its own bound.
+    """
+    if isinstance(value, (bool, np.bool_, str, bytes)):
+        raise TypeError(f"{name} must be {what}, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be {what}, got {value!r}") from None
 
 
 def check_timestep(timestep: float) -> float:
@@ -26,13 +56,8 @@ def check_timestep(timestep: float) -> float:
 
     A bool or a string is refused (``"1"`` and ``True`` read as 1 ASE time unit, about
     10 fs), as ASE's ``timestep`` is a number of ASE time units."""
-    if isinstance(timestep, (bool, str, bytes)):
-        raise TypeError(f"timestep must be a number of ASE time units (1 * ase.units.fs for "
-                        f"1 fs), got {timestep!r}")
-    try:
-        dt = float(timestep)
-    except (TypeError, ValueError):
-        raise TypeError(f"timestep must be a number, got {timestep!r}") from None
+    dt = real_number("timestep", timestep, "a number of ASE time units (1 * ase.units.fs "
+                     "for 1 fs)")
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"timestep must be positive and finite, got {timestep!r}")
     return dt

@@ -58,7 +58,7 @@ from rigidmd.core.observables import RigidObservables
 from rigidmd.core.operators import remove_centre_velocity
 from rigidmd.core.respa import evaluator_for, record_for, respa_for
 from rigidmd.core.schemes import BUILTIN_SCHEMES, resolve_scheme, scheme_with_middle
-from rigidmd.core.split import MultipleTimeStep
+from rigidmd.core.split import MultipleTimeStep, check_calculator_properties
 from rigidmd.core.state import STATE_FIELDS
 from rigidmd.core.stepcontext import StepContext
 from rigidmd.core.stepper import Stepper
@@ -197,8 +197,8 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         mover = check_composition(couplings, fixcom)
         middle = tuple(part for part in couplings if part.acts_in_middle)
         scheme = scheme_with_middle(scheme, integrator, [part.kind for part in middle])
-        model, (split, respa) = geometry.model, respa_for(atoms.calc, scheme, backend,
-                                                                   couplings)
+        check_calculator_properties(atoms.calc, couplings)
+        model, (split, respa) = geometry.model, respa_for(atoms.calc, scheme, backend)
         for part in couplings:
             part.check(atoms, model, self._dt)
         for name, path in (("trajectory", trajectory), ("logfile", logfile)):

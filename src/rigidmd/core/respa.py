@@ -45,24 +45,13 @@ __all__ = ["SplitRecord", "SplitForceEvaluator", "RespaStep", "respa_for", "reco
            "evaluator_for", "respa_step"]
 
 
-def respa_for(calc, scheme: Scheme, backend: Backend, couplings=()) -> tuple:
+def respa_for(calc, scheme: Scheme, backend: Backend) -> tuple:
     """``(split, outer step)`` for a dynamics whose atoms carry ``calc``; ``(None, None)``
     when ``calc`` is no :class:`MultipleTimeStep`.  Changes nothing; refuses in one line
-    a scheme it cannot run (:func:`respa_step`), a level (or a calculator) without the
-    energy a part needs, or a level without the stress one needs."""
-    needs = [(name, part) for part in couplings
-             for name, needed in (("stress", part.needs_stress), ("energy", part.needs_energy))
-             if needed]
+    a scheme it cannot run (:func:`respa_step`).  What the levels must provide the coupling
+    parts is :func:`rigidmd.core.split.check_calculator_properties`'s check."""
     if not isinstance(calc, MultipleTimeStep):
-        implemented = getattr(calc, "implemented_properties", None)
-        for name, part in needs:  # (a stress is looked for at the first call: it may come)
-            if name == "energy" and implemented is not None and name not in implemented:
-                raise ValueError(f"the calculator {type(calc).__name__} provides no energy (it "
-                                 f"implements {', '.join(implemented)}), which the {part.kind} "
-                                 f"{part.section} needs")
         return None, None
-    for name, part in needs:
-        calc.check_level_properties(name, f"the {part.kind} {part.section}")
     return calc, respa_step(scheme, calc, backend)
 
 

@@ -32,7 +32,8 @@ from ase.calculators.calculator import (
 
 from rigidmd.core.forces import calculate_together
 
-__all__ = ["MultipleTimeStep", "FullLessFast", "check_substeps", "MAX_SUBSTEPS"]
+__all__ = ["MultipleTimeStep", "FullLessFast", "check_substeps", "check_calculator_properties",
+           "MAX_SUBSTEPS"]
 
 #: The most inner steps per outer step.  An outer step is never interrupted (a stop
 #: signal waits for it), so a mistyped ``substeps`` (10**20) would hang the first step with
@@ -353,3 +354,41 @@ def _level_property(calc, name: str, atoms):
     if value is None:
         raise PropertyNotImplementedError(name)
     return float(value) if name in ("energy", "free_energy") else np.array(value, dtype=float)
+
+
+def check_calculator_properties(calc, couplings) -> None:
+    """Refuse in one line a calculator that lacks a property a coupling part needs.
+
+    Each part says what it reads (``needs_energy``: the Monte Carlo barostat's energy
+    difference; ``needs_stress``: a barostat's pressure). A :class:`MultipleTimeStep` is
+    asked for both on each level (:meth:`MultipleTimeStep.check_level_properties`); a
+    plain calculator for the energy, when it declares ``implemented_properties`` without
+    it. A plain calculator's stress is looked for at its first call instead (some give
+    one without declaring it), where :class:`~rigidmd.core.forces.ForceEvaluator` refuses
+    its absence. Changes nothing.
+
+    Parameters
+    ----------
+    calc : ase.calculators.calculator.BaseCalculator
+        The atoms' calculator.
+    couplings : sequence of rigidmd.couplings.base.Coupling
+        The dynamics' coupling parts.
+
+    Raises
+    ------
+    ValueError
+        Naming the calculator (or level), the property and the part that needs it.
+    """
+    needs = [(name, part) for part in couplings
+             for name, needed in (("stress", part.needs_stress), ("energy", part.needs_energy))
+             if needed]
+    if isinstance(calc, MultipleTimeStep):
+        for name, part in needs:
+            calc.check_level_properties(name, f"the {part.kind} {part.section}")
+        return
+    implemented = getattr(calc, "implemented_properties", None)
+    for name, part in needs:
+        if name == "energy" and implemented is not None and name not in implemented:
+            raise ValueError(f"the calculator {type(calc).__name__} provides no energy (it "
+                             f"implements {', '.join(implemented)}), which the {part.kind} "
+                             f"{part.section} needs")

@@ -27,6 +27,7 @@ from ase import units
 from rigidmd.core import observables as obs
 from rigidmd.core.backend import register as register_operation
 from rigidmd.core.bodies import check_bodies_fit
+from rigidmd.core.checks import real_number
 from rigidmd.couplings import _numba
 from rigidmd.couplings._numpy import exprel, symmetric_exp
 from rigidmd.couplings.base import (
@@ -42,7 +43,6 @@ from rigidmd.couplings.base import (
     check_rng,
     check_temperature,
     check_time,
-    real_number,
     register,
     rng_state,
     set_rng_state,

@@ -21,6 +21,7 @@ import numpy as np
 from ase import units
 
 from rigidmd.core.backend import NUMPY, Backend
+from rigidmd.core.checks import real_number
 from rigidmd.core.coupling import (
     COUPLINGS,
     Coupling,
@@ -43,20 +44,7 @@ __all__ = ["Coupling", "CouplingView", "Parameter", "COUPLINGS", "register", "No
            "LammpsFix", "NoseHooverChain", "Thermostat", "TargetTemperature", "NET_FORCE_FLOOR",
            "check_rng", "rng_state", "set_rng_state", "rng_kind", "new_rng", "check_composition",
            "export_parts", "check_temperature", "check_time", "check_flag",
-           "check_positive_integer", "real_number", "TEMPERATURE"]
-
-
-def real_number(name, value, what):
-    """``value`` as a float, or a TypeError naming ``name`` and ``what`` it must be.
-
-    ``True`` (1.0), ``False`` and text (``"1e-6"``) are refused: Python's ``float`` takes
-    them, and ``pressure_au=True`` was read as 1 eV/Å³ (160 GPa)."""
-    if isinstance(value, (bool, np.bool_, str, bytes)):
-        raise TypeError(f"{name} must be {what}, got {value!r}")
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be {what}, got {value!r}") from None
+           "check_positive_integer", "TEMPERATURE"]
 
 
 def check_temperature(temperature_K):

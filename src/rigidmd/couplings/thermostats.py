@@ -26,6 +26,7 @@ import numpy as np
 from ase import units
 
 from rigidmd.core import operators as ops
+from rigidmd.core.checks import real_number
 from rigidmd.couplings.base import (
     TEMPERATURE,
     CouplingView,
@@ -39,7 +40,6 @@ from rigidmd.couplings.base import (
     check_temperature,
     check_time,
     fixcm_parameter,
-    real_number,
     register,
     rng_state,
     set_rng_state,
