@@ -6,7 +6,12 @@ from ase import Atoms, units
 from ase.calculators.tip3p import TIP3P
 
 from rigidmd import RigidVerlet
-from rigidmd.lammps.atomtypes import lammps_molecule_ids, lammps_types, molecules_of
+from rigidmd.lammps.atomtypes import (
+    check_molecule_ids,
+    lammps_molecule_ids,
+    lammps_types,
+    molecules_of,
+)
 from rigidmd.lammps.data import MASSLESS_SITE_MASS
 from rigidmd.systems import water_cluster
 
@@ -38,7 +43,7 @@ def test_molecules_come_from_the_bodies_first():
     molecules, source, checked = molecules_of(atoms, ids, None)
     assert source == "bodies" and molecules.tolist() == np.repeat([1, 2, 3], 3).tolist()
     assert checked is not None
-    assert molecules_of(atoms, None, checked)[2] == checked  # checked once
+    assert molecules_of(atoms, ids, checked)[2] == checked  # checked once
     atoms.arrays["mol-id"] = np.array([1, 1, 1, 1, 2, 2, 3, 3, 3])
     with pytest.raises(ValueError, match="mol-id array put atoms 2 and 3 in one molecule"):
         molecules_of(atoms, None, None)
@@ -47,3 +52,27 @@ def test_molecules_come_from_the_bodies_first():
 def test_atoms_in_no_molecule_get_their_own_id():
     assert lammps_molecule_ids(None, 3).tolist() == [1, 2, 3]
     assert lammps_molecule_ids(np.array([2, 2, 0, -1, 1]), 5).tolist() == [2, 2, 3, 4, 1]
+
+
+def test_given_molecule_ids_win_over_the_mol_id_array_and_tags():
+    """An explicit ``molecule_ids`` was used only when the atoms carried neither a
+    ``mol-id`` array nor tags, and its shape was then never checked."""
+    atoms = water_cluster(3, seed=1)
+    atoms.set_tags(np.repeat([1, 2, 3], 3))
+    assert "mol-id" in atoms.arrays
+    alone = check_molecule_ids(range(1, 10))
+    molecules, source, _ = molecules_of(atoms, alone, None)
+    assert source == "molecule_ids" and molecules.tolist() == list(range(1, 10))
+    with pytest.raises(ValueError, match=r"^LAMMPSCalculator: molecule_ids has shape \(2,\), "
+                                         r"the atoms are 9$"):
+        molecules_of(atoms, check_molecule_ids([1, 2]), None)
+    assert check_molecule_ids(None) is None
+    assert check_molecule_ids([1.0, 2.0]).dtype == np.int64
+    with pytest.raises(ValueError, match=r"^LAMMPSEngine: molecule_ids must be one whole "
+                                         r"number per atom, got an array of shape \(1, 2\)"):
+        check_molecule_ids([[1, 2]], "LAMMPSEngine")
+    # In a rigid dynamics the bodies stay the molecules: given IDs must group alike.
+    atoms.calc = TIP3P()
+    RigidVerlet(atoms, 1 * units.fs, bodies="connectivity")
+    with pytest.raises(ValueError, match="molecule_ids split a rigid body"):
+        molecules_of(atoms, alone, None)

@@ -293,3 +293,44 @@ def test_two_live_instances_both_take_the_plugin(commands):
             if scale == 1.03:  # after the first new cell (the set-up that takes the fix in)
                 assert [c.split()[0] for c in commands] == ["rigidmd_box", "run"], commands
     assert pair[0].get_potential_energy() == pair[1].get_potential_energy()
+
+
+#: TIP3P with damped shifted-force Coulomb (no k-space) for the 27-water box.
+DSF_27 = ["pair_style lj/cut/coul/dsf 0.2 4.5", "pair_coeff * * 0.0 1.0",
+          "pair_coeff O O 0.0065956819 3.15061"]
+
+
+@pytest.mark.parametrize("interactions", ["dsf", "pppm"])
+def test_a_cell_shrunk_with_the_atoms_left_in_place_equals_a_fresh_lammps(interactions,
+                                                                           commands):
+    """A later cell change with no atom moving (``set_cell(..., scale_atoms=False)``)
+    goes through ``rigidmd_box``, and LAMMPS's neighbour check, which looks only at atom
+    displacements, kept its lists: a cell shrunk by 15 % (the box's far corner 2.4 Å
+    away, past the 2 Å skin) gave DSF energies 0.020 eV and forces 0.043 eV/Å off a
+    fresh LAMMPS, and PPPM died ("Out of range atoms - cannot compute PPPM").  The step
+    now re-neighbours when the box has moved by more than half the skin since the last
+    build.  (A triclinic box hid the fault: LAMMPS's round trip through its lamda
+    coordinates at a build moves its positions by roundoff, which its check counts once
+    the corners have moved past the skin.)  Measured (DSF, PPPM): energy to 2.2e-16 relative,
+    forces to 2.1e-16 relative to the largest, stress to 6.3e-16 relative; bounds 1e-9 as
+    above."""
+    interaction_commands = DSF_27 if interactions == "dsf" else PPPM_27
+    atoms = water_box_27()
+    atoms.calc = LAMMPSCalculator(interaction_commands)
+    atoms.get_potential_energy()
+    cell = atoms.cell.array.copy()
+    atoms.set_cell(cell * 1.005, scale_atoms=False)  # the set-up that takes the fix in
+    atoms.get_potential_energy()
+    atoms.set_cell(cell * 0.85, scale_atoms=False)
+    del commands[:]
+    energy, forces, stress = atoms.get_potential_energy(), atoms.get_forces(), atoms.get_stress()
+    assert commands[0].startswith("rigidmd_box ") and not any(
+        c.startswith(("change_box", "run 0")) for c in commands), commands
+    parameters = atoms.calc.kspace_parameters
+    reference = atoms.copy()
+    reference.calc = LAMMPSCalculator(interaction_commands + ([parameters] if parameters else []))
+    assert energy == pytest.approx(reference.get_potential_energy(), rel=1e-9, abs=0)
+    np.testing.assert_allclose(forces, reference.get_forces(), rtol=0,
+                               atol=1e-9 * np.abs(forces).max())
+    np.testing.assert_allclose(stress, reference.get_stress(), rtol=0,
+                               atol=1e-9 * np.abs(stress).max())

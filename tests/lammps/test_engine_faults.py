@@ -736,3 +736,36 @@ def test_what_the_engine_cannot_take_is_named_as_the_engine():
         uncharged.calc = engine
         with pytest.raises(ValueError, match=r"^LAMMPSEngine: the commands have Coulomb "):
             uncharged.get_potential_energy()
+
+
+def test_a_refused_call_leaves_the_engine_and_its_kspace_parameters():
+    """Other atoms with an element that has no type were refused only by write_input's
+    probe, after the running engine was stopped and the k-space parameters pinned for the
+    first atoms forgotten: the next call at those atoms, at a later cell, started an
+    engine with parameters chosen for that cell, 2.165 eV off.  Now they are refused
+    first; the engine and its parameters stay (measured: the energy after equal to the
+    last bit; asserted equal).  Wrong ``molecule_ids`` and ``skin`` are named as the
+    engine's, before any engine starts (a list of IDs raised AttributeError)."""
+    atoms = water_box_27()
+    with LAMMPSEngine(PPPM_27, atom_types={"O": 1, "H": 2}) as engine:
+        atoms.calc = engine
+        atoms.get_potential_energy()
+        pid, parameters = engine.pid, engine.kspace_parameters
+        atoms.set_cell(atoms.cell * 1.08, scale_atoms=True)
+        energy = atoms.get_potential_energy()
+        other = atoms.copy()
+        other[0].symbol = "Na"
+        with pytest.raises(ValueError, match="^LAMMPSEngine: element Na has no LAMMPS type"):
+            engine.get_potential_energy(other)
+        assert engine.pid == pid and engine.kspace_parameters == parameters
+        assert engine.get_potential_energy(atoms) == energy
+    untagged = water_box_27()
+    untagged.set_tags(0)
+    for ids in ([1, 2], np.arange(1, len(untagged))):
+        with LAMMPSEngine(PPPM_27, molecule_ids=ids) as engine:
+            untagged.calc = engine
+            with pytest.raises(ValueError, match=r"^LAMMPSEngine: molecule_ids has shape"):
+                untagged.get_potential_energy()
+            assert engine.pid is None
+    with pytest.raises(TypeError, match=r"^LAMMPSEngine: skin must be a finite number"):
+        LAMMPSEngine(PPPM_27, skin="abc")

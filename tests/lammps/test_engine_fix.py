@@ -115,6 +115,39 @@ def test_it_re_neighbours_only_when_an_atom_moved_half_the_skin():
         assert engine.neighbor_builds == 1
 
 
+@pytest.mark.parametrize("processes", [1, 2])
+def test_a_cell_shrunk_with_the_atoms_left_in_place_re_neighbours(processes):
+    """A cell change with no atom moving (``set_cell(..., scale_atoms=False)``): set_box
+    set the new box but forced a re-neighbouring only at a flip, and LAMMPS's check, which
+    looks only at atom displacements, saw nothing move, so a cell shrunk by 15 % (the far
+    corner 2.4 Å away, past the 2 Å skin) killed the engine ("Out of range atoms - cannot
+    compute PPPM"; without k-space: energies 1.7e-3 eV off, silently).  Now the step
+    re-neighbours when the box has moved by more than half the skin since the last build,
+    and only then: a 2 % change (the far corner 0.32 Å away) builds nothing.  Numbers as
+    in assert_equal_to_in_process."""
+    atoms = water_box_27()
+    atoms.wrap()
+    atoms.positions *= 0.9  # (inside the cell, also when moved by 0.6 Å below)
+    with LAMMPSEngine(PPPM_27, processes=processes) as engine:
+        atoms.calc = engine
+        atoms.get_forces()
+        reference = atoms.copy()
+        reference.calc = LAMMPSCalculator(PPPM_27 + [engine.kspace_parameters])
+        # Moved past half the skin: LAMMPS builds its lists at the positions sent, in
+        # their own images (the set-up's positions from the data file differ from them
+        # by roundoff, which LAMMPS's check would count as motion).
+        atoms.positions += 0.6
+        atoms.get_forces()
+        assert engine.neighbor_builds == 1
+        cell = atoms.cell.array.copy()
+        atoms.set_cell(cell * 1.02, scale_atoms=False)
+        assert_equal_to_in_process(atoms, reference)
+        assert engine.neighbor_builds == 1
+        atoms.set_cell(cell * 0.85, scale_atoms=False)
+        assert_equal_to_in_process(atoms, reference)
+        assert engine.neighbor_builds == 2
+
+
 def test_only_what_is_asked_for_is_tallied():
     """RMDTALLY: forces alone carry no energy or stress; the stress alone no energy;
     what comes equals the in-process calculator's."""

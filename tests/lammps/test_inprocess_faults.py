@@ -253,6 +253,75 @@ def test_kspace_parameters_are_a_checked_public_setting():
         other.calc.set_checkpoint_state({"gewald": 0.3})
 
 
+def test_a_refused_call_leaves_the_instance_and_its_kspace_parameters():
+    """Other atoms that cannot be given to LAMMPS (an element without a type, a flat
+    cell) were refused only after the running instance was closed and the k-space
+    parameters pinned for the first atoms forgotten: the next call at those atoms, at a
+    later cell (as in an NPT run), set LAMMPS up anew with parameters chosen for that
+    cell, 2.165 eV off.  Now they are refused first, and the calculator is as it was
+    (measured: the energy after equal to the last bit; asserted equal)."""
+    atoms = water_box_27()
+    calc = LAMMPSCalculator(PPPM_27, atom_types={"O": 1, "H": 2})
+    atoms.calc = calc
+    atoms.get_potential_energy()
+    parameters = calc.kspace_parameters
+    atoms.set_cell(atoms.cell * 1.08, scale_atoms=True)  # a barostat's later cell
+    energy = atoms.get_potential_energy()
+    instance = calc._instance
+    sodium = atoms.copy()
+    sodium[0].symbol = "Na"
+    flat = atoms[:-3]
+    flat.cell[2] = flat.cell[0]
+    for other, message in ((sodium, "element Na has no LAMMPS type in atom_types"),
+                           (flat, "the cell has zero volume")):
+        with pytest.raises(ValueError, match=f"^LAMMPSCalculator: {message}"):
+            calc.get_potential_energy(other)
+        assert calc._instance is instance and calc.kspace_parameters == parameters
+    assert calc.get_potential_energy(atoms) == energy
+
+
+def test_given_molecule_ids_win_over_the_atoms_tags_and_are_checked():
+    """``molecule_ids=`` was ignored without a word when the atoms carried tags or a
+    ``mol-id`` array (27 waters, every atom its own molecule: -156.23 eV, the tags'
+    molecules, against -248.10 eV meant), and never checked: ``[1, 2]`` on 81 atoms was
+    taken.  An explicit argument now wins; one ID per atom, else one line naming it."""
+    atoms = water_box_27()
+    assert atoms.get_tags().any()
+    alone = np.arange(1, len(atoms) + 1)  # every atom its own molecule: nothing excluded
+    untagged = atoms.copy()
+    untagged.set_tags(0)
+    untagged.calc = LAMMPSCalculator(PPPM_27, molecule_ids=alone)
+    meant = untagged.get_potential_energy()
+    for carried in ("tags", "mol-id"):
+        a = atoms.copy()
+        if carried == "mol-id":
+            a.arrays["mol-id"] = a.get_tags()
+            a.set_tags(0)
+        a.calc = LAMMPSCalculator(PPPM_27, molecule_ids=alone)
+        assert a.get_potential_energy() == meant, carried  # (measured: to the last bit)
+    atoms.calc = LAMMPSCalculator(PPPM_27, molecule_ids=[1, 2])
+    with pytest.raises(ValueError, match=r"^LAMMPSCalculator: molecule_ids has shape \(2,\), "
+                                         r"the atoms are 81$"):
+        atoms.get_potential_energy()
+    for bad in ([[1, 2, 3]], [1.5, 2.0], ["1", "2"], [True, False]):
+        with pytest.raises(ValueError, match=r"^LAMMPSCalculator: molecule_ids must be one "
+                                             r"whole number per atom, got an array of shape"):
+            LAMMPSCalculator(PPPM_27, molecule_ids=bad)
+
+
+def test_numeric_arguments_name_themselves():
+    """``skin="abc"`` raised Python's bare "could not convert string to float"."""
+    with pytest.raises(TypeError, match=r"^LAMMPSCalculator: skin must be a finite number "
+                                        r">= 0 \(Å\), got 'abc'$"):
+        LAMMPSCalculator(PPPM_27, skin="abc")
+    for bad in (-1.0, float("nan")):
+        with pytest.raises(ValueError, match=r"^LAMMPSCalculator: skin must be a finite"):
+            LAMMPSCalculator(PPPM_27, skin=bad)
+    with pytest.raises(ValueError, match=r"^LAMMPSCalculator: threads must be a positive"):
+        LAMMPSCalculator(PPPM_27, threads="2")
+    assert LAMMPSCalculator(PPPM_27, skin=np.float32(1.5)).skin == 1.5
+
+
 @pytest.mark.parametrize("tags", ["all-one", "layers", "split"])
 def test_tags_that_group_atoms_unlike_the_bodies_are_refused(tags):
     """Before: all tags 1 excluded every intermolecular pair, and layer tags (as ASE's

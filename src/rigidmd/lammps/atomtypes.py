@@ -3,16 +3,17 @@
 Molecules (for ``neigh_modify exclude molecule/intra all``) are the bodies of
 the rigid dynamics the atoms are in (a ``mol-id`` array, tags or
 ``molecule_ids`` that group the atoms otherwise are refused); outside a
-dynamics they come from the ``mol-id`` array, else from non-zero tags, else
-from ``molecule_ids``.  Masses never enter a force call: atoms of one element
-share a type whatever their masses (H and D).
+dynamics they come from ``molecule_ids`` when the calculator was given them
+(an explicit argument wins over what the atoms carry), else from the ``mol-id``
+array, else from non-zero tags.  Masses never enter a force call: atoms of one
+element share a type whatever their masses (H and D).
 """
 
 import numpy as np
 
 from rigidmd.lammps.data import MASSLESS_SITE_MASS
 
-__all__ = ["lammps_molecule_ids", "lammps_types", "molecules_of"]
+__all__ = ["check_molecule_ids", "lammps_molecule_ids", "lammps_types", "molecules_of"]
 
 
 def lammps_types(atoms, atom_types):
@@ -56,20 +57,45 @@ def lammps_types(atoms, atom_types):
     return types, type_mass, labels
 
 
+def check_molecule_ids(molecule_ids, owner="LAMMPSCalculator"):
+    """A calculator's ``molecule_ids`` argument as an int64 array, or None.
+
+    Refused in one ``ValueError`` naming ``owner`` (the class): anything but one
+    whole number per atom (a 1-D sequence of integers, or of floats with whole
+    values; not booleans or text).  Its length is checked against the atoms at
+    each call, by :func:`molecules_of`.
+    """
+    if molecule_ids is None:
+        return None
+    ids = np.asarray(molecule_ids)
+    whole = ids.ndim == 1 and (
+        np.issubdtype(ids.dtype, np.integer)
+        or np.issubdtype(ids.dtype, np.floating) and bool(np.all(np.isfinite(ids)))
+        and bool(np.all(ids == np.round(ids))))
+    if not whole:
+        raise ValueError(f"{owner}: molecule_ids must be one whole number per atom, got an "
+                         f"array of shape {ids.shape} and dtype {ids.dtype}")
+    ids = ids.astype(np.int64)
+    ids.flags.writeable = False
+    return ids
+
+
 def molecules_of(atoms, molecule_ids, checked):
     """Molecule ID of each atom (1-based; <= 0: in no molecule) and where they came from.
 
     The bodies of a rigid dynamics the atoms are in come first: they are the
     molecules.  A ``mol-id`` array, non-zero tags or ``molecule_ids`` that group
     the atoms otherwise are refused (they would exclude pairs between bodies, or
-    count pairs inside one).  Without a rigid dynamics: ``mol-id``, else non-zero
-    tags, else ``molecule_ids``.
+    count pairs inside one).  Without a rigid dynamics: ``molecule_ids`` when
+    given (the calculator's explicit argument wins over what the atoms carry),
+    else ``mol-id``, else non-zero tags.  Given ``molecule_ids`` must have one ID
+    per atom, whatever the atoms carry.
 
     Parameters
     ----------
     atoms : ase.Atoms
     molecule_ids : numpy.ndarray, shape (n_atoms,), or None
-        The calculator's ``molecule_ids``.
+        The calculator's ``molecule_ids`` (see :func:`check_molecule_ids`).
     checked : object
         What the last call returned as ``checked`` (None at first): a grouping
         found to agree is not checked again at every step.
@@ -84,15 +110,15 @@ def molecules_of(atoms, molecule_ids, checked):
     """
     n = len(atoms)
     given, source = None, None
-    if "mol-id" in atoms.arrays:
-        given, source = np.asarray(atoms.arrays["mol-id"], dtype=np.int64), "mol-id array"
-    elif np.any(atoms.get_tags() != 0):
-        given, source = np.asarray(atoms.get_tags(), dtype=np.int64), "tags"
-    elif molecule_ids is not None:
+    if molecule_ids is not None:  # (the explicit argument, whatever the atoms carry)
         if molecule_ids.shape != (n,):
             raise ValueError(f"LAMMPSCalculator: molecule_ids has shape "
                              f"{molecule_ids.shape}, the atoms are {n}")
-        given, source = molecule_ids.astype(np.int64), "molecule_ids"
+        given, source = np.asarray(molecule_ids, dtype=np.int64), "molecule_ids"
+    elif "mol-id" in atoms.arrays:
+        given, source = np.asarray(atoms.arrays["mol-id"], dtype=np.int64), "mol-id array"
+    elif np.any(atoms.get_tags() != 0):
+        given, source = np.asarray(atoms.get_tags(), dtype=np.int64), "tags"
     bodies = next((np.asarray(c.body_ids, dtype=np.int64) for c in atoms.constraints
                    if getattr(c, "body_ids", None) is not None), None)
     if bodies is None:

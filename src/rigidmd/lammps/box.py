@@ -149,10 +149,12 @@ class LammpsBox:
         With the box plugin (see :mod:`rigidmd.lammps.boxplugin`): one
         ``rigidmd_box`` command (the new box and ``KSpace::setup()``; positions
         are written at the call, in LAMMPS's own images, and the step decides
-        whether to re-neighbour).  At the first new cell of an instance (the
-        plugin's ``fix rigidmd/box`` is taken in by a set-up), without the
-        plugin, or when an orthogonal box gets tilted: ``change_box`` and a
-        set-up run at the call.
+        whether to re-neighbour: when an atom moved by half the skin less the box
+        corners' motion, as under a barostat, or when the box itself moved by more
+        than half the skin since the last build, which atoms left in place need).
+        At the first new cell of an instance (the plugin's ``fix rigidmd/box`` is
+        taken in by a set-up), without the plugin, or when an orthogonal box gets
+        tilted: ``change_box`` and a set-up run at the call.
 
         The cell is rotated into LAMMPS's lower-triangular frame anew (a
         barostat that shears a general cell turns that frame a little at every

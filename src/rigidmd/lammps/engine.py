@@ -92,10 +92,16 @@ from ase.calculators.calculator import all_changes
 from rigidmd.core.checks import check_finite
 from rigidmd.ipi import IPICalculator
 from rigidmd.ipi.processes import descends_from as _descends_from
-from rigidmd.lammps.atomtypes import molecules_of
+from rigidmd.lammps.atomtypes import check_molecule_ids, molecules_of
 from rigidmd.lammps.box import reduce_tilt
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
-from rigidmd.lammps.inprocess import LAMMPSCalculator, check_kspace_parameters, lower_triangular
+from rigidmd.lammps.inprocess import (
+    LAMMPSCalculator,
+    check_atoms,
+    check_kspace_parameters,
+    check_skin,
+    lower_triangular,
+)
 from rigidmd.lammps.library import check_atom_types, flatten, mpich_prefix
 
 __all__ = ["LAMMPSEngine", "LAMMPS_IPI_BOHR", "LAMMPS_IPI_HARTREE", "answer_mismatch",
@@ -479,9 +485,10 @@ class LAMMPSEngine(IPICalculator):
         self.processes = _positive("processes", processes)
         self.threads = None if threads is None else _positive("threads", threads)
         self.calculator_options = dict(
-            atom_types=check_atom_types(atom_types, "LAMMPSEngine"), molecule_ids=molecule_ids,
+            atom_types=check_atom_types(atom_types, "LAMMPSEngine"),
+            molecule_ids=check_molecule_ids(molecule_ids, "LAMMPSEngine"),
             exclude_intramolecular=bool(exclude_intramolecular),
-            ase_constants=bool(ase_constants), skin=float(skin))
+            ase_constants=bool(ase_constants), skin=check_skin(skin, "LAMMPSEngine"))
         self.triclinic = triclinic
         self.launch_engine = bool(launch)
         self.workdir = None if workdir is None else Path(workdir)
@@ -795,14 +802,27 @@ class LAMMPSEngine(IPICalculator):
     # ------------------------------------------------------------ ASE
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         target = atoms if atoms is not None else self.atoms
-        molecules, source, self._grouping_checked = molecules_of(
-            target, self.calculator_options["molecule_ids"], self._grouping_checked)
+        try:
+            molecules, source, self._grouping_checked = molecules_of(
+                target, self.calculator_options["molecule_ids"], self._grouping_checked)
+        except ValueError as err:  # (LAMMPSCalculator's rule: named as ours)
+            raise ValueError(str(err).replace("LAMMPSCalculator:", "LAMMPSEngine:", 1)) \
+                from None
         signature = _checked_signature(target, None if source is None else molecules)
         try:
             cell, flips = self._lattice(target.cell.array)
         except ValueError as err:  # (LAMMPSCalculator's check of the cell: named as ours)
             raise ValueError(str(err).replace("LAMMPSCalculator:", "LAMMPSEngine:", 1)) \
                 from None
+        if signature != self._signature or not self.connected:
+            # A new engine: what its atoms cannot be is refused now, not by write_input's
+            # probe once the running engine is stopped and the k-space parameters pinned
+            # for its atoms are forgotten (a refused call leaves both as they were).
+            try:
+                check_atoms(target, self.commands, self.calculator_options["atom_types"])
+            except ValueError as err:
+                raise ValueError(str(err).replace("LAMMPSCalculator:", "LAMMPSEngine:", 1)) \
+                    from None
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
         # (at a flip fix rigidmd/ipi re-maps the atoms on up to 2 ranks; fix ipi cannot)
         restart_at_flip = self.engine_fix != "rigidmd/ipi" or self.processes > 2

@@ -37,8 +37,9 @@ molecules builds a new instance.
 Molecules (for ``neigh_modify exclude molecule/intra all``) are the bodies of
 the rigid dynamics the atoms are in (a ``mol-id`` array, tags or
 ``molecule_ids`` that group the atoms otherwise are refused); outside a
-dynamics they come from the ``mol-id`` array (ASE's ``lammps-data`` reader
-sets it), else from non-zero tags, else from ``molecule_ids``.
+dynamics they come from ``molecule_ids`` when given (the explicit argument
+wins), else from the ``mol-id`` array (ASE's ``lammps-data`` reader sets it),
+else from non-zero tags.
 
 Masses never enter a force call: atoms of one element share a type whatever
 their masses (H and D).  LAMMPS's warnings at set-up are passed on as Python
@@ -53,8 +54,13 @@ import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 from ase.stress import voigt_6_to_full_3x3_stress
 
-from rigidmd.core.checks import check_finite, copy_atoms, quick_check_state
-from rigidmd.lammps.atomtypes import lammps_molecule_ids, lammps_types, molecules_of
+from rigidmd.core.checks import check_finite, copy_atoms, quick_check_state, real_number
+from rigidmd.lammps.atomtypes import (
+    check_molecule_ids,
+    lammps_molecule_ids,
+    lammps_types,
+    molecules_of,
+)
 from rigidmd.lammps.box import lower_triangular
 from rigidmd.lammps.instance import LammpsInstance, chosen_kspace
 from rigidmd.lammps.library import (
@@ -66,7 +72,8 @@ from rigidmd.lammps.library import (
     load_lammps,
 )
 
-__all__ = ["LAMMPSCalculator", "check_kspace_parameters", "lower_triangular"]
+__all__ = ["LAMMPSCalculator", "check_atoms", "check_kspace_parameters", "check_skin",
+           "lower_triangular"]
 
 _COULOMB = ("coul", "kspace_style", "tip4p")
 #: LAMMPS's pressure components (xx yy zz xy xz yz) in ASE's Voigt order (xx yy zz yz xz xy).
@@ -80,6 +87,15 @@ def _threads(threads):
     return int(threads)
 
 
+def check_skin(skin, owner):
+    """The neighbour skin (Å) as a float: a finite number >= 0, else one error naming
+    ``skin`` and ``owner`` (TypeError for what is not a number, ValueError otherwise)."""
+    value = real_number(f"{owner}: skin", skin, "a finite number >= 0 (Å)")
+    if not (np.isfinite(value) and value >= 0):
+        raise ValueError(f"{owner}: skin must be a finite number >= 0 (Å), got {skin!r}")
+    return value
+
+
 def check_kspace_parameters(value, owner):
     """Refuse ``value`` unless it is one ``kspace_modify gewald ...`` command or None
     (``owner``: the class named in the message)."""
@@ -87,6 +103,45 @@ def check_kspace_parameters(value, owner):
                               or value.split()[:2] != ["kspace_modify", "gewald"]):
         raise ValueError(f"{owner}: kspace_parameters must be one "
                          f"'kspace_modify gewald ...' command or None, got {value!r}")
+
+
+def check_atoms(atoms, commands, atom_types):
+    """Refuse what LAMMPS cannot be given with ``commands``, before anything is set up.
+
+    No atoms, Coulomb interactions without charges, mixed periodicity, an element
+    without a type in ``atom_types`` and a flat or left-handed periodic cell are
+    refused in one ``ValueError`` (``LAMMPSCalculator: ...``).  A calculator checks
+    the atoms of a new instance (and :class:`~rigidmd.lammps.engine.LAMMPSEngine` those
+    of a new engine) with it before it stops the one it has, so that a refused call
+    leaves the running instance and the pinned k-space parameters as they were.
+
+    Parameters
+    ----------
+    atoms : ase.Atoms
+    commands : list of str
+        The interaction commands.
+    atom_types : dict of str to int or None
+        As :func:`rigidmd.lammps.atomtypes.lammps_types` takes it.
+
+    Returns
+    -------
+    tuple
+        What :func:`~rigidmd.lammps.atomtypes.lammps_types` returns for the atoms.
+    """
+    if len(atoms) == 0:
+        raise ValueError("LAMMPSCalculator: no atoms (LAMMPS needs at least one)")
+    charges = atoms.get_initial_charges()
+    if any(word in command for command in commands for word in _COULOMB) \
+            and not np.any(charges):
+        raise ValueError("LAMMPSCalculator: the commands have Coulomb interactions but the "
+                         "atoms have no charges; set them with atoms.set_initial_charges()")
+    if atoms.pbc.any() and not atoms.pbc.all():
+        raise ValueError(f"LAMMPSCalculator: mixed periodicity {atoms.pbc.tolist()}; "
+                         "make the cell periodic in all or no directions")
+    types = lammps_types(atoms, atom_types)
+    if atoms.pbc.all():
+        lower_triangular(atoms.cell.array)  # (refuses a flat or left-handed cell)
+    return types
 
 
 class LAMMPSCalculator(Calculator):
@@ -103,8 +158,9 @@ class LAMMPSCalculator(Calculator):
         LAMMPS type of each element; default: the elements numbered 1, 2, ...
         in order of first appearance in the atoms.
     molecule_ids : array_like of int, shape (n_atoms,), optional
-        Molecule of each atom, when the atoms have neither a ``mol-id`` array
-        nor tags.
+        Molecule of each atom; given, they are the molecules whatever the atoms
+        carry (a ``mol-id`` array or tags), except in a rigid dynamics, whose
+        bodies they must group alike.
     exclude_intramolecular : bool, default True
         ``neigh_modify exclude molecule/intra all``: no interactions inside a
         molecule, so energy, forces and stress equal native LAMMPS with that
@@ -114,7 +170,8 @@ class LAMMPSCalculator(Calculator):
         instead of LAMMPS's ``metal`` one (2.4e-8 apart); see
         :mod:`rigidmd.lammps.library`.  The default reproduces native LAMMPS.
     skin : float, default 2.0
-        Neighbour skin (Å), LAMMPS's ``neighbor`` default for metal units.
+        Neighbour skin (Å, finite and >= 0), LAMMPS's ``neighbor`` default for
+        metal units.
     cmdargs : sequence of str, optional
         LAMMPS command-line arguments (default: no log, no screen output).
     threads : int, optional
@@ -158,10 +215,10 @@ class LAMMPSCalculator(Calculator):
         if not any(c.split()[0] == "pair_style" for c in self.commands):
             raise ValueError("LAMMPSCalculator: the commands need a pair_style")
         self.atom_types = check_atom_types(atom_types)
-        self.molecule_ids = None if molecule_ids is None else np.asarray(molecule_ids)
+        self.molecule_ids = check_molecule_ids(molecule_ids)
         self.exclude_intramolecular = bool(exclude_intramolecular)
         self.ase_constants = bool(ase_constants)
-        self.skin = float(skin)
+        self.skin = check_skin(skin, "LAMMPSCalculator")
         self.cmdargs = cmdargs
         self.threads = None if threads is None else _threads(threads)
         if self.threads is not None:
@@ -225,25 +282,18 @@ class LAMMPSCalculator(Calculator):
         return (len(atoms), atoms.numbers.tobytes(), atoms.get_initial_charges().tobytes(),
                 tuple(atoms.pbc), None if molecules is None else molecules.tobytes())
 
-    def _check(self, atoms):
-        if len(atoms) == 0:
-            raise ValueError("LAMMPSCalculator: no atoms (LAMMPS needs at least one)")
-        charges = atoms.get_initial_charges()
-        if any(word in command for command in self.commands for word in _COULOMB) \
-                and not np.any(charges):
-            raise ValueError("LAMMPSCalculator: the commands have Coulomb interactions but the "
-                             "atoms have no charges; set them with atoms.set_initial_charges()")
-        if atoms.pbc.any() and not atoms.pbc.all():
-            raise ValueError(f"LAMMPSCalculator: mixed periodicity {atoms.pbc.tolist()}; "
-                             "make the cell periodic in all or no directions")
-
     def _start(self, atoms, molecules, signature):
-        """A new LAMMPS instance for ``atoms`` (see :mod:`rigidmd.lammps.instance`)."""
+        """A new LAMMPS instance for ``atoms`` (see :mod:`rigidmd.lammps.instance`).
+
+        The atoms are checked (:func:`check_atoms`) before the running instance is
+        closed and the pinned k-space parameters are forgotten: a refused call leaves
+        the calculator as it was.
+        """
+        types = check_atoms(atoms, self.commands, self.atom_types)
         self._close()
         if self._pinned_for is not None and self._pinned_for != signature:
             # Other atoms (not a restart after an error): LAMMPS chooses for them anew.
             self._kspace_parameters = self._pinned_for = None
-        types = lammps_types(atoms, self.atom_types)
         if molecules is None and self.exclude_intramolecular:
             warnings.warn("LAMMPSCalculator: the atoms carry no molecules (no mol-id "
                           "array, no tags, no molecule_ids): no pair is excluded",
@@ -313,7 +363,7 @@ class LAMMPSCalculator(Calculator):
         signature = self._signature_of(atoms, None if source is None else molecules)
         instance = self._instance
         if instance is None or signature != instance.signature:
-            self._check(atoms)  # (what it checks is in the signature: once per instance)
+            # (what is checked is in the signature: once per instance)
             instance = self._start(atoms, molecules, signature)
         elif atoms.pbc.all() and not np.array_equal(atoms.cell.array, instance.box.cell):
             # (see rigidmd.lammps.box: the box plugin, or change_box and a set-up)

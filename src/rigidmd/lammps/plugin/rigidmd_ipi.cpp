@@ -18,7 +18,10 @@
 //   * the box is set, and KSpace::setup() called, only when the cell differs from the
 //     last one (the lower corner stays; positions are taken relative to it), on the path
 //     of LAMMPS's own barostats (the fix declares a changing box, so the neighbour check
-//     watches the box corners and a re-neighbouring step resets bins and cut-offs);
+//     watches the box corners and a re-neighbouring step resets bins and cut-offs), and
+//     the step re-neighbours in any case when the box has moved by more than half the
+//     skin since the last build (atoms the server leaves where they are do not move for
+//     LAMMPS's check; see rigidmd::box_moved_far in rigidmd_box.cpp);
 //   * energy and virial are tallied only when the server asks (see RMDTALLY below);
 //   * the full virial (3 x 3) is sent, converted with the server's Bohr and Hartree
 //     (`bohr`, `hartree`, default ASE's CODATA 2014 values), so the numbers come back to
@@ -86,6 +89,11 @@
 
 extern "C" int rigidmd_register_styles(void *lmp);
 
+namespace rigidmd {  // rigidmd_box.cpp
+void box_of(LAMMPS_NS::Domain *domain, double *box);
+bool box_moved_far(const double *held, const double *now, double skin);
+}    // namespace rigidmd
+
 namespace {
 
 using namespace LAMMPS_NS;
@@ -99,9 +107,14 @@ class FixRigidmdIPI : public Fix {
  public:
   FixRigidmdIPI(LAMMPS *lmp, int narg, char **arg);
   ~FixRigidmdIPI() override;
-  int setmask() override { return INITIAL_INTEGRATE | PRE_EXCHANGE | FINAL_INTEGRATE; }
+  int setmask() override
+  {
+    return INITIAL_INTEGRATE | PRE_EXCHANGE | POST_NEIGHBOR | FINAL_INTEGRATE;
+  }
   void init() override;
   void setup(int) override;
+  void setup_post_neighbor() override { rigidmd::box_of(domain, held); }
+  void post_neighbor() override { rigidmd::box_of(domain, held); }
   void initial_integrate(int) override;
   void pre_exchange() override;
   void final_integrate() override;
@@ -125,6 +138,7 @@ class FixRigidmdIPI : public Fix {
   bool pending = false;          // positions received, forces not yet sent
   double info[11];               // request, flags, h (Bohr, row-major h = cell^T)
   double last[6];                // the box last set: lx ly lz xy xz yz (Å)
+  double held[9];                // the box of the last neighbour build (rigidmd::box_of)
   bool flipped = false;          // the box's basis flipped at this step (see set_box)
   std::vector<double> positions, local, total, gathered;
   std::vector<int> counts, displs;  // rank 0's Gatherv layout
@@ -174,13 +188,14 @@ FixRigidmdIPI::FixRigidmdIPI(LAMMPS *lmp, int narg, char **arg) : Fix(lmp, narg,
     error->all(FLERR, "Fix rigidmd/ipi: port {} is not in 1025-65535", port);
   if (!inet && address.size() > 90) error->all(FLERR, "Fix rigidmd/ipi: socket name too long");
   box_change = BOX_CHANGE_SIZE | BOX_CHANGE_SHAPE;
-  force_reneighbor = 1;  // at a flip of the box's basis (set_box)
+  force_reneighbor = 1;  // at a flip of the box's basis, or a box moved far (set_box)
   next_reneighbor = -1;
   pe_id = std::string(id) + "_pe";
   press_id = std::string(id) + "_virial";
   modify->add_compute(pe_id + " all pe");
   modify->add_compute(press_id + " all pressure NULL virial");
   for (double &v : last) v = NAN;
+  for (double &v : held) v = NAN;
 }
 
 FixRigidmdIPI::~FixRigidmdIPI()
@@ -460,6 +475,12 @@ void FixRigidmdIPI::set_box(const double *h)
   domain->set_local_box();
   if (force->kspace) force->kspace->setup();
   for (int k = 0; k < 6; ++k) last[k] = box[k];
+  // Atoms the server leaves where they are do not move for LAMMPS's neighbour check, which
+  // then keeps stale lists and atoms out of the box: re-neighbour at this step when the box
+  // moved by more than half the skin since the last build (rigidmd_box.cpp).
+  double now[9];
+  rigidmd::box_of(domain, now);
+  if (rigidmd::box_moved_far(held, now, neighbor->skin)) next_reneighbor = update->ntimestep;
 }
 
 void FixRigidmdIPI::initial_integrate(int)
