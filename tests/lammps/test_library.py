@@ -1,4 +1,5 @@
-"""The mpich wheel's files are found wherever pip put them (not only under sys.prefix)."""
+"""The mpich wheel's files are found wherever pip put them (not only under sys.prefix),
+and loading it leaves the process's signals as they were."""
 
 import sys
 from importlib import metadata
@@ -51,3 +52,19 @@ def test_no_mpich_falls_back_to_the_interpreter_prefix(monkeypatch):
 
     monkeypatch.setattr(metadata, "files", missing)
     assert library.mpich_prefix() == sys.prefix
+
+
+def test_a_hang_up_still_ends_a_script_that_loaded_lammps():
+    """The mpich wheel's UCX installs a C handler for SIGHUP (its debug signal) when MPI
+    starts; a script that made a LAMMPS instance then outlived a closed terminal (measured:
+    still running 5 s after SIGHUP).  load_lammps puts the disposition back."""
+    import signal
+    import subprocess
+
+    child = ("import os, signal\nfrom rigidmd.lammps.library import load_lammps\n"
+             "lmp = load_lammps()\nos.kill(os.getpid(), signal.SIGHUP)\n"
+             "import time; time.sleep(10)\nprint('survived')\n")
+    result = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == -signal.SIGHUP, (result.returncode, result.stdout,
+                                                 result.stderr[-500:])

