@@ -216,3 +216,53 @@ def test_resume_without_a_state_file_says_where_it_comes_from(tmp_path):
                                          r"when Ctrl-C, .*\); relax the atoms as they are "
                                          r"without resume$"):
         relax(atoms, state_file=tmp_path / "none.npz", resume=True)
+
+
+@pytest.mark.parametrize("stop", ["steps", "observer"])
+def test_a_state_written_at_step_0_is_continued(tmp_path, monkeypatch, stop):
+    """A relaxation stopped at step 0 (``steps=0``, or an observer that raised there) wrote
+    the preconditioner's scales not yet estimated as NaN, and its own ``resume=True`` then
+    refused the file as damaged ("opt.precon.scales holds a non-finite number").  Now they
+    are marked not estimated (``scales_known``), the file is read, and the continuation is
+    the uninterrupted relaxation: the same positions bit for bit, in the same force calls in
+    all (6 waters: 44 steps, measured)."""
+    counted = tip3p_calls(monkeypatch)
+    atoms = water_cluster(6, seed=2)
+    atoms.calc = TIP3P(rc=20.0)
+    whole = relax(atoms, fmax=0.01)
+    reference, calls = atoms.positions.copy(), len(counted)
+
+    state = tmp_path / "relax.state.npz"
+    atoms = water_cluster(6, seed=2)
+    atoms.calc = TIP3P(rc=20.0)
+    counted.clear()
+    if stop == "steps":
+        assert not relax(atoms, fmax=0.01, steps=0, state_file=state).converged
+    else:
+        def observer(step, energy, fmax):
+            raise RuntimeError("stop")
+
+        with pytest.raises(RuntimeError, match="stop"):
+            relax(atoms, fmax=0.01, state_file=state, observers=[observer])
+    with np.load(state) as saved:
+        assert not saved["opt.precon.scales_known"].any()
+        assert np.isfinite(saved["opt.precon.scales"]).all()
+    second = relax(atoms, fmax=0.01, state_file=state, resume=True)
+    assert second.converged and second.steps == whole.steps and len(counted) == calls
+    np.testing.assert_array_equal(atoms.positions, reference)
+
+
+def test_a_nan_among_the_estimated_scales_is_still_refused(tmp_path):
+    """Not estimated is said by ``scales_known``; a NaN in the scales is damage, refused."""
+    state = tmp_path / "relax.state.npz"
+    atoms = water_cluster(4, seed=0)
+    atoms.calc = TIP3P(rc=20.0)
+    relax(atoms, fmax=0.01, steps=2, state_file=state)
+    with np.load(state) as saved:
+        arrays = dict(saved)
+    assert arrays["opt.precon.scales_known"].all()
+    arrays["opt.precon.scales"][1] = np.nan
+    np.savez(state, **arrays)
+    with pytest.raises(ValueError, match=r"a damaged relaxation state \(opt.precon.scales "
+                                         r"holds a non-finite number\)"):
+        relax(atoms, fmax=0.01, state_file=state, resume=True)

@@ -126,3 +126,45 @@ def test_the_preconditioner_s_scales_are_the_same_for_every_image_of_a_molecule(
     np.testing.assert_allclose(scales[0], scales[1], rtol=1e-9)
     assert energies[0] == pytest.approx(energies[1], abs=1e-8)
     assert scales[0][1] == scales[0][0] > MU_FLOOR
+
+
+def test_a_cell_relaxation_rebuilds_the_matrix_alike_for_wrapped_and_whole_molecules(
+        monkeypatch):
+    """With the cell relaxing, the matrix was rebuilt when a centre moved ``recompute r_NN``
+    in the lab frame, where a strain moves a centre far from the origin further: wrapped and
+    whole molecules (periodic images of one structure) were rebuilt at other steps and
+    relaxed apart (27 rigid triatomics, Lennard-Jones, cell="full": rebuilt at steps 1, 1, 7,
+    11, 15, ... whole and 1, 1, 5, 8, 11, ... wrapped, energies 5.2e-3 eV apart within 30
+    steps, ending in different minima).  Now a centre's move is measured against the
+    lattice, plus the strain times r_NN: the same steps, energies within round-off (4.9e-10
+    eV apart over 30 steps on 2.3e5 eV, measured)."""
+    from ase.calculators.lj import LennardJones
+
+    from rigidmd.relax.precon import RigidPrecon
+
+    rng = np.random.default_rng(0)
+    sites = 4.2 * np.array([[i, j, k] for i in range(3) for j in range(3) for k in range(3)])
+    shape = np.array([[0, 0, 0], [1.1, 0, 0], [-0.3, 1.0, 0.0]])
+    positions = [s + shape @ np.linalg.qr(rng.normal(size=(3, 3)))[0].T for s in sites]
+    base = Atoms("NeArAr" * 27, positions=np.concatenate(positions),
+                 cell=[[12.6, 0, 0], [3.0, 12.6, 0], [1.5, 2.0, 12.6]], pbc=True)
+    bodies = [[3 * b, 3 * b + 1, 3 * b + 2] for b in range(27)]
+    assemble = RigidPrecon._assemble_at
+    runs = []
+    for wrap in (False, True):
+        atoms = base.copy()
+        if wrap:
+            atoms.wrap()
+        atoms.calc = LennardJones(sigma=2.8, epsilon=0.01, rc=5.5, smooth=True)
+        energies, built = [], []
+
+        def counted(self, *args, built=built, energies=energies):
+            built.append(len(energies))
+            return assemble(self, *args)
+
+        monkeypatch.setattr(RigidPrecon, "_assemble_at", counted)
+        relax(atoms, bodies, fmax=1e-3, cell="full", steps=30,
+              observers=[lambda step, energy, fmax, energies=energies: energies.append(energy)])
+        runs.append((np.array(energies), built))
+    assert runs[0][1] == runs[1][1] and len(runs[0][1]) > 3
+    np.testing.assert_allclose(runs[0][0], runs[1][0], rtol=0, atol=1e-8)

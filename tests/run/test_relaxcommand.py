@@ -798,3 +798,67 @@ def test_the_relaxation_log_keeps_up_with_its_trajectory(tmp_path, monkeypatch):
     monkeypatch.setattr(RigidFilter, "get_forces", get_forces)
     assert relax_only(relax_config(tmp_path, steps=2000), io.StringIO()) == 0
     assert max(seen) > 10  # lines were on disk while the relaxation ran
+
+
+def test_a_relaxation_stopped_at_step_0_resumes_exactly_and_its_log_continues(
+        tmp_path, monkeypatch):
+    """SIGTERM in the first force call (step 0) of ``rigidmd relax``, then --resume: the state
+    file written at step 0 was refused ("the optimizer's memory starts afresh: ... a damaged
+    relaxation state", its preconditioner's scales not yet estimated written as NaN) and
+    relax.log got a second header and step 0 twice.  Now the continuation is the
+    uninterrupted relaxation, frame for frame, in the same force calls, and the log reads as
+    one relaxation: one header, the steps 0, 1, 2, ... each once."""
+    import io
+    import signal
+
+    from ase.io import read
+
+    from rigidmd.run.relaxcommand import relax_only
+
+    reference = tmp_path / "reference"
+    reference.mkdir()
+    calls = tip3p_calls(monkeypatch)
+    assert relax_only(relax_config(reference), io.StringIO()) == 0
+    uninterrupted, uninterrupted_calls = read(reference / "out" / "relax.traj", ":"), len(calls)
+    calls.clear()
+
+    raw = relax_config(tmp_path)
+    signal_at_call(monkeypatch, 1, signal.SIGTERM)
+    assert relax_only(raw, io.StringIO(), config_path="relax.yaml") == 143
+    assert len(read(tmp_path / "out" / "relax.traj", ":")) == 1
+    assert (tmp_path / "out" / "relax.state.npz").exists()
+    monkeypatch.setattr(RigidFilter, "get_forces", signal_at_call.original)
+    out = io.StringIO()
+    assert relax_only(raw, out, mode="resume") == 0
+    assert "continuing with the optimizer's memory" in out.getvalue(), out.getvalue()
+    resumed = read(tmp_path / "out" / "relax.traj", ":")
+    assert len(resumed) == len(uninterrupted) and len(calls) == uninterrupted_calls
+    for a, b in zip(uninterrupted, resumed, strict=True):
+        np.testing.assert_array_equal(a.positions, b.positions)
+    lines = (tmp_path / "out" / "relax.log").read_text().splitlines()
+    assert len([line for line in lines if "Step" in line]) == 1
+    steps = [int(line.split()[1]) for line in lines if "Step" not in line]
+    assert steps == list(range(len(resumed))), steps
+
+
+def test_a_converged_rigidmd_relax_is_complete_for_its_resume(tmp_path):
+    """``rigidmd relax`` (water_cluster(6, seed=6), fmax 0.02) said converged with a torque
+    of 0.0218 eV/Å (|τ|/ℓ: the rotation rows' force, J_rᵀτ/ℓ, read 0.0188), and --resume,
+    whose check is a new filter of the last frame, took another step and appended a frame.
+    Now the relaxation stops by that same reading, and --resume says it is complete."""
+    import io
+
+    from ase.io import read
+
+    from rigidmd.run.relaxcommand import relax_only
+
+    raw = relax_config(tmp_path, structure="{builtin: water_cluster, n_molecules: 6, "
+                                           "seed: 6}")
+    raw["calculator"]["options"]["rc"] = 20.0
+    raw["relax"]["fmax"] = 0.02
+    assert relax_only(raw, io.StringIO()) == 0
+    frames = len(read(tmp_path / "out" / "relax.traj", ":"))
+    out = io.StringIO()
+    assert relax_only(raw, out, mode="resume") == 0
+    assert "is complete: it converged at step" in out.getvalue(), out.getvalue()
+    assert len(read(tmp_path / "out" / "relax.traj", ":")) == frames

@@ -10,7 +10,9 @@ try:  # ASE >= 3.24
 except ImportError:  # pragma: no cover - ASE 3.23
     from ase.optimize.optimize import OptimizableAtoms as _Optimizable
 
-__all__ = ["AtomsFacade"]
+__all__ = ["AtomsFacade", "OptimizableFilter"]
+
+OptimizableFilter = _Optimizable  #: ASE's optimizable of a filter (its class by version)
 
 
 class AtomsFacade:

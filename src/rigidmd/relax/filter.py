@@ -22,9 +22,16 @@ row 0, when the optimizer next reads the coordinates (the rotation vector's
 chart stays well conditioned: the right Jacobian :math:`J_r(\varphi)` has
 singular values between :math:`\sin(|\varphi|/2)/(|\varphi|/2) \ge 0.76`
 and 1 below 2.5 rad).  The row jumps then: an optimizer's memory of earlier
-steps no longer fits it (:class:`rigidmd.relax.lbfgs.RigidLBFGS` clears its
-memory; a line search of ASE's BFGSLineSearch failed after one on a water
-dimer at 2 rad, which is why the angle is 2.5, not less).  The
+steps no longer fits it.  :class:`rigidmd.relax.lbfgs.RigidLBFGS` clears its
+memory, and :func:`relax` clears the memory of ASE's optimizers before the
+step that reads the new rows (BFGS's Hessian, the pairs of LBFGS and
+PreconLBFGS, the velocities of FIRE and MDMin, GPMin's training points,
+BFGSLineSearch's ``reset()``).  A plain ASE optimizer on a ``RigidFilter``
+(``BFGS(RigidFilter(atoms))``) is not told: it takes the jump for a step,
+and the line search of BFGSLineSearch can fail after it ("LineSearch
+failed!" on a water dimer turned 2.9 rad; with an anchor angle of 2 rad,
+on one at 2 rad, which is why the angle is 2.5, not less): relax such a
+start with :func:`relax`.  The
 body-frame torque :math:`\tau_b` (eV) becomes a force in eV/Å through the
 body's length :math:`\ell_b`, the root-mean-square distance of its atoms
 from its centre of mass (0.75 Å for a TIP3P water): a torque :math:`\tau`
@@ -32,13 +39,29 @@ reads as the force :math:`\tau/\ell_b` on an atom at the body's typical
 radius.  For a linear body the component about its axis is no coordinate:
 its gradient is 0 and its value is ignored (2 rotational degrees of freedom).
 
-Convergence, as every ASE optimizer judges it, is every row's norm below
-``fmax``: :math:`|F_b| < f_\max` for the force on each body,
-:math:`|J_r^\mathsf{T}\tau_b|/\ell_b < f_\max` for its torque, the force on
-each free atom, and with the cell :math:`|g_{\mathrm{cell}}| < f_\max` per
-row of the cell gradient (:func:`rigidmd.relax.cell.cell_gradient`, eV per
-``cell_factor``).  Massless atoms (the M site of four-site water) are placed
-rigidly with their body and the force on them enters its force and torque.
+Convergence is every row's norm below ``fmax`` in the chart anchored at the
+current structure (:meth:`RigidFilter.force_norms`: what a new
+``RigidFilter`` of the structure reads, whatever the chart the optimizer
+came by): :math:`|F_b| < f_\max` for the force on each body,
+:math:`|\tau_b|/\ell_b < f_\max` for its torque, the force on each free atom,
+and with the cell :math:`|g_{\mathrm{cell}}| < f_\max` per row of the cell
+gradient at :math:`D = 1` (:func:`rigidmd.relax.cell.cell_gradient`, eV per
+``cell_factor``).  The rotation rows' own force, :math:`J_r^\mathsf{T}\tau_b/
+\ell_b`, reads as low as 0.76 :math:`|\tau_b|/\ell_b` below 2.5 rad, so ASE's
+test of the rows (every row's norm below ``fmax``) would stop with a torque
+above it.  The rows' forces stay minus the gradient of the energy in these
+coordinates (what the optimizers' steps and line searches need); the
+criterion is the view's: :meth:`RigidFilter.__ase_optimizable__` gives ASE's
+optimizers an optimizable whose ``converged(gradient, fmax)`` is
+:meth:`RigidFilter.converged` at the current coordinates, which every
+optimizer of :mod:`ase.optimize` that keeps ASE's test calls (BFGS, LBFGS,
+FIRE, BFGSLineSearch, GPMin, MDMin, :class:`~rigidmd.relax.lbfgs.RigidLBFGS`).
+ASE's ``PreconLBFGS`` and ``PreconFIRE`` test the rows' norms themselves
+(``get_forces``): on their own they may stop with a torque up to 1/0.76 of
+``fmax``; :func:`relax` gives them the view's test.  The column ``fmax`` of
+ASE's log is the rows' largest norm (RigidLBFGS logs the view's).  Massless
+atoms (the M site of four-site water) are placed rigidly with their body and
+the force on them enters its force and torque.
 """
 
 from dataclasses import dataclass
@@ -55,11 +78,12 @@ from rigidmd.core.dof import RigidBodyDOF
 from rigidmd.core.forces import ForceEvaluator
 from rigidmd.core.link import BodyLink
 from rigidmd.core.model import BodyModel, describe_atoms
+from rigidmd.core.quaternion import rotate_inverse
 from rigidmd.core.record import StepRecord
 from rigidmd.relax import _numba
 from rigidmd.relax import cell as relaxcell
 from rigidmd.relax import optimizerstate as relaxstate
-from rigidmd.relax.facade import AtomsFacade
+from rigidmd.relax.facade import AtomsFacade, OptimizableFilter
 from rigidmd.relax.rotationvector import right_jacobian_transpose, rotation_quaternion
 from rigidmd.relax.stops import Interrupt, Interrupted, RelaxationFailed, WholeStep, failed
 
@@ -221,9 +245,11 @@ class RigidFilter(AtomsFacade):
         """The generalized coordinates, shape (n, 3) (Å; the cell rows dimensionless × c).
 
         A body turned by more than :data:`ANCHOR_ANGLE` from its reference is
-        re-anchored here (its reference becomes its orientation, its rows 0),
-        when the optimizer reads the coordinates at the start of a step, never
-        between the trial points of a line search.
+        re-anchored here (its reference becomes its orientation, its rows 0;
+        :attr:`reanchored` counts them), when the optimizer reads the
+        coordinates at the start of a step, never between the trial points of
+        a line search.  An optimizer that remembers earlier steps must forget
+        them then (:func:`relax` makes ASE's do so; see the module docstring).
         """
         self._reanchor()
         return self._x.copy()
@@ -402,9 +428,40 @@ class RigidFilter(AtomsFacade):
         cached = self._cached().get("forces")
         if cached is not None:
             return cached.copy()
-        out = self._generalized_forces()
-        self._remember(forces=out.copy(), **self._energies())
+        out, norms = self._generalized_forces()
+        self._remember(forces=out.copy(), norms=norms, **self._energies())
         return out
+
+    def force_norms(self):
+        r"""Each row's generalized force in the chart anchored here, shape (n,) (eV/Å).
+
+        What a new ``RigidFilter`` of the current structure reads as each row's
+        norm: :math:`|F_b|` (lab frame) for a body's centre, :math:`|\tau_b|/\ell_b`
+        for its rotation (the torque's component about a linear body's axis
+        left out), :math:`|f|` for a free atom, and a row of the cell gradient at
+        :math:`D = 1`; 0 for what ``FixAtoms`` holds.  The rows of :meth:`get_forces`
+        differ from these by the chart: a rotation row is :math:`J_r^\mathsf{T}\tau_b
+        /\ell_b`, down to 0.76 of it below 2.5 rad.  No force call where the
+        forces are known.
+        """
+        norms = self._cached().get("norms")
+        if norms is None:
+            self.get_forces()
+            norms = self._cached().get("norms")
+        if norms is None:  # forces of a state written before the norms were kept
+            out, norms = self._generalized_forces()
+            self._remember(forces=out, norms=norms)
+        return norms.copy()
+
+    def converged(self, fmax):
+        """Whether every row of :meth:`force_norms` is below ``fmax`` (eV/Å): the criterion
+        of :func:`relax`, and of ASE's optimizers that call their optimizable's test."""
+        return bool(len(self._x) == 0 or self.force_norms().max() < fmax)
+
+    def __ase_optimizable__(self):
+        """ASE's view of a filter, whose ``converged(gradient, fmax)`` is :meth:`converged`
+        at the current coordinates (the gradient ASE passes is the one there)."""
+        return _RigidOptimizable(self)
 
     def _energies(self):
         """The energies the force call computed with the forces (no further call), as
@@ -434,13 +491,25 @@ class RigidFilter(AtomsFacade):
         out[self._slices[2]] = record.f if fixed_cell else record.f @ D
         out[self._slices[0]][self._fixed_bodies] = 0.0
         out[self._slices[2]][self._fixed_free] = 0.0
+        # The rows' norms in the chart anchored here (phi = 0, D = 1): the convergence test.
+        norms = np.empty(len(out))
+        body_torque = rotate_inverse(q, tau)
+        body_torque[model.linear, 0] = 0.0  # about a linear body's axis: no coordinate
+        norms[self._slices[0]] = np.where(self._fixed_bodies, 0.0, np.linalg.norm(F, axis=1))
+        norms[self._slices[1]] = np.where(self._fixed_bodies, 0.0, np.linalg.norm(
+            body_torque, axis=1) / np.where(self.lengths > 0, self.lengths, 1.0))
+        norms[self._slices[2]] = np.where(self._fixed_free, 0.0,
+                                          np.linalg.norm(record.f, axis=1))
         if self.mode is not None:
             # The barostats' molecular virial (symmetric) and its antisymmetric part, half
             # the bodies' total torque: the full virial of a deformation at fixed orientations.
             W = record.virial - obs.torque_virial(tau)
             out[self._slices[3]] = -relaxcell.cell_gradient(
                 W, record.volume, D, self.scalar_pressure, self.mode, self.cell_factor)
-        return out
+            norms[self._slices[3]] = np.linalg.norm(relaxcell.cell_gradient(
+                W, record.volume, np.eye(3), self.scalar_pressure, self.mode,
+                self.cell_factor), axis=1)
+        return out, norms
 
     # ------------------------------------------------------------ what ASE asks of a filter
     def __len__(self):
@@ -448,6 +517,17 @@ class RigidFilter(AtomsFacade):
 
     def get_global_number_of_atoms(self):
         return len(self._x)
+
+
+class _RigidOptimizable(OptimizableFilter):
+    """ASE's optimizable of a :class:`RigidFilter`: ASE's filter one, with the view's
+    convergence test (:meth:`RigidFilter.converged`)."""
+
+    def converged(self, gradient, fmax):
+        view = getattr(self, "filterobj", None)
+        if view is None:  # ASE 3.23: OptimizableAtoms
+            view = self.atoms
+        return view.converged(fmax)
 
 
 def _check_cell(atoms):
@@ -545,7 +625,9 @@ class Relaxation:
     energy : float
         Final potential energy (eV), without :math:`pV`.
     fmax : float
-        Largest generalized force left (eV/Å).
+        Largest generalized force left (eV/Å): the largest of
+        :meth:`RigidFilter.force_norms`, the convergence test's, which a new
+        ``RigidFilter`` of the relaxed structure reads as its rows' largest norm.
     """
 
     converged: bool
@@ -575,7 +657,7 @@ def optimizer_class(name):
 
 def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", cell=False,
           scalar_pressure=0.0, trajectory=None, logfile=None, observers=(),
-          append_trajectory=False, state_file=None, resume=False, first_step=0,
+          append_trajectory=False, state_file=None, resume=False, first_step=None,
           state_label=None, **kwargs) -> Relaxation:
     """Relax the rigid bodies of ``atoms`` (and the cell) in place with an ASE optimizer.
 
@@ -586,7 +668,9 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
     bodies : optional
         Body specification (:meth:`rigidmd.RigidBodies.resolve`).
     fmax : float, default 0.05
-        Largest generalized force at convergence (eV/Å; see :class:`RigidFilter`).
+        Largest generalized force at convergence (eV/Å): every row of
+        :meth:`RigidFilter.force_norms` below it (every body's force and
+        torque over its length, ``|τ_b|/ℓ_b``), with every optimizer.
     steps : int, default 1000
         Optimizer steps allowed.
     optimizer : str or ase.optimize.Optimizer subclass, default "RigidLBFGS"
@@ -595,7 +679,12 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         BFGS preconditioned by :class:`rigidmd.relax.precon.RigidPrecon`
         (O(n) per step, independent of the number of BLAS threads).
         ``PreconLBFGS`` and ``PreconFIRE`` (ASE's) get a ``RigidPrecon``
-        unless ``precon`` is given.
+        unless ``precon`` is given.  An ASE optimizer's memory of earlier
+        steps is cleared when a body is re-anchored (its rows jump;
+        :data:`ANCHOR_ANGLE`), before the step that reads the new rows
+        (``reset()`` where it has one, else ``initialize()``; a class of your
+        own gets the same); RigidLBFGS clears its own.  Whatever the
+        optimizer, convergence is the view's test (:meth:`RigidFilter.converged`).
     cell, scalar_pressure :
         As for :class:`RigidFilter` (pressure in eV/Å³).
     trajectory, logfile : str or file, optional
@@ -603,8 +692,9 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
     observers : sequence of callables, optional
         Each called after every step as ``observer(step, energy, fmax)``
         (step of this call, energy in eV with :math:`pV`, largest generalized
-        force in eV/Å; no extra force call); an exception it raises stops
-        the relaxation after the step's trajectory frame.
+        force in eV/Å, of :meth:`RigidFilter.force_norms`; no extra force
+        call); an exception it raises stops the relaxation after the step's
+        trajectory frame.
     append_trajectory : bool, default False
         Append to ``trajectory`` (continuing a relaxation) instead of replacing it.
     state_file : str or pathlib.Path, optional
@@ -618,10 +708,12 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
         Continue from ``state_file``, written at ``atoms``' positions by this
         optimizer: the steps are those the uninterrupted relaxation would have
         taken (ValueError when it does not match the atoms).
-    first_step : int, default 0
-        Steps an earlier part of this relaxation took (a continued one): the
-        log numbers its steps from there, with no second header and no second
-        line for the starting point, which the earlier part logged last.
+    first_step : int, optional
+        Steps an earlier part of this relaxation took: given (0 included: a
+        part stopped at its step 0), this call continues it; the log numbers
+        its steps from there, with no second header and no second line for
+        the starting point, which the earlier part logged last (nor a second
+        call of the observers there).  None: a new relaxation, from step 0.
     state_label : str, optional
         Text recorded in the state file, which ``resume=True`` requires to be
         the same (ValueError otherwise): what else the continuation must
@@ -655,9 +747,14 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
     if isinstance(steps, bool) or not isinstance(steps, Real) or int(steps) != steps \
             or steps < 0:
         raise ValueError(f"relax: steps={steps!r} must be a whole number >= 0")
-    if int(first_step) != first_step or first_step < 0:
+    continued = first_step is not None
+    first_step = 0 if first_step is None else first_step
+    if isinstance(first_step, bool) or not isinstance(first_step, Real) \
+            or int(first_step) != first_step or first_step < 0:
         raise ValueError(f"relax: first_step={first_step!r} must be a whole number >= 0")
     cls = optimizer_class(optimizer)
+    from rigidmd.relax.lbfgs import RigidLBFGS
+
     view = RigidFilter(atoms, bodies, cell=cell, scalar_pressure=scalar_pressure)
     if cls.__name__ in PRECONDITIONED and "precon" not in kwargs:
         from rigidmd.relax.precon import RigidPrecon
@@ -669,10 +766,17 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
     with cls(view, trajectory=trajectory, logfile=logfile, append_trajectory=append_trajectory,
              **kwargs) as opt:
         opt.nsteps = int(first_step)  # ASE's log numbers steps by it (header and start at 0)
+        if continued and not first_step:
+            _skip_the_start(opt)  # continued from step 0: logged and observed already
         if saved is not None:
             view.set_state(relaxstate.split(saved, "view"))
             if hasattr(opt, "set_state"):
                 opt.set_state(relaxstate.split(saved, "opt"))
+        # The view's test, also for optimizers that test the rows' norms themselves
+        # (PreconLBFGS, PreconFIRE): every torque below fmax, whatever the chart.
+        opt.gradient_converged = lambda gradient: view.converged(opt.fmax)
+        if not issubclass(cls, RigidLBFGS):  # (RigidLBFGS clears its memory itself)
+            _forget_on_reanchoring(opt, view)
         whole = WholeStep(atoms, opt)  # first: the structure of each whole step
         opt.attach(whole, interval=1)
         reports = [_Report(observer, opt, view, int(first_step)) for observer in observers]
@@ -703,12 +807,63 @@ def relax(atoms, bodies=None, *, fmax=0.05, steps=1000, optimizer="RigidLBFGS", 
                 Path(state_file).unlink(missing_ok=True)
             else:
                 relaxstate.write_state(state_file, view, opt, state_label)
-    left = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.0
+    left = float(view.force_norms().max()) if len(view) else 0.0
     return Relaxation(converged, int(nsteps), float(atoms.get_potential_energy()), left)
 
 
+def _forget_on_reanchoring(opt, view):
+    """Before each step of ``opt``, re-anchor the bodies of ``view`` turned beyond
+    :data:`ANCHOR_ANGLE` and, when one was, clear what ``opt`` remembers of earlier steps
+    (:func:`_forget`): their rows jumped, and a memory of steps across the jump (ASE's
+    BFGSLineSearch: "LineSearch failed!") is not the surface's curvature."""
+    step = opt.step
+
+    def step_in_one_chart(*args, **kwargs):
+        before = view.reanchored
+        view.get_positions()  # re-anchors, as the step's own reading would
+        if view.reanchored != before:
+            _forget(opt)
+        return step(*args, **kwargs)
+
+    opt.step = step_in_one_chart
+
+
+def _forget(opt):
+    """Clear an ASE optimizer's memory of earlier steps, as it starts: BFGSLineSearch's
+    ``reset()``, else ``initialize()`` (BFGS's Hessian, FIRE's and MDMin's velocities,
+    PreconLBFGS's pairs, ...), with ASE's LBFGS's pairs (kept in ``state`` since ASE 3.29)
+    and GPMin's training points, which ``initialize`` leaves."""
+    reset = getattr(opt, "reset", None)
+    if callable(reset):
+        reset()
+    else:
+        opt.initialize()
+    pairs = getattr(opt, "state", None)
+    if all(hasattr(pairs, name) for name in ("s", "y", "rho", "iteration")):
+        pairs.s, pairs.y, pairs.rho, pairs.iteration = [], [], [], 0
+    if hasattr(opt, "x_list") and hasattr(opt, "y_list"):
+        opt.x_list, opt.y_list = [], []
+
+
+def _skip_the_start(opt):
+    """Make ``opt`` neither log nor call its observers at its starting point (step 0), as ASE
+    does for a start at step k > 0: a part stopped at step 0 wrote them."""
+    log, observe = opt.log, opt.call_observers
+
+    def skipped(call):
+        def at_step(*args, **kwargs):
+            if opt.nsteps:
+                return call(*args, **kwargs)
+            return None
+
+        return at_step
+
+    opt.log, opt.call_observers = skipped(log), skipped(observe)
+
+
 class _Report:
-    """``observer(step, energy, fmax)`` of the optimizer's current point (cached: no call)."""
+    """``observer(step, energy, fmax)`` of the optimizer's current point (cached: no call;
+    ``fmax`` the largest of :meth:`RigidFilter.force_norms`)."""
 
     def __init__(self, observer, opt, view, first_step=0):
         self.observer, self.opt, self.view = observer, opt, view
@@ -716,8 +871,7 @@ class _Report:
         self.raised = False  # the observer raised: the step and its frame are whole
 
     def __call__(self):
-        forces = self.view.get_forces()
-        fmax = float(np.sqrt(np.sum(forces * forces, axis=1).max())) if len(forces) else 0.0
+        fmax = float(self.view.force_norms().max()) if len(self.view) else 0.0
         try:
             self.observer(self.opt.nsteps - self.first_step, self.view.get_potential_energy(), fmax)
         except BaseException:

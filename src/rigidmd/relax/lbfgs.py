@@ -18,6 +18,8 @@ is applied to), and every sum is a compiled loop in a fixed order
 path does not depend on the number of BLAS threads.
 """
 
+import time
+
 import numpy as np
 from ase.optimize.optimize import Optimizer
 
@@ -201,11 +203,30 @@ class RigidLBFGS(Optimizer):
         if isinstance(self.precon, RigidPrecon):
             self.precon.set_state(split(state, "precon"), self._target)
 
-    def log(self, *args, **kwargs):
+    def log(self, gradient):
         """ASE's log line, when there is a log (ASE's own writes to ``os.devnull`` without
-        one, forming the norm and the energy first: 0.1 ms a step at 1728 waters)."""
-        if not self._quiet:
-            super().log(*args, **kwargs)
+        one, forming the norm and the energy first: 0.1 ms a step at 1728 waters).
+
+        Its ``fmax`` is the convergence test's: on a
+        :class:`~rigidmd.relax.filter.RigidFilter` the largest of its
+        :meth:`~rigidmd.relax.filter.RigidFilter.force_norms` (every torque as
+        ``|τ|/ℓ``), not the rows' largest norm as ASE's log has it.
+        """
+        if self._quiet or self.logfile is None:
+            return
+        norms = getattr(self._target, "force_norms", None)
+        if callable(norms):
+            fmax = float(norms().max()) if len(self._target) else 0.0
+        else:
+            fmax = self.optimizable.gradient_norm(gradient)
+        e = self.optimizable.get_value()
+        T = time.localtime()
+        name = self.__class__.__name__
+        if self.nsteps == 0:  # ASE's format
+            self.logfile.write(f"{' ' * len(name)}  {'Step':>4s} {'Time':>8s} "
+                               f"{'Energy':>15s}  {'fmax':>12s}\n")
+        self.logfile.write(f"{name}:  {self.nsteps:3d} {T[3]:02d}:{T[4]:02d}:{T[5]:02d} "
+                           f"{e:15.6f} {fmax:15.6f}\n")
 
     def _state(self):
         return (self.s, self.y, self.rho, self.x0, self.g0, self.e0, self.halvings)

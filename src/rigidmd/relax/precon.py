@@ -111,7 +111,9 @@ class RigidPrecon(Precon):
         Added to the diagonal (dimensionless), as ASE's.
     recompute : float, default 0.1
         The matrix is rebuilt when a centre moved more than ``recompute *
-        r_NN`` since the last build.
+        r_NN`` since the last build (with the cell relaxing: against the
+        lattice, plus the strain since the build times ``r_NN``; see
+        :meth:`make_precon`).
     """
 
     def __init__(self, A=3.0, r_cut=None, r_NN=None, mu=None, mu_rot=None, mu_c=None,
@@ -215,13 +217,18 @@ class RigidPrecon(Precon):
         return self._P
 
     def make_precon(self, atoms, reinitialize=None):
-        """Build :math:`P` for the current coordinates of the RigidFilter ``atoms``.
+        r"""Build :math:`P` for the current coordinates of the RigidFilter ``atoms``.
 
         Estimates the scales first (one extra force call) when not given or
         ``reinitialize``; rebuilds the matrix only when a centre moved more
         than ``recompute * r_NN`` since the last build (the pairs are listed
         again only when one moved more than half of :data:`SKIN` ``* r_NN``
-        since they were).
+        since they were).  With the cell relaxing, a centre's move is measured
+        against the lattice (the change of its fractional coordinates, mapped
+        through the current cell) and the cell's strain since the build adds
+        its change of a nearest neighbour's distance, :math:`\lVert C_b^{-1}C
+        - 1\rVert_2\,r_\mathrm{NN}`: the test is the same for every periodic
+        image of a body, so that wrapped and whole molecules relax alike.
 
         The matrix itself, :attr:`P`, is built only when asked for (what the
         optimizers call, :meth:`solve` and :meth:`Pdot`, do without it).
@@ -232,11 +239,33 @@ class RigidPrecon(Precon):
             self._built_at = None
         centres, rows = self._centres(view)
         if (self._built_at is not None and len(centres) == len(self._built_at)
-                and rows["n_rows"] == self._layout["n_rows"]):
-            moved = np.sum((centres - self._built_at) ** 2, axis=1)
-            if not len(moved) or moved.max() < (self.recompute * self.r_NN) ** 2:
-                return
+                and rows["n_rows"] == self._layout["n_rows"]
+                and self._moved_since_built(centres, view.atoms.cell.array)
+                < self.recompute * self.r_NN):
+            return
         self._assemble(view, self.mu, self.mu_rot, self.mu_c)
+
+    def _moved_since_built(self, centres, cell):
+        r"""How far the centres moved against their neighbours since the matrix was built (Å).
+
+        In an unchanged cell the largest distance a centre moved.  In a cell deformed by
+        :math:`M = C_b^{-1} C` since the build (a cell relaxation: periodic, full rank), the
+        largest move of a centre against the lattice, its fractional coordinates' change
+        mapped through the current cell, :math:`\lVert (s - s_b)\,C\rVert`, plus
+        :math:`\lVert M - 1\rVert_2\,r_\mathrm{NN}`, what the strain changed the distance to
+        a nearest neighbour by: the same for every periodic image of a body (wrapped and
+        whole molecules rebuild at the same steps), where the distance moved in the lab
+        frame grows with the distance from the origin (a strain moves a far image further).
+        """
+        built, built_cell = self._built_at, self._built_cell
+        if not len(centres):
+            return 0.0
+        if np.array_equal(built_cell, cell):
+            return float(np.sqrt(np.sum((centres - built) ** 2, axis=1).max()))
+        shift = (np.linalg.solve(cell.T, centres.T).T
+                 - np.linalg.solve(built_cell.T, built.T).T) @ cell
+        strain = np.linalg.norm(np.linalg.solve(built_cell, cell) - np.eye(3), 2)
+        return float(np.sqrt(np.sum(shift * shift, axis=1).max()) + strain * self.r_NN)
 
     def estimate_mu(self, atoms, H=None):
         r"""Estimate :math:`\mu_t, \mu_r, \mu_c` from one force call at a perturbation.
@@ -322,9 +351,16 @@ class RigidPrecon(Precon):
 
     # ------------------------------------------------------------ continuing exactly
     def get_state(self):
-        """The scales and the centres the matrix and the pair list were built at (dict)."""
-        state = {"scales": np.array([np.nan if v is None else v
-                                     for v in (self.mu, self.mu_rot, self.mu_c, self.r_NN)])}
+        """The scales and the centres the matrix and the pair list were built at (dict).
+
+        ``scales`` holds ``mu, mu_rot, mu_c, r_NN`` and ``scales_known`` which of them are
+        set: one not yet estimated (a relaxation stopped at step 0) is ``False`` there and 0
+        in ``scales``, never NaN, so that every number of the state is finite (a state file
+        holding a NaN is refused as damaged, :mod:`rigidmd.relax.optimizerstate`).
+        """
+        values = (self.mu, self.mu_rot, self.mu_c, self.r_NN)
+        state = {"scales": np.array([0.0 if v is None else float(v) for v in values]),
+                 "scales_known": np.array([v is not None for v in values])}
         if self._built_at is not None and self._listed is not None:
             state["built_at"], state["built_cell"] = self._built_at.copy(), self._built_cell
             state["listed_at"], state["listed_cell"] = self._listed[0], self._listed[4]
@@ -334,8 +370,15 @@ class RigidPrecon(Precon):
         """Continue from :meth:`get_state`: the same scales and the same matrix, rebuilt for
         the RigidFilter ``atoms`` (whose rows must be those of the state's)."""
         view = _view_of(atoms)
+        scales = np.asarray(state["scales"], dtype=float)
+        # A state of an earlier release marked a scale not yet estimated by NaN.
+        known = np.asarray(state["scales_known"], dtype=bool) if "scales_known" in state \
+            else ~np.isnan(scales)
+        if scales.shape != (4,) or known.shape != (4,):
+            raise ValueError(f"RigidPrecon.set_state: scales of shape {scales.shape} and "
+                             f"scales_known of shape {known.shape}, not (4,)")
         self.mu, self.mu_rot, self.mu_c, self.r_NN = (
-            None if np.isnan(v) else float(v) for v in state["scales"])
+            float(v) if k else None for v, k in zip(scales, known, strict=True))
         self._graph = self._P = self._built_at = self._listed = None
         if "built_at" not in state:
             return

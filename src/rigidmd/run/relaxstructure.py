@@ -240,8 +240,8 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
             # the last frame say which (one call, which the relaxation's first reuses).
             view = RigidFilter(atoms, bodies, cell=section.cell,
                                scalar_pressure=section.pressure)
-            force = float(np.linalg.norm(view.get_forces(), axis=1).max()) if len(view) else 0.
-            if force < section.fmax:
+            force = float(view.force_norms().max()) if len(view) else 0.0
+            if force < section.fmax:  # the relaxation's own test (RigidFilter.converged)
                 print(f"relax: the relaxation in {trajectory} is complete: it converged at "
                       f"step {done} (largest generalized force {force:.3g} eV/Å, below fmax "
                       f"{section.fmax:g}); nothing is left to do", file=stream)
@@ -257,8 +257,10 @@ def relax_structure(atoms, bodies, section, directory, stream=sys.stdout, *, res
     continuing = hint or "rigidmd relax CONFIG --resume"
     status = 0
     # A trajectory rebuilt from the state file (the old one unreadable) starts anew with its
-    # start frame, so its steps count from 0 again (a later --resume counts its frames).
-    first_step = done if resume and trajectory.exists() else 0
+    # start frame, so its steps count from 0 again (a later --resume counts its frames).  A
+    # continuation gives first_step even when it is 0 (a relaxation stopped at step 0: its log
+    # has the header and step 0 already); None starts the log anew.
+    first_step = done if resume and trajectory.exists() else None
     try:
         # Line-buffered: a relaxation killed outright keeps the log of every step its
         # trajectory has (block-buffered, the log of 103 steps was empty).
