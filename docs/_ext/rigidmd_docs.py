@@ -132,6 +132,100 @@ def _default(cls, name):
     return dataclasses.MISSING
 
 
+def _yaml(value):
+    """A default as a configuration file spells it (``true``, ``null``, ``1e-5``)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if value is None:
+        return "null"
+    if isinstance(value, float):
+        return re.sub(r"e([-+])0*(\d)", lambda m: f"e{m[1].lstrip('+')}{m[2]}", f"{value:g}")
+    return str(value)
+
+
+def _builder_defaults(builder):
+    """``{field: default}`` of a built-in structure: its builder's signature in
+    :mod:`rigidmd.systems` (the configuration passes only the fields it is given)."""
+    import rigidmd.systems
+
+    signature = inspect.signature(getattr(rigidmd.systems, builder))
+    return {name: p.default for name, p in signature.parameters.items()
+            if p.default is not inspect.Parameter.empty}
+
+
+class _Source(str):
+    """A default that is an expression of the code, not a literal (its source text)."""
+
+
+def _mapping_defaults(function, mapping):
+    """``{key: default}`` of every ``<mapping>.get("key", default)`` in ``function``'s
+    source, and ``{key: unit}`` of its ``parse_quantity(..., default_unit=unit)`` calls on
+    ``<mapping>["key"]``: the defaults a section applies, read from the code that applies
+    them.  A default that is not a literal is its source text (a :class:`_Source`)."""
+    import textwrap
+
+    tree = ast.parse(textwrap.dedent(inspect.getsource(function)))
+    defaults, units = {}, {}
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Call):
+            continue
+        func = node.func
+        if (isinstance(func, ast.Attribute) and func.attr == "get"
+                and isinstance(func.value, ast.Name) and func.value.id == mapping
+                and len(node.args) == 2 and isinstance(node.args[0], ast.Constant)):
+            try:
+                defaults[node.args[0].value] = ast.literal_eval(node.args[1])
+            except ValueError:
+                defaults[node.args[0].value] = _Source(ast.unparse(node.args[1]))
+        name = func.id if isinstance(func, ast.Name) else getattr(func, "attr", "")
+        unit = [k.value for k in node.keywords if k.arg == "default_unit"]
+        if name == "parse_quantity" and unit and isinstance(unit[0], ast.Constant):
+            for arg in node.args:
+                if (isinstance(arg, ast.Subscript) and isinstance(arg.value, ast.Name)
+                        and arg.value.id == mapping and isinstance(arg.slice, ast.Constant)):
+                    units[arg.slice.value] = unit[0].value
+    return defaults, units
+
+
+def _water_model_table(fields, models):
+    """The table of ``calculator.water_model``: each field's type and unit, whether it is
+    required, its default (read from ``sections._water_commands``) and what it sets."""
+    from rigidmd.config import sections
+    from rigidmd.config.quantities import LENGTH_UNITS
+
+    defaults, units = _mapping_defaults(sections._water_commands, "spec")
+    cutoff_unit = units.get("cutoff")
+    kinds = {"name": "str",
+             "cutoff": f"length: {_units(LENGTH_UNITS)}"
+                       + (f" (a bare number is in {'Å' if cutoff_unit == 'A' else cutoff_unit})"
+                          if cutoff_unit else ""),
+             "kspace": "`pppm`, `ewald` or `null`", "accuracy": "number, 0 < a < 1",
+             "tail": "`true`, `false`"}
+    meanings = {
+        "name": "The water model: " + ", ".join(f"`{m}`" for m in models) + ".",
+        "cutoff": "Real-space cut-off of the Lennard-Jones and Coulomb terms.",
+        "kspace": "Long-range electrostatics; `null`: plain cut-off Coulomb, for clusters.",
+        "accuracy": "Relative force accuracy of the k-space solver (not read without "
+                    "k-space).",
+        "tail": "Long-range Lennard-Jones corrections to energy and pressure (LAMMPS's "
+                "`pair_modify tail yes`), for a periodic box; `tail: true` with "
+                "`kspace: null` is refused."}
+    #: Defaults that are expressions of other fields, in words.
+    words = {"kspace is not None": "`true` with k-space, `false` with `kspace: null`"}
+    rows = ["| field | type / unit | required | default | meaning |\n|---|---|---|---|---|\n"]
+    for field in fields:
+        default = defaults.get(field, dataclasses.MISSING)
+        if default is dataclasses.MISSING:
+            required, shown = "yes", ""
+        elif isinstance(default, _Source):
+            required, shown = "no", words.get(default, f"`{default}`")
+        else:
+            required, shown = "no", f"`{_yaml(default)}`"
+        rows.append(f"| `{field}` | {kinds.get(field, '')} | {required} | {shown} | "
+                    f"{meanings.get(field, '')} |\n")
+    return "".join(rows)
+
+
 def _cell(value):
     """A table cell: RST roles in MyST's spelling, no pipes or line breaks."""
     text = re.sub(r":(\w+):`", r"{\1}`", str(value))
@@ -190,16 +284,20 @@ def configuration_reference():
         add(f"| `{key}` | {_cell(kind)} | {_cell(text)} |\n")
     add(f"\n`bodies` allows: {', '.join(f'`{r}`' for r in BODY_RULES)}.\n\n"
         "### Built-in structures (`structure: {builtin: NAME, ...}`)\n\n"
-        "| builder | field | type | smallest | largest | required |\n"
-        "|---|---|---|---|---|---|\n")
+        "| builder | field | type | smallest | largest | required | default |\n"
+        "|---|---|---|---|---|---|---|\n")
     for builder, fields in BUILDER_FIELDS.items():
+        builder_defaults = _builder_defaults(builder)
         for name, kind, low, high in fields:
             allowed = ", ".join(WATER_MODELS) if kind == "water_model" else kind
             if name in ("spacing", "jitter"):
                 allowed = f"{kind} (Å)"
-            req = "yes" if REQUIRED_BUILDER_FIELD.get(builder) == name else "no"
+            required = REQUIRED_BUILDER_FIELD.get(builder) == name
+            default = builder_defaults.get(name)
+            default = "" if required or name not in builder_defaults else f"`{_yaml(default)}`"
             add(f"| `{builder}` | `{name}` | {allowed} | {'' if low is None else low} | "
-                f"{'' if high is None else high} | {req} |\n")
+                f"{'' if high is None else high} | {'yes' if required else 'no'} | "
+                f"{default} |\n")
 
     add("\n## `integrator`, `integrator_options`, `timestep`, `steps`, `velocities`\n\n")
     docs = _attribute_docs(RunSection)
@@ -214,9 +312,11 @@ def configuration_reference():
         add(f"| `{key}` | {_cell(kind)}{unit} | {defaults.get(key, '')} | {_cell(text)} |\n")
     add(f"\n`integrator` allows {', '.join(f'`{s}`' for s in BUILTIN_SCHEMES)}, a YAML "
         "file of operators, or a list of operators.  `velocities` takes `temperature` "
-        f"({_units(UNIT_TABLES['temperature'])}), an optional integer `seed` and "
-        "`stationary` (default `true`: the total momentum zeroed after the draw, as "
-        "LAMMPS's `velocity create ... mom yes`).\n\n")
+        f"({_units(UNIT_TABLES['temperature'])}), an optional integer `seed` (absent: a "
+        "fresh random seed each run, so two runs of one file start from different "
+        "velocities; give a seed to repeat a run) and `stationary` (default `true`: the "
+        "total momentum zeroed after the draw, as LAMMPS's `velocity create ... mom "
+        "yes`).\n\n")
 
     add("## `calculator`\n\n")
     docs = _attribute_docs(CalculatorSection)
@@ -231,9 +331,9 @@ def configuration_reference():
         if name == "water_model":
             kind, text = docs["water"]
         add(f"| `{name}` | {_cell(kind)} | {_cell(text)} |\n")
-    add(f"\n`water_model` takes {', '.join(f'`{f}`' for f in WATER_MODEL_FIELDS)}; "
-        f"its `name` is one of {', '.join(f'`{m}`' for m in WATER_MODELS)}.  Without "
-        "`--trust`, `commands` may hold only these LAMMPS commands: "
+    add("\n### `calculator: {name: lammps, water_model: {...}}`\n\n")
+    add(_water_model_table(WATER_MODEL_FIELDS, WATER_MODELS))
+    add("\nWithout `--trust`, `commands` may hold only these LAMMPS commands: "
         f"{', '.join(f'`{c}`' for c in sorted(SAFE_LAMMPS_COMMANDS))}.\n\n")
     add("A force split for multiple time steps (the guide's Multiple time steps page) "
         "gives `fast` (a calculator section as above), `slow` (another) or `full` (the slow "
@@ -320,6 +420,52 @@ def write_configuration(path=DOCS / "_generated" / "configuration.md"):
     write_if_changed(path, configuration_reference())
 
 
+# ---------------------------------------------------------- validation tables
+
+#: The recorded run that ``docs/validation/lammps.md``'s figure and table both show.
+LAMMPS_GAP_OUTPUT = ROOT / "examples" / "output" / "validate_against_lammps.txt"
+
+
+def lammps_gap_rows(path=LAMMPS_GAP_OUTPUT):
+    """``(columns, rows)`` of ``examples/validate_against_lammps.py``'s recorded output:
+    the header's columns after system and constants (``step 0``, ..., ``max|dE| eV``) and per
+    row ``(system, constants, [cells as printed])``."""
+    lines = Path(path).read_text(encoding="utf-8").splitlines()
+    header = next((line for line in lines if line.startswith("system")), None)
+    if header is None:
+        raise RuntimeError(f"{_shown(path)}: no header line 'system  constants  step 0 ...'")
+    columns = re.findall(r"step \d+|max\|dE\| eV", header)
+    rows = []
+    for line in lines:
+        match = re.match(r"^(.+?)\s{2,}(ASE|LAMMPS)\s+(.*)$", line)
+        if match:
+            cells = match.group(3).split()
+            if len(cells) != len(columns):
+                raise RuntimeError(f"{_shown(path)}: {len(cells)} numbers in the row "
+                                   f"{line.strip()!r}, {len(columns)} columns in its header")
+            rows.append((match.group(1).strip(), match.group(2), cells))
+    if not rows:
+        raise RuntimeError(f"{_shown(path)}: no rows '<system>  ASE|LAMMPS  <gaps>'")
+    return columns, rows
+
+
+def lammps_gap_table(path=LAMMPS_GAP_OUTPUT):
+    """The Markdown table of the position gaps to LAMMPS, every cell as the recorded run
+    printed it (the run the figure beside it is drawn from)."""
+    columns, rows = lammps_gap_rows(path)
+    names = [c.replace("max|dE| eV", "max \\|ΔE\\| (eV)") for c in columns]
+    out = ["| system | LAMMPS constants | " + " | ".join(names) + " |\n",
+           "|---" * (len(columns) + 2) + "|\n"]
+    for system, constants, cells in rows:
+        system = re.sub(r"(?<=[A-Z])2", "₂", system).replace("+", " + ")
+        out.append(f"| {system} | {constants}'s | " + " | ".join(cells) + " |\n")
+    return "".join(out)
+
+
+def write_validation_tables(outdir=DOCS / "_generated"):
+    write_if_changed(Path(outdir) / "lammps_gap.md", lammps_gap_table())
+
+
 # ------------------------------------------------------------------- examples
 
 
@@ -380,17 +526,27 @@ def figure_scripts():
     return sorted(p for p in FIGURES.glob("*.py") if not p.name.startswith("_"))
 
 
+def _shown(path):
+    """``path`` relative to the repository where it is inside it (as a message names it)."""
+    try:
+        return Path(path).resolve().relative_to(ROOT).as_posix()
+    except ValueError:
+        return str(path)
+
+
 def write_figures(outdir=DOCS / "_generated" / "figures"):
     """Draw every figure from committed data into ``outdir`` (``NAME.png`` per script).
 
-    A figure is drawn again only when its script, ``_common.py`` or a data file it may read
-    is newer than the PNG; the scripts read files, they run no simulation.
+    A figure is drawn again only when its script, a shared module (``_common.py``,
+    ``_timestep.py``) or a data file it may read is newer than the PNG; the scripts read
+    files, they run no simulation.  A script that fails stops the build with a
+    ``RuntimeError`` naming the script (and its error, which names the data file).
     """
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     if str(FIGURES) not in sys.path:
         sys.path.insert(0, str(FIGURES))
-    inputs = [FIGURES / "_common.py", *(FIGURES / "data").glob("*"),
+    inputs = [*FIGURES.glob("_*.py"), *(FIGURES / "data").glob("*"),
               *(ROOT / "benchmarks").glob("*.txt"), *(ROOT / "benchmarks").glob("*.jsonl"),
               *(ROOT / "validation").glob("*.txt"), *(ROOT / "validation").glob("*.json"),
               *(ROOT / "examples" / "output").glob("*.txt")]
@@ -401,16 +557,24 @@ def write_figures(outdir=DOCS / "_generated" / "figures"):
         if (target.is_file()
                 and target.stat().st_mtime >= max(newest_input, script.stat().st_mtime)):
             continue
-        spec = importlib.util.spec_from_file_location(f"rigidmd_figure_{script.stem}", script)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        module.draw(target)
+        try:
+            spec = importlib.util.spec_from_file_location(f"rigidmd_figure_{script.stem}",
+                                                          script)
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+            module.draw(target)
+        except Exception as err:
+            target.unlink(missing_ok=True)  # (a half-written PNG would count as drawn)
+            message = " ".join(str(err).split()) or "(no message)"
+            raise RuntimeError(f"figure script {_shown(script)} failed to draw {target.name}: "
+                               f"{type(err).__name__}: {message}") from err
         drawn.append(target)
     return drawn
 
 
 def generate(app=None):
     write_configuration()
+    write_validation_tables()
     write_api()
     write_examples()
     write_figures()

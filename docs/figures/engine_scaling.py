@@ -4,14 +4,16 @@ Time per step of native LAMMPS and of ``LAMMPSEngine`` on 1-16 MPI ranks (16-cor
 from ``docs/figures/data/engine_scaling.csv`` (the table of the engine-scaling page).
 """
 
-from _common import DATA, figure, read_csv, save
+from _common import DATA, figure, read_csv, require, save
 
 
 def draw(path):
-    rows = read_csv(DATA / "engine_scaling.csv")
+    source = DATA / "engine_scaling.csv"
+    rows = read_csv(source, "waters", "ranks", "native_ms", "engine_over_native")
     fig, (ax, bx) = figure(ncols=2, height=3.2)
     for k, waters in enumerate((216, 1728, 13824)):
-        sel = [r for r in rows if r["waters"] == waters]
+        sel = require([r for r in rows if r["waters"] == waters], source,
+                      f"no rows of {waters} waters")
         ranks = [r["ranks"] for r in sel]
         native = [r["native_ms"] for r in sel]
         engine = [r["native_ms"] * r["engine_over_native"] for r in sel]

@@ -8,13 +8,16 @@ table of ``validation/engine_ensembles.txt``.
 import re
 
 import matplotlib.ticker
-from _common import ROOT, figure, save
+from _common import ROOT, figure, read_text, require, save
 
 
 def draw(path):
-    text = (ROOT / "validation" / "engine_ensembles.txt").read_text()
+    source = ROOT / "validation" / "engine_ensembles.txt"
+    text = read_text(source)
+    require("216 TIP3P waters" in text, source, "no '216 TIP3P waters' table")
     block = text[text.index("216 TIP3P waters"):]
-    rows = re.findall(r"^\s+(LAMMPS\w+ \w+)\s+([\d.]+)±([\d.]+)", block, re.MULTILINE)
+    rows = require(re.findall(r"^\s+(LAMMPS\w+ \w+)\s+([\d.]+)±([\d.]+)", block,
+                              re.MULTILINE), source, "no density rows in its 216-water table")
     fig, ax = figure(width=5.6, height=3.0)
     for k, (_run, density, error) in enumerate(rows):
         ax.errorbar(float(density), k, xerr=float(error), fmt="o", capsize=3)

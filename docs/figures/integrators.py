@@ -7,21 +7,23 @@ every integrator and LAMMPS's ``fix rigid/nve`` and ``fix rigid``, from
 
 import re
 
-from _common import ROOT, figure, save
+from _common import ROOT, figure, read_text, require, save
 
 ROW = re.compile(r"^(\S[\w /]*?)\s+(\d+\.\d+)\s+(\d+)\s+(\S+)\s+(\S+)\s+(\S+)\s+(\w+)\s*$")
 UNSTABLE = re.compile(r"^(\w+)\s+\d+\.\d+\s+\d+\s+.*unstable at")
 
 
 def draw(path):
+    source = ROOT / "validation" / "integrators.txt"
     rows, unstable = {}, set()
-    for line in (ROOT / "validation" / "integrators.txt").read_text().splitlines():
+    for line in read_text(source).splitlines():
         if UNSTABLE.match(line):
             unstable.add(UNSTABLE.match(line).group(1))
         match = ROW.match(line)
         if match and match.group(7) == "stable":
             rows.setdefault(match.group(1).strip(), []).append(
                 (float(match.group(2)), abs(float(match.group(4))), float(match.group(5))))
+    require(rows, source, "no stable rows (integrator, dt, steps, drift, RMS, ..., stable)")
     fig, (ax, bx) = figure(ncols=2, height=3.4)
     for k, (name, points) in enumerate(rows.items()):
         dt, drift, rms = zip(*points, strict=True)
@@ -37,6 +39,6 @@ def draw(path):
     bx.set_ylabel("|drift| (eV/ps)")
     ax.legend(fontsize=7)
     never = sorted(unstable - set(rows))
-    note = f" ({', '.join(never)}: unstable at every step)" if never else ""
-    fig.suptitle("32 rigid TIP3P waters, 10 ps NVE: the integrators beside LAMMPS" + note)
+    note = f"\n{', '.join(never)}: unstable at every step, not drawn" if never else ""
+    fig.suptitle("32 rigid TIP3P waters, 10 ps NVE per run" + note)
     save(fig, path)

@@ -6,14 +6,15 @@ physical constants, from ``examples/output/validate_against_lammps.txt``.
 
 import re
 
-from _common import ROOT, figure, save
+from _common import ROOT, figure, read_text, require, save
 
 
 def draw(path):
-    text = (ROOT / "examples" / "output" / "validate_against_lammps.txt").read_text()
-    lines = text.splitlines()
-    header = next(line for line in lines if line.startswith("system"))
-    steps = [int(s) for s in re.findall(r"step (\d+)", header)]
+    source = ROOT / "examples" / "output" / "validate_against_lammps.txt"
+    lines = read_text(source).splitlines()
+    header = next((line for line in lines if line.startswith("system")), "")
+    steps = [int(s) for s in require(re.findall(r"step (\d+)", header), source,
+                                     "no header line 'system ... step 0 step 100 ...'")]
     fig, ax = figure(width=6.0, height=3.4)
     k = 0
     for line in lines:
@@ -26,6 +27,7 @@ def draw(path):
         ax.plot(steps, values, "o-" if constants == "ASE" else "s--", color=colour,
                 label=f"{name}, {constants} constants")
         k += 1
+    require(k, source, "no rows '<system>  ASE|LAMMPS  <gaps>'")
     ax.set_yscale("log")
     ax.set_xlabel("step (1 fs)")
     ax.set_ylabel("largest position gap to LAMMPS (Å)")

@@ -5,7 +5,7 @@ RMS fluctuation of the total energy against the time step, 8 waters under CHGNet
 ``benchmarks/ml_potential.txt``.
 """
 
-from _common import ROOT, figure, markdown_rows, number, save
+from _common import ROOT, figure, markdown_rows, number, read_text, require, save
 
 SERIES = [(("float64", "rigidmd"), "rigid, rigidmd (float64)", "o-"),
           (("float32", "RATTLE"), "rigid, ASE RATTLE (float32)", "s--"),
@@ -14,10 +14,12 @@ SERIES = [(("float64", "rigidmd"), "rigid, rigidmd (float64)", "o-"),
 
 
 def draw(path):
-    rows = markdown_rows((ROOT / "benchmarks" / "ml_potential.txt").read_text())
+    source = ROOT / "benchmarks" / "ml_potential.txt"
+    rows = markdown_rows(read_text(source))
     fig, ax = figure(width=5.6, height=3.4)
     for (model, route), label, style in SERIES:
-        sel = [r for r in rows if r[0] == model and r[1] == route]
+        sel = require([r for r in rows if r[0] == model and r[1] == route], source,
+                      f"no table rows '| {model} | {route} |'")
         ax.plot([number(r[2]) for r in sel], [number(r[4]) for r in sel], style, label=label)
     ax.set_xscale("log", base=2)
     ax.set_yscale("log")

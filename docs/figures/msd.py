@@ -8,15 +8,18 @@ Mean squared displacement of the centres of mass of 216 rigid TIP3P waters over 
 import re
 
 import numpy as np
-from _common import DATA, figure, read_csv, save
+from _common import DATA, figure, read_csv, read_text, require, save
 
 
 def draw(path):
-    rows = read_csv(DATA / "tip3p_msd.csv")
+    source = DATA / "tip3p_msd.csv"
+    rows = read_csv(source, "lag_ps", "msd_A2")
     t = np.array([row["lag_ps"] for row in rows])
     msd = np.array([row["msd_A2"] for row in rows])
-    head = (DATA / "tip3p_msd.csv").read_text().splitlines()[0]
-    d_cm2_s = float(re.search(r"D = ([\d.e+-]+) cm2/s", head).group(1))
+    head = read_text(source).splitlines()[0]
+    found = require(re.search(r"D = ([\d.e+-]+) cm2/s", head), source,
+                    "no 'D = ... cm2/s' in its first line")
+    d_cm2_s = float(found.group(1))
     slope = 6 * d_cm2_s * 1e4  # Å²/ps
     window = (t >= 0.2) & (t <= 0.8)
     offset = np.mean(msd[window] - slope * t[window])

@@ -6,17 +6,15 @@ beside the published value (``validation/npt_density_216.runs.json`` and ``.json
 ``validation/npt_density.py``).
 """
 
-import json
-
 import numpy as np
-from _common import ROOT, figure, save
+from _common import ROOT, figure, read_json, save
 
 PUBLISHED = 0.9979  # g/cm³, TIP4P/2005 at 298 K and 1 bar (Abascal & Vega 2005)
 
 
 def draw(path):
-    runs = json.loads((ROOT / "validation" / "npt_density_216.runs.json").read_text())
-    steps = json.loads((ROOT / "validation" / "npt_density_216.json").read_text())
+    runs = read_json(ROOT / "validation" / "npt_density_216.runs.json")
+    steps = read_json(ROOT / "validation" / "npt_density_216.json")
     fig, ax = figure(width=5.6, height=3.4)
     for r in runs:
         rho, err = r["density"]

@@ -7,16 +7,19 @@ first tenth of a picosecond heats it, and the temperature then fluctuates about 
 """
 
 import numpy as np
-from _common import DATA, figure, read_csv, save
+from _common import DATA, figure, read_csv, require, save
 
 
 def draw(path):
-    rows = [r for r in read_csv(DATA / "nve_trace.csv") if r["dt_fs"] == 2.0]
+    source = DATA / "nve_trace.csv"
+    rows = require([r for r in read_csv(source, "dt_fs", "time_ps", "temperature_K")
+                    if r["dt_fs"] == 2.0], source, "no rows at 2 fs")
     t = np.array([r["time_ps"] for r in rows])
     temp = np.array([r["temperature_K"] for r in rows])
     fig, ax = figure(width=5.6, height=3.0)
     ax.plot(t, temp, label="temperature")
     late = t >= 0.5
+    require(late.any(), source, "no rows after 0.5 ps at 2 fs")
     ax.axhline(300, color="k", ls=":", label="velocities drawn at 300 K")
     ax.axhline(temp[late].mean(), color="C1", ls="--",
                label=f"mean after 0.5 ps: {temp[late].mean():.0f} K")

@@ -5,18 +5,18 @@ step, rigidmd (``RigidLangevin``) and OpenMM (``LangevinMiddleIntegrator``), man
 from ``validation/water_openmm_long.json``.
 """
 
-import json
-
-from _common import ROOT, figure, save
+from _common import ROOT, figure, read_json, require, save
 
 
 def draw(path):
-    groups = json.loads((ROOT / "validation" / "water_openmm_long.json").read_text())["groups"]
+    source = ROOT / "validation" / "water_openmm_long.json"
+    groups = read_json(source, "groups")["groups"]
     fig, (ax, bx) = figure(ncols=2, width=7.2, height=3.2)
     for code, thermo, label, style in (("rigidmd", "langevin", "rigidmd, RigidLangevin", "o-"),
                                        ("openmm", "middle", "OpenMM, Langevin middle", "s--")):
         sel = sorted((g for g in groups if g["model"] == "tip4pew" and g["code"] == code
                       and g["thermo"] == thermo), key=lambda g: g["dt_fs"])
+        require(sel, source, f"no tip4pew groups of {code} {thermo}")
         dt = [g["dt_fs"] for g in sel]
         ax.errorbar(dt, [g["U"][0] for g in sel], yerr=[g["U"][1] for g in sel], fmt=style,
                     capsize=2, label=label)

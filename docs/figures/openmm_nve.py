@@ -5,11 +5,10 @@ waters, rigidmd and OpenMM from the same states, against the time step (means of
 at each step, with their standard errors), from ``validation/water_openmm_nve.json``.
 """
 
-import json
 from collections import defaultdict
 
 import numpy as np
-from _common import ROOT, figure, save
+from _common import ROOT, figure, read_json, require, save
 
 KEYS = [("T_tr", "kinetic, translation"), ("T_rot", "kinetic, rotation"),
         ("Tconf_tr", "configurational, translation"),
@@ -17,7 +16,8 @@ KEYS = [("T_tr", "kinetic, translation"), ("T_rot", "kinetic, rotation"),
 
 
 def draw(path):
-    runs = json.loads((ROOT / "validation" / "water_openmm_nve.json").read_text())["runs"]
+    source = ROOT / "validation" / "water_openmm_nve.json"
+    runs = read_json(source, "runs")["runs"]
     fig, axes = figure(ncols=2, width=7.2, height=3.4, sharey=True)
     for ax, code in zip(axes, ("rigidmd", "openmm"), strict=True):
         for k, (key, label) in enumerate(KEYS):
@@ -25,7 +25,7 @@ def draw(path):
             for run in runs:
                 if run["code"] == code and run["ensemble"] == "nve" and key in run:
                     by_dt[run["dt_fs"]].append(run[key])
-            dts = sorted(by_dt)
+            dts = sorted(require(by_dt, source, f"no {code} NVE runs with {key}"))
             mean = [np.mean([v[0] for v in by_dt[dt]]) for dt in dts]
             err = [np.sqrt(np.mean([v[1] ** 2 for v in by_dt[dt]]) / len(by_dt[dt]))
                    for dt in dts]

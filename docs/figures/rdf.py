@@ -9,7 +9,7 @@ from _common import DATA, figure, read_csv, save
 
 
 def draw(path):
-    rows = read_csv(DATA / "tip3p_rdf.csv")
+    rows = read_csv(DATA / "tip3p_rdf.csv", "r_A", "g")
     r = np.array([row["r_A"] for row in rows])
     g = np.array([row["g"] for row in rows])
     fig, ax = figure(width=5.6, height=3.0)

@@ -5,18 +5,20 @@ Force calls to fmax 0.05 and 0.01 eV/Å of ``relax()`` and of ASE's ``BFGS`` wit
 ``benchmarks/relax_compare.jsonl``.
 """
 
-import json
-
-from _common import ROOT, figure, save
+from _common import ROOT, figure, read_jsonl, require, save
 
 
 def draw(path):
-    records = [json.loads(line) for line in
-               (ROOT / "benchmarks" / "relax_compare.jsonl").read_text().splitlines() if line]
+    source = ROOT / "benchmarks" / "relax_compare.jsonl"
+    records = read_jsonl(source)
+    require(all(isinstance(rec, dict) and {"system", "route", "rows"} <= rec.keys()
+                for rec in records), source, "a record without system, route or rows")
     routes = {}
     for rec in records:  # the last record of a system and route counts
         routes[(rec["system"], rec["route"])] = rec
     systems = sorted({s for s, _ in routes}, key=lambda s: (s.rstrip("0123456789s"), s))
+    require({"relax", "ASE"} <= {route for _, route in routes}, source,
+            "no records of both routes (relax and ASE)")
     fig, axes = figure(ncols=2, height=3.4)
     for ax, fmax in zip(axes, ("0.05", "0.01"), strict=True):
         for kind, marker in (("cluster", "o"), ("box", "s")):

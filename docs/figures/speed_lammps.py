@@ -8,7 +8,7 @@ rigid/npt/small`` for the barostats), 216 and 1728 TIP3P waters on one core, fro
 import re
 
 import numpy as np
-from _common import ROOT, figure, save
+from _common import ROOT, DataError, figure, name, read_text, save
 
 ROW = re.compile(r"^\s*(.+?)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s+([\d.]+)\s*$")
 RUNS = [("NVE LAMMPSCalculator", "NVE, in-process"), ("NVE LAMMPSEngine", "NVE, engine"),
@@ -33,11 +33,15 @@ def tables(text):
 
 
 def draw(path):
-    data = tables((ROOT / "benchmarks" / "lammps_engine.txt").read_text())
+    source = ROOT / "benchmarks" / "lammps_engine.txt"
+    data = tables(read_text(source))
     fig, ax = figure(height=3.2)
     y = np.arange(len(RUNS))
     for k, (title, colour) in enumerate((("216 waters, one core", "C0"),
                                          ("1728 waters, one core", "C1"))):
+        missing = [run for run, _ in RUNS if run not in data.get(title, {})]
+        if missing:
+            raise DataError(f"{name(source)}: no row {missing[0]!r} in a table {title!r}")
         ratios = [data[title][run] for run, _ in RUNS]
         ax.barh(y + (k - 0.5) * 0.38, ratios, height=0.38, color=colour,
                 label=title.replace(", one core", ""))

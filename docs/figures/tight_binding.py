@@ -5,15 +5,16 @@ flexible (ASE's ``VelocityVerlet``), 8 waters under GFN2-xTB, from
 ``benchmarks/tight_binding.txt``.
 """
 
-from _common import ROOT, figure, markdown_rows, number, save
+from _common import ROOT, figure, markdown_rows, number, read_text, require, save
 
 
 def draw(path):
-    text = (ROOT / "benchmarks" / "tight_binding.txt").read_text()
-    rows = [r for r in markdown_rows(text) if r[0] in ("rigid", "flexible")]
+    source = ROOT / "benchmarks" / "tight_binding.txt"
+    rows = [r for r in markdown_rows(read_text(source)) if r[0] in ("rigid", "flexible")]
     fig, ax = figure(width=5.2, height=3.4)
     for route, marker in (("rigid", "o"), ("flexible", "s")):
-        sel = [r for r in rows if r[0] == route]
+        sel = require([r for r in rows if r[0] == route and len(r) >= 5], source,
+                      f"no table rows '| {route} | dt | ... | calls per ps |'")
         calls = [number(r[4]) for r in sel]
         spread = [number(r[3]) for r in sel]
         ax.plot(calls, spread, marker + "-", label=route)

@@ -5,10 +5,8 @@ ns/day of each code and integrator at its largest step that meets the time-step 
 in one run (``validation/time_to_solution.json``, made by ``validation/time_to_solution.py``).
 """
 
-import json
-
 import numpy as np
-from _common import ROOT, figure, save
+from _common import ROOT, figure, read_json, save
 from matplotlib.patches import Patch
 
 NAMES = {("rigidmd", "baoab"): "rigidmd RigidLangevinBAOAB",
@@ -30,7 +28,7 @@ def label(row):
 
 
 def draw(path):
-    data = json.loads((ROOT / "validation" / "time_to_solution.json").read_text())
+    data = read_json(ROOT / "validation" / "time_to_solution.json", "rows", "waters")
     rows = data["rows"]
     fig, ax = figure(width=7.6, height=0.45 * len(rows) + 1.4)
     y = np.arange(len(rows))

@@ -10,7 +10,7 @@ from _common import DATA, figure, read_csv, save
 
 
 def draw(path):
-    rows = read_csv(DATA / "tip4p2005_density.csv")
+    rows = read_csv(DATA / "tip4p2005_density.csv", "time_ps", "density_g_cm3")
     fig, ax = figure(width=5.6, height=3.0)
     ax.plot([r["time_ps"] for r in rows], [r["density_g_cm3"] for r in rows],
             label="C-rescale NPT, 216 waters")

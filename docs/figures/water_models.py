@@ -8,7 +8,7 @@ measurement's standard error, from ``validation/water_models.txt``.
 import re
 
 import numpy as np
-from _common import ROOT, figure, save
+from _common import ROOT, DataError, figure, name, read_text, require, save
 
 PROPERTIES = [("density", "density"), ("ΔH_vap", "ΔH_vap"), ("D∞", "D∞"), ("η", "η"),
               ("ε", "ε")]
@@ -31,7 +31,12 @@ def parse(text):
 
 
 def draw(path):
-    models = parse((ROOT / "validation" / "water_models.txt").read_text())
+    source = ROOT / "validation" / "water_models.txt"
+    models = require(parse(read_text(source)), source, "no '<model>: N molecules' blocks")
+    for model, props in models.items():
+        missing = [key for key, _ in PROPERTIES if key not in props]
+        if missing:
+            raise DataError(f"{name(source)}: {model}: no {', '.join(missing)} line")
     fig, ax = figure(width=7.0, height=3.4)
     x = np.arange(len(PROPERTIES))
     width = 0.8 / len(models)

@@ -237,3 +237,93 @@ def test_every_message_the_faq_quotes_is_printed_by_the_code():
                 text = text[len(prefix):]
         pattern = re.compile(".*?".join(re.escape(part) for part in text.split("…")), re.S)
         assert any(pattern.search(template) for template in templates), quote
+
+
+def reference_rows(text, heading):
+    """The rows of the first table after ``heading`` in the configuration reference, as
+    ``{first cells: {column: cell}}``."""
+    lines = text[text.index(heading):].splitlines()
+    start = next(k for k, line in enumerate(lines) if line.startswith("|"))
+    table = []
+    for line in lines[start:]:
+        if not line.startswith("|"):
+            break
+        table.append([c.strip() for c in line.strip().strip("|").split("|")])
+    header, rows = table[0], table[2:]
+    return [dict(zip(header, row, strict=True)) for row in rows]
+
+
+def test_the_configuration_reference_gives_the_defaults_the_code_applies(tmp_path):
+    """Every default the reference states for a built-in structure and for
+    ``calculator.water_model`` is the one the configuration applies when the field is left
+    out (written into a configuration file as the page spells it: the same atoms, the same
+    LAMMPS commands), and it says what an absent ``velocities.seed`` does."""
+    pytest.importorskip("numpydoc", reason="needs numpydoc (the test and docs extras)")
+    from rigidmd.config import load_config
+    from rigidmd.config.sections import (
+        REQUIRED_BUILDER_FIELD,
+        CalculatorSection,
+        StructureSection,
+    )
+
+    def read(section, yaml_text):
+        (tmp_path / "config.yaml").write_text(yaml_text)
+        return section.from_config(load_config(tmp_path / "config.yaml"), tmp_path)
+
+    text = rigidmd_docs.configuration_reference()
+    small = {"n_molecules": 4, "n_side": 2}
+    builders = reference_rows(text, "### Built-in structures")
+    for builder, required in REQUIRED_BUILDER_FIELD.items():
+        rows = [r for r in builders if r["builder"] == f"`{builder}`"]
+        stated = {r["field"].strip("`"): r["default"].strip("`") for r in rows if r["default"]}
+        assert set(stated) == {r["field"].strip("`") for r in rows} - {required}, builder
+        built = []
+        for given in ({}, stated):
+            fields = "".join(f", {field}: {value}" for field, value in given.items())
+            yaml_text = f"structure: {{builtin: {builder}, {required}: {small[required]}{fields}}}"
+            built.append(read(StructureSection, yaml_text).build_atoms())
+        assert (built[0].positions == built[1].positions).all(), (builder, stated)
+        assert (built[0].cell == built[1].cell).all(), (builder, stated)
+
+    def commands(**model):
+        fields = "".join(f", {field}: {value}" for field, value in
+                         {"cutoff": "9", **model}.items())
+        return read(CalculatorSection, "calculator: {name: lammps, water_model: "
+                    f"{{name: tip4p2005{fields}}}}}").commands
+
+    water = {r["field"].strip("`"): r for r in
+             reference_rows(text, "### `calculator: {name: lammps, water_model")}
+    assert [f for f, r in water.items() if r["required"] == "yes"] == ["name", "cutoff"]
+    kspace, accuracy = (water[f]["default"].strip("`") for f in ("kspace", "accuracy"))
+    assert commands() == commands(kspace=kspace, accuracy=accuracy, tail="true")
+    assert "`true` with k-space, `false` with `kspace: null`" in water["tail"]["default"]
+    assert commands(kspace="null") == commands(kspace="null", tail="false")
+    with pytest.raises(ValueError, match="tail"):
+        commands(kspace="null", tail="true")
+    assert "nm" in water["cutoff"]["type / unit"]
+    assert "a bare number is in Å" in water["cutoff"]["type / unit"]
+    assert commands() == commands(cutoff="9 A") == commands(cutoff="0.9 nm") != commands(
+        cutoff="8")
+    assert "`seed` (absent: a fresh random seed each run" in text
+
+
+def test_the_lammps_validation_table_is_the_run_its_figure_shows():
+    """``validation/lammps.md`` shows the gap table generated from the recorded run that its
+    figure is drawn from (``examples/output/validate_against_lammps.txt``), every cell as
+    that run printed it, and says which run it is."""
+    page = (DOCS / "validation" / "lammps.md").read_text()
+    assert "```{include} ../_generated/lammps_gap.md" in page
+    assert "| system |" not in page  # no second, hand-copied table
+    assert "examples/output/validate_against_lammps.txt" in page
+    recorded = {}
+    for line in rigidmd_docs.LAMMPS_GAP_OUTPUT.read_text().splitlines():
+        match = re.match(r"^(.+?)\s{2,}(ASE|LAMMPS)\s+(.*)$", line)
+        if match:
+            recorded[(match.group(1).strip(), match.group(2))] = match.group(3).split()
+    table = rigidmd_docs.lammps_gap_table()
+    rows = [[c.strip() for c in line.strip("|").split("|")]
+            for line in table.splitlines()[2:]]
+    assert len(rows) == len(recorded) == 8
+    for row in rows:
+        system = row[0].replace("₂", "2").replace(" + ", "+")
+        assert row[2:] == recorded[(system, row[1].removesuffix("'s"))], row
