@@ -324,8 +324,9 @@ def configuration_reference():
     for name in CalculatorSection.FIELDS:
         kind, text = docs.get(name, docs.get("water", ("", "")))
         if name == "name":
-            text = ("`tip3p` (the default), `tip4p` (ASE's), `lammps`, `ipi`, or an ASE "
-                    "calculator class's dotted path (`ase.calculators.emt.EMT`).")
+            text = ("`tip3p` (the default, also when the section gives only `options`), "
+                    "`tip4p` (ASE's), `lammps`, `ipi`, or an ASE calculator class's dotted "
+                    "path (`ase.calculators.emt.EMT`).")
         if name == "pair":
             kind, text = "list of str", "Another name for `commands`."
         if name == "water_model":

@@ -74,3 +74,50 @@ def test_two_target_temperatures_are_refused():
     with pytest.raises(ConfigError, match="barostat.temperature: missing for mtk"):
         CouplingSection.from_config({"barostat": {"kind": "mtk", "pressure": "1 bar",
                                                   "pdamp": "1 ps"}}, None)
+
+
+@pytest.mark.parametrize("kind, extra", [
+    ("mtk", {"pdamp": "1 ps"}),
+    ("monte_carlo", {}),
+])
+@pytest.mark.parametrize("pressure", ["200 GPa", "-2e6 bar"])
+def test_a_pressure_beyond_the_barostats_range_is_refused_in_the_users_units(kind, extra,
+                                                                             pressure):
+    """``barostat.pressure: 200 GPa`` was refused in the Python API's words ("barostat.
+    pressure is in eV/Å³ (1 bar = ase.units.bar ...)") although the user wrote GPa."""
+    with pytest.raises(ConfigError) as err:
+        parse_coupling("barostat", {"kind": kind, "temperature": "300 K",
+                                    "pressure": pressure, **extra})
+    assert str(err.value) == (f"barostat.pressure: {pressure} is beyond ±160.2 GPa "
+                              "(±1.602e+06 bar), the largest pressure a barostat takes; is the "
+                              "unit right?")
+    assert parse_coupling("barostat", {"kind": kind, "temperature": "300 K",
+                                       "pressure": "150 GPa", **extra}).kwargs[
+        "pressure_au"] == pytest.approx(150 * units.GPa)
+
+
+def test_a_barostat_is_refused_for_a_cluster_or_a_calculator_without_stress():
+    """Refused by the dynamics in the Python API's words ("atoms.pbc is [False, False,
+    False]", "the calculator TIP3P provides no stress"), without the field at fault."""
+    from ase.calculators.tip3p import TIP3P
+
+    from rigidmd.systems import water_box, water_cluster
+
+    section = CouplingSection.from_config({"barostat": {
+        "kind": "mtk", "temperature": "300 K", "pressure": "1 bar", "pdamp": "1 ps"}}, None)
+    with pytest.raises(ConfigError) as err:
+        section.check_structure(water_cluster(2, seed=0))
+    assert str(err.value) == ("barostat: mtk changes the periodic cell, which needs "
+                              "periodicity in x, y and z; the structure is not periodic (a "
+                              "cluster); leave barostat out, or give a periodic box")
+    slab = water_box(2)
+    slab.pbc = [True, True, False]
+    with pytest.raises(ConfigError, match="the structure is periodic along x and y only"):
+        section.check_structure(slab)
+    section.check_structure(water_box(2))
+    with pytest.raises(ConfigError) as err:
+        section.check_calculator(TIP3P(), "tip3p")
+    assert str(err.value) == ("calculator.name: tip3p provides no stress (it implements "
+                              "energy, forces), which barostat mtk needs for the pressure; use "
+                              "a calculator with stress, e.g. lammps")
+    CouplingSection.from_config({}, None).check_calculator(TIP3P(), "tip3p")

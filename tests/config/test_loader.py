@@ -476,3 +476,26 @@ def test_a_cluster_water_model_has_no_tail_correction(tmp_path):
                                           r"is for a periodic box") as err:
         check_config(raw)
     assert_one_clear_line(err.value)
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"integrator": "richardson",
+      "thermostat": {"kind": "langevin_baoab", "temperature": "300 K", "friction": "1 1/ps"}},
+     "integrator: richardson has no 'middle' operator, where thermostat langevin_baoab acts; "
+     "use no_squish (the default, split for it) or baoab"),
+    ({"integrator": "richardson",
+      "calculator": {"fast": {"name": "tip3p"}, "slow": {"name": "tip3p"}, "substeps": 2}},
+     "integrator: a force split (calculator: fast, slow, substeps) runs its inner steps by "
+     "NO_SQUISH, not richardson; use no_squish (the default) or baoab"),
+])
+def test_an_integrator_the_other_sections_cannot_step_with_is_named(tmp_path, changes,
+                                                                    message):
+    """langevin_baoab, or a force split, with ``integrator: richardson`` reached the user in
+    the dynamics' words (``integrator='baoab'``, "MultipleTimeStep: ..."), no field named."""
+    raw = dict(BASES[0], _base=str(tmp_path), **changes)
+    with pytest.raises(ConfigError) as err:
+        check_config(raw)
+    assert str(err.value) == message
+    # What the dynamics runs is accepted: no_squish (split for the thermostat), baoab.
+    for integrator in ("no_squish", "baoab"):
+        check_config(dict(raw, integrator=integrator))

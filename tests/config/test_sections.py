@@ -86,6 +86,11 @@ def test_run_mistakes(tmp_path, raw, match):
 
 def test_the_calculator_section(tmp_path):
     assert CalculatorSection.from_config({}, tmp_path).name == "tip3p"
+    # tip3p is the default of a section that gives only options (was "calculator.name:
+    # missing", the documented way to change rc refused).
+    options_only = CalculatorSection.from_config({"calculator": {"options": {"rc": 9.0}}},
+                                                 tmp_path)
+    assert options_only.name == "tip3p" and options_only.options == {"rc": 9.0}
     lammps = CalculatorSection.from_config(
         {"calculator": {"name": "lammps", "pair": "pair_style lj/cut 8\npair_coeff * * 0 1",
                         "atom_types": {"O": 1, "H": 2}}}, tmp_path)
@@ -98,7 +103,6 @@ def test_the_calculator_section(tmp_path):
 
 
 @pytest.mark.parametrize("calc, match", [
-    ({"options": {}}, "calculator.name: missing"),
     ({"name": 3}, "calculator.name: expected tip3p, tip4p, lammps, ipi or a dotted"),
     ({"name": "lammps"}, "calculator.commands: the lammps calculator needs LAMMPS commands"),
     ({"name": "lammps", "commands": ["a"], "pair": ["b"]}, "calculator.pair: give the LAMMPS "
@@ -233,3 +237,75 @@ def test_read_options_mistakes_name_the_option(tmp_path):
                                                tmp_path)
         with pytest.raises(ConfigError, match=message):
             section.build_atoms()
+
+
+@pytest.mark.parametrize("threads, options", [(2, 1), (2, 2)])
+def test_threads_given_twice_are_refused(tmp_path, threads, options):
+    """``calculator: {threads: 2, options: {threads: 1}}`` ran 1 thread without a word
+    (``options.setdefault("threads", ...)``); two counts are refused in one line."""
+    calc = {"name": "lammps", "commands": ["pair_style lj/cut 3.0", "pair_coeff * * 0 1"],
+            "threads": threads, "options": {"threads": options}}
+    with pytest.raises(ConfigError, match=rf"^calculator.options.threads: {options} beside "
+                                          rf"calculator.threads: {threads}; give the OpenMP "
+                                          "threads once, as calculator.threads$"):
+        CalculatorSection.from_config({"calculator": calc}, tmp_path)
+
+
+def test_read_options_are_the_restarts_without_a_structure_file(tmp_path):
+    """``restart: prev.data`` with ``read_options: {format: lammps-data, ...}`` was read
+    without its options (``read(restart, index=-1)``: "cannot read"); they are the
+    restart's when no structure file takes them, ``index`` -1 unless given."""
+    frames = [water_cluster(2, seed=s) for s in range(3)]
+    for atoms in frames:
+        atoms.center(vacuum=10)
+    write(tmp_path / "prev.data", frames[0], format="lammps-data", atom_style="full",
+          masses=True)
+    options = {"format": "lammps-data", "atom_style": "full"}
+    for structure in ({}, {"structure": {"builtin": "water_cluster", "n_molecules": 2}}):
+        section = StructureSection.from_config(
+            {**structure, "restart": "prev.data", "read_options": options}, tmp_path)
+        atoms = section.build_atoms()
+        assert atoms.get_chemical_formula() == "H4O2" and atoms.calc is None
+    write(tmp_path / "three.xyz", frames, format="extxyz")
+    last = StructureSection.from_config({"restart": "three.xyz",
+                                         "read_options": {"format": "extxyz"}}, tmp_path)
+    assert abs(last.build_atoms().positions - frames[2].positions).max() < 1e-6
+    first = StructureSection.from_config({"restart": "three.xyz",
+                                          "read_options": {"index": 0}}, tmp_path)
+    assert abs(first.build_atoms().positions - frames[0].positions).max() < 1e-6
+    # A structure file's options are its own: the restart (a .traj) is read by its name.
+    write(tmp_path / "start.xyz", frames[0], format="extxyz")
+    write(tmp_path / "md.traj", frames)
+    both = StructureSection.from_config({"structure": "start.xyz", "restart": "md.traj",
+                                         "read_options": {"format": "extxyz"}}, tmp_path)
+    assert abs(both.build_atoms().positions - frames[2].positions).max() < 1e-6
+
+
+def test_read_options_with_a_builtin_structure_are_refused(tmp_path):
+    """``read_options`` beside ``structure: {builtin: ...}`` were ignored without a word."""
+    with pytest.raises(ConfigError, match=r"^read_options: the builtin water_cluster reads no "
+                                          "file; read_options go with a structure file or a "
+                                          "restart$"):
+        StructureSection.from_config(
+            {"structure": {"builtin": "water_cluster", "n_molecules": 2},
+             "read_options": {"format": "xyz"}}, tmp_path)
+
+
+@pytest.mark.parametrize("integrator, options, message", [
+    ("rozmanov_kusalik", {"tol": -1},
+     "integrator_options.tol: must be positive (for rozmanov_kusalik_rotate), got -1"),
+    ("rozmanov_kusalik", {"tol": 1e-10, "max_iter": 0},
+     "integrator_options.max_iter: must be a positive integer (for rozmanov_kusalik_rotate), "
+     "got 0"),
+    ("rozmanov_kusalik", {"tol": "small"},
+     "integrator_options.tol: must be a number, got 'small' (for rozmanov_kusalik_rotate)"),
+    ("no_squish", {"tol": 1e-10},
+     "integrator_options.tol: integrator 'no_squish' takes no parameter 'tol'"),
+])
+def test_integrator_options_mistakes_name_the_option(tmp_path, integrator, options, message):
+    """``integrator_options: {tol: -1}`` was refused as "integrator: scheme entry 2
+    (rozmanov_kusalik_rotate): tol must be positive", naming the integrator."""
+    with pytest.raises(ConfigError) as err:
+        RunSection.from_config({"timestep": "1 fs", "steps": 1, "integrator": integrator,
+                                "integrator_options": options}, tmp_path)
+    assert str(err.value) == message

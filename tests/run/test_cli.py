@@ -218,7 +218,10 @@ def test_run_from_flags_only(tmp_path):
      "calculator.options.commands: 'shell touch pwned': shell is not an interaction command"),
 ])
 def test_config_errors_are_one_line_and_status_2(project, change, field):
-    (project / "bad.yaml").write_text(with_change(PLAIN, change))
+    text = with_change(PLAIN, change)
+    if change.startswith("structure: {builtin"):  # (a builtin reads no file: no read_options)
+        text = with_change(text, "read_options: {}")
+    (project / "bad.yaml").write_text(text)
     result = rigidmd("run", "bad.yaml", cwd=project)
     assert result.returncode == 2
     assert "Traceback" not in result.stderr
@@ -328,6 +331,27 @@ def test_export_refuses_a_thermostat_before_relaxing(project):
     result = rigidmd("export-lammps", "bad.yaml", "deck", cwd=project)
     assert result.returncode == 2 and "no Bussi thermostat" in result.stderr
     assert "relax" not in result.stdout + result.stderr.replace("relax:", "")
+    assert not (project / "deck").exists() or not any((project / "deck").iterdir())
+
+
+@pytest.mark.parametrize("changes", [
+    ("calculator: {name: tip3p, options: {rc: 5.0}}",),
+    ("structure: {builtin: water_box, n_side: 2}", "read_options: {}",
+     "calculator: {name: tip3p, options: {rc: 3.0}}"),
+])
+def test_export_refuses_tip3p_it_cannot_write_before_relaxing(project, changes):
+    """A cluster too wide for TIP3P's rc, or a periodic box, with a relax: section was
+    relaxed in full, relax.traj and relax.log written into the deck's folder, then refused
+    with exit 2 (the check ran on the relaxed atoms): refused before anything is written."""
+    text = with_change(PLAIN, "relax: {fmax: 0.05, steps: 200}")
+    for change in changes:
+        text = with_change(text, change)
+    (project / "bad.yaml").write_text(text)
+    result = rigidmd("export-lammps", "bad.yaml", "deck", cwd=project)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith("rigidmd: error: calculator: ASE's TIP3P switches off each "
+                                    "molecule pair"), result.stderr
+    assert "relaxed" not in result.stdout
     assert not (project / "deck").exists() or not any((project / "deck").iterdir())
 
 
@@ -568,15 +592,15 @@ def test_export_never_writes_over_a_deck_or_an_input(project):
 
 def test_a_restart_says_what_it_does_not_use(project):
     """``--restart`` starts from the trajectory's last frame, positions and momenta: the
-    configuration's structure and velocities are not used, and the run says so (before, in
-    silence: a run "at 250 K" started at the frame's temperature)."""
+    configuration's structure (with its read_options) and velocities are not used, and the
+    run says so (before, in silence: a run "at 250 K" started at the frame's temperature)."""
     (project / "plain.yaml").write_text(PLAIN)
     assert rigidmd("run", "plain.yaml", "--outdir", "first", cwd=project).returncode == 0
     result = rigidmd("run", "plain.yaml", "--restart", "first/md.traj", "--outdir", "second",
                      cwd=project)
     assert result.returncode == 0, result.stderr
     assert ("restart: the run starts from the last frame of md.traj, its positions and "
-            "momenta; structure: and velocities: not used") in result.stdout
+            "momenta; structure:, read_options: and velocities: not used") in result.stdout
 
 
 def test_a_stopped_demo_says_the_command_that_works(tmp_path):
@@ -632,3 +656,73 @@ def test_bodies_whose_atoms_are_apart_are_refused_for_mdanalysis_before_any_file
                                     "residue 1"), result.stderr
     assert "leave outputs.mdanalysis out" in result.stderr and result.stderr.count("\n") == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_an_integrator_file_on_the_command_line_is_the_current_directorys(tmp_path):
+    """``rigidmd run sub/c.yaml --integrator my_scheme.yaml`` looked for the scheme beside
+    the configuration (sub/my_scheme.yaml: "not found", or another file of that name run
+    instead); paths on the command line are the current directory's, as for --structure."""
+    (tmp_path / "my_scheme.yaml").write_text(
+        "- rotational_kick: {dt_scale: 0.5}\n- no_squish_rotate\n"
+        "- translational_kick: {dt_scale: 0.5}\n- drift\n- compute_force\n"
+        "- translational_kick: {dt_scale: 0.5}\n- rotational_kick: {dt_scale: 0.5}\n")
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "c.yaml").write_text(
+        "structure: {builtin: water_cluster, n_molecules: 2}\ntimestep: 1 fs\nsteps: 2\n"
+        "outputs: {directory: out}\n")
+    result = rigidmd("run", "sub/c.yaml", "--integrator", "my_scheme.yaml", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert f"with {tmp_path / 'my_scheme.yaml'} integrator" in result.stdout
+    # A scheme of that name beside the configuration is not the one given.
+    (tmp_path / "sub" / "my_scheme.yaml").write_text("- not_an_operator\n")
+    result = rigidmd("run", "sub/c.yaml", "--integrator", "my_scheme.yaml", "--overwrite",
+                     cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+
+
+@pytest.mark.parametrize("changes, message", [
+    (["barostat: {kind: mtk, pressure: 1 bar, pdamp: 1 ps}"],
+     "barostat: mtk changes the periodic cell, which needs periodicity in x, y and z; the "
+     "structure is not periodic (a cluster)"),
+    (["structure: {builtin: water_box, n_side: 2}", "read_options: {}",
+      "calculator: {name: tip3p, options: {rc: 3.0}}",
+      "barostat: {kind: mtk, pressure: 1 bar, pdamp: 1 ps}"],
+     "calculator.name: tip3p provides no stress (it implements energy, forces), which "
+     "barostat mtk needs for the pressure"),
+    (["integrator: richardson",
+      "thermostat: {kind: langevin_baoab, temperature: 300 K, friction: 1 1/ps}"],
+     "integrator: richardson has no 'middle' operator, where thermostat langevin_baoab acts"),
+    (["integrator: richardson",
+      "calculator: {fast: {name: tip3p}, slow: {name: tip3p, options: {rc: 40.0}}, "
+      "substeps: 2}"],
+     "integrator: a force split (calculator: fast, slow, substeps) runs its inner steps by "
+     "NO_SQUISH, not richardson"),
+    (["integrator: rozmanov_kusalik", "integrator_options: {tol: -1}"],
+     "integrator_options.tol: must be positive (for rozmanov_kusalik_rotate), got -1"),
+])
+def test_what_the_dynamics_refuses_is_named_by_its_field(project, changes, message):
+    """A barostat on a cluster or with a calculator without stress, langevin_baoab or a force
+    split with integrator richardson, a negative integrator_options.tol: refused in the
+    Python API's words ("atoms.pbc is ...", "integrator='baoab'"), without the field."""
+    text = PLAIN
+    for change in changes:
+        text = with_change(text, change)
+    (project / "bad.yaml").write_text(text)
+    result = rigidmd("run", "bad.yaml", cwd=project)
+    assert result.returncode == 2
+    assert result.stderr.count("\n") == 1, result.stderr
+    assert result.stderr.startswith(f"rigidmd: error: {message}"), result.stderr
+    assert not (project / "out").exists()
+
+
+def test_plot_names_o_for_a_file_it_cannot_write(project):
+    """``rigidmd plot md.log -o energy.txt`` said "Format 'txt' is not supported ...",
+    naming no option."""
+    (project / "md.log").write_text("Time[ps] Etot[eV] Epot[eV] Ekin[eV] T[K]\n"
+                                     "0.0 -1.0 -2.0 1.0 300\n0.001 -1.0 -2.0 1.0 300\n")
+    result = rigidmd("plot", "md.log", "-o", "energy.txt", cwd=project)
+    assert result.returncode == 2
+    assert result.stderr == ("rigidmd: error: -o: energy.txt is not an image file the plot "
+                             "can write; end its name in .png, .pdf or .svg (or .svgz, .eps, "
+                             ".ps, .jpg, .jpeg, .tif, .tiff, .webp)\n")
+    assert not (project / "energy.txt").exists()

@@ -67,3 +67,29 @@ def test_the_advice_keeps_a_trajectory_first(tmp_path):
     (tmp_path / "out" / "md.traj").write_bytes(b"")
     assert files.fresh_start_advice().startswith(
         f"start a new run from its last frame with --restart {tmp_path / 'out' / 'md.traj'}")
+
+
+def test_a_run_that_never_started_removes_exactly_the_directories_it_made(tmp_path):
+    """``outputs.directory: a/b/c`` was made with its parents, and only ``c`` removed when
+    the run could not start (a calculator refused): a/ and a/b/ were left behind."""
+    (tmp_path / "keep").mkdir()
+    section = OutputsSection.from_config({"outputs": {"directory": "keep/a/b/c",
+                                                       "log": "md.log"}}, tmp_path)
+    files = RunFiles(section, "new", io.StringIO())
+    lock = files.open()
+    assert (tmp_path / "keep/a/b/c" / LOCK_NAME).exists()
+    files.abandon(lock, started=False)
+    assert (tmp_path / "keep").is_dir() and not any((tmp_path / "keep").iterdir())
+    # A run that had started keeps its outputs, and so the directories above them.
+    files = RunFiles(section, "new", io.StringIO())
+    lock = files.open()
+    (tmp_path / "keep/a/b/c/md.log").write_text("step 0\n")
+    files.abandon(lock, started=True)
+    assert (tmp_path / "keep/a/b/c/md.log").is_file()
+    # A directory that was there before is not the run's to remove.
+    (tmp_path / "keep/a/b/c/md.log").unlink()
+    files = RunFiles(section, "new", io.StringIO())
+    lock = files.open()
+    assert not files.made_directory
+    files.abandon(lock, started=False)
+    assert (tmp_path / "keep/a/b/c").is_dir()

@@ -12,6 +12,7 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
+from ase import units
 
 from rigidmd.config.quantities import (
     UNIT_TABLES,
@@ -23,6 +24,11 @@ from rigidmd.config.quantities import (
 
 __all__ = ["CouplingSpec", "CouplingSection", "parse_coupling"]
 
+#: The largest size of a target pressure (eV/Å³): the barostats'
+#: (:func:`rigidmd.couplings.barostats.check_pressure`), refused here in the units of the
+#: configuration (160 GPa; the Python API's message speaks of ``pressure_au``).
+LARGEST_PRESSURE = 1.0
+
 
 def _check_sign(field_name, quantity, value, raw):
     """Physical signs of parsed quantities: one wording for every field."""
@@ -32,6 +38,11 @@ def _check_sign(field_name, quantity, value, raw):
         raise ConfigError(f"{field_name}: must be positive, got {raw!r}")
     if quantity == "rate" and value < 0:
         raise ConfigError(f"{field_name}: must be >= 0, got {raw!r}")
+    if quantity == "pressure" and abs(value) > LARGEST_PRESSURE:
+        limit = LARGEST_PRESSURE / units.GPa
+        raise ConfigError(f"{field_name}: {raw} is beyond ±{limit:.4g} GPa "
+                          f"(±{limit * 1e4:.4g} bar), the largest pressure a barostat takes; "
+                          "is the unit right?")
 
 
 @dataclass
@@ -172,3 +183,33 @@ class CouplingSection:
     def parts(self):
         """New coupling parts for a dynamics."""
         return [spec.part() for spec in self.specs]
+
+    def check_structure(self, atoms):
+        """Refuse (ConfigError naming the section) a part that moves the cell (a barostat)
+        for a structure whose cell is not periodic in all three directions."""
+        for spec in self.specs:
+            if spec.cls.moves_cell and not np.all(atoms.pbc):
+                periodic = [axis for axis, on in zip("xyz", atoms.pbc, strict=True) if on]
+                has = (f"periodic along {' and '.join(periodic)} only" if periodic
+                       else "not periodic (a cluster)")
+                raise ConfigError(f"{spec.section}: {spec.kind} changes the periodic cell, "
+                                  f"which needs periodicity in x, y and z; the structure is "
+                                  f"{has}; leave {spec.section} out, or give a periodic box")
+
+    def check_calculator(self, calc, name):
+        """Refuse (ConfigError naming ``calculator.name``) a calculator that declares it
+        provides no stress or no energy where a part reads it (a barostat's pressure, the
+        Monte Carlo barostat's energy).  ``calc``: the built calculator; ``name``: the
+        configuration's ``calculator.name``.  A force split's levels are checked by the
+        dynamics, naming the level."""
+        implemented = getattr(calc, "implemented_properties", None)
+        if implemented is None or name == "multiple_time_step":
+            return  # (one that says nothing is asked at its first call)
+        for spec in self.specs:
+            for needed, why in (("stress", spec.cls.needs_stress and "the pressure"),
+                                ("energy", spec.cls.needs_energy and "its moves' energies")):
+                if why and needed not in implemented:
+                    raise ConfigError(
+                        f"calculator.name: {name} provides no {needed} (it implements "
+                        f"{', '.join(implemented)}), which {spec.section} {spec.kind} needs "
+                        f"for {why}; use a calculator with {needed}, e.g. lammps")

@@ -303,6 +303,35 @@ def _refuse_nul(value, where=""):
         raise ConfigError(f"{where}: contains a NUL character (\\0); remove it")
 
 
+def check_integrator(checked):
+    """Refuse (ConfigError naming ``integrator``) an integrator the run's other sections
+    cannot step with: one without a ``middle`` operator for a part that acts in the middle
+    of the step (``langevin_baoab``), or one other than NO_SQUISH (or ``baoab``) for a
+    force split, whose inner steps are NO_SQUISH's.
+
+    Parameters
+    ----------
+    checked : RunConfig
+    """
+    from rigidmd.core.schemes import resolve_scheme, scheme_with_middle
+
+    run = checked.run
+    scheme = resolve_scheme(run.integrator, **run.integrator_options)
+    shown = run.integrator if isinstance(run.integrator, str) else scheme.name
+    middle = [spec for spec in checked.coupling.specs if spec.cls.acts_in_middle]
+    try:
+        scheme = scheme_with_middle(scheme, run.integrator, [spec.kind for spec in middle])
+    except ValueError:
+        raise ConfigError(f"integrator: {shown} has no 'middle' operator, where "
+                          f"{middle[0].section} {middle[0].kind} acts; use no_squish (the "
+                          "default, split for it) or baoab") from None
+    if checked.calculator.name == "multiple_time_step" and not any(
+            scheme == resolve_scheme(name) for name in ("no_squish", "baoab")):
+        raise ConfigError(f"integrator: a force split (calculator: fast, slow, substeps) runs "
+                          f"its inner steps by NO_SQUISH, not {shown}; use no_squish (the "
+                          "default) or baoab")
+
+
 def check_config(config, trust=False):
     """Validate a raw configuration mapping and build its sections.
 
@@ -343,6 +372,7 @@ def check_config(config, trust=False):
             spec.part().check_timestep(checked.run.timestep)
         except ValueError as err:
             raise ConfigError(f"{spec.section}: {err}") from None
+    check_integrator(checked)
     if checked.relax is not None:
         outputs = checked.outputs
         others = {f"outputs.{key}": getattr(outputs, key)

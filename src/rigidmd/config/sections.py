@@ -31,6 +31,7 @@ from rigidmd.config.quantities import (
     TEMPERATURE_UNITS,
     TIME_UNITS,
     ConfigError,
+    key_name,
     mapping,
     parse_address,
     parse_quantity,
@@ -92,7 +93,9 @@ class StructureSection:
     source : pathlib.Path, dict or None
         A structure file, or ``{builtin: water_cluster, ...}``; None with a restart.
     read_options : dict
-        Keyword arguments of :func:`ase.io.read`.
+        Keyword arguments of :func:`ase.io.read` for the structure file, or, without one,
+        for the restart (``index`` -1, its last frame, unless given); refused with a
+        builtin structure, which reads no file.
     bodies : str or None
         ``"connectivity"``, ``"mol-id"`` or ``"tags"``; None (absent) is the
         library's default: mol-id, else tags, else connectivity.
@@ -126,18 +129,23 @@ class StructureSection:
         bodies = raw.get("bodies")
         if bodies is not None and bodies not in BODY_RULES:
             raise ConfigError(f"bodies: use connectivity, mol-id or tags, got {bodies!r}")
-        return cls(source, dict(mapping("read_options", raw.get("read_options", {}))), bodies,
-                   restart)
+        read_options = dict(mapping("read_options", raw.get("read_options", {})))
+        if read_options and isinstance(source, dict) and restart is None:
+            raise ConfigError(f"read_options: the builtin {source['builtin']} reads no file; "
+                              "read_options go with a structure file or a restart")
+        return cls(source, read_options, bodies, restart)
+
+    @property
+    def restart_read_options(self):
+        """The keyword arguments of :func:`ase.io.read` for the restart: ``read_options``
+        unless they are a structure file's, with ``index`` -1 (the last frame) unless given."""
+        given = {} if isinstance(self.source, Path) else self.read_options
+        return {"index": -1, **given}
 
     def build_atoms(self):
         """The starting Atoms: the restart's last frame, the file, or the builder."""
-        from ase.io import read
-
         if self.restart is not None:
-            try:
-                atoms = read(self.restart, index=-1)
-            except Exception as err:  # noqa: BLE001 - ASE raises many kinds for unreadable files
-                raise unreadable("restart", self.restart, err, self.read_options) from None
+            atoms = _read_frame("restart", self.restart, self.restart_read_options)
             atoms.calc = None
             return atoms
         if isinstance(self.source, dict):
@@ -148,16 +156,7 @@ class StructureSection:
                 return getattr(systems, self.source["builtin"])(**options)
             except TypeError as err:
                 raise ConfigError(f"structure: {err}") from None
-        try:
-            atoms = read(self.source, **self.read_options)
-        except Exception as err:  # noqa: BLE001 - any reader failure is a config mistake
-            raise unreadable("structure", self.source, err, self.read_options) from None
-        if isinstance(atoms, list):
-            if not atoms:
-                raise ConfigError(f"read_options.index: {self.read_options.get('index')!r} "
-                                  f"selects no frame of {self.source}")
-            atoms = atoms[-1]
-        return atoms
+        return _read_frame("structure", self.source, self.read_options)
 
     def resolve_bodies(self, atoms):
         """The bodies of the run (``bodies`` absent: the library's default rule).
@@ -172,6 +171,23 @@ class StructureSection:
         if rule == "mol-id" and "mol-id" not in atoms.arrays and self.restart is not None:
             rule = "tags"
         return RigidBodies.resolve(atoms, rule)
+
+
+def _read_frame(field_name, path, read_options):
+    """The frame :func:`ase.io.read` gives with ``read_options`` (the last of several), or a
+    ConfigError naming ``field_name`` (or ``read_options.index`` selecting no frame)."""
+    from ase.io import read
+
+    try:
+        atoms = read(path, **read_options)
+    except Exception as err:  # noqa: BLE001 - any reader failure is a config mistake
+        raise unreadable(field_name, path, err, read_options) from None
+    if isinstance(atoms, list):
+        if not atoms:
+            raise ConfigError(f"read_options.index: {read_options.get('index')!r} "
+                              f"selects no frame of {path}")
+        atoms = atoms[-1]
+    return atoms
 
 
 def unreadable(field_name, path, err, read_options=None):
@@ -322,7 +338,7 @@ class RunSection:
         if isinstance(integrator, str) and integrator.endswith((".yaml", ".yml")):
             integrator = str(base / integrator)
         try:
-            resolve_scheme(integrator, **options)
+            resolve_scheme(integrator)
         except (ValueError, TypeError) as err:
             raise ConfigError(f"integrator: {err}") from None
         except OSError as err:  # the scheme file: missing, a folder, unreadable
@@ -331,6 +347,20 @@ class RunSection:
             where = getattr(err, "problem_mark", None)
             line = f" at line {where.line + 1}" if where is not None else ""
             raise ConfigError(f"integrator: {integrator!r} is not valid YAML{line}") from None
+        for key, value in options.items():  # each option on its own: the refusal names it
+            where = f"integrator_options.{key_name(key)}"
+            if not isinstance(key, str):
+                raise ConfigError(f"{where}: expected an option's name, such as tol")
+            try:
+                resolve_scheme(integrator, **{key: value})
+            except (ValueError, TypeError) as err:
+                entry = re.fullmatch(rf"scheme entry \d+ \((\w+)\): {re.escape(key)} (.*)",
+                                     str(err))
+                if entry is None:  # (not an option of this integrator)
+                    raise ConfigError(f"{where}: {err}") from None
+                got = "" if "got " in entry.group(2) else f", got {value!r}"
+                raise ConfigError(f"{where}: {entry.group(2)} (for {entry.group(1)}){got}"
+                                  ) from None
         if "timestep" not in raw:
             raise ConfigError("timestep: missing (e.g. '1 fs')")
         timestep = parse_quantity("timestep", raw["timestep"], TIME_UNITS)
@@ -366,6 +396,7 @@ class CalculatorSection:
     Attributes
     ----------
     name : str
+        Absent: ``tip3p`` (a level of a force split names its calculator).
     options : dict
         Keyword arguments of the calculator (for ``lammps``: those of
         :class:`~rigidmd.lammps.LAMMPSCalculator`, e.g. ``exclude_intramolecular``).
@@ -384,7 +415,7 @@ class CalculatorSection:
         ``lammps``: run LAMMPS in its own process(es) on this many MPI ranks
         (:class:`~rigidmd.lammps.engine.LAMMPSEngine`); absent: in-process.
     threads : int or None
-        ``lammps``: OpenMP threads (per rank).
+        ``lammps``: OpenMP threads (per rank); not also as ``options.threads``.
     address : str or None
         An engine started elsewhere connects here: ``unix:NAME`` (the socket
         ``/tmp/ipi_NAME``) or ``HOST:PORT``.  With ``lammps`` the engine's
@@ -418,8 +449,12 @@ class CalculatorSection:
         self.calculator_class = check_calculator(self, trust)
 
     @classmethod
-    def from_config(cls, raw, base):
-        calc = mapping("calculator", raw.get("calculator", {"name": "tip3p"}), cls.FIELDS)
+    def from_config(cls, raw, base, default_name="tip3p"):
+        """The section of ``raw["calculator"]``; ``name`` absent is ``default_name`` (a
+        level of a force split passes None: each level names its calculator)."""
+        calc = dict(mapping("calculator", raw.get("calculator", {}), cls.FIELDS))
+        if "name" not in calc and default_name is not None:
+            calc["name"] = default_name
         if "name" not in calc:
             raise ConfigError("calculator.name: missing (tip3p, tip4p, lammps or a dotted path)")
         if not isinstance(calc["name"], str):
@@ -463,6 +498,10 @@ class CalculatorSection:
                 if calc["name"] != "lammps":
                     raise ConfigError(f"calculator.{key}: goes with name: lammps")
                 whole_number(f"calculator.{key}", value, minimum=1)
+        if threads is not None and "threads" in options:  # (two counts: which would run?)
+            raise ConfigError(f"calculator.options.threads: {options['threads']!r} beside "
+                              f"calculator.threads: {threads!r}; give the OpenMP threads once, "
+                              "as calculator.threads")
         if address is not None:
             if calc["name"] not in ("lammps", "ipi"):
                 raise ConfigError("calculator.address: goes with name: lammps or ipi")
@@ -561,10 +600,9 @@ class CalculatorSection:
                 raise ConfigError(f"calculator.atom_types: no LAMMPS type for {missing[0]} "
                                   f"(types given for {', '.join(map(str, self.atom_types))})")
         if self.processes is None and self.address is None:
-            if self.threads is not None:
-                self.options.setdefault("threads", self.threads)
+            threads = {} if self.threads is None else {"threads": self.threads}
             return LAMMPSCalculator(self.commands, atom_types=self.atom_types or None,
-                                    **self.options)
+                                    **threads, **self.options)
         from rigidmd.lammps.engine import LAMMPSEngine
 
         where = {} if self.address is None else dict(

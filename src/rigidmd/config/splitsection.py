@@ -98,7 +98,8 @@ class SplitCalculatorSection:
                 raise ConfigError(f"calculator.{level}: a level is one calculator, not another "
                                   "split")
             try:
-                levels[level] = CalculatorSection.from_config({"calculator": spec}, base)
+                levels[level] = CalculatorSection.from_config({"calculator": spec}, base,
+                                                              default_name=None)
             except ConfigError as err:
                 raise _renamed(err, level) from None
         return cls(levels["fast"], levels["full" if difference else "slow"], substeps,

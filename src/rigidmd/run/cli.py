@@ -33,6 +33,7 @@ from rigidmd.config import (
     load_config,
     parse_quantity,
 )
+from rigidmd.config.sections import PLOT_FORMATS
 from rigidmd.config.trust import GivenOnCommandLine
 from rigidmd.core.dynamics import NonFiniteForceError
 from rigidmd.core.operators import ConvergenceError
@@ -64,6 +65,9 @@ def _apply_flags(config, args):
         value = getattr(args, key, None)
         if value is not None:
             config[key] = value
+    integrator = getattr(args, "integrator", None)
+    if integrator is not None and integrator.endswith((".yaml", ".yml")):  # a scheme file
+        config["integrator"] = str(Path(integrator).resolve())
     for key in ("restart", "structure"):
         value = getattr(args, key, None)
         if value is not None:
@@ -118,7 +122,7 @@ def _export(config, directory, stream=sys.stdout):
                           "Verlet after one step at k = 1), and its levels split one LAMMPS "
                           "model, not two calculators; export the full model on its own")
     atoms, bodies = Run(config).start_atoms()
-    _check_exportable(config, bodies)  # before a relaxation spends its time and writes
+    _check_exportable(config, atoms, bodies)  # before a relaxation spends its time and writes
     # Installed before the relaxation's own handlers and kept until the deck is written: a
     # signal once the relaxation has ended is noted and the deck finished (a second
     # Ctrl-C only counted), never a kill without a word halfway through the files.
@@ -132,9 +136,10 @@ def _export(config, directory, stream=sys.stdout):
     return status
 
 
-def _check_exportable(config, bodies):
+def _check_exportable(config, atoms, bodies):
     """Refuse, in one line, a calculator, integrator or coupling LAMMPS has no equivalent
-    for: what does not depend on where the relaxation leaves the atoms."""
+    for, and ASE's TIP3P on a periodic box or a cluster too wide for its ``rc`` (checked on
+    the start; :func:`_write_deck` checks the relaxed cluster again)."""
     from rigidmd.couplings.base import NotExportable
     from rigidmd.lammps.deck import coupling_fix
 
@@ -149,6 +154,38 @@ def _check_exportable(config, bodies):
                      free_atoms=bool(np.any(np.asarray(bodies.body_ids) < 0)))
     except NotExportable as err:
         raise ConfigError(str(err)) from None
+    if config.calculator.name == "tip3p":
+        _check_tip3p_exportable(config.calculator, bodies.whole_positions(atoms), atoms)
+
+
+def _check_tip3p_exportable(calc, positions, atoms):
+    """Refuse (one line) ASE's TIP3P where the deck's pair style would not reproduce it.
+
+    The deck's pair style cuts each atom pair at ``rc``, where ASE's TIP3P takes every
+    atom pair of two molecules whose oxygens are within its switch: every atom pair must
+    lie within ``rc`` too, and a periodic box (images across the faces) cannot be written.
+
+    Parameters
+    ----------
+    calc : rigidmd.config.CalculatorSection
+        ``name: tip3p``.
+    positions : numpy.ndarray
+        The atoms' positions, each body whole.
+    atoms : ase.Atoms
+        Their numbers and periodicity.
+    """
+    rc = calc.options.get("rc", 5.0)
+    width = calc.options.get("width", 1.0)
+    oxygens = positions[atoms.numbers == 8]
+    span = np.linalg.norm(oxygens[:, None] - oxygens[None], axis=-1).max()
+    atom_span = np.linalg.norm(positions[:, None] - positions[None], axis=-1).max()
+    if atoms.pbc.any() or span >= rc - width or atom_span >= rc:
+        raise ConfigError(
+            "calculator: ASE's TIP3P switches off each molecule pair smoothly near rc, "
+            "which no LAMMPS pair style reproduces; export works for a cluster whose "
+            f"oxygens lie within rc - width and atoms within rc (here {span:.1f} Å "
+            f"against {rc - width:g} Å, {atom_span:.1f} Å against {rc:g} Å) or with the "
+            "lammps calculator")
 
 
 def _write_deck(config, atoms, bodies, directory, stream):
@@ -161,23 +198,9 @@ def _write_deck(config, atoms, bodies, directory, stream):
         relax_for_export(config, atoms, bodies, directory, stream)
     atoms.positions = bodies.whole_positions(atoms)
     calc = config.calculator
-    if calc.name == "tip3p":
+    if calc.name == "tip3p":  # (checked on the start; the relaxation may have spread it)
+        _check_tip3p_exportable(calc, atoms.positions, atoms)
         rc = calc.options.get("rc", 5.0)
-        width = calc.options.get("width", 1.0)
-        oxygens = atoms.positions[atoms.numbers == 8]
-        span = np.linalg.norm(oxygens[:, None] - oxygens[None], axis=-1).max()
-        # The deck's pair style cuts each atom pair at rc, where ASE's TIP3P takes every
-        # atom pair of two molecules whose oxygens are within its switch: every atom pair
-        # must lie within rc too.
-        atom_span = np.linalg.norm(atoms.positions[:, None] - atoms.positions[None],
-                                   axis=-1).max()
-        if atoms.pbc.any() or span >= rc - width or atom_span >= rc:
-            raise ConfigError(
-                "calculator: ASE's TIP3P switches off each molecule pair smoothly near rc, "
-                "which no LAMMPS pair style reproduces; export works for a cluster whose "
-                f"oxygens lie within rc - width and atoms within rc (here {span:.1f} Å "
-                f"against {rc - width:g} Å, {atom_span:.1f} Å against {rc:g} Å) or with the "
-                "lammps calculator")
         pair, charges = tip3p_pair_commands(rc), tip3p_charges(atoms)
     else:  # "lammps" (_check_exportable refused the others)
         pair = list(calc.commands)
@@ -258,7 +281,8 @@ def _parser():
     add_bias_parser(sub, trust_help)
     plot = sub.add_parser("plot", help="plot energies and temperature of an MD log")
     plot.add_argument("log", help="an MD log written by rigidmd (or by ASE's MDLogger)")
-    plot.add_argument("-o", "--output", help="PNG file (default: the log's name with .png)")
+    plot.add_argument("-o", "--output", help="image file: .png, .pdf, .svg, ... (default: the "
+                                             "log's name with .png)")
     export = sub.add_parser("export-lammps", help="write an equivalent LAMMPS data file and deck")
     export.add_argument("config", help="YAML configuration of the run to export")
     export.add_argument("directory", help="directory for data.rigidmd and in.rigidmd")
@@ -315,6 +339,10 @@ def main(argv=None):
             if not log.is_file():
                 raise ConfigError(f"log: no such file {str(log)!r}")
             png = Path(args.output) if args.output else log.with_suffix(".png")
+            if png.suffix.lower().lstrip(".") not in PLOT_FORMATS:
+                raise ConfigError(f"-o: {png.name} is not an image file the plot can write; "
+                                  "end its name in .png, .pdf or .svg (or "
+                                  f"{', '.join('.' + f for f in PLOT_FORMATS[3:])})")
             plot_log(log, png)
             print(f"wrote {png}")
             return 0

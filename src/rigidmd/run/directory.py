@@ -11,6 +11,9 @@
   file.
 """
 
+import os
+from pathlib import Path
+
 from rigidmd.config import ConfigError
 from rigidmd.run.outputs import OutputError, OutputLock, describe_os_error
 
@@ -34,6 +37,17 @@ class NamedOutput:
             raise
 
 
+def _missing_directories(directory):
+    """The directories ``directory.mkdir(parents=True)`` would create, deepest first (the
+    path taken as written, ``..`` resolved by name)."""
+    path = Path(os.path.normpath(directory.absolute()))
+    missing = []
+    while not path.exists() and path != path.parent:
+        missing.append(path)
+        path = path.parent
+    return missing
+
+
 class RunFiles:
     """The output files of one run in its directory.
 
@@ -54,6 +68,9 @@ class RunFiles:
     ----------
     created : list of pathlib.Path
         The output files this run creates (none was there before it).
+    made_directories : list of pathlib.Path
+        The directories :meth:`open` created (``outputs.directory`` and those of its
+        parents that did not exist), deepest first.
     """
 
     def __init__(self, outputs, mode, stream, relax=None):
@@ -61,7 +78,7 @@ class RunFiles:
         self.relaxation = [] if relax is None else [outputs.directory / relax.trajectory,
                                                    outputs.directory / relax.log]
         self.created = []
-        self.made_directory = False
+        self.made_directories = []
 
     def appended(self):
         """The files a run appends to (trimmed on resume): ``{name: path}``."""
@@ -104,19 +121,27 @@ class RunFiles:
         return f"{keep}start it again with --overwrite (which removes them)"
 
     # ------------------------------------------------------------ the directory
+    @property
+    def made_directory(self):
+        """Whether :meth:`open` created the output directory."""
+        return bool(self.made_directories)
+
     def open(self):
-        """Create the directory if needed and take its lock; returns the held lock."""
+        """Create the directory (and its missing parents) if needed and take its lock;
+        returns the held lock.  On failure, the directories it created are removed."""
         out = self.outputs
-        self.made_directory = not out.directory.exists()
+        self.made_directories = _missing_directories(out.directory)
         try:
             out.directory.mkdir(parents=True, exist_ok=True)
         except OSError as err:
+            self.remove_made_directories()
             raise OutputError(f"outputs.directory: cannot create {out.directory} "
                               f"({describe_os_error(err).split(': ', 1)[-1]})") from None
         lock = OutputLock(out.directory)
         try:
             lock.acquire()
         except OSError as err:
+            self.remove_made_directories()
             reason = describe_os_error(err).rsplit(": ", 1)[-1]
             raise OutputError(f"outputs.directory: cannot write in {out.directory} "
                               f"({reason})") from None
@@ -133,11 +158,19 @@ class RunFiles:
             print(f"the run did not start: removed {', '.join(removed)}, which it had "
                   "opened", file=self.stream)
         lock.release()
-        if self.made_directory:  # a run that could not start leaves no empty directory behind
+        self.remove_made_directories()  # a run that could not start leaves no empty directory
+
+    def remove_made_directories(self):
+        """Remove the directories :meth:`open` created, deepest first, while they are empty
+        (one that holds outputs, a run's that had started, stays, and so do its parents)."""
+        for directory in self.made_directories:
             try:
-                self.outputs.directory.rmdir()
+                directory.rmdir()
+            except FileNotFoundError:
+                continue  # (mkdir failed before it)
             except OSError:
-                pass  # it holds outputs: the run had started
+                return
+        self.made_directories = []
 
     def remove_created(self):
         """Remove the outputs of a new run that failed before its first checkpoint.

@@ -150,12 +150,15 @@ class Run:
         velocities = self.config.run.velocities
         structure = self.config.structure
         if structure.restart is not None:
+            file_options = isinstance(structure.source, Path) and bool(structure.read_options)
             unused = [name for name, given in (("structure:", structure.source is not None),
+                                               ("read_options:", file_options),
                                                ("velocities:", velocities is not None)) if given]
             if unused:  # said, not silent: the restart's frame is the start
+                listed = " and ".join([", ".join(unused[:-1]), unused[-1]] if len(unused) > 2
+                                      else unused)
                 print(f"restart: the run starts from the last frame of {structure.restart.name}, "
-                      f"its positions and momenta; {' and '.join(unused)} not used",
-                      file=self.stream)
+                      f"its positions and momenta; {listed} not used", file=self.stream)
             return
         if velocities is not None:
             rigid_maxwell_boltzmann(atoms, velocities["temperature_K"], bodies=bodies,
@@ -181,7 +184,9 @@ class Run:
         from rigidmd.core.dynamics import RigidDynamics
 
         atoms, bodies = self.start_atoms()
+        self.config.coupling.check_structure(atoms)  # (before a calculator is started)
         atoms.calc = self.config.calculator.build(atoms, self.outputs.directory / "engine")
+        self.config.coupling.check_calculator(atoms.calc, self.config.calculator.name)
         if self.config.relax is not None:  # what it cannot relax, before anything is written
             self.config.relax.check_structure(atoms)
         probe = atoms.copy()
