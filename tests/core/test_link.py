@@ -161,3 +161,23 @@ def test_a_split_run_in_pieces_is_the_run_in_one_without_asking_its_levels_again
     before = dict(asks)
     pieces.run(1)  # the start asks both levels, then one step
     assert (asks["fast"] - before["fast"], asks["slow"] - before["slow"]) == (4, 2)
+
+
+def test_each_dynamics_puts_its_own_degrees_of_freedom_on_the_atoms_when_it_runs():
+    """Two dynamics on one Atoms: a thermostat's (fixcm, 21 for 4 waters) then an NVE one
+    (24).  The NVE run kept the thermostat's marker, so ``atoms.get_temperature()`` (and
+    ASE's MDLogger) read 216.37 K where 2K/(24 k_B) is 189.32 K (measured)."""
+    from rigidmd import RigidLangevin
+
+    atoms = waters(4)
+    atoms.calc = TIP3P(rc=20.0)
+    nve = RigidVerlet(atoms, 1 * units.fs)
+    eq = RigidLangevin(atoms, 1 * units.fs, temperature_K=300, friction=0.01,
+                       rng=np.random.default_rng(0))
+    for dyn, dof in ((eq, 21), (nve, 24), (eq, 21)):
+        dyn.run(2)
+        assert dyn.degrees_of_freedom == dof
+        assert atoms.get_number_of_degrees_of_freedom() == dof
+        kinetic = atoms.get_kinetic_energy()
+        assert atoms.get_temperature() == pytest.approx(2 * kinetic / (dof * units.kB),
+                                                        rel=1e-12)

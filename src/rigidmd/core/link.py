@@ -252,6 +252,8 @@ class AtomsSync:
         #: holds results for the atoms as they are (:meth:`forces_still_current`).
         self.calculator = None
         self.reads_only = {}  # observer -> whether it is known to only read the Atoms
+        #: This dynamics' degree-of-freedom marker (:meth:`mark_atoms`); None before.
+        self.marker = None
 
     def mark_atoms(self) -> None:
         """Put the rigid degree-of-freedom marker in ``atoms.constraints`` (FixCom kept)."""
@@ -262,6 +264,7 @@ class AtomsSync:
         marker = RigidBodyDOF(removed, molecule_ids(self.body_ids))
         kept = [c for c in atoms.constraints if isinstance(c, FixCom)]
         atoms.constraints = kept + [marker]
+        self.marker = marker
 
     def write_atoms(self) -> None:
         """Write positions and rigid momenta of the state to the atoms, and remember them."""
@@ -283,7 +286,9 @@ class AtomsSync:
         if check_constraints(atoms) != self.fixcom:
             raise ValueError("FixCom was added to or removed from the atoms; create a new "
                              "dynamics")
-        if not any(isinstance(c, RigidBodyDOF) for c in atoms.constraints):
+        if not any(c is self.marker for c in atoms.constraints):
+            # absent, or another dynamics' (its count of degrees of freedom and its
+            # molecules): the atoms carry this dynamics' own while it runs
             self.mark_atoms()
         moved, kicked = link.changes_since(written, f"(set after step {step}; nothing was "
                                                     "changed)")

@@ -304,7 +304,13 @@ def principal_frames(r, m, starts, atom_body):
       that axis;
     * the remaining axis completes a right-handed frame; a linear body, whose
       atoms fix no direction across its axis, takes the lab axis least
-      aligned with its own.
+      aligned with its own.  Its frame therefore turns with the lab, not
+      with the body: a whole system rotated in the lab gives its linear bodies
+      other axes across their own, and NO_SQUISH's free-rotor splitting
+      (rotations about the two axes in turn) is not invariant under that
+      choice, so such a rotated run differs from the original by the
+      integrator's own O(dt²) error (4 CO₂, 300 fs at 1 fs: 1e-6 Å; a fourth
+      of it at each halving of the step), where other bodies agree to roundoff.
 
     Moments within ``LINEAR_TOLERANCE`` of the largest of each other count
     as equal and are replaced by their mean, so the frame chosen in their
