@@ -334,11 +334,21 @@ def test_files_of_another_estimate_are_never_taken_or_overwritten(tmp_path, monk
     assert estimate_bias(config, out, **kwargs)["status"] == 143
     monkeypatch.undo()
     assert (out / "leg-dt.npz").exists()
-    (out / "bias.json").rename(tmp_path / "bias.json")  # the checkpoint alone stays
+    for name in ("bias.json", "bias.txt"):
+        (out / name).rename(tmp_path / name)  # the checkpoint alone stays
     with pytest.raises(ConfigError, match=r"--outdir: .* already holds an estimate "
                                           r"\(leg-dt.npz\); continue it with --resume"):
         estimate_bias(config, out, **kwargs)
-    (tmp_path / "bias.json").rename(out / "bias.json")
+    # A table kept without its record (bias.txt alone) is not overwritten either.
+    lone = tmp_path / "lone"
+    lone.mkdir()
+    (lone / "bias.txt").write_text("a table someone kept\n")
+    with pytest.raises(ConfigError, match=r"--outdir: .* already holds an estimate "
+                                          r"\(bias.txt\); continue it with --resume"):
+        estimate_bias(config, lone, **kwargs)
+    assert (lone / "bias.txt").read_text() == "a table someone kept\n"
+    for name in ("bias.json", "bias.txt"):
+        (tmp_path / name).rename(out / name)
     # Another live process holds the directory.
     holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     try:

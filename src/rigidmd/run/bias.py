@@ -431,8 +431,9 @@ def _check_directory(directory, record, legs, arguments, prints, resume):
                               "runs' records are incomplete); start again in another "
                               "directory") from None
         return
-    held = [path.name for path in (record, *(_checkpoint_path(directory, leg) for leg in legs))
-            if path.exists()]
+    held = [path.name for path in (record, directory / "bias.txt",
+                                   *(_checkpoint_path(directory, leg) for leg in legs))
+            if path.exists()]  # (a bias.txt alone: a table someone kept, not overwritten)
     if held:
         raise ConfigError(f"--outdir: {directory} already holds an estimate "
                           f"({', '.join(held)}); continue it with --resume or give another "
