@@ -275,6 +275,8 @@ class RespaStep:
                 ev.fast.begin_step(ev.step, *((energy, stress) if j == k - 1 else (False, False)))
                 inside = acts and j == centre  # O between the half drifts of inner step k//2
                 self._inner_step(middle if inside else plain, h, inside)
+                if ctx.fixcom and j < k - 1:  # (the stepper removes it after the last)
+                    ops.remove_centre_velocity(state, model)  # FixCom: as each single step
             ev.evaluate_slow(state)
             ops.translational_kick(state, slow.F, slow.f, model, half)
             ops.rotational_kick(state, slow.tau, half)
