@@ -15,10 +15,11 @@ bath's temperature, not the momenta, so BAOAB's kinetic bias does not reach the 
 A run writes ``<name>.json`` (the density with the standard error of ``--blocks`` block
 means over the part after ``--equil-ps``, ⟨U⟩/N, T_tr, T_rot, the acceptance), its series
 ``<name>.series.npz`` (time, density, U, T_tr, T_rot every move) and its checkpoint
-``<name>.chk.npz`` (rigidmd's, exact).  It prints progress (a line on a terminal, a log
-line a minute otherwise), stops on SIGTERM or SIGINT at the end of the move interval it is
-in, writes what it has (``"complete": false``) and ``--resume`` continues it.  ``report``
-compares the steps.  Run::
+``<name>.chk.npz`` (rigidmd's, exact), the record of its arguments ``<name>.arguments``
+and, while it runs, its claim ``<name>.claim`` (as ``timestep_table.py``'s).  It prints
+progress (a line on a terminal, a log line a minute otherwise), stops on SIGTERM or SIGINT
+at the end of the move interval it is in, writes what it has (``"complete": false``) and
+``--resume`` continues it.  ``report`` compares the steps.  Run::
 
     python validation/npt_density.py run --dt-fs 0.5 4 --ps 400 --jobs 2 \
         --outdir validation/npt_runs
@@ -49,6 +50,7 @@ from arguments import at_least_zero, positive, whole  # noqa: E402
 from timestep_table import (  # noqa: E402
     FRICTION_PER_PS,
     TEMPERATURE_K,
+    Claim,
     Progress,
     Stop,
     add_run_options,
@@ -58,6 +60,7 @@ from timestep_table import (  # noqa: E402
     intramolecular_energy,
     load_start,
     make_atoms,
+    record_point,
     run_in_pieces,
     run_points,
 )
@@ -163,11 +166,19 @@ def point_main(p, resume):
     outdir = Path(p["outdir"])
     outdir.mkdir(parents=True, exist_ok=True)
     name = run_name(p)
+    with Claim(outdir / f"{name}.claim", name):  # (a second run of it refused)
+        return _point_main(p, resume, outdir, name)
+
+
+def _point_main(p, resume, outdir, name):
+    """:func:`point_main` once the point is claimed."""
     paths = {k: outdir / f"{name}.{k}.npz" for k in ("series", "chk")}
-    paths["json"] = outdir / f"{name}.json"
-    if complete_already(paths["json"], name, resume,
-                        {k: v for k, v in p.items() if k != "outdir"}, paths["chk"]):
+    paths["json"], paths["record"] = outdir / f"{name}.json", outdir / f"{name}.arguments"
+    arguments = {k: v for k, v in p.items() if k != "outdir"}
+    if complete_already(paths["json"], name, resume, arguments, paths["chk"],
+                        paths["record"]):
         return 0
+    record_point(paths["record"], arguments)  # (before the first sample: --resume checks it)
     stop = Stop()
     progress = Progress(name, p["ps"], p["log_s"], shared=p.get("jobs", 1) > 1)
     wall = time.perf_counter()

@@ -3,7 +3,10 @@ r"""The time-step table's runs: rigid water's ⟨U⟩, temperatures, RDF peak an
 One run is one point: a code and integrator, a water model and size, a step, a seed and a
 length, started from the model's shared thermal state.  It writes one JSON of results
 (``<name>.json``) beside its series (``<name>.series.npz``) and its checkpoint
-(``<name>.chk.npz``, rigidmd's own checkpoint; OpenMM's checkpoint in ``<name>.chk.omm``):
+(``<name>.chk.npz``, rigidmd's own checkpoint; OpenMM's checkpoint in ``<name>.chk.omm``),
+with the record of its arguments (``<name>.arguments``, checked by ``--resume``) and, while it
+runs, its claim on the point (``<name>.claim``: a second run of the point into the same
+``--outdir`` is refused):
 
 - ⟨U⟩/N (kJ/mol) with a block-average error (``--blocks`` blocks of the recorded part);
 - T_tr and T_rot as each code reports them (rigidmd: ``dyn.get_kinetic_temperatures()``,
@@ -62,6 +65,7 @@ import itertools
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -831,24 +835,98 @@ def analyse(series, p, n, offset=0.0):
 
 
 # --------------------------------------------------------------------------- command line
-def complete_already(path, name, resume, point=None, checkpoint=None):
+class Claim:
+    """A point's claim on its files in ``--outdir``: ``<name>.claim``, locked (``flock``,
+    exclusive) and holding the claiming process's id while the point runs, removed at the
+    end.  A second run of the point into the same directory is refused (SystemExit, one
+    line) before it writes anything, instead of both running and the later one's files
+    replacing the earlier one's.  The lock ends with its process however it ends (SIGKILL
+    too): a claim file left by a process that died is taken over, and said."""
+
+    def __init__(self, path, name):
+        self.path, self.name, self.fd = Path(path), name, None
+
+    def _holder(self, fd):
+        """The claim's ``pid host``, as it holds them (None when empty or unreadable)."""
+        try:
+            return os.pread(fd, 300, 0).decode().strip() or None
+        except (OSError, UnicodeDecodeError):
+            return None
+
+    def __enter__(self):
+        import fcntl
+
+        while True:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = self._holder(fd) or "?"
+                os.close(fd)
+                raise SystemExit(f"{self.name}: being run already (process {holder}, its claim "
+                                 f"{self.path}); wait for it, stop it, or give another "
+                                 "--outdir") from None
+            try:  # (a claim its holder removed as this opened it: claim afresh)
+                if os.fstat(fd).st_ino == os.stat(self.path).st_ino:
+                    break
+            except FileNotFoundError:
+                pass
+            os.close(fd)
+        left = self._holder(fd)
+        if left is not None:  # (its lock ended with its process: unheld, so not running)
+            print(f"{self.name}: the claim of process {left}, which ended without removing "
+                  f"it, taken over", flush=True)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()} {socket.gethostname()}\n".encode(), 0)
+        self.fd = fd
+        return self
+
+    def __exit__(self, *exc):
+        try:
+            self.path.unlink()  # (still locked: no run can claim the file being removed)
+        except FileNotFoundError:
+            pass
+        os.close(self.fd)
+        self.fd = None
+        return False
+
+
+def record_point(path, point):
+    """Write the run's arguments ``point`` to ``path`` (``<name>.arguments``, JSON) before its
+    first sample: a run killed outright leaves a checkpoint and a series but no JSON, and
+    ``--resume`` checks its arguments against this record (:func:`complete_already`)."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(point, indent=1) + "\n")
+    os.replace(tmp, path)
+
+
+def complete_already(path, name, resume, point=None, checkpoint=None, record=None):
     """Whether the run whose JSON is ``path`` is complete (said in a line).
 
     Refused (SystemExit, one line), never started over: without ``resume`` a run that is
     there (its JSON, or the checkpoint a killed run left); with ``resume`` a run made with
-    other arguments than ``point`` (each but :data:`RESUME_MAY_CHANGE`), or one whose JSON
-    says it stopped while its ``checkpoint`` is gone."""
+    other arguments than ``point`` (each but :data:`RESUME_MAY_CHANGE`; as its JSON says,
+    and as its ``record`` of them says, :func:`record_point`, which a run killed outright
+    before its JSON leaves), or one whose JSON says it stopped while its ``checkpoint`` is
+    gone."""
     left = [p for p in (path, checkpoint) if p is not None and p.exists()]
     if left and not resume:
         raise SystemExit(f"{left[0]}: exists; give --resume to continue it or remove it")
-    if not (resume and path.exists()):
+    if not (resume and left):
         return False
-    run = json.loads(path.read_text())
-    stored = run.get("point", {})
-    for key, value in (point or {}).items():
-        if key in stored and key not in RESUME_MAY_CHANGE and stored[key] != value:
-            raise SystemExit(f"{name}: --resume with {key} {value!r}, but the run was made "
-                             f"with {stored[key]!r}; give the run's arguments")
+    run = json.loads(path.read_text()) if path.exists() else {}
+    stored = [run.get("point", {})]
+    if record is not None and record.exists():
+        stored.append(json.loads(record.read_text()))
+    elif not path.exists():
+        print(f"{name}: its arguments were not recorded (a run made before they were): "
+              "--resume cannot check them", flush=True)
+    for made in stored:
+        for key, value in (point or {}).items():
+            if key in made and key not in RESUME_MAY_CHANGE and made[key] != value:
+                raise SystemExit(f"{name}: --resume with --{key.replace('_', '-')} {value!r}, "
+                                 f"but the run was made with {made[key]!r}; give the run's "
+                                 "arguments")
     if run.get("complete"):
         print(f"{name}: complete", flush=True)
         return True
@@ -863,14 +941,23 @@ def point_main(p, resume):
     outdir = Path(p["outdir"])
     outdir.mkdir(parents=True, exist_ok=True)
     name = run_name(p)
+    with Claim(outdir / f"{name}.claim", name):
+        return _point_main(p, resume, outdir, name)
+
+
+def _point_main(p, resume, outdir, name):
+    """:func:`point_main` once the point is claimed."""
     paths = {"json": outdir / f"{name}.json", "series": outdir / f"{name}.series.npz",
-             "chk": outdir / (f"{name}.chk.omm" if p["code"] == "openmm" else f"{name}.chk.npz")}
-    if complete_already(paths["json"], name, resume,
-                        {k: v for k, v in p.items() if k != "outdir"}, paths["chk"]):
+             "chk": outdir / (f"{name}.chk.omm" if p["code"] == "openmm" else f"{name}.chk.npz"),
+             "record": outdir / f"{name}.arguments"}
+    arguments = {k: v for k, v in p.items() if k != "outdir"}
+    if complete_already(paths["json"], name, resume, arguments, paths["chk"],
+                        paths["record"]):
         return 0
     if p["code"] == "rigidmd" and p["integrator"] not in INTEGRATORS:
         raise SystemExit(f"--integrator {p['integrator']!r}: rigidmd has {', '.join(INTEGRATORS)}")
     state = load_start(p["model"], p["waters"])
+    record_point(paths["record"], arguments)
     p = dict(p, box_A=float(state["cell"][0, 0]), cutoff_A=cutoff_for(state["cell"]))
     stop = Stop()
     progress = Progress(name, p["ps"], p["log_s"], shared=p.get("jobs", 1) > 1)
@@ -903,7 +990,14 @@ def point_main(p, resume):
 
 def reanalyse(paths, equil_ps=None):
     """Analyse runs again from their series (another ``--equil-ps``, or a newer analysis);
-    each JSON keeps its run's record and gets the new results."""
+    each JSON keeps its run's record and gets the new results.  Every file is checked
+    before any is rewritten (SystemExit, one line): a run's JSON with its series beside it,
+    and ``equil_ps`` a finite number >= 0 that leaves part of each run (as ``run
+    --equil-ps`` against ``--ps``: past the run, every result was NaN in a JSON still
+    ``"complete": true``)."""
+    if equil_ps is not None and not 0 <= equil_ps < float("inf"):
+        raise SystemExit(f"--equil-ps {equil_ps}: expected a number >= 0")
+    runs = []
     for path in paths:
         path = Path(path)
         out = read_json(path)
@@ -912,6 +1006,12 @@ def reanalyse(paths, equil_ps=None):
             raise SystemExit(f"{path}: not a run's JSON (no point, name or molecules)")
         if not path.with_name(out["name"] + ".series.npz").is_file():
             raise SystemExit(f"{path}: its series {out['name']}.series.npz is not beside it")
+        length = out.get("ps", out["point"].get("ps"))  # (a stopped run: the part it ran)
+        if equil_ps is not None and isinstance(length, int | float) and equil_ps >= length:
+            raise SystemExit(f"--equil-ps {equil_ps:g}: leaves nothing of {path.name}'s "
+                             f"{length:g} ps")
+        runs.append((path, out))
+    for path, out in runs:
         p = dict(out["point"])
         if equil_ps is not None:
             p["equil_ps"] = equil_ps
@@ -1039,6 +1139,7 @@ def cost(args):
     that pays for compiling; then the core-hours of the TIP4P/2005 table at that speed.  The
     CPU time is what a machine of idle cores would take; the wall time also holds what
     other processes took from this one."""
+    check_cost_arguments(args)
     rows = []
     steps_per_code = TABLE_RUNS * sum(TABLE_PS * 1000 / dt for dt in TABLE_DT_FS)
     for code, integ in ([("rigidmd", i) for i in INTEGRATORS]
@@ -1068,8 +1169,8 @@ def check_run_arguments(args):
     low, high = args.msd_fit_ps
     if not low < high:
         raise SystemExit(f"--msd-fit-ps {low:g} {high:g}: the fit's window must rise")
-    for option in ("seed", "dt_fs", "substeps", "code", "model"):
-        values = getattr(args, option)
+    for option in ("seed", "dt_fs", "substeps", "code", "model", "integrator"):
+        values = getattr(args, option) or []  # (--integrator: None, every one)
         if len(set(values)) != len(values):
             raise SystemExit(f"--{option.replace('_', '-')}: a value given twice ({values})")
     if max(args.substeps) > 1 and "rigidmd" not in args.code:
@@ -1078,13 +1179,30 @@ def check_run_arguments(args):
     if args.integrator and "rigidmd" not in args.code:
         raise SystemExit(f"--integrator: rigidmd's; --code {' '.join(args.code)} has its own")
     for model in args.model:  # (each point failed alone, after starting its process)
-        if not start_file(model, args.waters).exists():
-            side = round(args.waters ** (1 / 3))
-            how = (f"make it with 'timestep_table.py start --model {model} --waters "
-                   f"{args.waters}'" if side ** 3 == args.waters else
-                   f"starts are made for cube numbers of waters ({side ** 3}, ...)")
-            raise SystemExit(f"--waters {args.waters}: no start state "
-                             f"{start_file(model, args.waters).name}; {how}")
+        check_start(model, args.waters)
+
+
+def check_start(model, waters):
+    """SystemExit in one line naming ``--waters`` when ``model`` has no start state of
+    ``waters`` molecules, with how to make one."""
+    if not start_file(model, waters).exists():
+        side = max(round(waters ** (1 / 3)), 2)
+        how = (f"make it with 'timestep_table.py start --model {model} --waters "
+               f"{waters}'" if side ** 3 == waters else
+               f"starts are made for cube numbers of waters ({side ** 3}, ...)")
+        raise SystemExit(f"--waters {waters}: no start state "
+                         f"{start_file(model, waters).name}; {how}")
+
+
+def check_cost_arguments(args):
+    """``cost``'s arguments, before its first run writes anything (SystemExit, one line): a
+    start state of ``--waters``, ``--steps`` above the 20 subtracted, a folder for ``--json``."""
+    if args.steps <= 20:
+        raise SystemExit(f"--steps {args.steps}: must be above 20 (a run of 20 steps is "
+                         "subtracted from it)")
+    check_start(args.model[0], args.waters)
+    if args.json is not None and not args.json.parent.is_dir():
+        raise SystemExit(f"--json {args.json}: no folder {args.json.parent}")
 
 
 #: The parts of a point a continued run may change (how often it saves and says so).
@@ -1137,18 +1255,21 @@ def parse(argv=None):
     add_run_options(sub, r, HERE / "timestep_runs")
     s = sub.add_parser("start", help="make a start state")
     s.add_argument("--model", choices=MODELS, default="tip4p2005")
-    s.add_argument("--waters", type=int, default=64)
-    s.add_argument("--seed", type=int, default=1)
+    s.add_argument("--waters", type=whole(8), default=64,
+                   help="a cube number of waters, 8 or more (216: water_openmm_long.py's)")
+    s.add_argument("--seed", type=whole(0), default=1)
     s.add_argument("--eq-ps", type=positive, default=5.0)
     s.add_argument("--overwrite", action="store_true",
                    help="replace the committed start of this size")
     a = sub.add_parser("analyse", help="analyse runs again from their series")
     a.add_argument("files", nargs="+", type=existing_file, help="the runs' JSONs")
-    a.add_argument("--equil-ps", type=float, help="another length left out at the start")
+    a.add_argument("--equil-ps", type=at_least_zero,
+                   help="another length left out at the start (below each run's length)")
     c = sub.add_parser("cost", help="ms/step of every code")
     c.add_argument("--model", nargs=1, choices=MODELS, default=["tip4p2005"])
-    c.add_argument("--waters", type=int, default=216)
-    c.add_argument("--steps", type=int, default=200)
+    c.add_argument("--waters", type=whole(1), default=216)
+    c.add_argument("--steps", type=whole(21), default=200,
+                   help="steps of the run measured, above the 20 subtracted")
     c.add_argument("--outdir", type=Path, default=Path("/tmp/timestep_cost"))
     c.add_argument("--json", type=Path, help="also write the rows here")
     return p.parse_args(argv)

@@ -82,6 +82,12 @@ def pool(runs, key):
     return [float(x.mean()), float(error)]
 
 
+def _mean_of(runs, key):
+    """The mean of a number the runs carry, over those that carry it (None when none)."""
+    values = [float(r[key]) for r in runs if isinstance(r.get(key), int | float)]
+    return float(np.mean(values)) if values else None
+
+
 def read_runs(paths):
     """``(path, run)`` of each run: a run's JSON, or a bundle of them (a list, as
     ``--bundle`` writes), in the order given."""
@@ -94,12 +100,25 @@ def read_runs(paths):
             if not isinstance(run, dict) or not isinstance(run.get("point"), dict):
                 raise SystemExit(f"{path}: holds something that is not a table run (no "
                                  "point)")
+            lacks = [k for k in POINT_KEYS if k not in run["point"]]
+            if lacks:  # (an NPT run of npt_density.py has a point, without model or code)
+                raise SystemExit(f"{path}: holds something that is not a table run (its "
+                                 f"point has no {', '.join(lacks)})")
             yield path, run
 
 
+#: What a table run's point names (its point's key in :func:`load_points`, and its seed).
+POINT_KEYS = ("model", "waters", "code", "integrator", "dt_fs", "seed")
+
+
 #: What the runs pooled into one point must share beyond the point's key (a run of other
-#: length, equilibration, sampling or thermostat time is another measurement).
-SAME_IN_A_POINT = ("ps", "equil_ps", "sample_fs", "frame_fs", "tau_ps", "blocks")
+#: length, equilibration, sampling or thermostat time, or D_PBC fitted over another window of
+#: lags, is another measurement).  A field no run of the point holds (older runs) is alike.
+SAME_IN_A_POINT = ("ps", "equil_ps", "sample_fs", "frame_fs", "tau_ps", "blocks",
+                   "msd_fit_ps")
+#: What a code's runs must share too: LAMMPS's pieces (each restarts its Nosé–Hoover chain
+#: from rest; other codes' runs carry the option unused).
+SAME_IN_A_POINT_OF = {"lammps": ("piece_ps",)}
 
 
 def load_points(paths, include_incomplete=False):
@@ -127,7 +146,7 @@ def load_points(paths, include_incomplete=False):
     points = []
     for key in sorted(groups):
         runs = groups[key]
-        for field in SAME_IN_A_POINT:
+        for field in SAME_IN_A_POINT + SAME_IN_A_POINT_OF.get(key[2], ()):
             values = {json.dumps(r["point"].get(field)) for r in runs}
             if len(values) > 1:
                 raise SystemExit(f"{' '.join(map(str, key))} fs: its runs differ in {field} "
@@ -140,7 +159,7 @@ def load_points(paths, include_incomplete=False):
         row.update(runs=len(runs), seeds=sorted(r["point"]["seed"] for r in runs),
                    ps=float(sum(r.get("recorded_ps", 0.0) for r in runs)),
                    complete=all(r.get("complete") for r in runs),
-                   ms_per_step=float(np.mean([r["ms_per_step"] for r in runs])))
+                   ms_per_step=_mean_of(runs, "ms_per_step"))
         row.update({k: pool(runs, k) for k in POOLED})
         # How many runs each quantity pools (T_conf: only the runs that sampled it, fewer
         # than the point's runs where earlier runs did not), for the tables and the plan.

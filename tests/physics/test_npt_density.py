@@ -159,3 +159,31 @@ def test_the_report_refuses_a_run_twice_or_runs_made_unalike(tmp_path):
     with pytest.raises(SystemExit, match=r"the runs differ in molecules \(216, 64\)"):
         npt.report([bundle, tmp_path / "other.json"])
     npt.report([bundle])  # the committed runs, alike
+
+
+def test_a_point_running_or_killed_with_other_arguments_is_refused(tmp_path):
+    """As the table's runs (timestep_table.py's claim and record): a second run of a point
+    into one --outdir ran beside the first, and --resume of a run killed outright (a
+    checkpoint, no JSON) with other arguments continued it without a word."""
+    import fcntl
+
+    out = tmp_path / "out"
+    out.mkdir()
+    claim = out / f"{NAME}.claim"
+    claim.write_text("12345 elsewhere\n")
+    with open(claim) as held:  # the point, running
+        fcntl.flock(held, fcntl.LOCK_EX)
+        rc, _, err = finish(_run([*COMMON, "--outdir", str(out)]))
+    assert rc != 0 and f"{NAME}: being run already (process 12345 elsewhere" in err, err
+    assert sorted(p.name for p in out.iterdir()) == [claim.name]
+    claim.unlink()
+    # what a run killed before its JSON leaves: its checkpoint and the record of its arguments
+    (out / f"{NAME}.chk.npz").write_bytes(b"a checkpoint")
+    point = {"waters": 64, "ps": 0.6, "equil_ps": 0.1, "move_fs": 8.0, "blocks": 10,
+             "integrator": "baoab", "dt_fs": 2.0, "seed": 1}
+    (out / f"{NAME}.arguments").write_text(json.dumps(point))
+    rc, _, err = finish(_run([*COMMON[:4], "--move-fs", "50", "--equil-ps", "0.1",
+                              "--outdir", str(out), "--resume"]))
+    assert rc != 0 and f"{NAME}: --resume with --move-fs 50.0, but the run was made with " \
+                       "8.0" in err, err
+    assert "Traceback" not in err

@@ -732,6 +732,8 @@ def test_the_collector_refuses_a_run_twice_and_runs_made_unalike(tmp_path):
     (["--blocks", "1"], "--blocks: expected a whole number >= 2"),  # failed after the run
     (["--equil-ps", "5"], "--equil-ps 5: leaves nothing of --ps 0.1"),
     (["--seed", "1", "1"], "--seed: a value given twice"),
+    # the same point twice: both processes ran it into the same files (an outside pass)
+    (["--integrator", "baoab", "baoab"], "--integrator: a value given twice"),
     (["--code", "openmm", "--substeps", "2"], "--substeps: a force split is rigidmd's"),
     (["--code", "lammps", "--integrator", "baoab"], "--integrator: rigidmd's"),
     # each point failed in its own process, the hint repeated per point
@@ -759,7 +761,7 @@ def test_a_run_left_by_a_kill_or_resumed_otherwise_is_refused(tmp_path):
         table.complete_already(json_path, "run", False, point, chk)
     json_path.write_text(json.dumps({"point": dict(point, save_s=300.0), "complete": False,
                                      "steps": 50, "ps": 0.1}))
-    with pytest.raises(SystemExit, match=r"--resume with sample_fs 100.0, but the run was "
+    with pytest.raises(SystemExit, match=r"--resume with --sample-fs 100.0, but the run was "
                                          r"made with 20.0"):
         table.complete_already(json_path, "run", True, dict(point, sample_fs=100.0), chk)
     assert table.complete_already(json_path, "run", True, dict(point, save_s=10.0), chk) \
@@ -886,3 +888,175 @@ def test_a_native_lammps_run_ends_with_the_script_that_started_it(tmp_path):
             open(f"/proc/{child}/stat").read().split(") ")[1][0] != "Z":
         assert time.monotonic() < deadline, "the child outlived its parent"
         time.sleep(0.01)
+
+
+# ------------------------------------------------------------ outside pass, 2026-12 (runs)
+TINY = ["--integrator", "baoab", "--dt-fs", "2", "--sample-fs", "4", "--frame-fs", "8",
+        "--tconf-frames", "0"]
+BAOAB = "tip4p2005_64_rigidmd_baoab_dt2_s1"
+
+
+@pytest.mark.lammps
+def test_a_second_run_of_a_point_into_one_outdir_is_refused(tmp_path):
+    """Two runs of one point into one --outdir both ran, and the later one's files replaced
+    the earlier one's without a word: the point is claimed (its ``.claim`` locked) while it
+    runs; a claim left unlocked, by a process that ended, is taken over."""
+    import fcntl
+
+    claim = tmp_path / f"{BAOAB}.claim"
+    claim.write_text("12345 elsewhere\n")
+    with open(claim) as held:  # another run of the point, running
+        fcntl.flock(held, fcntl.LOCK_EX)
+        rc, _, err = finish(_run([*TINY, "--ps", "0.02", "--outdir", str(tmp_path)]))
+    assert rc != 0 and f"{BAOAB}: being run already (process 12345 elsewhere" in err, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == [claim.name]  # nothing written
+    rc, out, err = finish(_run([*TINY, "--ps", "0.02", "--outdir", str(tmp_path)]))
+    assert rc == 0, err
+    assert "the claim of process 12345 elsewhere, which ended without removing it, taken " \
+           "over" in out
+    assert not claim.exists()
+    # (the record of its arguments is no *.json: the collector reads every *.json)
+    assert [p.name for p in tmp_path.glob("*.json")] == [f"{BAOAB}.json"]
+
+
+@pytest.mark.lammps
+def test_a_resume_after_a_kill_with_other_arguments_is_refused(tmp_path):
+    """A run killed outright (SIGKILL: a checkpoint and a series, no JSON) was continued by
+    --resume with other arguments (--sample-fs 100 after 20) without a word, its series mixed:
+    its arguments are recorded before its first sample and checked."""
+    proc = _run([*TINY, "--ps", "4", "--save-s", "0", "--outdir", str(tmp_path)])
+    chk = tmp_path / f"{BAOAB}.chk.npz"
+    deadline = time.monotonic() + 200
+    while not chk.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    proc.kill()
+    finish(proc)
+    assert chk.exists() and not (tmp_path / f"{BAOAB}.json").exists()
+    before = {p.name: p.stat().st_mtime_ns for p in tmp_path.iterdir()}
+    rc, _, err = finish(_run([*TINY[:4], "--sample-fs", "100", "--frame-fs", "200",
+                              "--tconf-frames", "0", "--ps", "4", "--outdir", str(tmp_path),
+                              "--resume"]))
+    assert rc != 0 and f"{BAOAB}: --resume with --sample-fs 100.0, but the run was made " \
+                       "with 4.0" in err, err
+    assert "Traceback" not in err
+    after = {p.name: p.stat().st_mtime_ns for p in tmp_path.iterdir()}
+    assert {k: v for k, v in after.items() if not k.endswith(".claim")} == \
+        {k: v for k, v in before.items() if not k.endswith(".claim")}
+
+
+def _analysed_run(tmp_path, ps=0.4):
+    """A run's JSON and series as a run of ``ps`` (4 waters, a sample every 20 fs, a frame
+    every 40 fs), analysed."""
+    rng = np.random.default_rng(1)
+    point = {"code": "rigidmd", "integrator": "baoab", "model": "tip4p2005", "waters": 4,
+             "dt_fs": 2.0, "seed": 1, "ps": ps, "equil_ps": 0.0, "blocks": 2,
+             "msd_fit_ps": [1.0, 5.0], "box_A": 20.0}
+    series = table.Series(tmp_path / "run.series.npz")
+    for i in range(int(round(ps / 0.02)) + 1):
+        series.add(0.02 * i, -190.0 + rng.normal(), (298.0, 298.0), (298.0, 298.0))
+        if i % 2 == 0:
+            O = np.array([[0.0, 0, 0], [2.8, 0, 0], [0, 2.8, 0], [0, 0, 2.8]])
+            O = O + rng.normal(scale=0.1, size=O.shape)
+            series.frame(0.02 * i, O, O, np.diag([20.0] * 3))
+    series.save()
+    out = {"point": point, "name": "run", "molecules": 4, "complete": True, "ps": ps,
+           **table.analyse(series, point, 4)}
+    path = tmp_path / "run.json"
+    path.write_text(json.dumps(out))
+    return path
+
+
+@pytest.mark.parametrize("equil_ps, message", [
+    ("50", "--equil-ps 50: leaves nothing of run.json's 0.4 ps"),
+    ("0.4", "--equil-ps 0.4: leaves nothing of run.json's 0.4 ps"),
+    ("nan", "argument --equil-ps: expected a number >= 0"),
+    ("-3", "argument --equil-ps: expected a number >= 0"),
+])
+def test_analyse_refuses_an_equilibration_that_leaves_nothing(tmp_path, capsys, equil_ps,
+                                                              message):
+    """``analyse --equil-ps 50`` of a 0.4 ps run (or nan) rewrote its JSON with every result
+    NaN, still ``"complete": true``."""
+    path = _analysed_run(tmp_path)
+    before = path.read_text()
+    with pytest.raises(SystemExit) as refused:
+        table.main(["analyse", str(path), "--equil-ps", equil_ps])
+    assert message in f"{refused.value.code}{capsys.readouterr().err}"
+    assert path.read_text() == before
+    table.main(["analyse", str(path), "--equil-ps", "0.1"])  # what leaves part of it
+    run = json.loads(path.read_text())
+    assert run["point"]["equil_ps"] == 0.1 and np.isfinite(run["U"][0])
+
+
+def test_the_collector_refuses_runs_fitted_or_pieced_otherwise(tmp_path):
+    """Runs of D_PBC fitted over other lags (--msd-fit-ps), or LAMMPS's runs in other pieces
+    (--piece-ps), were pooled into one point, its D_PBC the mean of two measurements."""
+    files = [_synthetic(tmp_path, "baoab", dt, seed, -47.0) for dt in (1.0, 2.0)
+             for seed in (1, 2)]
+    for file, fit in zip(files, ([3.0, 10.0], [0.1, 0.25], [3.0, 10.0], [3.0, 10.0]),
+                         strict=True):
+        run = json.loads(file.read_text())
+        run["point"].update(msd_fit_ps=fit, piece_ps=10.0 * run["point"]["seed"])
+        file.write_text(json.dumps(run))
+    with pytest.raises(SystemExit, match=r"tip4p2005 216 rigidmd baoab 1.0 fs: its runs differ "
+                                         r"in msd_fit_ps \(\[0.1, 0.25\], \[3.0, 10.0\]\)"):
+        collector.report(files, tmp_path, "t")
+    collector.report(files[2:], tmp_path, "t")  # rigidmd's runs carry --piece-ps unused
+    pieces = [_synthetic(tmp_path, "nvt_small", dt, seed, -47.0, code="lammps")
+              for dt in (1.0, 2.0) for seed in (1, 2)]
+    for file in pieces:
+        run = json.loads(file.read_text())
+        run["point"].update(piece_ps=10.0 * run["point"]["seed"])
+        file.write_text(json.dumps(run))
+    with pytest.raises(SystemExit, match=r"lammps nvt_small 1.0 fs: its runs differ in "
+                                         r"piece_ps \(10.0, 20.0\)"):
+        collector.report(pieces, tmp_path, "t")
+
+
+@pytest.mark.parametrize("args, message", [
+    # refused only after a compile run that wrote into --outdir
+    (["cost", "--waters", "64", "--steps", "10"], "argument --steps: expected a whole number "
+                                                  ">= 21, got 10"),
+    # suggested 'start --waters 0'
+    (["cost", "--waters", "0"], "argument --waters: expected a whole number >= 1, got 0"),
+    (["cost", "--waters", "100"], "--waters 100: no start state timestep_table.start_tip4p2005"
+                                  "_100.npz; starts are made for cube numbers of waters"),
+    # tracebacks
+    (["start", "--waters", "0"], "argument --waters: expected a whole number >= 8, got 0"),
+    (["start", "--waters", "-8"], "argument --waters: expected a whole number >= 8, got -8"),
+    (["start", "--waters", "8", "--seed", "-1"], "argument --seed: expected a whole number "
+                                                 ">= 0, got -1"),
+])
+def test_cost_and_start_arguments_are_checked_first(tmp_path, args, message):
+    """Each argument in one line naming it, before a run writes anything."""
+    out = tmp_path / "cost"
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    result = subprocess.run([sys.executable, str(SCRIPT), *args,
+                             *(["--outdir", str(out)] if args[0] == "cost" else [])],
+                            env=env, capture_output=True, text=True, timeout=300)
+    assert result.returncode != 0 and message in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr and not out.exists()
+
+
+def test_the_collector_refuses_a_foreign_run_and_takes_a_missing_field_as_missing(tmp_path):
+    """An NPT run of npt_density.py (a point without model or code) ended in a KeyError
+    traceback, and so did a table run without ms_per_step."""
+    npt_runs = json.loads((ROOT / "validation" / "npt_density_216.runs.json").read_text())
+    (tmp_path / "npt.json").write_text(json.dumps(next(r for r in npt_runs if r["complete"])))
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    result = subprocess.run([sys.executable, str(ROOT / "validation" /
+                                                 "timestep_table_report.py"),
+                             str(tmp_path / "npt.json"), "--outdir", str(tmp_path / "out")],
+                            env=env, capture_output=True, text=True, timeout=120)
+    assert result.returncode != 0 and "Traceback" not in result.stderr, result.stderr
+    assert f"{tmp_path / 'npt.json'}: holds something that is not a table run (its point " \
+           "has no model" in result.stderr
+    assert not (tmp_path / "out").exists()
+    files = [_synthetic(tmp_path, "baoab", dt, seed, -47.0) for dt in (1.0, 2.0)
+             for seed in (1, 2)]
+    for file in files[:3]:  # the point of 2 fs: one run of two has it
+        run = json.loads(file.read_text())
+        del run["ms_per_step"]
+        file.write_text(json.dumps(run))
+    points, _ = collector.report(files, tmp_path, "t")
+    assert [p["ms_per_step"] for p in points] == [None, 3.0]
