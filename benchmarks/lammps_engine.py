@@ -55,6 +55,7 @@ import json
 import os
 import platform
 import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -71,6 +72,7 @@ from rigidmd.couplings.barostats import MTKBarostat
 from rigidmd.couplings.thermostats import NoseHooverThermostat
 from rigidmd.ipi.processes import cpu_seconds, descendants
 from rigidmd.lammps import LAMMPSCalculator, export_lammps, run_rigid_reference, tip3p_charges
+from rigidmd.lammps import engine as lammps_engine_module
 from rigidmd.lammps.boxplugin import BoxPluginUnavailable, plugin_library
 from rigidmd.lammps.engine import LAMMPSEngine, lammps_executable, mpirun_executable
 
@@ -194,8 +196,35 @@ def native_parallel(atoms, steps, processes=1, threads=None):
         env["OMP_NUM_THREADS"] = str(threads or 1)
         if processes > 1:
             cmd = [mpirun_executable(), "-np", str(processes)] + cmd
-        subprocess.run(cmd, cwd=tmp, env=env, check=True)
+        run_watched(cmd, cwd=tmp, env=env)
         return log_timing((Path(tmp) / "log.lammps").read_text(), steps)
+
+
+def run_watched(cmd, **options):
+    """``cmd`` run to its end under LAMMPSEngine's watchdog (a process group of its own,
+    killed when this process ends in any way, SIGKILL included, or when the wait here is
+    interrupted): no native ``mpirun`` or ``lmp`` outlives the benchmark."""
+    watchdog = Path(lammps_engine_module.__file__).with_name("_watchdog.py")
+    proc = subprocess.Popen([sys.executable, str(watchdog)] + [str(c) for c in cmd],
+                            stdin=subprocess.PIPE, **options)
+    try:
+        code = proc.wait()
+    finally:
+        proc.stdin.close()  # the watchdog kills the command's group (if it still runs)
+        proc.wait()
+    if code:
+        raise subprocess.CalledProcessError(code, cmd)
+
+
+def stop_on_signals():
+    """SIGTERM and SIGHUP end the benchmark as an exception: the runs' ``with`` blocks close
+    (temporary folders removed, engines and native runs ended) before it exits."""
+    def stop(signum, frame):
+        raise SystemExit(f"lammps_engine.py: stopped by {signal.Signals(signum).name}; the "
+                         "runs ended, their temporary folders removed")
+
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, stop)
 
 
 def interleaved(runs, rounds):
@@ -403,6 +432,7 @@ def main():
                         help="half the steps, 2 rounds, no C-rescale")
     parser.add_argument("--save", action="store_true", help="store the tables with --quick")
     args = parser.parse_args()
+    stop_on_signals()
     started = time.monotonic()
     deadline = started + (args.max_seconds or float("inf"))
     sizes = [replicas_of(n) for n in args.waters]

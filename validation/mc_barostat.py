@@ -21,7 +21,8 @@ corrections, PPPM 1e-5; as ``examples/tip4p2005.py``), 298 K and 1 bar,
 
 Run ``python validation/mc_barostat.py`` (``--equilibration-ps``,
 ``--production-ps``; about 20 minutes with the defaults on a shared
-machine); the results are written to ``validation/mc_barostat.txt``.
+machine); the results are written to ``validation/mc_barostat.txt`` (``--output``) when the
+run is complete, the lines so far to ``mc_barostat.txt.partial`` until then.
 """
 
 import argparse
@@ -41,10 +42,14 @@ from rigidmd.lammps import LAMMPSCalculator, LAMMPSEngine
 from rigidmd.systems import water_box
 from rigidmd.water import water_model
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # arguments.py, beside this script
+from arguments import at_least_zero, positive, whole  # noqa: E402
+
 MODEL = water_model("tip4p2005")
 T, P_BAR, PUBLISHED = 298.0, 1.0, 0.9979
 PS = 1000 * units.fs
 DT = 2 * units.fs
+BLOCKS = 10  # of the density's block average
 
 
 def lammps(engine=False):
@@ -76,7 +81,7 @@ class HiddenStress(Calculator):
         self.results = {k: v for k, v in self.inner.results.items() if k != "stress"}
 
 
-def block_average(values, blocks=10):
+def block_average(values, blocks=BLOCKS):
     means = np.array([b.mean() for b in np.array_split(np.asarray(values), blocks)])
     return float(means.mean()), float(means.std(ddof=1) / np.sqrt(blocks))
 
@@ -172,33 +177,57 @@ def cost(atoms, rounds, steps, out, engine=False):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--equilibration-ps", type=float, default=20.0)
-    p.add_argument("--production-ps", type=float, default=60.0)
-    p.add_argument("--rounds", type=int, default=3)
-    p.add_argument("--cost-steps", type=int, default=500)
+    p.add_argument("--equilibration-ps", type=at_least_zero, default=20.0)
+    p.add_argument("--production-ps", type=positive, default=60.0,
+                   help=f"at least {BLOCKS} density samples (one every 25 steps of 2 fs)")
+    p.add_argument("--rounds", type=whole(1), default=3)
+    p.add_argument("--cost-steps", type=whole(1), default=500)
     p.add_argument("--engine", action="store_true",
                    help="cost with LAMMPSEngine (LAMMPS in its own process)")
     p.add_argument("--only", choices=("mc", "crescale", "cost"), action="append")
     p.add_argument("--output", type=Path,
-                   default=Path(__file__).with_name("mc_barostat.txt"))
+                   default=Path(__file__).with_name("mc_barostat.txt"),
+                   help="replaced at the end of a complete run (until then the lines are in "
+                        "OUTPUT.partial)")
     args = p.parse_args(argv)
+    only = args.only or ["cost", "mc", "crescale"]
+    # The density runs' block averages need BLOCKS samples (MC: one every 25 steps).
+    samples = int(args.production_ps * PS / DT) // 25
+    if {"mc", "crescale"} & set(only) and samples < BLOCKS:
+        p.error(f"argument --production-ps: {args.production_ps:g} ps gives {samples} density "
+                f"samples, fewer than the {BLOCKS} blocks (at least "
+                f"{BLOCKS * 25 * DT / PS:g} ps)")
+    if not args.output.parent.is_dir():
+        p.error(f"argument --output: no folder {args.output.parent}")
+    # The lines go to OUTPUT.partial as they come; it replaces OUTPUT only when the run is
+    # complete, so a failed or interrupted run leaves the results file as it was.
+    partial = args.output.with_name(args.output.name + ".partial")
     lines = []
 
     def out(text):
         print(text, flush=True)
         lines.append(text)
-        args.output.write_text("\n".join(lines) + "\n")
+        partial.write_text("\n".join(lines) + "\n")
 
-    out(f"216 TIP4P/2005 waters, LAMMPS lj/cut/coul/long 8.5 + tail + pppm 1e-5, {T:g} K, "
-        f"{P_BAR:g} bar, 2 fs; one core, other jobs on the machine (absolute times pessimistic)")
-    out(f"command: python {' '.join(sys.argv)}")
-    atoms = start()
-    only = args.only or ["cost", "mc", "crescale"]
-    if "cost" in only:
-        cost(atoms, args.rounds, args.cost_steps, out, args.engine)
-    for kind in ("mc", "crescale"):
-        if kind in only:
-            density_run(atoms.copy(), kind, args.equilibration_ps, args.production_ps, out)
+    try:
+        out(f"216 TIP4P/2005 waters, LAMMPS lj/cut/coul/long 8.5 + tail + pppm 1e-5, {T:g} K, "
+            f"{P_BAR:g} bar, 2 fs; one core, other jobs on the machine (absolute times "
+            "pessimistic)")
+        out(f"command: python {' '.join(sys.argv)}")
+        atoms = start()
+        if "cost" in only:
+            cost(atoms, args.rounds, args.cost_steps, out, args.engine)
+        for kind in ("mc", "crescale"):
+            if kind in only:
+                mean, err = density_run(atoms.copy(), kind, args.equilibration_ps,
+                                        args.production_ps, out)
+                if not np.isfinite([mean, err]).all():
+                    raise SystemExit(f"mc_barostat.py: the {kind} run's density is not finite")
+    except BaseException:
+        print(f"mc_barostat.py: stopped before the end: {args.output} is left as it was; "
+              f"the lines so far are in {partial}", file=sys.stderr, flush=True)
+        raise
+    os.replace(partial, args.output)
 
 
 if __name__ == "__main__":

@@ -52,7 +52,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # (arguments.py, beside this script)
-from arguments import read_json, whole  # noqa: E402
+from arguments import positive, read_json, whole  # noqa: E402
 from children import ends_with_parent  # noqa: E402
 
 START = HERE / "water_openmm_long.start_tip4p2005.npz"
@@ -253,19 +253,50 @@ def report(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: What :func:`report` reads from a results file: a file without them is another script's.
+RESULT_KEYS = ("lammps", "repeats", "load_before", "load_after", "cpus", "rows", "split")
+
+
 def rewrite(out: Path) -> str:
     """The tables again from a results file (``--report``), without measuring."""
-    result = read_json(out.with_suffix(".json"))
+    path = out.with_suffix(".json")
+    result = read_json(path)
+    missing = [k for k in RESULT_KEYS if k not in result] if isinstance(result, dict) \
+        else list(RESULT_KEYS)
+    if missing:
+        raise SystemExit(f"--report: {path} is not a results file of respa_kspace_share.py "
+                         f"(no {', '.join(missing)})")
     text = report(result)
     out.with_suffix(".txt").write_text(text)
     return text
 
 
+def check_cases(parser, sizes, cutoffs, steps) -> None:
+    """Every case measurable before any is measured: ``parser.error`` (one line naming the
+    option) for a size without a step count, a cut-off above 9 Å, 9 Å missing or a case
+    given twice (a failing case came up after the others were measured, and they were lost)."""
+    for n in sizes:
+        if n not in steps:
+            parser.error(f"argument --sizes: {n} waters has no step count (sizes: "
+                         f"{', '.join(map(str, steps))})")
+    for rc in cutoffs:
+        if rc > 9.0:  # (positive: its type) the split takes the pair work beyond rc from 9 Å's
+            parser.error(f"argument --cutoffs: {rc:g} Å is above 9 Å, the reference the split "
+                         "is measured against")
+    if 9.0 not in cutoffs:
+        parser.error("argument --cutoffs: 9 Å is the reference and must be among them")
+    for name, values in (("--sizes", sizes), ("--cutoffs", cutoffs)):
+        if len(set(values)) != len(values):
+            parser.error(f"argument {name}: a value given twice ({' '.join(map(str, values))})")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=whole(1), default=3)
-    ap.add_argument("--sizes", type=int, nargs="+", default=list(SIZES))
-    ap.add_argument("--cutoffs", type=float, nargs="+", default=list(CUTOFFS))
+    ap.add_argument("--sizes", type=whole(1), nargs="+", default=list(SIZES),
+                    help=f"waters, among {', '.join(map(str, STEPS))} (their step counts)")
+    ap.add_argument("--cutoffs", type=positive, nargs="+", default=list(CUTOFFS),
+                    help="real-space cut-offs (Å), at most 9, 9 among them")
     ap.add_argument("--quick", action="store_true", help="one repeat, 216 waters, few steps")
     ap.add_argument("--out", type=Path, default=HERE / "respa_kspace_share")
     ap.add_argument("--report", action="store_true",
@@ -274,11 +305,10 @@ def main(argv=None):
     if args.report:
         print(rewrite(args.out))
         return None
-    if 9.0 not in args.cutoffs:
-        raise SystemExit("--cutoffs: 9 Å is the reference and must be among them")
     steps, warmup = dict(STEPS), 50
     if args.quick:
         args.repeats, args.sizes, steps, warmup = 1, [216], {216: 50, 1728: 10}, 5
+    check_cases(ap, args.sizes, args.cutoffs, steps)
     from rigidmd.lammps import load_lammps
 
     version = load_lammps().version()

@@ -24,14 +24,15 @@ single-threaded runs fills a machine for a known time.
   energy (rigidmd every 10 fs, with LAMMPS's constant intramolecular Coulomb
   energy in it; OpenMM every 50 fs) and frames of O, H, H every 1 ps, into
   one compressed ``.npz`` rewritten every minute and at the end (also on
-  SIGTERM).
+  SIGTERM); an existing ``--out`` is refused unless ``--overwrite``.
 - ``report``: reads any number of such files and gives, per model, code,
   thermostat and step (runs of several seeds pooled): ⟨U⟩/N (rigidmd's moved
   onto OpenMM's energy scale by the mean difference of the two energies on
   its own frames), T_tr (3N − 3 degrees of freedom where the total momentum
   is held, else 3N), T_rot (3N), the configurational temperatures of
   translation and rotation (``water_openmm_nve.configurational_sums`` on
-  every frame, OpenMM's force field for both codes), and D_PBC from the
+  every frame, OpenMM's force field for both codes; kept in ``<file>.conf.npz``
+  with the digest of the frames they are of), and D_PBC from the
   centres of mass (MSD slope over 3–10 ps lags in 20 ps segments, the
   system's own drift removed; runs of a few minutes are 20–30 ps long).
   The statistical unit is a run, or a 20 ps piece of a longer one (⟨U⟩
@@ -359,6 +360,28 @@ def msd_diffusion(com, frame_ps, fit=MSD_FIT_PS):
     return float(np.polyfit(lags * frame_ps, msd, 1)[0] / 6 * 10)  # Å²/ps = 10 × 1e-5 cm²/s
 
 
+def _frames_digest(model_name, frames):
+    """SHA-256 of a model's name and frames: what a cache of their sums is of."""
+    import hashlib
+
+    digest = hashlib.sha256(model_name.encode())
+    digest.update(np.ascontiguousarray(frames).tobytes())
+    return digest.hexdigest()
+
+
+def _cached_sums(cache, model_name, frames):
+    """The configurational sums in ``cache`` when they are of the first frames of
+    ``frames``; else none (an unreadable cache, or one of another run's frames)."""
+    try:
+        with np.load(cache) as d:
+            sums, digest = d["sums"], str(d["digest"])
+    except (OSError, KeyError, ValueError):
+        return np.zeros((0, 5))
+    if len(sums) > len(frames) or digest != _frames_digest(model_name, frames[:len(sums)]):
+        return np.zeros((0, 5))
+    return sums
+
+
 def analyse_run(path, contexts):
     """Per-piece values of one run (see the module docstring)."""
     import openmm
@@ -381,16 +404,19 @@ def analyse_run(path, contexts):
     full[:, :, :3] = frames
     if sites == 4:
         full[:, :, 3] = frames[:, :, 0]  # M: placed by OpenMM
-    # Nine force calls a frame: kept beside the run (``<file>.conf.npy``) and extended when
-    # the run has grown.
-    cache = Path(str(path) + ".conf.npy")
-    done = np.load(cache) if cache.exists() else np.zeros((0, 5))
+    # Nine force calls a frame: kept beside the run (``<file>.conf.npz``) with the digest of
+    # the frames they are of, and extended when the run has grown; frames that are not those
+    # (another run written to the same file) are computed afresh.
+    cache = Path(str(path) + ".conf.npz")
+    done = _cached_sums(cache, model.name, data["frames"])
     rng = np.random.default_rng(len(done))
     new = [configurational_sums(contexts[model.name], f.reshape(-1, 3) / 10, masses, rng,
                                 sites) for f in full[len(done):]]
     sums = np.concatenate([done, np.array(new).reshape(-1, 5)])[:len(full)]
     if new:
-        np.save(cache, sums)
+        tmp = Path(str(cache) + ".tmp.npz")
+        np.savez(tmp, sums=sums, digest=_frames_digest(model.name, data["frames"][:len(sums)]))
+        os.replace(tmp, cache)
     held = meta["code"] == "rigidmd" and (meta["thermo"] == "langevin" or meta["fixcm"])
     ke_ps, u_ps, frame_ps = (meta[k] / 1000 for k in ("ke_fs", "u_fs", "frame_fs"))
     u = np.asarray(data["U"]) / n
@@ -563,6 +589,8 @@ def parse(argv=None):
     r.add_argument("--skip-frac", type=float, default=0.25,
                    help="at most this fraction of the budget goes to --skip-ps")
     r.add_argument("--out", type=Path, required=True)
+    r.add_argument("--overwrite", action="store_true",
+                   help="replace an existing --out (else refused)")
     s = sub.add_parser("report", help="pool and analyse runs")
     s.add_argument("files", nargs="+", type=existing_file)
     s.add_argument("--name", default="water_openmm_long")
@@ -571,6 +599,15 @@ def parse(argv=None):
     args = p.parse_args(argv)
     if args.command is None and not args.quick:
         p.error("give run, report or starts (or --quick)")
+    if args.command == "run" and args.out.exists() and not args.overwrite:
+        p.error(f"argument --out: {args.out} exists (another run's; --overwrite replaces it)")
+    if args.command == "report":
+        seen = {}
+        for path in args.files:
+            if path.resolve() in seen:
+                p.error(f"argument files: {path} given twice (as {seen[path.resolve()]}): "
+                        "a run pooled twice")
+            seen[path.resolve()] = path
     return args
 
 
@@ -586,7 +623,8 @@ def main(argv=None):
             global T0
             T0 = time.perf_counter()
             run_main(parse(["run", "--code", code, "--thermo", thermo, "--dt-fs", "2",
-                            "--budget-s", "10", "--skip-ps", "0", "--out", str(out)]))
+                            "--budget-s", "10", "--skip-ps", "0", "--out", str(out),
+                            "--overwrite"]))
             files.append(out)
         return report(files, args.outdir, "water_openmm_long_quick")
     if args.command == "run":

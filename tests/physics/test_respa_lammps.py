@@ -92,3 +92,44 @@ def test_the_nve_scripts_quick_form():
         ps = steps * dt / 1000
         assert round(points[dt, 4]["fast_calls_per_ps"] * ps) == 4 * steps + 1
         assert round(points[dt, 4]["full_calls_per_ps"] * ps) == steps + 1
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--sizes", "216", "5832"], "argument --sizes: 5832 waters has no step count"),
+    (["--cutoffs", "9", "-2"], "argument --cutoffs: expected a positive number, got -2"),
+    (["--cutoffs", "9", "12"], "argument --cutoffs: 12 Å is above 9 Å"),
+    (["--cutoffs", "7"], "argument --cutoffs: 9 Å is the reference"),
+    (["--cutoffs", "9", "7", "9"], "argument --cutoffs: a value given twice"),
+    (["--sizes", "0"], "argument --sizes: expected a whole number >= 1"),
+])
+def test_the_kspace_share_scripts_cases_are_checked_before_any_is_measured(
+        monkeypatch, capsys, tmp_path, args, message):
+    """``--sizes 216 5832`` measured 216 and then failed (no STEPS entry: a KeyError);
+    ``--cutoffs 9 -2`` measured 9 Å and then failed (LAMMPS's CalledProcessError): the
+    measurements lost, in a traceback."""
+    share = validation_script("respa_kspace_share")
+    monkeypatch.setattr(share, "run_case", lambda *a, **k: pytest.fail("a case was measured"))
+    with pytest.raises(SystemExit) as stop:
+        share.main([*args, "--repeats", "1", "--out", str(tmp_path / "share")])
+    assert stop.value.code == 2
+    assert message in capsys.readouterr().err.strip().splitlines()[-1]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_kspace_share_scripts_report_refuses_another_scripts_json(tmp_path):
+    """``--report`` on ``respa_lammps_cost.json`` (another script's): a KeyError's
+    traceback; now one line naming the file, and no .txt written."""
+    (tmp_path / "cost.json").write_text((ROOT / "validation" /
+                                         "respa_lammps_cost.json").read_text())
+    result = subprocess.run([sys.executable, str(ROOT / "validation" / "respa_kspace_share.py"),
+                             "--report", "--out", str(tmp_path / "cost")],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode != 0 and "Traceback" not in result.stderr, result.stderr
+    assert result.stderr.strip().splitlines() == [
+        f"--report: {tmp_path / 'cost.json'} is not a results file of respa_kspace_share.py "
+        "(no lammps, rows, split)"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cost.json"]
+    # the committed results are one
+    share = validation_script("respa_kspace_share")
+    text = share.report(json.loads((ROOT / "validation" / "respa_kspace_share.json").read_text()))
+    assert text.startswith("The k-space share f")

@@ -237,3 +237,82 @@ def test_long_run_pipeline(tmp_path):
     # OpenMM's scale its frames agree with OpenMM's energy to PPPM against PME at 1e-5.
     assert all(sd < 0.01 for sd in groups["rigidmd"]["offset_sd"])
     assert abs(groups["rigidmd"]["U"][0] + 46.4) < 1.0
+
+
+def _long_run(path, seed, frames=3, n=4):
+    """A stand-in of ``water_openmm_long.py run``'s file: ``n`` TIP4P-Ew waters, ``frames``
+    frames 1 ps apart, energies and kinetic energies every 10 fs."""
+    import json
+
+    rng = np.random.default_rng(seed)
+    grown = rng.uniform(0, 20, (10, n, 3, 3)).astype(np.float32)  # a longer run: more of them
+    model = water_model("tip4pew")
+    samples = 100 * frames
+    meta = {"model": "tip4pew", "molecules": n, "code": "rigidmd", "thermo": "langevin",
+            "fixcm": 1, "tau_ps": 1.0, "dt_fs": 2.0, "seed": seed, "ke_fs": 10.0,
+            "u_fs": 10.0, "frame_fs": 1000.0}
+    np.savez_compressed(path, masses=np.tile(model.masses(), n), cell=np.eye(3) * 20,
+                        meta=json.dumps(meta), K_tr=rng.uniform(1, 2, samples),
+                        K_rot=rng.uniform(1, 2, samples), U=rng.uniform(-50, -40, samples),
+                        U_t_ps=np.arange(samples) / 100,
+                        frames=grown[:frames])
+
+
+def test_long_runs_configurational_sums_are_of_the_runs_own_frames(tmp_path, monkeypatch):
+    """The report kept each run's configurational sums beside it, keyed by the path alone:
+    after another run was written to the same file, its report took the first run's sums
+    (U_frames, T_conf and rigidmd's energy offset, silently).  OpenMM's nine force calls a
+    frame are replaced by a stand-in that counts them."""
+    script = benchmark_module("water_openmm_long")
+    computed = []
+
+    def sums(context, x, masses, rng, sites):
+        computed.append(x)
+        return np.array([x.sum(), 1.0, 2.0, 3.0, 4.0])
+
+    monkeypatch.setattr(script, "configurational_sums", sums)
+    contexts = {"tip4pew": None}  # no OpenMM context: the stand-in needs none
+    path = tmp_path / "run.npz"
+    _long_run(path, seed=1)
+    first = script.analyse_run(path, contexts)
+    assert len(computed) == 3
+    again = script.analyse_run(path, contexts)  # the same run: its cached sums
+    assert len(computed) == 3
+    np.testing.assert_array_equal(again["U_frames"], first["U_frames"])
+    _long_run(path, seed=2)  # another run into the same file
+    second = script.analyse_run(path, contexts)
+    assert len(computed) == 6
+    for cache in tmp_path.glob("run.npz.conf*"):
+        cache.unlink()
+    fresh = script.analyse_run(path, contexts)  # no cache: its own frames' sums
+    assert len(computed) == 9
+    for key in ("U_frames", "U", "conf"):
+        np.testing.assert_array_equal(second[key], fresh[key])
+    assert second["offset"] == fresh["offset"]
+    assert second["U_frames"][0, 0] != pytest.approx(first["U_frames"][0, 0])
+    _long_run(path, seed=2, frames=5)  # the same run grown: its sums extended
+    script.analyse_run(path, contexts)
+    assert len(computed) == 11
+
+
+def test_long_runs_out_and_report_files_are_checked(tmp_path, capsys):
+    """A second ``run`` into an existing ``--out`` replaced the first run's file silently
+    (now refused unless ``--overwrite``); ``report a.npz a.npz`` pooled one run twice."""
+    script = benchmark_module("water_openmm_long")
+    out = tmp_path / "run.npz"
+    out.write_bytes(b"a finished run")
+    run = ["run", "--code", "rigidmd", "--thermo", "langevin", "--dt-fs", "2",
+           "--budget-s", "10", "--out", str(out)]
+    with pytest.raises(SystemExit) as stop:
+        script.parse(run)
+    assert stop.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert f"argument --out: {out} exists" in err and "--overwrite" in err
+    assert script.parse([*run, "--overwrite"]).overwrite
+    (tmp_path / "sub").mkdir()
+    other = tmp_path / "sub" / ".." / "run.npz"
+    with pytest.raises(SystemExit) as stop:
+        script.parse(["report", str(out), str(other)])
+    assert stop.value.code == 2
+    assert f"argument files: {other} given twice" in capsys.readouterr().err
+    assert out.read_bytes() == b"a finished run"

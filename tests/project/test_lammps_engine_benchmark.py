@@ -7,6 +7,13 @@ thermal start LAMMPS re-neighbours at steps 22 and 39: a rigidmd window of steps
 read 1.12-1.13x native where the aligned windows read 0.98-1.03x.
 """
 
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
 import numpy as np
 import pytest
 from helpers import PPPM_27, benchmark_module, water_box_27
@@ -80,3 +87,61 @@ def test_the_native_step_leaves_out_its_output():
     assert wall == pytest.approx((0.8 - 0.04) / 40, rel=1e-12)
     assert cpu == pytest.approx(0.995 * (0.8 - 0.04) / 40, rel=1e-12)
     assert floor == pytest.approx((0.4 + 0.16 + 0.08) / 40, rel=1e-12)
+
+
+CHILD = """\
+import os, sys, tempfile
+sys.path.insert(0, {tests!r})
+from helpers import benchmark_module
+bench = benchmark_module("lammps_engine")
+getattr(bench, "stop_on_signals", lambda: None)()
+bench.lammps_executable = lambda: ({lmp!r}, dict(os.environ))
+bench.export_lammps = lambda *args, **kwargs: None
+tempfile.tempdir = {tmp!r}
+bench.native_parallel(bench.water_box(1), 4, processes={processes})
+"""
+
+
+@pytest.mark.parametrize("how", ["SIGTERM", "SIGKILL"])
+def test_a_native_run_ends_with_the_benchmark(tmp_path, how):
+    """The native ``[mpirun] lmp`` of the two-core and scaling tables was started with a
+    plain ``subprocess.run``: SIGTERM (or SIGKILL, a hang-up) of the benchmark left it
+    running on, and its temporary folder behind.  Now it runs under LAMMPSEngine's watchdog,
+    and SIGTERM ends the benchmark through its ``with`` blocks.  (A stand-in ``lmp``.)"""
+    lmp = tmp_path / "lmp"
+    pid_file = tmp_path / "lmp.pid"
+    lmp.write_text(f"#!/bin/sh\necho $$ > {pid_file}\nexec sleep 60\n")
+    lmp.chmod(0o755)
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    script = tmp_path / "bench.py"
+    script.write_text(CHILD.format(tests=str(Path(__file__).resolve().parents[1]),
+                                   lmp=str(lmp), tmp=str(tmp), processes=1))
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[2] / "src"))
+    stderr = tmp_path / "bench.err"  # (a file: an orphan would hold a pipe open)
+    with open(stderr, "w") as err:
+        bench = subprocess.Popen([sys.executable, str(script)], env=env, stderr=err)
+    deadline = time.monotonic() + 120
+    while not pid_file.exists() or not pid_file.read_text().strip():
+        assert bench.poll() is None, stderr.read_text()
+        assert time.monotonic() < deadline, "the native run did not start"
+        time.sleep(0.05)
+    native = int(pid_file.read_text())
+    bench.send_signal(getattr(signal, how))
+    bench.wait(timeout=60)
+    deadline = time.monotonic() + 10  # measured: gone within a second
+    try:
+        while os.path.exists(f"/proc/{native}") and \
+                open(f"/proc/{native}/stat").read().split(") ")[1][0] != "Z":
+            assert time.monotonic() < deadline, "the native run outlived the benchmark"
+            time.sleep(0.05)
+    finally:
+        try:
+            os.kill(native, signal.SIGKILL)  # (what this test started, if left)
+        except (ProcessLookupError, PermissionError):
+            pass
+    if how == "SIGTERM":
+        assert bench.returncode != 0
+        last = stderr.read_text().strip().splitlines()[-1]
+        assert last.startswith("lammps_engine.py: stopped by SIGTERM"), last
+        assert list(tmp.iterdir()) == []  # the run's temporary folder removed
