@@ -315,3 +315,19 @@ def test_the_tags_rule_refuses_atoms_without_tags():
         RigidBodies.resolve(atoms, "tags")
     single = atoms[:3]  # one molecule: the connectivity rule makes it one body
     assert RigidBodies.resolve(single, "connectivity").n_bodies == 1
+
+
+def test_a_flat_list_of_every_atom_index_is_read_as_body_ids_and_said():
+    """``bodies=[0, 1, 2]`` on one water: one body id per atom (three point particles), as
+    documented, but easily meant as the index list of one body; a warning says which."""
+    atoms = water_cluster(1)
+    with pytest.warns(UserWarning, match=r"^bodies: \[0, 1, \.\.\., 2\] is read as one body "
+                                         r"id per atom, 3 single-atom bodies .* give "
+                                         r"\[\[0, 1, \.\.\., 2\]\]$"):
+        bodies = RigidBodies.resolve(atoms, [0, 1, 2])
+    assert bodies.n_bodies == 0 and len(bodies.free_indices) == 3  # single atoms move free
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert RigidBodies.resolve(atoms, [[0, 1, 2]]).n_bodies == 1
+        assert RigidBodies.resolve(atoms, [0, 0, 0]).n_bodies == 1
+        assert len(RigidBodies.resolve(atoms[:1], [0]).free_indices) == 1  # one atom: no ask

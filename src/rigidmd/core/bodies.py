@@ -255,6 +255,11 @@ class RigidBodies:
                 ragged = True
             if not ragged and arr.ndim == 1 and arr.dtype != object:
                 bodies = cls.from_body_ids(arr, natoms=n)
+                if n > 1 and np.array_equal(arr, np.arange(n)):
+                    # one atom per body, each its own index: the index list of one body?
+                    warnings.warn(f"bodies: [0, 1, ..., {n - 1}] is read as one body id per "
+                                  f"atom, {n} single-atom bodies (free atoms); for one body "
+                                  f"of these atoms give [[0, 1, ..., {n - 1}]]", stacklevel=3)
             elif not ragged and arr.ndim == 2 and arr.dtype != object:
                 bodies = cls.from_index_lists(list(arr), n)
             else:
