@@ -60,7 +60,7 @@ def test_what_the_parts_read_is_asked_of_the_calculator_or_each_level():
 
     from ase.calculators.calculator import Calculator
 
-    from rigidmd.core.split import check_calculator_properties
+    from rigidmd.core.split import check_calculator_properties, missing_property
 
     def part(stress=False, energy=False):
         return SimpleNamespace(needs_stress=stress, needs_energy=energy, kind="barostat",
@@ -70,6 +70,10 @@ def test_what_the_parts_read_is_asked_of_the_calculator_or_each_level():
         implemented_properties = ("forces",)
 
     check_calculator_properties(TIP3P(), [part(stress=True, energy=True)])  # stress: later
+    barostat = part(stress=True)
+    assert missing_property(TIP3P(), [barostat]) is None
+    assert missing_property(TIP3P(), [barostat], declared=True) == ("stress", barostat)
+    assert missing_property(EMT(), [barostat], declared=True) is None  # EMT declares stress
     check_calculator_properties(ForcesOnly(), [part(stress=True)])
     with pytest.raises(ValueError, match=r"^the calculator ForcesOnly provides no energy "
                                          r"\(it implements forces\), which the barostat "

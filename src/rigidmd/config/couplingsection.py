@@ -199,17 +199,19 @@ class CouplingSection:
     def check_calculator(self, calc, name):
         """Refuse (ConfigError naming ``calculator.name``) a calculator that declares it
         provides no stress or no energy where a part reads it (a barostat's pressure, the
-        Monte Carlo barostat's energy).  ``calc``: the built calculator; ``name``: the
-        configuration's ``calculator.name``.  A force split's levels are checked by the
-        dynamics, naming the level."""
-        implemented = getattr(calc, "implemented_properties", None)
-        if implemented is None or name == "multiple_time_step":
-            return  # (one that says nothing is asked at its first call)
-        for spec in self.specs:
-            for needed, why in (("stress", spec.cls.needs_stress and "the pressure"),
-                                ("energy", spec.cls.needs_energy and "its moves' energies")):
-                if why and needed not in implemented:
-                    raise ConfigError(
-                        f"calculator.name: {name} provides no {needed} (it implements "
-                        f"{', '.join(implemented)}), which {spec.section} {spec.kind} needs "
-                        f"for {why}; use a calculator with {needed}, e.g. lammps")
+        Monte Carlo barostat's energy): :func:`rigidmd.core.split.missing_property`, with
+        the configuration's calculators taken at their declaration.  ``calc``: the built
+        calculator; ``name``: the configuration's ``calculator.name``.  A force split's
+        levels are checked by the dynamics, naming the level."""
+        from rigidmd.core.split import missing_property
+
+        if name == "multiple_time_step":
+            return
+        missing = missing_property(calc, [spec.cls for spec in self.specs], declared=True)
+        if missing is not None:
+            needed, part = missing
+            why = "the pressure" if needed == "stress" else "its moves' energies"
+            raise ConfigError(
+                f"calculator.name: {name} provides no {needed} (it implements "
+                f"{', '.join(calc.implemented_properties)}), which {part.section} {part.kind} "
+                f"needs for {why}; use a calculator with {needed}, e.g. lammps")

@@ -33,7 +33,7 @@ from ase.calculators.calculator import (
 from rigidmd.core.forces import calculate_together
 
 __all__ = ["MultipleTimeStep", "FullLessFast", "check_substeps", "check_calculator_properties",
-           "MAX_SUBSTEPS"]
+           "needed_properties", "missing_property", "MAX_SUBSTEPS"]
 
 #: The most inner steps per outer step.  An outer step is never interrupted (a stop
 #: signal waits for it), so a mistyped ``substeps`` (10**20) would hang the first step with
@@ -356,16 +356,42 @@ def _level_property(calc, name: str, atoms):
     return float(value) if name in ("energy", "free_energy") else np.array(value, dtype=float)
 
 
+def needed_properties(couplings) -> list:
+    """``(property, part)`` for each property a coupling part reads of the calculator:
+    ``"stress"`` (``needs_stress``: a barostat's pressure) and ``"energy"``
+    (``needs_energy``: the Monte Carlo barostat's energy difference).  ``couplings``: the
+    parts, or their classes (only class attributes are read)."""
+    return [(name, part) for part in couplings
+            for name, needed in (("stress", part.needs_stress), ("energy", part.needs_energy))
+            if needed]
+
+
+def missing_property(calc, couplings, declared: bool = False):
+    """The first ``(property, part)`` of :func:`needed_properties` that a plain calculator
+    declares it lacks, else None.
+
+    A calculator that declares no ``implemented_properties`` lacks nothing here.  Without
+    ``declared`` only the energy is judged by the declaration: some calculators give a
+    stress they do not declare, so the dynamics looks for it at the first call (where
+    :class:`~rigidmd.core.forces.ForceEvaluator` refuses its absence).  With ``declared``
+    (a configuration's calculators, which declare what they give) the stress is judged
+    so too.
+    """
+    implemented = getattr(calc, "implemented_properties", None)
+    if implemented is None:
+        return None
+    for name, part in needed_properties(couplings):
+        if (declared or name == "energy") and name not in implemented:
+            return name, part
+    return None
+
+
 def check_calculator_properties(calc, couplings) -> None:
     """Refuse in one line a calculator that lacks a property a coupling part needs.
 
-    Each part says what it reads (``needs_energy``: the Monte Carlo barostat's energy
-    difference; ``needs_stress``: a barostat's pressure). A :class:`MultipleTimeStep` is
-    asked for both on each level (:meth:`MultipleTimeStep.check_level_properties`); a
-    plain calculator for the energy, when it declares ``implemented_properties`` without
-    it. A plain calculator's stress is looked for at its first call instead (some give
-    one without declaring it), where :class:`~rigidmd.core.forces.ForceEvaluator` refuses
-    its absence. Changes nothing.
+    A :class:`MultipleTimeStep` is asked for each of :func:`needed_properties` on each level
+    (:meth:`MultipleTimeStep.check_level_properties`); a plain calculator as
+    :func:`missing_property` judges it.  Changes nothing.
 
     Parameters
     ----------
@@ -379,16 +405,13 @@ def check_calculator_properties(calc, couplings) -> None:
     ValueError
         Naming the calculator (or level), the property and the part that needs it.
     """
-    needs = [(name, part) for part in couplings
-             for name, needed in (("stress", part.needs_stress), ("energy", part.needs_energy))
-             if needed]
     if isinstance(calc, MultipleTimeStep):
-        for name, part in needs:
+        for name, part in needed_properties(couplings):
             calc.check_level_properties(name, f"the {part.kind} {part.section}")
         return
-    implemented = getattr(calc, "implemented_properties", None)
-    for name, part in needs:
-        if name == "energy" and implemented is not None and name not in implemented:
-            raise ValueError(f"the calculator {type(calc).__name__} provides no energy (it "
-                             f"implements {', '.join(implemented)}), which the {part.kind} "
-                             f"{part.section} needs")
+    missing = missing_property(calc, couplings)
+    if missing is not None:
+        name, part = missing
+        raise ValueError(f"the calculator {type(calc).__name__} provides no {name} (it "
+                         f"implements {', '.join(calc.implemented_properties)}), which the "
+                         f"{part.kind} {part.section} needs")
