@@ -114,7 +114,14 @@ def test_the_bias_of_a_trap_against_its_exact_mean(tmp_path):
     assert true > 0.8  # the step's bias is there, and large
     spread = np.hypot(e1 / 3, 4 * e2 / 3)  # of bias - true = u1/3 - 4 u2/3 + exact
     assert abs(bias - true) < 3 * spread + 0.1 * true, (bias, true, spread)
-    assert result["bias_K"][0] > 0
+    shift, shift_error = result["bias_K"]
+    assert shift > 0
+    # ΔT = bias / (Var(U)/k_B T²): its error carries the bias's and Var(U)'s (the spread of
+    # the half-step run's block variances), not the bias's alone.
+    half = result["legs"]["dt/2"]
+    assert half["var_U_error"] > 0
+    assert shift_error == pytest.approx(shift * np.hypot(error / bias,
+                                                         half["var_U_error"] / half["var_U"]))
     # The configurations are hotter at the larger step (the trap's T_conf,tr is exact).
     t1, t2 = (result["legs"][k]["T_conf_tr"][0] for k in ("dt", "dt/2"))
     assert t1 > t2 > 290
@@ -433,3 +440,4 @@ def test_the_command_that_continues_works_from_any_folder(tmp_path, monkeypatch)
                         or {"status": 0})
     assert cli.main(args) == 0
     assert f"rigidmd bias {tmp_path / 'bias.yaml'} " in hints[0]
+

@@ -17,7 +17,8 @@ own way.  The bias is said in kJ/mol per body and in kelvin: the shift of
 the bath temperature that would change ⟨U⟩ as much,
 :math:`\Delta T = N\,\mathrm{bias}\;k_BT^2/\mathrm{Var}(U)`, with
 :math:`\partial\langle U\rangle/\partial T = \mathrm{Var}(U)/k_BT^2` measured
-from the half-step run's fluctuations.
+from the half-step run's fluctuations; the kelvin error carries both the bias's error
+and Var(U)'s (the spread of its blocks' variances).
 
 Only a thermostatted run at constant volume is accepted: without a
 thermostat the temperature itself moves with the step (the energy is what is
@@ -152,6 +153,7 @@ class BiasLeg:
                "T_rot": _scaled(block_mean(s["K_rot"], blocks), 2 / (rot_dof * units.kB))
                if rot_dof else (np.nan, np.nan),
                "var_U": float(np.var(s["U"], ddof=1)) if len(s["U"]) > 1 else np.nan,
+               "var_U_error": _variance_error(s["U"], blocks),
                "samples": len(s["U"])}
         sums = np.array([t[:4] for t in self.tconf_sums]).reshape(-1, 4)
         out["T_conf_tr"] = _scaled(block_ratio(sums[:, 0], sums[:, 1], blocks), 1 / units.kB)
@@ -540,7 +542,11 @@ def _estimate(legs, blocks, config):
         kT2 = (config.coupling.thermostat.kwargs["temperature_K"] * units.kB) ** 2
         slope = b["var_U"] / kT2 * units.kB if kT2 > 0 else 0.0  # d<U>/dT (eV/K), all
         if slope > 0:
-            bias_k = (value * n * KJ_MOL / slope, error * n * KJ_MOL / slope)
+            # ΔT = bias / slope: the error of each, the slope's from its blocks' variances
+            relative = b.get("var_U_error", np.nan) / b["var_U"]
+            shift = value * n * KJ_MOL / slope
+            bias_k = (shift, float(np.hypot(error * n * KJ_MOL / slope,
+                                             shift * np.nan_to_num(relative))))
     text = _table(legs, per, n, bias, bias_k, complete, config)
     legs_out = {}
     for name, values in per.items():
@@ -550,6 +556,19 @@ def _estimate(legs, blocks, config):
         legs_out[name] = values
     return {"legs": legs_out, "bias_kJ_mol": bias, "bias_K": bias_k, "complete": complete,
             "bodies": n, "text": text}
+
+
+def _variance_error(values, blocks):
+    """Standard error of Var(``values``) from the variances of ``blocks`` consecutive blocks
+    about the whole series' mean (NaN with too few values).  Blocks long against the
+    correlation time make these nearly independent; shorter ones understate the error, as
+    for the means."""
+    values = np.asarray(values, dtype=float)
+    if len(values) < 2 * blocks or blocks < 2:
+        return np.nan
+    mean = values.mean()
+    spreads = np.array([np.mean((part - mean) ** 2) for part in np.array_split(values, blocks)])
+    return float(spreads.std(ddof=1) / np.sqrt(blocks))
 
 
 def _bodies(config, legs):
