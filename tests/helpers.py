@@ -797,3 +797,26 @@ def sigterm_once_written(proc, path, timeout=200):
         time.sleep(0.05)
     proc.send_signal(signal.SIGTERM)
     return finish(proc)
+
+
+def stopped_by_sigterm(call, after_s):
+    """Call ``call()`` under a run's stop handling (``StopSignals``) while this process gets
+    a SIGTERM after ``after_s`` seconds; it must end as a ``StopRequest`` naming SIGTERM.
+    Returns the seconds it took."""
+    import signal
+    import threading
+
+    import pytest
+
+    from rigidmd.run.signals import StopRequest, StopSignals
+
+    timer = threading.Timer(after_s, os.kill, (os.getpid(), signal.SIGTERM))
+    start = time.monotonic()
+    try:
+        with StopSignals(), pytest.raises(StopRequest, match="SIGTERM"):
+            timer.start()
+            call()
+        return time.monotonic() - start
+    finally:
+        timer.cancel()
+        timer.join()

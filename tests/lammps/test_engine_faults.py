@@ -18,14 +18,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ase import Atoms
-from helpers import PPPM_27, processes_named, start_cli_run, water_box_27
+from helpers import PPPM_27, processes_named, start_cli_run, stopped_by_sigterm, water_box_27
 from hypothesis_or_skip import HealthCheck, given, settings, st
 
 from rigidmd.ipi import EngineError, IPICalculator
 from rigidmd.ipi.processes import descendants
 from rigidmd.lammps import LAMMPSCalculator
 from rigidmd.lammps.engine import LAMMPSEngine, lammps_executable
-from rigidmd.run.runner import StopRequest, StopSignals
 
 pytestmark = pytest.mark.lammps
 
@@ -386,15 +385,7 @@ def test_a_stop_signal_ends_the_wait_for_an_engine_at_once(tmp_path, monkeypatch
     lmp = our_lmp()
     os.kill(lmp[0], signal.SIGSTOP)  # a hung engine
     atoms.positions[0] += 0.01
-    timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGTERM))
-    start = time.monotonic()
-    try:
-        with StopSignals(), pytest.raises(StopRequest, match="SIGTERM"):
-            timer.start()
-            atoms.get_forces()
-    finally:
-        timer.cancel()
-    assert time.monotonic() - start < 1.5
+    assert stopped_by_sigterm(atoms.get_forces, 0.3) < 1.5
     assert not engine.connected
     deadline = time.monotonic() + 5
     while our_lmp() and time.monotonic() < deadline:

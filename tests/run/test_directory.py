@@ -31,7 +31,7 @@ def test_the_files_of_a_run(tmp_path):
 def test_a_new_run_refuses_an_earlier_runs_outputs(tmp_path):
     files = RunFiles(outputs(tmp_path), "new", io.StringIO())
     lock = files.open()
-    assert files.made_directory and (tmp_path / "out" / LOCK_NAME).exists()
+    assert files.made_directories and (tmp_path / "out" / LOCK_NAME).exists()
     (tmp_path / "out" / "md.log").write_text("earlier\n")
     # No checkpoint beside it: --resume could only refuse, so it is not offered.
     with pytest.raises(ConfigError, match="already holds md.log from an earlier run; nothing "
@@ -90,6 +90,6 @@ def test_a_run_that_never_started_removes_exactly_the_directories_it_made(tmp_pa
     (tmp_path / "keep/a/b/c/md.log").unlink()
     files = RunFiles(section, "new", io.StringIO())
     lock = files.open()
-    assert not files.made_directory
+    assert not files.made_directories
     files.abandon(lock, started=False)
     assert (tmp_path / "keep/a/b/c").is_dir()

@@ -331,7 +331,7 @@ class RunSection:
 
     @classmethod
     def from_config(cls, raw, base):
-        from rigidmd.core.schemes import resolve_scheme
+        from rigidmd.core.schemes import SchemeParameterError, resolve_scheme
 
         integrator = raw.get("integrator", "no_squish")
         options = dict(mapping("integrator_options", raw.get("integrator_options", {})))
@@ -353,14 +353,11 @@ class RunSection:
                 raise ConfigError(f"{where}: expected an option's name, such as tol")
             try:
                 resolve_scheme(integrator, **{key: value})
-            except (ValueError, TypeError) as err:
-                entry = re.fullmatch(rf"scheme entry \d+ \((\w+)\): {re.escape(key)} (.*)",
-                                     str(err))
-                if entry is None:  # (not an option of this integrator)
-                    raise ConfigError(f"{where}: {err}") from None
-                got = "" if "got " in entry.group(2) else f", got {value!r}"
-                raise ConfigError(f"{where}: {entry.group(2)} (for {entry.group(1)}){got}"
-                                  ) from None
+            except SchemeParameterError as err:
+                got = "" if "got " in err.reason else f", got {value!r}"
+                raise ConfigError(f"{where}: {err.reason} (for {err.operator}){got}") from None
+            except (ValueError, TypeError) as err:  # (not an option of this integrator)
+                raise ConfigError(f"{where}: {err}") from None
         if "timestep" not in raw:
             raise ConfigError("timestep: missing (e.g. '1 fs')")
         timestep = parse_quantity("timestep", raw["timestep"], TIME_UNITS)

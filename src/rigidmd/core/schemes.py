@@ -53,7 +53,22 @@ import numpy as np
 from rigidmd.core import stepcontext as sc
 
 __all__ = ["Scheme", "OPERATORS", "BUILTIN_SCHEMES", "resolve_scheme", "load_yaml",
-           "scheme_with_middle"]
+           "scheme_with_middle", "SchemeParameterError", "SchemeParameterTypeError"]
+
+
+class SchemeParameterError(ValueError):
+    """A parameter of one scheme entry refused: ``"scheme entry I (OPERATOR): PARAMETER
+    REASON"``, with :attr:`operator`, :attr:`parameter` and :attr:`reason` kept, so that a
+    caller can name the option in its own words (the configuration's
+    ``integrator_options.tol``)."""
+
+    def __init__(self, entry: int, operator: str, parameter: str, reason: str):
+        super().__init__(f"scheme entry {entry} ({operator}): {parameter} {reason}")
+        self.operator, self.parameter, self.reason = operator, parameter, reason
+
+
+class SchemeParameterTypeError(SchemeParameterError, TypeError):
+    """A scheme parameter that is not a number (a TypeError as well)."""
 
 
 @dataclass(frozen=True)
@@ -301,16 +316,16 @@ def _parse_entry(i, entry):
     merged = dict(op.params) | dict(params)
     for key, value in merged.items():
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise TypeError(f"scheme entry {i} ({name}): {key} must be a number, got {value!r}")
+            raise SchemeParameterTypeError(i, name, key, f"must be a number, got {value!r}")
     if "dt_scale" in merged and not (np.isfinite(merged["dt_scale"])
                                      and merged["dt_scale"] > 0):
-        raise ValueError(f"scheme entry {i} ({name}): dt_scale must be positive, "
-                         f"got {merged['dt_scale']!r}")
+        raise SchemeParameterError(i, name, "dt_scale",
+                                   f"must be positive, got {merged['dt_scale']!r}")
     if "tol" in merged and not merged["tol"] > 0:
-        raise ValueError(f"scheme entry {i} ({name}): tol must be positive")
+        raise SchemeParameterError(i, name, "tol", "must be positive")
     if "max_iter" in merged:
         if int(merged["max_iter"]) != merged["max_iter"] or merged["max_iter"] < 1:
-            raise ValueError(f"scheme entry {i} ({name}): max_iter must be a positive integer")
+            raise SchemeParameterError(i, name, "max_iter", "must be a positive integer")
         merged["max_iter"] = int(merged["max_iter"])
     return name, merged
 

@@ -70,8 +70,8 @@ def check_molecule_ids(molecule_ids, owner="LAMMPSCalculator"):
     ids = np.asarray(molecule_ids)
     whole = ids.ndim == 1 and (
         np.issubdtype(ids.dtype, np.integer)
-        or np.issubdtype(ids.dtype, np.floating) and bool(np.all(np.isfinite(ids)))
-        and bool(np.all(ids == np.round(ids))))
+        or (np.issubdtype(ids.dtype, np.floating) and bool(np.all(np.isfinite(ids)))
+            and bool(np.all(ids == np.round(ids)))))
     if not whole:
         raise ValueError(f"{owner}: molecule_ids must be one whole number per atom, got an "
                          f"array of shape {ids.shape} and dtype {ids.dtype}")

@@ -75,6 +75,7 @@ Identity
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import socket
@@ -293,6 +294,16 @@ def _extra_number(extra, name):
         return json.loads(extra)[name]
     except (ValueError, KeyError, TypeError):
         return None
+
+
+@contextlib.contextmanager
+def _named_as_engine():
+    """LAMMPSCalculator's refusals (its checks of the atoms, the cell and the molecules,
+    which the engine shares) re-raised as this class's: ``LAMMPSEngine: ...``."""
+    try:
+        yield
+    except ValueError as err:
+        raise ValueError(str(err).replace("LAMMPSCalculator:", "LAMMPSEngine:", 1)) from None
 
 
 def _checked_signature(atoms, molecules):
@@ -597,12 +608,9 @@ class LAMMPSEngine(IPICalculator):
         try:
             # energy and forces too: the engine's first answer must equal them
             # (one LAMMPS call: LAMMPSCalculator computes the forces with the energy)
-            try:
+            with _named_as_engine():  # what the atoms cannot be, as this class says it
                 self._reference = (probe.get_potential_energy(atoms),
                                    probe.get_forces(atoms).copy())
-            except ValueError as err:  # what the atoms cannot be, as this class says it
-                raise ValueError(str(err).replace("LAMMPSCalculator:", "LAMMPSEngine:", 1)) \
-                    from None
             probe.write_data(atoms, directory / "engine.data")
             if self.kspace_parameters is None and probe.kspace_parameters is not None:
                 self._kspace_parameters = probe.kspace_parameters
@@ -802,27 +810,17 @@ class LAMMPSEngine(IPICalculator):
     # ------------------------------------------------------------ ASE
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         target = atoms if atoms is not None else self.atoms
-        try:
+        with _named_as_engine():  # LAMMPSCalculator's rules, named as ours
             molecules, source, self._grouping_checked = molecules_of(
                 target, self.calculator_options["molecule_ids"], self._grouping_checked)
-        except ValueError as err:  # (LAMMPSCalculator's rule: named as ours)
-            raise ValueError(str(err).replace("LAMMPSCalculator:", "LAMMPSEngine:", 1)) \
-                from None
-        signature = _checked_signature(target, None if source is None else molecules)
-        try:
+            signature = _checked_signature(target, None if source is None else molecules)
             cell, flips = self._lattice(target.cell.array)
-        except ValueError as err:  # (LAMMPSCalculator's check of the cell: named as ours)
-            raise ValueError(str(err).replace("LAMMPSCalculator:", "LAMMPSEngine:", 1)) \
-                from None
-        if signature != self._signature or not self.connected:
-            # A new engine: what its atoms cannot be is refused now, not by write_input's
-            # probe once the running engine is stopped and the k-space parameters pinned
-            # for its atoms are forgotten (a refused call leaves both as they were).
-            try:
+            if signature != self._signature or not self.connected:
+                # A new engine: what its atoms cannot be is refused now, not by
+                # write_input's probe once the running engine is stopped and the k-space
+                # parameters pinned for its atoms are forgotten (a refused call leaves
+                # both as they were).
                 check_atoms(target, self.commands, self.calculator_options["atom_types"])
-            except ValueError as err:
-                raise ValueError(str(err).replace("LAMMPSCalculator:", "LAMMPSEngine:", 1)) \
-                    from None
         tilted = bool(cell[1, 0] or cell[2, 0] or cell[2, 1])
         # (at a flip fix rigidmd/ipi re-maps the atoms on up to 2 ranks; fix ipi cannot)
         restart_at_flip = self.engine_fix != "rigidmd/ipi" or self.processes > 2

@@ -121,11 +121,6 @@ class RunFiles:
         return f"{keep}start it again with --overwrite (which removes them)"
 
     # ------------------------------------------------------------ the directory
-    @property
-    def made_directory(self):
-        """Whether :meth:`open` created the output directory."""
-        return bool(self.made_directories)
-
     def open(self):
         """Create the directory (and its missing parents) if needed and take its lock;
         returns the held lock.  On failure, the directories it created are removed."""
