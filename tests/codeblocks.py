@@ -58,6 +58,8 @@ CHECKED_ELSEWHERE = (
      "tests/physics/test_respa_lammps.py runs its --quick form"),
     ("validation/respa_lammps_cost.py", "minutes; tests/physics/test_respa_lammps.py runs its "
      "--quick form"),
+    ("validation/respa_lammps_native.py", "minutes of native LAMMPS runs; "
+     "tests/physics/test_respa_lammps.py runs its --quick form, a stop and --resume"),
     ("validation/respa_lammps_nve.py", "minutes; tests/physics/test_respa_lammps.py runs its "
      "--quick form"),
     ("validation/respa_chgnet.py", "15 minutes, in CHGNet's own environment (PyTorch, not "

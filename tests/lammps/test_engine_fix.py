@@ -246,6 +246,40 @@ def test_ranks_that_take_every_core_wait_in_mpi(monkeypatch, tmp_path, processes
     assert LAMMPSEngine(PPPM_27, processes=processes, poll_us=250).poll_us == 250
 
 
+def engine_input(engine):
+    return (engine._workdir / "in.engine").read_text()
+
+
+def test_engines_of_one_process_nap_while_the_other_computes(monkeypatch):
+    """Two engines of 2 ranks on 2 cores, the levels of a split: each took MPI's own wait
+    (poll_us=0) when it was made, so the idle one's rank kept a core busy while the other
+    computed; the split at 6 fs, k = 2, made 4-28 ns/day on 216 waters where naps make
+    45-55 (validation/respa_lammps_cost.py --engine 2).  Now each decides at its start,
+    knowing the other engines of the process that run or are yet to start."""
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    atoms = water_box_27()
+    with LAMMPSEngine(PPPM_27, processes=2) as first, \
+            LAMMPSEngine(PPPM_27, processes=2) as second:
+        for engine in (first, second):
+            atoms.calc = engine
+            atoms.get_forces()
+            assert engine.poll_us == 500 and " poll 500\n" in engine_input(engine)
+    with LAMMPSEngine(PPPM_27, processes=2) as alone:  # the others are closed
+        atoms.calc = alone
+        atoms.get_forces()
+        assert alone.poll_us == 0 and " poll 0\n" in engine_input(alone)
+        with LAMMPSEngine(PPPM_27, processes=2) as late, \
+                pytest.warns(UserWarning, match=rf"another engine of this process \(watchdog "
+                             rf"pid {alone.pid}\) waits with poll_us=0, its ranks keeping 1 "
+                             r"core\(s\) busy while this one computes"):
+            atoms.calc = late
+            atoms.get_forces()
+        assert late.poll_us == 500
+    with LAMMPSEngine(PPPM_27, processes=2, poll_us=0) as given, \
+            LAMMPSEngine(PPPM_27, processes=2, poll_us=0) as other:
+        assert given.poll_us == other.poll_us == 0  # given: kept
+
+
 @pytest.mark.parametrize("processes", [1, 2])
 def test_rank_zero_says_how_long_the_others_took_to_join(processes):
     """``broadcast_us``: rank 0's mean wait per call for the other ranks to take the

@@ -84,6 +84,7 @@ import subprocess
 import sys
 import tempfile
 import warnings
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -213,11 +214,12 @@ def engine_plugin():
         return None
 
 
-def default_poll_us(processes, threads=None, launch=True) -> int:
+def default_poll_us(processes, threads=None, launch=True, others=0) -> int:
     """``LAMMPSEngine``'s ``poll_us`` when none is given: how the waiting ranks wait.
 
-    MPI's own wait (0) when the engine is started here and its ranks times
-    threads take every core this process may use (its CPU affinity), else
+    MPI's own wait (0) when the engine is started here, its ranks times
+    threads take every core this process may use (its CPU affinity) and no
+    other engine of this process runs or is yet to start (``others``), else
     naps of at most 500 µs.  Measured (``benchmarks/lammps_engine.py``; NVE,
     TIP3P + PPPM, wall time per step against native LAMMPS on as many ranks,
     docs/performance.md): with 16 ranks on 16 cores the naps made a step
@@ -227,7 +229,12 @@ def default_poll_us(processes, threads=None, launch=True) -> int:
     ranks on 16 cores and fewer) the two ran alike, and the naps leave an
     idle engine's cores free (0.03-0.04 s of CPU per second and rank against
     a whole core).  An engine started elsewhere (``launch=False``) gets the
-    naps: the cores of its host are not known here.
+    naps: the cores of its host are not known here.  Two engines of one
+    process (the levels of a split, :class:`rigidmd.MultipleTimeStep`) compute
+    in turn, and MPI's wait kept the idle one's ranks on the cores the other
+    needed: two engines of 2 ranks on 2 cores (216 waters, BAOAB, the split at
+    6 fs, k = 2) made 4-28 ns/day where their naps make 45-55
+    (``validation/respa_lammps_cost.py --engine 2``).
 
     Parameters
     ----------
@@ -237,13 +244,21 @@ def default_poll_us(processes, threads=None, launch=True) -> int:
         OpenMP threads per rank (None: one).
     launch : bool
         Whether the engine runs on this machine.
+    others : int, default 0
+        Other engines of this process that run, or are yet to start.
 
     Returns
     -------
     int
         Microseconds: 0 or 500.
     """
-    return 0 if launch and processes * (threads or 1) >= usable_cores() else 500
+    return 0 if launch and not others and processes * (threads or 1) >= usable_cores() \
+        else 500
+
+
+#: Every LAMMPSEngine of this process (each decides its default ``poll_us`` at its start
+#: knowing the others: see :func:`default_poll_us`).
+_ENGINES = weakref.WeakSet()
 
 
 def usable_cores() -> int:
@@ -463,9 +478,10 @@ class LAMMPSEngine(IPICalculator):
         the wait it expects, the shortest of the last four, then a fortieth of
         it at a time, at least 10 µs; :attr:`broadcast_us` says what that
         costs a call); 0 leaves the wait to MPI (MPICH then keeps a core busy
-        while rigidmd integrates).  Default (:func:`default_poll_us`): 0 when
-        the engine's ranks and threads take every core this process may use,
-        else 500.
+        while rigidmd integrates).  Default (:func:`default_poll_us`, decided
+        when the engine starts): 0 when the engine's ranks and threads take
+        every core this process may use and no other engine of this process
+        runs or is yet to start (the levels of a split take turns), else 500.
 
     Notes
     -----
@@ -503,8 +519,15 @@ class LAMMPSEngine(IPICalculator):
         self.triclinic = triclinic
         self.launch_engine = bool(launch)
         self.workdir = None if workdir is None else Path(workdir)
-        self.poll_us = default_poll_us(self.processes, self.threads, self.launch_engine) \
-            if poll_us is None else _positive("poll_us", poll_us, least=0)
+        self._poll_given = None if poll_us is None else _positive("poll_us", poll_us, least=0)
+        #: The ranks' longest nap (µs); by default decided at each start of the engine,
+        #: knowing the other engines of this process then (:func:`default_poll_us`).
+        self.poll_us = self._poll_given
+        self._started = False  # an engine was started for this object once
+        _ENGINES.add(self)
+        if self.poll_us is None:
+            self.poll_us = default_poll_us(self.processes, self.threads, self.launch_engine,
+                                           len(self._other_engines()))
         #: The engine's fix: ``"rigidmd/ipi"`` or ``"ipi"`` (None before the first input).
         self.engine_fix = None
         self._library = None
@@ -643,8 +666,37 @@ class LAMMPSEngine(IPICalculator):
             cmd = [mpirun_executable(), "-np", str(self.processes)] + cmd
         return cmd, env
 
+    @property
+    def started(self) -> bool:
+        """Whether an engine was started for this object (it may have been closed since)."""
+        return self._started
+
+    def _other_engines(self):
+        """The other engines of this process that run here or are yet to start."""
+        return [e for e in list(_ENGINES) if e is not self and e.launch_engine
+                and (e.pid is not None or not e.started)]
+
+    def _choose_poll(self):
+        """``poll_us`` for the engine about to start (unless given), and one warning when
+        another engine of this process waits in MPI (``poll_us=0``) on the cores this one
+        needs."""
+        others = self._other_engines()
+        if self._poll_given is None:
+            self.poll_us = default_poll_us(self.processes, self.threads, self.launch_engine,
+                                           len(others))
+        spinning = [e for e in others if e.pid is not None and e.poll_us == 0
+                    and e.processes > 1 and e.engine_fix == "rigidmd/ipi"]
+        if spinning and self.launch_engine:
+            warnings.warn(f"LAMMPSEngine: another engine of this process (watchdog pid "
+                          f"{spinning[0].pid}) waits with poll_us=0, its ranks keeping "
+                          f"{spinning[0].processes - 1} core(s) busy while this one computes "
+                          "(several times slower, measured); make every engine before the "
+                          "first call, or give each poll_us=500", stacklevel=4)
+
     # ------------------------------------------------------------ hooks
     def launch(self, atoms):
+        self._choose_poll()
+        self._started = True
         if self.workdir is not None:
             workdir = self.workdir
         else:
