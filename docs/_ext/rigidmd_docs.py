@@ -189,11 +189,11 @@ def _mapping_defaults(function, mapping):
 
 def _water_model_table(fields, models):
     """The table of ``calculator.water_model``: each field's type and unit, whether it is
-    required, its default (read from ``sections._water_commands``) and what it sets."""
+    required, its default (read from ``sections.water_commands``) and what it sets."""
     from rigidmd.config import sections
     from rigidmd.config.quantities import LENGTH_UNITS
 
-    defaults, units = _mapping_defaults(sections._water_commands, "spec")
+    defaults, units = _mapping_defaults(sections.water_commands, "spec")
     cutoff_unit = units.get("cutoff")
     kinds = {"name": "str",
              "cutoff": f"length: {_units(LENGTH_UNITS)}"
@@ -382,7 +382,7 @@ def configuration_reference():
         default = {"directory": "`.`", "checkpoint": "`checkpoint.npz`"}.get(
             name, "" if default in (None, dataclasses.MISSING) else f"`{default}`")
         if name in ("trajectory", "log", "plot", "mdanalysis"):
-            kind, text = "path or absent", f"The {name} file, in `directory`; absent: none."
+            kind, text = "path or absent", f"The {name} file, in `directory`; absent or `null`: none."
         add(f"| `{name}` | {_cell(kind)} | {default} | {_cell(text)} |\n")
 
     add("\n## `relax`\n\n")

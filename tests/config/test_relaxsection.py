@@ -42,6 +42,18 @@ def test_mistakes_name_the_field(raw, match):
         RelaxSection.from_config({"relax": raw})
 
 
+@pytest.mark.parametrize("pressure", ["200 GPa", "-2e6 bar", "1.5 eV/A^3"])
+def test_a_pressure_beyond_a_barostats_is_refused_in_the_files_units(pressure):
+    """``relax.pressure: 2e6 bar`` (meant 2 bar, or 2e6 Pa) ran a relaxation at 200 GPa;
+    the barostats refuse such a target, and so does the relaxation now."""
+    with pytest.raises(ConfigError) as err:
+        RelaxSection.from_config({"relax": {"cell": "iso", "pressure": pressure}})
+    assert str(err.value) == (f"relax.pressure: {pressure} is beyond ±160.2 GPa (±1.602e+06 "
+                              "bar), where molecules no longer stay whole; is the unit right?")
+    assert RelaxSection.from_config({"relax": {"cell": "iso", "pressure": "100 GPa"}}) \
+        .pressure == pytest.approx(100 * units.GPa)
+
+
 def test_a_restart_is_not_relaxed():
     with pytest.raises(ConfigError, match="relax: a restart continues a run's dynamics"):
         RelaxSection.from_config({"relax": {}, "restart": "md.traj"})

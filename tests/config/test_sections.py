@@ -147,6 +147,29 @@ def test_the_outputs_section(tmp_path):
         OutputsSection.from_config({"outputs": {"plot": "e.png", "log": None}}, tmp_path)
 
 
+@pytest.mark.parametrize("key, value, message", [
+    ("trajectory", "", "outputs.trajectory: expected a file name (leave the field out, or "
+                       "null, for none), got ''"),
+    ("log", False, "outputs.log: expected a file name (leave the field out, or null, for "
+                   "none), got False"),
+    ("checkpoint", "", "outputs.checkpoint: expected a file name, got ''"),
+    ("directory", " ", "outputs.directory: expected a file name, got ' '"),
+    ("plot", 0, "outputs.plot: expected a file name (leave the field out, or null, for "
+                "none), got 0"),
+])
+def test_an_output_that_names_no_file_is_refused(tmp_path, key, value, message):
+    """``trajectory: ""`` or ``log: false`` ran without that output and said nothing (only
+    null, or leaving the field out, means none); ``checkpoint: ""`` named the output folder
+    itself as the checkpoint file."""
+    with pytest.raises(ConfigError) as err:
+        OutputsSection.from_config({"outputs": {key: value}}, tmp_path)
+    assert str(err.value) == message
+    assert list(tmp_path.iterdir()) == []
+    none = OutputsSection.from_config({"outputs": {"trajectory": None, "log": "md.log"}},
+                                      tmp_path)
+    assert set(none.files) == {"log"}
+
+
 @pytest.mark.parametrize("field", ["charges: {O: -2.0, H: 1.0}", "atom_types: {O: 1, H: 2}",
                                    "commands: ['pair_style zero 1.0']"])
 def test_lammps_fields_of_another_calculator_are_refused(field):

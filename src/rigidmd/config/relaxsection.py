@@ -20,6 +20,9 @@ resume), then draws velocities and runs MD from the relaxed structure;
 from dataclasses import dataclass
 from pathlib import Path
 
+from ase import units
+
+from rigidmd.config.couplingsection import LARGEST_PRESSURE
 from rigidmd.config.quantities import (
     PRESSURE_UNITS,
     ConfigError,
@@ -101,6 +104,11 @@ class RelaxSection:
                                   "(iso, aniso or full)")
             out.pressure = parse_quantity("relax.pressure", section["pressure"],
                                           PRESSURE_UNITS)
+            if abs(out.pressure) > LARGEST_PRESSURE:  # as a barostat's target
+                limit = LARGEST_PRESSURE / units.GPa
+                raise ConfigError(f"relax.pressure: {section['pressure']} is beyond "
+                                  f"±{limit:.4g} GPa (±{limit * 1e4:.4g} bar), where "
+                                  "molecules no longer stay whole; is the unit right?")
         for key in ("trajectory", "log"):
             if key in section:
                 name = section[key]

@@ -19,6 +19,7 @@ coupling section lives in :mod:`rigidmd.config.couplingsection`.
 """
 
 import importlib
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,7 +41,7 @@ from rigidmd.config.quantities import (
 from rigidmd.config.trust import calculator_class, check_calculator
 
 __all__ = ["StructureSection", "RunSection", "CalculatorSection", "CouplingSection",
-           "OutputsSection", "BUILTIN_STRUCTURES", "BODY_RULES", "LOCK_NAME"]
+           "OutputsSection", "BUILTIN_STRUCTURES", "BODY_RULES", "LOCK_NAME", "water_commands"]
 
 #: Name of the lock file in an output directory (no output may take it; the run's
 #: :class:`rigidmd.run.outputs.OutputLock` writes it).
@@ -268,8 +269,11 @@ def _water_model(where, value):
         raise ConfigError(f"{where}: {err}") from None
 
 
-def _water_commands(raw):
-    """``calculator.water_model``: the model and its LAMMPS commands (explicit M sites)."""
+def water_commands(raw):
+    """``calculator.water_model``: the model and its LAMMPS commands (explicit M sites).
+
+    The defaults it applies (``spec.get(key, default)``) are also what the configuration
+    reference shows (the docs' extension reads them from this function's source)."""
     spec = mapping("calculator.water_model", raw, WATER_MODEL_FIELDS)
     if "name" not in spec:
         raise ConfigError("calculator.water_model.name: missing (tip3p, tip4p2005, ...)")
@@ -482,7 +486,7 @@ class CalculatorSection:
                 if other in calc:
                     raise ConfigError(f"calculator.{other}: water_model gives the commands, "
                                       "charges and types; give one or the other")
-            water, commands = _water_commands(calc["water_model"])
+            water, commands = water_commands(calc["water_model"])
             atom_types = {"O": 1, "H": 2, "X": 3} if water.sites == 4 else {"O": 1, "H": 2}
         if calc["name"] == "lammps" and not commands:
             raise ConfigError("calculator.commands: the lammps calculator needs LAMMPS commands "
@@ -643,6 +647,18 @@ def check_output_files(directory, outputs, claimed=None):
                               "create it, or put the file in outputs.directory")
 
 
+def _path_field(field_name, value) -> str:
+    """A field naming a file or folder: a non-empty string (or path); one line otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (str, os.PathLike)) \
+            or not str(value).strip():
+        raise ConfigError(f"{field_name}: expected a file name"
+                          + (" (leave the field out, or null, for none)"
+                             if field_name.split(".")[-1] in ("trajectory", "log", "plot",
+                                                              "mdanalysis") else "")
+                          + f", got {value!r}")
+    return str(value)
+
+
 @dataclass
 class OutputsSection:
     """Where and how often the run writes.
@@ -677,11 +693,14 @@ class OutputsSection:
     @classmethod
     def from_config(cls, raw, base):
         outputs = mapping("outputs", raw.get("outputs", {}), cls.FIELDS)
-        directory = base / str(outputs.get("directory", "."))
+        directory = base / _path_field("outputs.directory", outputs.get("directory", "."))
         interval = whole_number("outputs.interval", outputs.get("interval", 10), minimum=1)
-        files = {key: directory / str(outputs[key])
-                 for key in ("trajectory", "log", "plot", "mdanalysis") if outputs.get(key)}
-        files["checkpoint"] = directory / str(outputs.get("checkpoint", "checkpoint.npz"))
+        # (null is "none", as leaving the field out; "" or false were taken as none silently)
+        files = {key: directory / _path_field(f"outputs.{key}", outputs[key])
+                 for key in ("trajectory", "log", "plot", "mdanalysis")
+                 if outputs.get(key, None) is not None}
+        files["checkpoint"] = directory / _path_field(
+            "outputs.checkpoint", outputs.get("checkpoint", "checkpoint.npz"))
         # Default: every 1000 steps, on a frame (a multiple of the interval).
         default = interval * max(1, -(-1000 // interval))
         every = whole_number("outputs.checkpoint_interval",
