@@ -382,7 +382,8 @@ def configuration_reference():
         default = {"directory": "`.`", "checkpoint": "`checkpoint.npz`"}.get(
             name, "" if default in (None, dataclasses.MISSING) else f"`{default}`")
         if name in ("trajectory", "log", "plot", "mdanalysis"):
-            kind, text = "path or absent", f"The {name} file, in `directory`; absent or `null`: none."
+            kind = "path or absent"
+            text = f"The {name} file, in `directory`; absent or `null`: none."
         add(f"| `{name}` | {_cell(kind)} | {default} | {_cell(text)} |\n")
 
     add("\n## `relax`\n\n")
