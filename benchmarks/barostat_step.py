@@ -124,6 +124,13 @@ def main():
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args()
+    for waters in args.waters:  # (100 printed "100 waters" and timed 216)
+        if waters < 27 or round((waters / 27) ** (1 / 3)) ** 3 * 27 != waters:
+            parser.error(f"argument --waters: {waters} is not 27 r^3 (27, 216, 729, 1728, "
+                         "...): the box is the 27-water box repeated r times along each edge")
+    for name in ("steps", "rounds"):
+        if getattr(args, name) < 1:
+            parser.error(f"argument --{name}: must be at least 1, got {getattr(args, name)}")
     print(f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; load average "
           + ", ".join(f"{v:.2f}" for v in os.getloadavg()))
     for waters in args.waters:

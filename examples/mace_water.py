@@ -77,6 +77,18 @@ def main(argv=None):
     args = p.parse_args(argv)
     if args.quick:
         args.molecules, args.ps = 8, 0.1
+    for name in ("ps", "timestep_fs"):
+        if not 0 < getattr(args, name) < float("inf"):
+            p.error(f"argument --{name.replace('_', '-')}: must be positive, got "
+                    f"{getattr(args, name)}")
+    if args.molecules < 1:
+        p.error(f"argument --molecules: must be at least 1, got {args.molecules}")
+    import importlib.util
+
+    missing = [m for m in ("torch", "mace") if importlib.util.find_spec(m) is None]
+    if missing:  # (a ModuleNotFoundError traceback before)
+        raise SystemExit(f"mace_water.py needs {' and '.join(missing)}: pip install "
+                         '"rigidmd[ml]" (PyTorch and mace-torch, not in the test extra)')
 
     calc, device = calculator(args)
     atoms = water_cluster(args.molecules, seed=args.seed)

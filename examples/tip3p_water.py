@@ -217,11 +217,12 @@ def parse(argv=None):
     p.add_argument("--accuracy", type=float, default=1e-5, help="k-space relative accuracy")
     p.add_argument("--cutoff", type=float, default=9.0, help="real-space cut-off (Å)")
     p.add_argument("--thermostat", choices=("bussi", "langevin"), default="bussi")
-    p.add_argument("--quench-ps", type=float, default=0.2)
-    p.add_argument("--equilibration-ps", type=float, default=20.0)
-    p.add_argument("--production-ps", type=float, default=50.0)
+    p.add_argument("--quench-ps", type=float, help="default 0.2 (--quick: 0.1)")
+    p.add_argument("--equilibration-ps", type=float, help="default 20 (--quick: 1)")
+    p.add_argument("--production-ps", type=float, help="default 50 (--quick: 2)")
     p.add_argument("--timestep-fs", type=float, default=2.0)
-    p.add_argument("--sample-fs", type=float, default=20.0, help="trajectory interval (fs)")
+    p.add_argument("--sample-fs", type=float,
+                   help="trajectory interval (fs); default 20 (--quick: 10)")
     p.add_argument("--viscosity-mpas", type=float, default=WATER_VISCOSITY_MPAS,
                    help="shear viscosity for the Yeh-Hummer correction (mPa s)")
     p.add_argument("--analyse-only", action="store_true",
@@ -229,9 +230,22 @@ def parse(argv=None):
     p.add_argument("--quick", action="store_true",
                    help="a short smoke run: 0.1 ps quench, 1 ps equilibration, 2 ps production")
     args = p.parse_args(argv)
-    if args.quick:
-        args.quench_ps, args.equilibration_ps, args.production_ps = 0.1, 1.0, 2.0
-        args.sample_fs = 10.0
+    times = {"quench_ps": (0.2, 0.1), "equilibration_ps": (20.0, 1.0),
+             "production_ps": (50.0, 2.0), "sample_fs": (20.0, 10.0)}
+    for key, (full, quick) in times.items():  # a time given explicitly is kept
+        if getattr(args, key) is None:
+            setattr(args, key, quick if args.quick else full)
+    for key in ("timestep_fs", "spacing", "cutoff", "accuracy", *times):
+        if not 0 < getattr(args, key) < float("inf"):
+            p.error(f"argument --{key.replace('_', '-')}: must be positive, got "
+                    f"{getattr(args, key)}")
+    if args.n_side < 1:
+        p.error(f"argument --n-side: must be at least 1, got {args.n_side}")
+    if args.analyse_only:
+        missing = [n for n in ("tip3p.psf", "tip3p.xtc") if not (args.outdir / n).is_file()]
+        if missing:
+            p.error(f"argument --analyse-only: no {', '.join(missing)} in {args.outdir} "
+                    "(run the simulation first)")
     return args
 
 
@@ -326,9 +340,15 @@ def main(argv=None):
     if args.analyse_only:
         results = json.loads(path.read_text()) if path.exists() else {}
     else:
+        earlier = sorted(p.name for p in outdir.glob("tip3p*"))
+        if earlier:
+            print(f"replacing an earlier run's {', '.join(earlier)} in {outdir}", flush=True)
         results = simulate(args, outdir, log)
     results.update(report(outdir, args, log))
-    path.write_text(json.dumps(results, indent=2) + "\n")
+    # Strict JSON: a quantity a short run cannot give (NaN) is null.
+    results = {k: None if isinstance(v, float) and not np.isfinite(v) else v
+               for k, v in results.items()}
+    path.write_text(json.dumps(results, indent=2, allow_nan=False) + "\n")
     print(f"wrote {', '.join(sorted(p.name for p in outdir.glob('tip3p*')))} in {outdir} "
           f"({time.perf_counter() - t_start:.0f} s)")
     return results

@@ -88,15 +88,28 @@ def parse(argv=None):
     p.add_argument("--cutoff", type=float, default=8.5, help="real-space cut-off (Å)")
     p.add_argument("--accuracy", type=float, default=1e-5, help="PPPM relative accuracy")
     p.add_argument("--timestep-fs", type=float, default=2.0)
-    p.add_argument("--quench-ps", type=float, default=0.2)
-    p.add_argument("--equilibration-ps", type=float, default=20.0)
-    p.add_argument("--production-ps", type=float, default=200.0)
+    p.add_argument("--quench-ps", type=float, help="default 0.2 (--quick: 0.05)")
+    p.add_argument("--equilibration-ps", type=float, help="default 20 (--quick: 0.4)")
+    p.add_argument("--production-ps", type=float,
+                   help="default 200 (--quick: 1); at least 1 (the diffusion fit)")
     p.add_argument("--quick", action="store_true",
                    help="a short smoke run: 0.05 ps quench, 0.4 ps equilibration, 1 ps "
-                        "production")
+                        "production (a time given explicitly is kept)")
     args = p.parse_args(argv)
-    if args.quick:
-        args.quench_ps, args.equilibration_ps, args.production_ps = 0.05, 0.4, 1.0
+    times = {"quench_ps": (0.2, 0.05), "equilibration_ps": (20.0, 0.4),
+             "production_ps": (200.0, 1.0)}
+    for key, (full, quick) in times.items():
+        if getattr(args, key) is None:
+            setattr(args, key, quick if args.quick else full)
+    for key in ("timestep_fs", *times):
+        if not 0 < getattr(args, key) < float("inf"):
+            p.error(f"argument --{key.replace('_', '-')}: must be positive, got "
+                    f"{getattr(args, key)}")
+    if args.production_ps < 1.0:  # lags of 0.2-0.4 of it, 0.1 ps apart: 3 at least
+        p.error(f"argument --production-ps: the diffusion fit needs at least 1 ps, got "
+                f"{args.production_ps:g}")
+    if args.n_side < 1:
+        p.error(f"argument --n-side: must be at least 1, got {args.n_side}")
     return args
 
 
@@ -104,6 +117,12 @@ def main(argv=None):
     args = parse(argv)
     outdir = args.outdir
     outdir.mkdir(parents=True, exist_ok=True)
+    earlier = [outdir / name for name in ("tip4p2005.log", "tip4p2005_results.json",
+                                          "tip4p2005_com.npz") if (outdir / name).exists()]
+    if earlier:  # (the log was appended to, mixing two runs)
+        print(f"replacing an earlier run's {', '.join(p.name for p in earlier)} in {outdir}",
+              flush=True)
+        (outdir / "tip4p2005.log").unlink(missing_ok=True)
     start = time.perf_counter()
 
     def log(text):

@@ -70,4 +70,7 @@ def main():
 
 
 if __name__ == "__main__":
+    import argparse  # no options (--help started the minutes-long comparison)
+
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     main()

@@ -7,7 +7,8 @@ import argparse
 import json
 from pathlib import Path
 
-__all__ = ["positive", "at_least_zero", "whole", "existing_file", "read_json"]
+__all__ = ["positive", "at_least_zero", "whole", "existing_file", "read_json",
+           "read_results"]
 
 
 def positive(text):
@@ -53,3 +54,15 @@ def read_json(path):
         return json.loads(Path(path).read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
         raise SystemExit(f"{path}: not a readable JSON file ({err})") from None
+
+
+def read_results(path, keys, script, prefix=""):
+    """The results JSON in ``path`` of ``script`` (a dict holding every one of ``keys``),
+    or SystemExit in one line naming the file and what it lacks (another script's file
+    failed with a KeyError's traceback)."""
+    result = read_json(path)
+    missing = [k for k in keys if k not in result] if isinstance(result, dict) else list(keys)
+    if missing:
+        raise SystemExit(f"{prefix}{path} is not a results file of {script} "
+                         f"(no {', '.join(missing)})")
+    return result

@@ -52,7 +52,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # (arguments.py, beside this script)
-from arguments import positive, read_json, whole  # noqa: E402
+from arguments import positive, read_results, whole  # noqa: E402
 from children import ends_with_parent  # noqa: E402
 
 START = HERE / "water_openmm_long.start_tip4p2005.npz"
@@ -259,13 +259,8 @@ RESULT_KEYS = ("lammps", "repeats", "load_before", "load_after", "cpus", "rows",
 
 def rewrite(out: Path) -> str:
     """The tables again from a results file (``--report``), without measuring."""
-    path = out.with_suffix(".json")
-    result = read_json(path)
-    missing = [k for k in RESULT_KEYS if k not in result] if isinstance(result, dict) \
-        else list(RESULT_KEYS)
-    if missing:
-        raise SystemExit(f"--report: {path} is not a results file of respa_kspace_share.py "
-                         f"(no {', '.join(missing)})")
+    result = read_results(out.with_suffix(".json"), RESULT_KEYS, "respa_kspace_share.py",
+                          "--report: ")
     text = report(result)
     out.with_suffix(".txt").write_text(text)
     return text

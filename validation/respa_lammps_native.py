@@ -48,7 +48,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # (arguments.py, children.py, respa_kspace_share.py beside it)
-from arguments import positive, read_json, whole  # noqa: E402
+from arguments import positive, read_json, read_results, whole  # noqa: E402
 from children import ends_with_parent  # noqa: E402
 from respa_kspace_share import START, parse_log  # noqa: E402
 
@@ -213,15 +213,9 @@ RESULT_KEYS = ("lammps", "arguments", "complete", "load_before", "load_after", "
                "rows")
 
 
-def read_results(path: Path) -> dict:
+def read_native(path: Path) -> dict:
     """A results file of this script; one line naming it otherwise."""
-    result = read_json(path)
-    missing = [k for k in RESULT_KEYS if k not in result] if isinstance(result, dict) \
-        else list(RESULT_KEYS)
-    if missing:
-        raise SystemExit(f"{path} is not a results file of respa_lammps_native.py "
-                         f"(no {', '.join(missing)})")
-    return result
+    return read_results(path, RESULT_KEYS, "respa_lammps_native.py")
 
 
 def write_results(out: Path, result: dict) -> str:
@@ -274,7 +268,7 @@ def main(argv=None):
                     help="rewrite the .txt from --out's .json, measuring nothing")
     args = ap.parse_args(argv)
     if args.report:
-        result = read_results(args.out.with_suffix(".json"))
+        result = read_native(args.out.with_suffix(".json"))
         text = write_results(args.out, result)
         print(text)
         return result
@@ -293,7 +287,7 @@ def main(argv=None):
                  "repeats": args.repeats, "ps": {str(n): ps[n] for n in args.sizes}}
     runs, load_before = [], os.getloadavg()[0]
     if args.resume:
-        earlier = read_results(args.out.with_suffix(".json"))
+        earlier = read_native(args.out.with_suffix(".json"))
         if earlier["arguments"] != arguments:
             ap.error(f"--resume: {args.out.with_suffix('.json')} was measured with "
                      f"{earlier['arguments']}, not {arguments}")

@@ -26,6 +26,39 @@ def test_the_dynamics_leaves_six_degrees_of_freedom_per_water():
     assert temperature(atoms) == pytest.approx(2 * kinetic_energy(atoms) / (24 * units.kB))
 
 
+@pytest.mark.parametrize("fixcm", [False, True])
+def test_repeated_atoms_count_each_copys_bodies_and_one_held_centre(fixcm):
+    """``atoms.repeat`` failed (AttributeError: the marker had no ``repeat``); the repeated
+    system now counts 6 per water of every copy, less 3 once when the momentum is held.
+    Atoms extended since the marking (``atoms + other``) read 186.8 K for 233.5 K (the old
+    count): refused now, in one line."""
+    from rigidmd import RigidBussi, rigid_maxwell_boltzmann, rigid_temperature
+
+    atoms = water_cluster(4, seed=1)
+    atoms.calc = TIP3P()
+    rigid_maxwell_boltzmann(atoms, 300, rng=np.random.default_rng(0), stationary=fixcm)
+    if fixcm:
+        RigidBussi(atoms, 1 * units.fs, temperature_K=300, taut=100 * units.fs)
+    else:
+        RigidVerlet(atoms, 1 * units.fs)
+    held = 3 if fixcm else 0
+    assert atoms.get_number_of_degrees_of_freedom() == 24 - held
+    atoms.set_cell([20.0, 20.0, 20.0])
+    big = atoms.repeat((2, 1, 3))
+    assert big.get_number_of_degrees_of_freedom() == 6 * 24 - held
+    (marker,) = [c for c in big.constraints if isinstance(c, RigidBodyDOF)]
+    assert list(marker.body_ids) == list(np.repeat(np.arange(1, 25), 3))
+    bodies = [list(range(3 * i, 3 * i + 3)) for i in range(24)]
+    kinetic = kinetic_energy(big)
+    assert big.get_temperature() == pytest.approx(2 * kinetic / ((144 - held) * units.kB))
+    if not fixcm:
+        assert big.get_temperature() == pytest.approx(rigid_temperature(big, bodies=bodies))
+    doubled = atoms + atoms.copy()
+    with pytest.raises(ValueError, match=r"RigidBodyDOF: these 24 atoms are not the 12 a "
+                                         r"rigid dynamics marked \(extended since\?\)"):
+        doubled.get_temperature()
+
+
 def test_it_never_moves_anything_and_copies_cheaply():
     dof = RigidBodyDOF(5, [1, 1, -1])
     atoms = Atoms("H3", positions=np.eye(3))

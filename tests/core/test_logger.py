@@ -10,7 +10,7 @@ from helpers import PeriodicLJ, dimer_fluid
 
 from rigidmd import RigidBussi, RigidVerlet
 from rigidmd.core.logger import LOG_COLUMNS, RigidLogger
-from rigidmd.systems import water_cluster
+from rigidmd.systems import water_box, water_cluster
 
 
 def test_a_cluster_logs_the_energies_and_temperatures():
@@ -48,3 +48,28 @@ def test_a_periodic_box_adds_pressure_volume_density_and_the_parts_columns():
     quiet = io.StringIO()
     RigidLogger(dyn, quiet, header=False)()
     assert len(quiet.getvalue().splitlines()) == 1
+
+
+@pytest.mark.parametrize("atoms, calc, message", [
+    (water_cluster(4), TIP3P(rc=20.0),
+     r"log_pressure=True: the pressure needs a cell periodic in x, y and z \(pbc is "
+     r"\[False, False, False\]\)"),
+    (water_box(2), TIP3P(rc=2.9), r"log_pressure=True: the calculator TIP3P provides no "
+                                  r"stress \(it implements energy, forces\)"),
+    (water_box(2), TIP3P(rc=2.9), None),
+])
+def test_a_pressure_the_log_cannot_have_is_refused_before_the_log_is_written(
+        tmp_path, atoms, calc, message):
+    """``log_pressure=True`` on a cluster, or with a calculator without stress, wrote the
+    log's header and failed at the first step, leaving a log of one line; "yes" was taken
+    for True."""
+    atoms.calc = calc
+    log = tmp_path / "md.log"
+    if message is None:
+        with pytest.raises(TypeError, match="log_pressure must be True, False or None, got "
+                                            "'yes'"):
+            RigidVerlet(atoms, 1 * units.fs, logfile=str(log), log_pressure="yes")
+    else:
+        with pytest.raises(ValueError, match=message):
+            RigidVerlet(atoms, 1 * units.fs, logfile=str(log), log_pressure=True)
+    assert not log.exists() and atoms.constraints == []

@@ -155,6 +155,115 @@ def test_a_level_without_stress_is_named():
     np.testing.assert_array_equal(fluid.positions, before)
 
 
+def test_a_failed_step_after_an_accepted_monte_carlo_move_puts_the_levels_back(monkeypatch):
+    """The move evaluates both levels at the trial cell before the outer step backs them
+    up; when the step then failed, the state, the cell and the summed record went back but
+    ``record.fast`` and ``record.slow`` kept the trial cell's forces (5e-3 eV/Å off; a
+    checkpoint written then stored them)."""
+    from rigidmd.couplings.montecarlo import MonteCarloBarostat
+
+    class Armed(Calculator):
+        implemented_properties = ["energy", "forces", "stress"]
+
+        def __init__(self, inner):
+            super().__init__()
+            self.inner, self.armed = inner, False
+
+        def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+            super().calculate(atoms, properties, system_changes)
+            if self.armed:
+                self.armed = False
+                raise RuntimeError("engine lost")
+            self.inner.calculate(self.atoms, properties, system_changes)
+            self.results = dict(self.inner.results)
+
+    fast = Armed(PeriodicLJ(rc=5.0))
+    slow = LinearCombinationCalculator([PeriodicLJ(rc=7.0), PeriodicLJ(rc=5.0)], [1.0, -1.0])
+    atoms = dimer_fluid(n_side=4, spacing=4.4, temperature_K=80)
+    atoms.calc = MultipleTimeStep(fast, slow, substeps=3)
+    dyn = RigidMCBarostat(atoms, 4 * units.fs, 80, 100 * units.bar, 50 * units.fs, every=1,
+                          step=0.02, rng=np.random.default_rng(0))
+    original = MonteCarloBarostat.attempt
+
+    def attempt(self, view):  # the fast level fails right after an accepted move
+        accepted = original(self, view)
+        fast.armed = accepted
+        return accepted
+
+    monkeypatch.setattr(MonteCarloBarostat, "attempt", attempt)
+    dyn.run(1)
+    record = dyn.record
+    for _ in range(50):
+        before = [r.F.copy() for r in (record, record.fast, record.slow)]
+        cell = dyn.state.cell.copy()
+        try:
+            dyn.run(1)
+        except RuntimeError:
+            break
+    else:
+        pytest.fail("no move was accepted in 50 steps")
+    np.testing.assert_array_equal(dyn.state.cell, cell)
+    for now, was in zip((record, record.fast, record.slow), before, strict=True):
+        np.testing.assert_array_equal(now.F, was)
+
+
+def test_a_full_model_without_stress_is_named_as_given():
+    """``full=`` a model without stress under a barostat was refused as "the slow calculator
+    FullLessFast provides no stress": a class the user never wrote, listing what it
+    implements, not the full model."""
+    fluid = dimer_fluid(n_side=3, spacing=4.4)
+    fluid.calc = MultipleTimeStep(PeriodicLJ(rc=3.0), full=ZeroForce())
+    with pytest.raises(ValueError) as err:
+        RigidNPT(fluid, 2 * units.fs, 80, units.bar, 50 * units.fs, 500 * units.fs)
+    assert str(err.value).startswith("MultipleTimeStep: the full calculator ZeroForce "
+                                     "provides no stress (it implements ")
+
+
+def test_a_level_is_a_calculator_made_once():
+    """A class given as a level (``TIP3P`` for ``TIP3P()``) was taken, and the run failed at
+    its first force call with "'Atoms' object has no attribute 'get_property'"; a level
+    replaced in place (``split.fast = other``) was read by the log, the trajectory and the
+    energies while the dynamics went on integrating the old one (the logged conserved energy
+    jumped 0.57 eV): both refused in one line."""
+    with pytest.raises(TypeError, match=r"MultipleTimeStep: the slow calculator is the class "
+                                        r"TIP3P, not a calculator; make one \(TIP3P\(...\)\)"):
+        MultipleTimeStep(TIP3P(rc=7, width=3), TIP3P, substeps=2)
+    with pytest.raises(TypeError, match="the full calculator is the class TIP3P"):
+        MultipleTimeStep(TIP3P(rc=7, width=3), full=TIP3P)
+    split = MultipleTimeStep(TIP3P(rc=7, width=3), full=TIP3P(rc=40), substeps=2)
+    fast = split.fast
+    for name in ("fast", "slow", "full"):
+        with pytest.raises(AttributeError, match=f"MultipleTimeStep: the {name} level is fixed "
+                                                 "when the split is made"):
+            setattr(split, name, ZeroForce())
+    with pytest.raises(AttributeError, match="the full level is fixed"):
+        split.slow.full = ZeroForce()
+    assert split.fast is fast and split.slow.fast is fast
+
+
+def test_the_energy_warning_of_a_split_names_the_outer_step_too(tmp_path):
+    """An outer step of 32 fs with 32 substeps of 1 fs (the inner step is fine: the full
+    model single-step at 1 fs spreads 1.2e-3 eV where the split spreads 0.08 eV, and
+    shorter inner steps do not help) was blamed on "the inner step (timestep / 32) 1 fs"."""
+    from rigidmd import rigid_maxwell_boltzmann
+    from rigidmd.systems import water_cluster
+
+    atoms = water_cluster(8, seed=1)
+    rigid_maxwell_boltzmann(atoms, 250, rng=np.random.default_rng(1))
+    atoms.calc = MultipleTimeStep(TIP3P(rc=7.0, width=3.0),
+                                  LinearCombinationCalculator(
+                                      [TIP3P(rc=40.0), TIP3P(rc=7.0, width=3.0)], [1.0, -1.0]),
+                                  substeps=32)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        RigidVerlet(atoms, 32 * units.fs, logfile=str(tmp_path / "md.log")).run(30)
+    found = [str(w.message) for w in caught if "conserved energy changed" in str(w.message)]
+    assert found, [str(w.message) for w in caught]
+    assert found[0].endswith("the outer step 32 fs (the slow forces; resonances past a third "
+                             "of their fastest period) or the inner step 1 fs is probably too "
+                             "large")
+
+
 @pytest.mark.parametrize("substeps, error, words", [
     (0, ValueError, "at least 1"), (-2, ValueError, "at least 1"),
     (2.5, TypeError, "whole number"), (True, TypeError, "whole number"),

@@ -280,6 +280,34 @@ def test_engines_of_one_process_nap_while_the_other_computes(monkeypatch):
         assert given.poll_us == other.poll_us == 0  # given: kept
 
 
+def test_a_refused_engine_is_no_engine_of_the_process():
+    """A constructor refused (here its kspace_parameters) had joined the process's engines
+    half-made; while anything kept it (an interactive session's last traceback), every
+    later ``LAMMPSEngine(...)`` failed with "'LAMMPSEngine' object has no attribute
+    '_proc'"."""
+    with pytest.raises(ValueError, match="kspace_parameters must be one") as refused:
+        LAMMPSEngine(PPPM_27, kspace_parameters="kspace_style pppm 1e-4")
+    kept = refused.value.__traceback__  # holds the half-made object's frame
+    engine = LAMMPSEngine(PPPM_27)
+    assert engine.poll_us in (0, 500) and kept is not None
+
+
+def test_two_engines_of_one_process_may_not_share_a_socket(tmp_path):
+    """The levels of a split given one ``unixsocket`` (or port): the fast level started
+    and computed, then the full level failed with "in use by another live process"; now
+    the second engine is refused when it is made."""
+    first = LAMMPSEngine(PPPM_27, unixsocket="rigidmd-test-shared")
+    with pytest.raises(ValueError, match="LAMMPSEngine: unixsocket 'rigidmd-test-shared' is "
+                                         "already that of another engine of this process"):
+        LAMMPSEngine(PPPM_27, unixsocket="rigidmd-test-shared")
+    port = LAMMPSEngine(PPPM_27, port=34571)
+    with pytest.raises(ValueError, match="LAMMPSEngine: port 34571 on 'localhost' is already"):
+        LAMMPSEngine(PPPM_27, port=34571)
+    assert first.pid is None and port.pid is None  # nothing started
+    first.close()
+    port.close()
+
+
 @pytest.mark.parametrize("processes", [1, 2])
 def test_rank_zero_says_how_long_the_others_took_to_join(processes):
     """``broadcast_us``: rank 0's mean wait per call for the other ranks to take the

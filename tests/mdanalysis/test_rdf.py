@@ -57,6 +57,27 @@ def test_rdf_of_simple_cubic_lattice(tmp_path):
     assert (tmp_path / "rdf.png").stat().st_size > 0
 
 
+def test_the_coordination_number_counts_to_the_first_minimums_position():
+    """It counted to the minimum bin's upper edge, half a bin beyond the position it reports:
+    on noisy fcc argon with 0.3 Å bins 13.86 neighbours where 13.17 lie within that position
+    (0.05 Å bins: 12.35 for 12.26).  Interpolated to the bin's centre: 13.21 (0.3 % off,
+    the count's own variation within the bin); bound 1 %."""
+    from ase.lattice.cubic import FaceCenteredCubic
+    from ase.neighborlist import neighbor_list
+
+    rng = np.random.default_rng(0)
+    frames = []
+    for _ in range(3):
+        crystal = FaceCenteredCubic("Ar", size=(5, 5, 5), latticeconstant=5.3)
+        crystal.positions += rng.normal(0, 0.35, crystal.positions.shape)
+        frames.append(crystal)
+    u = to_universe(frames, bodies=[[i] for i in range(len(frames[0]))], dt=1.0)
+    res = RadialDistribution(u, "all", r_max=6.0, bin_width=0.3).run().results
+    r_min = res.first_minimum_position
+    direct = np.mean([len(neighbor_list("i", f, r_min)) / len(f) for f in frames])
+    assert res.coordination_number == pytest.approx(direct, rel=0.01)
+
+
 def test_rdf_of_random_molecules_tends_to_one():
     """Waters placed at random: g = 1 between atoms of different molecules.
 

@@ -72,6 +72,18 @@ def test_heat_of_vaporization_of_known_energies(rng):
         4.33, abs=0.01)
 
 
+def test_the_mean_is_the_series_mean_when_the_blocks_are_unequal():
+    """19 frames in 10 blocks (one of one frame, nine of two): the mean of the block means
+    weighted the lone frame twice, ``block_average([0]*10 + [10], 10)`` gave 1.0 (the mean is
+    10/11), and ΔH_vap of a known ⟨U⟩/N came out 0.26 kJ/mol off."""
+    values = np.array([0.0] * 10 + [10.0])
+    mean, error = block_average(values, 10)
+    assert mean == pytest.approx(10 / 11) and error > 0
+    energies = np.r_[np.full(10, -40.0), np.full(9, -50.0)] * 216 * KJ_PER_MOL
+    result = HeatOfVaporization(energies, 216, 298.0).run().results
+    assert result.potential_energy_kj_mol == pytest.approx(energies.mean() / 216 / KJ_PER_MOL)
+
+
 def test_bad_inputs_are_refused():
     with pytest.raises(ValueError, match="n_molecules"):
         HeatOfVaporization([1.0, 2.0], 0, 298.0)

@@ -104,3 +104,51 @@ def test_tip4p2005_quick(tmp_path):
     assert "Abascal & Vega 2005" in proc.stdout
     assert (tmp_path / "tip4p2005.log").stat().st_size > 0
     assert_output_is_current("tip4p2005", "python examples/tip4p2005.py --quick", proc.stdout)
+    # Again into the same folder (as docs/validation/water.md's two commands): the log got
+    # the second run appended (two headers, times from 0 again); now it is replaced, and
+    # the run says so.
+    again = run_example(tmp_path, "tip4p2005", "--quick")
+    assert again.stdout.startswith("replacing an earlier run's tip4p2005.log, "
+                                   "tip4p2005_results.json, tip4p2005_com.npz in .")
+    log = (tmp_path / "tip4p2005.log").read_text()
+    assert log.count("Time[ps]") == 1
+
+
+def example_module(name):
+    import importlib
+
+    sys.path.insert(0, str(ROOT / "examples"))
+    try:
+        return importlib.import_module(name)
+    finally:
+        sys.path.remove(str(ROOT / "examples"))
+
+
+@pytest.mark.parametrize("name, args, message", [
+    ("tip4p2005", ["--production-ps", "0.3"], "argument --production-ps: the diffusion fit "
+                                              "needs at least 1 ps, got 0.3"),
+    ("tip4p2005", ["--timestep-fs", "0"], "argument --timestep-fs: must be positive, got 0.0"),
+    ("tip3p_water", ["--n-side", "0"], "argument --n-side: must be at least 1, got 0"),
+    ("tip3p_water", ["--production-ps", "-1"], "argument --production-ps: must be positive"),
+    ("tip3p_water", ["--analyse-only", "--outdir", "{tmp}"], "argument --analyse-only: no "
+                                                             "tip3p.psf, tip3p.xtc in"),
+])
+def test_the_water_examples_refuse_a_bad_argument_first(tmp_path, capsys, name, args, message):
+    """``--production-ps 0.3`` printed a diffusion coefficient fitted through one lag,
+    ``--timestep-fs 0`` divided by zero after the quench, ``--n-side 0`` and
+    ``--analyse-only`` in an empty folder gave tracebacks, ``--production-ps -1`` ran the
+    whole simulation first."""
+    module = example_module(name)
+    with pytest.raises(SystemExit) as stop:
+        module.parse([a.format(tmp=tmp_path) for a in args])
+    assert stop.value.code == 2
+    assert message in capsys.readouterr().err.strip().splitlines()[-1]
+
+
+def test_quick_keeps_a_time_given_explicitly():
+    """``--quick --production-ps 0.4`` ran 2 ps: --quick set every time over what was given."""
+    tip3p = example_module("tip3p_water").parse(["--quick", "--production-ps", "0.4"])
+    assert (tip3p.production_ps, tip3p.equilibration_ps, tip3p.sample_fs) == (0.4, 1.0, 10.0)
+    tip4p = example_module("tip4p2005").parse(["--quick", "--production-ps", "3"])
+    assert (tip4p.production_ps, tip4p.quench_ps) == (3.0, 0.05)
+    assert example_module("tip4p2005").parse([]).production_ps == 200.0

@@ -253,6 +253,14 @@ def test_plot_of_a_binary_file_says_it_is_not_a_log(tmp_path, monkeypatch, capsy
     (path / "notes.txt").write_text("step energy\n1 2\n")
     assert cli.main(["plot", str(path / "notes.txt")]) == 2
     assert "is not an MD log (no Time[ps] column)" in capsys.readouterr().err
+    # ASE's MDLogger(peratom=True) was "not an MD log (no Etot[eV] column)"
+    (path / "peratom.log").write_text("Time[ps]      Etot/N[eV]    Epot/N[eV]    Ekin/N[eV]    "
+                                      "T[K]\n0.0000  -0.1 -0.2 0.1 300.0\n")
+    assert cli.main(["plot", str(path / "peratom.log")]) == 2
+    assert messages(capsys.readouterr().err) == [
+        f"rigidmd: error: log: {path / 'peratom.log'} holds energies per atom (Etot/N[eV]: "
+        "ASE's MDLogger with peratom=True), which the plot does not read; log the totals "
+        "(peratom=False)"]
 
 
 def test_help_names_every_command(capsys):

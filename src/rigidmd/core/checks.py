@@ -243,7 +243,7 @@ class StepSizeCheck:
         rotation = step % 10 == 0
         if self.warned or step == 0 or not (rotation or self.evaluator.energy_known):
             return  # step 0: no step taken yet; else nothing to check at this step
-        dt, message = dyn.dt, None
+        dt, message, turned = dyn.dt, None, False
         # Under a force split the bodies turn in the inner steps: the rotation is theirs.
         split = getattr(self.evaluator, "split", None)
         if split is not None:
@@ -254,6 +254,7 @@ class StepSizeCheck:
                 message = (f"body {b} turns by {speed * dt:.2f} rad per "
                            f"{'step' if split is None else 'inner step'} at step "
                            f"{step} (above {MAX_ROTATION_PER_STEP} rad)")
+                turned = True
         if message is None and dyn.evaluator.energy_known:
             energy = dyn.get_conserved_energy()
             if self.reference is None:
@@ -268,9 +269,16 @@ class StepSizeCheck:
                                f"kinetic energy ({kinetic:.4g} eV)")
         if message is not None:
             self.warned = True
-            what = "time step" if split is None else f"inner step (timestep / {split.substeps})"
-            warnings.warn(f"{type(dyn).__name__}: {message}: the {what} "
-                          f"{dt / units.fs:g} fs is probably too large", stacklevel=5)
+            if split is None:
+                cause = f": the time step {dt / units.fs:g} fs is probably too large"
+            elif turned:
+                cause = (f": the inner step (timestep / {split.substeps}) {dt / units.fs:g} "
+                         "fs is probably too large")
+            else:  # the slow forces' outer step, or the fast forces' inner step
+                cause = (f": the outer step {dyn.dt / units.fs:g} fs (the slow forces; "
+                         f"resonances past a third of their fastest period) or the inner "
+                         f"step {dt / units.fs:g} fs is probably too large")
+            warnings.warn(f"{type(dyn).__name__}: {message}{cause}", stacklevel=5)
 
 
 def check_output_file(name: str, path) -> None:

@@ -31,15 +31,45 @@ class RigidBodyDOF:
         Each atom's body as a molecule ID (body ``b`` is ``b + 1``, an atom in
         no body -1; :func:`rigidmd.core.bodies.molecule_ids`), for calculators
         that need molecules (:class:`rigidmd.lammps.LAMMPSCalculator`
-        excludes pairs within one; IDs <= 0 are no molecule).
+        excludes pairs within one; IDs <= 0 are no molecule).  With them the
+        marker knows how many atoms it counts: atoms extended since (``atoms +
+        other``, ``extend``) are refused by :meth:`get_removed_dof`, and
+        ``atoms.repeat`` repeats the bodies (:meth:`repeat`).
+    held : int, default 0
+        The centre-of-mass degrees of freedom ``removed_dof`` counts as held
+        (3 under a thermostat's ``fixcm``): one system's, not each body's, so a
+        repeated system holds them once.
     """
 
-    def __init__(self, removed_dof: int, molecule_ids=None):
+    def __init__(self, removed_dof: int, molecule_ids=None, held: int = 0):
         self.removed_dof = int(removed_dof)
         self.body_ids = None if molecule_ids is None else np.array(molecule_ids)
+        self.held = int(held)
 
     def get_removed_dof(self, atoms):
+        if self.body_ids is not None and len(atoms) != len(self.body_ids):
+            raise ValueError(
+                f"RigidBodyDOF: these {len(atoms)} atoms are not the {len(self.body_ids)} a "
+                "rigid dynamics marked (extended since?), so their rigid degrees of freedom "
+                "are unknown; take the marker out (atoms.constraints = [c for c in "
+                "atoms.constraints if not isinstance(c, rigidmd.RigidBodyDOF)]) or count "
+                "with rigidmd.rigid_temperature(atoms, bodies=...)")
         return self.removed_dof
+
+    def repeat(self, m, n):
+        """The marker of ``atoms.repeat(m)`` (``n`` atoms repeated ``m = (m1, m2, m3)``
+        times, as ASE's ``Atoms.repeat`` asks its constraints): each copy's bodies are
+        bodies of their own, the held centre of mass the whole system's."""
+        copies = int(np.prod(m))
+        ids = None
+        if self.body_ids is not None:
+            if len(self.body_ids) != n:
+                self.get_removed_dof(range(n))  # refused, in its words
+            step = max(int(self.body_ids.max()), 0)
+            ids = np.concatenate([np.where(self.body_ids > 0, self.body_ids + c * step,
+                                           self.body_ids) for c in range(copies)])
+        per_copy = self.removed_dof - self.held
+        return type(self)(per_copy * copies + self.held, ids, self.held)
 
     def adjust_positions(self, atoms, new):
         pass
@@ -58,7 +88,7 @@ class RigidBodyDOF:
         # Every calculator call deep-copies the constraints (ASE's Atoms.copy of the
         # atoms it keeps): 3.9 us through copy's generic reduction, 1.5 us this way
         # (the list of one RigidBodyDOF for 216 bodies).
-        return type(self)(self.removed_dof, self.body_ids)
+        return type(self)(self.removed_dof, self.body_ids, self.held)
 
     def __repr__(self):
         return f"RigidBodyDOF(removed_dof={self.removed_dof})"

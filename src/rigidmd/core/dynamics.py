@@ -77,6 +77,29 @@ def observed_at(observers, step: int) -> bool:
     return False
 
 
+def check_log_pressure(log_pressure, atoms) -> None:
+    """Refuse in one line a ``log_pressure`` the dynamics cannot log: not a bool (or None),
+    or True without a periodic cell or with a calculator that gives no stress (which
+    failed at the first step, after the log file was written).  Changes nothing."""
+    if log_pressure is None:
+        return
+    if not isinstance(log_pressure, (bool, np.bool_)):
+        raise TypeError(f"log_pressure must be True, False or None, got {log_pressure!r}")
+    if not log_pressure:
+        return
+    if not atoms.pbc.all():
+        raise ValueError(f"log_pressure=True: the pressure needs a cell periodic in x, y "
+                         f"and z (pbc is {atoms.pbc.tolist()})")
+    calc = atoms.calc
+    if isinstance(calc, MultipleTimeStep):
+        calc.check_level_properties("stress", "log_pressure=True")
+        return
+    implemented = getattr(calc, "implemented_properties", None)
+    if implemented is not None and "stress" not in implemented:
+        raise ValueError(f"log_pressure=True: the calculator {type(calc).__name__} provides "
+                         f"no stress (it implements {', '.join(implemented)})")
+
+
 class RigidDynamics(RigidObservables, MolecularDynamics):
     r"""Rigid-body molecular dynamics: an integrator scheme and optional coupling parts.
 
@@ -158,6 +181,10 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
     couplings : sequence of rigidmd.core.coupling.Coupling, optional
         Thermostat and barostat parts, applied in this order before the
         scheme's step and in reverse order after it.
+    log_pressure : bool, optional
+        Whether the log has the molecular pressure (``P[bar]``); default: when a
+        part reads the stress (a barostat).  True needs a cell periodic in x, y and
+        z and a calculator that gives the stress.
     **kwargs
         Passed to :class:`ase.md.md.MolecularDynamics` (e.g. ``append_trajectory``).
 
@@ -198,6 +225,7 @@ class RigidDynamics(RigidObservables, MolecularDynamics):
         middle = tuple(part for part in couplings if part.acts_in_middle)
         scheme = scheme_with_middle(scheme, integrator, [part.kind for part in middle])
         check_calculator_properties(atoms.calc, couplings)
+        check_log_pressure(log_pressure, atoms)
         model, (split, respa) = geometry.model, respa_for(atoms.calc, scheme, backend)
         for part in couplings:
             part.check(atoms, model, self._dt)

@@ -259,9 +259,9 @@ class AtomsSync:
         """Put the rigid degree-of-freedom marker in ``atoms.constraints`` (FixCom kept)."""
         atoms, model = self.link.atoms, self.link.model
         removed = 3 * len(atoms) - model.degrees_of_freedom
-        if self.holds_momentum and not self.fixcom:
-            removed += 3  # fixcm keeps the total momentum; FixCom counts its own 3
-        marker = RigidBodyDOF(removed, molecule_ids(self.body_ids))
+        held = 3 if self.holds_momentum and not self.fixcom else 0
+        # (fixcm keeps the total momentum; FixCom counts its own 3)
+        marker = RigidBodyDOF(removed + held, molecule_ids(self.body_ids), held)
         kept = [c for c in atoms.constraints if isinstance(c, FixCom)]
         atoms.constraints = kept + [marker]
         self.marker = marker

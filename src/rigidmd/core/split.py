@@ -65,9 +65,34 @@ def _check_level(name: str, calc) -> None:
     if isinstance(calc, MultipleTimeStep):
         raise TypeError(f"MultipleTimeStep: the {name} calculator is itself a "
                         "MultipleTimeStep; nest levels by splitting one of them instead")
+    if isinstance(calc, type):  # (its get_forces is an unbound function: callable)
+        raise TypeError(f"MultipleTimeStep: the {name} calculator is the class "
+                        f"{calc.__name__}, not a calculator; make one ({calc.__name__}(...))")
     if not callable(getattr(calc, "get_forces", None)):
         raise TypeError(f"MultipleTimeStep: the {name} calculator must be an ASE calculator "
                         f"(with get_forces), got {type(calc).__name__}")
+
+
+def _fixed_level(name: str):
+    """Refuse replacing a level of a made split (a dynamics integrating it kept the old one,
+    while the log, trajectory and energies read the new: two models mixed, silently)."""
+    raise AttributeError(f"MultipleTimeStep: the {name} level is fixed when the split is made "
+                         "(a dynamics integrating it holds its calculators); make a new "
+                         "MultipleTimeStep, and a new dynamics for it")
+
+
+class _FixedLevel:
+    """A level of a split, read from ``_<name>``; setting it is refused
+    (:func:`_fixed_level`)."""
+
+    def __set_name__(self, owner, name):
+        self.name = name
+
+    def __get__(self, obj, owner=None):
+        return self if obj is None else getattr(obj, "_" + self.name)
+
+    def __set__(self, obj, value):
+        _fixed_level(self.name)
 
 
 class _Levels:
@@ -145,15 +170,18 @@ class MultipleTimeStep(_Levels, Calculator):
                                  "the fast level)")
         k = check_substeps(substeps)
         super().__init__()
-        self.fast, self.slow, self._substeps = fast, slow, k
-        #: The full model when the slow level is full less fast (``full=``), else None.
-        self.full = full
+        self._fast, self._slow, self._substeps, self._full = fast, slow, k, full
         # What both levels compute (a property one lacks is no property of the sum).
         own = [getattr(calc, "implemented_properties", _SUMMED) for calc in (fast, slow)]
         self.implemented_properties = [
             name for name in _SUMMED
             if all(name in names or (name == "free_energy" and "energy" in names)
                    for names in own)]
+
+    #: The fast level's calculator; the slow level's (with ``full=``, the
+    #: :class:`FullLessFast`); the full model given as ``full=``, else None.  Each is
+    #: fixed when the split is made (a dynamics integrating it holds its calculators).
+    fast, slow, full = (_FixedLevel() for _ in range(3))
 
     @property
     def substeps(self) -> int:
@@ -196,8 +224,11 @@ class MultipleTimeStep(_Levels, Calculator):
         self.results.update(_combined("MultipleTimeStep", terms, atoms, properties))
 
     def check_level_properties(self, name: str, needed_by: str) -> None:
-        """Refuse in one line a level that lacks ``name`` (e.g. ``"stress"``), naming it."""
-        for level, calc in self.levels:
+        """Refuse in one line a level that lacks ``name`` (e.g. ``"stress"``), naming it:
+        with ``full=`` the full model or the fast level, the calculators the user gave."""
+        levels = [("fast", self.fast)] + (list(self.slow.levels) if self.full is not None
+                                          else [("slow", self.slow)])
+        for level, calc in levels:
             implemented = getattr(calc, "implemented_properties", _SUMMED)
             if name not in implemented:
                 raise ValueError(
@@ -257,12 +288,15 @@ class FullLessFast(_Levels, Calculator):
         _check_level("full", full)
         _check_level("fast", fast)
         super().__init__()
-        self.full, self.fast = full, fast
+        self._full, self._fast = full, fast
         own = [getattr(calc, "implemented_properties", _SUMMED) for calc in (full, fast)]
         self.implemented_properties = [
             name for name in _SUMMED
             if all(name in names or (name == "free_energy" and "energy" in names)
                    for names in own)]
+
+    #: The full model, and the fast level it is less; fixed when made.
+    full, fast = _FixedLevel(), _FixedLevel()
 
     def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
         """``full`` less ``fast`` for every property asked (one call of each at most)."""

@@ -132,6 +132,12 @@ class IPICalculator(Calculator):
         self._verified = False  # its first answer was checked (check_first_answer)
         self._message = None    # (cell, n, tally) and the POSDATA message made for them
 
+    @property
+    def owned_here(self) -> bool:
+        """Whether this process made the calculator (False in a forked child: the engine,
+        its socket and its files are the parent's)."""
+        return os.getpid() == self._owner
+
     # ------------------------------------------------------------ hooks
     @property
     def socketfile(self):

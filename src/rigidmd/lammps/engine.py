@@ -524,10 +524,6 @@ class LAMMPSEngine(IPICalculator):
         #: knowing the other engines of this process then (:func:`default_poll_us`).
         self.poll_us = self._poll_given
         self._started = False  # an engine was started for this object once
-        _ENGINES.add(self)
-        if self.poll_us is None:
-            self.poll_us = default_poll_us(self.processes, self.threads, self.launch_engine,
-                                           len(self._other_engines()))
         #: The engine's fix: ``"rigidmd/ipi"`` or ``"ipi"`` (None before the first input).
         self.engine_fix = None
         self._library = None
@@ -547,6 +543,21 @@ class LAMMPSEngine(IPICalculator):
         self._frame = _PerCell(_frame_rotation)
         self._engine_cell = _PerCell(_reduced_lower)
         self._lattice = _PerCell(_lattice)
+        # Last, once every check passed (a refused engine is no engine of the process).
+        others = self._other_engines()
+        for other in others:
+            if (self.unixsocket is not None and other.unixsocket == self.unixsocket) or (
+                    self.port is not None and (other.host, other.port) == (self.host,
+                                                                           self.port)):
+                where = (f"unixsocket {self.unixsocket!r}" if self.port is None
+                         else f"port {self.port} on {self.host!r}")
+                raise ValueError(f"LAMMPSEngine: {where} is already that of another engine "
+                                 "of this process (the levels of a split need one each); give "
+                                 "each engine its own")
+        _ENGINES.add(self)
+        if self.poll_us is None:
+            self.poll_us = default_poll_us(self.processes, self.threads, self.launch_engine,
+                                           len(others))
 
     @property
     def kspace_parameters(self):
@@ -674,7 +685,7 @@ class LAMMPSEngine(IPICalculator):
     def _other_engines(self):
         """The other engines of this process that run here or are yet to start."""
         return [e for e in list(_ENGINES) if e is not self and e.launch_engine
-                and (e.pid is not None or not e.started)]
+                and e.owned_here and (e.pid is not None or not e.started)]
 
     def _choose_poll(self):
         """``poll_us`` for the engine about to start (unless given), and one warning when

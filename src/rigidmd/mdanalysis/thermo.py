@@ -82,15 +82,16 @@ def block_average(values, blocks=10):
     Returns
     -------
     (mean, stderr)
-        ``stderr`` is the standard deviation of the block means over
-        :math:`\\sqrt{B}`.
+        ``mean`` is the series' own mean (blocks of unequal length, when ``n`` is not
+        a multiple of ``B``, would weight their values unequally); ``stderr`` is the
+        standard deviation of the block means over :math:`\\sqrt{B}`.
     """
     values = np.asarray(values, dtype=float)
     if blocks < 2 or len(values) < blocks:
         raise ValueError(f"block_average: {len(values)} values cannot make {blocks} blocks "
                          "(need at least 2 blocks of one value)")
     means = np.array([b.mean(axis=0) for b in np.array_split(values, blocks)])
-    return means.mean(axis=0), means.std(axis=0, ddof=1) / np.sqrt(blocks)
+    return values.mean(axis=0), means.std(axis=0, ddof=1) / np.sqrt(blocks)
 
 
 def dipole_moment_debye(model):

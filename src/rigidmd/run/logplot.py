@@ -41,6 +41,10 @@ def read_log(path):
         raise LogError(f"log: {path} holds no MD log lines")
     missing = [name for name in ("Time[ps]", "Etot[eV]", "Epot[eV]", "Ekin[eV]", "T[K]")
                if name not in names]
+    if missing and "Etot/N[eV]" in names:
+        raise LogError(f"log: {path} holds energies per atom (Etot/N[eV]: ASE's MDLogger with "
+                       "peratom=True), which the plot does not read; log the totals "
+                       "(peratom=False)")
     if missing:
         raise LogError(f"log: {path} is not an MD log (no {missing[0]} column)")
     # A line cut short (the last one of a killed run) is left out, not every column with it.
