@@ -123,6 +123,8 @@ def main():
     parser.add_argument("--rounds", type=int, default=3,
                         help="interleaved rounds of --ratio (more on a busy machine)")
     args = parser.parse_args()
+    if args.rounds < 1:  # (an empty min() traceback after the set-up)
+        parser.error(f"argument --rounds: must be at least 1, got {args.rounds}")
     if args.ratio:
         ratio(rounds=args.rounds)
         return

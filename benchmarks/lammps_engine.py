@@ -407,7 +407,7 @@ def table(title, results, native_key, floor_key, ratios):
 def replicas_of(waters):
     """Replicas of the 27-water box per direction for ``waters`` (27 r^3)."""
     r = round((waters / 27) ** (1 / 3))
-    if 27 * r**3 != waters:
+    if r < 1 or 27 * r**3 != waters:
         raise SystemExit(f"--waters: {waters} is not 27 r^3 (216, 1728, 13824, ...)")
     return r
 
@@ -432,12 +432,27 @@ def main():
                         help="half the steps, 2 rounds, no C-rescale")
     parser.add_argument("--save", action="store_true", help="store the tables with --quick")
     args = parser.parse_args()
+    # Every argument checked before the first run (a bad one failed after minutes of runs).
+    for name in ("rounds", "ranks", "steps"):
+        values = getattr(args, name)
+        for value in values if isinstance(values, list) else [values]:
+            if value is not None and value < 1:
+                parser.error(f"argument --{name}: must be at least 1, got {value}")
+    sizes = [replicas_of(n) for n in args.waters]
+    if args.steps is not None and len(args.steps) != len(sizes):
+        parser.error("argument --steps: one count per --waters")
+    if "one-core" in args.tables:
+        for n in args.waters:
+            if n not in STEPS:
+                parser.error(f"argument --waters: the one-core table has step counts for "
+                             f"{', '.join(map(str, STEPS))} waters, not {n}")
+    if args.json is not None and not args.json.parent.is_dir():
+        parser.error(f"argument --json: no folder {args.json.parent}")
+    if args.max_seconds is not None and not args.max_seconds > 0:
+        parser.error(f"argument --max-seconds: must be positive, got {args.max_seconds}")
     stop_on_signals()
     started = time.monotonic()
     deadline = started + (args.max_seconds or float("inf"))
-    sizes = [replicas_of(n) for n in args.waters]
-    if args.steps is not None and len(args.steps) != len(sizes):
-        raise SystemExit("--steps: one count per --waters")
     if args.quick:
         args.rounds = min(args.rounds, 2)
         for n in STEPS:
@@ -455,6 +470,16 @@ def main():
         "RigidNPT (MTK iso) LAMMPSCalculator", "RigidNPT (MTK iso) LAMMPSEngine",
         "RigidCRescale every 1, LAMMPSCalculator", "RigidCRescale every 1, LAMMPSEngine",
         "RigidCRescale every 10, LAMMPSCalculator", "RigidCRescale every 10, LAMMPSEngine")}
+    try:
+        tables(args, sizes, lines, npt, plugin, started, deadline)
+    except KeyboardInterrupt:  # (a traceback before; the tables printed so far stand)
+        raise SystemExit("lammps_engine.py: stopped (Ctrl-C); the tables printed above are "
+                         "whole, the one under way is lost (rerun it with --tables), and "
+                         "nothing was stored") from None
+
+
+def tables(args, sizes, lines, npt, plugin, started, deadline):
+    """Measure and print the tables asked for (``lines`` collects them); store them."""
     if "one-core" in args.tables:
         for replicas in sizes:
             atoms = water_box(replicas)

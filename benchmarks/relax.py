@@ -555,10 +555,36 @@ def cell_rows(optimizers=("RigidLBFGS", "BFGS"), modes=("iso", "aniso", "full"),
     return rows
 
 
+def _whole(text, what):
+    """``text`` as a whole number >= 1, or SystemExit in one line naming ``what``."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise SystemExit(f"relax.py: {what} must be a whole number >= 1, got {text!r}")
+    return value
+
+
+COMMANDS = ("compare", "compare-table", "step-cost", "cell", "tolerances", "large",
+            "defaults", "totals", "alpha")
+
+
 def main():
     import sys
 
     args = sys.argv[1:]
+    # (a mistyped word, a missing file or a non-number failed with a KeyError, IndexError or
+    # ValueError traceback)
+    if args and args[0] not in COMMANDS and args[0] not in SYSTEMS:
+        raise SystemExit(f"relax.py: {args[0]!r} is not a command ({', '.join(COMMANDS)}) or "
+                         f"a system ({', '.join(SYSTEMS)}); see the module's docstring")
+    if args[:1] in (["totals"], ["compare-table"]) and len(args) < 2:
+        raise SystemExit(f"relax.py {args[0]}: give the rows file(s) to read")
+    if args[:1] in (["large"], ["defaults"], ["step-cost"]) and len(args) > 1:
+        _whole(args[1], f"{args[0]}'s first argument")
+    if args[:1] == ["large"] and len(args) > 3:
+        _whole(args[3], "large's steps")
     if args[:1] in (["compare"], ["compare-table"], ["step-cost"]):  # relax_ase.py
         import json
 

@@ -142,6 +142,8 @@ class WaterBondLengths(FixBondLengths):
 def parse_system(name):
     """``"cluster32s0"`` -> ("cluster", 32, 0); ``"box216s1"`` -> ("box", 216, 1)."""
     kind = "cluster" if name.startswith("cluster") else "box"
+    if not name.startswith(kind):
+        raise ValueError(f"{name!r}: not clusterNsS or boxNsS")
     size, seed = name[len(kind):].split("s")
     return kind, int(size), int(seed)
 
@@ -356,6 +358,20 @@ def main(argv):
     parser.add_argument("--out", default="relax_compare.jsonl")
     parser.add_argument("--ase-own", action="store_true", help="ASE's FixBondLengths class")
     args = parser.parse_args(argv)
+    # Every system and route checked before the first run (a bad route was refused only
+    # after the routes before it had run and been recorded).
+    for system in args.systems:
+        try:
+            kind, n, _ = parse_system(system)
+        except ValueError:
+            parser.error(f"argument systems: {system!r} is not clusterNsS or boxNsS "
+                         "(e.g. cluster32s0, box216s1)")
+        if n < 1 or kind == "box" and round(n ** (1 / 3)) ** 3 != n:
+            parser.error(f"argument systems: {system}: a cluster of at least 1 water, or a "
+                         "box of a cube number of waters")
+    for route in args.routes.split(","):
+        if route not in ("relax", "ASE"):
+            parser.error(f"argument --routes: {route!r} is not relax or ASE")
     for system in args.systems:
         for route in args.routes.split(","):
             record = run(system, route, args.fmax, args.max_steps, args.timeout,

@@ -145,3 +145,23 @@ def test_a_native_run_ends_with_the_benchmark(tmp_path, how):
         last = stderr.read_text().strip().splitlines()[-1]
         assert last.startswith("lammps_engine.py: stopped by SIGTERM"), last
         assert list(tmp.iterdir()) == []  # the run's temporary folder removed
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--waters", "27", "--tables", "one-core"], "argument --waters: the one-core table has "
+                                                 "step counts for 216, 1728, 13824 waters, "
+                                                 "not 27"),
+    (["--waters", "0", "--tables", "scaling"], "--waters: 0 is not 27 r^3"),
+    (["--rounds", "0"], "argument --rounds: must be at least 1, got 0"),
+    (["--tables", "scaling", "--json", "nodir/x.json"], "argument --json: no folder nodir"),
+])
+def test_the_benchmarks_arguments_are_checked_before_any_run(tmp_path, args, message):
+    """``--waters 27`` passed the 27 r^3 check and failed with a KeyError after set-up,
+    ``--waters 0 --rounds 0`` printed an empty table, a --json in a missing folder failed
+    after the first measured run."""
+    script = Path(__file__).resolve().parents[2] / "benchmarks" / "lammps_engine.py"
+    done = subprocess.run([sys.executable, str(script), *args], capture_output=True,
+                          text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode != 0 and "Traceback" not in done.stderr, done.stderr
+    assert message in done.stderr.strip().splitlines()[-1]
+    assert list(tmp_path.iterdir()) == []
