@@ -389,11 +389,13 @@ def water_dimer(seed, model="tip3p"):
 
 
 def benchmark_module(script="water_models"):
-    """``validation/<script>.py`` or ``benchmarks/<script>.py`` as a module (not a package)."""
+    """``validation/<script>.py``, ``benchmarks/<script>.py`` or ``examples/<script>.py`` as
+    a module (not a package)."""
     import importlib.util
 
     root = Path(__file__).resolve().parents[1]
-    paths = [root / folder / f"{script}.py" for folder in ("validation", "benchmarks")]
+    paths = [root / folder / f"{script}.py" for folder in ("validation", "benchmarks",
+                                                           "examples")]
     path = next((p for p in paths if p.exists()), paths[0])
     spec = importlib.util.spec_from_file_location(script, path)
     bench = importlib.util.module_from_spec(spec)

@@ -144,13 +144,9 @@ def test_tip4p2005_quick(tmp_path):
 
 
 def example_module(name):
-    import importlib
+    from helpers import benchmark_module
 
-    sys.path.insert(0, str(ROOT / "examples"))
-    try:
-        return importlib.import_module(name)
-    finally:
-        sys.path.remove(str(ROOT / "examples"))
+    return benchmark_module(name)
 
 
 @pytest.mark.parametrize("name, args, message", [
