@@ -23,11 +23,17 @@ Writes to ``--outdir``: ``tip3p.psf`` and ``tip3p.xtc`` (read them with
 ``MDAnalysis.Universe("tip3p.psf", "tip3p.xtc")``), ``tip3p_rdf.png``,
 ``tip3p_msd.png``, ``tip3p_rotation.png``, ``tip3p_results.json`` and the MD
 log ``tip3p.log``.
+
+Each phase reports its progress at every quarter.  Ctrl-C or SIGTERM finishes the step
+under way; in the production it closes the trajectory and the log whole, and
+``--analyse-only`` then analyses what was run; before it nothing is kept (run again).
 """
 
 import argparse
 import json
 import math
+import signal
+import sys
 import time
 from pathlib import Path
 
@@ -125,6 +131,40 @@ def compare_kspace(atoms, bodies, kspace, accuracy, cutoff):
     return rel(F1, F0), rel(T1, T0)
 
 
+class Stopped(Exception):
+    """A stop signal ended the phase ``name`` after ``done`` of its ``steps``."""
+
+    def __init__(self, name, done, steps, dt_ps):
+        super().__init__(name)
+        self.name, self.done, self.steps, self.dt_ps = name, done, steps, dt_ps
+
+
+#: The signal that asked the run to stop (None: none).
+STOP = {"signal": None}
+
+
+def ask_to_stop(signum, frame):
+    STOP["signal"] = signal.Signals(signum).name
+    print(f"{STOP['signal']}: stopping after the step under way", flush=True)
+
+
+def run_steps(dyn, steps, name, log):
+    """``dyn.run(steps)``, ten steps at a time: progress at each quarter, and
+    :class:`Stopped` after the step under way when a stop signal came."""
+    reports = {steps * q // 4 for q in (1, 2, 3)} - {0}
+    dt_ps = dyn.dt / (1000 * units.fs)
+    done = 0
+    while done < steps:
+        if STOP["signal"]:
+            raise Stopped(name, done, steps, dt_ps)
+        due = min([r for r in reports if r > done] + [steps])
+        chunk = min(10, due - done)
+        dyn.run(chunk)
+        done += chunk
+        if done in reports:
+            log(f"{name} {done * dt_ps:g} / {steps * dt_ps:g} ps")
+
+
 def equilibrate(atoms, args, log):
     """Quench the lattice start, then thermalise at 298 K; return the elapsed time (s)."""
     start = time.perf_counter()
@@ -133,7 +173,7 @@ def equilibrate(atoms, args, log):
     # lattice start has overlapping molecules and would heat by thousands of K.
     quench = RigidLangevin(atoms, 0.5 * units.fs, temperature_K=TEMPERATURE_K,
                            friction=0.2 / units.fs, rng=rng, bodies="mol-id")
-    quench.run(max(int(round(args.quench_ps * 1000 / 0.5)), 1))
+    run_steps(quench, max(int(round(args.quench_ps * 1000 / 0.5)), 1), "quench", log)
     log(f"quench: {quench.nsteps} steps of 0.5 fs, T = {atoms.get_temperature():.0f} K")
     dt = args.timestep_fs * units.fs
     steps = max(int(round(args.equilibration_ps * 1000 / args.timestep_fs)), 1)
@@ -145,7 +185,7 @@ def equilibrate(atoms, args, log):
                                friction=0.01 / units.fs, rng=rng, bodies="mol-id")
     temperatures = []
     thermo.attach(lambda: temperatures.append(atoms.get_temperature()), interval=10)
-    thermo.run(steps)
+    run_steps(thermo, steps, "equilibration", log)
     last = np.array(temperatures[len(temperatures) // 2:])
     log(f"equilibration: {args.equilibration_ps:g} ps with {args.thermostat} at "
         f"{TEMPERATURE_K:g} K, second half T = {last.mean():.1f} ± {last.std():.1f} K")
@@ -170,9 +210,9 @@ def production(atoms, args, outdir, log):
     energies = []
     dyn.attach(lambda: energies.append(atoms.get_total_energy()), interval=every)
     start = time.perf_counter()
-    with MDAWriter(dyn, outdir / "tip3p.xtc", overwrite=True) as writer:
-        dyn.attach(writer, interval=every)
-        dyn.run(steps)
+    with MDAWriter(dyn, outdir / "tip3p.xtc", overwrite=True) as writer:  # closed whole,
+        dyn.attach(writer, interval=every)  # also after a stop (the log is flushed by line)
+        run_steps(dyn, steps, "production", log)
     elapsed = time.perf_counter() - start
     log(f"production: {steps} NVE steps of {args.timestep_fs:g} fs ({args.production_ps:g} ps), "
         f"{writer.n_frames} frames every {every * args.timestep_fs:g} fs, "
@@ -336,6 +376,8 @@ def main(argv=None):
     def log(text):
         print(f"[{time.perf_counter() - t_start:7.1f} s] {text}", flush=True)
 
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, ask_to_stop)
     path = outdir / "tip3p_results.json"
     if args.analyse_only:
         results = json.loads(path.read_text()) if path.exists() else {}
@@ -343,7 +385,20 @@ def main(argv=None):
         earlier = sorted(p.name for p in outdir.glob("tip3p*"))
         if earlier:
             print(f"replacing an earlier run's {', '.join(earlier)} in {outdir}", flush=True)
-        results = simulate(args, outdir, log)
+        try:
+            results = simulate(args, outdir, log)
+        except Stopped as stop:
+            path.unlink(missing_ok=True)  # (an earlier run's results: not this run's)
+            where = (f"{stop.done * stop.dt_ps:g} of {stop.steps * stop.dt_ps:g} ps of the "
+                     f"{stop.name}")
+            if stop.name == "production":
+                hint = (f"tip3p.psf, tip3p.xtc and tip3p.log hold it whole: python "
+                        f"{sys.argv[0]} --outdir {outdir} --analyse-only analyses it; run "
+                        "again for the whole production")
+            else:
+                hint = "nothing is kept before the production: run again"
+            print(f"stopped ({STOP['signal']}) at {where}; {hint}", flush=True)
+            raise SystemExit(130 if STOP["signal"] == "SIGINT" else 143) from None
     results.update(report(outdir, args, log))
     # Strict JSON: a quantity a short run cannot give (NaN) is null.
     results = {k: None if isinstance(v, float) and not np.isfinite(v) else v

@@ -88,6 +88,26 @@ def test_tip3p_water_quick(tmp_path):
         assert source in proc.stdout
     assert_output_is_current("tip3p_water", "python examples/tip3p_water.py --quick",
                              proc.stdout)
+    # A Ctrl-C in the production was a traceback that left the trajectory and log cut
+    # anywhere; now the step under way ends, both are closed whole, and --analyse-only
+    # analyses what was run.
+    stopped = tmp_path / "stopped"
+    run = subprocess.Popen([sys.executable, str(ROOT / "examples" / "tip3p_water.py"),
+                            "--quick", "--outdir", str(stopped)], stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    for line in run.stdout:
+        if "production 1 / 2 ps" in line:
+            run.send_signal(signal.SIGINT)
+            break
+    out, err = run.communicate(timeout=300)
+    assert run.returncode == 130 and "Traceback" not in err, out + err
+    assert "stopped (SIGINT) at 1" in out and "--analyse-only analyses it" in out
+    assert not (stopped / "tip3p_results.json").exists()
+    analysed = run_example(tmp_path, "tip3p_water", "--outdir", str(stopped),
+                           "--analyse-only")
+    assert "analysed" in analysed.stdout
+    partial = json.loads((stopped / "tip3p_results.json").read_text())
+    assert 100 < partial["n_frames"] < 201  # 1-1.1 ps of the 2, a frame each 10 fs
 
 
 def test_tip4p2005_quick(tmp_path):
