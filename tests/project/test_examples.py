@@ -47,6 +47,20 @@ def run_example(tmp_path, name, *args):
     return proc
 
 
+def interrupted(tmp_path, name, outdir, when):
+    """``examples/<name>.py --quick --outdir outdir`` sent SIGINT once it prints a line
+    holding ``when``: its exit status, standard output and standard error."""
+    run = subprocess.Popen([sys.executable, str(ROOT / "examples" / f"{name}.py"), "--quick",
+                            "--outdir", str(outdir)], stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    for line in run.stdout:
+        if when in line:
+            run.send_signal(signal.SIGINT)
+            break
+    out, err = run.communicate(timeout=300)
+    return run.returncode, out, err
+
+
 def test_water_cluster_output_is_current(tmp_path):
     """32 TIP3P waters, 1 ps NVE with ASE's calculator (~20 s idle)."""
     proc = run_example(tmp_path, "water_cluster")
@@ -92,15 +106,8 @@ def test_tip3p_water_quick(tmp_path):
     # anywhere; now the step under way ends, both are closed whole, and --analyse-only
     # analyses what was run.
     stopped = tmp_path / "stopped"
-    run = subprocess.Popen([sys.executable, str(ROOT / "examples" / "tip3p_water.py"),
-                            "--quick", "--outdir", str(stopped)], stdout=subprocess.PIPE,
-                           stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-    for line in run.stdout:
-        if "production 1 / 2 ps" in line:
-            run.send_signal(signal.SIGINT)
-            break
-    out, err = run.communicate(timeout=300)
-    assert run.returncode == 130 and "Traceback" not in err, out + err
+    code, out, err = interrupted(tmp_path, "tip3p_water", stopped, "production 1 / 2 ps")
+    assert code == 130 and "Traceback" not in err, out + err
     assert "stopped (SIGINT) at 1" in out and "--analyse-only analyses it" in out
     assert not (stopped / "tip3p_results.json").exists()
     analysed = run_example(tmp_path, "tip3p_water", "--outdir", str(stopped),
@@ -140,16 +147,8 @@ def test_tip4p2005_quick(tmp_path):
     # 1e-15 relative, or equal).
     first = json.loads((tmp_path / "tip4p2005_results.json").read_text())
     stopped = tmp_path / "stopped"
-    proc = subprocess.Popen([sys.executable, str(ROOT / "examples" / "tip4p2005.py"),
-                             "--quick", "--outdir", str(stopped)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-    for line in proc.stdout:
-        if "production 0.5 / 1 ps" in line:
-            proc.send_signal(signal.SIGINT)
-            break
-    out, err = proc.communicate(timeout=300)
-    assert proc.returncode == 130, out + err
-    assert "Traceback" not in err
+    code, out, err = interrupted(tmp_path, "tip4p2005", stopped, "production 0.5 / 1 ps")
+    assert code == 130 and "Traceback" not in err, out + err
     assert f"continue with: python {ROOT / 'examples' / 'tip4p2005.py'} --outdir {stopped} " \
            "--resume" in out
     assert not (stopped / "tip4p2005_results.json").exists()
