@@ -207,6 +207,25 @@ def test_a_failed_step_after_an_accepted_monte_carlo_move_puts_the_levels_back(m
         np.testing.assert_array_equal(now.F, was)
 
 
+@pytest.mark.parametrize("level", ["fast", "slow"])
+def test_non_finite_forces_of_a_level_are_refused_naming_it(level):
+    """A NaN from one level was refused as "calculator returned non-finite forces", not
+    saying which of the two."""
+    from rigidmd.core.forces import NonFiniteForceError
+
+    class Poisoned(ZeroForce):
+        def calculate(self, atoms=None, properties=("energy",), system_changes=all_changes):
+            super().calculate(atoms, properties, system_changes)
+            self.results["forces"][3] = np.nan
+
+    atoms = waters(2)
+    fast, slow = (Poisoned(), TIP3P(rc=40)) if level == "fast" else (TIP3P(rc=40), Poisoned())
+    atoms.calc = MultipleTimeStep(fast, slow, substeps=2)
+    with pytest.raises(NonFiniteForceError, match=rf"^the {level} level \(Poisoned\) returned "
+                                                  r"non-finite forces on atom\(s\) \[3\]"):
+        RigidVerlet(atoms, units.fs).run(2)
+
+
 def test_a_full_model_without_stress_is_named_as_given():
     """``full=`` a model without stress under a barostat was refused as "the slow calculator
     FullLessFast provides no stress": a class the user never wrote, listing what it

@@ -120,6 +120,9 @@ class ForceEvaluator:
         The calculator to call on the atoms instead of the atoms' own: one
         level of a :class:`~rigidmd.core.split.MultipleTimeStep` (its fast or
         slow part), whose record holds that level's forces alone.
+    label : str, default ``"calculator"``
+        What a refusal of non-finite forces or energy calls the calculator
+        (a split's level names itself: ``"the slow level (LAMMPSCalculator)"``).
 
     Attributes
     ----------
@@ -131,9 +134,11 @@ class ForceEvaluator:
     """
 
     def __init__(self, link: BodyLink, record: StepRecord, *, stress: bool = False,
-                 cell_moves: bool = False, calc=None):
+                 cell_moves: bool = False, calc=None, label: str = "calculator"):
         self.link, self.record = link, record
         self.calc = calc  # None: the atoms' calculator
+        #: What a refusal calls the calculator (a split's level names itself).
+        self.label = label
         self.atoms, self.model = link.atoms, link.model
         self.stress, self.cell_moves = stress, cell_moves
         self._shape = (len(self.atoms), 3)  # of the forces (the atoms cannot change in number)
@@ -221,7 +226,7 @@ class ForceEvaluator:
             energy = results["energy"]
             if not np.isfinite(energy):
                 raise NonFiniteForceError(
-                    f"calculator returned a non-finite energy ({energy}) with finite forces "
+                    f"{self.label} returned a non-finite energy ({energy}) with finite forces "
                     f"after step {self.step}; the atoms are left at step {self.step}")
             record.energy = float(energy)
         if self.stress:
@@ -235,7 +240,7 @@ class ForceEvaluator:
         if not np.isfinite(forces.sum()):
             bad = np.flatnonzero(~np.isfinite(forces).all(axis=1))
             raise NonFiniteForceError(
-                f"calculator returned non-finite forces on atom(s) {bad[:10].tolist()} "
+                f"{self.label} returned non-finite forces on atom(s) {bad[:10].tolist()} "
                 f"after step {self.step}; the atoms are left at step {self.step}")
 
     def molecular_virial(self, forces: np.ndarray,

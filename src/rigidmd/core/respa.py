@@ -140,9 +140,11 @@ class SplitForceEvaluator(ForceEvaluator):
         self.split = split
         self.fast_record, self.slow_record = record.fast, record.slow
         self.fast = ForceEvaluator(link, self.fast_record, stress=stress,
-                                   cell_moves=cell_moves, calc=split.fast)
+                                   cell_moves=cell_moves, calc=split.fast,
+                                   label=f"the fast level ({type(split.fast).__name__})")
         self.slow = ForceEvaluator(link, self.slow_record, stress=stress,
-                                   cell_moves=cell_moves, calc=split.slow)
+                                   cell_moves=cell_moves, calc=split.slow,
+                                   label=f"the slow level ({type(split.slow).__name__})")
         self.asked = (False, False)  # energy, stress of the step's last calls
 
     def begin_step(self, step: int, energy: bool = False, stress: bool = False) -> None:
